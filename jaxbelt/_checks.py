@@ -1,0 +1,79 @@
+"""Parameter checks shared by every model and command.
+
+Checks run when values are concrete (construction outside `jit`/`vmap`); under a
+transformation the values are tracers and the checks are skipped there, so that
+constructing a model inside `jax.vmap` stays cheap. Invariants that matter under
+`jit` are guarded with `eqx.error_if` where they are used.
+"""
+
+from __future__ import annotations
+
+import jax
+import numpy as np
+
+
+def is_concrete(x) -> bool:
+    """True when `x` holds values (not a tracer inside jit/vmap/grad)."""
+    leaves = jax.tree_util.tree_leaves(x)
+    return not any(isinstance(leaf, jax.core.Tracer) for leaf in leaves)
+
+
+def _values(x):
+    return np.asarray(jax.device_get(x), dtype=float)
+
+
+def check_positive(name: str, value, unit: str = "", owner: str = "") -> None:
+    """Raise `ValueError` unless every element of `value` is finite and > 0."""
+    if not is_concrete(value):
+        return
+    v = _values(value)
+    if not np.all(np.isfinite(v)) or np.any(v <= 0):
+        where = f"{owner}: " if owner else ""
+        raise ValueError(
+            f"{where}parameter `{name}` must be finite and > 0{(' ' + unit) if unit else ''}; "
+            f"got {v.tolist() if v.ndim else float(v)}"
+        )
+
+
+def check_nonnegative(name: str, value, unit: str = "", owner: str = "") -> None:
+    """Raise `ValueError` unless every element of `value` is finite and >= 0."""
+    if not is_concrete(value):
+        return
+    v = _values(value)
+    if not np.all(np.isfinite(v)) or np.any(v < 0):
+        where = f"{owner}: " if owner else ""
+        raise ValueError(
+            f"{where}parameter `{name}` must be finite and >= 0{(' ' + unit) if unit else ''}; "
+            f"got {v.tolist() if v.ndim else float(v)}"
+        )
+
+
+def check_finite(name: str, value, owner: str = "") -> None:
+    """Raise `ValueError` unless every element of `value` is finite."""
+    if not is_concrete(value):
+        return
+    v = _values(value)
+    if not np.all(np.isfinite(v)):
+        where = f"{owner}: " if owner else ""
+        raise ValueError(f"{where}parameter `{name}` must be finite; got {v.tolist() if v.ndim else float(v)}")
+
+
+def check_range(name: str, value, lo=None, hi=None, *, lo_open=False, hi_open=False, unit="", owner="") -> None:
+    """Raise `ValueError` unless lo (<|<=) value (<|<=) hi elementwise."""
+    if not is_concrete(value):
+        return
+    v = _values(value)
+    ok = np.all(np.isfinite(v))
+    if lo is not None:
+        ok &= bool(np.all(v > lo) if lo_open else np.all(v >= lo))
+    if hi is not None:
+        ok &= bool(np.all(v < hi) if hi_open else np.all(v <= hi))
+    if not ok:
+        lb = "-inf" if lo is None else f"{lo:g}"
+        ub = "inf" if hi is None else f"{hi:g}"
+        interval = f"{'(' if lo_open or lo is None else '['}{lb}, {ub}{')' if hi_open or hi is None else ']'}"
+        where = f"{owner}: " if owner else ""
+        raise ValueError(
+            f"{where}parameter `{name}` must lie in {interval}{(' ' + unit) if unit else ''}; "
+            f"got {v.tolist() if v.ndim else float(v)}"
+        )

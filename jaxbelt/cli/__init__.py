@@ -1,0 +1,43 @@
+"""The `jaxbelt` command: one sub-command per scene (`jaxbelt startup --out startup.png`, ...).
+
+Each sub-command lives in `jaxbelt/cli/<name>.py` and defines `register(subparsers)`, which adds
+its parser and sets `func` to the function that runs it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+SUBCOMMANDS = ("startup", "shaping", "fourbar", "string", "nonlinear", "bench")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="jaxbelt",
+        description="Differentiable simulation of belt drives and DC-motor mechanisms (figures from the papers).",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name in SUBCOMMANDS:
+        try:
+            mod = importlib.import_module(f"{__name__}.{name}")
+        except ModuleNotFoundError as e:  # a scene that is not part of this installation
+            if e.name == f"{__name__}.{name}":
+                continue
+            raise
+        mod.register(sub)
+    return parser
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except ValueError as e:  # bad parameters: say which, no traceback
+        print(f"jaxbelt {args.command}: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

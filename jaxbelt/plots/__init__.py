@@ -1,0 +1,1 @@
+"""Matplotlib figures: the papers' figures and more. One module per scene."""
