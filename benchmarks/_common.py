@@ -1,0 +1,102 @@
+"""Shared timing and result-writing helpers for jaxbelt benchmarks.
+
+Every benchmark writes `benchmarks/results/<scene>.json` with this schema:
+
+    {"scene": str, "machine": {...}, "quick": bool,
+     "rows": [{"name": str, "method": str, "error": float | None, "median_s": float,
+               "compile_s": float | None, "repeats": int, ...extra}],
+     "headline": [{"what": str, "value": float, "unit": str, "target": str | None}]}
+
+`rows` are the work-precision points (error against a tight reference, median run time after
+compilation); `headline` holds the few numbers the README table shows.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import time
+from pathlib import Path
+
+import jax
+import numpy as np
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def block(x):
+    return jax.tree_util.tree_map(lambda a: a.block_until_ready() if hasattr(a, "block_until_ready") else a, x)
+
+
+def time_jax(fn, *args, repeats: int = 7, min_time: float = 0.05):
+    """Compile time and median run time [s] of a jitted callable.
+
+    The first call (compile + run) is timed apart; then `repeats` timings, each the mean over
+    enough inner calls to last at least `min_time`, and their median is returned.
+    Returns (median_s, compile_s, output).
+    """
+    t = time.perf_counter()
+    out = block(fn(*args))
+    compile_s = time.perf_counter() - t
+    t = time.perf_counter()
+    block(fn(*args))
+    once = max(time.perf_counter() - t, 1e-7)
+    inner = max(1, int(min_time / once))
+    samples = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        for _ in range(inner):
+            block(fn(*args))
+        samples.append((time.perf_counter() - t) / inner)
+    return float(np.median(samples)), float(compile_s), out
+
+
+def time_py(fn, *args, repeats: int = 5, min_time: float = 0.0):
+    """Median wall time [s] of a plain Python callable (e.g. scipy); returns (median_s, output)."""
+    out = fn(*args)
+    samples = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        inner = 0
+        while True:
+            out = fn(*args)
+            inner += 1
+            if time.perf_counter() - t >= min_time:
+                break
+        samples.append((time.perf_counter() - t) / inner)
+    return float(np.median(samples)), out
+
+
+def machine_info() -> dict:
+    return {
+        "platform": platform.platform(),
+        "processor": platform.processor() or platform.machine(),
+        "cpu_count": os.cpu_count(),
+        "python": platform.python_version(),
+        "jax": jax.__version__,
+        "backend": jax.default_backend(),
+        "devices": [str(d) for d in jax.devices()],
+    }
+
+
+def write_results(scene: str, rows: list, headline: list, quick: bool, extra: dict | None = None) -> Path:
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    data = {"scene": scene, "machine": machine_info(), "quick": bool(quick), "rows": rows, "headline": headline}
+    if extra:
+        data.update(extra)
+    path = RESULTS / f"{scene}.json"
+    path.write_text(json.dumps(data, indent=2, default=float))
+    return path
+
+
+def rel_error(x, ref) -> float:
+    """max |x - ref| / max |ref| over all entries (per-column max taken, then the worst column)."""
+    x = np.asarray(x, dtype=float)
+    ref = np.asarray(ref, dtype=float)
+    if ref.ndim >= 2:
+        scale = np.max(np.abs(ref), axis=tuple(range(ref.ndim - 1)))
+        scale = np.where(scale > 0, scale, 1.0)
+        return float(np.max(np.max(np.abs(x - ref), axis=tuple(range(ref.ndim - 1))) / scale))
+    scale = np.max(np.abs(ref)) or 1.0
+    return float(np.max(np.abs(x - ref)) / scale)
