@@ -1,0 +1,1 @@
+"""Optimisers: optax loops (one jitted step), constraints, progress bars and result objects."""
