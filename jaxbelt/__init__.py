@@ -18,4 +18,7 @@ from .solve import Solution as Solution  # noqa: E402
 from .solve import SolveError as SolveError  # noqa: E402
 from .solve import simulate as simulate  # noqa: E402
 
+from . import modal as modal  # noqa: E402
+from . import plots as plots  # noqa: E402
+
 __version__ = "0.1.0"

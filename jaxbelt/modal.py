@@ -28,7 +28,7 @@ MODAL_COND_LIMIT = 1e6
 
 
 def balance_scaling(M, sweeps: int = 8):
-    """Powers of two d such that $D^{-1} M D$ has balanced row and column norms.
+    r"""Powers of two d such that $D^{-1} M D$ has balanced row and column norms.
 
     Balancing (Parlett-Reinsch) lowers the norm that drives the number of squarings in the
     matrix exponential; for the start-up model with a tiny inductance it cuts the error of
