@@ -46,7 +46,19 @@ __all__ = [
     "runout_phasors",
     "galerkin_runout_system",
     "simulate_runout_response",
+    "TABLE2_COMPUTED_RPM",
+    "TABLE2_MEASURED_RPM",
 ]
+
+#: Seed 002, Table 2, computed column: (mode n, harmonic m) -> exciting rotor speed [rpm].
+TABLE2_COMPUTED_RPM = {
+    (1, 8): 735, (1, 7): 833, (1, 6): 960, (1, 5): 1130, (1, 4): 1364, (1, 3): 1706,
+    (2, 9): 1236, (2, 8): 1364, (2, 7): 1518, (2, 6): 1706, (3, 9): 1706,
+}
+#: Seed 002, Table 2, measured speeds [rpm] with the (n, m) the paper pairs them with (None: unpaired).
+TABLE2_MEASURED_RPM = (
+    (730, (1, 8)), (810, (1, 7)), (910, (1, 6)), (1020, None), (1180, (1, 5)), (1400, (1, 4)), (1720, (1, 3)),
+)
 
 
 def _arr(x):
