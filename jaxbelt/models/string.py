@@ -193,12 +193,17 @@ class MovingString(eqx.Module):
             raise ValueError(
                 f"MovingString.galerkin_frequencies: `n_modes` ({n_modes}) must not exceed `n_basis` ({n_basis})"
             )
-        M, G, K = self.galerkin_matrices(speed, n_basis)
-        A = _first_order(M, G, K)
-        lam = jnp.linalg.eigvals(A)
-        w = jnp.sort(jnp.abs(jnp.imag(lam)))
-        # eigenvalues come in +/- pairs: take every other one
-        return w[::2][: int(n_modes)]
+        speed = _check_subcritical(speed, self.critical_speed, "MovingString.galerkin_frequencies")
+        return _galerkin_frequencies(self, speed, int(n_basis), int(n_modes))
+
+
+@eqx.filter_jit
+def _galerkin_frequencies(span, speed, n_basis, n_modes):
+    M, G, K = span.galerkin_matrices(speed, n_basis)
+    lam = jnp.linalg.eigvals(_first_order(M, G, K))
+    w = jnp.sort(jnp.abs(jnp.imag(lam)))
+    # eigenvalues come in +/- pairs: take every other one
+    return w[::2][:n_modes]
 
 
 def _first_order(M, G, K):
@@ -374,16 +379,18 @@ def runout_phasors(
     """
     o = "runout_phasors"
     speed = _check_response_inputs(o, speed, length, wave_speed, pulley_radii, runouts, damping_ratio, position)
-    L = _arr(length)
-    vt = _arr(wave_speed)
-    r0, r1 = _arr(pulley_radii)[0], _arr(pulley_radii)[1]
-    e0, e1 = _arr(runouts)[0], _arr(runouts)[1]
+    return _phasors(speed, _arr(length), _arr(wave_speed), _arr(pulley_radii), _arr(runouts), _arr(phase),
+                    _arr(damping_ratio), _arr(position), int(n_modes))
+
+
+@eqx.filter_jit
+def _phasors(speed, L, vt, radii, runouts, phase, zeta, position, nm):
+    r0, r1 = radii[0], radii[1]
+    e0, e1 = runouts[0], runouts[1]
     # sin(W t) = Re(-i e^{iWt}): boundary phasors of eq. (3)
     s0 = -1j * e0 / L
-    s1 = -1j * e1 * jnp.exp(1j * _arr(phase)) / L
-    xm = _arr(position) / L
-    zeta = _arr(damping_ratio)
-    nm = int(n_modes)
+    s1 = -1j * e1 * jnp.exp(1j * phase) / L
+    xm = position / L
 
     def one(V):
         v = V / vt
@@ -416,8 +423,9 @@ def linear_runout_response(
     $N_n = (n\\pi)^2(1 - v^2)$ (non-dimensional), $\\omega_n = n\\pi(1 - v^2)$. Modal damping:
     $\\sigma_n = i\\omega_n - \\zeta\\omega_n$ (each complex mode decays at the rate $\\zeta\\omega_n$,
     its frequency unchanged). The projections are exact closed-form integrals; the steady state of
-    each mode is algebraic. Modal terms fall off as $n^{-3}$; `n_modes` = 64 gives < 1e-5 relative.
-    With $\\zeta = 0$ this is the steady response of Moon & Wickert eq. (10) (which infinite at
+    each mode is algebraic. Modal terms fall off as $n^{-3}$; against the exact travelling-wave solution (undamped) `n_modes` = 64
+    is within 1e-4 relative up to half the critical speed, 256 within 2e-6.
+    With $\\zeta = 0$ this is the steady response of Moon & Wickert eq. (10) (infinite at
     $\\Omega_j = \\omega_n$).
 
     Arguments (SI):
