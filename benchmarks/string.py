@@ -56,9 +56,10 @@ def np_crossing_loop(speeds):
     for a in range(N_MODES):
         for j in range(len(RADII)):
             for k in range(HARM):
-                cross[a, j, k] = brentq(
-                    lambda V: (a + 1) * np.pi / L * VT * (1 - (V / VT) ** 2) - (k + 1) * V / RADII[j], 0.0, VT, xtol=1e-14
-                )
+                def f(V, n=a + 1, h=k + 1, r=RADII[j]):
+                    return n * np.pi / L * VT * (1 - (V / VT) ** 2) - h * V / r
+
+                cross[a, j, k] = brentq(f, 0.0, VT, xtol=1e-14)
     return nat, load, cross
 
 

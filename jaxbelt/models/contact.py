@@ -54,7 +54,8 @@ class SlipReport:
     ok: bool
 
     def __str__(self) -> str:
-        head = f"at omega = {self.omega:.6g} rad/s ({self.omega * 30 / np.pi:.6g} rpm), T_c = {self.centrifugal_tension:.6g} N: "
+        rpm = self.omega * 30 / np.pi
+        head = f"at omega = {self.omega:.6g} rad/s ({rpm:.6g} rpm), T_c = {self.centrifugal_tension:.6g} N: "
         if self.ok:
             return head + (
                 f"no slip; (T2 - Tc)/(T1 - Tc) = {self.ratio:.6g} <= e^(mu theta) = {self.limit:.6g}, "

@@ -35,7 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_positive, check_range, is_concrete
+from .._checks import check_nonnegative, check_positive, check_range, is_concrete
 
 __all__ = [
     "MovingString",
@@ -255,7 +255,8 @@ def _crossing_newton(n_pi_over_L, vt, slope, iters: int = 40):
         f, df = f_df(V)
         return V - f / df
 
-    return jax.lax.fori_loop(0, iters, body, jnp.broadcast_to(vt, jnp.broadcast_shapes(jnp.shape(slope), jnp.shape(n_pi_over_L), jnp.shape(vt))) * 1.0)
+    shape = jnp.broadcast_shapes(jnp.shape(slope), jnp.shape(n_pi_over_L), jnp.shape(vt))
+    return jax.lax.fori_loop(0, iters, body, jnp.broadcast_to(vt, shape) * 1.0)
 
 
 def _check_span_inputs(owner, length, pulley_radii, wave_speed):
@@ -358,8 +359,6 @@ def _check_response_inputs(o, speed, length, wave_speed, pulley_radii, runouts, 
             f"{o}: `pulley_radii` and `runouts` must each hold two values (pulley 0 at x = 0, pulley 1 at "
             f"x = length); got shapes {np.shape(pulley_radii)} and {np.shape(runouts)}"
         )
-    from .._checks import check_nonnegative
-
     check_nonnegative("runouts", runouts, "m", o)
     check_range("damping_ratio", damping_ratio, 0.0, 1.0, hi_open=True, owner=o)
     if is_concrete(position) and is_concrete(length):
@@ -423,8 +422,9 @@ def linear_runout_response(
     $N_n = (n\\pi)^2(1 - v^2)$ (non-dimensional), $\\omega_n = n\\pi(1 - v^2)$. Modal damping:
     $\\sigma_n = i\\omega_n - \\zeta\\omega_n$ (each complex mode decays at the rate $\\zeta\\omega_n$,
     its frequency unchanged). The projections are exact closed-form integrals; the steady state of
-    each mode is algebraic. Modal terms fall off as $n^{-3}$; against the exact travelling-wave solution (undamped) `n_modes` = 64
-    is within 1e-4 relative up to half the critical speed, 256 within 2e-6.
+    each mode is algebraic. Modal terms fall off as $n^{-3}$; against the exact travelling-wave
+    solution (undamped), `n_modes` = 64 is within 1e-4 relative up to half the critical speed,
+    256 within 2e-6.
     With $\\zeta = 0$ this is the steady response of Moon & Wickert eq. (10) (infinite at
     $\\Omega_j = \\omega_n$).
 
