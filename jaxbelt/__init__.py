@@ -22,3 +22,13 @@ from . import modal as modal  # noqa: E402
 from . import plots as plots  # noqa: E402
 
 __version__ = "0.1.0"
+from .models import BeltPulleyContact as BeltPulleyContact  # noqa: E402
+from .models import SlipError as SlipError  # noqa: E402
+from .models import SlipReport as SlipReport  # noqa: E402
+from .models import MovingString as MovingString  # noqa: E402
+from .models import crossing_diagram as crossing_diagram  # noqa: E402
+from .models import crossing_speeds as crossing_speeds  # noqa: E402
+from .models import exciting_speeds as exciting_speeds  # noqa: E402
+from .models import linear_runout_response as linear_runout_response  # noqa: E402
+from .models import runout_phasors as runout_phasors  # noqa: E402
+from .models import simulate_runout_response as simulate_runout_response  # noqa: E402

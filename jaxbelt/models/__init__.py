@@ -4,3 +4,14 @@ from .base import AbstractModel as AbstractModel
 from .startup import BeltChain as BeltChain
 from .startup import BeltStartup as BeltStartup
 from .startup import chain_matrices as chain_matrices
+from .contact import BeltPulleyContact as BeltPulleyContact
+from .contact import SlipError as SlipError
+from .contact import SlipReport as SlipReport
+from .string import MovingString as MovingString
+from .string import crossing_diagram as crossing_diagram
+from .string import crossing_speeds as crossing_speeds
+from .string import exciting_speeds as exciting_speeds
+from .string import galerkin_runout_system as galerkin_runout_system
+from .string import linear_runout_response as linear_runout_response
+from .string import runout_phasors as runout_phasors
+from .string import simulate_runout_response as simulate_runout_response

@@ -1,0 +1,164 @@
+"""Belt-pulley contact: centrifugal tension, slip limit and contact pressure (seed 002, eq. 1-11).
+
+On a pulley of radius $R$ turning at $\\omega$, a belt element of mass $\\rho R\\,d\\alpha$ needs the
+centripetal force $\\rho R^2\\omega^2 d\\alpha$ (eq. 5), which the tension supplies before it can
+press on the pulley: the centrifugal tension $T_c = \\rho R^2\\omega^2$.
+
+- Slip limit (Euler-Eytelwein with centrifugal term, eq. 8):
+  $\\frac{T_2 - T_c}{T_1 - T_c} \\le e^{\\mu\\vartheta}$.
+- Pressure with linear tension along the wrap (eq. 9-10):
+  $p(\\alpha) = \\frac{T_2 - T_1}{R\\vartheta}\\alpha + \\frac{T_1}{R} - \\rho\\omega^2 R$,
+  $0 \\le \\alpha \\le \\vartheta$; the belt lifts off where $p < 0$ (eq. 11).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from .._checks import check_positive, check_range, is_concrete
+
+__all__ = ["BeltPulleyContact", "SlipError", "SlipReport"]
+
+
+def _arr(x):
+    return jnp.asarray(x, dtype=float)
+
+
+class SlipError(ValueError):
+    """The slip condition of eq. (8) fails; the message says by how much."""
+
+
+@dataclass(frozen=True)
+class SlipReport:
+    """Outcome of the slip check of eq. (8) at one pulley speed (plain floats, SI units).
+
+    - `centrifugal_tension` $T_c$ [N];
+    - `ratio` $(T_2 - T_c)/(T_1 - T_c)$ and `limit` $e^{\\mu\\vartheta}$ (ratio is `inf` when
+      $T_1 \\le T_c$: the slack side carries no contact force at all);
+    - `margin` [N] $= (T_1 - T_c)e^{\\mu\\vartheta} - (T_2 - T_c)$: tight-side tension that could
+      still be added before slip (negative: the excess that makes it slip);
+    - `required_friction`: the smallest $\\mu$ that would hold ($\\ln(\\text{ratio})/\\vartheta$);
+    - `ok`: margin >= 0.
+    """
+
+    omega: float
+    centrifugal_tension: float
+    ratio: float
+    limit: float
+    margin: float
+    required_friction: float
+    ok: bool
+
+    def __str__(self) -> str:
+        rpm = self.omega * 30 / np.pi
+        head = f"at omega = {self.omega:.6g} rad/s ({rpm:.6g} rpm), T_c = {self.centrifugal_tension:.6g} N: "
+        if self.ok:
+            return head + (
+                f"no slip; (T2 - Tc)/(T1 - Tc) = {self.ratio:.6g} <= e^(mu theta) = {self.limit:.6g}, "
+                f"the tight side could carry {self.margin:.6g} N more"
+            )
+        if not np.isfinite(self.ratio):
+            return head + (
+                f"the belt slips: centrifugal tension exceeds the slack-side tension, no friction is left; "
+                f"the tight side exceeds what the pulley can hold by {-self.margin:.6g} N"
+            )
+        return head + (
+            f"the belt slips: (T2 - Tc)/(T1 - Tc) = {self.ratio:.6g} exceeds e^(mu theta) = {self.limit:.6g} "
+            f"by {100 * (self.ratio / self.limit - 1):.3g} %; the tight-side tension is {-self.margin:.6g} N too high, "
+            f"or the friction coefficient must be at least {self.required_friction:.6g}"
+        )
+
+
+class BeltPulleyContact(eqx.Module):
+    """A belt wrapped on one pulley with slack-side tension $T_1$ and tight-side tension $T_2$ (seed 002).
+
+    | field | symbol | unit | default |
+    |---|---|---|---|
+    | `radius` | $R$ pulley radius | m | required (the motor pulley's is not in seed 002) |
+    | `slack_tension` | $T_1$ | N | 120 |
+    | `tight_tension` | $T_2$ | N | 140 |
+    | `density` | $\\rho$ belt mass per length | kg/m | 0.05 |
+    | `friction` | $\\mu$ | – | 0.2 |
+    | `wrap_angle` | $\\vartheta$, in $(0, 2\\pi)$ | rad | 2.094 (120°) |
+
+    Pulley speeds `omega` are angular [rad/s].
+    """
+
+    radius: jnp.ndarray = eqx.field(converter=_arr)
+    slack_tension: jnp.ndarray = eqx.field(converter=_arr, default=120.0)
+    tight_tension: jnp.ndarray = eqx.field(converter=_arr, default=140.0)
+    density: jnp.ndarray = eqx.field(converter=_arr, default=0.05)
+    friction: jnp.ndarray = eqx.field(converter=_arr, default=0.2)
+    wrap_angle: jnp.ndarray = eqx.field(converter=_arr, default=2.094)
+
+    def __check_init__(self):
+        o = "BeltPulleyContact"
+        check_positive("radius", self.radius, "m", o)
+        check_positive("slack_tension", self.slack_tension, "N", o)
+        check_positive("tight_tension", self.tight_tension, "N", o)
+        check_positive("density", self.density, "kg/m", o)
+        check_positive("friction", self.friction, "", o)
+        check_range("wrap_angle", self.wrap_angle, 0.0, 2.0 * np.pi, lo_open=True, hi_open=True, unit="rad", owner=o)
+
+    def centrifugal_tension(self, omega):
+        """$T_c = \\rho R^2\\omega^2$ [N] (eq. 5-6)."""
+        return self.density * self.radius**2 * _arr(omega) ** 2
+
+    def slip_limit(self):
+        """$e^{\\mu\\vartheta}$, the largest tension ratio friction can hold (eq. 8)."""
+        return jnp.exp(self.friction * self.wrap_angle)
+
+    def slip_margin(self, omega):
+        """$(T_1 - T_c)e^{\\mu\\vartheta} - (T_2 - T_c)$ [N]: eq. (8) as a margin (>= 0: no slip).
+
+        Smooth in every parameter (usable as a constraint under `grad`); negative values are the
+        tight-side tension in excess of what the pulley can transmit.
+        """
+        tc = self.centrifugal_tension(omega)
+        return (self.slack_tension - tc) * self.slip_limit() - (self.tight_tension - tc)
+
+    def slip_report(self, omega) -> SlipReport:
+        """The slip check at one concrete speed as a `SlipReport` (ratio, limit, margin, needed μ)."""
+        omega = float(np.asarray(omega))
+        tc = float(self.centrifugal_tension(omega))
+        t1, t2 = float(self.slack_tension), float(self.tight_tension)
+        lim = float(self.slip_limit())
+        margin = float(self.slip_margin(omega))
+        ratio = (t2 - tc) / (t1 - tc) if t1 > tc else float("inf")
+        req = float(np.log(ratio) / float(self.wrap_angle)) if np.isfinite(ratio) and ratio > 0 else float("inf")
+        return SlipReport(omega, tc, ratio, lim, margin, max(req, 0.0), margin >= 0.0)
+
+    def check_slip(self, omega) -> SlipReport:
+        """Return the `SlipReport` if eq. (8) holds at `omega`, else raise `SlipError` saying by how much."""
+        rep = self.slip_report(omega)
+        if not rep.ok:
+            raise SlipError(f"BeltPulleyContact: {rep}")
+        return rep
+
+    def pressure(self, alpha, omega):
+        """Contact pressure $p(\\alpha)$ [N/m] (force per unit belt length on the pulley), eq. (10).
+
+        $p = \\frac{T_2 - T_1}{R\\vartheta}\\alpha + \\frac{T_1}{R} - \\rho\\omega^2 R$ for
+        $0 \\le \\alpha \\le \\vartheta$ (measured from where the slack side arrives). Negative values
+        are returned as they are: there the belt has separated (eq. 11).
+        """
+        alpha = _arr(alpha)
+        if is_concrete(alpha) and is_concrete(self.wrap_angle):
+            check_range("alpha", alpha, 0.0, float(self.wrap_angle), unit="rad", owner="BeltPulleyContact.pressure")
+        t = (self.tight_tension - self.slack_tension) / self.wrap_angle * alpha + self.slack_tension
+        return (t - self.centrifugal_tension(omega)) / self.radius
+
+    def separation_speed(self):
+        """Pulley speed [rad/s] at which $p$ first reaches 0: $\\omega_s = \\sqrt{\\min(T_1, T_2)/\\rho}/R$.
+
+        p is linear in $\\alpha$, so its minimum is at the end with the lower tension.
+        """
+        return jnp.sqrt(jnp.minimum(self.slack_tension, self.tight_tension) / self.density) / self.radius
+
+    def separation_angle(self):
+        """Wrap position $\\alpha$ [rad] where separation starts (0 if $T_1 \\le T_2$, else $\\vartheta$)."""
+        return jnp.where(self.slack_tension <= self.tight_tension, 0.0, self.wrap_angle)

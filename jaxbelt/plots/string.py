@@ -1,0 +1,203 @@
+"""Figures of the belt-span scene: seed 002 figs. 40, 41, 43 and Moon & Wickert's Fig. 5."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import matplotlib.pyplot as plt
+import numpy as np
+
+from ..models.contact import BeltPulleyContact
+from ..models.string import (
+    TABLE2_COMPUTED_RPM,
+    TABLE2_MEASURED_RPM,
+    MovingString,
+    crossing_diagram,
+    crossing_speeds,
+    exciting_speeds,
+    linear_runout_response,
+)
+
+__all__ = [
+    "plot_contact_pressure",
+    "plot_frequency_harmonics",
+    "plot_exciting_speeds",
+    "plot_crossing_diagram",
+    "plot_runout_response",
+    "string_figure",
+]
+
+RPM = 30.0 / np.pi  # rad/s -> rpm
+
+
+def _ax(ax):
+    if ax is None:
+        _, ax = plt.subplots(figsize=(5.5, 4))
+    return ax
+
+
+def plot_contact_pressure(contact: BeltPulleyContact | None = None, rpm: float = 15000.0, ax=None):
+    """Seed 002, Fig. 40: contact pressure $p(\\alpha)$ over the wrap at `rpm` (eq. 10).
+
+    Default contact: seed 002's values with an ASSUMED motor-pulley radius of 25 mm (not in the text).
+    """
+    contact = BeltPulleyContact(radius=0.025) if contact is None else contact
+    ax = _ax(ax)
+    omega = rpm / RPM
+    a = np.linspace(0.0, float(contact.wrap_angle), 200)
+    p = np.asarray(contact.pressure(a, omega))
+    ax.plot(np.degrees(a), p, label=f"{rpm:.0f} rpm")
+    ax.plot(np.degrees(a), np.asarray(contact.pressure(a, 0.0)), ":", color="gray", label="at rest")
+    ax.axhline(0.0, color="k", lw=0.6)
+    ax.set_xlabel("wrap position α [deg]")
+    ax.set_ylabel("contact pressure p [N/m]")
+    ax.set_title(f"Belt pressure on the pulley (R = {1e3 * float(contact.radius):.1f} mm)")
+    ax.legend(fontsize=8)
+    return ax
+
+
+def plot_frequency_harmonics(span: MovingString | None = None, pulley_radius: float = 0.1166, n_modes: int = 3,
+                             harmonics=range(3, 10), max_rpm: float = 2000.0, ax=None):
+    """Seed 002, Fig. 41: sub-multiples $\\omega_n/m$ of the span frequencies against rotor speed (eq. 51).
+
+    The rotor harmonic m meets mode n where the line $\\omega_U$ crosses $\\omega_n(\\omega_U R_U)/m$;
+    the crossings are the exciting speeds of eq. (55) (dots).
+    """
+    span = MovingString() if span is None else span
+    ax = _ax(ax)
+    rpm = np.linspace(0.0, max_rpm, 400)
+    wn = np.asarray(span.natural_frequencies(jnp.asarray(rpm / RPM * pulley_radius), n_modes))
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i in range(n_modes):
+        for m in harmonics:
+            ax.plot(rpm, wn[:, i] / m * RPM, "--", lw=0.7, color=colors[i % len(colors)],
+                    label=f"n = {i + 1}" if m == list(harmonics)[0] else None)
+            w = float(exciting_speeds(span, pulley_radius, i + 1, m)) * RPM
+            if w <= max_rpm:
+                ax.plot(w, w, "o", ms=3, color=colors[i % len(colors)])
+    ax.plot(rpm, rpm, "k", lw=1, label="rotor speed")
+    ax.set_xlim(0, max_rpm)
+    ax.set_ylim(0, max_rpm)
+    ax.set_xlabel("rotor speed [rpm]")
+    ax.set_ylabel("ω_n / m [rpm]")
+    ax.set_title(f"Span frequencies / harmonic order m = {min(harmonics)}..{max(harmonics)}")
+    ax.legend(fontsize=8)
+    return ax
+
+
+def plot_exciting_speeds(span: MovingString | None = None, pulley_radius: float = 0.1166, ax=None):
+    """Seed 002, Fig. 43 / Table 2: exciting speeds of eq. (55) against the measured speeds."""
+    span = MovingString() if span is None else span
+    ax = _ax(ax)
+    markers = {1: "o", 2: "s", 3: "^"}
+    for (n, m), paper in TABLE2_COMPUTED_RPM.items():
+        w = float(exciting_speeds(span, pulley_radius, n, m)) * RPM
+        ax.plot(w, n, markers[n], color="C0", mfc="none")
+        ax.annotate(f"m={m}", (w, n), textcoords="offset points", xytext=(0, 6), fontsize=6, ha="center")
+        ax.plot(paper, n, "x", color="C1", ms=5)
+    for meas, _ in TABLE2_MEASURED_RPM:
+        ax.axvline(meas, color="C2", lw=0.8, alpha=0.6)
+    ax.plot([], [], "o", color="C0", mfc="none", label="eq. (55), this code")
+    ax.plot([], [], "x", color="C1", label="Table 2, computed")
+    ax.plot([], [], "-", color="C2", label="measured")
+    ax.set_yticks([1, 2, 3])
+    ax.set_ylim(0.5, 3.6)
+    ax.set_xlabel("rotor speed [rpm]")
+    ax.set_ylabel("mode n")
+    ax.set_title("Exciting speeds vs measurements")
+    ax.legend(fontsize=7, loc="lower right")
+    return ax
+
+
+def plot_crossing_diagram(length=0.86, pulley_radii=(0.063, 0.063), wave_speed=41.0, n_modes: int = 3,
+                          harmonics=1, max_speed=None, ax=None):
+    """Moon & Wickert, Fig. 5(a): natural frequencies and pulley load lines against running speed.
+
+    Crossings (dots) come from `crossing_speeds` (Newton root finding).
+    """
+    ax = _ax(ax)
+    vmax = 0.55 * wave_speed if max_speed is None else max_speed
+    V = np.linspace(0.0, vmax, 400)
+    nat, load = crossing_diagram(jnp.asarray(V), length, pulley_radii, wave_speed, n_modes, harmonics)
+    nat, load = np.asarray(nat) / (2 * np.pi), np.asarray(load) / (2 * np.pi)
+    for i in range(n_modes):
+        ax.plot(V, nat[:, i], "k", lw=1.2, label="ω_n / 2π" if i == 0 else None)
+    ls = ["-", "--", ":", "-."]
+    for j in range(load.shape[1]):
+        for k in range(load.shape[2]):
+            ax.plot(V, load[:, j, k], ls[j % 4], color=f"C{k}", lw=0.9,
+                    label=f"pulley {j} (r = {1e3 * pulley_radii[j]:.0f} mm), harmonic {k + 1}" if k < 3 else None)
+    vc = np.asarray(crossing_speeds(length, pulley_radii, wave_speed, n_modes, harmonics))
+    ks = np.arange(1, vc.shape[2] + 1)
+    for i in range(n_modes):
+        for j in range(vc.shape[1]):
+            for k in range(vc.shape[2]):
+                if vc[i, j, k] <= vmax:
+                    f = ks[k] * vc[i, j, k] / pulley_radii[j] / (2 * np.pi)
+                    ax.plot(vc[i, j, k], f, "o", color="C3", ms=4)
+                    if j == 0 and k == 0:
+                        ax.annotate(f"{vc[i, j, k]:.2f} m/s", (vc[i, j, k], f), textcoords="offset points",
+                                    xytext=(4, -10), fontsize=7)
+    ax.set_xlim(0, vmax)
+    ax.set_ylim(0, 1.05 * nat[0, -1])
+    ax.set_xlabel("running speed V [m/s]")
+    ax.set_ylabel("frequency [Hz]")
+    ax.set_title("Frequency crossing diagram")
+    ax.legend(fontsize=7)
+    return ax
+
+
+def plot_runout_response(length=0.86, wave_speed=41.0, pulley_radii=(0.063, 0.063), runouts=(0.355e-3, 0.21e-3),
+                         phase=np.radians(240.0), damping_ratio=0.01, position=0.01, max_speed=None, mid_span=True,
+                         ax=None):
+    """Moon & Wickert, Fig. 5(b): linear steady peak-to-peak response [mm] against running speed."""
+    ax = _ax(ax)
+    vmax = 0.55 * wave_speed if max_speed is None else max_speed
+    V = np.linspace(0.05, vmax, 1500)
+    pp = np.asarray(linear_runout_response(jnp.asarray(V), length, wave_speed, pulley_radii, runouts, phase,
+                                           damping_ratio, position))
+    ax.semilogy(V, 1e3 * pp, label=f"ζ = {damping_ratio:g}, x = {1e3 * position:.0f} mm")
+    if mid_span:
+        pq = np.asarray(linear_runout_response(jnp.asarray(V), length, wave_speed, pulley_radii, runouts, phase,
+                                               damping_ratio, length / 4))
+        ax.semilogy(V, 1e3 * pq, lw=0.9, label=f"ζ = {damping_ratio:g}, x = L/4")
+    vc = np.asarray(crossing_speeds(length, pulley_radii, wave_speed, 3))
+    for v in np.unique(np.round(vc.ravel(), 9)):
+        if v <= vmax:
+            ax.axvline(v, color="C3", lw=0.6, ls=":")
+    ax.set_xlim(0, vmax)
+    ax.set_xlabel("running speed V [m/s]")
+    ax.set_ylabel("peak-to-peak displacement [mm]")
+    ax.set_title("Linear response to pulley run-out")
+    ax.legend(fontsize=8)
+    return ax
+
+
+def string_figure(contact_radius: float = 0.025):
+    """All figures of the scene on one page (the `jaxbelt string` CLI figure)."""
+    fig, axs = plt.subplots(2, 3, figsize=(16, 9.5))
+    plot_contact_pressure(BeltPulleyContact(radius=contact_radius), ax=axs[0, 0])
+    plot_frequency_harmonics(ax=axs[0, 1])
+    plot_exciting_speeds(ax=axs[0, 2])
+    plot_crossing_diagram(ax=axs[1, 0])
+    plot_runout_response(ax=axs[1, 1])
+    _galerkin_panel(axs[1, 2])
+    fig.tight_layout()
+    return fig
+
+
+def _galerkin_panel(ax, speed: float = 20.0):
+    """Relative error of the Galerkin frequencies against eq. (39) versus the number of sine modes."""
+    span = MovingString()
+    exact = np.asarray(span.natural_frequencies(speed, 3))
+    Ns = [4, 8, 16, 32, 64]
+    err = np.array([np.abs(np.asarray(span.galerkin_frequencies(speed, N, 3)) - exact) / exact for N in Ns])
+    for i in range(3):
+        ax.loglog(Ns, err[:, i], "o-", label=f"mode {i + 1}")
+    ax.loglog(Ns, 0.5 * err[0, 0] * (np.array(Ns) / Ns[0]) ** -3.0, "k:", label="N^-3")
+    ax.set_xticks(Ns, [str(n) for n in Ns])
+    ax.minorticks_off()
+    ax.set_xlabel("number of sine modes N")
+    ax.set_ylabel("relative frequency error")
+    ax.set_title(f"Galerkin vs eq. (39), V = {speed:g} m/s")
+    ax.legend(fontsize=8)
+    return ax

@@ -1,0 +1,306 @@
+"""Belt spans (seeds 002 and 004): each test checks jaxbelt against an independent reference."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+import jaxbelt as jb
+from jaxbelt.models.string import TABLE2_COMPUTED_RPM, _exact_phasor
+
+RPM = 30.0 / np.pi
+T, RHO, L, RU = 140.0, 0.05, 0.2621, 0.1166
+
+
+@pytest.fixture(scope="module")
+def span():
+    return jb.MovingString(tension=T, density=RHO, length=L)
+
+
+# --- moving string (seed 002) ---------------------------------------------------------------------
+def test_contract_calls(span):
+    assert float(span.critical_speed) == pytest.approx(np.sqrt(140.0 / 0.05), rel=1e-14)
+    V = np.linspace(0, 50, 1001)
+    w = span.natural_frequencies(speed=jnp.asarray(V), n_modes=3)
+    assert w.shape == (1001, 3)
+    vc = np.sqrt(T / RHO)
+    ref = np.outer(vc * (1 - V**2 / vc**2), np.arange(1, 4) * np.pi / L)  # eq. (39) in numpy
+    np.testing.assert_allclose(np.asarray(w), ref, rtol=1e-13)
+    # vmap over speed gives the same numbers as the broadcast call
+    wv = jax.vmap(lambda v: span.natural_frequencies(v, 3))(jnp.asarray(V))
+    np.testing.assert_allclose(np.asarray(wv), ref, rtol=1e-13)
+    assert float(jb.exciting_speeds(span, pulley_radius=0.1166, n=1, m=8)) * RPM == pytest.approx(735, abs=1.0)
+
+
+@pytest.mark.parametrize("nm", sorted(TABLE2_COMPUTED_RPM))
+def test_table2_computed_column(span, nm):
+    n, m = nm
+    got = float(jb.exciting_speeds(span, RU, n, m)) * RPM
+    assert abs(got - TABLE2_COMPUTED_RPM[nm]) <= 1.0
+
+
+def test_exciting_speeds_solve_eq54(span):
+    n = np.array([1, 1, 2, 3, 5])[:, None]
+    m = np.array([1, 3, 9, 40])[None, :]
+    wu = np.asarray(jb.exciting_speeds(span, RU, n, m))
+    assert wu.shape == (5, 4)
+    vc = np.sqrt(T / RHO)
+    rhs = n * np.pi / L * vc * (1 - (wu * RU) ** 2 / vc**2)  # eq. (51) at V = omega_U R_U
+    np.testing.assert_allclose(m * wu, rhs, rtol=1e-12)
+
+
+def test_galerkin_converges_to_eq39(span):
+    V = 30.0
+    exact = np.asarray(span.natural_frequencies(V, 3))
+    errs = []
+    for N in (6, 12, 24, 48):
+        g = np.asarray(span.galerkin_frequencies(V, N, 3))
+        errs.append(np.max(np.abs(g - exact) / exact))
+    errs = np.array(errs)
+    assert errs[-1] < 2e-5
+    assert np.all(np.diff(errs) < 0)
+    order = np.log2(errs[:-1] / errs[1:])
+    assert np.all(order > 2.5)  # observed ~3 (sine coefficients of the gyroscopic coupling fall as 1/k)
+    # at rest G = 0 and the sine basis is exact
+    np.testing.assert_allclose(np.asarray(span.galerkin_frequencies(0.0, 6, 3)),
+                               np.asarray(span.natural_frequencies(0.0, 3)), rtol=1e-12)
+
+
+def test_galerkin_vs_scipy_quadratic_eigenproblem(span):
+    from scipy.linalg import eig
+
+    V, N = 25.0, 12
+    M, G, K = (np.asarray(a) for a in span.galerkin_matrices(V, N))
+    Z, I = np.zeros((N, N)), np.eye(N)
+    # generalised linearisation [[0, I], [-K, -G]] x = lam [[I, 0], [0, M]] x
+    lam = eig(np.block([[Z, I], [-K, -G]]), np.block([[I, Z], [Z, M]]), right=False)
+    ref = np.sort(np.abs(lam.imag))[::2][:3]
+    np.testing.assert_allclose(np.asarray(span.galerkin_frequencies(V, N, 3)), ref, rtol=1e-10)
+
+
+@pytest.mark.parametrize("n", [1, 2, 3])
+def test_mode_shape_solves_eq24(span, n):
+    V = 21.0
+    vc = float(span.critical_speed)
+
+    def y(x, t):
+        return span.mode_shape(x, t, V, n, b1=0.7, b2=-0.3)
+
+    y_t = jax.grad(y, 1)
+    y_x = jax.grad(y, 0)
+    y_tt = jax.grad(y_t, 1)
+    y_xt = jax.grad(y_t, 0)
+    y_xx = jax.grad(y_x, 0)
+    for x, t in [(0.05, 0.0), (0.13, 0.011), (0.2, 0.3)]:
+        res = y_tt(x, t) + 2 * V * y_xt(x, t) + (V**2 - vc**2) * y_xx(x, t)
+        scale = abs(y_tt(x, t)) + abs(vc**2 * y_xx(x, t))
+        assert abs(float(res)) < 1e-10 * float(scale)
+    for t in (0.0, 0.004, 0.17):
+        assert abs(float(y(0.0, t))) < 1e-12 and abs(float(y(L, t))) < 1e-12
+
+
+# --- crossing diagram (seed 004) ------------------------------------------------------------------
+def test_crossing_speeds_moon_wickert():
+    vc = np.asarray(jb.crossing_speeds(length=0.86, pulley_radii=(0.063, 0.063), wave_speed=41.0, n_modes=2))
+    assert vc.shape == (2, 2, 1)
+    np.testing.assert_allclose(vc[0], 9.0, atol=0.05)
+    np.testing.assert_allclose(vc[1], 16.0, atol=0.1)
+
+
+def test_crossing_speeds_vs_brentq():
+    Lm, r, vt = 0.86, (0.063, 0.045), 41.0
+    vc = np.asarray(jb.crossing_speeds(Lm, r, vt, n_modes=4, harmonics=(1, 2, 3)))
+    for i, n in enumerate(range(1, 5)):
+        for j, rj in enumerate(r):
+            for k, h in enumerate((1, 2, 3)):
+                ref = brentq(lambda V: n * np.pi / Lm * vt * (1 - V**2 / vt**2) - h * V / rj, 0, vt, xtol=1e-14)
+                assert vc[i, j, k] == pytest.approx(ref, rel=1e-12)
+
+
+def test_crossing_is_exciting_speed(span):
+    # harmonic m of a pulley of radius R_U meets mode n at V = omega_U R_U (eq. 50 + 55)
+    vc = np.asarray(jb.crossing_speeds(L, (RU,), span.critical_speed, n_modes=3, harmonics=9))
+    wu = np.asarray(jb.exciting_speeds(span, RU, np.arange(1, 4)[:, None], np.arange(1, 10)[None, :]))
+    np.testing.assert_allclose(vc[:, 0, :], wu * RU, rtol=1e-12)
+
+
+def test_crossing_gradient_fd_and_vmap():
+    @jax.jit
+    def f(vt):
+        return jb.crossing_speeds(0.86, (0.063, 0.063), vt, 2)[1, 0, 0]
+
+    g = jax.grad(f)(41.0)
+    h = 1e-4
+    fd = (f(41.0 + h) - f(41.0 - h)) / (2 * h)
+    assert float(g) == pytest.approx(float(fd), rel=1e-7)
+    vts = jnp.array([35.0, 41.0, 48.0])
+    gv = jax.vmap(jax.grad(f))(vts)
+    fdv = jnp.array([(f(v + h) - f(v - h)) / (2 * h) for v in vts])
+    np.testing.assert_allclose(np.asarray(gv), np.asarray(fdv), rtol=1e-7)
+
+
+def test_crossing_diagram_shapes_and_values():
+    V = jnp.linspace(0, 20, 7)
+    nat, load = jb.crossing_diagram(V, 0.86, (0.063, 0.05), 41.0, n_modes=5, harmonics=3)
+    assert nat.shape == (7, 5) and load.shape == (7, 2, 3)
+    np.testing.assert_allclose(np.asarray(load[:, 1, 2]), 3 * np.asarray(V) / 0.05, rtol=1e-14)
+    ref = 5 * np.pi / 0.86 * 41.0 * (1 - (np.asarray(V) / 41) ** 2)
+    np.testing.assert_allclose(np.asarray(nat[:, 4]), ref, rtol=1e-13)
+
+
+# --- linear forced response -----------------------------------------------------------------------
+MW = dict(length=0.86, wave_speed=41.0, pulley_radii=(0.063, 0.063), runouts=(0.355e-3, 0.21e-3), phase=np.radians(240))
+
+
+@pytest.mark.parametrize("V", [2.0, 6.5, 12.0, 19.0])
+@pytest.mark.parametrize("x", [0.01, 0.3, 0.61])
+def test_modal_response_matches_travelling_wave_solution(V, x):
+    """Undamped modal sum vs the exact two-wave solution of the boundary-value problem (numpy)."""
+    Lm, vt, r, e, ph = MW["length"], MW["wave_speed"], MW["pulley_radii"][0], MW["runouts"], MW["phase"]
+    v, Om = V / vt, V / r * Lm / vt
+    ref = _exact_phasor(v, Om, -1j * e[0] / Lm, -1j * e[1] * np.exp(1j * ph) / Lm, x / Lm) * Lm
+    W0, W1 = jb.runout_phasors(V, position=x, damping_ratio=0.0, n_modes=256, **MW)
+    assert abs(complex(W0 + W1) - complex(ref)) < 1e-5 * abs(ref)
+    pp = float(jb.linear_runout_response(V, position=x, n_modes=256, **MW))
+    assert pp == pytest.approx(2 * abs(ref), rel=1e-5)
+    W0, W1 = jb.runout_phasors(V, position=x, damping_ratio=0.0, n_modes=64, **MW)
+    assert abs(complex(W0 + W1) - complex(ref)) < 1e-4 * abs(ref)
+
+
+def test_modal_response_at_the_pulley_is_the_runout():
+    # at x = 0 only pulley 0 moves the belt: peak-to-peak = 2 e0
+    pp = jb.linear_runout_response(jnp.array([3.0, 11.0]), position=0.0, damping_ratio=0.02, **MW)
+    np.testing.assert_allclose(np.asarray(pp), 0.71e-3, rtol=1e-12)
+
+
+def test_response_gradient_fd():
+    @jax.jit
+    def f(V):
+        return jb.linear_runout_response(V, position=0.2, damping_ratio=0.02, n_modes=16, **MW)
+
+    for V in (5.0, 12.0):
+        h = 1e-4
+        fd = (f(V + h) - f(V - h)) / (2 * h)
+        assert float(jax.jit(jax.grad(f))(V)) == pytest.approx(float(fd), rel=1e-6)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("V", [4.0, 12.5])
+def test_modal_response_matches_galerkin_time_simulation(V):
+    """Formula vs a diffrax run of the 24-mode Galerkin model to steady state: within 1 % (off resonance)."""
+    kw = dict(MW, damping_ratio=0.05, position=0.25)
+    ref = float(jb.simulate_runout_response(V, n_basis=24, **kw))
+    got = float(jb.linear_runout_response(V, **kw))
+    assert got == pytest.approx(ref, rel=0.01)
+
+
+def test_different_radii_peak_to_peak_is_sum_of_amplitudes():
+    kw = dict(MW, pulley_radii=(0.063, 0.05), damping_ratio=0.01, position=0.3)
+    W0, W1 = jb.runout_phasors(7.0, **kw)
+    pp = jb.linear_runout_response(7.0, **kw)
+    # long-time max - min of Re(W0 e^{i a t} + W1 e^{i b t}) with incommensurate a, b
+    t = np.linspace(0, 4000, 2_000_001)
+    sig = np.real(complex(W0) * np.exp(1j * t) + complex(W1) * np.exp(1j * np.sqrt(2) * t))
+    assert float(pp) == pytest.approx(sig.max() - sig.min(), rel=1e-3)
+
+
+# --- contact (seed 002) ---------------------------------------------------------------------------
+def test_contact_pressure_and_separation():
+    c = jb.BeltPulleyContact(radius=0.025)
+    w = 15000 / RPM
+    tc = 0.05 * 0.025**2 * w**2
+    assert float(c.centrifugal_tension(w)) == pytest.approx(tc, rel=1e-14)
+    a = np.linspace(0, 2.094, 9)
+    tension = 120 + (140 - 120) * a / 2.094  # eq. (9)
+    np.testing.assert_allclose(np.asarray(c.pressure(a, w)), (tension - tc) / 0.025, rtol=1e-13)
+    assert np.all(np.asarray(c.pressure(a, w)) > 0)  # Fig. 40: no separation at 15000 rpm
+    ws = float(c.separation_speed())
+    ref = brentq(lambda om: float(c.pressure(0.0, om)), 1.0, 1e5, xtol=1e-12)
+    assert ws == pytest.approx(ref, rel=1e-10)
+    assert float(c.separation_angle()) == 0.0
+
+
+def test_slip_margin_and_report():
+    c = jb.BeltPulleyContact(radius=0.025)
+    lim = np.exp(0.2 * 2.094)
+    for w in (0.0, 800.0, 1570.8):
+        tc = 0.05 * 0.025**2 * w**2
+        assert float(c.slip_margin(w)) == pytest.approx((120 - tc) * lim - (140 - tc), rel=1e-12)
+        rep = c.check_slip(w)
+        assert rep.ok and rep.ratio == pytest.approx((140 - tc) / (120 - tc), rel=1e-12)
+    # the speed at which eq. (8) becomes an equality, by scipy
+    w_slip = brentq(lambda om: (140 - 0.05 * 0.025**2 * om**2) / (120 - 0.05 * 0.025**2 * om**2) - lim, 1.0, 1700.0)
+    assert c.slip_report(0.999 * w_slip).ok
+    with pytest.raises(jb.SlipError, match=r"slips.*N too high.*at least"):
+        c.check_slip(1.001 * w_slip)
+    # tight tension beyond the limit: the report says by how much (in N and in needed friction)
+    c2 = jb.BeltPulleyContact(radius=0.025, tight_tension=200.0)
+    rep = c2.slip_report(0.0)
+    assert not rep.ok
+    assert -rep.margin == pytest.approx(200 - 120 * lim, rel=1e-12)
+    assert rep.required_friction == pytest.approx(np.log(200 / 120) / 2.094, rel=1e-12)
+    with pytest.raises(jb.SlipError, match="too high"):
+        c2.check_slip(0.0)
+    # beyond separation of the slack side: no friction left at all
+    with pytest.raises(jb.SlipError, match="no friction"):
+        c.check_slip(1.1 * float(c.separation_speed()))
+
+
+def test_slip_margin_gradient_fd():
+    def f(R):
+        return jb.BeltPulleyContact(radius=R).slip_margin(1500.0)
+
+    h = 1e-7
+    assert float(jax.grad(f)(0.025)) == pytest.approx(float((f(0.025 + h) - f(0.025 - h)) / (2 * h)), rel=1e-6)
+
+
+# --- errors ---------------------------------------------------------------------------------------
+def test_errors_speed_at_or_above_critical(span):
+    vc = float(span.critical_speed)
+    for bad in (vc, 60.0, -vc):
+        with pytest.raises(ValueError, match="critical speed"):
+            span.natural_frequencies(bad, 2)
+    with pytest.raises(ValueError, match="critical speed"):
+        span.natural_frequencies(jnp.array([1.0, 70.0]), 2)
+    with pytest.raises(ValueError, match="critical speed"):
+        jb.linear_runout_response(41.0, **MW)
+    with pytest.raises(ValueError, match="critical speed"):
+        jb.crossing_diagram(jnp.array([50.0]), 0.86, (0.063,), 41.0)
+    with pytest.raises(Exception, match="critical speed"):
+        jax.jit(lambda v: span.natural_frequencies(v, 2))(60.0).block_until_ready()
+
+
+@pytest.mark.parametrize("kw,name", [
+    (dict(tension=0.0), "tension"), (dict(tension=-5.0), "tension"),
+    (dict(density=0.0), "density"), (dict(density=-0.05), "density"), (dict(length=0.0), "length"),
+])
+def test_errors_string_parameters(kw, name):
+    with pytest.raises(ValueError, match=name):
+        jb.MovingString(**kw)
+
+
+@pytest.mark.parametrize("theta", [0.0, -0.1, 2 * np.pi, 7.0])
+def test_errors_wrap_angle(theta):
+    with pytest.raises(ValueError, match=r"wrap_angle.*\(0, 6.28319\)"):
+        jb.BeltPulleyContact(radius=0.03, wrap_angle=theta)
+
+
+@pytest.mark.parametrize("kw,name", [
+    (dict(slack_tension=0.0), "slack_tension"), (dict(tight_tension=-1.0), "tight_tension"),
+    (dict(density=0.0), "density"), (dict(radius=0.0), "radius"),
+])
+def test_errors_contact_parameters(kw, name):
+    args = dict(radius=0.03)
+    args.update(kw)
+    with pytest.raises(ValueError, match=name):
+        jb.BeltPulleyContact(**args)
+
+
+def test_errors_response_inputs():
+    with pytest.raises(ValueError, match="position"):
+        jb.linear_runout_response(5.0, position=1.0, **MW)
+    with pytest.raises(ValueError, match="damping_ratio"):
+        jb.linear_runout_response(5.0, damping_ratio=-0.1, **MW)
+    with pytest.raises(ValueError, match="pulley_radii"):
+        jb.crossing_speeds(0.86, (0.063, 0.0), 41.0)
