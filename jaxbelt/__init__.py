@@ -19,3 +19,16 @@ from .solve import SolveError as SolveError  # noqa: E402
 from .solve import simulate as simulate  # noqa: E402
 
 __version__ = "0.1.0"
+from .models.nonlinear import NonlinearBelt as NonlinearBelt  # noqa: E402
+from .models.nonlinear import RunningSpeed as RunningSpeed  # noqa: E402
+from .nonlinear_sweep import SteadyStateError as SteadyStateError  # noqa: E402
+from .nonlinear_sweep import speed_sweep as speed_sweep  # noqa: E402
+from .nonlinear_sweep import sweep as nonlinear_sweep  # noqa: E402
+from .nonlinear_sweep import steady_state as nonlinear_steady_state  # noqa: E402
+from .nonlinear_sweep import basins as nonlinear_basins  # noqa: E402
+from .nonlinear_sweep import trajectory as nonlinear_trajectory  # noqa: E402
+from .nonlinear_kbm import backbone_frequency as backbone_frequency  # noqa: E402
+from .nonlinear_kbm import backbone_amplitude as backbone_amplitude  # noqa: E402
+from .nonlinear_kbm import backbone_speed as backbone_speed  # noqa: E402
+from .nonlinear_kbm import amplitude_coefficients as kbm_coefficients  # noqa: E402
+from .nonlinear_kbm import steady_amplitudes as kbm_amplitudes  # noqa: E402
