@@ -198,7 +198,7 @@ def _check_common(belt, speeds, at):
             raise ValueError(
                 f"steady state needs a running speed > 0 m/s (the pulleys must turn); got {s[s <= 0].tolist()} m/s"
             )
-    if is_concrete(at) and is_concrete(belt.span):
+    if at is not None and is_concrete(at) and is_concrete(belt.span):
         a = float(np.asarray(at))
         if not (0 < a < float(np.max(np.asarray(belt.span)))):
             raise ValueError(f"measurement point `at` must lie inside the span (0, {float(belt.span):g}) m; got {a}")
@@ -341,7 +341,7 @@ def _trajectory_jit(belt, speed, z0, *, periods, steps_per_period):
 def trajectory(belt: NonlinearBelt, speed, z0=None, periods: int = 200, steps_per_period: int = 64):
     """Modal state history from `z0` at a fixed speed: `(t [s], zs (periods*steps+1, 2N))`,
     for phase-plane plots ($\\zeta^R_1$ against $\\zeta^I_1$, Fig. 6)."""
-    _check_common(belt, speed, 0.01 if belt.span.size == 1 and float(belt.span) > 0.01 else belt.span / 2)
+    _check_common(belt, speed, None)
     sys = belt.modal(speed)
     if is_concrete(sys.omega):
         need = int(np.ceil(2 * np.pi / float(sys.Omega[0]) * float(sys.omega[-1]) / 0.25))
