@@ -97,7 +97,10 @@ def nonlinear_figure(belt: NonlinearBelt | None = None, *, quick: bool = False, 
                        runout=belt.runout, phase=belt.phase, damping=belt.damping, n_modes=1)
     fig, axes = plt.subplots(2, 3, figsize=(15, 8.5))
     step = 0.25 if quick else 0.1
-    speeds = jnp.arange(0.5, 17.0 + 1e-9, step)
+    fine = 0.05 if quick else 0.02  # the hysteresis band near the first crossing is narrow
+    c1 = float(belt.crossing_speeds(1)[0])
+    speeds = jnp.concatenate([jnp.arange(0.5, c1 - 0.5, step), jnp.arange(c1 - 0.5, c1 + 1.0, fine),
+                              jnp.arange(c1 + 1.0, 17.0 + 1e-9, step)])
     up, dn = response_sweeps(b2, speeds)
     plot_speed_response(axes[0, 0], speeds, up.pp, dn.pp)
     band = jnp.linspace(8.8, 9.8, 11 if quick else 26)
