@@ -209,10 +209,10 @@ def test_nonconvergence_names_speed():
 
 def test_simulate_scene_matches_sweep_integrator():
     """`simulate` (diffrax Tsit5, rtol 1e-10, physical time) of the model's vector field agrees
-    with the fixed-step RK4 of the sweeps (128 steps per forcing period) to 1e-6."""
+    with the fixed-step RK4 of the sweeps (128 steps per forcing period) to 1e-5 of the amplitude."""
     b = belt()
     t2, zs = jb.nonlinear_trajectory(b, 9.0, periods=20, steps_per_period=128)
     idx = np.arange(0, t2.shape[0], 128)
     sol = jb.simulate(jb.Scene(b, jb.RunningSpeed(9.0), t2[idx]), method="ode", rtol=1e-10, atol=1e-14)
     scale = float(jnp.max(jnp.abs(zs)))
-    np.testing.assert_allclose(np.asarray(sol.ys), np.asarray(zs[idx]), atol=1e-6 * scale)
+    np.testing.assert_allclose(np.asarray(sol.ys), np.asarray(zs[idx]), atol=1e-5 * scale)
