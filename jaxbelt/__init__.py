@@ -32,3 +32,16 @@ from .models import exciting_speeds as exciting_speeds  # noqa: E402
 from .models import linear_runout_response as linear_runout_response  # noqa: E402
 from .models import runout_phasors as runout_phasors  # noqa: E402
 from .models import simulate_runout_response as simulate_runout_response  # noqa: E402
+from .models.nonlinear import NonlinearBelt as NonlinearBelt  # noqa: E402
+from .models.nonlinear import RunningSpeed as RunningSpeed  # noqa: E402
+from .nonlinear_sweep import SteadyStateError as SteadyStateError  # noqa: E402
+from .nonlinear_sweep import speed_sweep as speed_sweep  # noqa: E402
+from .nonlinear_sweep import sweep as nonlinear_sweep  # noqa: E402
+from .nonlinear_sweep import steady_state as nonlinear_steady_state  # noqa: E402
+from .nonlinear_sweep import basins as nonlinear_basins  # noqa: E402
+from .nonlinear_sweep import trajectory as nonlinear_trajectory  # noqa: E402
+from .nonlinear_kbm import backbone_frequency as backbone_frequency  # noqa: E402
+from .nonlinear_kbm import backbone_amplitude as backbone_amplitude  # noqa: E402
+from .nonlinear_kbm import backbone_speed as backbone_speed  # noqa: E402
+from .nonlinear_kbm import amplitude_coefficients as kbm_coefficients  # noqa: E402
+from .nonlinear_kbm import steady_amplitudes as kbm_amplitudes  # noqa: E402

@@ -15,3 +15,5 @@ from .string import galerkin_runout_system as galerkin_runout_system
 from .string import linear_runout_response as linear_runout_response
 from .string import runout_phasors as runout_phasors
 from .string import simulate_runout_response as simulate_runout_response
+from .nonlinear import NonlinearBelt as NonlinearBelt  # noqa: E402
+from .nonlinear import RunningSpeed as RunningSpeed  # noqa: E402

@@ -7,3 +7,4 @@ from .string import plot_exciting_speeds as plot_exciting_speeds
 from .string import plot_frequency_harmonics as plot_frequency_harmonics
 from .string import plot_runout_response as plot_runout_response
 from .string import string_figure as string_figure
+from .nonlinear import nonlinear_figure as nonlinear_figure  # noqa: E402

@@ -1,0 +1,295 @@
+"""Non-linear travelling belt driven by eccentric pulleys: the Galerkin model of seed 004.
+
+Moon & Wickert, *Non-linear vibration of power transmission belts*, J. Sound Vib. 200(4), 1997.
+
+## Governing equation (dimensionless, eq. 2 as corrected in NOTES.md)
+
+Lengths are scaled by the span $L$, the transverse displacement $w$ by $L$, the running speed
+by the transverse wave speed $v_t = \\sqrt{P/\\rho A}$ ($v = V/v_t$) and time by $L/v_t$:
+
+$w_{,tt} + 2v\\,w_{,xt} + (v^2 - 1)\\,w_{,xx} = \\tfrac{v_l^2}{2}\\,w_{,xx}\\int_0^1 w_{,x}^2\\,dx$   (eq. 2)
+
+with $v_l = c/v_t$ the longitudinal-to-transverse wave speed ratio, and the pulley run-out
+boundary conditions (eq. 3)
+
+$w(0,t) = e_0\\sin\\theta_0(t)$, $w(1,t) = e_1\\sin\\theta_1(t)$, $\\theta_0 = \\Omega_0 t$,
+$\\theta_1 = \\Omega_1 t + \\phi$, $\\Omega_i = v L / r_i$, $e_i = \\varepsilon_i / L$,
+
+where $\\varepsilon_i$ is the eccentricity (half the peak-to-peak run-out) of pulley $i$. Pulley 0
+(at $x = 0$) is the driven pulley next to which the response is measured.
+
+## Boundary-shift substitution and the forcing (replaces the garbled eq. 6)
+
+Write $w = u + b$ with the quasi-static boundary motion
+$b(x,t) = e_0\\sin\\theta_0\\,(1 - x) + e_1\\sin\\theta_1\\,x$, so $u(0,t) = u(1,t) = 0$. Since
+$b_{,xx} = 0$ and $b_{,x} = d(t) := e_1\\sin\\theta_1 - e_0\\sin\\theta_0$ does not depend on $x$,
+
+- linear part: $u_{,tt} + 2v u_{,xt} + (v^2-1)u_{,xx} = -b_{,tt} - 2v\\,b_{,xt}$;
+- stretching: $\\int_0^1 (u_{,x} + d)^2 dx = \\int_0^1 u_{,x}^2 dx + d^2$, because
+  $\\int_0^1 u_{,x}\\,dx = u(1) - u(0) = 0$.
+
+Hence $M u_{,tt} + G u_{,t} + K u = f(x,t) + N(u)$ (eq. 7) with $M = I$, $G = 2v\\partial_x$,
+$K = -(1-v^2)\\partial_x^2$ (eq. 4),
+
+$f(x,t) = e_0\\Omega_0^2\\sin\\theta_0\\,(1-x) + e_1\\Omega_1^2\\sin\\theta_1\\,x
+          - 2v\\,(e_1\\Omega_1\\cos\\theta_1 - e_0\\Omega_0\\cos\\theta_0)$,
+
+$N(u) = \\tfrac{v_l^2}{2}\\,u_{,xx}\\left(\\int_0^1 u_{,x}^2 dx + d(t)^2\\right)$ (eq. 5 plus a
+small parametric term $d^2$ that the exact substitution produces).
+
+## Galerkin model in the complex modes (eq. 34-36, generalised to N modes)
+
+The free linear modes are $\\psi_n = \\sqrt2\\sin(n\\pi x)e^{in\\pi v x}$, $\\omega_n = n\\pi(1-v^2)$,
+$\\langle\\psi_n,\\psi_n\\rangle = 1$. In the first-order form $A\\dot y + B y = F$,
+$y = (u_{,t}, u)$, $A = \\mathrm{diag}(M, K)$, $B = [[G, K], [-K, 0]]$, the real and imaginary
+parts of the state eigenvectors $(i\\omega_n\\psi_n, \\psi_n)$ are $A$-orthogonal with norm
+$\\mu_n = \\omega_n^2\\|\\psi^I_n\\|^2 + (1-v^2)\\|\\psi^{R\\prime}_n\\|^2 = (n\\pi)^2(1-v^2)$.
+Expanding $u = \\sum_n \\zeta^R_n\\psi^R_n + \\zeta^I_n\\psi^I_n$ (eq. 34) and projecting gives
+
+$\\dot\\zeta^R_n = \\omega_n\\zeta^I_n - \\xi\\omega_n\\zeta^R_n - (\\omega_n/\\mu_n)\\langle\\psi^I_n, f + N\\rangle$,
+
+$\\dot\\zeta^I_n = -\\omega_n\\zeta^R_n - \\xi\\omega_n\\zeta^I_n + (\\omega_n/\\mu_n)\\langle\\psi^R_n, f + N\\rangle$,
+
+(eq. 35-36; their cubic right-hand sides are the projections of $N$). $\\xi$ is the modal damping
+ratio: each complex mode decays as $e^{-\\xi\\omega_n t}$ (the paper adds "small numerical modal
+damping" to reach the steady state). With $\\Phi = (\\psi^R_1..\\psi^R_N, \\psi^I_1..\\psi^I_N)$,
+$z = (\\zeta^R, \\zeta^I)$ and $S_{jk} = \\int_0^1\\Phi_j'\\Phi_k'\\,dx$, integration by parts
+gives $\\langle\\Phi, N\\rangle = -\\tfrac{v_l^2}{2}(z^T S z + d^2)\\,S z$. All inner products are
+evaluated by Gauss-Legendre quadrature.
+
+The displacement at a point is $w(x, t) = \\sum_n (\\zeta^R_n\\psi^R_n(x) + \\zeta^I_n\\psi^I_n(x))
++ b(x, t)$ (dimensionless; multiply by $L$ for metres).
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from .._checks import check_nonnegative, check_positive, check_range, is_concrete
+from .base import AbstractModel
+
+
+def _arr(x):
+    return jnp.asarray(x, dtype=float)
+
+
+def _pair(x):
+    return jnp.broadcast_to(jnp.asarray(x, dtype=float), (2,))
+
+
+class RunningSpeed(eqx.Module):
+    """Input of a `NonlinearBelt` scene: the constant belt running speed $V$ [m/s]."""
+
+    speed: jnp.ndarray = eqx.field(converter=_arr)
+
+    def __call__(self, t):
+        return self.speed
+
+
+class ModalSystem(eqx.Module):
+    """The dimensionless N-mode Galerkin system of a `NonlinearBelt` at one running speed.
+
+    Built by `NonlinearBelt.modal(speed)`; all arrays are dimensionless (time in $L/v_t$).
+    `rhs(tau, z, theta00)` is the vector field in $\\tau$ with the drive-pulley angle
+    $\\theta_0 = \\theta_{00} + \\Omega_0\\tau$.
+    """
+
+    v: jnp.ndarray  # running speed / transverse wave speed
+    omega: jnp.ndarray  # (N,) natural frequencies n pi (1 - v^2)
+    mu: jnp.ndarray  # (N,) A-norms of the state eigenvectors
+    S: jnp.ndarray  # (2N, 2N) int Phi_j' Phi_k' dx
+    P: jnp.ndarray  # (2N, 3) projections of the forcing shapes (1 - x, x, 1)
+    Omega: jnp.ndarray  # (2,) pulley rotation rates L v / r_i
+    e: jnp.ndarray  # (2,) dimensionless eccentricities
+    phase: jnp.ndarray
+    damping: jnp.ndarray
+    v_l: jnp.ndarray
+
+    @property
+    def n_modes(self) -> int:
+        return self.omega.shape[0]
+
+    def angles(self, tau, theta00):
+        th0 = theta00 + self.Omega[0] * tau
+        th1 = (theta00 + self.Omega[0] * tau) * self.Omega[1] / self.Omega[0] + self.phase
+        return th0, th1
+
+    def boundary(self, x, tau, theta00):
+        """Quasi-static boundary motion $b(x, \\tau)$ (dimensionless)."""
+        th0, th1 = self.angles(tau, theta00)
+        return self.e[0] * jnp.sin(th0) * (1.0 - x) + self.e[1] * jnp.sin(th1) * x
+
+    def rhs(self, tau, z, theta00):
+        n = self.n_modes
+        th0, th1 = self.angles(tau, theta00)
+        s0, s1 = jnp.sin(th0), jnp.sin(th1)
+        e0, e1 = self.e
+        W0, W1 = self.Omega
+        d = e1 * s1 - e0 * s0
+        q = jnp.stack([
+            e0 * W0**2 * s0,
+            e1 * W1**2 * s1,
+            -2.0 * self.v * (e1 * W1 * jnp.cos(th1) - e0 * W0 * jnp.cos(th0)),
+        ])
+        Sz = self.S @ z
+        gen = self.P @ q - 0.5 * self.v_l**2 * (z @ Sz + d**2) * Sz  # <Phi_j, f + N>
+        zr, zi = z[:n], z[n:]
+        k = self.omega / self.mu
+        dzr = self.omega * zi - self.damping * self.omega * zr - k * gen[n:]
+        dzi = -self.omega * zr - self.damping * self.omega * zi + k * gen[:n]
+        return jnp.concatenate([dzr, dzi])
+
+
+def mode_shapes(x, v, n_modes: int):
+    """Complex modes $\\psi_n(x) = \\sqrt2\\sin(n\\pi x)e^{in\\pi vx}$ and $\\psi_n'(x)$, shape (N, len(x))."""
+    x = jnp.asarray(x, dtype=float)
+    k = jnp.pi * jnp.arange(1, n_modes + 1, dtype=float)[:, None]
+    ph = jnp.exp(1j * k * v * x)
+    s, c = jnp.sin(k * x), jnp.cos(k * x)
+    psi = jnp.sqrt(2.0) * s * ph
+    dpsi = jnp.sqrt(2.0) * k * (c + 1j * v * s) * ph
+    return psi, dpsi
+
+
+def _gauss(n_modes: int):
+    nq = 48 + 16 * n_modes
+    xg, wg = np.polynomial.legendre.leggauss(nq)
+    return jnp.asarray(0.5 * (xg + 1.0)), jnp.asarray(0.5 * wg)
+
+
+class NonlinearBelt(AbstractModel):
+    """Travelling belt span with stretching non-linearity, driven by eccentric pulleys (seed 004).
+
+    See the module docstring for the equations (eq. 1-7, 34-36 of Moon & Wickert) and the
+    derivation of the forcing. Parameters (SI; defaults: the 004 test stand):
+
+    | field | meaning | unit | default |
+    |---|---|---|---|
+    | `span` | free span length $L$ | m | 0.86 |
+    | `wave_speed` | transverse wave speed $v_t = \\sqrt{P/\\rho A}$ | m/s | 41.0 (assumed, NOTES.md) |
+    | `v_l` | longitudinal / transverse wave speed ratio | – | 50 |
+    | `pulley_radii` | $(r_0, r_1)$ driven (x = 0) and idle pulley | m | (0.063, 0.063) |
+    | `runout` | eccentricities $(\\varepsilon_0, \\varepsilon_1)$ = half the peak-to-peak run-out | m | (0.355e-3, 0.21e-3) |
+    | `phase` | phase $\\phi$ of the idle pulley's run-out | rad | 240° |
+    | `damping` | modal damping ratio $\\xi$ (0.015 puts the up-sweep jump near 9.4 m/s) | – | 0.015 |
+    | `n_modes` | number of complex modes N (static) | – | 1 |
+
+    The running speed $V$ [m/s] is given per call (`modal(speed)`, `RunningSpeed(V)` as the
+    scene input). State: $(\\zeta^R_1..\\zeta^R_N, \\zeta^I_1..\\zeta^I_N)$, dimensionless modal
+    coordinates; `vector_field` uses physical time [s]. Output `"w_drive"`: displacement [m]
+    1 cm from the driven pulley.
+    """
+
+    span: jnp.ndarray = eqx.field(converter=_arr, default=0.86)
+    wave_speed: jnp.ndarray = eqx.field(converter=_arr, default=41.0)
+    v_l: jnp.ndarray = eqx.field(converter=_arr, default=50.0)
+    pulley_radii: jnp.ndarray = eqx.field(converter=_pair, default=(0.063, 0.063))
+    runout: jnp.ndarray = eqx.field(converter=_pair, default=(0.355e-3, 0.21e-3))
+    phase: jnp.ndarray = eqx.field(converter=_arr, default=float(np.deg2rad(240.0)))
+    damping: jnp.ndarray = eqx.field(converter=_arr, default=0.015)
+    n_modes: int = eqx.field(static=True, default=1)
+
+    output_names: ClassVar[tuple[str, ...]] = ("w_drive",)
+
+    def __check_init__(self):
+        o = "NonlinearBelt"
+        if not isinstance(self.n_modes, (int, np.integer)) or isinstance(self.n_modes, bool) or self.n_modes < 1:
+            raise ValueError(f"{o}: parameter `n_modes` must be an integer >= 1; got {self.n_modes!r}")
+        check_positive("span", self.span, "m", o)
+        check_positive("wave_speed", self.wave_speed, "m/s", o)
+        check_nonnegative("v_l", self.v_l, "", o)
+        check_positive("pulley_radii", self.pulley_radii, "m", o)
+        check_nonnegative("runout", self.runout, "m", o)
+        check_range("phase", self.phase, owner=o, unit="rad")
+        check_range("damping", self.damping, 0.0, 1.0, hi_open=True, owner=o)
+        if is_concrete(self.runout) and is_concrete(self.span):
+            if np.any(np.asarray(self.runout) >= 0.1 * np.asarray(self.span)):
+                raise ValueError(
+                    f"{o}: parameter `runout` must be small against the span (< 0.1 span = "
+                    f"{0.1 * float(self.span):g} m); got {np.asarray(self.runout).tolist()}"
+                )
+
+    @property
+    def state_names(self) -> tuple[str, ...]:  # type: ignore[override]
+        n = self.n_modes
+        return tuple(f"zeta_r{i + 1}" for i in range(n)) + tuple(f"zeta_i{i + 1}" for i in range(n))
+
+    # --- speeds -------------------------------------------------------------------------
+    def check_speed(self, speed):
+        """Raise `ValueError` unless $0 \\le V < v_t$ (sub-critical); arrays are checked elementwise."""
+        if is_concrete(speed) and is_concrete(self.wave_speed):
+            s = np.atleast_1d(np.asarray(speed, dtype=float))
+            vt = float(np.max(np.asarray(self.wave_speed)))
+            bad = s[~np.isfinite(s) | (s < 0) | (s >= np.min(np.asarray(self.wave_speed)))]
+            if bad.size:
+                raise ValueError(
+                    f"NonlinearBelt: running speed must lie in [0, wave_speed) = [0, {vt:g}) m/s "
+                    f"(sub-critical travelling string); got {bad.tolist()} m/s"
+                )
+
+    def dimensionless_speed(self, speed):
+        return jnp.asarray(speed, dtype=float) / self.wave_speed
+
+    def crossing_speeds(self, n_max: int = 3):
+        """Speeds [m/s] where the drive-pulley rate $\\Omega_0 = vL/r_0$ meets $\\omega_n = n\\pi(1-v^2)$.
+
+        Root of $n\\pi v^2 + (L/r_0) v - n\\pi = 0$ for n = 1..n_max (the crossing diagram, Fig. 5).
+        """
+        n = jnp.arange(1, n_max + 1, dtype=float) * jnp.pi
+        c = self.span / self.pulley_radii[0]
+        v = (-c + jnp.sqrt(c**2 + 4 * n**2)) / (2 * n)
+        return v * self.wave_speed
+
+    def modal(self, speed) -> ModalSystem:
+        """The dimensionless Galerkin system at running speed `speed` [m/s]."""
+        self.check_speed(speed)
+        v = self.dimensionless_speed(speed)
+        v = eqx.error_if(v, (v < 0) | (v >= 1), "NonlinearBelt: running speed must be sub-critical, 0 <= V < wave_speed")
+        x, wq = _gauss(self.n_modes)
+        psi, dpsi = mode_shapes(x, v, self.n_modes)
+        Phi = jnp.concatenate([psi.real, psi.imag])
+        dPhi = jnp.concatenate([dpsi.real, dpsi.imag])
+        S = (dPhi * wq) @ dPhi.T
+        n = self.n_modes
+        omega = jnp.pi * jnp.arange(1, n + 1, dtype=float) * (1.0 - v**2)
+        mu = omega**2 * jnp.sum(wq * psi.imag**2, axis=1) + (1.0 - v**2) * jnp.sum(wq * dpsi.real**2, axis=1)
+        shapes = jnp.stack([1.0 - x, x, jnp.ones_like(x)])
+        P = (Phi * wq) @ shapes.T
+        Omega = v * self.span / self.pulley_radii
+        return ModalSystem(
+            v=v, omega=omega, mu=mu, S=S, P=P, Omega=Omega, e=self.runout / self.span,
+            phase=self.phase, damping=self.damping, v_l=self.v_l,
+        )
+
+    # --- model protocol (physical time) ---------------------------------------------------
+    def _speed_of(self, inp):
+        return inp.speed if hasattr(inp, "speed") else jnp.asarray(inp, dtype=float)
+
+    def vector_field(self, t, y, inp):
+        sys = self.modal(self._speed_of(inp))
+        scale = self.wave_speed / self.span
+        return scale * sys.rhs(t * scale, y, 0.0)
+
+    def displacement(self, x, z, tau, theta00, sys: ModalSystem):
+        """Displacement $w(x)$ [m] at dimensionless time `tau` for modal state `z`."""
+        xd = jnp.asarray(x, dtype=float) / self.span
+        psi, _ = mode_shapes(jnp.atleast_1d(xd), sys.v, self.n_modes)
+        n = self.n_modes
+        u = z[:n] @ psi.real + z[n:] @ psi.imag
+        return self.span * (u + sys.boundary(jnp.atleast_1d(xd), tau, theta00)).reshape(jnp.shape(xd))
+
+    def _out_w_drive(self, t, y, inp):
+        sys = self.modal(self._speed_of(inp))
+        return self.displacement(0.01, y, t * self.wave_speed / self.span, 0.0, sys)
+
+    def default_solver(self):
+        import diffrax
+
+        return diffrax.Tsit5()
+
+
+__all__ = ["NonlinearBelt", "ModalSystem", "RunningSpeed", "mode_shapes"]

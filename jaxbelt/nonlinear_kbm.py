@@ -1,0 +1,137 @@
+"""First-order KBM (averaging) results for the non-linear belt: backbone curve and steady amplitudes.
+
+Moon & Wickert (seed 004), section 5.1, eq. (18)-(33), specialised to one complex mode
+$\\psi_n = \\sqrt2\\sin(n\\pi x)e^{in\\pi vx}$ ($\\langle\\psi_n,\\psi_n\\rangle = 1$) of the model in
+`jaxbelt.models.nonlinear`, with the modal damping ratio $\\xi$ kept (the paper's perturbation
+solution has none; $\\xi = 0$ recovers it).
+
+## Derivation (closed form, dimensionless)
+
+With $c = \\zeta^R_n - i\\zeta^I_n = a e^{i\\theta}$ the single-mode equations (35)-(36) read
+$\\dot c = i\\omega_n c - \\xi\\omega_n c - i(\\omega_n/\\mu_n)\\int_0^1\\bar\\psi_n (f + N)\\,dx$, and
+$w = \\mathrm{Re}(c\\,\\psi_n)$ is the paper's $w^{(0)} = \\tfrac12 a\\psi_n e^{i\\theta} + cc$ (eq. 18).
+The undamped, unforced single-mode system is Hamiltonian,
+$H = \\tfrac{\\omega_n}{2}|c|^2 + \\tfrac{\\omega_n}{\\mu_n}\\tfrac{v_l^2}{8}Q^2$,
+$Q = \\int_0^1 w_{,x}^2 dx$. Averaging $Q^2$ over the phase gives the amplitude-dependent frequency
+
+$\\omega_e(a) = \\omega_n + \\kappa_n a^2$, $\\kappa_n = \\tfrac{v_l^2}{8}(n\\pi)^3\\left[(1+v^2)^2 +
+\\tfrac12\\left(\\tfrac{\\sin n\\pi v}{n\\pi v}\\right)^2\\right]$,
+
+using $\\omega_n/\\mu_n = 1/(n\\pi)$, $\\int|\\psi_n'|^2 = (n\\pi)^2(1+v^2)$ and
+$|\\int\\psi_n'^2| = (n\\pi)^2|\\sin n\\pi v/(n\\pi v)|$. The **backbone** (exact resonance, eq. 33) is
+
+$\\Omega = n\\pi(1-v^2) + \\tfrac18 (a v_l)^2 (n\\pi)^3\\left[(1+v^2)^2 + \\tfrac12\\left(\\tfrac{\\sin n\\pi v}{n\\pi v}\\right)^2\\right]$
+
+(the paper's $\\varepsilon a$ is our $a$). The text of eq. (33) shows a minus sign in front of the
+amplitude term; the stretching non-linearity hardens the belt (the averaged Hamiltonian
+grows with $a$), so the frequency grows with amplitude, as the measured jumps to lower amplitude
+on *increasing* speed confirm. We use +.
+
+With harmonic forcing $f = \\mathrm{Re}(\\hat F(x)e^{i\\Omega t})$ at the pulley rate $\\Omega$ and
+$g = \\tfrac{\\omega_n}{2\\mu_n}\\int_0^1\\bar\\psi_n\\hat F dx$, the stationary points of the averaged
+equations (28)-(29) ($\\dot a = \\dot\\theta - \\Omega = 0$) satisfy, with $\\sigma = \\Omega - \\omega_n$,
+
+$\\kappa^2 (a^2)^3 - 2\\sigma\\kappa (a^2)^2 + (\\sigma^2 + \\xi^2\\omega_n^2)(a^2) - |g|^2 = 0$,
+
+the cubic in $a^2$ of eq. (31) (`amplitude_coefficients` returns $C_3..C_0$). Below the fold
+there is one real root, above it three; the middle one is the saddle (unrealisable).
+The forcing of the eccentric pulleys is the one derived in `jaxbelt.models.nonlinear`:
+$\\hat F = -i e_0\\Omega_0^2(1-x) + 2v e_0\\Omega_0 + e^{i\\phi}(-i e_1\\Omega_1^2 x - 2v e_1\\Omega_1)$
+(both pulleys at one frequency when $r_0 = r_1$; otherwise only the pulley whose rate is nearer
+$\\omega_n$ is kept).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .models.nonlinear import NonlinearBelt, _gauss, mode_shapes
+
+
+def kappa(v, v_l, n: int = 1):
+    """Backbone coefficient $\\kappa_n(v)$: $\\omega_e = \\omega_n + \\kappa_n a^2$ (dimensionless)."""
+    v = jnp.asarray(v, dtype=float)
+    k = n * jnp.pi
+    sinc = jnp.sinc(n * v)  # sin(n pi v) / (n pi v)
+    return v_l**2 / 8.0 * k**3 * ((1 + v**2) ** 2 + 0.5 * sinc**2)
+
+
+def backbone_frequency(v, a, v_l, n: int = 1):
+    """Exact-resonance frequency (dimensionless) at modal amplitude `a` (eq. 33, sign corrected)."""
+    return n * jnp.pi * (1 - jnp.asarray(v) ** 2) + kappa(v, v_l, n) * jnp.asarray(a) ** 2
+
+
+def backbone_amplitude(belt: NonlinearBelt, speed, n: int = 1):
+    """Modal amplitude $a$ on the backbone at running speed `speed` [m/s], driven by pulley 0:
+    $a = \\sqrt{(\\Omega_0 - \\omega_n)/\\kappa_n}$ above the linear crossing, 0 below it (where the
+    backbone does not exist)."""
+    v = jnp.asarray(speed, dtype=float) / belt.wave_speed
+    Om = v * belt.span / belt.pulley_radii[0]
+    sig = Om - n * jnp.pi * (1 - v**2)
+    return jnp.sqrt(jnp.maximum(sig, 0.0) / kappa(v, belt.v_l, n))
+
+
+def backbone_speed(belt: NonlinearBelt, a, n: int = 1):
+    """Running speed [m/s] at which the drive-pulley rate meets the backbone at amplitude `a`
+    (bisection in $v \\in (0, 1)$; `a` may be an array)."""
+    a = jnp.asarray(a, dtype=float)
+    c = belt.span / belt.pulley_radii[0]
+
+    def resid(v):
+        return v * c - backbone_frequency(v, a, belt.v_l, n)
+
+    def body(_, lohi):
+        lo, hi = lohi
+        mid = 0.5 * (lo + hi)
+        pos = resid(mid) > 0
+        return jnp.where(pos, lo, mid), jnp.where(pos, mid, hi)
+
+    lo, hi = jax.lax.fori_loop(0, 80, body, (jnp.zeros_like(a), jnp.ones_like(a) * (1 - 1e-12)))
+    return 0.5 * (lo + hi) * belt.wave_speed
+
+
+def forcing_coefficient(belt: NonlinearBelt, speed, n: int = 1):
+    """$g = \\tfrac{\\omega_n}{2\\mu_n}\\int_0^1\\bar\\psi_n\\hat F\\,dx$ (complex, dimensionless)."""
+    sys = belt.modal(speed)
+    v = sys.v
+    x, wq = _gauss(max(n, belt.n_modes))
+    psi, _ = mode_shapes(x, v, n)
+    pb = jnp.conj(psi[n - 1]) * wq
+    e0, e1 = sys.e
+    W0, W1 = sys.Omega
+    F0 = -1j * e0 * W0**2 * (1 - x) + 2 * v * e0 * W0
+    F1 = jnp.exp(1j * sys.phase) * (-1j * e1 * W1**2 * x - 2 * v * e1 * W1)
+    om = n * jnp.pi * (1 - v**2)
+    same = jnp.abs(W0 - W1) <= 1e-12 * jnp.abs(W0)
+    use0 = same | (jnp.abs(W0 - om) <= jnp.abs(W1 - om))
+    use1 = same | ~use0
+    F = jnp.where(use0, 1.0, 0.0) * F0 + jnp.where(use1, 1.0, 0.0) * F1
+    mu = (n * jnp.pi) ** 2 * (1 - v**2)
+    return om / (2 * mu) * jnp.sum(pb * F)
+
+
+def amplitude_coefficients(belt: NonlinearBelt, speed, n: int = 1):
+    """$(C_3, C_2, C_1, C_0)$ of eq. (31), $\\sum_i C_i (a^2)^i = 0$, with modal damping kept."""
+    v = jnp.asarray(speed, dtype=float) / belt.wave_speed
+    g = forcing_coefficient(belt, speed, n)
+    om = n * jnp.pi * (1 - v**2)
+    W0, W1 = v * belt.span / belt.pulley_radii
+    Om = jnp.where(jnp.abs(W0 - om) <= jnp.abs(W1 - om), W0, W1)
+    sig = Om - om
+    kap = kappa(v, belt.v_l, n)
+    return jnp.stack([kap**2, -2 * sig * kap, sig**2 + (belt.damping * om) ** 2, -jnp.abs(g) ** 2])
+
+
+def steady_amplitudes(belt: NonlinearBelt, speed, n: int = 1):
+    """Real positive steady modal amplitudes $a$ of eq. (31) at one speed, ascending (1 or 3).
+
+    With three, the middle one is the saddle. Uses `numpy.roots` (not differentiable).
+    """
+    C = np.asarray(amplitude_coefficients(belt, speed, n), dtype=float)
+    if C[0] == 0.0:  # linear belt (v_l = 0): C1 a^2 + C0 = 0
+        return np.sqrt(np.array([-C[3] / C[2]]))
+    r = np.roots(C)
+    s = np.sort(r[(np.abs(r.imag) <= 1e-9 * np.abs(r).max()) & (r.real > 0)].real)
+    return np.sqrt(s)
