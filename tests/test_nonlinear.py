@@ -12,7 +12,7 @@ import pytest
 
 import jaxbelt as jb
 from jaxbelt.nonlinear_kbm import kappa, steady_amplitudes
-from jaxbelt.nonlinear_linear import modal_harmonic_pp, string_exact_pp
+from nonlinear_reference import modal_harmonic_pp, string_exact_pp
 
 XI = 0.015  # modal damping ratio used for the 004 acceptance checks
 

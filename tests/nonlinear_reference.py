@@ -1,9 +1,8 @@
 """Linear steady-state references for the non-linear belt (v_l = 0): frequency domain, no stepping.
 
-STAND-IN: the moving-string scene (issue 5) owns the linear forced response of the travelling
-string; these two functions are a self-contained reference for the non-linear scene's tests and
-can be swapped for that function once it exists. They share no code path with the time
-integration of `jaxbelt.nonlinear_sweep` (numpy only, complex harmonic solves).
+Test references only: numpy, complex harmonic solves, no code path shared with the time
+integration of `jaxbelt.nonlinear_sweep`. (The library's own linear response is
+`jaxbelt.linear_runout_response`; tests/test_cross_scene.py compares the two scenes.)
 
 - `modal_harmonic_pp(belt, speed)`: steady peak-to-peak displacement [m] of the *linearised
   N-mode Galerkin model with modal damping*: each mode block
