@@ -19,3 +19,8 @@ from .solve import SolveError as SolveError  # noqa: E402
 from .solve import simulate as simulate  # noqa: E402
 
 __version__ = "0.1.0"
+from .commands import PseudoPolynomial as PseudoPolynomial  # noqa: E402
+from .commands import ShapedCommand as ShapedCommand  # noqa: E402
+from .models import BeltPlatform as BeltPlatform  # noqa: E402
+from .objectives.residual import residual_energy as residual_energy  # noqa: E402
+from .objectives.residual import residual_energy_joules as residual_energy_joules  # noqa: E402

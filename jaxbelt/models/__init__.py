@@ -4,3 +4,4 @@ from .base import AbstractModel as AbstractModel
 from .startup import BeltChain as BeltChain
 from .startup import BeltStartup as BeltStartup
 from .startup import chain_matrices as chain_matrices
+from .platform import BeltPlatform as BeltPlatform
