@@ -7,11 +7,14 @@ transformation accepted) with one jitted step per iteration and a tqdm progress 
 
 Feasibility by reparametrisation. The exponents must be distinct and each exceed
 $b = \\max(n, 2)$. The optimiser works on unconstrained $\\theta\\in\\mathbb R^{n+1}$ with
-$\\gamma_0 = b + \\epsilon + \\operatorname{softplus}(\\theta_0)$ and
-$\\gamma_i = \\gamma_{i-1} + \\delta + \\operatorname{softplus}(\\theta_i)$: every $\\theta$ maps to
-sorted exponents with $\\gamma_0 > b$ and gaps $> \\delta$ (defaults $\\epsilon = \\delta = 10^{-3}$,
-shrunk when the start point is closer than that), so no iterate is ever infeasible and nothing
-is clipped. H is symmetric under permutation of the exponents, so sorting loses nothing.
+$\\gamma_0 = b + \\epsilon + s\\,\\sigma(\\theta_0)$ and
+$\\gamma_i = \\gamma_{i-1} + \\delta + s\\,\\sigma(\\theta_i)$ ($\\sigma$ the logistic function): every
+$\\theta$ maps to sorted exponents with $\\gamma_0 > b$, gaps $> \\delta$ and increments below
+$\\delta + s$ (defaults $\\epsilon = \\delta = 10^{-3}$, shrunk when the start point is closer than
+that; `max_step` $s = 10$). No iterate, line-search trials included, is ever infeasible and
+nothing is clipped; the cap $s$ keeps trial points from running to exponents so large that
+$\\gamma + \\delta = \\gamma$ in floating point. H is symmetric under permutation of the
+exponents, so sorting loses nothing.
 
 Sensitivity tools (`sensitivity_curve`, `tolerance_band`) evaluate the residual energy
 $E(T) = h\\mathcal H$ [J] of a command on platforms whose belt stiffness is scaled so that the
@@ -35,25 +38,20 @@ from ..objectives.residual import residual_energy, residual_energy_joules
 # --------------------------------------------------------------------------------------------
 # Reparametrisation
 # --------------------------------------------------------------------------------------------
-def _softplus_inv(y):
-    # log(expm1(y)) written to stay accurate for large y
-    y = jnp.asarray(y, dtype=float)
-    return y + jnp.log(-jnp.expm1(-y))
-
-
-def gammas_from_params(theta, lower, margin, gap):
-    """Map unconstrained `theta` to sorted exponents $\\gamma_0 > $ `lower` with gaps > `gap`."""
-    inc = jax.nn.softplus(theta)
+def gammas_from_params(theta, lower, margin, gap, max_step):
+    """Map unconstrained `theta` to sorted exponents: $\\gamma_0 >$ `lower`, gaps > `gap`."""
+    inc = max_step * jax.nn.sigmoid(theta)
     steps = jnp.concatenate([jnp.stack([lower + margin]), jnp.full((theta.shape[0] - 1,), gap)])
     return jnp.cumsum(steps + inc)
 
 
-def params_from_gammas(gammas, lower, margin, gap):
-    """Inverse of `gammas_from_params` (gammas sorted, feasible for these bounds)."""
+def params_from_gammas(gammas, lower, margin, gap, max_step):
+    """Inverse of `gammas_from_params` (the start point must lie inside its box)."""
     g = jnp.sort(jnp.asarray(gammas, dtype=float))
     d = jnp.diff(jnp.concatenate([jnp.stack([jnp.asarray(lower, dtype=float)]), g]))
     steps = jnp.concatenate([jnp.stack([jnp.asarray(margin, dtype=float)]), jnp.full((g.shape[0] - 1,), gap)])
-    return _softplus_inv(d - steps)
+    x = (d - steps) / max_step
+    return jnp.log(x) - jnp.log1p(-x)
 
 
 # --------------------------------------------------------------------------------------------
@@ -62,11 +60,14 @@ def params_from_gammas(gammas, lower, margin, gap):
 class ShapingProblem(eqx.Module):
     """Objective of the command optimisation as a function of the unconstrained parameters.
 
-    `kind="nominal"`: $\\mathcal H(\\gamma)/\\mathcal H_0$. `kind="band"`: the mean (or, with
-    `mode="max"`, a smooth maximum: the $L^{16}$ mean) over `omegas` of
-    $E_\\gamma(\\omega)/E_{ref}(\\omega)$, the residual energy relative to that of the reference
-    command at the same natural frequency. Optional soft limits on the peak motor speed and
-    acceleration add $w\\,\\max(0, peak/limit - 1)^2$ (peaks sampled on `n_peak` times).
+    `kind="nominal"`: $\\mathcal H(\\gamma)/\\mathcal H_0$. `kind="band"`: with residual energies
+    $E(\\omega)$ on the frequency grid `omegas`, `mode="mean"` gives
+    $\\overline{E_\\gamma}/\\overline{E_{ref}}$ (mean over the band, relative to the reference
+    command's mean) and `mode="max"` a smooth maximum, the $L^{16}$ mean of
+    $E_\\gamma(\\omega)/\\max E_{ref}$. Normalising by the reference's band mean or maximum, not
+    pointwise, keeps the near-zeros of the reference's own residual curve from dominating.
+    Soft limits add $w\\,\\max(0, x/x_{max} - 1)^2$ for the peak motor speed and acceleration
+    (sampled on `n_peak` times).
     """
 
     plat: eqx.Module
@@ -75,6 +76,7 @@ class ShapingProblem(eqx.Module):
     lower: float = eqx.field(static=True)
     margin: jnp.ndarray
     gap: jnp.ndarray
+    max_step: jnp.ndarray
     scale: jnp.ndarray
     omegas: jnp.ndarray | None = None
     ref_energy: jnp.ndarray | None = None
@@ -87,7 +89,7 @@ class ShapingProblem(eqx.Module):
     n_peak: int = eqx.field(static=True, default=401)
 
     def gammas(self, theta):
-        return gammas_from_params(theta, self.lower, self.margin, self.gap)
+        return gammas_from_params(theta, self.lower, self.margin, self.gap, self.max_step)
 
     def command(self, theta):
         return PseudoPolynomial(self.gammas(theta), self.displacement, self.duration)
@@ -100,10 +102,10 @@ class ShapingProblem(eqx.Module):
         e = jax.vmap(lambda w: residual_energy_joules(self.plat.with_natural_frequency(w), cmd, n_nodes=self.n_nodes))(
             self.omegas
         )
-        r = e / self.ref_energy
         if self.mode == "max":
+            r = e / jnp.max(self.ref_energy)
             return jnp.mean(r**16) ** (1.0 / 16)
-        return jnp.mean(r)
+        return jnp.mean(e) / jnp.mean(self.ref_energy)
 
     def penalties(self, theta):
         cmd = self.command(theta)
@@ -128,6 +130,7 @@ class CommandOptimResult(eqx.Module):
     - `value`: final objective: $\\mathcal H$ [rad²/s²] for `optimise_command`, the band
       measure for `optimise_robust`; `initial_value`: the same at the start point;
     - `history`: objective after each iteration (index 0: start), `gammas_history` likewise;
+      the result is the best iterate (lowest objective), normally the last;
     - `n_steps`, `converged` (stopping test met before `max_steps`);
     - `peak_speed` [rad/s], `peak_accel` [rad/s²] of the final motor command.
     """
@@ -210,12 +213,15 @@ def _run(problem: ShapingProblem, theta0, optimizer, learning_rate, max_steps, t
         bar = tqdm(total=max_steps, desc=desc, leave=False)
     n = 0
     stall = 0
+    best_f, best_theta = hist[0], theta
     for n in range(1, max_steps + 1):
         theta, state, f, gmax, g = _step(opt, problem, theta, state, use_state_value)
         f = float(f)
         if not np.isfinite(f):
             raise FloatingPointError(f"{desc}: the objective became non-finite at iteration {n}")
-        stall = stall + 1 if f >= hist[-1] * (1 - 1e-12) else 0
+        stall = stall + 1 if f >= best_f * (1 - 1e-12) else 0
+        if f < best_f:
+            best_f, best_theta = f, theta
         hist.append(f)
         ghist.append(np.asarray(g))
         if bar is not None:
@@ -228,7 +234,8 @@ def _run(problem: ShapingProblem, theta0, optimizer, learning_rate, max_steps, t
             break
     if bar is not None:
         bar.close()
-    return theta, np.asarray(hist), np.stack(ghist), n, converged
+    # a line search that fails may still move; report the best iterate, not the last
+    return best_theta, np.asarray(hist), np.stack(ghist), n, converged
 
 
 @eqx.filter_jit
@@ -269,16 +276,25 @@ def _band_reference(plat, reference, omegas, n_nodes):
     return jax.vmap(lambda w: residual_energy_joules(plat.with_natural_frequency(w), reference, n_nodes=n_nodes))(omegas)
 
 
-def _bounds(cmd: PseudoPolynomial, margin, gap):
+def _bounds(cmd: PseudoPolynomial, margin, gap, max_step):
     g = np.sort(np.asarray(cmd.gammas, dtype=float))
     lower = float(max(cmd.order, 2))
     margin = min(float(margin), 0.5 * (g[0] - lower))
     gap = min(float(gap), 0.5 * float(np.min(np.diff(g))))
+    if not float(max_step) > 0:
+        raise ValueError(f"`max_step` must be > 0; got {max_step}")
+    d = np.diff(np.concatenate([[lower], g])) - np.array([margin] + [gap] * (len(g) - 1))
+    if np.any(d >= float(max_step)):
+        raise ValueError(
+            f"start exponents {g.tolist()} need increments up to {float(np.max(d)):.3g} above the minimum gaps; "
+            f"raise `max_step` (now {max_step}) above that"
+        )
     return lower, margin, gap
 
 
 def optimise_command(plat, cmd: PseudoPolynomial, *, optimizer="lbfgs", learning_rate=None, max_steps: int = 200,
                      tol: float = 1e-14, gtol: float = 1e-15, margin: float = 1e-3, gap: float = 1e-3,
+                     max_step: float = 10.0,
                      max_speed=None, max_accel=None, penalty: float = 10.0, n_nodes: int = 128,
                      progress: bool = True) -> CommandOptimResult:
     """Minimise the residual energy $\\mathcal H(\\gamma)$ (eq. 32) over the exponents of `cmd`.
@@ -291,7 +307,7 @@ def optimise_command(plat, cmd: PseudoPolynomial, *, optimizer="lbfgs", learning
 
     - `optimizer`: `"lbfgs"` (default, `optax.lbfgs` with zoom line search), `"adam"`, or any
       optax `GradientTransformation`.
-    - `margin`, `gap`: feasibility margins of the reparametrisation (module docstring).
+    - `margin`, `gap`, `max_step`: bounds of the reparametrisation (module docstring).
     - `progress`: tqdm bar.
 
     Returns a `CommandOptimResult`; `value` is $\\mathcal H$ [rad²/s²]. The zero set of
@@ -299,12 +315,12 @@ def optimise_command(plat, cmd: PseudoPolynomial, *, optimizer="lbfgs", learning
     """
     if not isinstance(cmd, PseudoPolynomial):
         raise ValueError(f"optimise_command: `cmd` must be a PseudoPolynomial; got {type(cmd).__name__}")
-    lower, margin, gap = _bounds(cmd, margin, gap)
-    theta0 = _params_jit(cmd.gammas, lower, margin, gap)
+    lower, margin, gap = _bounds(cmd, margin, gap, max_step)
+    theta0 = _params_jit(cmd.gammas, lower, margin, gap, max_step)
     h0 = _residual_jit(plat, cmd, n_nodes)
     problem = ShapingProblem(
         plat=plat, displacement=cmd.displacement, duration=cmd.duration, lower=lower,
-        margin=jnp.asarray(margin), gap=jnp.asarray(gap), scale=h0,
+        margin=jnp.asarray(margin), gap=jnp.asarray(gap), max_step=jnp.asarray(max_step, dtype=float), scale=h0,
         max_speed=None if max_speed is None else jnp.asarray(max_speed, dtype=float),
         max_accel=None if max_accel is None else jnp.asarray(max_accel, dtype=float),
         penalty=jnp.asarray(penalty, dtype=float), kind="nominal", n_nodes=n_nodes,
@@ -316,17 +332,23 @@ def optimise_command(plat, cmd: PseudoPolynomial, *, optimizer="lbfgs", learning
 
 def optimise_robust(plat, cmd: PseudoPolynomial, *, band=(0.8, 1.2), n_freq: int = 25, mode: str = "mean",
                     reference: PseudoPolynomial | None = None, optimizer="lbfgs", learning_rate=None,
-                    max_steps: int = 300, tol: float = 0.0, gtol: float = 1e-12, margin: float = 1e-3,
-                    gap: float = 1e-3, max_speed=None, max_accel=None, penalty: float = 10.0,
-                    n_nodes: int = 128, progress: bool = True) -> CommandOptimResult:
+                    max_steps: int = 150, tol: float = 0.0, gtol: float = 1e-12, margin: float = 1e-3,
+                    gap: float = 0.25, max_step: float = 10.0, max_speed=None, max_accel=None,
+                    penalty: float = 10.0, n_nodes: int = 128, progress: bool = True) -> CommandOptimResult:
     """Minimise the residual energy over a band of natural frequencies (robust shaping).
 
-    Objective: mean (`mode="mean"`) or smooth maximum (`mode="max"`, $L^{16}$ mean) over
-    `n_freq` frequencies $\\omega\\in$ `band` × $\\omega_n$ of $E_\\gamma(\\omega)/E_{ref}(\\omega)$,
-    where $E(\\omega)$ is the residual energy [J] on the platform with stiffness scaled to
-    natural frequency ω (`BeltPlatform.with_natural_frequency`) and the reference is the
-    3-4-5 polynomial (or `reference`) with the same Φ and T. Use higher orders (4 or 5
-    exponents) for more freedom. `value` is the final band measure.
+    $E(\\omega)$ is the residual energy [J] on the platform with its belt stiffness scaled to
+    natural frequency ω (`BeltPlatform.with_natural_frequency`), for `n_freq` frequencies in
+    `band` × $\\omega_n$ (a `vmap` inside the objective). Objective (`ShapingProblem`):
+    `mode="mean"`: $\\overline{E_\\gamma}/\\overline{E_{ref}}$; `mode="max"`: the $L^{16}$ mean of
+    $E_\\gamma/\\max E_{ref}$ (a smooth worst case). The reference is the 3-4-5 polynomial (or
+    `reference`) with the same Φ and T. Higher orders (4 or 5 exponents; each must exceed n)
+    give more freedom.
+
+    The minimum gap between exponents defaults to 0.25 here: the band optimum pushes exponents
+    together, and clustered exponents make the $C_i$ grow like gap$^{-n}$ and cancel in floating
+    point. `max_step` bounds each increment (module docstring).
+    `value` is the final band measure; `initial_value` the start point's.
     """
     if not isinstance(cmd, PseudoPolynomial):
         raise ValueError(f"optimise_robust: `cmd` must be a PseudoPolynomial; got {type(cmd).__name__}")
@@ -339,11 +361,11 @@ def optimise_robust(plat, cmd: PseudoPolynomial, *, band=(0.8, 1.2), n_freq: int
         reference = PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]), cmd.displacement, cmd.duration)
     omegas = jnp.linspace(lo_b, hi_b, int(n_freq)) * plat.omega_n
     e_ref = _band_reference(plat, reference, omegas, n_nodes)
-    lower, margin, gap = _bounds(cmd, margin, gap)
-    theta0 = _params_jit(cmd.gammas, lower, margin, gap)
+    lower, margin, gap = _bounds(cmd, margin, gap, max_step)
+    theta0 = _params_jit(cmd.gammas, lower, margin, gap, max_step)
     problem = ShapingProblem(
         plat=plat, displacement=cmd.displacement, duration=cmd.duration, lower=lower,
-        margin=jnp.asarray(margin), gap=jnp.asarray(gap), scale=jnp.asarray(1.0), omegas=omegas, ref_energy=e_ref,
+        margin=jnp.asarray(margin), gap=jnp.asarray(gap), max_step=jnp.asarray(max_step, dtype=float), scale=jnp.asarray(1.0), omegas=omegas, ref_energy=e_ref,
         max_speed=None if max_speed is None else jnp.asarray(max_speed, dtype=float),
         max_accel=None if max_accel is None else jnp.asarray(max_accel, dtype=float),
         penalty=jnp.asarray(penalty, dtype=float), kind="band", mode=mode, n_nodes=n_nodes,
