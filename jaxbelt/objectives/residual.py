@@ -40,25 +40,36 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..commands import PseudoPolynomial, ShapedCommand, _safe_pow, falling_factorial
+from ..commands import PseudoPolynomial, ShapedCommand, falling_factorial
 
 _P = 4  # substitution power u = v**p
 
 
 def _gauss_legendre01(n: int):
     x, w = np.polynomial.legendre.leggauss(int(n))
-    return jnp.asarray(0.5 * (x + 1.0)), jnp.asarray(0.5 * w)
+    return 0.5 * (x + 1.0), 0.5 * w
 
 
-def _guard_exponents(cmd: PseudoPolynomial, value):
-    """Under jit the constructor's checks are skipped: refuse infeasible exponents here."""
+def _guard_exponents(cmd: PseudoPolynomial) -> PseudoPolynomial:
+    """Under jit the constructor's checks are skipped: refuse infeasible exponents here.
+
+    The guard sits on the exponents (an identity for the gradient), before any work is done."""
     g = cmd.gammas
     lo = max(cmd.order, 2)
     diff = jnp.abs(g[:, None] - g[None, :]) + jnp.eye(g.shape[0])
     bad = jnp.any(g <= lo) | jnp.any(diff <= 0)
-    return eqx.error_if(
-        value, bad, f"PseudoPolynomial: exponents must be distinct and each > {lo} (eq. 23 singular or acceleration infinite at T)"
+    g = eqx.error_if(
+        g, bad, f"PseudoPolynomial: exponents must be distinct and each > {lo} (eq. 23 singular or acceleration infinite at T)"
     )
+    return eqx.tree_at(lambda c: c.gammas, cmd, g)
+
+
+def _guarded(cmd):
+    if isinstance(cmd, PseudoPolynomial):
+        return _guard_exponents(cmd)
+    if isinstance(cmd, ShapedCommand) and isinstance(cmd.base, PseudoPolynomial):
+        return eqx.tree_at(lambda c: c.base, cmd, _guard_exponents(cmd.base))
+    return cmd
 
 
 def _pseudo_poly_w(plat, cmd: PseudoPolynomial, n_nodes: int):
@@ -68,9 +79,12 @@ def _pseudo_poly_w(plat, cmd: PseudoPolynomial, n_nodes: int):
     sigma = plat.damping_ratio * plat.omega_n
     wd = plat.omega_d
     coef = falling_factorial(cmd.gammas, 2) * cmd.coefficients  # a_i of phi'' ∝ sum a_i u^(g_i - 2)
-    u = v**_P
-    # p v^(p(g-1)-1) dv = u^(g-2) du
-    powers = _P * _safe_pow(v[:, None], _P * (cmd.gammas[None, :] - 1.0) - 1.0)
+    u = jnp.asarray(v**_P)
+    w = jnp.asarray(w)
+    # p v^(p(g-1)-1) dv = u^(g-2) du; Gauss-Legendre nodes are interior (v > 0), so log v is a
+    # finite constant and the power needs no guard at v = 0
+    logv = jnp.asarray(np.log(v))
+    powers = _P * jnp.exp(logv[:, None] * (_P * (cmd.gammas[None, :] - 1.0) - 1.0))
     shape = powers @ coef  # (n_nodes,)
     decay = jnp.exp(-sigma * T * u)
     re = jnp.sum(w * shape * decay * jnp.cos(wd * T * u))
@@ -127,6 +141,7 @@ def residual_energy(plat, cmd, *, method: str = "quadrature", n_nodes: int = 128
     A pure scalar function: `jax.grad` (w.r.t. `cmd.gammas` or platform parameters),
     `jax.vmap` and `jax.jit` compose with it.
     """
+    cmd = _guarded(cmd)
     if method == "quadrature":
         F, G = convolution_integrals(plat, cmd, n_nodes)
         H = G**2 + plat.omega_n**2 * F**2
@@ -135,9 +150,6 @@ def residual_energy(plat, cmd, *, method: str = "quadrature", n_nodes: int = 128
         H = (plat.omega_d / plat.lam) ** 2 * (ad**2 + plat.omega_n**2 * a**2)
     else:
         raise ValueError(f"residual_energy: `method` must be 'quadrature' or 'ode'; got {method!r}")
-    pp = cmd if isinstance(cmd, PseudoPolynomial) else getattr(cmd, "base", None)
-    if isinstance(pp, PseudoPolynomial):
-        H = _guard_exponents(pp, H)
     return H
 
 
