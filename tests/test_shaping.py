@@ -16,7 +16,8 @@ import pytest
 from scipy.integrate import quad
 
 import jaxbelt as jb
-from jaxbelt.commands import PseudoPolynomial, ShapedCommand
+from jaxbelt.commands import PseudoPolynomial
+from jaxbelt.objectives.residual import convolution_integrals
 from jaxbelt.optimise.command import gammas_from_params, params_from_gammas, shaped_commands
 
 PHI = 15 * 2 * np.pi
@@ -310,3 +311,21 @@ def test_optimise_command_with_adam_and_speed_limit():
     ts = jnp.linspace(0, 1, 20001)
     assert float(jnp.max(jnp.abs(res2.command.velocity(ts)))) <= vmax * 1.001
     assert float(res2.value) < 1e-3 * h0
+
+
+def test_platform_free_vibration_after_the_move_matches_closed_form():
+    # After T the motor is locked at Phi: alpha obeys the free damped oscillator from the state
+    # alpha(T) = -lambda F / omega_d, alpha'(T) = -lambda G / omega_d (eq. 5, 28, 30).
+    p = jb.BeltPlatform()
+    cmd = _cmd(G345)
+    F, G = convolution_integrals(p, cmd)
+    lam, wd, wn, xi = p.lam, p.omega_d, p.omega_n, p.damping_ratio
+    a0, ad0 = -lam * F / wd, -lam * G / wd
+    ts = jnp.linspace(1.0, 1.5, 11)
+    s = ts - 1.0
+    sig = xi * wn
+    alpha = jnp.exp(-sig * s) * (a0 * jnp.cos(wd * s) + (ad0 + sig * a0) / wd * jnp.sin(wd * s))
+    sol = jb.simulate(jb.Scene(p, cmd, ts=jnp.concatenate([jnp.zeros(1), ts]), observe=("alpha",)),
+                      method="ode", rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(sol.alpha[1:], alpha, rtol=0, atol=1e-7 * float(jnp.max(jnp.abs(alpha))))
+    np.testing.assert_allclose(sol.theta[1:], PHI * lam + alpha, rtol=1e-9)
