@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import diffrax
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -71,6 +72,27 @@ def _guarded(cmd):
     return cmd
 
 
+@jax.custom_jvp
+def _moments(e, logv, kre, kim):
+    """$M_i = \\sum_j e^{e_i \\log v_j} k_j$ for the real and imaginary kernels (n_terms each).
+
+    A custom JVP: $\\partial M_i/\\partial e_i = \\sum_j \\log v_j\\, v_j^{e_i} k_j$ reuses the powers and
+    costs two more dot products, so that a gradient stays within ~2x the forward pass."""
+    powers = jnp.exp(logv[:, None] * e[None, :])
+    return powers.T @ kre, powers.T @ kim
+
+
+@_moments.defjvp
+def _moments_jvp(primals, tangents):
+    e, logv, kre, kim = primals
+    de, _, dkre, dkim = tangents  # log v is a constant of the rule (no tangent flows into it)
+    powers = jnp.exp(logv[:, None] * e[None, :])
+    re, im = powers.T @ kre, powers.T @ kim
+    d_re = (powers.T @ (logv * kre)) * de + powers.T @ dkre
+    d_im = (powers.T @ (logv * kim)) * de + powers.T @ dkim
+    return (re, im), (d_re, d_im)
+
+
 def _pseudo_poly_w(plat, cmd: PseudoPolynomial, n_nodes: int):
     """(Re W, Im W) of the convolution integral for a pseudo-polynomial command."""
     v, w = _gauss_legendre01(n_nodes)
@@ -79,17 +101,15 @@ def _pseudo_poly_w(plat, cmd: PseudoPolynomial, n_nodes: int):
     wd = plat.omega_d
     coef = falling_factorial(cmd.gammas, 2) * cmd.coefficients  # a_i of phi'' ∝ sum a_i u^(g_i - 2)
     u = jnp.asarray(v**_P)
-    w = jnp.asarray(w)
     # p v^(p(g-1)-1) dv = u^(g-2) du; Gauss-Legendre nodes are interior (v > 0), so log v is a
     # finite constant and the power needs no guard at v = 0
     logv = jnp.asarray(np.log(v))
-    powers = _P * jnp.exp(logv[:, None] * (_P * (cmd.gammas[None, :] - 1.0) - 1.0))
-    shape = powers @ coef  # (n_nodes,)
-    decay = jnp.exp(-sigma * T * u)
-    re = jnp.sum(w * shape * decay * jnp.cos(wd * T * u))
-    im = jnp.sum(w * shape * decay * jnp.sin(wd * T * u))
+    kern = _P * jnp.asarray(w) * jnp.exp(-sigma * T * u)
+    kre = kern * jnp.cos(wd * T * u)
+    kim = kern * jnp.sin(wd * T * u)
+    m_re, m_im = _moments(_P * (cmd.gammas - 1.0) - 1.0, logv, kre, kim)
     scale = -cmd.displacement / T  # phi'' = -Phi/T^2 * sum(...), d tau = T du
-    return scale * re, scale * im
+    return scale * (coef @ m_re), scale * (coef @ m_im)
 
 
 def _w_quadrature(plat, cmd, n_nodes: int):
