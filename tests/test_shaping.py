@@ -283,8 +283,8 @@ def test_optimise_command_reaches_the_zero_set_from_345():
     h0 = jb.residual_energy(p, cmd)
     res = jb.optimise_command(p, cmd, progress=False)
     assert float(res.value) < 1e-8 * float(h0)
-    assert float(res.initial_value) == pytest.approx(float(h0), rel=1e-14)
-    assert float(res.history[0]) == pytest.approx(float(h0), rel=1e-14)
+    assert float(res.initial_value) == pytest.approx(float(h0), rel=1e-12)  # via the reparametrisation
+    assert float(res.history[0]) == pytest.approx(float(h0), rel=1e-12)
     assert float(res.history[-1]) == pytest.approx(float(res.value), rel=1e-6, abs=1e-12 * float(h0))
     g = np.asarray(res.gammas)
     assert g[0] > 2 and np.all(np.diff(g) > 0)
