@@ -29,3 +29,4 @@ from .optimise.command import optimise_command as optimise_command  # noqa: E402
 from .optimise.command import optimise_robust as optimise_robust  # noqa: E402
 from .optimise.command import sensitivity_curve as sensitivity_curve  # noqa: E402
 from .optimise.command import tolerance_band as tolerance_band  # noqa: E402
+from .optimise.command import shaped_commands as shaped_commands  # noqa: E402
