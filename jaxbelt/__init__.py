@@ -45,3 +45,14 @@ from .nonlinear_kbm import backbone_amplitude as backbone_amplitude  # noqa: E40
 from .nonlinear_kbm import backbone_speed as backbone_speed  # noqa: E402
 from .nonlinear_kbm import amplitude_coefficients as kbm_coefficients  # noqa: E402
 from .nonlinear_kbm import steady_amplitudes as kbm_amplitudes  # noqa: E402
+from .commands import PseudoPolynomial as PseudoPolynomial  # noqa: E402
+from .commands import ShapedCommand as ShapedCommand  # noqa: E402
+from .models import BeltPlatform as BeltPlatform  # noqa: E402
+from .objectives.residual import residual_energy as residual_energy  # noqa: E402
+from .objectives.residual import residual_energy_joules as residual_energy_joules  # noqa: E402
+from .optimise.command import CommandOptimResult as CommandOptimResult  # noqa: E402
+from .optimise.command import optimise_command as optimise_command  # noqa: E402
+from .optimise.command import optimise_robust as optimise_robust  # noqa: E402
+from .optimise.command import sensitivity_curve as sensitivity_curve  # noqa: E402
+from .optimise.command import tolerance_band as tolerance_band  # noqa: E402
+from .optimise.command import shaped_commands as shaped_commands  # noqa: E402

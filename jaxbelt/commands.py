@@ -8,9 +8,11 @@ linear time-invariant scene can be solved in closed form (no time stepping).
 from __future__ import annotations
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
+import numpy as _np
 
-from ._checks import check_finite, check_positive
+from ._checks import check_finite, check_nonnegative, check_positive, check_range, is_concrete
 
 
 def _arr(x):
@@ -67,3 +69,202 @@ class ExponentialVoltage(AbstractCommand):
         amps = jnp.stack([self.v_max, -self.v_max])
         rates = jnp.stack([jnp.zeros_like(self.gamma), -1.0 / self.gamma])
         return amps, rates
+
+
+# --------------------------------------------------------------------------------------------
+# Motion commands for servo axes (seed 003): pseudo-polynomial profiles and input shapers.
+# --------------------------------------------------------------------------------------------
+
+
+
+
+def _safe_pow(u, e):
+    """$u^e$ for $u \\ge 0$, with value 0 and finite derivatives (w.r.t. both) at $u = 0$.
+
+    The double `where` keeps `log(0)` out of the gradient: at u = 0 the exponent derivative
+    $u^e \\log u$ tends to 0 for e > 0, which is what the command's limit at t = T needs.
+    """
+    pos = u > 0
+    us = jnp.where(pos, u, 1.0)
+    return jnp.where(pos, jnp.exp(e * jnp.log(us)), 0.0)
+
+
+def falling_factorial(gammas, k: int):
+    """$P(\\gamma, k) = \\prod_{r=0}^{k-1} (\\gamma - r)$ (seed 003, eq. 19); $P(\\gamma, 0) = 1$."""
+    gammas = jnp.asarray(gammas, dtype=float)
+    out = jnp.ones_like(gammas)
+    for r in range(k):
+        out = out * (gammas - r)
+    return out
+
+
+class PseudoPolynomial(AbstractCommand):
+    """Pseudo-polynomial rest-to-rest motion command of order n (seed 003, eq. 17-23).
+
+    $\\varphi_m(t) = \\Phi\\,[1 - \\sum_{i=0}^{n} C_i (1 - t/T)^{\\gamma_i}]$ (eq. 17)
+
+    $\\varphi_m^{(k)}(t) = (-1)^{k+1}\\frac{\\Phi}{T^k}\\sum_i P(\\gamma_i, k)\\,C_i\\,(1 - t/T)^{\\gamma_i - k}$
+    (eq. 18-19)
+
+    The coefficients solve the $(n+1)\\times(n+1)$ system $\\bar Z \\bar c = (1, 0, \\dots, 0)^T$ with
+    $\\bar Z_{ki} = P(\\gamma_i, k)$ (eq. 21-23), so that $\\varphi_m$ and its first n derivatives
+    vanish at t = 0 and $\\varphi_m(T) = \\Phi$ with n derivatives zero at T. Integer exponents
+    give the classical polynomials: (3, 4, 5) → C = (10, −15, 6).
+
+    - `gammas`: the n + 1 exponents $\\gamma_i$ (shape parameters), distinct and each
+      > max(n, 2): > 2 keeps the acceleration finite at t = T, > n keeps the n-th derivative so.
+    - `displacement`: total motor displacement $\\Phi$ [rad] (default 15 rev, seed 003).
+    - `duration`: motion time T [s], > 0 (default 1 s).
+
+    `cmd(t)` is the position [rad]; before t = 0 the axis is at 0, after T it holds at $\\Phi$.
+    Everything is differentiable with respect to `gammas` (and Φ, T).
+    """
+
+    gammas: jnp.ndarray = eqx.field(converter=_arr)
+    displacement: jnp.ndarray = eqx.field(converter=_arr, default=15 * 2 * 3.141592653589793)
+    duration: jnp.ndarray = eqx.field(converter=_arr, default=1.0)
+
+    def __check_init__(self):
+        o = "PseudoPolynomial"
+        if self.gammas.ndim != 1 or self.gammas.shape[0] < 2:
+            raise ValueError(
+                f"{o}: `gammas` must be a 1-D array of n + 1 >= 2 exponents; got shape {self.gammas.shape}"
+            )
+        check_finite("displacement", self.displacement, owner=o)
+        check_positive("duration", self.duration, "s", owner=o)
+        lo = float(max(self.order, 2))
+        check_range("gammas", self.gammas, lo=lo, lo_open=True, owner=o)
+        if is_concrete(self.gammas):
+            g = _np.sort(_np.asarray(self.gammas, dtype=float))
+            gap = _np.min(_np.diff(g))
+            if not gap > 1e-9 * max(1.0, float(_np.max(_np.abs(g)))):
+                raise ValueError(
+                    f"{o}: parameter `gammas` must be pairwise distinct (eq. 23 is singular otherwise); "
+                    f"got {self.gammas.tolist()}"
+                )
+
+    @property
+    def order(self) -> int:
+        """n: the order of the highest derivative that vanishes at both ends."""
+        return self.gammas.shape[0] - 1
+
+    @property
+    def min_exponent(self) -> float:
+        """Feasibility bound: every exponent must exceed max(n, 2)."""
+        return float(max(self.order, 2))
+
+    def system_matrix(self):
+        """$\\bar Z$ of eq. (23): row k holds $P(\\gamma_i, k)$, k = 0..n."""
+        return jnp.stack([falling_factorial(self.gammas, k) for k in range(self.order + 1)])
+
+    @property
+    def coefficients(self):
+        """$C_i$ from $\\bar Z \\bar c = \\bar u$ (eq. 22)."""
+        rhs = jnp.zeros((self.order + 1,)).at[0].set(1.0)
+        return jnp.linalg.solve(self.system_matrix(), rhs)
+
+    def derivative(self, t, k: int = 0):
+        """k-th time derivative $\\varphi_m^{(k)}(t)$ [rad/s^k] (eq. 17 for k = 0, eq. 18 for k >= 1).
+
+        Exact for 0 <= k <= n on the whole line; for k > n the value at t = T is the limit 0 only
+        when every exponent exceeds k.
+        """
+        if k < 0:
+            raise ValueError(f"PseudoPolynomial.derivative: order `k` must be >= 0; got {k}")
+        t = jnp.asarray(t, dtype=float)
+        T = self.duration
+        u = jnp.clip(1.0 - t / T, 0.0, 1.0)
+        C = self.coefficients
+        pk = falling_factorial(self.gammas, k)
+        terms = pk * C * _safe_pow(u[..., None], self.gammas - k)
+        s = jnp.sum(terms, axis=-1)
+        if k == 0:
+            val = self.displacement * (1.0 - s)
+        else:
+            val = (-1.0) ** (k + 1) * self.displacement / T**k * s
+        return jnp.where(t < 0, 0.0, val)
+
+    def __call__(self, t):
+        return self.derivative(t, 0)
+
+    def velocity(self, t):
+        """$\\dot\\varphi_m(t)$ [rad/s] (eq. 9)."""
+        return self.derivative(t, 1)
+
+    def acceleration(self, t):
+        """$\\ddot\\varphi_m(t)$ [rad/s²] (eq. 10)."""
+        return self.derivative(t, 2)
+
+    @property
+    def end_time(self):
+        """Time at which the motion ends [s] (= T)."""
+        return self.duration
+
+
+class ShapedCommand(AbstractCommand):
+    """A motion command passed through an input shaper (impulse sequence).
+
+    $\\varphi_s(t) = \\sum_j A_j\\,\\varphi(t - t_j)$ with $\\sum_j A_j = 1$, so the total
+    displacement is kept and the move lasts $T + t_{last}$. `ShapedCommand.zv(...)` and
+    `ShapedCommand.zvd(...)` build the classical zero-vibration shapers for a mode of natural
+    frequency $\\omega_n$ [rad/s] and damping ratio $\\zeta$:
+    $K = e^{-\\zeta\\pi/\\sqrt{1-\\zeta^2}}$, $t_2 = \\pi/\\omega_d$; ZV: $A = (1, K)/(1+K)$ at
+    $(0, t_2)$; ZVD: $A = (1, 2K, K^2)/(1+K)^2$ at $(0, t_2, 2t_2)$.
+
+    - `base`: a command with `derivative(t, k)` and `end_time` (e.g. `PseudoPolynomial`).
+    - `times` [s] (>= 0, increasing) and `amplitudes` (summing to 1).
+    """
+
+    base: AbstractCommand
+    times: jnp.ndarray = eqx.field(converter=_arr)
+    amplitudes: jnp.ndarray = eqx.field(converter=_arr)
+
+    def __check_init__(self):
+        o = "ShapedCommand"
+        if self.times.ndim != 1 or self.times.shape != self.amplitudes.shape:
+            raise ValueError(
+                f"{o}: `times` and `amplitudes` must be 1-D of equal length; got {self.times.shape}, {self.amplitudes.shape}"
+            )
+        check_nonnegative("times", self.times, "s", owner=o)
+        check_finite("amplitudes", self.amplitudes, owner=o)
+        if is_concrete(self.amplitudes):
+            if abs(float(_np.sum(_np.asarray(self.amplitudes))) - 1.0) > 1e-9:
+                raise ValueError(f"{o}: `amplitudes` must sum to 1; got {self.amplitudes.tolist()}")
+
+    @classmethod
+    def zv(cls, base, omega_n, zeta=0.0):
+        """Zero-vibration (two-impulse) shaper for the mode $(\\omega_n, \\zeta)$."""
+        omega_n = jnp.asarray(omega_n, dtype=float)
+        zeta = jnp.asarray(zeta, dtype=float)
+        wd = omega_n * jnp.sqrt(1.0 - zeta**2)
+        K = jnp.exp(-zeta * jnp.pi / jnp.sqrt(1.0 - zeta**2))
+        return cls(base, jnp.stack([0.0 * wd, jnp.pi / wd]), jnp.stack([1.0 + 0 * K, K]) / (1.0 + K))
+
+    @classmethod
+    def zvd(cls, base, omega_n, zeta=0.0):
+        """Zero-vibration-derivative (three-impulse) shaper for the mode $(\\omega_n, \\zeta)$."""
+        omega_n = jnp.asarray(omega_n, dtype=float)
+        zeta = jnp.asarray(zeta, dtype=float)
+        wd = omega_n * jnp.sqrt(1.0 - zeta**2)
+        K = jnp.exp(-zeta * jnp.pi / jnp.sqrt(1.0 - zeta**2))
+        t2 = jnp.pi / wd
+        return cls(base, jnp.stack([0.0 * t2, t2, 2 * t2]), jnp.stack([1.0 + 0 * K, 2 * K, K**2]) / (1.0 + K) ** 2)
+
+    def derivative(self, t, k: int = 0):
+        t = jnp.asarray(t, dtype=float)
+        vals = jax.vmap(lambda tj: self.base.derivative(t - tj, k))(self.times)
+        return jnp.tensordot(self.amplitudes, vals, axes=(0, 0))
+
+    def __call__(self, t):
+        return self.derivative(t, 0)
+
+    def velocity(self, t):
+        return self.derivative(t, 1)
+
+    def acceleration(self, t):
+        return self.derivative(t, 2)
+
+    @property
+    def end_time(self):
+        """Time at which the shaped motion ends [s]: base end time + last impulse time."""
+        return self.base.end_time + self.times[-1]

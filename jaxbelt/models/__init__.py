@@ -17,3 +17,4 @@ from .string import runout_phasors as runout_phasors
 from .string import simulate_runout_response as simulate_runout_response
 from .nonlinear import NonlinearBelt as NonlinearBelt  # noqa: E402
 from .nonlinear import RunningSpeed as RunningSpeed  # noqa: E402
+from .platform import BeltPlatform as BeltPlatform

@@ -1,0 +1,75 @@
+"""`jaxbelt shaping`: command shaping of the belt-driven platform (seed 003).
+
+Optimises the pseudo-polynomial exponents from (3, 4, 5), optionally a robust higher-order
+command over a frequency band, compares with ZV/ZVD shapers, prints H and the 5 % tolerance
+band widths, and writes the figure (paper's Fig. 3 + sensitivity plot).
+"""
+
+from __future__ import annotations
+
+
+def register(subparsers):
+    p = subparsers.add_parser("shaping", help="pseudo-polynomial command shaping of a belt-driven platform (seed 003)")
+    p.add_argument("--out", default="shaping.png", help="figure file (default shaping.png)")
+    p.add_argument("--gammas", type=float, nargs="+", default=[3.0, 4.0, 5.0], help="start exponents (default 3 4 5)")
+    p.add_argument("--duration", type=float, default=1.0, help="motion time T [s] (default 1)")
+    p.add_argument("--revolutions", type=float, default=15.0, help="motor displacement [rev] (default 15)")
+    p.add_argument("--robust-order", type=int, nargs="*", default=[4], choices=[2, 3, 4, 5],
+                   help="orders n of band-robust commands to add (none: --robust-order with no value; default 4)")
+    p.add_argument("--robust-mode", default="mean", choices=["mean", "max"],
+                   help="robust objective over the band: mean or smooth worst case (default mean)")
+    p.add_argument("--band", type=float, nargs=2, default=[0.8, 1.2],
+                   help="robust band as fractions of omega_n (default 0.8 1.2)")
+    p.add_argument("--spread", type=float, default=0.3, help="sensitivity sweep +-spread around omega_n (default 0.3)")
+    p.add_argument("--no-progress", action="store_true", help="hide progress bars")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    import jax.numpy as jnp
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..commands import PseudoPolynomial
+    from ..models.platform import BeltPlatform
+    from ..objectives.residual import residual_energy
+    from ..optimise.command import optimise_command, optimise_robust, sensitivity_curve, shaped_commands, tolerance_band
+    from ..plots.shaping import shaping_figure
+
+    progress = not args.no_progress
+    plat = BeltPlatform()
+    phi = args.revolutions * 2 * jnp.pi
+    cmd0 = PseudoPolynomial(jnp.asarray(args.gammas, dtype=float), phi, args.duration)
+    res = optimise_command(plat, cmd0, progress=progress)
+    h0 = float(residual_energy(plat, cmd0))
+    print(f"H(start {list(args.gammas)}) = {h0:.6g} rad^2/s^2, E(T) = {h0 * float(plat.energy_factor):.4g} J")
+    g = ", ".join(f"{x:.4f}" for x in res.gammas.tolist())
+    print(f"optimised exponents ({g}): H = {float(res.value):.3g} (H/H0 = {float(res.value) / h0:.2e}, "
+          f"{res.n_steps} L-BFGS steps)")
+    label0 = "-".join(f"{x:g}" for x in args.gammas)
+    cmds = {label0: cmd0, "optimised": res.command}
+    for name, c in shaped_commands(plat, cmd0).items():
+        cmds[f"{label0} + {name}"] = c
+    for n in args.robust_order:
+        # start from the classical rest-to-rest polynomial of order n: exponents n+1 .. 2n+1
+        start = PseudoPolynomial(jnp.arange(n + 1, 2 * n + 2, dtype=float), phi, args.duration)
+        rob = optimise_robust(plat, start, band=tuple(args.band), mode=args.robust_mode, progress=progress)
+        g = ", ".join(f"{x:.3f}" for x in rob.gammas.tolist())
+        print(f"robust n={n} ({args.robust_mode} over {args.band[0]:g}-{args.band[1]:g} omega_n): exponents ({g}), "
+              f"band measure {float(rob.value):.3g} (start {float(rob.initial_value):.3g})")
+        cmds[f"robust n={n} ({args.robust_mode}, band {args.band[0]:g}-{args.band[1]:g})"] = rob.command
+    omegas, curves = sensitivity_curve(plat, cmds, rel=args.spread)
+    print(f"width of the band where E(T) < 5 % of the {label0} command's (fraction of omega_n = "
+          f"{float(plat.omega_n):.3f} rad/s; sweep +-{args.spread:.0%}):")
+    for name, e in curves.items():
+        c = cmds[name]
+        w = tolerance_band(omegas, e, curves[label0], plat.omega_n)
+        edge = ">=" if w >= 2 * args.spread * (1 - 1e-9) else "  "  # the band fills the whole sweep
+        print(f"  {name:34s} {edge}{w:6.3f}   move time {float(c.end_time):.3f} s")
+    fig = shaping_figure(plat, cmd0, res.command, omegas, curves, reference=label0)
+    fig.savefig(args.out, dpi=120)
+    plt.close(fig)
+    print(f"wrote {args.out}")
+    return 0

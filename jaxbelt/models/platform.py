@@ -1,0 +1,167 @@
+"""Belt-driven rotary platform, 1 DOF (seed 003: Incerti, pseudo-polynomial motion commands).
+
+A servomotor executes a motion command $\\varphi_m(t)$ exactly; through a gear reducer (ratio z)
+and a belt stage (pulley radii r, R; two branches of stiffness k and damping c) it drives a
+platform of inertia J. The platform angle obeys eq. (2):
+
+$J\\ddot\\vartheta + 2cR^2(\\dot\\vartheta - \\lambda\\dot\\varphi_m) + 2kR^2(\\vartheta - \\lambda\\varphi_m) = 0$,
+$\\lambda = z r / R$.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import equinox as eqx
+import jax.numpy as jnp
+
+from .._checks import check_nonnegative, check_positive, is_concrete
+from .base import AbstractModel
+
+
+def _arr(x):
+    return jnp.asarray(x, dtype=float)
+
+
+class BeltPlatform(AbstractModel):
+    """Rotary platform driven by a position-controlled servomotor through a belt (seed 003).
+
+    Equation of motion (eq. 2), with $k_t = 2kR^2$, $c_t = 2cR^2$, $\\lambda = zr/R$:
+
+    $J\\ddot\\vartheta = -c_t(\\dot\\vartheta - \\lambda\\dot\\varphi_m) - k_t(\\vartheta - \\lambda\\varphi_m)$
+
+    In the deflection $\\alpha = \\vartheta - \\lambda\\varphi_m$ (eq. 4):
+    $\\ddot\\alpha + 2\\xi\\omega_n\\dot\\alpha + \\omega_n^2\\alpha = -\\lambda\\ddot\\varphi_m$,
+    $\\omega_n = \\sqrt{k_t/J}$, $\\xi = c_t/(2J\\omega_n)$.
+
+    Parameters (SI; defaults are Table III of seed 003):
+
+    | field | symbol | unit | default |
+    |---|---|---|---|
+    | `J` | platform moment of inertia | kg m² | 6 |
+    | `k` | stiffness of each belt branch | N/m | 9e4 |
+    | `c` | damping constant of each branch | N s/m | 150 |
+    | `r` | radius of the driving pulley (1) | m | 0.060 |
+    | `R` | radius of the platform pulley (2) | m | 0.180 |
+    | `z` | gear ratio of the reducer, $\\varphi = z\\varphi_m$ | – | 0.1 (1:10) |
+
+    State: `theta` [rad], `omega` [rad/s] (platform). The input is a motion command of the motor
+    shaft with `cmd(t)`, `cmd.velocity(t)`, `cmd.acceleration(t)` (e.g. `PseudoPolynomial`).
+    Outputs: `acceleration` [rad/s²], `kinetic_energy` $\\tfrac12 J\\dot\\vartheta^2$ [J],
+    `elastic_energy` $\\tfrac12 k_t\\alpha^2$ [J] (eq. 24), `total_energy` [J], `alpha` [rad],
+    and the rigid-body commands `command_angle` $\\lambda\\varphi_m$, `command_velocity`
+    $\\lambda\\dot\\varphi_m$, `command_acceleration` $\\lambda\\ddot\\varphi_m$ (Fig. 3, dashed).
+    The model must be underdamped ($\\xi < 1$) for the residual energy of eq. (31).
+    """
+
+    J: jnp.ndarray = eqx.field(converter=_arr, default=6.0)
+    k: jnp.ndarray = eqx.field(converter=_arr, default=9e4)
+    c: jnp.ndarray = eqx.field(converter=_arr, default=150.0)
+    r: jnp.ndarray = eqx.field(converter=_arr, default=0.060)
+    R: jnp.ndarray = eqx.field(converter=_arr, default=0.180)
+    z: jnp.ndarray = eqx.field(converter=_arr, default=0.1)
+
+    state_names: ClassVar[tuple[str, ...]] = ("theta", "omega")
+    output_names: ClassVar[tuple[str, ...]] = (
+        "acceleration", "kinetic_energy", "elastic_energy", "total_energy", "alpha",
+        "command_angle", "command_velocity", "command_acceleration",
+    )
+
+    def __check_init__(self):
+        o = "BeltPlatform"
+        check_positive("J", self.J, "kg m^2", o)
+        check_positive("k", self.k, "N/m", o)
+        check_nonnegative("c", self.c, "N s/m", o)
+        check_positive("r", self.r, "m", o)
+        check_positive("R", self.R, "m", o)
+        check_positive("z", self.z, "", o)
+        if is_concrete(self) and not bool(jnp.all(self.damping_ratio < 1.0)):
+            raise ValueError(
+                f"{o}: the platform must be underdamped (damping ratio xi = c_t / (2 J omega_n) < 1); "
+                f"got xi = {jnp.asarray(self.damping_ratio).tolist()} (lower `c` or raise `k`)"
+            )
+
+    # --- derived constants ------------------------------------------------------------------
+    @property
+    def lam(self):
+        """$\\lambda = z r / R$: platform turn per motor turn for a rigid belt."""
+        return self.z * self.r / self.R
+
+    @property
+    def k_t(self):
+        """Equivalent torsional stiffness $k_t = 2kR^2$ [N m/rad]."""
+        return 2.0 * self.k * self.R**2
+
+    @property
+    def c_t(self):
+        """Equivalent torsional damping $c_t = 2cR^2$ [N m s/rad]."""
+        return 2.0 * self.c * self.R**2
+
+    @property
+    def omega_n(self):
+        """Natural angular frequency $\\omega_n = \\sqrt{k_t/J}$ [rad/s]."""
+        return jnp.sqrt(self.k_t / self.J)
+
+    @property
+    def damping_ratio(self):
+        """$\\xi = c_t / (2 J \\omega_n)$."""
+        return self.c_t / (2.0 * self.J * self.omega_n)
+
+    @property
+    def omega_d(self):
+        """Damped natural frequency $\\omega_d = \\omega_n\\sqrt{1 - \\xi^2}$ [rad/s]."""
+        return self.omega_n * jnp.sqrt(1.0 - self.damping_ratio**2)
+
+    @property
+    def energy_factor(self):
+        """$h = \\tfrac12 J (\\lambda/\\omega_d)^2$ of eq. (31): $E_{tot}(T) = h\\,\\mathcal H$."""
+        return 0.5 * self.J * (self.lam / self.omega_d) ** 2
+
+    def with_natural_frequency(self, omega_n):
+        """The same platform with the belt stiffness scaled so that $\\omega_n$ takes the given value
+        (inertia, damping constant and geometry unchanged, so $\\xi$ scales as $1/\\omega_n$)."""
+        return eqx.tree_at(lambda p: p.k, self, self.k * (jnp.asarray(omega_n, dtype=float) / self.omega_n) ** 2)
+
+    # --- dynamics -----------------------------------------------------------------------------
+    def vector_field(self, t, y, inp):
+        theta, omega = y[0], y[1]
+        lam = self.lam
+        acc = -(self.c_t * (omega - lam * inp.velocity(t)) + self.k_t * (theta - lam * inp(t))) / self.J
+        return jnp.stack([omega, acc])
+
+    def deflection_vector_field(self, t, y, inp):
+        """Eq. (4) in $(\\alpha, \\dot\\alpha)$: the residual-vibration ODE, forced by $-\\lambda\\ddot\\varphi_m$."""
+        a, ad = y[0], y[1]
+        wn = self.omega_n
+        add = -2.0 * self.damping_ratio * wn * ad - wn**2 * a - self.lam * inp.acceleration(t)
+        return jnp.stack([ad, add])
+
+    def default_solver(self):
+        import diffrax
+
+        return diffrax.Tsit5()
+
+    # --- outputs (one time) -------------------------------------------------------------------
+    def _out_acceleration(self, t, y, inp):
+        return self.vector_field(t, y, inp)[1]
+
+    def _out_kinetic_energy(self, t, y, inp):
+        return 0.5 * self.J * y[1] ** 2
+
+    def _out_elastic_energy(self, t, y, inp):
+        return 0.5 * self.k_t * (y[0] - self.lam * inp(t)) ** 2
+
+    def _out_total_energy(self, t, y, inp):
+        return self._out_kinetic_energy(t, y, inp) + self._out_elastic_energy(t, y, inp)
+
+    def _out_alpha(self, t, y, inp):
+        return y[0] - self.lam * inp(t)
+
+    def _out_command_angle(self, t, y, inp):
+        return self.lam * inp(t)
+
+    def _out_command_velocity(self, t, y, inp):
+        return self.lam * inp.velocity(t)
+
+    def _out_command_acceleration(self, t, y, inp):
+        return self.lam * inp.acceleration(t)

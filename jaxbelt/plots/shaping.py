@@ -1,0 +1,97 @@
+"""Figures of the command-shaping scene (seed 003): the paper's Fig. 3 and the sensitivity plot."""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import numpy as np
+
+from ..scene import Scene
+from ..solve import simulate
+
+
+def platform_response(plat, cmd, t_end: float | None = None, n: int = 901):
+    """Simulate the platform over [0, t_end] (default 1.5 × the move) and return a dict of numpy
+    arrays: `t`, `velocity`, `acceleration`, `command_velocity`, `command_acceleration`,
+    `kinetic_energy`, `elastic_energy`."""
+    if t_end is None:
+        t_end = 1.5 * float(cmd.end_time)
+    ts = jnp.linspace(0.0, t_end, n)
+    obs = ("acceleration", "kinetic_energy", "elastic_energy", "command_velocity", "command_acceleration")
+    sol = simulate(Scene(plat, cmd, ts=ts, observe=obs), method="ode", rtol=1e-10, atol=1e-12)
+    out = {"t": np.asarray(ts), "velocity": np.asarray(sol.omega)}
+    out.update({k: np.asarray(sol[k]) for k in obs})
+    return out
+
+
+def plot_fig3(plat, cmd_before, cmd_after, *, axes=None, t_end=None, titles=("3-4-5 polynomial", "optimised")):
+    """Paper's Fig. 3: platform velocity and acceleration (solid) with the rigid-body commands
+    $\\lambda\\dot\\varphi_m$, $\\lambda\\ddot\\varphi_m$ (dashed), kinetic and elastic energy, for the
+    command before (left column) and after (right column) the optimisation. `axes`: a 4 × 2 array."""
+    import matplotlib.pyplot as plt
+
+    if axes is None:
+        _, axes = plt.subplots(4, 2, figsize=(10, 9), sharex=True)
+    axes = np.asarray(axes)
+    rows = [
+        ("velocity", "command_velocity", "platform speed [rad/s]"),
+        ("acceleration", "command_acceleration", "platform accel. [rad/s²]"),
+        ("kinetic_energy", None, "kinetic energy [J]"),
+        ("elastic_energy", None, "elastic energy [J]"),
+    ]
+    for col, (cmd, title) in enumerate(zip((cmd_before, cmd_after), titles)):
+        r = platform_response(plat, cmd, t_end)
+        for row, (key, dashed, label) in enumerate(rows):
+            ax = axes[row, col]
+            ax.plot(r["t"], r[key], "C0-", lw=1.2)
+            if dashed is not None:
+                ax.plot(r["t"], r[dashed], "k--", lw=0.9)
+            ax.axvline(float(cmd.end_time), color="0.6", lw=0.6)
+            ax.grid(alpha=0.3)
+            if col == 0:
+                ax.set_ylabel(label)
+        axes[0, col].set_title(title)
+        axes[-1, col].set_xlabel("time [s]")
+    # same scales left and right, as in the paper, so the residual vibration is comparable
+    for row in range(axes.shape[0]):
+        lo = min(a.get_ylim()[0] for a in axes[row])
+        hi = max(a.get_ylim()[1] for a in axes[row])
+        for a in axes[row]:
+            a.set_ylim(lo, hi)
+    return axes
+
+
+def plot_sensitivity(omegas, curves: dict, omega0, *, ax=None, reference: str | None = None, level: float = 0.05):
+    """Residual energy E(T) [J] against the actual natural frequency (relative to the design
+    value `omega0`), log scale, one line per command; with `reference` named, the level
+    `level` × E_ref is drawn dotted (the 5 % tolerance of the band widths)."""
+    import matplotlib.pyplot as plt
+
+    if ax is None:
+        _, ax = plt.subplots(figsize=(8, 4))
+    x = np.asarray(omegas) / float(omega0)
+    floor = 1e-12 * max(float(np.max(np.asarray(c))) for c in curves.values())
+    for name, e in curves.items():
+        ax.semilogy(x, np.maximum(np.asarray(e), floor), label=name, lw=1.3)
+    if reference is not None:
+        ax.semilogy(x, level * np.asarray(curves[reference]), "k:", lw=0.9, label=f"{level:.0%} of {reference}")
+    ax.axvline(1.0, color="0.6", lw=0.6)
+    ax.set_xlabel("actual / design natural frequency")
+    ax.set_ylabel("residual energy E(T) [J]")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8, ncol=2)
+    return ax
+
+
+def shaping_figure(plat, cmd_before, cmd_after, omegas, curves: dict, *, reference: str | None = None):
+    """One figure: Fig. 3 (rows 1-4) and the sensitivity plot (row 5). Returns the Figure."""
+    import matplotlib.pyplot as plt
+
+    fig = plt.figure(figsize=(10, 12), constrained_layout=True)
+    gs = fig.add_gridspec(5, 2, height_ratios=[1, 1, 1, 1, 1.6])
+    axes = np.empty((4, 2), dtype=object)
+    for i in range(4):
+        for j in range(2):
+            axes[i, j] = fig.add_subplot(gs[i, j], sharex=axes[0, 0] if (i, j) != (0, 0) else None)
+    plot_fig3(plat, cmd_before, cmd_after, axes=axes)
+    plot_sensitivity(omegas, curves, plat.omega_n, ax=fig.add_subplot(gs[4, :]), reference=reference)
+    return fig
