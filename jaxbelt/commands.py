@@ -76,8 +76,6 @@ class ExponentialVoltage(AbstractCommand):
 # --------------------------------------------------------------------------------------------
 
 
-
-
 def _safe_pow(u, e):
     """$u^e$ for $u \\ge 0$, with value 0 and finite derivatives (w.r.t. both) at $u = 0$.
 
