@@ -19,3 +19,9 @@ from .solve import SolveError as SolveError  # noqa: E402
 from .solve import simulate as simulate  # noqa: E402
 
 __version__ = "0.1.0"
+from .models.fourbar import FourBarDrive as FourBarDrive  # noqa: E402
+from .models.motor import PID as PID  # noqa: E402
+from .objectives.fluctuation import fluctuation_index as fluctuation_index  # noqa: E402
+from .objectives.fluctuation import fluctuation_objective as fluctuation_objective  # noqa: E402
+from .optimise.pid import PIDTuneResult as PIDTuneResult  # noqa: E402
+from .optimise.pid import tune_pid as tune_pid  # noqa: E402

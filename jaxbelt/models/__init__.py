@@ -4,3 +4,5 @@ from .base import AbstractModel as AbstractModel
 from .startup import BeltChain as BeltChain
 from .startup import BeltStartup as BeltStartup
 from .startup import chain_matrices as chain_matrices
+from .fourbar import FourBarDrive as FourBarDrive
+from .motor import PID as PID

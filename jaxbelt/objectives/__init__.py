@@ -3,3 +3,7 @@
 One module per objective family: residual vibration energy H (command shaping, seed 003) and
 the speed-fluctuation index χ (four-bar drive, seed 001).
 """
+from .fluctuation import chi_from_samples as chi_from_samples
+from .fluctuation import closed_loop_metrics as closed_loop_metrics
+from .fluctuation import fluctuation_index as fluctuation_index
+from .fluctuation import fluctuation_objective as fluctuation_objective
