@@ -214,38 +214,40 @@ class FourBarDrive(AbstractModel):
         g3 = pD + self.f3 * e(gamma + self.theta3)
         return {"A": pA, "B": pB, "C": pC, "D": pD, "G1": g1, "G2": g2, "G3": g3}
 
+    def _energy_coeffs(self, alpha):
+        # J and Ep from one evaluation of the angles (the vector field differentiates this).
+        beta, gamma = self.angles(alpha)
+        s = jnp.sin(gamma - beta)
+        Q = self.a * jnp.sin(alpha - gamma) / (self.b * s)
+        Rr = self.a * jnp.sin(alpha - beta) / (self.c * s)
+        JA = self.jg1 + self.m1 * self.f1**2
+        JB = self.jg2 + self.m2 * self.f2**2
+        JD = self.jg3 + self.m3 * self.f3**2
+        J = (
+            JA + JD * Rr**2 + self.m2 * self.a**2 + JB * Q**2
+            + 2 * self.a * self.f2 * self.m2 * Q * jnp.cos(alpha - beta - self.theta2)
+        )
+        y1 = self.f1 * jnp.sin(alpha + self.theta1)
+        y2 = self.a * jnp.sin(alpha) + self.f2 * jnp.sin(beta + self.theta2)
+        y3 = self.hy + self.f3 * jnp.sin(gamma + self.theta3)
+        return J, self.g * (self.m1 * y1 + self.m2 * y2 + self.m3 * y3)
+
     def inertia(self, alpha):
         """Equivalent inertia of the linkage about the crank axis $J(\\alpha)$ [kg m²] (Appendix C).
 
         $J = J_A + J_D R^2 + m_2 a^2 + J_B Q^2 + 2 a f_2 m_2 Q\\cos(\\alpha - \\beta - \\vartheta_2)$,
         $J_A = J_{G1} + m_1 f_1^2$, $J_B = J_{G2} + m_2 f_2^2$, $J_D = J_{G3} + m_3 f_3^2$.
         """
-        alpha = jnp.asarray(alpha, dtype=float)
-        beta, _ = self.angles(alpha)
-        Q, Rr = self.velocity_ratios(alpha)
-        JA = self.jg1 + self.m1 * self.f1**2
-        JB = self.jg2 + self.m2 * self.f2**2
-        JD = self.jg3 + self.m3 * self.f3**2
-        return (
-            JA + JD * Rr**2 + self.m2 * self.a**2 + JB * Q**2
-            + 2 * self.a * self.f2 * self.m2 * Q * jnp.cos(alpha - beta - self.theta2)
-        )
+        return self._energy_coeffs(jnp.asarray(alpha, dtype=float))[0]
 
     def potential_energy(self, alpha):
         """Gravitational energy $E_p(\\alpha) = g(m_1 y_{G1} + m_2 y_{G2} + m_3 y_{G3})$ [J] (eq. 3-4)."""
-        alpha = jnp.asarray(alpha, dtype=float)
-        beta, gamma = self.angles(alpha)
-        y1 = self.f1 * jnp.sin(alpha + self.theta1)
-        y2 = self.a * jnp.sin(alpha) + self.f2 * jnp.sin(beta + self.theta2)
-        y3 = self.hy + self.f3 * jnp.sin(gamma + self.theta3)
-        return self.g * (self.m1 * y1 + self.m2 * y2 + self.m3 * y3)
+        return self._energy_coeffs(jnp.asarray(alpha, dtype=float))[1]
 
     def inertia_and_potential(self, alpha):
         """`(J, Ep, dJ/dalpha, dEp/dalpha)` elementwise; the derivatives by forward-mode AD."""
         alpha = jnp.asarray(alpha, dtype=float)
-        (J, Ep), (dJ, dEp) = jax.jvp(
-            lambda x: (self.inertia(x), self.potential_energy(x)), (alpha,), (jnp.ones_like(alpha),)
-        )
+        (J, Ep), (dJ, dEp) = jax.jvp(self._energy_coeffs, (alpha,), (jnp.ones_like(alpha),))
         return J, Ep, dJ, dEp
 
     def dinertia(self, alpha):
