@@ -45,12 +45,12 @@ def _check_window(inside, w):
             raise ValueError("fluctuation index: the window [t0, t1] must contain at least two output times")
 
 
-def chi_from_samples(ts, speed, t0=None, t1=None, *, smooth: bool = False, temperature=1e-3):
+def chi_from_samples(ts, speed, t0=None, t1=None, *, smooth: bool = False, temperature=3e-4):
     """χ of the sampled signal `speed` (..., N) at times `ts` (N,) over [t0, t1].
 
     `smooth=False`: exact $(\\max - \\min)/\\text{average}$ over the samples in the window (time
     average by the trapezoid rule). `smooth=True`: log-mean-exp max and min at temperature
-    `temperature` × average speed (dimensionless, default 1e-3).
+    `temperature` × average speed (dimensionless, default 3e-4).
     """
     speed = jnp.asarray(speed, dtype=float)
     inside, w = _node_weights(ts, t0, t1)
@@ -82,7 +82,7 @@ def _speed(sol):
     )
 
 
-def fluctuation_index(sol, t0=None, t1=None, *, smooth: bool = False, temperature=1e-3):
+def fluctuation_index(sol, t0=None, t1=None, *, smooth: bool = False, temperature=3e-4):
     """Fluctuation index χ (eq. 22) of the motor speed in a `Solution`, over [t0, t1] [s].
 
     Uses the observed `motor_speed` output, else the crank speed state (the gear ratio cancels
@@ -107,7 +107,7 @@ def _fixed_rk4(model, inp, ts, dt):
 
 
 def closed_loop_metrics(
-    drive, pid, t0=0.375, t1=0.5, *, temperature=1e-3, peak_temperature=0.5, dt_save=5e-4,
+    drive, pid, t0=0.375, t1=0.5, *, temperature=3e-4, peak_temperature=0.5, dt_save=5e-4,
     method="ode", rtol=1e-8, atol=1e-8, dt=1e-3, max_steps=100_000,
 ):
     """χ (exact and smooth) over [t0, t1] and peak |voltage| and |current| over [0, t1].
@@ -141,7 +141,7 @@ def closed_loop_metrics(
     }
 
 
-def fluctuation_objective(drive, pid, t0=0.375, t1=0.5, *, smooth=True, temperature=1e-3, **kw):
+def fluctuation_objective(drive, pid, t0=0.375, t1=0.5, *, smooth=True, temperature=3e-4, **kw):
     """Pure scalar objective $\\chi(\\text{drive}, \\text{pid})$ over [t0, t1] for optimisers.
 
     Simulates from rest (diffrax by default; `method="rk4", dt=1e-3` reproduces the paper's
