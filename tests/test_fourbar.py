@@ -8,7 +8,6 @@ the energy balance; the paper's χ values.
 
 import math
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
