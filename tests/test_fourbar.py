@@ -8,6 +8,7 @@ the energy balance; the paper's χ values.
 
 import math
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -291,22 +292,23 @@ def test_exact_chi_closed_form():
 
 
 # --- gradients ------------------------------------------------------------------------------
-def _obj(drive, gains):
-    pid = jb.PID(v_limit=60.0, limiter="smooth").with_gains(gains)
-    return jb.fluctuation_objective(drive, pid, 0.1, 0.2, method="rk4", dt=1e-3)
+def _obj(drive, x):
+    """Smooth χ over 0.1-0.2 s (paper's RK4, 1 ms) as a function of x = (Kp, Ki, Kd, R)."""
+    pid = jb.PID(v_limit=60.0, limiter="smooth").with_gains(x[:3])
+    return jb.fluctuation_objective(eqx.tree_at(lambda d: d.R, drive, x[3]), pid, 0.1, 0.2, method="rk4", dt=1e-3)
 
 
 @pytest.mark.slow
 def test_smooth_chi_gradient_fd_under_vmap(drive):
-    """Gradient of the smooth χ (paper's RK4 at 1 ms) for a batch of gain sets vs central FD."""
-    g0 = jnp.array([80.0, 32.0, 0.015])
-    batch = jnp.stack([g0, g0 * jnp.array([2.0, 0.5, 3.0])])
-    grads = np.asarray(jax.jit(jax.vmap(jax.grad(lambda g: _obj(drive, g))))(batch))
-    h = jnp.array([1e-3, 1e-3, 1e-7])
-    steps = jnp.concatenate([jnp.diag(h), -jnp.diag(h)])  # (6, 3)
-    pts = (batch[:, None, :] + steps[None]).reshape(-1, 3)
-    vals = np.asarray(jax.jit(jax.vmap(lambda g: _obj(drive, g)))(pts)).reshape(2, 6)
-    fd = (vals[:, :3] - vals[:, 3:]) / (2 * np.asarray(h))
+    """Gradient of the smooth χ w.r.t. the gains and the resistance, for a batch, vs central FD."""
+    x0 = jnp.array([80.0, 32.0, 0.015, 1.5])
+    batch = jnp.stack([x0, x0 * jnp.array([2.0, 0.5, 3.0, 0.7])])
+    grads = np.asarray(jax.jit(jax.vmap(jax.grad(lambda x: _obj(drive, x))))(batch))
+    h = jnp.array([1e-3, 1e-3, 1e-7, 1e-6])
+    steps = jnp.concatenate([jnp.diag(h), -jnp.diag(h)])  # (8, 4)
+    pts = (batch[:, None, :] + steps[None]).reshape(-1, 4)
+    vals = np.asarray(jax.jit(jax.vmap(lambda x: _obj(drive, x)))(pts)).reshape(2, 8)
+    fd = (vals[:, :4] - vals[:, 4:]) / (2 * np.asarray(h))
     np.testing.assert_allclose(grads, fd, rtol=1e-5)
     assert np.all(np.abs(grads[:, 2]) > 1e-3)  # the Kd sensitivity is not trivially zero
 
@@ -325,3 +327,13 @@ def test_tune_pid_halves_chi(drive):
     assert abs(chi_new - res.chi) < 1e-5 and abs(chi_old - res.chi_initial) < 1e-5
     assert float(jnp.max(jnp.abs(sol.voltage))) <= 60.0 + 1e-9
     assert res.history["loss"].shape == (12,)
+
+
+def test_bad_tuning_and_window_inputs(drive):
+    with pytest.raises(ValueError, match="kd"):
+        jb.tune_pid(drive, jb.PID(kd=0.0), progress=False)
+    with pytest.raises(ValueError, match="t0 < t1"):
+        jb.tune_pid(drive, jb.PID(), t0=0.5, t1=0.4, progress=False)
+    ts = jnp.linspace(0.0, 1.0, 11)
+    with pytest.raises(ValueError, match="two output times"):
+        chi_from_samples(ts, jnp.ones(11), 0.31, 0.39)
