@@ -56,3 +56,9 @@ from .optimise.command import optimise_robust as optimise_robust  # noqa: E402
 from .optimise.command import sensitivity_curve as sensitivity_curve  # noqa: E402
 from .optimise.command import tolerance_band as tolerance_band  # noqa: E402
 from .optimise.command import shaped_commands as shaped_commands  # noqa: E402
+from .models.fourbar import FourBarDrive as FourBarDrive  # noqa: E402
+from .models.motor import PID as PID  # noqa: E402
+from .objectives.fluctuation import fluctuation_index as fluctuation_index  # noqa: E402
+from .objectives.fluctuation import fluctuation_objective as fluctuation_objective  # noqa: E402
+from .optimise.pid import PIDTuneResult as PIDTuneResult  # noqa: E402
+from .optimise.pid import tune_pid as tune_pid  # noqa: E402

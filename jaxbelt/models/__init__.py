@@ -18,3 +18,5 @@ from .string import simulate_runout_response as simulate_runout_response
 from .nonlinear import NonlinearBelt as NonlinearBelt  # noqa: E402
 from .nonlinear import RunningSpeed as RunningSpeed  # noqa: E402
 from .platform import BeltPlatform as BeltPlatform
+from .fourbar import FourBarDrive as FourBarDrive
+from .motor import PID as PID

@@ -5,3 +5,5 @@ from .command import optimise_robust as optimise_robust
 from .command import sensitivity_curve as sensitivity_curve
 from .command import shaped_commands as shaped_commands
 from .command import tolerance_band as tolerance_band
+from .pid import PIDTuneResult as PIDTuneResult
+from .pid import tune_pid as tune_pid

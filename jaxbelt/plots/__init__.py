@@ -11,3 +11,6 @@ from .nonlinear import nonlinear_figure as nonlinear_figure  # noqa: E402
 from .shaping import plot_fig3 as plot_fig3
 from .shaping import plot_sensitivity as plot_sensitivity
 from .shaping import shaping_figure as shaping_figure
+from .fourbar import fourbar_figure as fourbar_figure
+from .fourbar import linkage_strip as linkage_strip
+from .fourbar import simulate_fig4 as simulate_fig4

@@ -1,0 +1,50 @@
+"""`jaxbelt fourbar`: the paper's Fig. 4 (open loop vs PID) and a linkage snapshot strip (seed 001)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "fourbar",
+        help="four-bar linkage + DC motor + PID: Fig. 4 and speed-fluctuation indices",
+        description="Simulate the four-bar drive open loop (constant voltage) and with the PID of the paper, "
+        "print the fluctuation indices and write Fig. 4. Geometry, link masses and R are ASSUMED "
+        "(the paper's Table I was lost).",
+    )
+    p.add_argument("--out", default="fourbar.png", help="Fig. 4 image (default fourbar.png)")
+    p.add_argument("--strip", default=None, help="also write a linkage snapshot strip to this image")
+    p.add_argument("--voltage", type=float, default=25.0, help="open-loop voltage [V] (paper: 25)")
+    p.add_argument("--kp", type=float, default=80.0, help="Kp [V/rad], multiplies t (paper: 80)")
+    p.add_argument("--ki", type=float, default=32.0, help="Ki [V/rad] (paper: 32)")
+    p.add_argument("--kd", type=float, default=0.015, help="Kd [V/(rad/s^2)] (paper: 0.015)")
+    p.add_argument("--omega-ref", type=float, default=30.0, help="motor speed set point [rad/s] (paper: 30)")
+    p.add_argument("--v-limit", type=float, default=None, help="voltage limiter [V] (default: none)")
+    p.add_argument("--t1", type=float, default=1.0, help="simulated time [s]")
+    p.set_defaults(func=run)
+
+
+def run(args) -> int:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import jaxbelt as jb
+    from jaxbelt.plots.fourbar import fourbar_figure, linkage_strip, simulate_fig4
+
+    drive = jb.FourBarDrive()
+    pid = jb.PID(kp=args.kp, ki=args.ki, kd=args.kd, omega_ref=args.omega_ref, v_limit=args.v_limit)
+    if not args.t1 > 0.5:
+        raise ValueError(f"--t1 must be > 0.5 s (the closed-loop index is taken over 0.375-0.5 s); got {args.t1}")
+    open_, closed = simulate_fig4(drive, pid, voltage=args.voltage, t1=args.t1, n=int(round(2000 * args.t1)) + 1)
+    chi_open = float(jb.fluctuation_index(open_, 0.5 * args.t1, args.t1))
+    chi_closed = float(jb.fluctuation_index(closed, 0.375, 0.5))
+    print(f"open loop {args.voltage:g} V: chi = {100 * chi_open:.1f} % over {0.5 * args.t1:g}-{args.t1:g} s (paper: 54.3 %)")
+    print(f"closed loop PID: chi = {100 * chi_closed:.2f} % over 0.375-0.5 s (paper: 2.6 %)")
+    fig = fourbar_figure(open_, closed, omega_ref=args.omega_ref, voltage=args.voltage)
+    fig.savefig(Path(args.out), dpi=120)
+    print(f"wrote {args.out}")
+    if args.strip:
+        linkage_strip(drive).savefig(Path(args.strip), dpi=120)
+        print(f"wrote {args.strip}")
+    return 0

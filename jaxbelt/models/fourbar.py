@@ -1,0 +1,342 @@
+"""Four-bar linkage driven by a DC motor through a gearbox, open loop or PID speed control (seed 001).
+
+Kinematics in closed form (Appendix A-B), the equivalent inertia $J(\\alpha)$ (Appendix C), the
+potential energy $E_p(\\alpha)$ (eq. 3-4); $dJ/d\\alpha$ and $dE_p/d\\alpha$ by forward-mode
+automatic differentiation. The drive couples the linkage's equation of motion (eq. 5, 10-13) to
+the armature equation (eq. 7) with either a constant voltage or the PID law (eq. 15-21).
+
+**Assumed values.** Table I of the paper was lost in extraction. The link lengths, pivot
+abscissa, centre-of-mass distances, link masses, armature resistance and assembly mode used as
+defaults here (`a, b, c, hx, f1, f2, f3, m1, m2, m3, R, assembly`) are ASSUMED (see
+`ASSUMED_PARAMETERS`); the masses were chosen so that the open-loop speed fluctuation at 25 V is
+close to the paper's 54.3 %. The other defaults are the paper's.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._checks import check_nonnegative, check_positive, is_concrete
+from .base import AbstractModel
+from .motor import PID
+
+
+def _arr(x):
+    return jnp.asarray(x, dtype=float)
+
+
+#: Defaults that are NOT from the paper (its Table I was lost): assumed values.
+ASSUMED_PARAMETERS = {
+    "a": 0.10, "b": 0.30, "c": 0.30, "hx": 0.30, "f1": 0.05, "f2": 0.15, "f3": 0.15,
+    "m1": 0.40, "m2": 0.38, "m3": 0.38, "R": 1.5, "assembly": 1,
+}
+
+# Crank angles at which the construction checks look for a gap or a dead point.
+_N_CHECK = 4096
+# Smallest |sin(transmission angle)| accepted: below this the velocity ratios Q, R blow up.
+_DEAD_TOL = 1e-3
+
+
+class FourBarDrive(AbstractModel):
+    """Four-bar linkage (crank a, coupler b, rocker c) driven by a DC motor through a gearbox.
+
+    Equation of motion of the crank (eq. 10-13), with $J_{eq} = J_b + (J_m + J_a) z^2$:
+
+    $\\ddot\\alpha = \\mathcal F(\\alpha, \\dot\\alpha, I) =
+      \\dfrac{z(k_m I - T_0 - z\\lambda\\dot\\alpha) - E_p'(\\alpha) - \\tfrac12 J'(\\alpha)\\dot\\alpha^2}
+      {J_{eq} + J(\\alpha)}$
+
+    Armature (eq. 7): $L\\dot I = V_a - R I - k_m z\\dot\\alpha$.
+
+    **Input roles.** The scene's input decides $V_a$:
+
+    - a command (`ConstantVoltage(25.0)`, any `AbstractCommand`): $V_a = $ `inp(t)` (open loop);
+    - a controller (`PID(kp, ki, kd, omega_ref, v_limit)`): $V_a$ from eq. (16) with the
+      motor angle $z\\alpha$, speed $z\\dot\\alpha$ and acceleration $z\\mathcal F$ (closed loop,
+      eq. 17-21).
+
+    State (eq. 20): `alpha` [rad], `alpha_dot` [rad/s], `current` [A]; the motor speed is
+    $\\dot\\varphi = z\\dot\\alpha$.
+
+    Parameters (SI). Defaults marked *assumed* replace the lost Table I (see module docstring):
+
+    | field | symbol | unit | default |
+    |---|---|---|---|
+    | `a`, `b`, `c` | crank, coupler, rocker lengths | m | 0.10, 0.30, 0.30 (*assumed*) |
+    | `hx`, `hy` | rocker pivot D | m | 0.30 (*assumed*), 0.05 |
+    | `f1`, `f2`, `f3` | distances of $G_i$ from A, B, D | m | 0.05, 0.15, 0.15 (*assumed*) |
+    | `theta1..3` | angles $\\vartheta_i$ of $G_i$ off the link lines | rad | 0 |
+    | `m1`, `m2`, `m3` | link masses | kg | 0.40, 0.38, 0.38 (*assumed*) |
+    | `jg1`, `jg2`, `jg3` | link inertias about $G_i$ | kg m² | 3.5e-4, 1.7e-2, 1.7e-2 |
+    | `g` | gravity | m/s² | 9.81 |
+    | `R` | armature resistance | Ω | 1.5 (*assumed*) |
+    | `L` | armature inductance | H | 9e-3 |
+    | `km` | torque / back-emf constant | N m/A | 0.48 |
+    | `jm`, `ja`, `jb` | motor, gear a, gear b inertias | kg m² | 13e-4, 9.8e-5, 9.8e-5 |
+    | `z` | gear ratio $\\dot\\varphi/\\dot\\alpha$ | – | 1 |
+    | `T0` | constant friction torque on the motor shaft | N m | 0 |
+    | `lam` | viscous friction $\\lambda$ on the motor shaft | N m s/rad | 0.08 |
+    | `assembly` | $k = \\pm 1$, the assembly mode (static) | – | +1 (*assumed*) |
+
+    Construction raises `ValueError` when the linkage cannot be assembled over a full crank turn
+    ($D^2 < 0$ somewhere), when it passes a dead point (coupler and rocker aligned, $D = 0$), or
+    when a length, inductance, resistance or inertia is not positive.
+    """
+
+    a: jnp.ndarray = eqx.field(converter=_arr, default=0.10)
+    b: jnp.ndarray = eqx.field(converter=_arr, default=0.30)
+    c: jnp.ndarray = eqx.field(converter=_arr, default=0.30)
+    hx: jnp.ndarray = eqx.field(converter=_arr, default=0.30)
+    hy: jnp.ndarray = eqx.field(converter=_arr, default=0.05)
+    f1: jnp.ndarray = eqx.field(converter=_arr, default=0.05)
+    f2: jnp.ndarray = eqx.field(converter=_arr, default=0.15)
+    f3: jnp.ndarray = eqx.field(converter=_arr, default=0.15)
+    theta1: jnp.ndarray = eqx.field(converter=_arr, default=0.0)
+    theta2: jnp.ndarray = eqx.field(converter=_arr, default=0.0)
+    theta3: jnp.ndarray = eqx.field(converter=_arr, default=0.0)
+    m1: jnp.ndarray = eqx.field(converter=_arr, default=0.40)
+    m2: jnp.ndarray = eqx.field(converter=_arr, default=0.38)
+    m3: jnp.ndarray = eqx.field(converter=_arr, default=0.38)
+    jg1: jnp.ndarray = eqx.field(converter=_arr, default=3.5e-4)
+    jg2: jnp.ndarray = eqx.field(converter=_arr, default=1.7e-2)
+    jg3: jnp.ndarray = eqx.field(converter=_arr, default=1.7e-2)
+    g: jnp.ndarray = eqx.field(converter=_arr, default=9.81)
+    R: jnp.ndarray = eqx.field(converter=_arr, default=1.5)
+    L: jnp.ndarray = eqx.field(converter=_arr, default=9e-3)
+    km: jnp.ndarray = eqx.field(converter=_arr, default=0.48)
+    jm: jnp.ndarray = eqx.field(converter=_arr, default=13e-4)
+    ja: jnp.ndarray = eqx.field(converter=_arr, default=9.8e-5)
+    jb: jnp.ndarray = eqx.field(converter=_arr, default=9.8e-5)
+    z: jnp.ndarray = eqx.field(converter=_arr, default=1.0)
+    T0: jnp.ndarray = eqx.field(converter=_arr, default=0.0)
+    lam: jnp.ndarray = eqx.field(converter=_arr, default=0.08)
+    assembly: int = eqx.field(static=True, default=1)
+
+    state_names: ClassVar[tuple[str, ...]] = ("alpha", "alpha_dot", "current")
+    output_names: ClassVar[tuple[str, ...]] = (
+        "motor_speed", "alpha_ddot", "voltage", "mechanical_power", "electric_power",
+        "kinetic_energy", "potential_energy", "magnetic_energy", "beta", "gamma", "inertia",
+    )
+    integral_names: ClassVar[tuple[str, ...]] = ("electric_energy", "copper_loss", "friction_loss")
+
+    def __check_init__(self):
+        o = "FourBarDrive"
+        for name in ("a", "b", "c"):
+            check_positive(name, getattr(self, name), "m", o)
+        for name in ("f1", "f2", "f3"):
+            check_nonnegative(name, getattr(self, name), "m", o)
+        for name in ("m1", "m2", "m3"):
+            check_nonnegative(name, getattr(self, name), "kg", o)
+        for name in ("jg1", "jg2", "jg3", "jm", "ja", "jb"):
+            check_positive(name, getattr(self, name), "kg m^2", o)
+        check_nonnegative("g", self.g, "m/s^2", o)
+        check_positive("R", self.R, "ohm", o)
+        check_positive("L", self.L, "H", o)
+        check_positive("km", self.km, "N m/A", o)
+        check_positive("z", self.z, "", o)
+        check_nonnegative("T0", self.T0, "N m", o)
+        check_nonnegative("lam", self.lam, "N m s/rad", o)
+        if self.assembly not in (1, -1):
+            raise ValueError(f"{o}: `assembly` (k of Appendix A) must be +1 or -1; got {self.assembly!r}")
+        if is_concrete(self):
+            self._check_geometry()
+
+    def _check_geometry(self):
+        al = np.linspace(0.0, 2 * np.pi, _N_CHECK, endpoint=False)
+        A, B, C, D2 = (np.asarray(x) for x in self._abcd(jnp.asarray(al)))
+        geo = f"a={float(self.a):g}, b={float(self.b):g}, c={float(self.c):g}, hx={float(self.hx):g}, hy={float(self.hy):g} m"
+        if np.any(D2 < 0):
+            i = int(np.argmin(D2))
+            raise ValueError(
+                f"FourBarDrive: the linkage ({geo}) cannot be assembled over a full crank turn: "
+                f"D^2 = A^2 + B^2 - C^2 < 0 at alpha = {np.degrees(al[i]):.1f} deg (the crank must be the "
+                "shortest link of a Grashof crank-rocker: a + longest <= sum of the other two)"
+            )
+        # |sin(gamma - beta)| = D / sqrt(A^2 + B^2): zero where coupler and rocker align.
+        s = np.sqrt(D2 / (A**2 + B**2))
+        if np.min(s) < _DEAD_TOL:
+            i = int(np.argmin(s))
+            raise ValueError(
+                f"FourBarDrive: the linkage ({geo}) passes a dead point (coupler and rocker aligned, "
+                f"|sin(gamma - beta)| = {s[i]:.2e} < {_DEAD_TOL:g}) at alpha = {np.degrees(al[i]):.1f} deg; "
+                "the crank cannot drive it through"
+            )
+
+    # --- kinematics (Appendix A-B) ----------------------------------------------------------
+    def _abcd(self, alpha):
+        a, b, c, hx, hy = self.a, self.b, self.c, self.hx, self.hy
+        sa, ca = jnp.sin(alpha), jnp.cos(alpha)
+        A = 2 * c * (hy - a * sa)
+        B = 2 * c * (hx - a * ca)
+        C = a**2 - b**2 + c**2 + hx**2 + hy**2 - 2 * a * (hx * ca + hy * sa)
+        return A, B, C, A**2 + B**2 - C**2
+
+    def angles(self, alpha):
+        """Coupler and rocker angles $(\\beta(\\alpha), \\gamma(\\alpha))$ [rad] (Appendix A), elementwise."""
+        alpha = jnp.asarray(alpha, dtype=float)
+        A, B, C, D2 = self._abcd(alpha)
+        D = jnp.sqrt(D2)
+        k = float(self.assembly)
+        den = A**2 + B**2
+        sg = -(A * C + k * B * D) / den
+        cg = -(B * C - k * A * D) / den
+        sb = (self.hy + self.c * sg - self.a * jnp.sin(alpha)) / self.b
+        cb = (self.hx + self.c * cg - self.a * jnp.cos(alpha)) / self.b
+        return jnp.arctan2(sb, cb), jnp.arctan2(sg, cg)
+
+    def velocity_ratios(self, alpha):
+        """$(Q(\\alpha), R(\\alpha)) = (d\\beta/d\\alpha, d\\gamma/d\\alpha)$ in closed form (Appendix B)."""
+        beta, gamma = self.angles(alpha)
+        s = jnp.sin(gamma - beta)
+        Q = self.a * jnp.sin(alpha - gamma) / (self.b * s)
+        Rr = self.a * jnp.sin(alpha - beta) / (self.c * s)
+        return Q, Rr
+
+    def points(self, alpha):
+        """Joint positions A, B, C, D and centres of mass G1, G2, G3, each (..., 2) [m]."""
+        alpha = jnp.asarray(alpha, dtype=float)
+        beta, gamma = self.angles(alpha)
+
+        def e(x):
+            return jnp.stack([jnp.cos(x), jnp.sin(x)], axis=-1)
+
+        pA = jnp.zeros(alpha.shape + (2,))
+        pD = jnp.broadcast_to(jnp.stack([self.hx, self.hy]), alpha.shape + (2,))
+        pB = self.a * e(alpha)
+        pC = pB + self.b * e(beta)
+        g1 = self.f1 * e(alpha + self.theta1)
+        g2 = pB + self.f2 * e(beta + self.theta2)
+        g3 = pD + self.f3 * e(gamma + self.theta3)
+        return {"A": pA, "B": pB, "C": pC, "D": pD, "G1": g1, "G2": g2, "G3": g3}
+
+    def _energy_coeffs(self, alpha):
+        # J and Ep from one evaluation of the angles (the vector field differentiates this).
+        beta, gamma = self.angles(alpha)
+        s = jnp.sin(gamma - beta)
+        Q = self.a * jnp.sin(alpha - gamma) / (self.b * s)
+        Rr = self.a * jnp.sin(alpha - beta) / (self.c * s)
+        JA = self.jg1 + self.m1 * self.f1**2
+        JB = self.jg2 + self.m2 * self.f2**2
+        JD = self.jg3 + self.m3 * self.f3**2
+        J = (
+            JA + JD * Rr**2 + self.m2 * self.a**2 + JB * Q**2
+            + 2 * self.a * self.f2 * self.m2 * Q * jnp.cos(alpha - beta - self.theta2)
+        )
+        y1 = self.f1 * jnp.sin(alpha + self.theta1)
+        y2 = self.a * jnp.sin(alpha) + self.f2 * jnp.sin(beta + self.theta2)
+        y3 = self.hy + self.f3 * jnp.sin(gamma + self.theta3)
+        return J, self.g * (self.m1 * y1 + self.m2 * y2 + self.m3 * y3)
+
+    def inertia(self, alpha):
+        """Equivalent inertia of the linkage about the crank axis $J(\\alpha)$ [kg m²] (Appendix C).
+
+        $J = J_A + J_D R^2 + m_2 a^2 + J_B Q^2 + 2 a f_2 m_2 Q\\cos(\\alpha - \\beta - \\vartheta_2)$,
+        $J_A = J_{G1} + m_1 f_1^2$, $J_B = J_{G2} + m_2 f_2^2$, $J_D = J_{G3} + m_3 f_3^2$.
+        """
+        return self._energy_coeffs(jnp.asarray(alpha, dtype=float))[0]
+
+    def potential_energy(self, alpha):
+        """Gravitational energy $E_p(\\alpha) = g(m_1 y_{G1} + m_2 y_{G2} + m_3 y_{G3})$ [J] (eq. 3-4)."""
+        return self._energy_coeffs(jnp.asarray(alpha, dtype=float))[1]
+
+    def inertia_and_potential(self, alpha):
+        """`(J, Ep, dJ/dalpha, dEp/dalpha)` elementwise; the derivatives by forward-mode AD."""
+        alpha = jnp.asarray(alpha, dtype=float)
+        (J, Ep), (dJ, dEp) = jax.jvp(self._energy_coeffs, (alpha,), (jnp.ones_like(alpha),))
+        return J, Ep, dJ, dEp
+
+    def dinertia(self, alpha):
+        """$dJ/d\\alpha$ [kg m²/rad] by automatic differentiation."""
+        return self.inertia_and_potential(alpha)[2]
+
+    def dpotential(self, alpha):
+        """$dE_p/d\\alpha$ [J/rad] (the gravity torque on the crank) by automatic differentiation."""
+        return self.inertia_and_potential(alpha)[3]
+
+    # --- drive ------------------------------------------------------------------------------
+    @property
+    def j_eq(self):
+        """Inertia of motor and gears reduced to the crank, $J_{eq} = J_b + (J_m + J_a) z^2$ (eq. 9)."""
+        return self.jb + (self.jm + self.ja) * self.z**2
+
+    def accel(self, alpha, alpha_dot, current):
+        """Crank acceleration $\\mathcal F(\\alpha, \\dot\\alpha, I)$ [rad/s²] (eq. 11-13)."""
+        J, _, dJ, dEp = self.inertia_and_potential(alpha)
+        drive = self.z * (self.km * current - self.T0 - self.z * self.lam * alpha_dot)  # eq. 12
+        load = dEp + 0.5 * dJ * alpha_dot**2  # eq. 13
+        return (drive - load) / (self.j_eq + J)
+
+    def _voltage(self, t, y, inp, acc):
+        if isinstance(inp, PID):
+            z = self.z
+            return inp.voltage(t, z * y[0], z * y[1], z * acc)
+        return inp(t)
+
+    def voltage(self, t, y, inp):
+        """Armature voltage $V_a$ [V] at time `t`, state `y` for a command or a `PID`."""
+        return self._voltage(t, y, inp, self.accel(y[0], y[1], y[2]))
+
+    def vector_field(self, t, y, inp):
+        """Eq. (21): $(\\dot\\alpha, \\mathcal F, (V_a - R I - k_m z\\dot\\alpha)/L)$."""
+        alpha, w, i = y[0], y[1], y[2]
+        acc = self.accel(alpha, w, i)
+        v = self._voltage(t, y, inp, acc)
+        di = (v - self.R * i - self.km * self.z * w) / self.L
+        return jnp.stack([w, acc, di])
+
+    # --- derived outputs --------------------------------------------------------------------
+    def _out_motor_speed(self, t, y, inp):
+        """Motor speed $\\dot\\varphi = z\\dot\\alpha$ [rad/s] (Fig. 4a-b)."""
+        return self.z * y[1]
+
+    def _out_alpha_ddot(self, t, y, inp):
+        return self.accel(y[0], y[1], y[2])
+
+    def _out_voltage(self, t, y, inp):
+        """Armature voltage [V] (Fig. 4c-d)."""
+        return self.voltage(t, y, inp)
+
+    def _out_mechanical_power(self, t, y, inp):
+        """Motor shaft power $k_m I\\,z\\dot\\alpha$ [W] (Fig. 4g-h)."""
+        return self.km * y[2] * self.z * y[1]
+
+    def _out_electric_power(self, t, y, inp):
+        """Electric power $V_a I$ [W] (Fig. 4g-h)."""
+        return self.voltage(t, y, inp) * y[2]
+
+    def _out_kinetic_energy(self, t, y, inp):
+        """$\\tfrac12 (J_{eq} + J(\\alpha))\\dot\\alpha^2$ [J]: linkage, motor and gears."""
+        return 0.5 * (self.j_eq + self.inertia(y[0])) * y[1] ** 2
+
+    def _out_potential_energy(self, t, y, inp):
+        return self.potential_energy(y[0])
+
+    def _out_magnetic_energy(self, t, y, inp):
+        """$\\tfrac12 L I^2$ [J]."""
+        return 0.5 * self.L * y[2] ** 2
+
+    def _out_beta(self, t, y, inp):
+        return self.angles(y[0])[0]
+
+    def _out_gamma(self, t, y, inp):
+        return self.angles(y[0])[1]
+
+    def _out_inertia(self, t, y, inp):
+        return self.inertia(y[0])
+
+    # --- integrands of the energy balance ---------------------------------------------------
+    def _rate_electric_energy(self, t, y, inp):
+        return self.voltage(t, y, inp) * y[2]
+
+    def _rate_copper_loss(self, t, y, inp):
+        return self.R * y[2] ** 2
+
+    def _rate_friction_loss(self, t, y, inp):
+        """Bearing friction $(T_0 + \\lambda\\dot\\varphi)\\dot\\varphi$ [W] (eq. 6)."""
+        w = self.z * y[1]
+        return (self.T0 + self.lam * w) * w

@@ -1,0 +1,125 @@
+"""Speed controller of a DC motor: the PID law with time-varying proportional gain (seed 001).
+
+The controller is not a command: a command is a known function of time (`ConstantVoltage`,
+`inp(t)`), whereas the controller's voltage depends on the state of the drive it is attached to.
+A model that accepts a controller (e.g. `FourBarDrive`) recognises it in its vector field and
+evaluates `pid.voltage(t, phi, phi_dot, phi_ddot)` with its own motor angle, speed and
+acceleration.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._checks import check_finite, check_nonnegative, check_positive
+
+
+def _arr(x):
+    return jnp.asarray(x, dtype=float)
+
+
+def _opt_arr(x):
+    return None if x is None else jnp.asarray(x, dtype=float)
+
+
+_LIMITERS = ("hard", "smooth")
+
+
+class PID(eqx.Module):
+    """PID speed regulator with time-varying proportional gain (seed 001, eq. 15-16).
+
+    For a constant speed set point $\\dot\\varphi_{ref} = \\omega_0$, $\\varphi_{ref} = \\omega_0 t$,
+    $\\ddot\\varphi_{ref} = 0$ (Sec. II-D):
+
+    $V_a(t) = K_p t\\,(\\omega_0 - \\dot\\varphi) + K_i(\\omega_0 t - \\varphi) - K_d\\ddot\\varphi$
+
+    where $\\varphi = z\\alpha$ is the motor angle. The integral term is written with the angle
+    itself (eq. 16), so no extra state is needed; the derivative term needs the motor
+    acceleration, which the drive supplies from its equation of motion (eq. 10-11; it does not
+    depend on $V_a$, so there is no algebraic loop).
+
+    Voltage limiter (Fig. 3, value not stated in the paper: default none):
+
+    - `limiter="hard"`: $\\mathrm{clip}(V_a, -V_{lim}, V_{lim})$;
+    - `limiter="smooth"`: $V_a - s\\,\\mathrm{softplus}((V_a - V_{lim})/s)
+      + s\\,\\mathrm{softplus}((-V_a - V_{lim})/s)$ with width $s$ = `v_smooth`; it is strictly
+      inside $(-V_{lim}, V_{lim})$, tends to the hard clip as $s \\to 0$, and has a non-zero
+      gradient everywhere (use it for gradient-based tuning).
+
+    | field | symbol | unit | paper value |
+    |---|---|---|---|
+    | `kp` | $K_p$ (multiplies $t$) | V/rad | 80 |
+    | `ki` | $K_i$ | V/rad | 32 |
+    | `kd` | $K_d$ | V/(rad s⁻²) | 0.015 |
+    | `omega_ref` | $\\omega_0$ motor speed set point | rad/s | 30 |
+    | `v_limit` | $V_{lim}$ (None: no limiter) | V | – |
+    | `v_smooth` | width $s$ of the smooth limiter | V | 0.5 |
+    """
+
+    kp: jnp.ndarray = eqx.field(converter=_arr, default=80.0)
+    ki: jnp.ndarray = eqx.field(converter=_arr, default=32.0)
+    kd: jnp.ndarray = eqx.field(converter=_arr, default=0.015)
+    omega_ref: jnp.ndarray = eqx.field(converter=_arr, default=30.0)
+    v_limit: jnp.ndarray | None = eqx.field(converter=_opt_arr, default=None)
+    limiter: str = eqx.field(static=True, default="hard")
+    v_smooth: jnp.ndarray = eqx.field(converter=_arr, default=0.5)
+
+    def __check_init__(self):
+        o = "PID"
+        check_finite("kp", self.kp, o)
+        check_finite("ki", self.ki, o)
+        check_finite("kd", self.kd, o)
+        check_finite("omega_ref", self.omega_ref, o)
+        if self.v_limit is not None:
+            check_positive("v_limit", self.v_limit, "V", o)
+        check_positive("v_smooth", self.v_smooth, "V", o)
+        if self.limiter not in _LIMITERS:
+            raise ValueError(f"{o}: `limiter` must be one of {_LIMITERS}; got {self.limiter!r}")
+
+    def raw_voltage(self, t, phi, phi_dot, phi_ddot):
+        """Regulator output before the limiter [V] (eq. 16 with the constant set point)."""
+        w0 = self.omega_ref
+        return self.kp * t * (w0 - phi_dot) + self.ki * (w0 * t - phi) - self.kd * phi_ddot
+
+    def limit(self, v):
+        """Apply the voltage limiter (identity when `v_limit is None`)."""
+        if self.v_limit is None:
+            return v
+        vl = self.v_limit
+        if self.limiter == "hard":
+            return jnp.clip(v, -vl, vl)
+        s = self.v_smooth
+        return v - s * jax.nn.softplus((v - vl) / s) + s * jax.nn.softplus((-v - vl) / s)
+
+    def voltage(self, t, phi, phi_dot, phi_ddot):
+        """Armature voltage $V_a$ [V] for motor angle, speed and acceleration at time `t`."""
+        return self.limit(self.raw_voltage(t, phi, phi_dot, phi_ddot))
+
+    def with_limiter(self, limiter: str) -> "PID":
+        """The same regulator with the `"hard"` or `"smooth"` limiter."""
+        return PID(self.kp, self.ki, self.kd, self.omega_ref, self.v_limit, limiter, self.v_smooth)
+
+    @property
+    def gains(self):
+        """`(kp, ki, kd)` stacked as one array."""
+        return jnp.stack([self.kp, self.ki, self.kd])
+
+    def with_gains(self, gains) -> "PID":
+        """The same regulator with gains `(kp, ki, kd)`."""
+        gains = jnp.asarray(gains, dtype=float)
+        return eqx.tree_at(lambda p: (p.kp, p.ki, p.kd), self, (gains[0], gains[1], gains[2]))
+
+    def __call__(self, t):
+        raise TypeError(
+            "PID is a feedback controller, not a time command: its voltage depends on the motor state. "
+            "Use it as the input of a model that accepts a controller (e.g. FourBarDrive), which calls "
+            "PID.voltage(t, phi, phi_dot, phi_ddot)."
+        )
+
+
+def check_pid_nonnegative(pid: PID) -> None:
+    """Raise `ValueError` if a gain is negative (the tuning works in log-gains)."""
+    for name in ("kp", "ki", "kd"):
+        check_nonnegative(name, getattr(pid, name), owner="PID")

@@ -1,0 +1,149 @@
+"""Gradient tuning of the PID speed regulator of a motor-driven mechanism (seed 001, Sec. IV).
+
+The paper tuned $K_p, K_i, K_d$ by trial and error and names optimisation of χ with respect to
+them as future work; `tune_pid` does it by descending the smooth fluctuation index through the
+simulation (diffrax, reverse-mode) with optax.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+
+from ..models.motor import PID, check_pid_nonnegative
+from ..objectives.fluctuation import closed_loop_metrics
+
+
+@dataclasses.dataclass(frozen=True)
+class PIDTuneResult:
+    """Result of `tune_pid`.
+
+    - `pid`: the tuned regulator (with the caller's limiter kind restored);
+    - `chi`: exact χ over the window with `pid` (hard limiter if the input had one);
+    - `chi_initial`: exact χ of the starting gains, same conditions;
+    - `v_peak`, `i_peak`: peak |voltage| [V] and |current| [A] over [0, t1] with `pid`;
+    - `history`: dict of arrays per iteration: `loss`, `chi_smooth`, `v_peak`, `i_peak`,
+      `kp`, `ki`, `kd`;
+    - `best_step`: iteration whose gains were returned (lowest loss seen).
+    """
+
+    pid: PID
+    chi: float
+    chi_initial: float
+    v_peak: float
+    i_peak: float
+    history: dict
+    best_step: int
+
+
+def tune_pid(
+    drive,
+    pid: PID,
+    t0: float = 0.375,
+    t1: float = 0.5,
+    *,
+    steps: int = 60,
+    learning_rate: float = 0.1,
+    optimizer: optax.GradientTransformation | None = None,
+    v_max: float | None = None,
+    i_max: float | None = None,
+    penalty: float = 10.0,
+    temperature: float = 3e-4,
+    method: str = "ode",
+    rtol: float = 1e-7,
+    atol: float = 1e-7,
+    dt: float = 1e-3,
+    progress: bool = True,
+) -> PIDTuneResult:
+    """Minimise the fluctuation index χ over [t0, t1] [s] with respect to $(K_p, K_i, K_d)$.
+
+    Loss, on log-gains $p = \\log(K/K^{(0)})$ (gains stay positive, steps are relative):
+
+    $\\ell = \\chi_{smooth} + w\\,[\\max(0, |V|_{max}/V_{max} - 1)^2 + \\max(0, |I|_{max}/I_{max} - 1)^2]$
+
+    - `pid`: starting gains, set point and limiter. If `pid.v_limit` is set, the tuner simulates
+      with the smooth limiter (gradients through saturation) and reports with `pid`'s own limiter.
+    - `v_max` [V], `i_max` [A]: bounds on peak |voltage| and |current| over [0, t1], imposed by
+      the quadratic penalty of weight `penalty` (default `v_max`: none; with a limiter the voltage
+      bound holds by construction).
+    - `optimizer`: any optax transformation (default `optax.adam(learning_rate)`), updated inside
+      one jitted step.
+    - `temperature`: of the smooth χ (relative to the average speed).
+    - `method`, `rtol`, `atol`, `dt`: the simulation (see `simulate`).
+    - `progress`: tqdm progress bar.
+
+    Returns a `PIDTuneResult` (the gains with the lowest loss seen).
+    """
+    check_pid_nonnegative(pid)
+    for name in ("kp", "ki", "kd"):
+        if not float(getattr(pid, name)) > 0:
+            raise ValueError(f"tune_pid: starting gain `{name}` must be > 0 (the tuner works on log-gains)")
+    if not 0 <= t0 < t1:
+        raise ValueError(f"tune_pid: need 0 <= t0 < t1; got t0={t0}, t1={t1}")
+    if steps < 1:
+        raise ValueError(f"tune_pid: `steps` must be >= 1; got {steps}")
+    train_pid = pid.with_limiter("smooth") if pid.v_limit is not None else pid
+    g0 = pid.gains
+    opt = optimizer if optimizer is not None else optax.adam(learning_rate)
+    sim = dict(method=method, rtol=rtol, atol=atol, dt=dt)
+
+    def metrics(p, which):
+        return closed_loop_metrics(drive, which.with_gains(g0 * jnp.exp(p)), t0, t1, temperature=temperature, **sim)
+
+    def loss_fn(p):
+        m = metrics(p, train_pid)
+        loss = m["chi_smooth"]
+        if v_max is not None:
+            loss = loss + penalty * jnp.maximum(0.0, m["v_peak"] / v_max - 1.0) ** 2
+        if i_max is not None:
+            loss = loss + penalty * jnp.maximum(0.0, m["i_peak"] / i_max - 1.0) ** 2
+        return loss, m
+
+    @eqx.filter_jit
+    def step(p, state):
+        (loss, m), grad = jax.value_and_grad(loss_fn, has_aux=True)(p)
+        updates, state = opt.update(grad, state, p)
+        return optax.apply_updates(p, updates), state, loss, m
+
+    report = eqx.filter_jit(lambda p: metrics(p, pid))
+
+    p = jnp.zeros(3)
+    state = opt.init(p)
+    hist = {k: [] for k in ("loss", "chi_smooth", "v_peak", "i_peak", "kp", "ki", "kd")}
+    best = (np.inf, p, 0)
+    it = range(steps)
+    if progress:
+        from tqdm.auto import tqdm
+
+        it = tqdm(it, desc="tune_pid", leave=False)
+    for k in it:
+        gains = np.asarray(g0 * jnp.exp(p))
+        p_new, state, loss, m = step(p, state)
+        loss = float(loss)
+        if not np.isfinite(loss):
+            raise FloatingPointError(f"tune_pid: non-finite loss at step {k} with gains {gains.tolist()}")
+        for name, val in (("loss", loss), ("chi_smooth", m["chi_smooth"]), ("v_peak", m["v_peak"]),
+                          ("i_peak", m["i_peak"]), ("kp", gains[0]), ("ki", gains[1]), ("kd", gains[2])):
+            hist[name].append(float(val))
+        if loss < best[0]:
+            best = (loss, p, k)
+        if progress:
+            it.set_postfix(chi=f"{float(m['chi_smooth']):.4f}")
+        p = p_new
+    _, p_best, k_best = best
+    m0 = report(jnp.zeros(3))
+    mb = report(p_best)
+    return PIDTuneResult(
+        pid=pid.with_gains(g0 * jnp.exp(p_best)),
+        chi=float(mb["chi"]),
+        chi_initial=float(m0["chi"]),
+        v_peak=float(mb["v_peak"]),
+        i_peak=float(mb["i_peak"]),
+        history={k: np.asarray(v) for k, v in hist.items()},
+        best_step=int(k_best),
+    )
