@@ -7,46 +7,43 @@ import jax as _jax
 
 _jax.config.update("jax_enable_x64", True)
 
+# --- core: scenes, simulation, commands --------------------------------------------------------
 from .commands import AbstractCommand as AbstractCommand  # noqa: E402
 from .commands import ConstantVoltage as ConstantVoltage  # noqa: E402
 from .commands import ExponentialVoltage as ExponentialVoltage  # noqa: E402
+from .commands import PseudoPolynomial as PseudoPolynomial  # noqa: E402
+from .commands import ShapedCommand as ShapedCommand  # noqa: E402
 from .models import AbstractModel as AbstractModel  # noqa: E402
-from .models import BeltChain as BeltChain  # noqa: E402
-from .models import BeltStartup as BeltStartup  # noqa: E402
 from .scene import Scene as Scene  # noqa: E402
 from .solve import Solution as Solution  # noqa: E402
 from .solve import SolveError as SolveError  # noqa: E402
 from .solve import simulate as simulate  # noqa: E402
 
-from . import modal as modal  # noqa: E402
-from . import plots as plots  # noqa: E402
+# --- start-up of a belt drive (seed 000) ---------------------------------------------------------
+from .models import BeltChain as BeltChain  # noqa: E402
+from .models import BeltStartup as BeltStartup  # noqa: E402
 
-__version__ = "0.1.0"
+# --- four-bar linkage + PID-controlled DC motor (seed 001) -------------------------------------
+from .models.fourbar import FourBarDrive as FourBarDrive  # noqa: E402
+from .models.motor import PID as PID  # noqa: E402
+from .objectives.fluctuation import fluctuation_index as fluctuation_index  # noqa: E402
+from .objectives.fluctuation import fluctuation_objective as fluctuation_objective  # noqa: E402
+from .optimise.pid import PIDTuneResult as PIDTuneResult  # noqa: E402
+from .optimise.pid import tune_pid as tune_pid  # noqa: E402
+
+# --- belt spans: contact, moving string, crossing diagrams (seeds 002, 004) --------------------
 from .models import BeltPulleyContact as BeltPulleyContact  # noqa: E402
+from .models import MovingString as MovingString  # noqa: E402
 from .models import SlipError as SlipError  # noqa: E402
 from .models import SlipReport as SlipReport  # noqa: E402
-from .models import MovingString as MovingString  # noqa: E402
 from .models import crossing_diagram as crossing_diagram  # noqa: E402
 from .models import crossing_speeds as crossing_speeds  # noqa: E402
 from .models import exciting_speeds as exciting_speeds  # noqa: E402
 from .models import linear_runout_response as linear_runout_response  # noqa: E402
 from .models import runout_phasors as runout_phasors  # noqa: E402
 from .models import simulate_runout_response as simulate_runout_response  # noqa: E402
-from .models.nonlinear import NonlinearBelt as NonlinearBelt  # noqa: E402
-from .models.nonlinear import RunningSpeed as RunningSpeed  # noqa: E402
-from .nonlinear_sweep import SteadyStateError as SteadyStateError  # noqa: E402
-from .nonlinear_sweep import speed_sweep as speed_sweep  # noqa: E402
-from .nonlinear_sweep import sweep as nonlinear_sweep  # noqa: E402
-from .nonlinear_sweep import steady_state as nonlinear_steady_state  # noqa: E402
-from .nonlinear_sweep import basins as nonlinear_basins  # noqa: E402
-from .nonlinear_sweep import trajectory as nonlinear_trajectory  # noqa: E402
-from .nonlinear_kbm import backbone_frequency as backbone_frequency  # noqa: E402
-from .nonlinear_kbm import backbone_amplitude as backbone_amplitude  # noqa: E402
-from .nonlinear_kbm import backbone_speed as backbone_speed  # noqa: E402
-from .nonlinear_kbm import amplitude_coefficients as kbm_coefficients  # noqa: E402
-from .nonlinear_kbm import steady_amplitudes as kbm_amplitudes  # noqa: E402
-from .commands import PseudoPolynomial as PseudoPolynomial  # noqa: E402
-from .commands import ShapedCommand as ShapedCommand  # noqa: E402
+
+# --- command shaping of a belt-driven platform (seed 003) --------------------------------------
 from .models import BeltPlatform as BeltPlatform  # noqa: E402
 from .objectives.residual import residual_energy as residual_energy  # noqa: E402
 from .objectives.residual import residual_energy_joules as residual_energy_joules  # noqa: E402
@@ -54,11 +51,28 @@ from .optimise.command import CommandOptimResult as CommandOptimResult  # noqa: 
 from .optimise.command import optimise_command as optimise_command  # noqa: E402
 from .optimise.command import optimise_robust as optimise_robust  # noqa: E402
 from .optimise.command import sensitivity_curve as sensitivity_curve  # noqa: E402
-from .optimise.command import tolerance_band as tolerance_band  # noqa: E402
 from .optimise.command import shaped_commands as shaped_commands  # noqa: E402
-from .models.fourbar import FourBarDrive as FourBarDrive  # noqa: E402
-from .models.motor import PID as PID  # noqa: E402
-from .objectives.fluctuation import fluctuation_index as fluctuation_index  # noqa: E402
-from .objectives.fluctuation import fluctuation_objective as fluctuation_objective  # noqa: E402
-from .optimise.pid import PIDTuneResult as PIDTuneResult  # noqa: E402
-from .optimise.pid import tune_pid as tune_pid  # noqa: E402
+from .optimise.command import tolerance_band as tolerance_band  # noqa: E402
+
+# --- non-linear belt vibration (seed 004) ------------------------------------------------------
+from .models.nonlinear import NonlinearBelt as NonlinearBelt  # noqa: E402
+from .models.nonlinear import RunningSpeed as RunningSpeed  # noqa: E402
+from .nonlinear_kbm import amplitude_coefficients as kbm_coefficients  # noqa: E402
+from .nonlinear_kbm import backbone_amplitude as backbone_amplitude  # noqa: E402
+from .nonlinear_kbm import backbone_frequency as backbone_frequency  # noqa: E402
+from .nonlinear_kbm import backbone_speed as backbone_speed  # noqa: E402
+from .nonlinear_kbm import steady_amplitudes as kbm_amplitudes  # noqa: E402
+from .nonlinear_sweep import SteadyStateError as SteadyStateError  # noqa: E402
+from .nonlinear_sweep import basins as nonlinear_basins  # noqa: E402
+from .nonlinear_sweep import speed_sweep as speed_sweep  # noqa: E402
+from .nonlinear_sweep import steady_state as nonlinear_steady_state  # noqa: E402
+from .nonlinear_sweep import sweep as nonlinear_sweep  # noqa: E402
+from .nonlinear_sweep import trajectory as nonlinear_trajectory  # noqa: E402
+
+# --- sub-modules -------------------------------------------------------------------------------
+from . import modal as modal  # noqa: E402
+from . import plots as plots  # noqa: E402
+
+__version__ = "0.1.0"
+
+__all__ = [name for name in dir() if not name.startswith("_")]

@@ -47,6 +47,7 @@ class Scene(eqx.Module):
     y0: jnp.ndarray | None = None
     state: bool = eqx.field(static=True, default=True)
     uniform: bool = eqx.field(static=True, default=False)
+    max_spacing: float | None = eqx.field(static=True, default=None)
 
     def __init__(self, model, input, ts=None, *, t0=None, t1=None, observe=None, y0=None, state=True):
         self.model = model
@@ -59,27 +60,35 @@ class Scene(eqx.Module):
         if ts is not None and t1 is not None:
             raise ValueError("Scene takes `ts` (output times) or `t1` (final time only), not both")
         if ts is not None:
+            # Check the values before converting: inside `jit` even a numpy constant becomes a tracer
+            # once passed through jnp, and the grid's spacing must stay known (RK4 substeps, uniform grids).
+            raw = ts
             ts = jnp.asarray(ts, dtype=float)
             if ts.ndim != 1 or ts.shape[0] < 1:
                 raise ValueError(f"Scene: `ts` must be a 1-D array of output times; got shape {ts.shape}")
             uniform = False
-            if is_concrete(ts):
-                d = np.diff(np.asarray(ts))
-                if not np.all(np.isfinite(np.asarray(ts))):
+            max_spacing = None
+            if is_concrete(raw):
+                tv = np.asarray(raw, dtype=float)
+                d = np.diff(tv)
+                if not np.all(np.isfinite(tv)):
                     raise ValueError("Scene: `ts` must be finite")
                 if np.any(d <= 0):
                     i = int(np.argmax(d <= 0))
                     raise ValueError(
-                        f"Scene: `ts` must be strictly increasing; ts[{i}] = {float(ts[i])} >= ts[{i + 1}] = {float(ts[i + 1])}"
+                        f"Scene: `ts` must be strictly increasing; ts[{i}] = {tv[i]} >= ts[{i + 1}] = {tv[i + 1]}"
                     )
                 uniform = bool(d.size > 0 and np.allclose(d, d[0], rtol=1e-12, atol=0.0))
+                max_spacing = float(d.max()) if d.size else 0.0
             self.ts = ts
             self.uniform = uniform
+            self.max_spacing = max_spacing
             self.t0 = ts[0] if t0 is None else jnp.asarray(t0, dtype=float)
             self.t1 = None
         else:
             self.ts = None
             self.uniform = False
+            self.max_spacing = None
             self.t0 = jnp.asarray(0.0 if t0 is None else t0, dtype=float)
             self.t1 = jnp.asarray(t1, dtype=float)
             if is_concrete(self.t1) and is_concrete(self.t0) and not float(self.t1) > float(self.t0):

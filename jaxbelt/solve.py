@@ -78,12 +78,9 @@ class Solution(eqx.Module):
         return None if self.ys is None else self.ys[..., -1, :]
 
 
-def _rk4_substeps(ts, dt) -> int:
-    """RK4 steps per output interval so that no step exceeds `dt` (needs concrete `ts`)."""
-    ts_np = np.asarray(ts)
-    if ts_np.size < 2:
-        return 1
-    return max(int(np.ceil(np.max(np.diff(ts_np)) / float(dt) - 1e-9)), 1)
+def _rk4_substeps(max_spacing: float, dt) -> int:
+    """RK4 steps per output interval so that no step exceeds `dt` [s]."""
+    return max(int(np.ceil(max_spacing / float(dt) - 1e-9)), 1)
 
 
 def _rk4(f, y0, ts, n_sub: int, inp):
@@ -222,8 +219,16 @@ def simulate(
             )
         if integrals:
             raise ValueError(f"simulate: integral outputs {integrals} need method='ode' (they are augmented states)")
-    if method == "rk4" and scene.ts is not None and not is_concrete(scene.ts):
-        raise ValueError("simulate: method='rk4' needs concrete output times `ts` (not traced)")
+    if method == "rk4":
+        if scene.ts is None:
+            raise ValueError("simulate: method='rk4' needs output times `ts` (use Scene(..., ts=...))")
+        if scene.max_spacing is None:
+            raise ValueError(
+                "simulate: method='rk4' needs output times whose values are known when the Scene is built "
+                "(a numpy array or a concrete jax array, not a traced one)"
+            )
+        if not is_concrete(dt) or not float(dt) > 0:
+            raise ValueError(f"simulate: `dt` (RK4 step, s) must be a concrete number > 0; got {dt}")
     if solver is None and method == "ode":
         solver = model.default_solver()
     if method == "ode" and dt0 is None and not isinstance(solver, diffrax.AbstractAdaptiveSolver):
@@ -235,7 +240,7 @@ def simulate(
     sol = _run(
         scene, method, solver, jnp.asarray(rtol, dtype=float), jnp.asarray(atol, dtype=float),
         None if dt0 is None else jnp.asarray(dt0, dtype=float),
-        _rk4_substeps(scene.ts, dt) if method == "rk4" else 1,
+        _rk4_substeps(scene.max_spacing, dt) if method == "rk4" else 1,
         int(max_steps), bool(progress),
     )
     if throw:

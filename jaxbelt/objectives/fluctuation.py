@@ -23,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..scene import Scene
-from ..solve import _rk4, _rk4_substeps, simulate
+from ..solve import simulate
 
 
 def _node_weights(ts, t0, t1):
@@ -98,14 +98,6 @@ def _grid(t1, dt_save):
     return np.linspace(0.0, t1, n)
 
 
-def _fixed_rk4(model, inp, ts, dt):
-    """Classical RK4 at a step <= `dt`, saved at the concrete times `ts` (numpy). Calls the
-    stepping loop of `simulate(method="rk4")` directly: `simulate` itself needs concrete output
-    times, which it cannot see inside `jit`."""
-    n_sub = _rk4_substeps(ts, dt)
-    return _rk4(model.vector_field, model.initial_state(inp), jnp.asarray(ts), n_sub, inp)
-
-
 def closed_loop_metrics(
     drive, pid, t0=0.375, t1=0.5, *, temperature=3e-4, peak_temperature=0.5, dt_save=5e-4,
     method="ode", rtol=1e-8, atol=1e-8, dt=1e-3, max_steps=100_000,
@@ -117,15 +109,9 @@ def closed_loop_metrics(
     temperature `peak_temperature` in V or A, >= the exact peak). Returns a dict of scalars.
     """
     ts = _grid(t1, dt if method == "rk4" else dt_save)
-    if method == "rk4":
-        ys = _fixed_rk4(drive, pid, ts, dt)
-        out = jax.vmap(lambda t, y: jnp.stack([drive.output("motor_speed", t, y, pid),
-                                               drive.output("voltage", t, y, pid)]))(jnp.asarray(ts), ys)
-        speed, v = out[:, 0], out[:, 1]
-    else:
-        scene = Scene(drive, pid, ts=ts, observe=("motor_speed", "voltage"))
-        sol = simulate(scene, method=method, rtol=rtol, atol=atol, max_steps=max_steps)
-        speed, v, ys = sol.outputs["motor_speed"], sol.outputs["voltage"], sol.ys
+    scene = Scene(drive, pid, ts=ts, observe=("motor_speed", "voltage"))
+    sol = simulate(scene, method=method, rtol=rtol, atol=atol, dt=dt, max_steps=max_steps)
+    speed, v, ys = sol.outputs["motor_speed"], sol.outputs["voltage"], sol.ys
     i = ys[:, 2]
 
     def speak(x):
