@@ -107,7 +107,7 @@ def _rk4(f, y0, ts, n_sub: int, inp):
 
 
 @eqx.filter_jit
-def _run(scene: Scene, method: str, solver, rtol, atol, dt0, n_sub: int, max_steps: int, progress: bool):
+def _run(scene: Scene, method: str, solver, rtol, atol, dt0, n_sub: int, max_steps: int, progress: bool, adjoint):
     model, inp = scene.model, scene.input
     integrals = tuple(n for n in scene.observe if n in model.integral_names)
     pointwise = tuple(n for n in scene.observe if n not in integrals)
@@ -150,6 +150,7 @@ def _run(scene: Scene, method: str, solver, rtol, atol, dt0, n_sub: int, max_ste
         sol = diffrax.diffeqsolve(
             diffrax.ODETerm(vf), solver, t0, t_end, dt0, y_init, args=inp, saveat=saveat,
             stepsize_controller=controller, max_steps=max_steps, throw=False, progress_meter=meter,
+            adjoint=adjoint,
         )
         if integrals:
             ys, acc = sol.ys
@@ -180,6 +181,7 @@ def simulate(
     max_steps: int = 100_000,
     throw: bool = True,
     progress: bool = False,
+    adjoint=None,
 ) -> Solution:
     """Simulate a `Scene` and return a `Solution`.
 
@@ -196,6 +198,9 @@ def simulate(
     throw: raise `SolveError` when the solve fails (outside `jit`/`vmap`), or an
         `eqx.error_if` runtime error inside them. With `throw=False`, check `sol.success`.
     progress: show a tqdm progress bar for the ODE method.
+    adjoint: how the ODE method is differentiated: `None` (reverse mode with recursive
+        checkpointing, diffrax's default), `"forward"` (`diffrax.ForwardMode()`: use with
+        `jax.jacfwd`/`jax.jvp`; cheaper when there are few parameters) or any diffrax adjoint.
 
     Works under `jax.jit`, `jax.vmap` and `jax.grad` (the modal method differentiates with
     respect to the input's parameters only: JAX does not differentiate eigenvectors).
@@ -237,11 +242,17 @@ def simulate(
         v = rtol if name == "rtol" else atol
         if is_concrete(v) and not float(np.asarray(v)) > 0:
             raise ValueError(f"simulate: `{name}` must be > 0; got {v}")
+    if adjoint is None:
+        adjoint = diffrax.RecursiveCheckpointAdjoint()
+    elif adjoint == "forward":
+        adjoint = diffrax.ForwardMode()
+    elif not isinstance(adjoint, diffrax.AbstractAdjoint):
+        raise ValueError(f"simulate: `adjoint` must be None, 'forward' or a diffrax adjoint; got {adjoint!r}")
     sol = _run(
         scene, method, solver, jnp.asarray(rtol, dtype=float), jnp.asarray(atol, dtype=float),
         None if dt0 is None else jnp.asarray(dt0, dtype=float),
         _rk4_substeps(scene.max_spacing, dt) if method == "rk4" else 1,
-        int(max_steps), bool(progress),
+        int(max_steps), bool(progress), adjoint,
     )
     if throw:
         what = f"{type(model).__name__} driven by {type(inp).__name__} (method={method!r})"

@@ -100,7 +100,7 @@ def _grid(t1, dt_save):
 
 def closed_loop_metrics(
     drive, pid, t0=0.375, t1=0.5, *, temperature=3e-4, peak_temperature=0.5, dt_save=5e-4,
-    method="ode", rtol=1e-8, atol=1e-8, dt=1e-3, max_steps=100_000,
+    method="ode", rtol=1e-8, atol=1e-8, dt=1e-3, max_steps=100_000, adjoint=None,
 ):
     """χ (exact and smooth) over [t0, t1] and peak |voltage| and |current| over [0, t1].
 
@@ -110,7 +110,7 @@ def closed_loop_metrics(
     """
     ts = _grid(t1, dt if method == "rk4" else dt_save)
     scene = Scene(drive, pid, ts=ts, observe=("motor_speed", "voltage"))
-    sol = simulate(scene, method=method, rtol=rtol, atol=atol, dt=dt, max_steps=max_steps)
+    sol = simulate(scene, method=method, rtol=rtol, atol=atol, dt=dt, max_steps=max_steps, adjoint=adjoint)
     speed, v, ys = sol.outputs["motor_speed"], sol.outputs["voltage"], sol.ys
     i = ys[:, 2]
 
