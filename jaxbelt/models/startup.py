@@ -70,21 +70,52 @@ def chain_matrices(jm, inertias, k, c, r_drive, r_driven, z, mu, R, L, km):
 
 
 class _BeltDriveBase(AbstractModel):
-    """Shared behaviour of the belt-drive start-up models (linear, voltage driven)."""
+    """Shared behaviour of the belt-drive start-up models (linear, voltage driven).
+
+    Subclasses provide the shaft inertias `_inertias()` (n + 1) and the stage radii
+    `_stage_radii()` (driving, driven; n each); the motor, load and belt fields (`jm`, `k`, `c`,
+    `tau_r0`, `mu`, `z`, `R`, `L`, `km`) have the same names in every subclass.
+    """
+
+    def _inertias(self):
+        raise NotImplementedError
+
+    def _stage_radii(self):
+        raise NotImplementedError
+
+    def _check_common(self, owner: str):
+        check_positive("jm", self.jm, "kg m^2", owner)
+        check_positive("k", self.k, "N/m", owner)
+        check_nonnegative("c", self.c, "N s/m", owner)
+        check_nonnegative("mu", self.mu, "N m s/rad", owner)
+        check_positive("z", self.z, "", owner)
+        check_positive("R", self.R, "ohm", owner)
+        check_positive("L", self.L, "H", owner)
+        check_positive("km", self.km, "N m/A", owner)
 
     def matrices(self):
         """`(A, B)` of eq. (10)-(11) (generalised to n stages)."""
-        raise NotImplementedError
+        r_drive, r_driven = self._stage_radii()
+        return chain_matrices(
+            self.jm, self._inertias(), self.k, self.c, r_drive, r_driven, self.z, self.mu, self.R, self.L, self.km
+        )
 
     @property
     def n_shafts(self) -> int:
         return (self.n_states - 1) // 2
 
-    def _load_torque(self):
-        raise NotImplementedError
+    def _elongation_map(self):
+        r"""G with belt elongations $\delta = G\vartheta$, one row per stage."""
+        r_drive, r_driven = self._stage_radii()
+        n = r_drive.shape[0]
+        idx = jnp.arange(n)
+        return jnp.zeros((n, n + 1)).at[idx, idx].set(r_drive).at[idx, idx + 1].set(-r_driven)
+
+    def _j_eff(self):
+        return self._inertias().at[0].add(self.z**2 * self.jm)  # J1* = J1 + z^2 Jm
 
     def _u(self, t, inp):
-        return jnp.stack([self._load_torque(), inp(t)])
+        return jnp.stack([self.tau_r0, inp(t)])
 
     def vector_field(self, t, y, inp):
         A, B = self.matrices()
@@ -99,7 +130,7 @@ class _BeltDriveBase(AbstractModel):
         amps, rates = terms
         A, B = self.matrices()
         # constant load torque is one more term of rate 0
-        F = jnp.concatenate([B[:, :1] * self._load_torque(), B[:, 1:] * amps[None, :]], axis=1)
+        F = jnp.concatenate([B[:, :1] * self.tau_r0, B[:, 1:] * amps[None, :]], axis=1)
         s = jnp.concatenate([jnp.zeros((1,)), rates])
         return A, F, s
 
@@ -118,6 +149,12 @@ class _BeltDriveBase(AbstractModel):
         nz = mag[mag > 1e-9 * jnp.max(mag)]
         return jnp.max(nz) / jnp.min(nz)
 
+    def output(self, name, t, y, inp):
+        # accelerations alpha1..alpha{n+1} (Fig. 3g-h for the 2-DOF drive)
+        if name.startswith("alpha") and name[5:].isdigit() and 1 <= int(name[5:]) <= self.n_shafts:
+            return self._accel(t, y, inp)[int(name[5:]) - 1]
+        return super().output(name, t, y, inp)
+
     # --- derived outputs (one time) ---------------------------------------------------------
     def _accel(self, t, y, inp):
         m = self.n_shafts
@@ -132,45 +169,38 @@ class _BeltDriveBase(AbstractModel):
 
     def _out_mechanical_power(self, t, y, inp):
         """Mechanical power at the motor shaft $k_m I \\cdot z\\dot\\vartheta_1$ [W] (Fig. 3d)."""
-        m = self.n_shafts
-        return self._km() * y[-1] * self._z() * y[m]
+        return self.km * y[-1] * self.z * y[self.n_shafts]
 
     def _out_motor_speed(self, t, y, inp):
         """Motor shaft speed $z\\dot\\vartheta_1$ [rad/s]."""
-        return self._z() * y[self.n_shafts]
+        return self.z * y[self.n_shafts]
 
-    # --- energy bookkeeping (integrands and stored energies) --------------------------------
+    def _out_kinetic_energy(self, t, y, inp):
+        m = self.n_shafts
+        return 0.5 * jnp.sum(self._j_eff() * y[m : 2 * m] ** 2)
+
+    def _out_elastic_energy(self, t, y, inp):
+        d = self._elongation_map() @ y[: self.n_shafts]
+        return jnp.sum(jnp.atleast_1d(self.k) * d**2)
+
+    def _out_magnetic_energy(self, t, y, inp):
+        return 0.5 * self.L * y[-1] ** 2
+
+    # --- energy bookkeeping: integrands -----------------------------------------------------
     def _rate_electric_energy(self, t, y, inp):
         return inp(t) * y[-1]
 
     def _rate_copper_loss(self, t, y, inp):
-        return self._R() * y[-1] ** 2
+        return self.R * y[-1] ** 2
 
     def _rate_damping_loss(self, t, y, inp):
         m = self.n_shafts
-        G, c = self._elongation_map()
-        d = G @ y[m : 2 * m]
-        return 2.0 * jnp.sum(c * d**2)
+        d = self._elongation_map() @ y[m : 2 * m]
+        return 2.0 * jnp.sum(jnp.atleast_1d(self.c) * d**2)
 
     def _rate_load_work(self, t, y, inp):
-        m = self.n_shafts
-        w = y[2 * m - 1]
-        return (self._load_torque() + self._mu() * w) * w
-
-    def _out_kinetic_energy(self, t, y, inp):
-        m = self.n_shafts
-        j = self._j_eff()
-        return 0.5 * jnp.sum(j * y[m : 2 * m] ** 2)
-
-    def _out_elastic_energy(self, t, y, inp):
-        m = self.n_shafts
-        G, _ = self._elongation_map()
-        k = self._k()
-        d = G @ y[:m]
-        return jnp.sum(k * d**2)
-
-    def _out_magnetic_energy(self, t, y, inp):
-        return 0.5 * self._L() * y[-1] ** 2
+        w = y[2 * self.n_shafts - 1]
+        return (self.tau_r0 + self.mu * w) * w
 
     output_names: ClassVar[tuple[str, ...]] = (
         "voltage",
@@ -180,6 +210,8 @@ class _BeltDriveBase(AbstractModel):
         "kinetic_energy",
         "elastic_energy",
         "magnetic_energy",
+        "alpha1",
+        "alpha2",
     )
     integral_names: ClassVar[tuple[str, ...]] = ("electric_energy", "copper_loss", "damping_loss", "load_work")
 
@@ -235,66 +267,17 @@ class BeltStartup(_BeltDriveBase):
 
     def __check_init__(self):
         o = "BeltStartup"
-        check_positive("jm", self.jm, "kg m^2", o)
         check_positive("j1", self.j1, "kg m^2", o)
         check_positive("j2", self.j2, "kg m^2", o)
-        check_positive("k", self.k, "N/m", o)
-        check_nonnegative("c", self.c, "N s/m", o)
         check_positive("r1", self.r1, "m", o)
         check_positive("r2", self.r2, "m", o)
-        check_nonnegative("mu", self.mu, "N m s/rad", o)
-        check_positive("z", self.z, "", o)
-        check_positive("R", self.R, "ohm", o)
-        check_positive("L", self.L, "H", o)
-        check_positive("km", self.km, "N m/A", o)
+        self._check_common(o)
 
-    def matrices(self):
-        return chain_matrices(
-            self.jm, jnp.stack([self.j1, self.j2]), self.k, self.c, self.r1, self.r2,
-            self.z, self.mu, self.R, self.L, self.km,
-        )
+    def _inertias(self):
+        return jnp.stack([self.j1, self.j2])
 
-    def _elongation_map(self):
-        G = jnp.stack([self.r1, -self.r2])[None, :]
-        return G, jnp.atleast_1d(self.c)
-
-    def _load_torque(self):
-        return self.tau_r0
-
-    def _k(self):
-        return jnp.atleast_1d(self.k)
-
-    def _j_eff(self):
-        return jnp.stack([self.j1 + self.z**2 * self.jm, self.j2])
-
-    def _z(self):
-        return self.z
-
-    def _km(self):
-        return self.km
-
-    def _mu(self):
-        return self.mu
-
-    def _R(self):
-        return self.R
-
-    def _L(self):
-        return self.L
-
-    def _out_theta_dd1(self, t, y, inp):
-        return self._accel(t, y, inp)[0]
-
-    def _out_theta_dd2(self, t, y, inp):
-        return self._accel(t, y, inp)[1]
-
-    # readable aliases for the accelerations of Fig. 3g-h
-    _out_alpha1 = _out_theta_dd1
-    _out_alpha2 = _out_theta_dd2
-
-    output_names: ClassVar[tuple[str, ...]] = _BeltDriveBase.output_names + (
-        "alpha1", "alpha2", "theta_dd1", "theta_dd2",
-    )
+    def _stage_radii(self):
+        return self.r1[None], self.r2[None]
 
 
 class BeltChain(_BeltDriveBase):
@@ -330,16 +313,9 @@ class BeltChain(_BeltDriveBase):
             if getattr(self, name).shape != (n,):
                 raise ValueError(f"{o}: `{name}` must have shape ({n},) for {n} stages; got {getattr(self, name).shape}")
         check_positive("inertias", self.inertias, "kg m^2", o)
-        check_positive("k", self.k, "N/m", o)
-        check_nonnegative("c", self.c, "N s/m", o)
         check_positive("r_drive", self.r_drive, "m", o)
         check_positive("r_driven", self.r_driven, "m", o)
-        check_positive("jm", self.jm, "kg m^2", o)
-        check_nonnegative("mu", self.mu, "N m s/rad", o)
-        check_positive("z", self.z, "", o)
-        check_positive("R", self.R, "ohm", o)
-        check_positive("L", self.L, "H", o)
-        check_positive("km", self.km, "N m/A", o)
+        self._check_common(o)
 
     @classmethod
     def from_startup(cls, m: BeltStartup) -> "BeltChain":
@@ -357,44 +333,8 @@ class BeltChain(_BeltDriveBase):
             + ("current",)
         )
 
-    def matrices(self):
-        return chain_matrices(
-            self.jm, self.inertias, self.k, self.c, self.r_drive, self.r_driven,
-            self.z, self.mu, self.R, self.L, self.km,
-        )
+    def _inertias(self):
+        return self.inertias
 
-    def _elongation_map(self):
-        n = self.k.shape[0]
-        idx = jnp.arange(n)
-        G = jnp.zeros((n, n + 1)).at[idx, idx].set(self.r_drive).at[idx, idx + 1].set(-self.r_driven)
-        return G, self.c
-
-    def _load_torque(self):
-        return self.tau_r0
-
-    def _k(self):
-        return self.k
-
-    def _j_eff(self):
-        return self.inertias.at[0].add(self.z**2 * self.jm)
-
-    def _z(self):
-        return self.z
-
-    def _km(self):
-        return self.km
-
-    def _mu(self):
-        return self.mu
-
-    def _R(self):
-        return self.R
-
-    def _L(self):
-        return self.L
-
-    def output(self, name, t, y, inp):
-        # accelerations alpha1..alpha{n+1}
-        if name.startswith("alpha") and name[5:].isdigit():
-            return self._accel(t, y, inp)[int(name[5:]) - 1]
-        return super().output(name, t, y, inp)
+    def _stage_radii(self):
+        return self.r_drive, self.r_driven
