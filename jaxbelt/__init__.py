@@ -9,6 +9,7 @@ _jax.config.update("jax_enable_x64", True)
 
 # --- core: scenes, simulation, commands --------------------------------------------------------
 from .commands import AbstractCommand as AbstractCommand  # noqa: E402
+from .commands import AbstractMotionCommand as AbstractMotionCommand  # noqa: E402
 from .commands import ConstantVoltage as ConstantVoltage  # noqa: E402
 from .commands import ExponentialVoltage as ExponentialVoltage  # noqa: E402
 from .commands import PseudoPolynomial as PseudoPolynomial  # noqa: E402

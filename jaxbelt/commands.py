@@ -96,7 +96,28 @@ def falling_factorial(gammas, k: int):
     return out
 
 
-class PseudoPolynomial(AbstractCommand):
+class AbstractMotionCommand(AbstractCommand):
+    """A motor displacement command $\\varphi_m(t)$ [rad] with derivatives of any order.
+
+    Subclasses implement `derivative(t, k)` (k-th time derivative, rad/s^k) and `end_time` [s].
+    """
+
+    def derivative(self, t, k: int = 0):
+        raise NotImplementedError
+
+    def __call__(self, t):
+        return self.derivative(t, 0)
+
+    def velocity(self, t):
+        """$\\dot\\varphi_m(t)$ [rad/s]."""
+        return self.derivative(t, 1)
+
+    def acceleration(self, t):
+        """$\\ddot\\varphi_m(t)$ [rad/s²]."""
+        return self.derivative(t, 2)
+
+
+class PseudoPolynomial(AbstractMotionCommand):
     """Pseudo-polynomial rest-to-rest motion command of order n (seed 003, eq. 17-23).
 
     $\\varphi_m(t) = \\Phi\\,[1 - \\sum_{i=0}^{n} C_i (1 - t/T)^{\\gamma_i}]$ (eq. 17)
@@ -182,24 +203,21 @@ class PseudoPolynomial(AbstractCommand):
             val = (-1.0) ** (k + 1) * self.displacement / T**k * s
         return jnp.where(t < 0, 0.0, val)
 
-    def __call__(self, t):
-        return self.derivative(t, 0)
-
-    def velocity(self, t):
-        """$\\dot\\varphi_m(t)$ [rad/s] (eq. 9)."""
-        return self.derivative(t, 1)
-
-    def acceleration(self, t):
-        """$\\ddot\\varphi_m(t)$ [rad/s²] (eq. 10)."""
-        return self.derivative(t, 2)
-
     @property
     def end_time(self):
         """Time at which the motion ends [s] (= T)."""
         return self.duration
 
 
-class ShapedCommand(AbstractCommand):
+def _damped_half_period_and_ratio(omega_n, zeta):
+    """$(\\pi/\\omega_d, K = e^{-\\zeta\\pi/\\sqrt{1-\\zeta^2}})$ of a mode, shared by ZV and ZVD."""
+    omega_n = jnp.asarray(omega_n, dtype=float)
+    zeta = jnp.asarray(zeta, dtype=float)
+    wd = omega_n * jnp.sqrt(1.0 - zeta**2)
+    return jnp.pi / wd, jnp.exp(-zeta * jnp.pi / jnp.sqrt(1.0 - zeta**2))
+
+
+class ShapedCommand(AbstractMotionCommand):
     """A motion command passed through an input shaper (impulse sequence).
 
     $\\varphi_s(t) = \\sum_j A_j\\,\\varphi(t - t_j)$ with $\\sum_j A_j = 1$, so the total
@@ -232,35 +250,19 @@ class ShapedCommand(AbstractCommand):
     @classmethod
     def zv(cls, base, omega_n, zeta=0.0):
         """Zero-vibration (two-impulse) shaper for the mode $(\\omega_n, \\zeta)$."""
-        omega_n = jnp.asarray(omega_n, dtype=float)
-        zeta = jnp.asarray(zeta, dtype=float)
-        wd = omega_n * jnp.sqrt(1.0 - zeta**2)
-        K = jnp.exp(-zeta * jnp.pi / jnp.sqrt(1.0 - zeta**2))
-        return cls(base, jnp.stack([0.0 * wd, jnp.pi / wd]), jnp.stack([1.0 + 0 * K, K]) / (1.0 + K))
+        t2, K = _damped_half_period_and_ratio(omega_n, zeta)
+        return cls(base, jnp.stack([0.0 * t2, t2]), jnp.stack([1.0 + 0 * K, K]) / (1.0 + K))
 
     @classmethod
     def zvd(cls, base, omega_n, zeta=0.0):
         """Zero-vibration-derivative (three-impulse) shaper for the mode $(\\omega_n, \\zeta)$."""
-        omega_n = jnp.asarray(omega_n, dtype=float)
-        zeta = jnp.asarray(zeta, dtype=float)
-        wd = omega_n * jnp.sqrt(1.0 - zeta**2)
-        K = jnp.exp(-zeta * jnp.pi / jnp.sqrt(1.0 - zeta**2))
-        t2 = jnp.pi / wd
+        t2, K = _damped_half_period_and_ratio(omega_n, zeta)
         return cls(base, jnp.stack([0.0 * t2, t2, 2 * t2]), jnp.stack([1.0 + 0 * K, 2 * K, K**2]) / (1.0 + K) ** 2)
 
     def derivative(self, t, k: int = 0):
         t = jnp.asarray(t, dtype=float)
         vals = jax.vmap(lambda tj: self.base.derivative(t - tj, k))(self.times)
         return jnp.tensordot(self.amplitudes, vals, axes=(0, 0))
-
-    def __call__(self, t):
-        return self.derivative(t, 0)
-
-    def velocity(self, t):
-        return self.derivative(t, 1)
-
-    def acceleration(self, t):
-        return self.derivative(t, 2)
 
     @property
     def end_time(self):
