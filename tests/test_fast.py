@@ -1,0 +1,101 @@
+"""The batched closed form of `jaxbelt.fast` against scipy's matrix exponential (independent)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.linalg as sl
+
+import jaxbelt as jb
+from jaxbelt.fast import exp_input_batch, startup_gamma_batch
+
+
+def expm_reference(A, F, s, x0, ts):
+    """States of x' = A x + sum_j F_j e^{s_j t}, x(ts[0]) = x0, by scipy.linalg.expm of the augmented system."""
+    A, F, s = np.asarray(A), np.asarray(F), np.asarray(s)
+    n, m = F.shape
+    Aa = np.zeros((n + m, n + m))
+    Aa[:n, :n], Aa[:n, n:], Aa[n:, n:] = A, F, np.diag(s)
+    t0 = float(ts[0])
+    z0 = np.concatenate([np.asarray(x0, float), np.exp(s * t0)])
+    return np.array([sl.expm(Aa * (t - t0)) @ z0 for t in np.asarray(ts)])[:, :n]
+
+
+def rel(x, ref):
+    scale = np.maximum(np.max(np.abs(ref), axis=0), 1e-300)
+    return float(np.max(np.max(np.abs(np.asarray(x) - ref), axis=0) / scale))
+
+
+def startup_reference(model, gamma, ts, v_max=24.0):
+    A, B = (np.asarray(a) for a in model.matrices())
+    F = np.stack([v_max * B[:, 1], -v_max * B[:, 1]], axis=1)
+    return expm_reference(A, F, np.array([0.0, -1.0 / gamma]), np.zeros(5), ts)
+
+
+def test_gamma_batch_matches_expm_reference_including_resonance():
+    model = jb.BeltStartup()
+    ts = jnp.linspace(0.0, 0.5, 101)
+    lam = np.linalg.eigvals(np.asarray(model.matrices()[0]))
+    real_modes = sorted(-1.0 / lam[(np.imag(lam) == 0) & (np.real(lam) < -1)].real)
+    g_res = real_modes[0]  # gamma = -1/lambda: the input rate equals a real mode exactly
+    gammas = np.array([0.02, 0.04, 0.06, g_res, g_res * (1 + 1e-6), g_res * (1 + 3e-3), 0.1, 0.005])
+    xs = np.asarray(startup_gamma_batch(model, jnp.asarray(gammas), ts))
+    for i, g in enumerate(gammas):
+        assert rel(xs[i], startup_reference(model, g, np.asarray(ts))) < 1e-11, g
+
+
+def test_gamma_batch_equals_vmapped_simulate():
+    model = jb.BeltStartup(tau_r0=2.0)
+    ts = jnp.linspace(0.0, 0.3, 61)
+    gammas = jnp.linspace(0.01, 0.08, 7)
+    ref = jax.vmap(lambda g: jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, g), ts=ts), method="expm").ys)(gammas)
+    fast = startup_gamma_batch(model, gammas, ts)
+    assert rel(fast.reshape(-1, 5), np.asarray(ref).reshape(-1, 5)) < 1e-10
+
+
+def test_many_near_resonant_elements_use_whole_batch_correction():
+    # more near-resonant elements than n_fix: the correction is applied to the whole batch
+    model = jb.BeltStartup()
+    ts = jnp.linspace(0.0, 0.2, 41)
+    lam = np.linalg.eigvals(np.asarray(model.matrices()[0]))
+    g_res = -1.0 / sorted(lam[(np.imag(lam) == 0) & (np.real(lam) < -1)].real)[-1]
+    gammas = g_res * (1 + jnp.linspace(-1e-3, 1e-3, 9))
+    xs = np.asarray(startup_gamma_batch(model, gammas, ts, n_fix=2))
+    for i, g in enumerate(np.asarray(gammas)):
+        assert rel(xs[i], startup_reference(model, g, np.asarray(ts))) < 1e-11
+
+
+@pytest.mark.parametrize(
+    "A, s_var",
+    [
+        (np.array([[-10.0, 0.0], [0.0, -10.02]]), np.array([-10.01, -3.0])),  # two modes near one rate: exact form
+        (np.array([[-5.0, 1.0], [0.0, -5.0]]), np.array([-5.0, -1.0])),  # defective A (Jordan block): expm form
+    ],
+)
+def test_fallbacks_match_reference(A, s_var):
+    F = np.array([[1.0], [0.5]])
+    s = np.array([0.0])
+    f = np.array([0.3, -1.0])
+    x0 = np.array([0.2, 0.1])
+    ts = np.linspace(0.0, 1.0, 21)
+    xs = np.asarray(exp_input_batch(jnp.asarray(A), jnp.asarray(F), jnp.asarray(s), jnp.asarray(x0), 0.0, jnp.asarray(ts), jnp.asarray(f), jnp.asarray(s_var)))
+    for i, sv in enumerate(s_var):
+        ref = expm_reference(A, np.concatenate([F, f[:, None]], axis=1), np.array([0.0, sv]), x0, ts)
+        assert rel(xs[i], ref) < 1e-10
+
+
+def test_gamma_batch_gradient_matches_finite_differences():
+    model = jb.BeltStartup()
+    ts = jnp.linspace(0.0, 0.2, 41)
+
+    @jax.jit
+    def f(gs):
+        return jnp.sum(startup_gamma_batch(model, gs, ts)[:, -1, 3])
+
+    gs = jnp.array([0.02, 0.03])
+    g = jax.jit(jax.grad(f))(gs)
+    h = 1e-6
+    for i in range(2):
+        e = jnp.zeros(2).at[i].set(h)
+        fd = (f(gs + e) - f(gs - e)) / (2 * h)
+        assert abs(g[i] - fd) < 1e-6 * abs(fd)
