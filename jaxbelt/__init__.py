@@ -19,3 +19,4 @@ from .solve import SolveError as SolveError  # noqa: E402
 from .solve import simulate as simulate  # noqa: E402
 
 __version__ = "0.1.0"
+from .sweep import sweep as sweep  # noqa: E402
