@@ -21,8 +21,8 @@ $(N\\times 2m)(2m\\times n)$, which XLA runs as a single GEMM over the batch. Th
 $O(\\epsilon/|s_b-\\lambda_i|)$). For a mode with $|s_b-\\lambda_i| < 10^{-2}\\max(|\\lambda_i|,|s_b|,1/T)$
 the separated term is dropped and replaced by the cancellation-free
 $e^{\\lambda_i\\tau}\\,\\tau\\,\\varphi_1((s_b-\\lambda_i)\\tau)$ (real arithmetic: only a real
-eigenvalue can be that close to a real rate), evaluated only for the `n_fix` elements concerned
-(or the whole batch when more are). Anything less regular (two modes near one rate, a nearly real
+eigenvalue can be that close to a real rate), evaluated only for the elements concerned
+(at most `n_fix` per chunk of `chunk` elements; with more, the batch takes the exact form). Anything less regular (two modes near one rate, a nearly real
 complex pair) takes the exact per-element form of `jaxbelt.modal`; a defective or ill-conditioned A
 (e.g. a critically damped belt) falls back to a per-element matrix exponential. Both fall-backs run
 element by element (`lax.map`), so that their memory stays that of one trajectory.
@@ -56,7 +56,7 @@ def _exact_one(lam, X, q, s_b, tau):
     return jnp.real((conv * q[None, :]) @ X.T)
 
 
-def exp_input_batch(A, F, s, x0, t0, ts, f_var, s_var, *, uniform: bool = False, n_fix: int = 64):
+def exp_input_batch(A, F, s, x0, t0, ts, f_var, s_var, *, uniform: bool = False, n_fix: int = 64, chunk: int = 512):
     """States of $\\dot x = A x + \\sum_j F_{:,j}e^{s_j t} + f_b e^{s_b t}$ for a batch of $(f_b, s_b)$.
 
     - `A` (n, n), `F` (n, J), `s` (J,): the system and the inputs shared by the batch
@@ -65,8 +65,9 @@ def exp_input_batch(A, F, s, x0, t0, ts, f_var, s_var, *, uniform: bool = False,
     - `f_var` (n,) or (B, n): amplitude vector of the varying term; `s_var` (B,) its real
       rates [1/s] (e.g. $-1/\\gamma_b$);
     - `uniform`: static promise that `ts` is evenly spaced (used by the expm fall-back only);
-    - `n_fix`: how many near-resonant elements are corrected cheaply before the correction is
-      applied to the whole batch.
+    - `n_fix`: how many near-resonant elements per chunk get the cheap correction (with more,
+      the exact per-element form is used for the batch);
+    - `chunk`: batch elements per chunk of the separated form (memory locality).
 
     Returns (B, N, n). Differentiable with respect to `f_var`, `s_var` (and `x0`, `F`, `s`);
     not with respect to A (JAX does not differentiate eigenvectors).
@@ -87,41 +88,60 @@ def exp_input_batch(A, F, s, x0, t0, ts, f_var, s_var, *, uniform: bool = False,
     # a cheap real correction handles one near-resonant real mode per element; anything else
     # (a nearly real complex pair, two modes near one rate) takes the exact per-element form
     simple = jnp.all((n_near <= 1) & ~jnp.any(near & ~is_real[None, :], axis=1))
+    # the cheap correction covers n_fix elements per chunk; more go to the exact form
+    n_chunks = -(-nb // chunk)
+    size = -(-nb // n_chunks)
+    has_all = jnp.any(near, axis=1)
+    per_chunk = jnp.concatenate([has_all, jnp.zeros((n_chunks * size - nb,), bool)]).reshape(n_chunks, size)
+    simple = simple & jnp.all(jnp.sum(per_chunk, axis=1) <= min(n_fix, size))
+    shared = _shared_response(lam, X, Yt, F, s, x0, t0, tau)
+    E = jnp.exp(lam[None, :] * tau[:, None])  # (N, m)
+    G = jnp.concatenate([jnp.real(E), -jnp.imag(E)], axis=1)  # (N, 2m)
 
-    def separated():
-        shared = _shared_response(lam, X, Yt, F, s, x0, t0, tau)
-        w = jnp.where(near, 0.0, q / jnp.where(near, 1.0, delta))  # (B, m)
+    def separated_chunk(s_c, q_c):
+        nc = s_c.shape[0]
+        delta = s_c[:, None] - lam[None, :]
+        scale = jnp.maximum(jnp.maximum(jnp.abs(lam)[None, :], jnp.abs(s_c)[:, None]), 1.0 / jnp.max(tau))
+        near = jnp.abs(delta) < RESONANCE_REL * scale
+        w = jnp.where(near, 0.0, q_c / jnp.where(near, 1.0, delta))  # (B, m)
         v = jnp.real(w @ X.T)  # (B, n)
-        E = jnp.exp(lam[None, :] * tau[:, None])  # (N, m)
-        G = jnp.concatenate([jnp.real(E), -jnp.imag(E)], axis=1)  # (N, 2m)
         M = X[None, :, :] * w[:, None, :]  # (B, n, m)
         W = jnp.concatenate([jnp.real(M), jnp.imag(M)], axis=2)  # (B, n, 2m)
         # (B, n, N) then transposed: XLA's CPU GEMM is several times faster in this layout
         xs = jnp.einsum("tk,bnk->bnt", G, W).transpose(0, 2, 1)
-        xs = shared[None] + jnp.exp(s_var[:, None] * tau[None, :])[:, :, None] * v[:, None, :] - xs
+        xs = shared[None] + jnp.exp(s_c[:, None] * tau[None, :])[:, :, None] * v[:, None, :] - xs
 
         # near-resonant real mode i: conv = e^{lam tau} tau phi1((s - lam) tau), all real
         i_star = jnp.argmax(near, axis=1)
         lam_b = jnp.real(lam[i_star])
-        coef = jnp.real(X[:, i_star].T * q[jnp.arange(nb), i_star][:, None])  # (B, n)
+        coef = jnp.real(X[:, i_star].T * q_c[jnp.arange(nc), i_star][:, None])  # (B, n)
         has = jnp.any(near, axis=1)
 
         def correction(sel):
-            d = s_var[sel] - lam_b[sel]
+            d = s_c[sel] - lam_b[sel]
             tt = tau[None, :]
             c = jnp.exp(lam_b[sel][:, None] * tt) * tt * phi1(d[:, None] * tt)  # (K, N)
             return jnp.where(has[sel][:, None, None], c[:, :, None] * coef[sel][:, None, :], 0.0)
 
-        k = min(n_fix, nb)
-        _, idx = jax.lax.top_k(has.astype(float), k)
-        return jax.lax.cond(
-            jnp.sum(has) > k,
-            lambda: xs + correction(jnp.arange(nb)),
-            lambda: xs.at[idx].add(correction(idx)),
-        )
+        # the (at most n_fix, checked before the branch is chosen) near-resonant elements of the chunk
+        _, idx = jax.lax.top_k(has.astype(float), min(n_fix, nc))
+        return xs.at[idx].add(correction(idx))
+
+    def separated():
+        if n_chunks == 1:
+            return separated_chunk(s_var, q)
+        # chunks keep the intermediates of one GEMM in cache instead of streaming B x N x n
+        # arrays through memory several times
+        # equal chunks of at most `chunk` elements; padding (and the copy that removes it) only
+        # when no such split exists
+        pad = n_chunks * size - nb
+        s_p = jnp.concatenate([s_var, jnp.repeat(s_var[-1:], pad)]).reshape(n_chunks, size)
+        q_p = jnp.concatenate([q, jnp.repeat(q[-1:], pad, axis=0)]).reshape(n_chunks, size, -1)
+        xs = jax.lax.map(lambda a: separated_chunk(*a), (s_p, q_p))
+        xs = xs.reshape(n_chunks * size, *xs.shape[2:])
+        return xs if pad == 0 else xs[:nb]
 
     def exact():
-        shared = _shared_response(lam, X, Yt, F, s, x0, t0, tau)
         return shared[None] + jax.lax.map(lambda a: _exact_one(lam, X, a[0], a[1], tau), (q, s_var))
 
     def expm_path():
@@ -136,7 +156,7 @@ def exp_input_batch(A, F, s, x0, t0, ts, f_var, s_var, *, uniform: bool = False,
     return jax.lax.switch(branch, [separated, exact, expm_path])
 
 
-def startup_gamma_batch(model, gammas, ts, v_max=24.0, y0=None, *, n_fix: int = 64):
+def startup_gamma_batch(model, gammas, ts, v_max=24.0, y0=None, *, n_fix: int = 64, chunk: int = 512):
     """State histories of a belt start-up model for a batch of voltage time constants.
 
     $V_b(t) = V_{max}(1 - e^{-t/\\gamma_b})$ (seed 000, eq. 30) drives `model` (a `BeltStartup`
@@ -157,4 +177,4 @@ def startup_gamma_batch(model, gammas, ts, v_max=24.0, y0=None, *, n_fix: int = 
     if is_concrete(ts) and ts.shape[0] > 1:
         d = np.diff(np.asarray(ts))
         uniform = bool(np.allclose(d, d[0], rtol=1e-12, atol=0.0))
-    return exp_input_batch(A, F, s, x0, ts[0], ts, f_var, -1.0 / gammas, uniform=uniform, n_fix=n_fix)
+    return exp_input_batch(A, F, s, x0, ts[0], ts, f_var, -1.0 / gammas, uniform=uniform, n_fix=n_fix, chunk=chunk)

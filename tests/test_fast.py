@@ -53,8 +53,8 @@ def test_gamma_batch_equals_vmapped_simulate():
     assert rel(fast.reshape(-1, 5), np.asarray(ref).reshape(-1, 5)) < 1e-10
 
 
-def test_many_near_resonant_elements_use_whole_batch_correction():
-    # more near-resonant elements than n_fix: the correction is applied to the whole batch
+def test_many_near_resonant_elements_take_the_exact_form():
+    # more near-resonant elements than n_fix: the batch takes the exact per-element form
     model = jb.BeltStartup()
     ts = jnp.linspace(0.0, 0.2, 41)
     lam = np.linalg.eigvals(np.asarray(model.matrices()[0]))
