@@ -100,15 +100,21 @@ def main(quick: bool = False) -> Path:
         add(f"closed form ({method})", method, rel_error(ys, ref), med, comp, batch=1)
 
     # --- diffrax, one compilation per solver (rtol/atol are arrays) -------------------------
-    rtols = [1e-4, 1e-8, 1e-12] if quick else [1e-4, 1e-6, 1e-8, 1e-10, 1e-12]
+    rtols = [1e-5, 1e-10] if quick else [1e-4, 1e-6, 1e-8, 1e-10, 1e-12]
     solvers = {"Tsit5": diffrax.Tsit5(), "Dopri8": diffrax.Dopri8(), "Kvaerno5": diffrax.Kvaerno5()}
     for sname, solver in solvers.items():
+        if quick and sname == "Dopri8":
+            continue
         @jax.jit
         def run(g, rtol, atol, solver=solver):
             scene = jb.Scene(model, jb.ExponentialVoltage(V_MAX, g), ts=ts)
             return jb.simulate(scene, method="ode", solver=solver, rtol=rtol, atol=atol, max_steps=200_000, throw=False).ys
 
         for rtol in rtols:
+            if sname == "Kvaerno5" and rtol < 1e-10:
+                # measured: Kvaerno5 at rtol 1e-12 exhausts 200k steps (its Newton solve cannot
+                # meet the tolerance) and returns a failed solve; it is left out of the plot
+                continue
             med, comp, ys = time_jax(run, jnp.asarray(GAMMA), jnp.asarray(rtol), jnp.asarray(rtol * 1e-2), **reps)
             add(f"diffrax {sname} rtol={rtol:g}", f"diffrax-{sname}", rel_error(ys, ref), med, comp, rtol=rtol, batch=1)
 
@@ -117,10 +123,10 @@ def main(quick: bool = False) -> Path:
     add("RK4 dt=0.1 ms", "rk4", rel_error(ys, ref), med, comp, batch=1)
 
     # --- scipy solve_ivp ------------------------------------------------------------------
-    scipy_rtols = {"RK45": [1e-4, 1e-8] if quick else [1e-4, 1e-6, 1e-8, 1e-10],
-                   "DOP853": [1e-4, 1e-10] if quick else [1e-4, 1e-6, 1e-8, 1e-10, 1e-12],
-                   "LSODA": [1e-4, 1e-8] if quick else [1e-4, 1e-6, 1e-8, 1e-10],
-                   "Radau": [1e-4, 1e-8] if quick else [1e-4, 1e-6, 1e-8, 1e-10]}
+    scipy_rtols = {"RK45": [1e-6] if quick else [1e-4, 1e-6, 1e-8, 1e-10],
+                   "DOP853": [1e-10] if quick else [1e-4, 1e-6, 1e-8, 1e-10, 1e-12],
+                   "LSODA": [1e-6] if quick else [1e-4, 1e-6, 1e-8, 1e-10],
+                   "Radau": [1e-6] if quick else [1e-4, 1e-6, 1e-8, 1e-10]}
     scipy_reps = 1 if quick else 3
     dop853_1e10 = None
     for meth, rts in scipy_rtols.items():
@@ -135,7 +141,7 @@ def main(quick: bool = False) -> Path:
     # --- batches over gamma ---------------------------------------------------------------
     n_fast = 1_000 if quick else 10_000
     n_vmap = 100 if quick else 1_000
-    n_ode = 20 if quick else 100
+    n_ode = 10 if quick else 100
     print(f"batches over gamma (501 points each): fast closed form {n_fast}, vmap expm {n_vmap}, vmap Tsit5 {n_ode}")
     check_idx = lambda n: np.unique(np.linspace(0, n - 1, 4).astype(int))  # noqa: E731
     refs = {}
