@@ -22,7 +22,7 @@ $O(\\epsilon/|s_b-\\lambda_i|)$). For a mode with $|s_b-\\lambda_i| < 10^{-2}\\m
 the separated term is dropped and replaced by the cancellation-free
 $e^{\\lambda_i\\tau}\\,\\tau\\,\\varphi_1((s_b-\\lambda_i)\\tau)$ (real arithmetic: only a real
 eigenvalue can be that close to a real rate), evaluated only for the elements concerned
-(at most `n_fix` per chunk of `chunk` elements; with more, the batch takes the exact form). Anything less regular (two modes near one rate, a nearly real
+(up to `n_fix` per chunk of `chunk` elements; beyond that for the whole chunk). Anything less regular (two modes near one rate, a nearly real
 complex pair) takes the exact per-element form of `jaxbelt.modal`; a defective or ill-conditioned A
 (e.g. a critically damped belt) falls back to a per-element matrix exponential. Both fall-backs run
 element by element (`lax.map`), so that their memory stays that of one trajectory.
@@ -56,7 +56,7 @@ def _exact_one(lam, X, q, s_b, tau):
     return jnp.real((conv * q[None, :]) @ X.T)
 
 
-def exp_input_batch(A, F, s, x0, t0, ts, f_var, s_var, *, uniform: bool = False, n_fix: int = 64, chunk: int = 512):
+def exp_input_batch(A, F, s, x0, t0, ts, f_var, s_var, *, uniform: bool = False, n_fix: int = 8, chunk: int = 256):
     """States of $\\dot x = A x + \\sum_j F_{:,j}e^{s_j t} + f_b e^{s_b t}$ for a batch of $(f_b, s_b)$.
 
     - `A` (n, n), `F` (n, J), `s` (J,): the system and the inputs shared by the batch
@@ -65,8 +65,8 @@ def exp_input_batch(A, F, s, x0, t0, ts, f_var, s_var, *, uniform: bool = False,
     - `f_var` (n,) or (B, n): amplitude vector of the varying term; `s_var` (B,) its real
       rates [1/s] (e.g. $-1/\\gamma_b$);
     - `uniform`: static promise that `ts` is evenly spaced (used by the expm fall-back only);
-    - `n_fix`: how many near-resonant elements per chunk get the cheap correction (with more,
-      the exact per-element form is used for the batch);
+    - `n_fix`: near-resonant elements per chunk corrected one by one (with more, the correction
+      is evaluated for the whole chunk);
     - `chunk`: batch elements per chunk of the separated form (memory locality).
 
     Returns (B, N, n). Differentiable with respect to `f_var`, `s_var` (and `x0`, `F`, `s`);
@@ -88,12 +88,8 @@ def exp_input_batch(A, F, s, x0, t0, ts, f_var, s_var, *, uniform: bool = False,
     # a cheap real correction handles one near-resonant real mode per element; anything else
     # (a nearly real complex pair, two modes near one rate) takes the exact per-element form
     simple = jnp.all((n_near <= 1) & ~jnp.any(near & ~is_real[None, :], axis=1))
-    # the cheap correction covers n_fix elements per chunk; more go to the exact form
     n_chunks = -(-nb // chunk)
     size = -(-nb // n_chunks)
-    has_all = jnp.any(near, axis=1)
-    per_chunk = jnp.concatenate([has_all, jnp.zeros((n_chunks * size - nb,), bool)]).reshape(n_chunks, size)
-    simple = simple & jnp.all(jnp.sum(per_chunk, axis=1) <= min(n_fix, size))
     shared = _shared_response(lam, X, Yt, F, s, x0, t0, tau)
     E = jnp.exp(lam[None, :] * tau[:, None])  # (N, m)
     G = jnp.concatenate([jnp.real(E), -jnp.imag(E)], axis=1)  # (N, 2m)
@@ -123,9 +119,15 @@ def exp_input_batch(A, F, s, x0, t0, ts, f_var, s_var, *, uniform: bool = False,
             c = jnp.exp(lam_b[sel][:, None] * tt) * tt * phi1(d[:, None] * tt)  # (K, N)
             return jnp.where(has[sel][:, None, None], c[:, :, None] * coef[sel][:, None, :], 0.0)
 
-        # the (at most n_fix, checked before the branch is chosen) near-resonant elements of the chunk
-        _, idx = jax.lax.top_k(has.astype(float), min(n_fix, nc))
-        return xs.at[idx].add(correction(idx))
+        # usually a handful of elements per chunk are near resonance: correct only those
+        k = min(n_fix, nc)
+        _, idx = jax.lax.top_k(has.astype(float), k)
+        return jax.lax.cond(
+            jnp.sum(has) > k,
+            lambda x: x + correction(jnp.arange(nc)),
+            lambda x: x.at[idx].add(correction(idx)),
+            xs,
+        )
 
     def separated():
         if n_chunks == 1:
@@ -156,7 +158,7 @@ def exp_input_batch(A, F, s, x0, t0, ts, f_var, s_var, *, uniform: bool = False,
     return jax.lax.switch(branch, [separated, exact, expm_path])
 
 
-def startup_gamma_batch(model, gammas, ts, v_max=24.0, y0=None, *, n_fix: int = 64, chunk: int = 512):
+def startup_gamma_batch(model, gammas, ts, v_max=24.0, y0=None, *, n_fix: int = 8, chunk: int = 256):
     """State histories of a belt start-up model for a batch of voltage time constants.
 
     $V_b(t) = V_{max}(1 - e^{-t/\\gamma_b})$ (seed 000, eq. 30) drives `model` (a `BeltStartup`

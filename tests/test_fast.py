@@ -56,8 +56,9 @@ def test_gamma_batch_equals_vmapped_simulate():
     assert rel(fast.reshape(-1, 5), np.asarray(ref).reshape(-1, 5)) < 1e-10
 
 
-def test_many_near_resonant_elements_take_the_exact_form():
-    # more near-resonant elements than n_fix: the batch takes the exact per-element form
+def test_many_near_resonant_elements_and_chunking():
+    # more near-resonant elements than n_fix: the correction covers the whole chunk; chunks of 3
+    # (8 = 3 x 3 - 1: one padded element) give the same numbers as one chunk
     model = jb.BeltStartup()
     lam = np.linalg.eigvals(np.asarray(model.matrices()[0]))
     g_res = -1.0 / sorted(lam[(np.imag(lam) == 0) & (np.real(lam) < -1)].real)[-1]
@@ -65,6 +66,9 @@ def test_many_near_resonant_elements_take_the_exact_form():
     xs = np.asarray(gamma_batch(model, gammas, TS, n_fix=2))
     for i, g in enumerate(np.asarray(gammas)):
         assert rel(xs[i], startup_reference(model, g, np.asarray(TS))) < 1e-10
+    chunked = np.asarray(gamma_batch(model, gammas, TS, n_fix=2, chunk=3))
+    assert chunked.shape == xs.shape
+    assert np.max(np.abs(chunked - xs)) <= 1e-13 * np.max(np.abs(xs))
 
 
 @pytest.mark.parametrize(
