@@ -157,7 +157,7 @@ def main(quick: bool = False) -> Path:
 
     gs = jnp.linspace(0.01, 0.1, n_fast)
     fast = jax.jit(lambda g: startup_gamma_batch(model, g, ts, v_max=V_MAX))
-    med, comp, ys = time_jax(fast, gs, repeats=reps["repeats"], min_time=0.0)
+    med, comp, ys = time_jax(fast, gs, repeats=5, min_time=0.0)
     fast_err = batch_error(np.asarray(gs), ys)
     add(f"batched closed form (fast) x{n_fast}", "fast-batch", fast_err, med / n_fast, comp, batch=n_fast,
         batch_s=med)
@@ -177,6 +177,17 @@ def main(quick: bool = False) -> Path:
     med, comp, ys = time_jax(fn, gs, repeats=reps["repeats"], min_time=0.0)
     add(f"vmap diffrax Tsit5 rtol=1e-10 x{n_ode}", "diffrax-Tsit5-vmap", batch_error(np.asarray(gs), ys), med / n_ode,
         comp, batch=n_ode, batch_s=med)
+
+    # throughput of the batched closed form over batch sizes (fast has been compiled for n_fast
+    # only; each size compiles once, compile time apart)
+    throughput = []
+    for nb in ([100, 1_000] if quick else [100, 1_000, 10_000, 30_000]):
+        g = jnp.linspace(0.01, 0.1, nb)
+        med_b, comp_b, _ = time_jax(fast, g, repeats=3 if quick else 5, min_time=0.0)
+        throughput.append({"batch": nb, "median_s": med_b, "compile_s": comp_b, "traj_per_s": nb / med_b,
+                           "us_per_traj": med_b / nb * 1e6, "output_MB": nb * N_T * 5 * 8 / 1e6})
+        print(f"  throughput batch {nb:6d}: {nb / med_b:12.0f} traj/s ({med_b / nb * 1e6:6.2f} us each), "
+              f"output {nb * N_T * 5 * 8 / 1e6:.0f} MB", flush=True)
 
     shortcuts = measure_shortcuts(model, ts, ref, reps)
 
@@ -202,7 +213,7 @@ def main(quick: bool = False) -> Path:
     ]
     path = write_results("startup", rows, headline, quick, extra={
         "reference": "scipy.linalg.expm of the augmented system at each output time",
-        "gamma": GAMMA, "n_points": N_T, "shortcuts": shortcuts,
+        "gamma": GAMMA, "n_points": N_T, "shortcuts": shortcuts, "throughput": throughput,
         "ratios": {"fast_batch_vs_scipy_DOP853_1e-10": ratio,
                    "single_expm_vs_scipy_DOP853_1e-10": dop853_1e10["median_s"] / single_expm["median_s"]},
         "wall_s": time.perf_counter() - t_start,
