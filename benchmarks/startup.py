@@ -295,7 +295,7 @@ def plot(rows, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(8, 5.5))
+    fig, ax = plt.subplots(figsize=(11, 5.5))
     groups = {}
     for r in rows:
         groups.setdefault(r["method"], []).append(r)
@@ -313,7 +313,7 @@ def plot(rows, path):
     ax.set_ylabel("relative error vs expm reference")
     ax.set_title("jaxbelt start-up scene (seed 000): work-precision, gamma = 20 ms, 501 points")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7, ncol=2)
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.tight_layout()
     fig.savefig(path, dpi=120)
     plt.close(fig)
