@@ -180,3 +180,37 @@ def startup_gamma_batch(model, gammas, ts, v_max=24.0, y0=None, *, n_fix: int = 
         d = np.diff(np.asarray(ts))
         uniform = bool(np.allclose(d, d[0], rtol=1e-12, atol=0.0))
     return exp_input_batch(A, F, s, x0, ts[0], ts, f_var, -1.0 / gammas, uniform=uniform, n_fix=n_fix, chunk=chunk)
+
+
+def batched_exponential_scene(scene):
+    """Solve a start-up scene whose command carries a *batch* of time constants, or return None.
+
+    `Scene(model, ExponentialVoltage(v_max, gammas), ts=ts)` with `gammas` of shape (B,) (a scalar
+    `v_max`, scalar model parameters) is B start-up runs sharing A: they are solved together by
+    `startup_gamma_batch`. The result is a `Solution` with `ys` (B, N, n) and each observed output
+    (B, N); `success` (B,) is False where a trajectory is not finite. Anything else returns None
+    (the caller solves the scene as usual).
+    """
+    from .commands import ExponentialVoltage
+    from .solve import Solution
+
+    model, inp = scene.model, scene.input
+    if scene.ts is None or not isinstance(inp, ExponentialVoltage) or not hasattr(model, "matrices"):
+        return None
+    if jnp.ndim(inp.gamma) != 1 or jnp.ndim(inp.v_max) != 0:
+        return None
+    if any(jnp.ndim(leaf) != 0 for leaf in jax.tree_util.tree_leaves(model)):
+        return None
+    if any(n in getattr(model, "integral_names", ()) for n in scene.observe):
+        return None
+    ys = startup_gamma_batch(model, inp.gamma, scene.ts, v_max=inp.v_max, y0=scene.y0)
+    outputs = {}
+    for name in scene.observe:
+        def one(g, yb, name=name):
+            cmd = ExponentialVoltage(inp.v_max, g)
+            return jax.vmap(lambda t, y: model.output(name, t, y, cmd))(scene.ts, yb)
+
+        outputs[name] = jax.vmap(one)(inp.gamma, ys)
+    success = jnp.all(jnp.isfinite(ys), axis=(1, 2))
+    return Solution(ts=scene.ts, ys=ys if scene.state else None, outputs=outputs, success=success, stats={},
+                    state_names=tuple(model.state_names), method="fast")

@@ -104,3 +104,21 @@ def test_gamma_batch_gradient_matches_finite_differences():
         e = jnp.zeros(2).at[i].set(h)
         fd = (f(gs + e) - f(gs - e)) / (2 * h)
         assert abs(g[i] - fd) < 1e-6 * abs(fd)
+
+
+def test_batched_command_scene_equals_vmapped_simulate():
+    from jaxbelt.fast import batched_exponential_scene
+
+    model = jb.BeltStartup()
+    gammas = jnp.array([0.02, 0.04, 0.06])
+    sol = batched_exponential_scene(jb.Scene(model, jb.ExponentialVoltage(24.0, gammas), ts=TS,
+                                             observe=("electric_power", "alpha2")))
+    ref = jax.vmap(lambda g: jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, g), ts=TS,
+                                                  observe=("electric_power", "alpha2")), method="expm"))(gammas)
+    assert sol.ys.shape == (3, 61, 5) and sol.method == "fast"
+    assert rel(sol.ys.reshape(-1, 5), np.asarray(ref.ys).reshape(-1, 5)) < 1e-10
+    for name in ("electric_power", "alpha2"):
+        np.testing.assert_allclose(sol[name], ref[name], rtol=1e-9, atol=1e-9 * float(np.max(np.abs(ref[name]))))
+    assert np.asarray(sol.success).tolist() == [True, True, True]
+    # a scalar gamma is not a batch: the caller solves it as usual
+    assert batched_exponential_scene(jb.Scene(model, jb.ExponentialVoltage(24.0, 0.02), ts=TS)) is None

@@ -65,7 +65,8 @@ def test_stiff_corner_closed_form_matches_expm_reference(params, method):
     model = jb.BeltStartup(**params)
     ts = jnp.linspace(0.0, 0.3, 61)
     sol = jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V, 0.02), ts=ts), method=method)
-    assert rel(sol.ys, reference(model, 0.02, ts)) < 1e-9
+    # 2e-9: with the max_squarings fix the expm path measures 9.8e-10 here (modal: < 1e-10)
+    assert rel(sol.ys, reference(model, 0.02, ts)) < 2e-9
 
 
 @pytest.mark.parametrize("params", [dict(L=1e-7), dict(k=1e8)], ids=["L=1e-7H", "k=1e8N/m"])
