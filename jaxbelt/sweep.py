@@ -35,6 +35,7 @@ same script and the same `params` on every process, and initialise JAX's distrib
 before any other JAX call:
 
 ```python
+import os
 import jax
 jax.distributed.initialize(
     coordinator_address="host0:1234",   # host:port of process 0, reachable from every host
