@@ -19,6 +19,7 @@ from .scene import Scene as Scene  # noqa: E402
 from .solve import Solution as Solution  # noqa: E402
 from .solve import SolveError as SolveError  # noqa: E402
 from .solve import simulate as simulate  # noqa: E402
+from .sweep import sweep as sweep  # noqa: E402
 
 # --- start-up of a belt drive (seed 000) ---------------------------------------------------------
 from .models import BeltChain as BeltChain  # noqa: E402

@@ -1,0 +1,64 @@
+"""Run every scene benchmark, then regenerate the README's benchmark table.
+
+Discovers `benchmarks/<scene>.py` (every module here not starting with `_` and not one of the
+helpers), runs each as a subprocess (`python benchmarks/<scene>.py [--quick]`, so that one
+scene's compile caches and memory do not affect the next), and finally calls
+`readme_table.update_readme()`.
+
+Run: `python benchmarks/run_all.py [--quick] [--only startup fourbar]` (also `jaxbelt bench`).
+`--quick` is the CI size: the whole run stays under 2 minutes on 2 cores.
+"""
+
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+HELPERS = {"run_all", "readme_table", "shortcuts"}
+
+
+def discover() -> list[str]:
+    return sorted(p.stem for p in HERE.glob("*.py") if not p.stem.startswith("_") and p.stem not in HELPERS)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--quick", action="store_true", help="CI-sized runs (< 2 minutes in all on 2 cores)")
+    p.add_argument("--only", nargs="+", metavar="SCENE", help="run only these scenes")
+    p.add_argument("--timeout", type=float, default=None, help="per-scene time limit [s]")
+    args = p.parse_args(argv)
+    scenes = discover()
+    if args.only:
+        unknown = sorted(set(args.only) - set(scenes))
+        if unknown:
+            print(f"run_all: unknown scene(s) {unknown}; available: {scenes}", file=sys.stderr)
+            return 2
+        scenes = [s for s in scenes if s in args.only]
+    failed = []
+    t0 = time.perf_counter()
+    for scene in scenes:
+        cmd = [sys.executable, str(HERE / f"{scene}.py")] + (["--quick"] if args.quick else [])
+        print(f"=== {scene}: {' '.join(cmd[1:])}", flush=True)
+        t = time.perf_counter()
+        try:
+            rc = subprocess.run(cmd, cwd=HERE.parent, timeout=args.timeout).returncode
+        except subprocess.TimeoutExpired:
+            rc = "timeout"
+        print(f"=== {scene}: {'ok' if rc == 0 else f'FAILED ({rc})'} in {time.perf_counter() - t:.1f} s", flush=True)
+        if rc != 0:
+            failed.append(scene)
+    sys.path.insert(0, str(HERE))
+    import readme_table
+
+    readme_table.update_readme()
+    print(f"run_all: {len(scenes) - len(failed)}/{len(scenes)} benchmarks ran in {time.perf_counter() - t0:.1f} s"
+          + (f"; failed: {failed}" if failed else ""))
+    return 1 if failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,161 @@
+"""`sweep(fn, params)`: a `vmap` over a batch of parameters, sharded over devices.
+
+```python
+import jax.numpy as jnp, jaxbelt as jb
+
+model = jb.BeltStartup()
+ts = jnp.linspace(0.0, 0.5, 501)
+
+def run(gamma):
+    scene = jb.Scene(model, jb.ExponentialVoltage(24.0, gamma), ts=ts, observe=("electric_power",))
+    return jb.simulate(scene, throw=False)          # throw=False: failures are collected, not raised
+
+sol = jb.sweep(run, jnp.linspace(0.01, 0.1, 10_000))   # a batched Solution, leading axis 10 000
+```
+
+- The batch is the leading axis of every leaf of `params` (any pytree: an array, a tuple, a dict,
+  a model built with array fields...). `fn(p)` is called on one element; it must be traceable
+  (jit/vmap-able).
+- With several local devices (GPUs, TPU cores, or CPU devices made with
+  `XLA_FLAGS=--xla_force_host_platform_device_count=N`), the batch is padded to a multiple of the
+  device count (by repeating its last element), laid out with
+  `jax.sharding.NamedSharding(Mesh(devices, ("batch",)), PartitionSpec("batch"))`, computed in
+  one jitted `vmap` (each device runs its slice; no communication), and the padding is dropped.
+  With one device this is `jax.jit(jax.vmap(fn))(params)`.
+- Failures: when the result has a `success` field (a `jb.Solution`, a dict or any pytree with
+  that key/attribute), elements with `success == False` are reported in a `SolveError` that lists
+  their indices and parameter values (`check=False` returns the result as it is; inspect
+  `result.success`). Inside `fn`, call `simulate(..., throw=False)` so that one failing element
+  does not abort the whole batch.
+
+## Several hosts with `jax.distributed`
+
+The same call scales past one machine. Start one Python process per host (or per GPU) with the
+same script and the same `params` on every process, and initialise JAX's distributed runtime
+before any other JAX call:
+
+```python
+import os
+import jax
+jax.distributed.initialize(
+    coordinator_address="host0:1234",   # host:port of process 0, reachable from every host
+    num_processes=4,                    # total number of processes
+    process_id=int(os.environ["RANK"]), # 0 .. num_processes - 1 (SLURM/OpenMPI are auto-detected
+)                                       # when initialize() is called without arguments)
+import jaxbelt as jb
+out = jb.sweep(run, params, devices=jax.devices())   # all devices of all hosts
+```
+
+`jax.devices()` then lists the devices of every process; `sweep` shards the batch over all of
+them (each host computes its slice) and gathers the result on every process with
+`jax.experimental.multihost_utils.process_allgather`, so every process returns the full batch.
+Write results from process 0 only (`if jax.process_index() == 0: ...`). With the default
+`devices=None` only the local devices are used (no communication between hosts).
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .solve import SolveError
+
+_MAX_LISTED = 10
+
+
+def _batch_size(params) -> int:
+    leaves = jax.tree_util.tree_leaves(params)
+    if not leaves:
+        raise ValueError("sweep: `params` has no array leaves to sweep over")
+    sizes = {int(np.shape(x)[0]) if np.ndim(x) else -1 for x in leaves}
+    if -1 in sizes:
+        raise ValueError("sweep: every leaf of `params` needs a leading batch axis; got a scalar leaf")
+    if len(sizes) != 1:
+        raise ValueError(f"sweep: the leaves of `params` have different batch sizes {sorted(sizes)}")
+    n = sizes.pop()
+    if n < 1:
+        raise ValueError("sweep: the batch is empty")
+    return n
+
+
+def _pad(params, n_pad: int):
+    if n_pad == 0:
+        return params
+    return jax.tree_util.tree_map(
+        lambda x: jnp.concatenate([jnp.asarray(x), jnp.repeat(jnp.asarray(x)[-1:], n_pad, axis=0)], axis=0), params
+    )
+
+
+def _success(result):
+    if isinstance(result, dict):
+        return result.get("success")
+    return getattr(result, "success", None)
+
+
+def _describe(params, i: int) -> str:
+    leaves, treedef = jax.tree_util.tree_flatten(params)
+    vals = [np.asarray(x[i]) for x in leaves]
+    if len(vals) == 1:
+        v = vals[0]
+        return f"{v.item():.6g}" if v.size == 1 else np.array2string(v, precision=6)
+    flat = jax.tree_util.tree_unflatten(treedef, [v.item() if v.size == 1 else v.tolist() for v in vals])
+    return repr(flat)
+
+
+@eqx.filter_jit
+def _vmapped(fn, params):
+    return jax.vmap(fn)(params)
+
+
+def sweep(fn, params, *, devices=None, check: bool = True, name: str | None = None):
+    """Evaluate `fn` on every element of the batch `params` (leading axis), sharded over devices.
+
+    Parameters
+    ----------
+    fn: function of one batch element (traceable; e.g. returns `simulate(..., throw=False)`).
+    params: pytree of arrays sharing a leading batch axis of size B.
+    devices: devices to shard over (default: `jax.local_devices()`; pass `jax.devices()` after
+        `jax.distributed.initialize()` to use every host, see the module docstring).
+    check: raise `SolveError` listing the failing elements when the result has a `success` field.
+    name: what the sweep is, used in the error message (default: the name of `fn`).
+
+    Returns the batched result of `fn` (leading axis B), as `jax.vmap(fn)(params)` would.
+    """
+    n = _batch_size(params)
+    devices = list(jax.local_devices() if devices is None else devices)
+    n_dev = len(devices)
+    if n_dev > 1:
+        from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+        n_pad = (-n) % n_dev
+        padded = _pad(params, n_pad)
+        sharding = NamedSharding(Mesh(np.asarray(devices), ("batch",)), PartitionSpec("batch"))
+        padded = jax.device_put(padded, sharding)
+        out = _vmapped(fn, padded)
+        if not all(getattr(x, "is_fully_addressable", True) for x in jax.tree_util.tree_leaves(out)):
+            from jax.experimental import multihost_utils
+
+            out = multihost_utils.process_allgather(out, tiled=True)
+        if n_pad:
+            out = jax.tree_util.tree_map(lambda x: x[:n] if np.ndim(x) else x, out)
+    else:
+        out = _vmapped(fn, params)
+    if check:
+        ok = _success(out)
+        if ok is not None:
+            ok = np.asarray(ok).reshape(n, -1).all(axis=1)
+            bad = np.flatnonzero(~ok)
+            if bad.size:
+                what = name or getattr(fn, "__name__", "fn")
+                listed = "; ".join(f"[{i}] {_describe(params, int(i))}" for i in bad[:_MAX_LISTED])
+                more = f" (and {bad.size - _MAX_LISTED} more)" if bad.size > _MAX_LISTED else ""
+                err = SolveError(
+                    f"sweep of {what!r}: {bad.size} of {n} elements failed (success == False); "
+                    f"index [i] and parameters: {listed}{more}. Call sweep(..., check=False) to get the "
+                    "results anyway and inspect `.success`."
+                )
+                err.indices = bad  # failing indices, for programmatic use
+                raise err
+    return out

@@ -1,0 +1,124 @@
+"""The batched closed form of `jaxbelt.fast` against scipy's matrix exponential (independent)."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.linalg as sl
+
+import jaxbelt as jb
+from jaxbelt.fast import exp_input_batch, startup_gamma_batch
+
+# one compilation per shape, shared by the tests (the model is a pytree argument)
+gamma_batch = jax.jit(startup_gamma_batch, static_argnames=("n_fix", "chunk"))
+TS = jnp.linspace(0.0, 0.3, 61)
+
+
+def expm_reference(A, F, s, x0, ts):
+    """States of x' = A x + sum_j F_j e^{s_j t}, x(ts[0]) = x0, by scipy.linalg.expm of the augmented system."""
+    A, F, s = np.asarray(A), np.asarray(F), np.asarray(s)
+    n, m = F.shape
+    Aa = np.zeros((n + m, n + m))
+    Aa[:n, :n], Aa[:n, n:], Aa[n:, n:] = A, F, np.diag(s)
+    t0 = float(ts[0])
+    z0 = np.concatenate([np.asarray(x0, float), np.exp(s * t0)])
+    return np.array([sl.expm(Aa * (t - t0)) @ z0 for t in np.asarray(ts)])[:, :n]
+
+
+def rel(x, ref):
+    scale = np.maximum(np.max(np.abs(ref), axis=0), 1e-300)
+    return float(np.max(np.max(np.abs(np.asarray(x) - ref), axis=0) / scale))
+
+
+def startup_reference(model, gamma, ts, v_max=24.0):
+    A, B = (np.asarray(a) for a in model.matrices())
+    F = np.stack([B[:, 0] * float(model.tau_r0) + v_max * B[:, 1], -v_max * B[:, 1]], axis=1)
+    return expm_reference(A, F, np.array([0.0, -1.0 / gamma]), np.zeros(5), ts)
+
+
+@pytest.mark.parametrize("params", [{}, {"L": 1e-7}, {"tau_r0": 2.0, "k": 1e8}], ids=["tableI", "L=1e-7H", "k=1e8"])
+def test_gamma_batch_matches_expm_reference_including_resonance(params):
+    model = jb.BeltStartup(**params)
+    lam = np.linalg.eigvals(np.asarray(model.matrices()[0]))
+    real_modes = sorted(-1.0 / lam[(np.imag(lam) == 0) & (np.real(lam) < -1)].real)
+    g_res = real_modes[-1]  # gamma = -1/lambda: the input rate equals a real mode exactly
+    gammas = np.array([0.02, 0.04, 0.06, g_res, g_res * (1 + 1e-6), g_res * (1 + 3e-3), 0.1, 0.005])
+    xs = np.asarray(gamma_batch(model, jnp.asarray(gammas), TS))
+    for i, g in enumerate(gammas):
+        assert rel(xs[i], startup_reference(model, g, np.asarray(TS))) < 1e-10, g
+
+
+def test_gamma_batch_equals_vmapped_simulate():
+    model = jb.BeltStartup(tau_r0=2.0)
+    gammas = jnp.linspace(0.01, 0.08, 8)
+    ref = jax.vmap(lambda g: jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, g), ts=TS), method="expm").ys)(gammas)
+    fast = gamma_batch(model, gammas, TS)
+    assert rel(fast.reshape(-1, 5), np.asarray(ref).reshape(-1, 5)) < 1e-10
+
+
+def test_many_near_resonant_elements_and_chunking():
+    # more near-resonant elements than n_fix: the correction covers the whole chunk; chunks of 3
+    # (8 = 3 x 3 - 1: one padded element) give the same numbers as one chunk
+    model = jb.BeltStartup()
+    lam = np.linalg.eigvals(np.asarray(model.matrices()[0]))
+    g_res = -1.0 / sorted(lam[(np.imag(lam) == 0) & (np.real(lam) < -1)].real)[-1]
+    gammas = g_res * (1 + jnp.linspace(-1e-3, 1e-3, 8))
+    xs = np.asarray(gamma_batch(model, gammas, TS, n_fix=2))
+    for i, g in enumerate(np.asarray(gammas)):
+        assert rel(xs[i], startup_reference(model, g, np.asarray(TS))) < 1e-10
+    chunked = np.asarray(gamma_batch(model, gammas, TS, n_fix=2, chunk=3))
+    assert chunked.shape == xs.shape
+    assert np.max(np.abs(chunked - xs)) <= 1e-13 * np.max(np.abs(xs))
+
+
+@pytest.mark.parametrize(
+    "A, s_var",
+    [
+        (np.array([[-10.0, 0.0], [0.0, -10.02]]), np.array([-10.01, -3.0])),  # two modes near one rate: exact form
+        (np.array([[-5.0, 1.0], [0.0, -5.0]]), np.array([-5.0, -1.0])),  # defective A (Jordan block): expm form
+    ],
+)
+def test_fallbacks_match_reference(A, s_var):
+    F = np.array([[1.0], [0.5]])
+    s = np.array([0.0])
+    f = np.array([0.3, -1.0])
+    x0 = np.array([0.2, 0.1])
+    ts = np.linspace(0.0, 1.0, 21)
+    xs = np.asarray(exp_input_batch(jnp.asarray(A), jnp.asarray(F), jnp.asarray(s), jnp.asarray(x0), 0.0, jnp.asarray(ts), jnp.asarray(f), jnp.asarray(s_var)))
+    for i, sv in enumerate(s_var):
+        ref = expm_reference(A, np.concatenate([F, f[:, None]], axis=1), np.array([0.0, sv]), x0, ts)
+        assert rel(xs[i], ref) < 1e-10
+
+
+def test_gamma_batch_gradient_matches_finite_differences():
+    model = jb.BeltStartup()
+
+    @jax.jit
+    def f(gs):
+        return jnp.sum(startup_gamma_batch(model, gs, TS)[:, -1, 3])
+
+    gs = jnp.array([0.02, 0.03])
+    g = jax.jit(jax.grad(f))(gs)
+    h = 1e-6
+    for i in range(2):
+        e = jnp.zeros(2).at[i].set(h)
+        fd = (f(gs + e) - f(gs - e)) / (2 * h)
+        assert abs(g[i] - fd) < 1e-6 * abs(fd)
+
+
+def test_batched_command_scene_equals_vmapped_simulate():
+    from jaxbelt.fast import batched_exponential_scene
+
+    model = jb.BeltStartup()
+    gammas = jnp.array([0.02, 0.04, 0.06])
+    sol = batched_exponential_scene(jb.Scene(model, jb.ExponentialVoltage(24.0, gammas), ts=TS,
+                                             observe=("electric_power", "alpha2")))
+    ref = jax.vmap(lambda g: jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, g), ts=TS,
+                                                  observe=("electric_power", "alpha2")), method="expm"))(gammas)
+    assert sol.ys.shape == (3, 61, 5) and sol.method == "fast"
+    assert rel(sol.ys.reshape(-1, 5), np.asarray(ref.ys).reshape(-1, 5)) < 1e-10
+    for name in ("electric_power", "alpha2"):
+        np.testing.assert_allclose(sol[name], ref[name], rtol=1e-9, atol=1e-9 * float(np.max(np.abs(ref[name]))))
+    assert np.asarray(sol.success).tolist() == [True, True, True]
+    # a scalar gamma is not a batch: the caller solves it as usual
+    assert batched_exponential_scene(jb.Scene(model, jb.ExponentialVoltage(24.0, 0.02), ts=TS)) is None

@@ -1,0 +1,104 @@
+"""Scene shortcuts give the same answer as the full computation (speed-ups: benchmarks/startup.py).
+
+- final state only (`Scene(..., t1=T)`, no dense buffer) == last row of the dense solve;
+- closed form (no stepping) == time stepping at tight tolerance;
+- outputs not named in `observe` are never computed (traced) and the state is unchanged.
+"""
+
+import diffrax
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+import scipy.linalg as sl
+
+import jaxbelt as jb
+
+V, GAMMA, T = 24.0, 0.02, 0.5
+TS = jnp.linspace(0.0, T, 101)
+
+
+def reference_final(model):
+    """x(T) by scipy.linalg.expm of the augmented system (independent)."""
+    A, B = (np.asarray(a) for a in model.matrices())
+    Aa = np.zeros((7, 7))
+    Aa[:5, :5] = A
+    Aa[:5, 5] = V * B[:, 1]
+    Aa[:5, 6] = -V * B[:, 1]
+    Aa[6, 6] = -1.0 / GAMMA
+    z0 = np.zeros(7)
+    z0[5] = z0[6] = 1.0
+    return (sl.expm(Aa * T) @ z0)[:5]
+
+
+@pytest.mark.parametrize("method", ["expm", "modal", "ode"])
+def test_final_state_only_equals_last_row_of_dense_solve(method):
+    model = jb.BeltStartup()
+    kw = dict(solver=diffrax.Tsit5(), rtol=1e-10, atol=1e-12) if method == "ode" else {}
+    dense = jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V, GAMMA), ts=TS), method=method, **kw)
+    final = jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V, GAMMA), t1=T), method=method, **kw)
+    assert final.ys.shape == (1, 5)
+    scale = np.max(np.abs(np.asarray(dense.ys)), axis=0)
+    # ode and modal: the same steps / formula either way, equal to rounding; expm: one exponential
+    # e^{A T} instead of a 100-step product, equal to its rounding (measured 2e-12)
+    same = 1e-11 if method == "expm" else 1e-12
+    assert np.max(np.abs(np.asarray(final.ys[-1] - dense.ys[-1])) / scale) < same
+    tol = 1e-8 if method == "ode" else 1e-11
+    assert np.max(np.abs(np.asarray(final.ys[-1]) - reference_final(model)) / scale) < tol
+
+
+def test_closed_form_equals_stepping():
+    model = jb.BeltStartup()
+    scene = jb.Scene(model, jb.ExponentialVoltage(V, GAMMA), ts=TS)
+    closed = jb.simulate(scene)
+    assert closed.method == "expm"  # the default for this linear scene: no stepping
+    modal = jb.simulate(scene, method="modal")
+    stepped = jb.simulate(scene, method="ode", solver=diffrax.Dopri8(), rtol=1e-12, atol=1e-14)
+    scale = np.max(np.abs(np.asarray(stepped.ys)), axis=0)
+    assert np.max(np.max(np.abs(np.asarray(closed.ys - stepped.ys)), axis=0) / scale) < 1e-9
+    assert np.max(np.max(np.abs(np.asarray(modal.ys - closed.ys)), axis=0) / scale) < 1e-10
+
+
+def test_unobserved_outputs_are_not_computed(monkeypatch):
+    calls = {"electric_power": 0, "alpha2": 0}
+    orig_p, orig_a = jb.BeltStartup._out_electric_power, jb.BeltStartup._out_alpha2
+
+    def spy_p(self, t, y, inp):
+        calls["electric_power"] += 1
+        return orig_p(self, t, y, inp)
+
+    def spy_a(self, t, y, inp):
+        calls["alpha2"] += 1
+        return orig_a(self, t, y, inp)
+
+    monkeypatch.setattr(jb.BeltStartup, "_out_electric_power", spy_p)
+    monkeypatch.setattr(jb.BeltStartup, "_out_alpha2", spy_a)
+    model = jb.BeltStartup()
+    cmd = jb.ExponentialVoltage(V, GAMMA + 1e-3)  # a gamma no other test compiled for
+    only = jb.simulate(jb.Scene(model, cmd, ts=TS, observe=("current",)))
+    assert calls == {"electric_power": 0, "alpha2": 0}
+    assert set(only.outputs) == {"current"}
+    both = jb.simulate(jb.Scene(model, cmd, ts=TS, observe=("current", "electric_power", "alpha2")))
+    assert calls["electric_power"] >= 1 and calls["alpha2"] >= 1
+    np.testing.assert_array_equal(np.asarray(only.ys), np.asarray(both.ys))
+    # the observed outputs against their definitions (seed 000, Fig. 3c, 3h), from the state
+    I = np.asarray(both.ys[:, 4])
+    v = V * (1 - np.exp(-np.asarray(TS) / (GAMMA + 1e-3)))
+    np.testing.assert_allclose(both.electric_power, v * I, rtol=1e-12, atol=1e-12)
+    A, _ = model.matrices()
+    alpha2 = np.asarray(both.ys) @ np.asarray(A)[3]  # tau_r0 = 0: no constant term
+    np.testing.assert_allclose(both.alpha2, alpha2, rtol=1e-9, atol=1e-9 * np.max(np.abs(alpha2)))
+
+
+def test_unobserved_outputs_shrink_the_program():
+    model = jb.BeltStartup()
+
+    def size(observe):
+        f = lambda g: jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V, g), ts=TS, observe=observe))  # noqa: E731
+        jaxpr = jax.make_jaxpr(f)(jnp.asarray(GAMMA))
+        return sum(len(e.params["jaxpr"].eqns) if "jaxpr" in e.params and hasattr(e.params["jaxpr"], "eqns") else 1
+                   for e in jaxpr.eqns)
+
+    n0 = size(())
+    n_all = size(("electric_power", "mechanical_power", "alpha1", "alpha2", "kinetic_energy", "elastic_energy"))
+    assert n_all > n0 + 10
