@@ -51,7 +51,8 @@ class ExponentialVoltage(AbstractCommand):
     $V(t) = V_{max}\\,(1 - e^{-t/\\gamma})$
 
     - `v_max`: final voltage $V_{max}$ [V] (Table I: 24 V).
-    - `gamma`: time constant $\\gamma$ [s], > 0 (the paper uses 0.02, 0.04, 0.06 s).
+    - `gamma`: time constant $\\gamma$ [s], > 0 (the paper uses 0.02, 0.04, 0.06 s). A 1-D array
+      of time constants makes a batch: `simulate` solves all of them at once (batched closed form).
     """
 
     v_max: jnp.ndarray = eqx.field(converter=_arr, default=24.0)

@@ -11,6 +11,10 @@ Method choice (`method=`):
 - `"ode"`: diffrax, `solver=` any diffrax solver (default: the model's choice, Tsit5 for
   non-stiff models), adaptive step with `rtol`/`atol` (arrays: changing them does not recompile).
 - `"rk4"`: classical fixed-step fourth-order Runge-Kutta with step `dt` (the papers' check).
+
+A start-up scene whose `ExponentialVoltage` carries a 1-D array of time constants is a batch:
+`simulate` solves all of them at once with the batched closed form of `jaxbelt.fast` and returns
+`ys` of shape (B, N, n).
 """
 
 from __future__ import annotations
@@ -22,11 +26,16 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._checks import is_concrete
+from .commands import ExponentialVoltage
+from .fast import batched_exponential_scene
 from .modal import expm_solve, modal_solve
 from .scene import Scene
 
 _CLOSED = ("closed", "expm", "modal")
 _METHODS = ("auto", "ode", "rk4") + _CLOSED
+
+
+_batched_exponential_scene = eqx.filter_jit(batched_exponential_scene)
 
 
 class SolveError(RuntimeError):
@@ -210,6 +219,24 @@ def simulate(
     if not isinstance(scene, Scene):
         raise ValueError(f"simulate expects a jaxbelt.Scene; got {type(scene).__name__}")
     model, inp = scene.model, scene.input
+    if isinstance(inp, ExponentialVoltage) and jnp.ndim(inp.gamma) == 1:
+        # A batch of time constants in one command: solved together by the batched closed form
+        # (shared modal decomposition, only the exp(-t/gamma) response differs per element).
+        if method not in ("auto", "closed"):
+            raise ValueError(
+                f"simulate: a command with a batch of gammas (shape {jnp.shape(inp.gamma)}) is solved by the "
+                f"batched closed form (method='auto'); for method={method!r} use jax.vmap over scalar gammas"
+            )
+        batched = _batched_exponential_scene(scene)
+        if batched is None:
+            raise ValueError(
+                "simulate: a batch of gammas needs a belt start-up model with scalar parameters, output times `ts` "
+                "and no integral outputs; otherwise use jax.vmap over scalar gammas"
+            )
+        if throw and is_concrete(batched.success) and not bool(np.all(np.asarray(batched.success))):
+            bad = np.flatnonzero(~np.asarray(batched.success))
+            raise SolveError(f"simulate: non-finite values in the batched start-up scene at elements {bad.tolist()}")
+        return batched
     integrals = [n for n in scene.observe if n in getattr(model, "integral_names", ())]
     lin = model.linear_form(inp) is not None
     if method == "auto":

@@ -122,3 +122,19 @@ def test_batched_command_scene_equals_vmapped_simulate():
     assert np.asarray(sol.success).tolist() == [True, True, True]
     # a scalar gamma is not a batch: the caller solves it as usual
     assert batched_exponential_scene(jb.Scene(model, jb.ExponentialVoltage(24.0, 0.02), ts=TS)) is None
+
+
+def test_simulate_routes_a_batch_of_gammas_to_the_fast_path():
+    """`ExponentialVoltage(v, gammas)` with a 1-D gammas array is a batch: `simulate` solves it at
+    once; each element equals the scalar closed form, outputs included; other methods say how."""
+    model = jb.BeltStartup()
+    gammas = jnp.array([0.01, 0.0105, 0.03, 0.06])  # 0.0105 s: next to the -95.27 1/s eigenvalue
+    sol = jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, gammas), ts=TS, observe=("electric_power",)))
+    assert sol.method == "fast" and sol.ys.shape == (4, TS.shape[0], 5)
+    for i, g in enumerate(np.asarray(gammas)):
+        one = jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, g), ts=TS, observe=("electric_power",)), method="expm")
+        np.testing.assert_allclose(sol.ys[i], one.ys, rtol=0, atol=1e-10 * float(jnp.max(jnp.abs(one.ys))))
+        np.testing.assert_allclose(sol.electric_power[i], one.electric_power, rtol=0,
+                                   atol=1e-10 * float(jnp.max(jnp.abs(one.electric_power))))
+    with pytest.raises(ValueError, match="jax.vmap over scalar gammas"):
+        jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, gammas), ts=TS), method="ode")

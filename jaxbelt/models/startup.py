@@ -13,7 +13,9 @@ from __future__ import annotations
 from typing import ClassVar
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .._checks import check_nonnegative, check_positive, is_concrete
 from ..commands import AbstractCommand
@@ -139,21 +141,38 @@ class _BeltDriveBase(AbstractModel):
 
         # The armature pole -R/L is far faster than the belt modes when L is small: an implicit
         # solver then takes steps at the belt's time scale instead of the electrical one.
-        if is_concrete(self) and float(self._stiffness_ratio()) > 1e4:
-            return diffrax.Kvaerno5()
+        # Decided from concrete parameters at trace time (inside jit the matrices are built from
+        # constants, so evaluate them eagerly); a traced model keeps the explicit default.
+        if is_concrete(self):
+            with jax.ensure_compile_time_eval():
+                if self._stiffness_ratio() > 1e4:
+                    return diffrax.Kvaerno5()
         return diffrax.Tsit5()
 
-    def _stiffness_ratio(self):
-        lam = jnp.linalg.eigvals(self.matrices()[0])
-        mag = jnp.abs(lam)
-        nz = mag[mag > 1e-9 * jnp.max(mag)]
-        return jnp.max(nz) / jnp.min(nz)
+    def _stiffness_ratio(self) -> float:
+        """Largest over smallest non-zero eigenvalue magnitude of A (the rigid-body 0 excluded)."""
+        mag = np.abs(np.linalg.eigvals(np.asarray(self.matrices()[0])))
+        nz = mag[mag > 1e-9 * mag.max()]
+        return float(nz.max() / nz.min())
 
     def output(self, name, t, y, inp):
-        # accelerations alpha1..alpha{n+1} (Fig. 3g-h for the 2-DOF drive)
-        if name.startswith("alpha") and name[5:].isdigit() and 1 <= int(name[5:]) <= self.n_shafts:
+        # accelerations alpha3, alpha4, ... of longer chains (alpha1, alpha2 are methods below)
+        if (
+            getattr(self, f"_out_{name}", None) is None
+            and name.startswith("alpha")
+            and name[5:].isdigit()
+            and 1 <= int(name[5:]) <= self.n_shafts
+        ):
             return self._accel(t, y, inp)[int(name[5:]) - 1]
         return super().output(name, t, y, inp)
+
+    def _out_alpha1(self, t, y, inp):
+        """Angular acceleration of pulley 1 $\\ddot\\vartheta_1$ [rad/s²] (Fig. 3g)."""
+        return self._accel(t, y, inp)[0]
+
+    def _out_alpha2(self, t, y, inp):
+        """Angular acceleration of pulley 2 $\\ddot\\vartheta_2$ [rad/s²] (Fig. 3h)."""
+        return self._accel(t, y, inp)[1]
 
     # --- derived outputs (one time) ---------------------------------------------------------
     def _accel(self, t, y, inp):

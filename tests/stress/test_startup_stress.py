@@ -43,18 +43,11 @@ def rel(x, ref):
 
 
 # ---------------------------------------------------------------- stiff corners
-_EXPM_SQUARINGS = pytest.mark.xfail(strict=True, raises=jb.SolveError, reason=(
-    "modal.expm_solve calls jax.scipy.linalg.expm with its default max_squarings=16: for "
-    "||A_a dt|| > ~3.5e5 (here -R/L = -1.5e6 1/s times a 5 ms output step) it returns NaN, so the "
-    "default closed form of a 1e-7 H motor fails (SolveError) although the scene is well posed. "
-    "Fix: expm(..., max_squarings=64) in modal.expm_solve."))
-
-
 @pytest.mark.parametrize(
     "params, method",
     [
-        pytest.param(dict(L=1e-7), "auto", marks=_EXPM_SQUARINGS),
-        pytest.param(dict(L=1e-7), "expm", marks=_EXPM_SQUARINGS),
+        (dict(L=1e-7), "auto"),
+        (dict(L=1e-7), "expm"),
         (dict(L=1e-7), "modal"),
         (dict(k=1e8), "auto"),
         (dict(k=1e8), "modal"),
@@ -65,7 +58,7 @@ def test_stiff_corner_closed_form_matches_expm_reference(params, method):
     model = jb.BeltStartup(**params)
     ts = jnp.linspace(0.0, 0.3, 61)
     sol = jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V, 0.02), ts=ts), method=method)
-    # 2e-9: with the max_squarings fix the expm path measures 9.8e-10 here (modal: < 1e-10)
+    # 2e-9: the balanced expm with 64 squarings measures ~1e-9 here (modal: < 1e-10)
     assert rel(sol.ys, reference(model, 0.02, ts)) < 2e-9
 
 
@@ -223,11 +216,7 @@ def test_changing_tolerances_does_not_recompile():
         assert jb.solve._run._cached._cache_size() - before <= 1
 
 
-# ---------------------------------------------------------------- known bug (shared core)
-@pytest.mark.xfail(strict=True, reason=(
-    "BeltStartup.default_solver() evaluates `mag[mag > ...]` (boolean indexing) on values that are "
-    "tracers inside jit, so simulate(method='ode') without solver= fails under jax.jit/sweep even for "
-    "a concrete model (NonConcreteBooleanIndexError)."))
+# ---------------------------------------------------------------- default solver under jit
 def test_default_solver_inside_jit():
     model = jb.BeltStartup()
     ts = jnp.linspace(0.0, 0.1, 11)
