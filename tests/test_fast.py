@@ -4,36 +4,20 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-import scipy.linalg as sl
 
 import jaxbelt as jb
 from jaxbelt.fast import exp_input_batch, startup_gamma_batch
+from references import expm_reference, startup_reference
 
 # one compilation per shape, shared by the tests (the model is a pytree argument)
 gamma_batch = jax.jit(startup_gamma_batch, static_argnames=("n_fix", "chunk"))
 TS = jnp.linspace(0.0, 0.3, 61)
 
 
-def expm_reference(A, F, s, x0, ts):
-    """States of x' = A x + sum_j F_j e^{s_j t}, x(ts[0]) = x0, by scipy.linalg.expm of the augmented system."""
-    A, F, s = np.asarray(A), np.asarray(F), np.asarray(s)
-    n, m = F.shape
-    Aa = np.zeros((n + m, n + m))
-    Aa[:n, :n], Aa[:n, n:], Aa[n:, n:] = A, F, np.diag(s)
-    t0 = float(ts[0])
-    z0 = np.concatenate([np.asarray(x0, float), np.exp(s * t0)])
-    return np.array([sl.expm(Aa * (t - t0)) @ z0 for t in np.asarray(ts)])[:, :n]
-
-
 def rel(x, ref):
     scale = np.maximum(np.max(np.abs(ref), axis=0), 1e-300)
     return float(np.max(np.max(np.abs(np.asarray(x) - ref), axis=0) / scale))
 
-
-def startup_reference(model, gamma, ts, v_max=24.0):
-    A, B = (np.asarray(a) for a in model.matrices())
-    F = np.stack([B[:, 0] * float(model.tau_r0) + v_max * B[:, 1], -v_max * B[:, 1]], axis=1)
-    return expm_reference(A, F, np.array([0.0, -1.0 / gamma]), np.zeros(5), ts)
 
 
 @pytest.mark.parametrize("params", [{}, {"L": 1e-7}, {"tau_r0": 2.0, "k": 1e8}], ids=["tableI", "L=1e-7H", "k=1e8"])
@@ -45,7 +29,7 @@ def test_gamma_batch_matches_expm_reference_including_resonance(params):
     gammas = np.array([0.02, 0.04, 0.06, g_res, g_res * (1 + 1e-6), g_res * (1 + 3e-3), 0.1, 0.005])
     xs = np.asarray(gamma_batch(model, jnp.asarray(gammas), TS))
     for i, g in enumerate(gammas):
-        assert rel(xs[i], startup_reference(model, g, np.asarray(TS))) < 1e-10, g
+        assert rel(xs[i], startup_reference(model, np.asarray(TS), 24.0, g)) < 1e-10, g
 
 
 def test_gamma_batch_equals_vmapped_simulate():
@@ -65,7 +49,7 @@ def test_many_near_resonant_elements_and_chunking():
     gammas = g_res * (1 + jnp.linspace(-1e-3, 1e-3, 8))
     xs = np.asarray(gamma_batch(model, gammas, TS, n_fix=2))
     for i, g in enumerate(np.asarray(gammas)):
-        assert rel(xs[i], startup_reference(model, g, np.asarray(TS))) < 1e-10
+        assert rel(xs[i], startup_reference(model, np.asarray(TS), 24.0, g)) < 1e-10
     chunked = np.asarray(gamma_batch(model, gammas, TS, n_fix=2, chunk=3))
     assert chunked.shape == xs.shape
     assert np.max(np.abs(chunked - xs)) <= 1e-13 * np.max(np.abs(xs))

@@ -8,23 +8,20 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-import scipy.linalg as sla
 from scipy.integrate import solve_ivp
 
 import jaxbelt as jb
-from jaxbelt.modal import augmented_matrix, modal_decomposition, modal_solve, modal_solve_raw
+from jaxbelt.modal import modal_decomposition, modal_solve, modal_solve_raw
+from references import expm_reference, startup_reference
 
 TS = jnp.linspace(0.0, 0.5, 501)
 
 
 def reference(model, cmd, ts, x0=None):
-    """States by scipy's expm of the augmented (state + exponential generators) matrix."""
-    A, F, s = (np.asarray(a) for a in model.linear_form(cmd))
-    Aa = np.asarray(augmented_matrix(jnp.asarray(A), jnp.asarray(F), jnp.asarray(s)))
-    n = A.shape[0]
-    x0 = np.zeros(n) if x0 is None else np.asarray(x0)
-    z0 = np.concatenate([x0, np.exp(s * float(ts[0]))])
-    return np.array([sla.expm(Aa * (t - float(ts[0]))) @ z0 for t in np.asarray(ts)])[:, :n]
+    """States for an `ExponentialVoltage` or `ConstantVoltage` command (scipy expm, tests/references.py)."""
+    if isinstance(cmd, jb.ExponentialVoltage):
+        return startup_reference(model, ts, float(cmd.v_max), float(cmd.gamma), x0)
+    return startup_reference(model, ts, float(cmd.voltage), None, x0)
 
 
 def rel_err(x, ref):
@@ -168,8 +165,7 @@ def test_modal_falls_back_for_a_defective_matrix():
     s = jnp.array([0.0])
     ts = jnp.linspace(0.0, 3.0, 31)
     x0 = jnp.array([1.0, 0.0, 0.0])
-    Aa = np.asarray(augmented_matrix(A, F, s))
-    ref = np.array([sla.expm(Aa * t) @ np.r_[np.asarray(x0), 1.0] for t in np.asarray(ts)])[:, :3]
+    ref = expm_reference(A, F, s, x0, ts)
     _, cond = modal_solve_raw(A, F, s, x0, 0.0, ts)
     assert cond > 1e6
     xs = modal_solve(A, F, s, x0, 0.0, ts)

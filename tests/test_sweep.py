@@ -8,7 +8,6 @@ import textwrap
 from pathlib import Path
 
 import diffrax
-import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest

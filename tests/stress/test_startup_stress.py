@@ -12,9 +12,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-import scipy.linalg as sl
 
 import jaxbelt as jb
+from references import startup_reference
 
 pytestmark = pytest.mark.stress
 
@@ -22,17 +22,8 @@ V = 24.0
 
 
 def reference(model, gamma, ts):
-    """States at `ts` by scipy.linalg.expm of the augmented system [x, 1, e^{-t/gamma}] (independent)."""
-    A, B = (np.asarray(a, dtype=float) for a in model.matrices())
-    n = A.shape[0]
-    Aa = np.zeros((n + 2, n + 2))
-    Aa[:n, :n] = A
-    Aa[:n, n] = B[:, 0] * float(model.tau_r0) + V * B[:, 1]
-    Aa[:n, n + 1] = -V * B[:, 1]
-    Aa[n + 1, n + 1] = -1.0 / gamma
-    z0 = np.zeros(n + 2)
-    z0[n] = z0[n + 1] = 1.0
-    return np.array([sl.expm(Aa * t) @ z0 for t in np.asarray(ts, dtype=float)])[:, :n]
+    """States at `ts` by scipy's expm of the augmented system (tests/references.py, independent)."""
+    return startup_reference(model, ts, V, gamma)
 
 
 def rel(x, ref):
@@ -170,7 +161,7 @@ def test_sweep_with_step_budget_failures_names_the_elements():
     out = jb.sweep(run, horizons, check=False)
     ok = np.asarray(out.success)
     assert ok.tolist() == [True, False, True, False]
-    ref = reference(model, 0.02, [1e-3, 2e-3])
+    ref = reference(model, 0.02, [0.0, 1e-3, 2e-3])[1:]  # from rest at t = 0
     np.testing.assert_allclose(np.asarray(out.ys)[[0, 2], -1], ref, rtol=1e-6, atol=1e-12)
 
 
