@@ -55,3 +55,20 @@ def test_cli_bench_without_checkout_says_so(monkeypatch, capsys):
     monkeypatch.setattr(bench, "benchmarks_dir", lambda: None)
     assert main(["bench", "--quick"]) == 2
     assert "benchmarks/ folder was not found" in capsys.readouterr().err
+
+
+def test_matched_error_ratio_pairs_the_most_accurate_matched_reference():
+    """Hand-made rows: the most accurate scipy run (1e-10) is matched by no jaxbelt run, the next
+    (1e-8, 2 s) by two; the cheaper of those (0.01 s) is taken: ratio 200. Batches are left out."""
+
+    rows = [
+        {"name": "a", "method": "scipy", "error": 1e-10, "median_s": 5.0},
+        {"name": "b", "method": "scipy", "error": 1e-8, "median_s": 2.0},
+        {"name": "c", "method": "ode", "error": 5e-9, "median_s": 0.05},
+        {"name": "d", "method": "ode", "error": 9e-9, "median_s": 0.01},
+        {"name": "e", "method": "ode", "error": 1e-9, "median_s": 1e-6, "batch": 1000},
+        {"name": "f", "method": "ode", "error": 1e-7, "median_s": 1e-4},
+    ]
+    (m,) = readme_table.matched_error_ratios({"rows": rows})
+    assert m["ref_error"] == 1e-8 and m["jax_error"] == 9e-9
+    assert abs(m["ratio"] - 200.0) < 1e-12
