@@ -243,8 +243,10 @@ def measure_scene(scene: str, sizes, quick: bool, t_budget_end: float) -> list[d
         rows.append(row)
         print(f"  {scene} n={n:>6d}: {median * 1e3:9.3f} ms ({row['per_element_us']:.3g} us/elem, "
               f"{row['elements_per_s']:.3g}/s), first call {first:.2f} s, out {row['output_bytes'] / 1e6:.2f} MB, "
-              f"RSS +{growth / 1024:.0f} MiB", flush=True)
+              f"peak RSS growth {max(growth, 0) / 1024:.0f} MiB", flush=True)
         del out
+        if n == sizes[-1]:
+            break
         if median > MAX_RUN_S or 10 * median > MAX_RUN_S:
             print(f"  {scene}: stopping at n={n} (the next size would take ~{10 * median:.0f} s > {MAX_RUN_S:.0f} s)")
             break
@@ -379,7 +381,7 @@ def plot(rows, scenes):
     labels = {"startup": "start-up gamma sweep (501 pts, closed form)", "shaping": "shaping H(exponents)",
               "pid": "PID gains -> chi (diffrax)", "runout": "run-out response (64 modes)",
               "span_freqs": "span natural frequencies (3 modes)"}
-    fig, ax = plt.subplots(figsize=(7.5, 5), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(7.5, 6), constrained_layout=True)
     for scene in scenes:
         sel = [r for r in rows if r["name"] == scene]
         ax.loglog([r["batch"] for r in sel], [r["elements_per_s"] for r in sel], "o-", label=labels[scene])
@@ -387,7 +389,7 @@ def plot(rows, scenes):
     ax.set_ylabel("elements per second (after compilation)")
     ax.set_title(f"jaxbelt: throughput of batched sweeps ({jax.default_backend()})")
     ax.grid(alpha=0.3, which="both")
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2)
     fig.savefig(RESULTS / "throughput.png", dpi=120)
 
 
