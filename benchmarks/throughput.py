@@ -205,7 +205,9 @@ def _nbytes(tree) -> int:
 def reps_for(scene: str, n: int, quick: bool) -> int:
     if scene == "pid" and n >= 1000:
         return 1
-    return 3 if quick or n > 1000 else 5
+    if quick:
+        return 2
+    return 3 if n > 1000 else 5
 
 
 # --- measurements --------------------------------------------------------------------------------
@@ -259,7 +261,7 @@ def measure_scene(scene: str, sizes, quick: bool, t_budget_end: float) -> list[d
 def gradient_costs(quick: bool) -> list[dict]:
     """Derivative over forward time for the start-up and belt-span sweeps (1000 elements; quick: 200)."""
     n = 200 if quick else 1000
-    reps = 3 if quick else 5
+    reps = 2 if quick else 5
     out = []
     model = jb.BeltStartup()
 
@@ -285,7 +287,9 @@ def gradient_costs(quick: bool) -> list[dict]:
         t_g, c_g, (_, g) = time_jax(jvp, x, repeats=reps)
         row = {"scene": scene, "what": what, "batch": n, "forward_s": t_f, "grad_s": t_g, "mode": "forward (jvp)",
                "ratio": t_g / t_f, "forward_compile_s": c_f, "grad_compile_s": c_g, "source": "measured here"}
-        if scene != "startup":  # reverse mode: the gradient of the sum is the batch of derivatives
+        if quick:  # --quick keeps to forward mode (time)
+            row.update(reverse_s=None, reverse_ratio=None, reverse_note="not measured in --quick")
+        elif scene != "startup":  # reverse mode: the gradient of the sum is the batch of derivatives
             rev = jax.jit(jax.grad(lambda x, f=f: jnp.sum(f(x))))
             t_r, c_r, g_r = time_jax(rev, x, repeats=reps)
             row.update(reverse_s=t_r, reverse_ratio=t_r / t_f, reverse_compile_s=c_r,
