@@ -167,7 +167,7 @@ def test_platform_table_iii_derived_constants():
     # 15 motor revolutions turn the platform by 180 degrees (section V)
     assert float(p.lam * PHI) == pytest.approx(np.pi, rel=1e-14)
     assert float(p.omega_n) == pytest.approx(np.sqrt(2 * 9e4 * 0.18**2 / 6), rel=1e-14)
-    assert float(p.damping_ratio) == pytest.approx(2 * 150 * 0.18**2 / (2 * 6 * p.omega_n), rel=1e-14)
+    assert float(p.damping_ratio) == pytest.approx(float(2 * 150 * 0.18**2 / (2 * 6 * p.omega_n)), rel=1e-14)
 
 
 @pytest.mark.parametrize("g", [G345, PAPER_OPT, jnp.array([2.05, 2.6, 7.3]), jnp.array([4.5, 6.2, 8.4])])

@@ -163,7 +163,7 @@ def test_modal_response_matches_travelling_wave_solution(V, x):
     W0, W1 = jb.runout_phasors(V, position=x, damping_ratio=0.0, n_modes=256, **MW)
     assert abs(complex(W0 + W1) - complex(ref)) < 1e-5 * abs(ref)
     pp = float(jb.linear_runout_response(V, position=x, n_modes=256, **MW))
-    assert pp == pytest.approx(2 * abs(ref), rel=1e-5)
+    assert pp == pytest.approx(float(2 * abs(ref)), rel=1e-5)
     W0, W1 = jb.runout_phasors(V, position=x, damping_ratio=0.0, n_modes=64, **MW)
     assert abs(complex(W0 + W1) - complex(ref)) < 1e-4 * abs(ref)
 
