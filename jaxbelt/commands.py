@@ -7,6 +7,8 @@ linear time-invariant scene can be solved in closed form (no time stepping).
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -20,7 +22,12 @@ def _arr(x):
 
 
 class AbstractCommand(eqx.Module):
-    """Base class of all inputs. `__call__(t)` gives the input at time `t` [s]."""
+    """Base class of all inputs. `__call__(t)` gives the input at time `t` [s].
+
+    `has_exp_terms` says, without computing anything, whether `exp_terms()` returns terms.
+    """
+
+    has_exp_terms: ClassVar[bool] = False
 
     def __call__(self, t):
         raise NotImplementedError
@@ -32,6 +39,8 @@ class AbstractCommand(eqx.Module):
 
 class ConstantVoltage(AbstractCommand):
     """Constant armature voltage $V(t) = V_0$ [V] (a step applied at t = 0)."""
+
+    has_exp_terms: ClassVar[bool] = True
 
     voltage: jnp.ndarray = eqx.field(converter=_arr)
 
@@ -54,6 +63,8 @@ class ExponentialVoltage(AbstractCommand):
     - `gamma`: time constant $\\gamma$ [s], > 0 (the paper uses 0.02, 0.04, 0.06 s). A 1-D array
       of time constants makes a batch: `simulate` solves all of them at once (batched closed form).
     """
+
+    has_exp_terms: ClassVar[bool] = True
 
     v_max: jnp.ndarray = eqx.field(converter=_arr, default=24.0)
     gamma: jnp.ndarray = eqx.field(converter=_arr, default=0.02)

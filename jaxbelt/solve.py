@@ -238,7 +238,7 @@ def simulate(
             raise SolveError(f"simulate: non-finite values in the batched start-up scene at elements {bad.tolist()}")
         return batched
     integrals = [n for n in scene.observe if n in getattr(model, "integral_names", ())]
-    lin = model.linear_form(inp) is not None
+    lin = model.is_linear_for(inp)
     if method == "auto":
         method = "closed" if (lin and not integrals) else "ode"
     if method == "closed":

@@ -6,8 +6,8 @@ A model is an `eqx.Module` of SI parameters. `simulate` needs:
 - `vector_field(t, y, inp)`: $\\dot y = f(t, y, u)$ for the input `inp` (a command or controller);
   `model(t, y, args)` calls it, so `diffrax.ODETerm(model)` works;
 - `initial_state(inp)`: the state at the scene's first time (default: zeros, at rest);
-- optional `linear_form(inp)`: `(A, F, s)` when the scene is linear time-invariant with an
-  exponential-sum input, $\\dot x = A x + \\sum_j F_{:,j} e^{s_j t}$; `simulate` then solves in
+- optional `is_linear_for(inp)` and `linear_form(inp)`: `(A, F, s)` when the scene is linear
+  time-invariant with an exponential-sum input, $\\dot x = A x + \\sum_j F_{:,j} e^{s_j t}$; `simulate` then solves in
   closed form;
 - derived outputs: methods `_out_<name>(t, y, inp)` for each name in `output_names`
   (evaluated at one time; `simulate` maps them over the saved times);
@@ -42,6 +42,10 @@ class AbstractModel(eqx.Module):
 
     def initial_state(self, inp):
         return jnp.zeros((self.n_states,))
+
+    def is_linear_for(self, inp) -> bool:
+        """Whether `linear_form(inp)` gives a closed form; decided from types, nothing computed."""
+        return False
 
     def linear_form(self, inp):
         """`(A, F, s)` for an LTI scene with exponential-sum input, else `None`."""

@@ -123,13 +123,13 @@ class _BeltDriveBase(AbstractModel):
         A, B = self.matrices()
         return A @ y + B @ self._u(t, inp)
 
+    def is_linear_for(self, inp) -> bool:
+        return isinstance(inp, AbstractCommand) and inp.has_exp_terms
+
     def linear_form(self, inp):
-        if not isinstance(inp, AbstractCommand):
+        if not self.is_linear_for(inp):
             return None
-        terms = inp.exp_terms()
-        if terms is None:
-            return None
-        amps, rates = terms
+        amps, rates = inp.exp_terms()
         A, B = self.matrices()
         # constant load torque is one more term of rate 0
         F = jnp.concatenate([B[:, :1] * self.tau_r0, B[:, 1:] * amps[None, :]], axis=1)
