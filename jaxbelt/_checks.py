@@ -9,7 +9,14 @@ constructing a model inside `jax.vmap` stays cheap. Invariants that matter under
 from __future__ import annotations
 
 import jax
+import jax.numpy as jnp
 import numpy as np
+
+
+def as_float_array(x):
+    """Field converter of every model and command: parameters become float arrays (float64 with x64),
+    so they are traced under jit instead of being baked in as constants."""
+    return jnp.asarray(x, dtype=float)
 
 
 def is_concrete(x) -> bool:

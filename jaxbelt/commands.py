@@ -15,10 +15,8 @@ import jax.numpy as jnp
 import numpy as _np
 
 from ._checks import check_finite, check_nonnegative, check_positive, check_range, is_concrete
+from ._checks import as_float_array as _arr
 
-
-def _arr(x):
-    return jnp.asarray(x, dtype=float)
 
 
 class AbstractCommand(eqx.Module):

@@ -20,12 +20,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import check_positive, check_range, is_concrete
+from .._checks import as_float_array as _arr
 
 __all__ = ["BeltPulleyContact", "SlipError", "SlipReport"]
 
-
-def _arr(x):
-    return jnp.asarray(x, dtype=float)
 
 
 class SlipError(ValueError):

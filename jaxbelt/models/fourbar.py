@@ -22,12 +22,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import check_nonnegative, check_positive, is_concrete
+from .._checks import as_float_array as _arr
 from .base import AbstractModel
 from .motor import PID
 
-
-def _arr(x):
-    return jnp.asarray(x, dtype=float)
 
 
 #: Defaults that are NOT from the paper (its Table I was lost): assumed values.

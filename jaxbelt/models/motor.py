@@ -14,10 +14,8 @@ import jax
 import jax.numpy as jnp
 
 from .._checks import check_finite, check_nonnegative, check_positive
+from .._checks import as_float_array as _arr
 
-
-def _arr(x):
-    return jnp.asarray(x, dtype=float)
 
 
 def _opt_arr(x):

@@ -70,11 +70,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import check_nonnegative, check_positive, check_range, is_concrete
+from .._checks import as_float_array as _arr
 from .base import AbstractModel
 
-
-def _arr(x):
-    return jnp.asarray(x, dtype=float)
 
 
 def _pair(x):

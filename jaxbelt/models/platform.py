@@ -16,11 +16,9 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from .._checks import check_nonnegative, check_positive, is_concrete
+from .._checks import as_float_array as _arr
 from .base import AbstractModel
 
-
-def _arr(x):
-    return jnp.asarray(x, dtype=float)
 
 
 class BeltPlatform(AbstractModel):

@@ -18,12 +18,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import check_nonnegative, check_positive, is_concrete
+from .._checks import as_float_array as _arr
 from ..commands import AbstractCommand
 from .base import AbstractModel
 
-
-def _arr(x):
-    return jnp.asarray(x, dtype=float)
 
 
 def chain_matrices(jm, inertias, k, c, r_drive, r_driven, z, mu, R, L, km):

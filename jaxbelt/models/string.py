@@ -36,6 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import check_nonnegative, check_positive, check_range, is_concrete
+from .._checks import as_float_array as _arr
 
 __all__ = [
     "MovingString",
@@ -60,9 +61,6 @@ TABLE2_MEASURED_RPM = (
     (730, (1, 8)), (810, (1, 7)), (910, (1, 6)), (1020, None), (1180, (1, 5)), (1400, (1, 4)), (1720, (1, 3)),
 )
 
-
-def _arr(x):
-    return jnp.asarray(x, dtype=float)
 
 
 def _check_subcritical(speed, critical, owner: str, name: str = "speed"):
