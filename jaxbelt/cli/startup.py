@@ -26,7 +26,7 @@ def run(args) -> int:
 
     matplotlib.use("Agg")
     from ..models.startup import BeltStartup
-    from ..plots.startup import plot_startup, startup_curves
+    from ..plots.startup import draw_startup, startup_curves
 
     if args.t_end <= 0:
         raise ValueError(f"--t-end must be > 0 s; got {args.t_end}")
@@ -42,7 +42,7 @@ def run(args) -> int:
             f"peak electric power {c['electric_power'][i].max():7.1f} W, "
             f"final speeds {c['omega1'][i][-1]:.3f} / {c['omega2'][i][-1]:.3f} rad/s"
         )
-    fig = plot_startup(model, args.gamma, args.v_max, args.t_end, args.points, args.method)
+    fig = draw_startup(ts, c, args.gamma, args.v_max)
     fig.savefig(args.out, dpi=110)
     print(f"wrote {args.out}")
     return 0

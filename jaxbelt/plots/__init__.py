@@ -14,3 +14,4 @@ from .shaping import shaping_figure as shaping_figure
 from .fourbar import fourbar_figure as fourbar_figure
 from .fourbar import linkage_strip as linkage_strip
 from .fourbar import simulate_fig4 as simulate_fig4
+from .startup import draw_startup as draw_startup  # noqa: E402

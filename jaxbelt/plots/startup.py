@@ -44,9 +44,14 @@ def startup_curves(model=None, gammas=(0.02, 0.04, 0.06), v_max=24.0, t_end=0.5,
 def plot_startup(model=None, gammas=(0.02, 0.04, 0.06), v_max=24.0, t_end=0.5, n_points=501, method="auto", fig=None):
     """Draw the 8 panels of seed 000's Fig. 3 (V, I, electric and mechanical power, pulley speeds
     and accelerations) for each voltage time constant γ [s]. Returns the matplotlib figure."""
+    ts, curves = startup_curves(model, gammas, v_max, t_end, n_points, method)
+    return draw_startup(ts, curves, gammas, v_max, fig)
+
+
+def draw_startup(ts, curves, gammas, v_max=24.0, fig=None):
+    """Draw Fig. 3 from `startup_curves` output (`ts`, `curves`) for the time constants `gammas`."""
     import matplotlib.pyplot as plt
 
-    ts, curves = startup_curves(model, gammas, v_max, t_end, n_points, method)
     if fig is None:
         fig = plt.figure(figsize=(11, 12), constrained_layout=True)
     axes = fig.subplots(4, 2)
