@@ -1,4 +1,4 @@
-"""Benchmark of the command-shaping scene (seed 003).
+"""Benchmark of the command-shaping scene (Incerti, pseudo-polynomial commands).
 
 Measures, on the Table III platform with the 3-4-5 command:
 - one residual energy H (quadrature, jitted) and one gradient dH/dgamma; their cost ratio;

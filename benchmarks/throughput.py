@@ -98,7 +98,7 @@ def span_freqs_batch(speeds):
 
 
 def span_freqs_closed_form(speeds):
-    """$\\omega_n = (n\\pi/L) V_{cr} (1 - V^2/V_{cr}^2)$ in numpy (seed 002, eq. 39), the reference."""
+    """$\\omega_n = (n\\pi/L) V_{cr} (1 - V^2/V_{cr}^2)$ in numpy (belt-vibration report, eq. 39), the reference."""
     vc = np.sqrt(SPAN["tension"] / SPAN["density"])
     v = np.asarray(speeds, dtype=float)
     return (np.pi / SPAN["length"]) * vc * (1 - (v / vc) ** 2)[:, None] * np.arange(1, 4)

@@ -53,7 +53,7 @@ class ConstantVoltage(AbstractCommand):
 
 
 class ExponentialVoltage(AbstractCommand):
-    """Exponential voltage ramp of seed 000, eq. (30).
+    """Exponential voltage ramp of Incerti (2014), eq. (30).
 
     $V(t) = V_{max}\\,(1 - e^{-t/\\gamma})$
 
@@ -82,7 +82,7 @@ class ExponentialVoltage(AbstractCommand):
 
 
 # --------------------------------------------------------------------------------------------
-# Motion commands for servo axes (seed 003): pseudo-polynomial profiles and input shapers.
+# Motion commands for servo axes (Incerti, pseudo-polynomial commands): pseudo-polynomial profiles and input shapers.
 # --------------------------------------------------------------------------------------------
 
 
@@ -98,7 +98,7 @@ def _safe_pow(u, e):
 
 
 def falling_factorial(gammas, k: int):
-    """$P(\\gamma, k) = \\prod_{r=0}^{k-1} (\\gamma - r)$ (seed 003, eq. 19); $P(\\gamma, 0) = 1$."""
+    """$P(\\gamma, k) = \\prod_{r=0}^{k-1} (\\gamma - r)$ (Incerti, pseudo-polynomial commands, eq. 19); $P(\\gamma, 0) = 1$."""
     gammas = jnp.asarray(gammas, dtype=float)
     out = jnp.ones_like(gammas)
     for r in range(k):
@@ -128,7 +128,7 @@ class AbstractMotionCommand(AbstractCommand):
 
 
 class PseudoPolynomial(AbstractMotionCommand):
-    """Pseudo-polynomial rest-to-rest motion command of order n (seed 003, eq. 17-23).
+    """Pseudo-polynomial rest-to-rest motion command of order n (Incerti, pseudo-polynomial commands, eq. 17-23).
 
     $\\varphi_m(t) = \\Phi\\,[1 - \\sum_{i=0}^{n} C_i (1 - t/T)^{\\gamma_i}]$ (eq. 17)
 
@@ -142,7 +142,7 @@ class PseudoPolynomial(AbstractMotionCommand):
 
     - `gammas`: the n + 1 exponents $\\gamma_i$ (shape parameters), distinct and each
       > max(n, 2): > 2 keeps the acceleration finite at t = T, > n keeps the n-th derivative so.
-    - `displacement`: total motor displacement $\\Phi$ [rad] (default 15 rev, seed 003).
+    - `displacement`: total motor displacement $\\Phi$ [rad] (default 15 rev, Incerti (pseudo-polynomial commands)).
     - `duration`: motion time T [s], > 0 (default 1 s).
 
     `cmd(t)` is the position [rad]; before t = 0 the axis is at 0, after T it holds at $\\Phi$.

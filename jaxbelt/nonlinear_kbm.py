@@ -1,6 +1,6 @@
 """First-order KBM (averaging) results for the non-linear belt: backbone curve and steady amplitudes.
 
-Moon & Wickert (seed 004), section 5.1, eq. (18)-(33), specialised to one complex mode
+Moon & Wickert (1997), section 5.1, eq. (18)-(33), specialised to one complex mode
 $\\psi_n = \\sqrt2\\sin(n\\pi x)e^{in\\pi vx}$ ($\\langle\\psi_n,\\psi_n\\rangle = 1$) of the model in
 `jaxbelt.models.nonlinear`, with the modal damping ratio $\\xi$ kept (the paper's perturbation
 solution has none; $\\xi = 0$ recovers it).

@@ -6,7 +6,7 @@ Method choice (`method=`):
   sum of exponentials (e.g. `BeltStartup` + `ExponentialVoltage`) and no integral output is
   requested; diffrax otherwise.
 - `"closed"`: the preferred closed form (`"expm"`); `"expm"`: matrix exponential of the
-  augmented system; `"modal"`: the modal solution of seed 000 (eq. 14-29), with an automatic
+  augmented system; `"modal"`: the modal solution of Incerti (2014) (eq. 14-29), with an automatic
   fall-back to `"expm"` when the eigenvector matrix is ill-conditioned.
 - `"ode"`: diffrax, `solver=` any diffrax solver (default: the model's choice, Tsit5 for
   non-stiff models), adaptive step with `rtol`/`atol` (arrays: changing them does not recompile).
@@ -202,7 +202,7 @@ def simulate(
     rtol, atol: tolerances of the adaptive step-size controller (ODE method).
     dt0: initial step [s] for the ODE method (default: chosen automatically; required for
         fixed-step diffrax solvers).
-    dt: step [s] of `method="rk4"` (default 0.1 ms, the check of seed 000).
+    dt: step [s] of `method="rk4"` (default 0.1 ms, the check of Incerti (2014)).
     max_steps: step budget of the ODE method.
     throw: raise `SolveError` when the solve fails (outside `jit`/`vmap`), or an
         `eqx.error_if` runtime error inside them. With `throw=False`, check `sol.success`.

@@ -9,7 +9,7 @@ integration of `jaxbelt.nonlinear_sweep`. (The library's own linear response is
   $\\dot z = [[-\\xi\\omega, \\omega], [-\\omega, -\\xi\\omega]] z + \\hat q e^{i\\Omega t}$ is solved
   as $\\hat z = (i\\Omega I - A)^{-1}\\hat q$.
 - `string_exact_pp(belt, speed)`: the exact undamped steady state of the linear travelling string
-  with harmonically moving ends (the closed form behind eq. 10 of seed 004): for each pulley,
+  with harmonically moving ends (the closed form behind eq. 10 of Moon & Wickert (1997)): for each pulley,
   $W(x) = A e^{s_1 x} + B e^{s_2 x}$ with $s_1 = -i\\Omega/(1+v)$, $s_2 = i\\Omega/(1-v)$ (roots of
   $(1-v^2)s^2 - 2iv\\Omega s + \\Omega^2 = 0$) and $W$ equal to the pulley's complex run-out at its
   end and 0 at the other. It checks the forcing derived by the boundary-shift substitution.

@@ -1,7 +1,7 @@
 """Independent references shared by the tests: numpy/scipy only, no jaxbelt solver code.
 
 The start-up model enters only through its matrices A and B, which `test_startup.py` checks
-entry by entry against eq. (10)-(11) of seed 000.
+entry by entry against eq. (10)-(11) of Incerti (2014).
 """
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""Checks between scenes: the non-linear belt with v_l = 0 is the linear moving string of seed 002/004."""
+"""Checks between scenes: the non-linear belt with v_l = 0 is the linear moving string of the belt-vibration report and Moon & Wickert (1997)."""
 
 import jax.numpy as jnp
 import numpy as np
@@ -7,7 +7,7 @@ import jaxbelt as jb
 
 
 def test_nonlinear_belt_with_vl_zero_matches_linear_runout_response():
-    """Acceptance (issue 6): with v_l = 0 the up and down sweeps coincide and match the linear
+    """With v_l = 0 the up and down sweeps coincide and match the linear
     forced response of the moving-string scene (64-mode modal formula) within 2 %."""
     kw = dict(span=0.86, wave_speed=41.0, pulley_radii=(0.063, 0.063), runout=(0.355e-3, 0.21e-3), phase=jnp.deg2rad(240.0))
     belt = jb.NonlinearBelt(v_l=0.0, damping=0.01, n_modes=4, **kw)

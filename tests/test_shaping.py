@@ -1,4 +1,4 @@
-"""Command shaping (seed 003): pseudo-polynomial commands, residual energy H, optimisation.
+"""Command shaping (Incerti, pseudo-polynomial commands): pseudo-polynomial commands, residual energy H, optimisation.
 
 Every number is checked against an independent reference: the paper's tables, closed forms
 (Lagrange coefficients, the classical 3-4-5 polynomial), scipy.integrate.quad at tight

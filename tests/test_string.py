@@ -18,7 +18,7 @@ def span():
     return jb.MovingString(tension=T, density=RHO, length=L)
 
 
-# --- moving string (seed 002) ---------------------------------------------------------------------
+# --- moving string (belt-vibration report) ---------------------------------------------------------------------
 def test_contract_calls(span):
     assert float(span.critical_speed) == pytest.approx(np.sqrt(140.0 / 0.05), rel=1e-14)
     V = np.linspace(0, 50, 1001)
@@ -100,7 +100,7 @@ def test_mode_shape_solves_eq24(span, n):
         assert abs(float(y(0.0, t))) < 1e-12 and abs(float(y(L, t))) < 1e-12
 
 
-# --- crossing diagram (seed 004) ------------------------------------------------------------------
+# --- crossing diagram (Moon & Wickert (1997)) ------------------------------------------------------------------
 def test_crossing_speeds_moon_wickert():
     vc = np.asarray(jb.crossing_speeds(length=0.86, pulley_radii=(0.063, 0.063), wave_speed=41.0, n_modes=2))
     assert vc.shape == (2, 2, 1)
@@ -205,7 +205,7 @@ def test_different_radii_peak_to_peak_is_sum_of_amplitudes():
     assert float(pp) == pytest.approx(sig.max() - sig.min(), rel=1e-3)
 
 
-# --- contact (seed 002) ---------------------------------------------------------------------------
+# --- contact (belt-vibration report) ---------------------------------------------------------------------------
 def test_contact_pressure_and_separation():
     c = jb.BeltPulleyContact(radius=0.025)
     w = 15000 / RPM

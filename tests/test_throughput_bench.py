@@ -33,7 +33,7 @@ def test_batch_equals_scalar_loop(tp, scene):
 
 
 def test_span_frequencies_match_eq39(tp):
-    # reference: eq. (39) of seed 002 written out in numpy, checked here at V = 0 by hand too
+    # reference: eq. (39) of the belt-vibration report written out in numpy, checked here at V = 0 by hand too
     x = tp.random_inputs("span_freqs", 4, seed=3)
     out, ref = tp.batch_and_reference("span_freqs", x)
     np.testing.assert_allclose(out, ref, rtol=1e-12)

@@ -1,4 +1,4 @@
-"""`jaxbelt shaping`: command shaping of the belt-driven platform (seed 003).
+"""`jaxbelt shaping`: command shaping of the belt-driven platform (Incerti, pseudo-polynomial commands).
 
 Optimises the pseudo-polynomial exponents from (3, 4, 5), optionally a robust higher-order
 command over a frequency band, compares with ZV/ZVD shapers, prints H and the 5 % tolerance
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 
 def register(subparsers):
-    p = subparsers.add_parser("shaping", help="pseudo-polynomial command shaping of a belt-driven platform (seed 003)")
+    p = subparsers.add_parser("shaping", help="pseudo-polynomial command shaping of a belt-driven platform (Incerti, pseudo-polynomial commands)")
     p.add_argument("--out", default="shaping.png", help="figure file (default shaping.png)")
     p.add_argument("--gammas", type=float, nargs="+", default=[3.0, 4.0, 5.0], help="start exponents (default 3 4 5)")
     p.add_argument("--duration", type=float, default=1.0, help="motion time T [s] (default 1)")

@@ -1,4 +1,4 @@
-"""`jaxbelt startup`: Fig. 3 of seed 000 (belt-drive start-up for several voltage time constants)."""
+"""`jaxbelt startup`: Fig. 3 of Incerti (2014) (belt-drive start-up for several voltage time constants)."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import time
 def register(sub):
     p = sub.add_parser(
         "startup",
-        help="belt drive start-up driven by a DC motor (seed 000, Fig. 3)",
-        description="Simulate the start-up of the belt drive of seed 000 (Table I) for each time constant "
+        help="belt drive start-up driven by a DC motor (Incerti (2014), Fig. 3)",
+        description="Simulate the start-up of the belt drive of Incerti (2014) (Table I) for each time constant "
         "of the voltage command V(t) = Vmax (1 - exp(-t/gamma)) and write the 8-panel figure.",
     )
     p.add_argument("--gamma", type=float, nargs="+", default=[0.02, 0.04, 0.06], help="time constants [s] (default 0.02 0.04 0.06)")

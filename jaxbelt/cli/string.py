@@ -1,4 +1,4 @@
-"""`jaxbelt string`: the belt-span figures (seed 002 figs. 40, 41, 43; Moon & Wickert Fig. 5)."""
+"""`jaxbelt string`: the belt-span figures (belt-vibration report figs. 40, 41, 43; Moon & Wickert Fig. 5)."""
 
 from __future__ import annotations
 
@@ -7,11 +7,11 @@ def register(subparsers):
     p = subparsers.add_parser(
         "string",
         help="belt spans: contact pressure, span frequencies, exciting speeds, crossing diagram, run-out response",
-        description="Belt spans as axially moving strings (seed 002 and Moon & Wickert): writes one figure.",
+        description="Belt spans as axially moving strings (the belt-vibration report and Moon & Wickert): writes one figure.",
     )
     p.add_argument("--out", default="string.png", help="output image (default: string.png)")
     p.add_argument("--contact-radius", type=float, default=0.025,
-                   help="motor pulley radius [m] for the pressure plot (not in seed 002; default 0.025)")
+                   help="motor pulley radius [m] for the pressure plot (not in the belt-vibration report; default 0.025)")
     p.set_defaults(func=run)
 
 
@@ -27,7 +27,7 @@ def run(args) -> int:
     vc = jb.crossing_speeds(length=0.86, pulley_radii=(0.063, 0.063), wave_speed=41.0, n_modes=2)
     fig = string_figure(contact_radius=args.contact_radius)
     fig.savefig(args.out, dpi=110)
-    print(f"critical speed (seed 002 span): {float(span.critical_speed):.3f} m/s")
+    print(f"critical speed (belt-vibration report span): {float(span.critical_speed):.3f} m/s")
     print(f"Moon & Wickert crossings: mode 1 {float(vc[0, 0, 0]):.3f} m/s, mode 2 {float(vc[1, 0, 0]):.3f} m/s")
     print(f"wrote {args.out}")
     return 0

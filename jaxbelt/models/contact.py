@@ -1,4 +1,4 @@
-"""Belt-pulley contact: centrifugal tension, slip limit and contact pressure (seed 002, eq. 1-11).
+"""Belt-pulley contact: centrifugal tension, slip limit and contact pressure (belt-vibration report, eq. 1-11).
 
 On a pulley of radius $R$ turning at $\\omega$, a belt element of mass $\\rho R\\,d\\alpha$ needs the
 centripetal force $\\rho R^2\\omega^2 d\\alpha$ (eq. 5), which the tension supplies before it can
@@ -72,11 +72,11 @@ class SlipReport:
 
 
 class BeltPulleyContact(eqx.Module):
-    """A belt wrapped on one pulley with slack-side tension $T_1$ and tight-side tension $T_2$ (seed 002).
+    """A belt wrapped on one pulley with slack-side tension $T_1$ and tight-side tension $T_2$ (belt-vibration report).
 
     | field | symbol | unit | default |
     |---|---|---|---|
-    | `radius` | $R$ pulley radius | m | required (the motor pulley's is not in seed 002) |
+    | `radius` | $R$ pulley radius | m | required (the motor pulley's is not in the belt-vibration report) |
     | `slack_tension` | $T_1$ | N | 120 |
     | `tight_tension` | $T_2$ | N | 140 |
     | `density` | $\\rho$ belt mass per length | kg/m | 0.05 |

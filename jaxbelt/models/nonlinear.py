@@ -1,8 +1,8 @@
-"""Non-linear travelling belt driven by eccentric pulleys: the Galerkin model of seed 004.
+"""Non-linear travelling belt driven by eccentric pulleys: the Galerkin model of Moon & Wickert (1997).
 
 Moon & Wickert, *Non-linear vibration of power transmission belts*, J. Sound Vib. 200(4), 1997.
 
-## Governing equation (dimensionless, eq. 2 as corrected in NOTES.md)
+## Governing equation (dimensionless, eq. 2 with the sign of the stretching term corrected)
 
 Lengths are scaled by the span $L$, the transverse displacement $w$ by $L$, the running speed
 by the transverse wave speed $v_t = \\sqrt{P/\\rho A}$ ($v = V/v_t$) and time by $L/v_t$:
@@ -160,7 +160,7 @@ def _gauss(n_modes: int):
 
 
 class NonlinearBelt(AbstractModel):
-    """Travelling belt span with stretching non-linearity, driven by eccentric pulleys (seed 004).
+    """Travelling belt span with stretching non-linearity, driven by eccentric pulleys (Moon & Wickert (1997)).
 
     See the module docstring for the equations (eq. 1-7, 34-36 of Moon & Wickert) and the
     derivation of the forcing. Parameters (SI; defaults: the 004 test stand):
@@ -168,7 +168,7 @@ class NonlinearBelt(AbstractModel):
     | field | meaning | unit | default |
     |---|---|---|---|
     | `span` | free span length $L$ | m | 0.86 |
-    | `wave_speed` | transverse wave speed $v_t = \\sqrt{P/\\rho A}$ | m/s | 41.0 (assumed, NOTES.md) |
+    | `wave_speed` | transverse wave speed $v_t = \\sqrt{P/\\rho A}$ | m/s | 41.0 (assumed) |
     | `v_l` | longitudinal / transverse wave speed ratio | – | 50 |
     | `pulley_radii` | $(r_0, r_1)$ driven (x = 0) and idle pulley | m | (0.063, 0.063) |
     | `runout` | eccentricities $(\\varepsilon_0, \\varepsilon_1)$ = half the peak-to-peak run-out | m | (0.355e-3, 0.21e-3) |

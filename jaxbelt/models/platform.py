@@ -1,4 +1,4 @@
-"""Belt-driven rotary platform, 1 DOF (seed 003: Incerti, pseudo-polynomial motion commands).
+"""Belt-driven rotary platform, 1 DOF (Incerti, pseudo-polynomial motion commands).
 
 A servomotor executes a motion command $\\varphi_m(t)$ exactly; through a gear reducer (ratio z)
 and a belt stage (pulley radii r, R; two branches of stiffness k and damping c) it drives a
@@ -22,7 +22,7 @@ from .base import AbstractModel
 
 
 class BeltPlatform(AbstractModel):
-    """Rotary platform driven by a position-controlled servomotor through a belt (seed 003).
+    """Rotary platform driven by a position-controlled servomotor through a belt (Incerti, pseudo-polynomial commands).
 
     Equation of motion (eq. 2), with $k_t = 2kR^2$, $c_t = 2cR^2$, $\\lambda = zr/R$:
 
@@ -32,7 +32,7 @@ class BeltPlatform(AbstractModel):
     $\\ddot\\alpha + 2\\xi\\omega_n\\dot\\alpha + \\omega_n^2\\alpha = -\\lambda\\ddot\\varphi_m$,
     $\\omega_n = \\sqrt{k_t/J}$, $\\xi = c_t/(2J\\omega_n)$.
 
-    Parameters (SI; defaults are Table III of seed 003):
+    Parameters (SI; defaults are Table III of Incerti (pseudo-polynomial commands)):
 
     | field | symbol | unit | default |
     |---|---|---|---|

@@ -1,4 +1,4 @@
-"""Belt drive driven by a DC motor through a gear reducer: the start-up model of seed 000.
+"""Belt drive driven by a DC motor through a gear reducer: the start-up model of Incerti (2014).
 
 State (eq. 12) $x = (\\vartheta_1, \\vartheta_2, \\dot\\vartheta_1, \\dot\\vartheta_2, I)$, input
 (eq. 13) $u = (\\tau_{r0}, V(t))$, $\\dot x = A x + B u$ with A, B of eq. (10)-(11).
@@ -32,7 +32,7 @@ def chain_matrices(jm, inertias, k, c, r_drive, r_driven, z, mu, R, L, km):
     $\\tau_r = \\tau_{r0} + \\mu\\dot\\vartheta_n$ acts on the last shaft. Each stage has two
     branches of stiffness k and damping c, so $U = \\sum_i k_i\\delta_i^2$,
     $D = \\sum_i c_i\\dot\\delta_i^2$ with $\\delta_i = r^{d}_i\\vartheta_i - r^{n}_i\\vartheta_{i+1}$
-    (seed 000, eq. 5). Returns `(A, B)` with shapes (2m+1, 2m+1) and (2m+1, 2), m = n + 1.
+    (Incerti (2014), eq. 5). Returns `(A, B)` with shapes (2m+1, 2m+1) and (2m+1, 2), m = n + 1.
     """
     inertias = jnp.asarray(inertias, dtype=float)
     k = jnp.atleast_1d(jnp.asarray(k, dtype=float))
@@ -234,7 +234,7 @@ class _BeltDriveBase(AbstractModel):
 
 
 class BeltStartup(_BeltDriveBase):
-    """2-DOF synchronous belt drive + gear reducer + permanent-magnet DC motor (seed 000).
+    """2-DOF synchronous belt drive + gear reducer + permanent-magnet DC motor (Incerti (2014)).
 
     Equations of motion (eq. 6-8), with $J_1^* = J_1 + z^2 J_m$:
 
@@ -246,7 +246,7 @@ class BeltStartup(_BeltDriveBase):
 
     $V(t) = R I + L\\dot I + z k_m\\dot\\vartheta_1$ (eq. 7)
 
-    Parameters (SI; defaults are Table I of seed 000):
+    Parameters (SI; defaults are Table I of Incerti (2014)):
 
     | field | symbol | unit | default |
     |---|---|---|---|
@@ -298,7 +298,7 @@ class BeltStartup(_BeltDriveBase):
 
 
 class BeltChain(_BeltDriveBase):
-    """n belt stages in series driven by a DC motor (generalisation of seed 000).
+    """n belt stages in series driven by a DC motor (generalisation of Incerti (2014)).
 
     Shafts 0..n; shaft 0 carries the motor through gear ratio `z`. Stage i (i = 0..n-1) joins
     shaft i (driving pulley radius `r_drive[i]`) and shaft i+1 (driven radius `r_driven[i]`) with

@@ -1,7 +1,7 @@
 """The axially moving string: a free belt span between two pulleys (seeds 002 and 004).
 
 Equation of motion of a span of tension $T$ [N], mass per length $\\rho$ [kg/m] and length $L$ [m]
-running at constant speed $V$ [m/s] (seed 002, eq. 24):
+running at constant speed $V$ [m/s] (belt-vibration report, eq. 24):
 
 $y_{,tt} + 2V y_{,xt} + (V^2 - T/\\rho)\\, y_{,xx} = 0, \\qquad y(0, t) = y(L, t) = 0.$
 
@@ -17,13 +17,13 @@ What lives here:
 - `exciting_speeds`: the rotor speeds of eq. (55) at which harmonic $m$ of the pulley rotation meets
   mode $n$.
 - `crossing_speeds`, `crossing_diagram`: the frequency-crossing (Campbell) diagram of Moon & Wickert
-  (seed 004, sec. 4, Fig. 5); crossings by Newton iteration on each load line.
+  (Moon & Wickert (1997), sec. 4, Fig. 5); crossings by Newton iteration on each load line.
 - `linear_runout_response`: the steady-state peak-to-peak transverse displacement of the linear span
   excited by eccentric pulleys (Moon & Wickert eq. 3 boundary motion), from the exact complex modes.
 - `galerkin_runout_system`, `simulate_runout_response`: the same forced problem as a Galerkin
   state-space model integrated with diffrax (the independent check of the modal formula).
 
-Seed 004 is written in the non-dimensional form of Moon & Wickert: lengths over $L$, speeds over the
+Moon & Wickert (1997) is written in the non-dimensional form of Moon & Wickert: lengths over $L$, speeds over the
 transverse wave speed $v_t = V_{cr}$, time over $L/v_t$; $v = V/v_t$ and $\\omega_n = n\\pi(1 - v^2)$.
 The public functions here take and return SI quantities.
 """
@@ -51,12 +51,12 @@ __all__ = [
     "TABLE2_MEASURED_RPM",
 ]
 
-#: Seed 002, Table 2, computed column: (mode n, harmonic m) -> exciting rotor speed [rpm].
+#: Belt-vibration report, Table 2, computed column: (mode n, harmonic m) -> exciting rotor speed [rpm].
 TABLE2_COMPUTED_RPM = {
     (1, 8): 735, (1, 7): 833, (1, 6): 960, (1, 5): 1130, (1, 4): 1364, (1, 3): 1706,
     (2, 9): 1236, (2, 8): 1364, (2, 7): 1518, (2, 6): 1706, (3, 9): 1706,
 }
-#: Seed 002, Table 2, measured speeds [rpm] with the (n, m) the paper pairs them with (None: unpaired).
+#: Belt-vibration report, Table 2, measured speeds [rpm] with the (n, m) the paper pairs them with (None: unpaired).
 TABLE2_MEASURED_RPM = (
     (730, (1, 8)), (810, (1, 7)), (910, (1, 6)), (1020, None), (1180, (1, 5)), (1400, (1, 4)), (1720, (1, 3)),
 )
@@ -85,15 +85,15 @@ def _check_subcritical(speed, critical, owner: str, name: str = "speed"):
 
 
 class MovingString(eqx.Module):
-    """A belt span as an axially moving string (seed 002, eq. 24-55).
+    """A belt span as an axially moving string (belt-vibration report, eq. 24-55).
 
     $y_{,tt} + 2V y_{,xt} + (V^2 - T/\\rho) y_{,xx} = 0$ on $0 < x < L$, $y = 0$ at both ends.
 
     | field | symbol | unit | default |
     |---|---|---|---|
-    | `tension` | $T$ span tension | N | 140 (seed 002, tight side) |
-    | `density` | $\\rho$ mass per unit length | kg/m | 0.05 (seed 002) |
-    | `length` | $L$ free span length | m | 0.2621 (fitted to seed 002, Table 2; not in the text) |
+    | `tension` | $T$ span tension | N | 140 (belt-vibration report, tight side) |
+    | `density` | $\\rho$ mass per unit length | kg/m | 0.05 (belt-vibration report) |
+    | `length` | $L$ free span length | m | 0.2621 (fitted to the belt-vibration report, Table 2; not in the text) |
 
     Speeds are belt speeds $V$ [m/s]; frequencies are angular [rad/s].
     """
@@ -221,7 +221,7 @@ def exciting_speeds(span: MovingString, pulley_radius, n=1, m=1):
     $\\omega_U = \\frac{V_{cr}}{2n\\pi R_U^2}\\left(\\sqrt{(mL)^2 + (2n\\pi R_U)^2} - mL\\right)$.
 
     `pulley_radius` $R_U$ [m], `n` (mode) and `m` (harmonic, >= 1) broadcast against each other.
-    Example (seed 002, Table 2): `exciting_speeds(MovingString(), 0.1166, n=1, m=8)` is 77.0 rad/s
+    Example (belt-vibration report, Table 2): `exciting_speeds(MovingString(), 0.1166, n=1, m=8)` is 77.0 rad/s
     (735 rpm).
     """
     check_positive("pulley_radius", pulley_radius, "m", "exciting_speeds")
@@ -264,7 +264,7 @@ def _check_span_inputs(owner, length, pulley_radii, wave_speed):
 
 
 def crossing_speeds(length=0.86, pulley_radii=(0.063, 0.063), wave_speed=41.0, n_modes: int = 2, harmonics=1):
-    """Belt speeds [m/s] where the pulley load lines cross the natural-frequency loci (seed 004, Fig. 5).
+    """Belt speeds [m/s] where the pulley load lines cross the natural-frequency loci (Moon & Wickert (1997), Fig. 5).
 
     A pulley of radius $r$ turns at $\\Omega = V/r$; its harmonic $k$ meets mode $n$ where
     $k V / r = (n\\pi/L)\\, v_t (1 - V^2/v_t^2)$. Each crossing is found by Newton iteration on that
@@ -290,7 +290,7 @@ def crossing_speeds(length=0.86, pulley_radii=(0.063, 0.063), wave_speed=41.0, n
 
 
 def crossing_diagram(speed, length=0.86, pulley_radii=(0.063, 0.063), wave_speed=41.0, n_modes: int = 2, harmonics=1):
-    """Loci of the crossing diagram at belt speeds `speed` [m/s] (seed 004, Fig. 5a).
+    """Loci of the crossing diagram at belt speeds `speed` [m/s] (Moon & Wickert (1997), Fig. 5a).
 
     Returns `(natural, load)`: natural frequencies $\\omega_n(V)$ [rad/s] of shape
     `speed.shape + (n_modes,)` and pulley excitation frequencies $kV/r_j$ [rad/s] of shape
@@ -406,7 +406,7 @@ def linear_runout_response(
 ):
     """Steady peak-to-peak transverse displacement [m] of the linear span driven by eccentric pulleys.
 
-    Problem (seed 004, eq. 2-3 with $v_l = 0$), in SI units:
+    Problem (Moon & Wickert (1997), eq. 2-3 with $v_l = 0$), in SI units:
     $w_{,tt} + 2V w_{,xt} + (V^2 - v_t^2) w_{,xx} = 0$ on $0 < x < L$,
     $w(0,t) = e_0\\sin(\\Omega_0 t)$, $w(L,t) = e_1\\sin(\\Omega_1 t + \\phi)$, $\\Omega_j = V/r_j$.
     The belt runs from pulley 0 ($x = 0$) to pulley 1 ($x = L$).

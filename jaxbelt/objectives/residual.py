@@ -1,4 +1,4 @@
-"""Residual vibration energy of a rest-to-rest move (seed 003, eq. 24-32).
+"""Residual vibration energy of a rest-to-rest move (Incerti, pseudo-polynomial commands, eq. 24-32).
 
 At the end time T of the motion the motor is locked ($\\dot\\varphi_m(T) = 0$), and the energy
 left in the belt-platform system is (eq. 26, 31)

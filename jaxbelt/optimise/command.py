@@ -1,4 +1,4 @@
-"""Optimisation of pseudo-polynomial motion commands (seed 003, section V, and beyond).
+"""Optimisation of pseudo-polynomial motion commands (Incerti, pseudo-polynomial commands, section V, and beyond).
 
 `optimise_command` minimises the residual energy $\\mathcal H(\\gamma)$ of eq. (32) over the
 exponents; `optimise_robust` minimises the residual over a band of natural frequencies (a

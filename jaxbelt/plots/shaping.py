@@ -1,4 +1,4 @@
-"""Figures of the command-shaping scene (seed 003): the paper's Fig. 3 and the sensitivity plot."""
+"""Figures of the command-shaping scene (Incerti, pseudo-polynomial commands): the paper's Fig. 3 and the sensitivity plot."""
 
 from __future__ import annotations
 

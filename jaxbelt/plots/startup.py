@@ -1,4 +1,4 @@
-"""Fig. 3 of seed 000: start-up of the belt drive for several voltage time constants."""
+"""Fig. 3 of Incerti (2014): start-up of the belt drive for several voltage time constants."""
 
 from __future__ import annotations
 
@@ -42,7 +42,7 @@ def startup_curves(model=None, gammas=(0.02, 0.04, 0.06), v_max=24.0, t_end=0.5,
 
 
 def plot_startup(model=None, gammas=(0.02, 0.04, 0.06), v_max=24.0, t_end=0.5, n_points=501, method="auto", fig=None):
-    """Draw the 8 panels of seed 000's Fig. 3 (V, I, electric and mechanical power, pulley speeds
+    """Draw the 8 panels of Incerti (2014)'s Fig. 3 (V, I, electric and mechanical power, pulley speeds
     and accelerations) for each voltage time constant γ [s]. Returns the matplotlib figure."""
     ts, curves = startup_curves(model, gammas, v_max, t_end, n_points, method)
     return draw_startup(ts, curves, gammas, v_max, fig)
@@ -64,5 +64,5 @@ def draw_startup(ts, curves, gammas, v_max=24.0, fig=None):
     for ax in axes[-1]:
         ax.set_xlabel("time t [s]")
     axes[0, 0].legend(fontsize=9)
-    fig.suptitle(f"Belt drive start-up, V(t) = {v_max:g}(1 − e^(−t/γ)) V  (seed 000, Fig. 3)")
+    fig.suptitle(f"Belt drive start-up, V(t) = {v_max:g}(1 − e^(−t/γ)) V  (Incerti (2014), Fig. 3)")
     return fig

@@ -1,4 +1,4 @@
-"""Figures of the belt-span scene: seed 002 figs. 40, 41, 43 and Moon & Wickert's Fig. 5."""
+"""Figures of the belt-span scene: belt-vibration report figs. 40, 41, 43 and Moon & Wickert's Fig. 5."""
 
 from __future__ import annotations
 
@@ -36,9 +36,9 @@ def _ax(ax):
 
 
 def plot_contact_pressure(contact: BeltPulleyContact | None = None, rpm: float = 15000.0, ax=None):
-    """Seed 002, Fig. 40: contact pressure $p(\\alpha)$ over the wrap at `rpm` (eq. 10).
+    """Belt-vibration report, Fig. 40: contact pressure $p(\\alpha)$ over the wrap at `rpm` (eq. 10).
 
-    Default contact: seed 002's values with an ASSUMED motor-pulley radius of 25 mm (not in the text).
+    Default contact: the belt-vibration report's values with an ASSUMED motor-pulley radius of 25 mm (not in the text).
     """
     contact = BeltPulleyContact(radius=0.025) if contact is None else contact
     ax = _ax(ax)
@@ -57,7 +57,7 @@ def plot_contact_pressure(contact: BeltPulleyContact | None = None, rpm: float =
 
 def plot_frequency_harmonics(span: MovingString | None = None, pulley_radius: float = 0.1166, n_modes: int = 3,
                              harmonics=range(3, 10), max_rpm: float = 2000.0, ax=None):
-    """Seed 002, Fig. 41: sub-multiples $\\omega_n/m$ of the span frequencies against rotor speed (eq. 51).
+    """Belt-vibration report, Fig. 41: sub-multiples $\\omega_n/m$ of the span frequencies against rotor speed (eq. 51).
 
     The rotor harmonic m meets mode n where the line $\\omega_U$ crosses $\\omega_n(\\omega_U R_U)/m$;
     the crossings are the exciting speeds of eq. (55) (dots).
@@ -85,7 +85,7 @@ def plot_frequency_harmonics(span: MovingString | None = None, pulley_radius: fl
 
 
 def plot_exciting_speeds(span: MovingString | None = None, pulley_radius: float = 0.1166, ax=None):
-    """Seed 002, Fig. 43 / Table 2: exciting speeds of eq. (55) against the measured speeds."""
+    """Belt-vibration report, Fig. 43 / Table 2: exciting speeds of eq. (55) against the measured speeds."""
     span = MovingString() if span is None else span
     ax = _ax(ax)
     markers = {1: "o", 2: "s", 3: "^"}
