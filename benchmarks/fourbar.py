@@ -1,4 +1,4 @@
-"""Benchmark of the four-bar drive (Incerti (2012)): closed-loop run with the paper's PID.
+"""Benchmark of the four-bar drive (Incerti, 2012): closed-loop run with the paper's PID.
 
 1. Work-precision: error of the state at the output times (relative to each component's peak)
    against a tight Dopri8 reference (rtol 1e-12), versus median run time, for diffrax solvers

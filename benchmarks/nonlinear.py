@@ -1,4 +1,4 @@
-"""Benchmark: non-linear belt (Moon & Wickert (1997)) speed sweeps and steady-state accuracy.
+"""Benchmark: non-linear belt (Moon & Wickert, 1997) speed sweeps and steady-state accuracy.
 
 1. A 200-speed increasing + decreasing quasi-static sweep over 7.5-10.5 m/s with N = 1 and
    N = 4 complex modes (`jaxbelt.nonlinear_sweep`, jit-compiled `lax.scan` over speeds):

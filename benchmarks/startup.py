@@ -324,7 +324,7 @@ def plot(rows, path):
                   mfc="none" if batch else None)
     ax.set_xlabel("median run time per trajectory [s] (compile time excluded)")
     ax.set_ylabel("relative error vs expm reference")
-    ax.set_title("jaxbelt start-up scene (Incerti (2014)): work-precision, gamma = 20 ms, 501 points")
+    ax.set_title("jaxbelt start-up scene (Incerti, 2014): work-precision, gamma = 20 ms, 501 points")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.tight_layout()

@@ -21,11 +21,11 @@ from .solve import SolveError as SolveError  # noqa: E402
 from .solve import simulate as simulate  # noqa: E402
 from .sweep import sweep as sweep  # noqa: E402
 
-# --- start-up of a belt drive (Incerti (2014)) ---------------------------------------------------------
+# --- start-up of a belt drive (Incerti, 2014) ---------------------------------------------------------
 from .models import BeltChain as BeltChain  # noqa: E402
 from .models import BeltStartup as BeltStartup  # noqa: E402
 
-# --- four-bar linkage + PID-controlled DC motor (Incerti (2012)) -------------------------------------
+# --- four-bar linkage + PID-controlled DC motor (Incerti, 2012) -------------------------------------
 from .models.fourbar import FourBarDrive as FourBarDrive  # noqa: E402
 from .models.motor import PID as PID  # noqa: E402
 from .objectives.fluctuation import fluctuation_index as fluctuation_index  # noqa: E402
@@ -56,7 +56,7 @@ from .optimise.command import sensitivity_curve as sensitivity_curve  # noqa: E4
 from .optimise.command import shaped_commands as shaped_commands  # noqa: E402
 from .optimise.command import tolerance_band as tolerance_band  # noqa: E402
 
-# --- non-linear belt vibration (Moon & Wickert (1997)) ------------------------------------------------------
+# --- non-linear belt vibration (Moon & Wickert, 1997) ------------------------------------------------------
 from .models.nonlinear import NonlinearBelt as NonlinearBelt  # noqa: E402
 from .models.nonlinear import RunningSpeed as RunningSpeed  # noqa: E402
 from .nonlinear_kbm import amplitude_coefficients as kbm_coefficients  # noqa: E402

@@ -1,8 +1,8 @@
 """Fast batched closed forms: many exponential inputs through one linear time-invariant system.
 
-A sweep over the time constant $\\gamma$ of the start-up command (Incerti (2014), eq. 30) shares the
+A sweep over the time constant $\\gamma$ of the start-up command (Incerti, 2014, eq. 30) shares the
 state matrix A: only the input rate $s_b = -1/\\gamma_b$ changes from one trajectory to the next.
-With the modal decomposition $A = X\\Lambda X^{-1}$ computed once (Incerti (2014), eq. 14-29), the
+With the modal decomposition $A = X\\Lambda X^{-1}$ computed once (Incerti, 2014, eq. 14-29), the
 response to $f_b e^{s_b t}$ is, mode by mode (eq. 27 with $q_{bi} = (X^{-1} f_b)_i$),
 
 $\\eta_{bi}(\\tau) = q_{bi}\\,\\dfrac{e^{s_b\\tau} - e^{\\lambda_i\\tau}}{s_b - \\lambda_i}$,
@@ -161,7 +161,7 @@ def exp_input_batch(A, F, s, x0, t0, ts, f_var, s_var, *, uniform: bool = False,
 def startup_gamma_batch(model, gammas, ts, v_max=24.0, y0=None, *, n_fix: int = 8, chunk: int = 256):
     """State histories of a belt start-up model for a batch of voltage time constants.
 
-    $V_b(t) = V_{max}(1 - e^{-t/\\gamma_b})$ (Incerti (2014), eq. 30) drives `model` (a `BeltStartup`
+    $V_b(t) = V_{max}(1 - e^{-t/\\gamma_b})$ (Incerti, 2014, eq. 30) drives `model` (a `BeltStartup`
     or `BeltChain`) from rest (or `y0`) at t = `ts[0]`. Equivalent to
     `jax.vmap(lambda g: simulate(Scene(model, ExponentialVoltage(v_max, g), ts=ts)).ys)(gammas)`
     with shape (B, N, n_states), but with the modal decomposition and the shared responses

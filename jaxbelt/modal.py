@@ -3,7 +3,7 @@
 The scenes solved here have the form $\\dot x = A x + \\sum_j F_{:,j} e^{s_j t}$, i.e. an LTI
 model driven by a sum of exponentials (constants are $s_j = 0$). Two independent closed forms:
 
-- **modal** (Incerti (2014), eq. 14-29): right eigenvectors X, left eigenvectors $Y^T = X^{-1}$
+- **modal** (Incerti, 2014, eq. 14-29): right eigenvectors X, left eigenvectors $Y^T = X^{-1}$
   (eq. 20, 42: normalised so that $Y^T X = I$), modal coordinates
   $\\eta_i(t) = \\eta_i(0)e^{\\lambda_i t} + \\int_0^t q_i(\\tau) e^{\\lambda_i(t-\\tau)}d\\tau$ (eq. 27)
   with the convolution integral taken analytically, including its $\\lambda\\to 0$ limit

@@ -1,4 +1,4 @@
-"""Steady-state response and quasi-static speed sweeps of the non-linear belt (Moon & Wickert (1997)).
+"""Steady-state response and quasi-static speed sweeps of the non-linear belt (Moon & Wickert, 1997).
 
 - `steady_state(belt, speed)`: integrate whole forcing periods until the transient has decayed,
   then report the peak-to-peak displacement at a point (default 1 cm from the driven pulley, as

@@ -1,4 +1,4 @@
-"""Four-bar linkage + DC motor + PID (Incerti (2012)): kinematics, dynamics, χ, tuning.
+"""Four-bar linkage + DC motor + PID (Incerti, 2012): kinematics, dynamics, χ, tuning.
 
 References: loop closure and autodiff of the closed-form angles; a direct Lagrangian
 (kinetic energy summed over the links from the centre-of-mass velocities); central finite

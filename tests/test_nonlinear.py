@@ -1,4 +1,4 @@
-"""Non-linear belt (Moon & Wickert (1997)): Galerkin model, steady state, sweeps, KBM results.
+"""Non-linear belt (Moon & Wickert, 1997): Galerkin model, steady state, sweeps, KBM results.
 
 References: closed-form modal integrals, the exact linear travelling-string solution, a
 frequency-domain solve of the linear modal model, the KBM (averaging) cubic and backbone, and

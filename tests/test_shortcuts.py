@@ -81,7 +81,7 @@ def test_unobserved_outputs_are_not_computed(monkeypatch):
     both = jb.simulate(jb.Scene(model, cmd, ts=TS, observe=("current", "electric_power", "alpha2")))
     assert calls["electric_power"] >= 1 and calls["alpha2"] >= 1
     np.testing.assert_array_equal(np.asarray(only.ys), np.asarray(both.ys))
-    # the observed outputs against their definitions (Incerti (2014), Fig. 3c, 3h), from the state
+    # the observed outputs against their definitions (Incerti, 2014, Fig. 3c, 3h), from the state
     I = np.asarray(both.ys[:, 4])
     v = V * (1 - np.exp(-np.asarray(TS) / (GAMMA + 1e-3)))
     np.testing.assert_allclose(both.electric_power, v * I, rtol=1e-12, atol=1e-12)

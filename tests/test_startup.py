@@ -1,4 +1,4 @@
-"""Start-up of a belt drive driven by a DC motor (Incerti (2014)): accuracy against independent references.
+"""Start-up of a belt drive driven by a DC motor (Incerti, 2014): accuracy against independent references.
 
 References: scipy.linalg.expm of the exponential-augmented system (exact up to round-off),
 steady-state closed forms, scipy solve_ivp, central finite differences.

@@ -100,7 +100,7 @@ def test_mode_shape_solves_eq24(span, n):
         assert abs(float(y(0.0, t))) < 1e-12 and abs(float(y(L, t))) < 1e-12
 
 
-# --- crossing diagram (Moon & Wickert (1997)) ------------------------------------------------------------------
+# --- crossing diagram (Moon & Wickert, 1997) ------------------------------------------------------------------
 def test_crossing_speeds_moon_wickert():
     vc = np.asarray(jb.crossing_speeds(length=0.86, pulley_radii=(0.063, 0.063), wave_speed=41.0, n_modes=2))
     assert vc.shape == (2, 2, 1)

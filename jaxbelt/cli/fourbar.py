@@ -1,4 +1,4 @@
-"""`jaxbelt fourbar`: the paper's Fig. 4 (open loop vs PID) and a linkage snapshot strip (Incerti (2012))."""
+"""`jaxbelt fourbar`: the paper's Fig. 4 (open loop vs PID) and a linkage snapshot strip (Incerti, 2012)."""
 
 from __future__ import annotations
 

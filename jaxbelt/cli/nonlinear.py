@@ -1,4 +1,4 @@
-"""`jaxbelt nonlinear --out nonlinear.png`: the non-linear belt scene (Moon & Wickert (1997)) on one page."""
+"""`jaxbelt nonlinear --out nonlinear.png`: the non-linear belt scene (Moon & Wickert, 1997) on one page."""
 
 from __future__ import annotations
 

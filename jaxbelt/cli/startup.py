@@ -8,7 +8,7 @@ import time
 def register(sub):
     p = sub.add_parser(
         "startup",
-        help="belt drive start-up driven by a DC motor (Incerti (2014), Fig. 3)",
+        help="belt drive start-up driven by a DC motor (Incerti, 2014, Fig. 3)",
         description="Simulate the start-up of the belt drive of Incerti (2014) (Table I) for each time constant "
         "of the voltage command V(t) = Vmax (1 - exp(-t/gamma)) and write the 8-panel figure.",
     )

@@ -1,4 +1,4 @@
-"""Four-bar linkage driven by a DC motor through a gearbox, open loop or PID speed control (Incerti (2012)).
+"""Four-bar linkage driven by a DC motor through a gearbox, open loop or PID speed control (Incerti, 2012).
 
 Kinematics in closed form (Appendix A-B), the equivalent inertia $J(\\alpha)$ (Appendix C), the
 potential energy $E_p(\\alpha)$ (eq. 3-4); $dJ/d\\alpha$ and $dE_p/d\\alpha$ by forward-mode

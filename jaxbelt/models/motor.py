@@ -1,4 +1,4 @@
-"""Speed controller of a DC motor: the PID law with time-varying proportional gain (Incerti (2012)).
+"""Speed controller of a DC motor: the PID law with time-varying proportional gain (Incerti, 2012).
 
 The controller is not a command: a command is a known function of time (`ConstantVoltage`,
 `inp(t)`), whereas the controller's voltage depends on the state of the drive it is attached to.
@@ -26,7 +26,7 @@ _LIMITERS = ("hard", "smooth")
 
 
 class PID(eqx.Module):
-    """PID speed regulator with time-varying proportional gain (Incerti (2012), eq. 15-16).
+    """PID speed regulator with time-varying proportional gain (Incerti, 2012, eq. 15-16).
 
     For a constant speed set point $\\dot\\varphi_{ref} = \\omega_0$, $\\varphi_{ref} = \\omega_0 t$,
     $\\ddot\\varphi_{ref} = 0$ (Sec. II-D):

@@ -160,7 +160,7 @@ def _gauss(n_modes: int):
 
 
 class NonlinearBelt(AbstractModel):
-    """Travelling belt span with stretching non-linearity, driven by eccentric pulleys (Moon & Wickert (1997)).
+    """Travelling belt span with stretching non-linearity, driven by eccentric pulleys (Moon & Wickert, 1997).
 
     See the module docstring for the equations (eq. 1-7, 34-36 of Moon & Wickert) and the
     derivation of the forcing. Parameters (SI; defaults: the 004 test stand):

@@ -32,7 +32,7 @@ def chain_matrices(jm, inertias, k, c, r_drive, r_driven, z, mu, R, L, km):
     $\\tau_r = \\tau_{r0} + \\mu\\dot\\vartheta_n$ acts on the last shaft. Each stage has two
     branches of stiffness k and damping c, so $U = \\sum_i k_i\\delta_i^2$,
     $D = \\sum_i c_i\\dot\\delta_i^2$ with $\\delta_i = r^{d}_i\\vartheta_i - r^{n}_i\\vartheta_{i+1}$
-    (Incerti (2014), eq. 5). Returns `(A, B)` with shapes (2m+1, 2m+1) and (2m+1, 2), m = n + 1.
+    (Incerti, 2014, eq. 5). Returns `(A, B)` with shapes (2m+1, 2m+1) and (2m+1, 2), m = n + 1.
     """
     inertias = jnp.asarray(inertias, dtype=float)
     k = jnp.atleast_1d(jnp.asarray(k, dtype=float))
@@ -234,7 +234,7 @@ class _BeltDriveBase(AbstractModel):
 
 
 class BeltStartup(_BeltDriveBase):
-    """2-DOF synchronous belt drive + gear reducer + permanent-magnet DC motor (Incerti (2014)).
+    """2-DOF synchronous belt drive + gear reducer + permanent-magnet DC motor (Incerti, 2014).
 
     Equations of motion (eq. 6-8), with $J_1^* = J_1 + z^2 J_m$:
 

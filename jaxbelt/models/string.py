@@ -17,7 +17,7 @@ What lives here:
 - `exciting_speeds`: the rotor speeds of eq. (55) at which harmonic $m$ of the pulley rotation meets
   mode $n$.
 - `crossing_speeds`, `crossing_diagram`: the frequency-crossing (Campbell) diagram of Moon & Wickert
-  (Moon & Wickert (1997), sec. 4, Fig. 5); crossings by Newton iteration on each load line.
+  (Moon & Wickert, 1997, sec. 4, Fig. 5); crossings by Newton iteration on each load line.
 - `linear_runout_response`: the steady-state peak-to-peak transverse displacement of the linear span
   excited by eccentric pulleys (Moon & Wickert eq. 3 boundary motion), from the exact complex modes.
 - `galerkin_runout_system`, `simulate_runout_response`: the same forced problem as a Galerkin
@@ -264,7 +264,7 @@ def _check_span_inputs(owner, length, pulley_radii, wave_speed):
 
 
 def crossing_speeds(length=0.86, pulley_radii=(0.063, 0.063), wave_speed=41.0, n_modes: int = 2, harmonics=1):
-    """Belt speeds [m/s] where the pulley load lines cross the natural-frequency loci (Moon & Wickert (1997), Fig. 5).
+    """Belt speeds [m/s] where the pulley load lines cross the natural-frequency loci (Moon & Wickert, 1997, Fig. 5).
 
     A pulley of radius $r$ turns at $\\Omega = V/r$; its harmonic $k$ meets mode $n$ where
     $k V / r = (n\\pi/L)\\, v_t (1 - V^2/v_t^2)$. Each crossing is found by Newton iteration on that
@@ -290,7 +290,7 @@ def crossing_speeds(length=0.86, pulley_radii=(0.063, 0.063), wave_speed=41.0, n
 
 
 def crossing_diagram(speed, length=0.86, pulley_radii=(0.063, 0.063), wave_speed=41.0, n_modes: int = 2, harmonics=1):
-    """Loci of the crossing diagram at belt speeds `speed` [m/s] (Moon & Wickert (1997), Fig. 5a).
+    """Loci of the crossing diagram at belt speeds `speed` [m/s] (Moon & Wickert, 1997, Fig. 5a).
 
     Returns `(natural, load)`: natural frequencies $\\omega_n(V)$ [rad/s] of shape
     `speed.shape + (n_modes,)` and pulley excitation frequencies $kV/r_j$ [rad/s] of shape
@@ -406,7 +406,7 @@ def linear_runout_response(
 ):
     """Steady peak-to-peak transverse displacement [m] of the linear span driven by eccentric pulleys.
 
-    Problem (Moon & Wickert (1997), eq. 2-3 with $v_l = 0$), in SI units:
+    Problem (Moon & Wickert, 1997, eq. 2-3 with $v_l = 0$), in SI units:
     $w_{,tt} + 2V w_{,xt} + (V^2 - v_t^2) w_{,xx} = 0$ on $0 < x < L$,
     $w(0,t) = e_0\\sin(\\Omega_0 t)$, $w(L,t) = e_1\\sin(\\Omega_1 t + \\phi)$, $\\Omega_j = V/r_j$.
     The belt runs from pulley 0 ($x = 0$) to pulley 1 ($x = L$).

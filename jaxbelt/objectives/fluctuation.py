@@ -1,4 +1,4 @@
-"""Speed-fluctuation index χ of a motor-driven mechanism (Incerti (2012), eq. 22).
+"""Speed-fluctuation index χ of a motor-driven mechanism (Incerti, 2012, eq. 22).
 
 $\\chi = \\dfrac{\\dot\\varphi_{max} - \\dot\\varphi_{min}}{\\dot\\varphi_{av}}$ over a time window
 $[t_0, t_1]$, with $\\dot\\varphi$ the motor speed. Max and min make the exact index

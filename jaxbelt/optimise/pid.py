@@ -1,4 +1,4 @@
-"""Gradient tuning of the PID speed regulator of a motor-driven mechanism (Incerti (2012), Sec. IV).
+"""Gradient tuning of the PID speed regulator of a motor-driven mechanism (Incerti, 2012, Sec. IV).
 
 The paper tuned $K_p, K_i, K_d$ by trial and error and names optimisation of χ with respect to
 them as future work; `tune_pid` does it by descending the smooth fluctuation index through the

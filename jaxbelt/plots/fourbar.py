@@ -1,4 +1,4 @@
-"""Figures of the four-bar drive (Incerti (2012)): the paper's Fig. 4 and a linkage snapshot strip."""
+"""Figures of the four-bar drive (Incerti, 2012): the paper's Fig. 4 and a linkage snapshot strip."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Figures of the non-linear belt scene (Moon & Wickert (1997)): Fig. 2, 6 and 7 analogues.
+"""Figures of the non-linear belt scene (Moon & Wickert, 1997): Fig. 2, 6 and 7 analogues.
 
 - `plot_speed_response`: peak-to-peak response 1 cm from the driven pulley against running
   speed, increasing and decreasing quasi-static sweeps (Fig. 2 analogue);

@@ -64,5 +64,5 @@ def draw_startup(ts, curves, gammas, v_max=24.0, fig=None):
     for ax in axes[-1]:
         ax.set_xlabel("time t [s]")
     axes[0, 0].legend(fontsize=9)
-    fig.suptitle(f"Belt drive start-up, V(t) = {v_max:g}(1 − e^(−t/γ)) V  (Incerti (2014), Fig. 3)")
+    fig.suptitle(f"Belt drive start-up, V(t) = {v_max:g}(1 − e^(−t/γ)) V  (Incerti, 2014, Fig. 3)")
     return fig

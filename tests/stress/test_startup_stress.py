@@ -1,4 +1,4 @@
-"""Hostile corners of the start-up scene (Incerti (2014)): each case matches an independent reference
+"""Hostile corners of the start-up scene (Incerti, 2014): each case matches an independent reference
 (scipy's matrix exponential, central finite differences, a plain loop) or raises a clear error.
 
 float32 is an opt-in: build the model, the command and the times inside
