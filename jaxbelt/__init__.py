@@ -8,13 +8,22 @@ import jax as _jax
 _jax.config.update("jax_enable_x64", True)
 
 # --- core: scenes, simulation, commands --------------------------------------------------------
-from .commands import AbstractCommand as AbstractCommand  # noqa: E402
+from .commands import AbstractInput as AbstractInput  # noqa: E402
+from .commands import AbstractVoltageSource as AbstractVoltageSource  # noqa: E402
+from .commands import AbstractVoltageCommand as AbstractVoltageCommand  # noqa: E402
+from .commands import AbstractExponentialVoltage as AbstractExponentialVoltage  # noqa: E402
+from .commands import AbstractController as AbstractController  # noqa: E402
+from .commands import AbstractRunningSpeed as AbstractRunningSpeed  # noqa: E402
+from .commands import MotorState as MotorState  # noqa: E402
 from .commands import AbstractMotionCommand as AbstractMotionCommand  # noqa: E402
 from .commands import ConstantVoltage as ConstantVoltage  # noqa: E402
 from .commands import ExponentialVoltage as ExponentialVoltage  # noqa: E402
 from .commands import PseudoPolynomial as PseudoPolynomial  # noqa: E402
 from .commands import ShapedCommand as ShapedCommand  # noqa: E402
 from .models import AbstractModel as AbstractModel  # noqa: E402
+from .models import AbstractLinearModel as AbstractLinearModel  # noqa: E402
+from .models import integrand as integrand  # noqa: E402
+from .models import observable as observable  # noqa: E402
 from .scene import Scene as Scene  # noqa: E402
 from .solve import Solution as Solution  # noqa: E402
 from .solve import SolveError as SolveError  # noqa: E402
@@ -33,7 +42,7 @@ from .objectives.fluctuation import fluctuation_objective as fluctuation_objecti
 from .optimise.pid import PIDTuneResult as PIDTuneResult  # noqa: E402
 from .optimise.pid import tune_pid as tune_pid  # noqa: E402
 
-# --- belt spans: contact, moving string, crossing diagrams (seeds 002, 004) --------------------
+# --- belt spans: contact, moving string, crossing diagrams (belt-vibration report; Moon & Wickert, 1997) --------------------
 from .models import BeltPulleyContact as BeltPulleyContact  # noqa: E402
 from .models import MovingString as MovingString  # noqa: E402
 from .models import SlipError as SlipError  # noqa: E402

@@ -1,13 +1,24 @@
-"""Inputs: voltage commands for DC motors and motion commands for servo axes.
+"""Inputs of the models, one abstract class per kind, and the concrete commands.
 
-A command is an `eqx.Module` evaluated as `cmd(t)`. Commands that are sums of
-exponentials, $u(t) = \\sum_j a_j e^{s_j t}$, also expose `exp_terms()` so that a
-linear time-invariant scene can be solved in closed form (no time stepping).
+Every model declares which kinds of input it accepts (`Model.input_types`); `Scene` raises a
+`TypeError` for a wrong pairing (a four-bar driven by a motion command, say). The kinds:
+
+| kind | meaning | evaluated as | concrete classes |
+|---|---|---|---|
+| `AbstractVoltageCommand` | open-loop armature voltage [V] | `cmd(t)` | `ConstantVoltage`, `ExponentialVoltage` |
+| `AbstractController` | closed-loop armature voltage from the motor state [V] | `ctrl.voltage_at(t, motor)` | `PID` |
+| `AbstractMotionCommand` | motor position command [rad] and its derivatives | `cmd.derivative(t, k)` | `PseudoPolynomial`, `ShapedCommand` |
+| `AbstractRunningSpeed` | belt running speed [m/s] | `inp.speed_at(t)` | `RunningSpeed`, `SpeedRamp` |
+
+A voltage command that is a sum of exponentials, $u(t) = \\sum_j a_j e^{s_j t}$, is an
+`AbstractExponentialVoltage`: with a linear time-invariant model (`AbstractLinearModel`) the
+scene is solved in closed form (no time stepping). The question is answered by the types alone.
 """
 
 from __future__ import annotations
 
-from typing import ClassVar
+import abc
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
@@ -18,27 +29,86 @@ from ._checks import check_finite, check_nonnegative, check_positive, check_rang
 from ._checks import as_float_array as _arr
 
 
+class AbstractInput(eqx.Module):
+    """Base class of every model input (command, controller or running speed)."""
 
-class AbstractCommand(eqx.Module):
-    """Base class of all inputs. `__call__(t)` gives the input at time `t` [s].
 
-    `has_exp_terms` says, without computing anything, whether `exp_terms()` returns terms.
+class MotorState(NamedTuple):
+    """Motor-shaft kinematics a drive hands to its voltage source at time t.
+
+    - `angle` $\\varphi$ [rad], `speed` $\\dot\\varphi$ [rad/s], `acceleration` $\\ddot\\varphi$ [rad/s²];
+    - `angle0`: $\\varphi$ at the start of the scene [rad] (a controller's angle reference starts there).
     """
 
-    has_exp_terms: ClassVar[bool] = False
+    angle: jnp.ndarray
+    speed: jnp.ndarray
+    acceleration: jnp.ndarray
+    angle0: jnp.ndarray
+
+
+class AbstractVoltageSource(AbstractInput):
+    """Anything that sets a DC motor's armature voltage: `voltage_at(t, motor)` [V]."""
+
+    @abc.abstractmethod
+    def voltage_at(self, t, motor: MotorState):
+        """Armature voltage [V] at time `t` [s] for the motor state `motor`."""
+
+
+class AbstractVoltageCommand(AbstractVoltageSource):
+    """An open-loop voltage command $V(t)$ [V]: `cmd(t)`; the motor state is not used."""
+
+    @abc.abstractmethod
+    def __call__(self, t):
+        """$V(t)$ [V]."""
+
+    def voltage_at(self, t, motor: MotorState):
+        return self(t)
+
+
+class AbstractExponentialVoltage(AbstractVoltageCommand):
+    """A voltage command that is a finite sum of exponentials, $V(t) = \\sum_j a_j e^{s_j t}$."""
+
+    @abc.abstractmethod
+    def exp_terms(self):
+        """`(amplitudes, rates)`, each of shape (J,): $a_j$ [V] and $s_j$ [1/s]."""
+
+
+class AbstractController(AbstractVoltageSource):
+    """A feedback law: the armature voltage depends on the motor state (e.g. `PID`)."""
+
+
+class AbstractMotionCommand(AbstractInput):
+    """A motor displacement command $\\varphi_m(t)$ [rad] with derivatives of any order.
+
+    Subclasses implement `derivative(t, k)` (k-th time derivative, rad/s^k) and `end_time` [s].
+    """
+
+    @abc.abstractmethod
+    def derivative(self, t, k: int = 0):
+        """k-th time derivative of the command [rad/s^k]."""
 
     def __call__(self, t):
-        raise NotImplementedError
+        return self.derivative(t, 0)
 
-    def exp_terms(self):
-        """Return `(amplitudes, rates)` with $u(t)=\\sum_j a_j e^{s_j t}$, or `None`."""
-        return None
+    def velocity(self, t):
+        """$\\dot\\varphi_m(t)$ [rad/s]."""
+        return self.derivative(t, 1)
+
+    def acceleration(self, t):
+        """$\\ddot\\varphi_m(t)$ [rad/s²]."""
+        return self.derivative(t, 2)
 
 
-class ConstantVoltage(AbstractCommand):
+class AbstractRunningSpeed(AbstractInput):
+    """The running speed of a belt, $v(t)$ [m/s]: `speed_at(t)`."""
+
+    @abc.abstractmethod
+    def speed_at(self, t):
+        """Belt speed [m/s] at time `t` [s]."""
+
+
+class ConstantVoltage(AbstractExponentialVoltage):
     """Constant armature voltage $V(t) = V_0$ [V] (a step applied at t = 0)."""
-
-    has_exp_terms: ClassVar[bool] = True
 
     voltage: jnp.ndarray = eqx.field(converter=_arr)
 
@@ -52,7 +122,7 @@ class ConstantVoltage(AbstractCommand):
         return jnp.stack([self.voltage]), jnp.zeros((1,))
 
 
-class ExponentialVoltage(AbstractCommand):
+class ExponentialVoltage(AbstractExponentialVoltage):
     """Exponential voltage ramp of Incerti (2014), eq. (30).
 
     $V(t) = V_{max}\\,(1 - e^{-t/\\gamma})$
@@ -61,8 +131,6 @@ class ExponentialVoltage(AbstractCommand):
     - `gamma`: time constant $\\gamma$ [s], > 0 (the paper uses 0.02, 0.04, 0.06 s). A 1-D array
       of time constants makes a batch: `simulate` solves all of them at once (batched closed form).
     """
-
-    has_exp_terms: ClassVar[bool] = True
 
     v_max: jnp.ndarray = eqx.field(converter=_arr, default=24.0)
     gamma: jnp.ndarray = eqx.field(converter=_arr, default=0.02)
@@ -104,27 +172,6 @@ def falling_factorial(gammas, k: int):
     for r in range(k):
         out = out * (gammas - r)
     return out
-
-
-class AbstractMotionCommand(AbstractCommand):
-    """A motor displacement command $\\varphi_m(t)$ [rad] with derivatives of any order.
-
-    Subclasses implement `derivative(t, k)` (k-th time derivative, rad/s^k) and `end_time` [s].
-    """
-
-    def derivative(self, t, k: int = 0):
-        raise NotImplementedError
-
-    def __call__(self, t):
-        return self.derivative(t, 0)
-
-    def velocity(self, t):
-        """$\\dot\\varphi_m(t)$ [rad/s]."""
-        return self.derivative(t, 1)
-
-    def acceleration(self, t):
-        """$\\ddot\\varphi_m(t)$ [rad/s²]."""
-        return self.derivative(t, 2)
 
 
 class PseudoPolynomial(AbstractMotionCommand):
@@ -241,7 +288,7 @@ class ShapedCommand(AbstractMotionCommand):
     - `times` [s] (>= 0, increasing) and `amplitudes` (summing to 1).
     """
 
-    base: AbstractCommand
+    base: AbstractMotionCommand
     times: jnp.ndarray = eqx.field(converter=_arr)
     amplitudes: jnp.ndarray = eqx.field(converter=_arr)
 

@@ -60,7 +60,7 @@ def exp_input_batch(A, F, s, x0, t0, ts, f_var, s_var, *, uniform: bool = False,
     """States of $\\dot x = A x + \\sum_j F_{:,j}e^{s_j t} + f_b e^{s_b t}$ for a batch of $(f_b, s_b)$.
 
     - `A` (n, n), `F` (n, J), `s` (J,): the system and the inputs shared by the batch
-      (as returned by `model.linear_form`, minus the varying term);
+      (as returned by `model.exponential_form`, minus the varying term);
     - `x0` (n,), `t0`: initial state at time `t0` [s]; `ts` (N,) output times;
     - `f_var` (n,) or (B, n): amplitude vector of the varying term; `s_var` (B,) its real
       rates [1/s] (e.g. $-1/\\gamma_b$);
@@ -171,9 +171,8 @@ def startup_gamma_batch(model, gammas, ts, v_max=24.0, y0=None, *, n_fix: int = 
 
     gammas = jnp.asarray(gammas, dtype=float)
     ts = jnp.asarray(ts, dtype=float)
-    A, F, s = model.linear_form(ConstantVoltage(v_max))  # load torque + constant V_max
-    _, B = model.matrices()
-    f_var = -jnp.asarray(v_max, dtype=float) * B[:, 1]
+    A, F, s = model.exponential_form(ConstantVoltage(v_max))  # load torque + constant V_max
+    f_var = -jnp.asarray(v_max, dtype=float) * model.linear_system()[1]
     x0 = jnp.zeros((A.shape[0],)) if y0 is None else jnp.asarray(y0, dtype=float)
     uniform = False
     if is_concrete(ts) and ts.shape[0] > 1:
@@ -192,16 +191,17 @@ def batched_exponential_scene(scene):
     (the caller solves the scene as usual).
     """
     from .commands import ExponentialVoltage
+    from .models.base import AbstractLinearModel
     from .solve import Solution
 
     model, inp = scene.model, scene.input
-    if scene.ts is None or not isinstance(inp, ExponentialVoltage) or not hasattr(model, "matrices"):
+    if scene.ts is None or not isinstance(inp, ExponentialVoltage) or not isinstance(model, AbstractLinearModel):
         return None
     if jnp.ndim(inp.gamma) != 1 or jnp.ndim(inp.v_max) != 0:
         return None
     if any(jnp.ndim(leaf) != 0 for leaf in jax.tree_util.tree_leaves(model)):
         return None
-    if any(n in getattr(model, "integral_names", ()) for n in scene.observe):
+    if any(n in model.integral_names() for n in scene.observe):
         return None
     ys = startup_gamma_batch(model, inp.gamma, scene.ts, v_max=inp.v_max, y0=scene.y0)
     outputs = {}

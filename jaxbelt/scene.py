@@ -50,6 +50,14 @@ class Scene(eqx.Module):
     max_spacing: float | None = eqx.field(static=True, default=None)
 
     def __init__(self, model, input, ts=None, *, t0=None, t1=None, observe=None, y0=None, state=True):
+        types = getattr(type(model), "input_types", None)
+        if types is None:
+            raise TypeError(f"Scene: `model` must be a jaxbelt model (an AbstractModel); got {type(model).__name__}")
+        if not isinstance(input, types):
+            kinds = " or ".join(t.__name__ for t in types)
+            raise TypeError(
+                f"Scene: {type(model).__name__} is driven by an input of kind {kinds}; got {type(input).__name__}"
+            )
         self.model = model
         self.input = input
         self.observe = _as_tuple(observe)

@@ -26,9 +26,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._checks import is_concrete
-from .commands import ExponentialVoltage
+from .commands import AbstractExponentialVoltage, ExponentialVoltage
 from .fast import batched_exponential_scene
 from .modal import expm_solve, modal_solve
+from .models.base import AbstractLinearModel
 from .scene import Scene
 
 _CLOSED = ("closed", "expm", "modal")
@@ -118,7 +119,7 @@ def _rk4(f, y0, ts, n_sub: int, inp):
 @eqx.filter_jit
 def _run(scene: Scene, method: str, solver, rtol, atol, dt0, n_sub: int, max_steps: int, progress: bool, adjoint):
     model, inp = scene.model, scene.input
-    integrals = tuple(n for n in scene.observe if n in model.integral_names)
+    integrals = tuple(n for n in scene.observe if n in model.integral_names())
     pointwise = tuple(n for n in scene.observe if n not in integrals)
     y0 = scene.y0 if scene.y0 is not None else model.initial_state(inp)
     times = scene.times
@@ -127,7 +128,7 @@ def _run(scene: Scene, method: str, solver, rtol, atol, dt0, n_sub: int, max_ste
     integral_vals = {}
     success = jnp.array(True)
     if method in _CLOSED:
-        A, F, s = model.linear_form(inp)
+        A, F, s = model.exponential_form(inp)
         if method == "modal":
             ys = modal_solve(A, F, s, y0, t0, times, scene.uniform)
         else:
@@ -237,8 +238,8 @@ def simulate(
             bad = np.flatnonzero(~np.asarray(batched.success))
             raise SolveError(f"simulate: non-finite values in the batched start-up scene at elements {bad.tolist()}")
         return batched
-    integrals = [n for n in scene.observe if n in getattr(model, "integral_names", ())]
-    lin = model.is_linear_for(inp)
+    integrals = [n for n in scene.observe if n in model.integral_names()]
+    lin = isinstance(model, AbstractLinearModel) and isinstance(inp, AbstractExponentialVoltage)
     if method == "auto":
         method = "closed" if (lin and not integrals) else "ode"
     if method == "closed":

@@ -1,6 +1,9 @@
 """Physical models, one module per system (see each module for its source paper)."""
 
+from .base import AbstractLinearModel as AbstractLinearModel
 from .base import AbstractModel as AbstractModel
+from .base import integrand as integrand
+from .base import observable as observable
 from .startup import BeltChain as BeltChain
 from .startup import BeltStartup as BeltStartup
 from .startup import chain_matrices as chain_matrices

@@ -23,8 +23,8 @@ import numpy as np
 
 from .._checks import check_nonnegative, check_positive, is_concrete
 from .._checks import as_float_array as _arr
-from .base import AbstractModel
-from .motor import PID
+from .base import AbstractModel, integrand, observable
+from ..commands import AbstractVoltageSource, MotorState
 
 
 
@@ -53,7 +53,7 @@ class FourBarDrive(AbstractModel):
 
     **Input roles.** The scene's input decides $V_a$:
 
-    - a command (`ConstantVoltage(25.0)`, any `AbstractCommand`): $V_a = $ `inp(t)` (open loop);
+    - a command (`ConstantVoltage(25.0)`, any `AbstractVoltageCommand`): $V_a = $ `inp(t)` (open loop);
     - a controller (`PID(kp, ki, kd, omega_ref, v_limit)`): $V_a$ from eq. (16) with the
       motor angle $z\\alpha$, speed $z\\dot\\alpha$ and acceleration $z\\mathcal F$ (closed loop,
       eq. 17-21).
@@ -116,11 +116,7 @@ class FourBarDrive(AbstractModel):
     assembly: int = eqx.field(static=True, default=1)
 
     state_names: ClassVar[tuple[str, ...]] = ("alpha", "alpha_dot", "current")
-    output_names: ClassVar[tuple[str, ...]] = (
-        "motor_speed", "alpha_ddot", "voltage", "mechanical_power", "electric_power",
-        "kinetic_energy", "potential_energy", "magnetic_energy", "beta", "gamma", "inertia",
-    )
-    integral_names: ClassVar[tuple[str, ...]] = ("electric_energy", "copper_loss", "friction_loss")
+    input_types: ClassVar[tuple[type, ...]] = (AbstractVoltageSource,)
 
     def __check_init__(self):
         o = "FourBarDrive"
@@ -270,10 +266,8 @@ class FourBarDrive(AbstractModel):
         return (drive - load) / (self.j_eq + J)
 
     def _voltage(self, t, y, inp, acc):
-        if isinstance(inp, PID):
-            z = self.z
-            return inp.voltage(t, z * y[0], z * y[1], z * acc)
-        return inp(t)
+        z = self.z
+        return inp.voltage_at(t, MotorState(z * y[0], z * y[1], z * acc, jnp.zeros_like(y[0])))
 
     def voltage(self, t, y, inp):
         """Armature voltage $V_a$ [V] at time `t`, state `y` for a command or a `PID`."""
@@ -288,52 +282,66 @@ class FourBarDrive(AbstractModel):
         return jnp.stack([w, acc, di])
 
     # --- derived outputs --------------------------------------------------------------------
+    @observable("motor_speed")
     def _out_motor_speed(self, t, y, inp):
         """Motor speed $\\dot\\varphi = z\\dot\\alpha$ [rad/s] (Fig. 4a-b)."""
         return self.z * y[1]
 
+    @observable("alpha_ddot")
     def _out_alpha_ddot(self, t, y, inp):
         return self.accel(y[0], y[1], y[2])
 
+    @observable("voltage")
     def _out_voltage(self, t, y, inp):
         """Armature voltage [V] (Fig. 4c-d)."""
         return self.voltage(t, y, inp)
 
+    @observable("mechanical_power")
     def _out_mechanical_power(self, t, y, inp):
         """Motor shaft power $k_m I\\,z\\dot\\alpha$ [W] (Fig. 4g-h)."""
         return self.km * y[2] * self.z * y[1]
 
+    @observable("electric_power")
     def _out_electric_power(self, t, y, inp):
         """Electric power $V_a I$ [W] (Fig. 4g-h)."""
         return self.voltage(t, y, inp) * y[2]
 
+    @observable("kinetic_energy")
     def _out_kinetic_energy(self, t, y, inp):
         """$\\tfrac12 (J_{eq} + J(\\alpha))\\dot\\alpha^2$ [J]: linkage, motor and gears."""
         return 0.5 * (self.j_eq + self.inertia(y[0])) * y[1] ** 2
 
+    @observable("potential_energy")
     def _out_potential_energy(self, t, y, inp):
         return self.potential_energy(y[0])
 
+    @observable("magnetic_energy")
     def _out_magnetic_energy(self, t, y, inp):
         """$\\tfrac12 L I^2$ [J]."""
         return 0.5 * self.L * y[2] ** 2
 
+    @observable("beta")
     def _out_beta(self, t, y, inp):
         return self.angles(y[0])[0]
 
+    @observable("gamma")
     def _out_gamma(self, t, y, inp):
         return self.angles(y[0])[1]
 
+    @observable("inertia")
     def _out_inertia(self, t, y, inp):
         return self.inertia(y[0])
 
     # --- integrands of the energy balance ---------------------------------------------------
+    @integrand("electric_energy")
     def _rate_electric_energy(self, t, y, inp):
         return self.voltage(t, y, inp) * y[2]
 
+    @integrand("copper_loss")
     def _rate_copper_loss(self, t, y, inp):
         return self.R * y[2] ** 2
 
+    @integrand("friction_loss")
     def _rate_friction_loss(self, t, y, inp):
         """Bearing friction $(T_0 + \\lambda\\dot\\varphi)\\dot\\varphi$ [W] (eq. 6)."""
         w = self.z * y[1]

@@ -2,9 +2,9 @@
 
 The controller is not a command: a command is a known function of time (`ConstantVoltage`,
 `inp(t)`), whereas the controller's voltage depends on the state of the drive it is attached to.
-A model that accepts a controller (e.g. `FourBarDrive`) recognises it in its vector field and
-evaluates `pid.voltage(t, phi, phi_dot, phi_ddot)` with its own motor angle, speed and
-acceleration.
+Both are voltage sources: a motor-driven model (e.g. `FourBarDrive`) calls
+`inp.voltage_at(t, motor)` with its motor angle, speed and acceleration (`MotorState`), and a
+command simply ignores the state.
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ import jax.numpy as jnp
 
 from .._checks import check_finite, check_nonnegative, check_positive
 from .._checks import as_float_array as _arr
+from ..commands import AbstractController, MotorState
 
 
 
@@ -25,7 +26,7 @@ def _opt_arr(x):
 _LIMITERS = ("hard", "smooth")
 
 
-class PID(eqx.Module):
+class PID(AbstractController):
     """PID speed regulator with time-varying proportional gain (Incerti, 2012, eq. 15-16).
 
     For a constant speed set point $\\dot\\varphi_{ref} = \\omega_0$, $\\varphi_{ref} = \\omega_0 t$,
@@ -91,9 +92,9 @@ class PID(eqx.Module):
         s = self.v_smooth
         return v - s * jax.nn.softplus((v - vl) / s) + s * jax.nn.softplus((-v - vl) / s)
 
-    def voltage(self, t, phi, phi_dot, phi_ddot):
-        """Armature voltage $V_a$ [V] for motor angle, speed and acceleration at time `t`."""
-        return self.limit(self.raw_voltage(t, phi, phi_dot, phi_ddot))
+    def voltage_at(self, t, motor: MotorState):
+        """Armature voltage $V_a$ [V] at time `t` for the motor state `motor`."""
+        return self.limit(self.raw_voltage(t, motor.angle, motor.speed, motor.acceleration))
 
     def with_limiter(self, limiter: str) -> "PID":
         """The same regulator with the `"hard"` or `"smooth"` limiter."""
@@ -113,7 +114,7 @@ class PID(eqx.Module):
         raise TypeError(
             "PID is a feedback controller, not a time command: its voltage depends on the motor state. "
             "Use it as the input of a model that accepts a controller (e.g. FourBarDrive), which calls "
-            "PID.voltage(t, phi, phi_dot, phi_ddot)."
+            "PID.voltage_at(t, motor_state)."
         )
 
 

@@ -71,7 +71,8 @@ import numpy as np
 
 from .._checks import check_nonnegative, check_positive, check_range, is_concrete
 from .._checks import as_float_array as _arr
-from .base import AbstractModel
+from ..commands import AbstractRunningSpeed
+from .base import AbstractModel, integrand, observable
 
 
 
@@ -79,10 +80,13 @@ def _pair(x):
     return jnp.broadcast_to(jnp.asarray(x, dtype=float), (2,))
 
 
-class RunningSpeed(eqx.Module):
+class RunningSpeed(AbstractRunningSpeed):
     """Input of a `NonlinearBelt` scene: the constant belt running speed $V$ [m/s]."""
 
     speed: jnp.ndarray = eqx.field(converter=_arr)
+
+    def speed_at(self, t):
+        return self.speed
 
     def __call__(self, t):
         return self.speed
@@ -163,7 +167,7 @@ class NonlinearBelt(AbstractModel):
     """Travelling belt span with stretching non-linearity, driven by eccentric pulleys (Moon & Wickert, 1997).
 
     See the module docstring for the equations (eq. 1-7, 34-36 of Moon & Wickert) and the
-    derivation of the forcing. Parameters (SI; defaults: the 004 test stand):
+    derivation of the forcing. Parameters (SI; defaults: the test stand of Moon & Wickert (1997)):
 
     | field | meaning | unit | default |
     |---|---|---|---|
@@ -191,7 +195,6 @@ class NonlinearBelt(AbstractModel):
     damping: jnp.ndarray = eqx.field(converter=_arr, default=0.015)
     n_modes: int = eqx.field(static=True, default=1)
 
-    output_names: ClassVar[tuple[str, ...]] = ("w_drive",)
 
     def __check_init__(self):
         o = "NonlinearBelt"
@@ -210,6 +213,8 @@ class NonlinearBelt(AbstractModel):
                     f"{o}: parameter `runout` must be small against the span (< 0.1 span = "
                     f"{0.1 * float(self.span):g} m); got {np.asarray(self.runout).tolist()}"
                 )
+
+    input_types: ClassVar[tuple[type, ...]] = (AbstractRunningSpeed,)
 
     @property
     def state_names(self) -> tuple[str, ...]:  # type: ignore[override]
@@ -265,7 +270,7 @@ class NonlinearBelt(AbstractModel):
 
     # --- model protocol (physical time) ---------------------------------------------------
     def _speed_of(self, inp):
-        return inp.speed if hasattr(inp, "speed") else jnp.asarray(inp, dtype=float)
+        return inp.speed_at(0.0)
 
     def vector_field(self, t, y, inp):
         sys = self.modal(self._speed_of(inp))
@@ -280,6 +285,7 @@ class NonlinearBelt(AbstractModel):
         u = z[:n] @ psi.real + z[n:] @ psi.imag
         return self.span * (u + sys.boundary(jnp.atleast_1d(xd), tau, theta00)).reshape(jnp.shape(xd))
 
+    @observable("w_drive")
     def _out_w_drive(self, t, y, inp):
         sys = self.modal(self._speed_of(inp))
         return self.displacement(0.01, y, t * self.wave_speed / self.span, 0.0, sys)

@@ -17,7 +17,8 @@ import jax.numpy as jnp
 
 from .._checks import check_nonnegative, check_positive, is_concrete
 from .._checks import as_float_array as _arr
-from .base import AbstractModel
+from ..commands import AbstractMotionCommand
+from .base import AbstractModel, integrand, observable
 
 
 
@@ -60,10 +61,7 @@ class BeltPlatform(AbstractModel):
     z: jnp.ndarray = eqx.field(converter=_arr, default=0.1)
 
     state_names: ClassVar[tuple[str, ...]] = ("theta", "omega")
-    output_names: ClassVar[tuple[str, ...]] = (
-        "acceleration", "kinetic_energy", "elastic_energy", "total_energy", "alpha",
-        "command_angle", "command_velocity", "command_acceleration",
-    )
+    input_types: ClassVar[tuple[type, ...]] = (AbstractMotionCommand,)
 
     def __check_init__(self):
         o = "BeltPlatform"
@@ -140,26 +138,34 @@ class BeltPlatform(AbstractModel):
         return diffrax.Tsit5()
 
     # --- outputs (one time) -------------------------------------------------------------------
+    @observable("acceleration")
     def _out_acceleration(self, t, y, inp):
         return self.vector_field(t, y, inp)[1]
 
+    @observable("kinetic_energy")
     def _out_kinetic_energy(self, t, y, inp):
         return 0.5 * self.J * y[1] ** 2
 
+    @observable("elastic_energy")
     def _out_elastic_energy(self, t, y, inp):
         return 0.5 * self.k_t * (y[0] - self.lam * inp(t)) ** 2
 
+    @observable("total_energy")
     def _out_total_energy(self, t, y, inp):
         return self._out_kinetic_energy(t, y, inp) + self._out_elastic_energy(t, y, inp)
 
+    @observable("alpha")
     def _out_alpha(self, t, y, inp):
         return y[0] - self.lam * inp(t)
 
+    @observable("command_angle")
     def _out_command_angle(self, t, y, inp):
         return self.lam * inp(t)
 
+    @observable("command_velocity")
     def _out_command_velocity(self, t, y, inp):
         return self.lam * inp.velocity(t)
 
+    @observable("command_acceleration")
     def _out_command_acceleration(self, t, y, inp):
         return self.lam * inp.acceleration(t)

@@ -19,8 +19,8 @@ import numpy as np
 
 from .._checks import check_nonnegative, check_positive, is_concrete
 from .._checks import as_float_array as _arr
-from ..commands import AbstractCommand
-from .base import AbstractModel
+from ..commands import AbstractVoltageCommand
+from .base import AbstractLinearModel, integrand, observable
 
 
 
@@ -69,13 +69,15 @@ def chain_matrices(jm, inertias, k, c, r_drive, r_driven, z, mu, R, L, km):
     return A, B
 
 
-class _BeltDriveBase(AbstractModel):
+class _BeltDriveBase(AbstractLinearModel):
     """Shared behaviour of the belt-drive start-up models (linear, voltage driven).
 
     Subclasses provide the shaft inertias `_inertias()` (n + 1) and the stage radii
     `_stage_radii()` (driving, driven; n each); the motor, load and belt fields (`jm`, `k`, `c`,
     `tau_r0`, `mu`, `z`, `R`, `L`, `km`) have the same names in every subclass.
     """
+
+    input_types: ClassVar[tuple[type, ...]] = (AbstractVoltageCommand,)
 
     def _inertias(self):
         raise NotImplementedError
@@ -114,25 +116,15 @@ class _BeltDriveBase(AbstractModel):
     def _j_eff(self):
         return self._inertias().at[0].add(self.z**2 * self.jm)  # J1* = J1 + z^2 Jm
 
-    def _u(self, t, inp):
-        return jnp.stack([self.tau_r0, inp(t)])
+    def linear_system(self):
+        """`(A, b, c)`: $\\dot x = A x + b V(t) + c$, with $b$ the voltage column of B and
+        $c = B_{:,0}\\,\\tau_{r0}$ the constant load torque (eq. 10-13)."""
+        A, B = self.matrices()
+        return A, B[:, 1], B[:, 0] * self.tau_r0
 
     def vector_field(self, t, y, inp):
         A, B = self.matrices()
-        return A @ y + B @ self._u(t, inp)
-
-    def is_linear_for(self, inp) -> bool:
-        return isinstance(inp, AbstractCommand) and inp.has_exp_terms
-
-    def linear_form(self, inp):
-        if not self.is_linear_for(inp):
-            return None
-        amps, rates = inp.exp_terms()
-        A, B = self.matrices()
-        # constant load torque is one more term of rate 0
-        F = jnp.concatenate([B[:, :1] * self.tau_r0, B[:, 1:] * amps[None, :]], axis=1)
-        s = jnp.concatenate([jnp.zeros((1,)), rates])
-        return A, F, s
+        return A @ y + B[:, 1] * inp(t) + B[:, 0] * self.tau_r0
 
     def default_solver(self):
         import diffrax
@@ -156,7 +148,7 @@ class _BeltDriveBase(AbstractModel):
     def output(self, name, t, y, inp):
         # accelerations alpha3, alpha4, ... of longer chains (alpha1, alpha2 are methods below)
         if (
-            getattr(self, f"_out_{name}", None) is None
+            name not in self.output_names()
             and name.startswith("alpha")
             and name[5:].isdigit()
             and 1 <= int(name[5:]) <= self.n_shafts
@@ -164,10 +156,12 @@ class _BeltDriveBase(AbstractModel):
             return self._accel(t, y, inp)[int(name[5:]) - 1]
         return super().output(name, t, y, inp)
 
+    @observable("alpha1")
     def _out_alpha1(self, t, y, inp):
         """Angular acceleration of pulley 1 $\\ddot\\vartheta_1$ [rad/s²] (Fig. 3g)."""
         return self._accel(t, y, inp)[0]
 
+    @observable("alpha2")
     def _out_alpha2(self, t, y, inp):
         """Angular acceleration of pulley 2 $\\ddot\\vartheta_2$ [rad/s²] (Fig. 3h)."""
         return self._accel(t, y, inp)[1]
@@ -177,60 +171,59 @@ class _BeltDriveBase(AbstractModel):
         m = self.n_shafts
         return self.vector_field(t, y, inp)[m : 2 * m]
 
+    @observable("voltage")
     def _out_voltage(self, t, y, inp):
         return inp(t)
 
+    @observable("electric_power")
     def _out_electric_power(self, t, y, inp):
         """Electric power at the motor terminals $V I$ [W] (Fig. 3c)."""
         return inp(t) * y[-1]
 
+    @observable("mechanical_power")
     def _out_mechanical_power(self, t, y, inp):
         """Mechanical power at the motor shaft $k_m I \\cdot z\\dot\\vartheta_1$ [W] (Fig. 3d)."""
         return self.km * y[-1] * self.z * y[self.n_shafts]
 
+    @observable("motor_speed")
     def _out_motor_speed(self, t, y, inp):
         """Motor shaft speed $z\\dot\\vartheta_1$ [rad/s]."""
         return self.z * y[self.n_shafts]
 
+    @observable("kinetic_energy")
     def _out_kinetic_energy(self, t, y, inp):
         m = self.n_shafts
         return 0.5 * jnp.sum(self._j_eff() * y[m : 2 * m] ** 2)
 
+    @observable("elastic_energy")
     def _out_elastic_energy(self, t, y, inp):
         d = self._elongation_map() @ y[: self.n_shafts]
         return jnp.sum(jnp.atleast_1d(self.k) * d**2)
 
+    @observable("magnetic_energy")
     def _out_magnetic_energy(self, t, y, inp):
         return 0.5 * self.L * y[-1] ** 2
 
     # --- energy bookkeeping: integrands -----------------------------------------------------
+    @integrand("electric_energy")
     def _rate_electric_energy(self, t, y, inp):
         return inp(t) * y[-1]
 
+    @integrand("copper_loss")
     def _rate_copper_loss(self, t, y, inp):
         return self.R * y[-1] ** 2
 
+    @integrand("damping_loss")
     def _rate_damping_loss(self, t, y, inp):
         m = self.n_shafts
         d = self._elongation_map() @ y[m : 2 * m]
         return 2.0 * jnp.sum(jnp.atleast_1d(self.c) * d**2)
 
+    @integrand("load_work")
     def _rate_load_work(self, t, y, inp):
         w = y[2 * self.n_shafts - 1]
         return (self.tau_r0 + self.mu * w) * w
 
-    output_names: ClassVar[tuple[str, ...]] = (
-        "voltage",
-        "electric_power",
-        "mechanical_power",
-        "motor_speed",
-        "kinetic_energy",
-        "elastic_energy",
-        "magnetic_energy",
-        "alpha1",
-        "alpha2",
-    )
-    integral_names: ClassVar[tuple[str, ...]] = ("electric_energy", "copper_loss", "damping_loss", "load_work")
 
 
 class BeltStartup(_BeltDriveBase):

@@ -1,4 +1,4 @@
-"""The axially moving string: a free belt span between two pulleys (seeds 002 and 004).
+"""The axially moving string: a free belt span between two pulleys (the belt-vibration report and Moon & Wickert, 1997).
 
 Equation of motion of a span of tension $T$ [N], mass per length $\\rho$ [kg/m] and length $L$ [m]
 running at constant speed $V$ [m/s] (belt-vibration report, eq. 24):
