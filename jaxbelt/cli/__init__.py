@@ -13,8 +13,15 @@ import sys
 SUBCOMMANDS = ("startup", "shaping", "fourbar", "string", "nonlinear", "bench")
 
 
+class _Parser(argparse.ArgumentParser):
+    """Bad arguments: one line on stderr (`jaxbelt startup: error: argument --gamma: must be > 0`), exit 2."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="jaxbelt",
         description="Differentiable simulation of belt drives and DC-motor mechanisms (figures from the papers).",
     )

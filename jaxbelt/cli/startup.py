@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import time
 
+from ._args import image_path, int_at_least, positive_float, finite_float
+
 
 def register(sub):
     p = sub.add_parser(
@@ -12,12 +14,12 @@ def register(sub):
         description="Simulate the start-up of the belt drive of Incerti (2014) (Table I) for each time constant "
         "of the voltage command V(t) = Vmax (1 - exp(-t/gamma)) and write the 8-panel figure.",
     )
-    p.add_argument("--gamma", type=float, nargs="+", default=[0.02, 0.04, 0.06], help="time constants [s] (default 0.02 0.04 0.06)")
-    p.add_argument("--v-max", type=float, default=24.0, help="final voltage Vmax [V] (default 24)")
-    p.add_argument("--t-end", type=float, default=0.5, help="simulated time [s] (default 0.5)")
-    p.add_argument("--points", type=int, default=501, help="output points (default 501)")
+    p.add_argument("--gamma", type=positive_float, nargs="+", default=[0.02, 0.04, 0.06], help="time constants [s] (default 0.02 0.04 0.06)")
+    p.add_argument("--v-max", type=finite_float, default=24.0, help="final voltage Vmax [V] (default 24)")
+    p.add_argument("--t-end", type=positive_float, default=0.5, help="simulated time [s] (default 0.5)")
+    p.add_argument("--points", type=int_at_least(2), default=501, help="output points (default 501)")
     p.add_argument("--method", default="auto", choices=["auto", "expm", "modal", "ode", "rk4"], help="solution method (default: closed form)")
-    p.add_argument("--out", default="startup.png", help="output image (default startup.png)")
+    p.add_argument("--out", type=image_path, default="startup.png", help="output image (default startup.png)")
     p.set_defaults(func=run)
 
 
@@ -28,10 +30,6 @@ def run(args) -> int:
     from ..models.startup import BeltStartup
     from ..plots.startup import draw_startup, startup_curves
 
-    if args.t_end <= 0:
-        raise ValueError(f"--t-end must be > 0 s; got {args.t_end}")
-    if args.points < 2:
-        raise ValueError(f"--points must be >= 2; got {args.points}")
     model = BeltStartup()
     t = time.perf_counter()
     ts, c = startup_curves(model, args.gamma, args.v_max, args.t_end, args.points, args.method)

@@ -1,0 +1,92 @@
+"""Argument types of the `jaxbelt` command: every value is checked before anything is computed.
+
+argparse turns an `argparse.ArgumentTypeError` into a one-line `error:` and exit status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+from pathlib import Path
+
+_IMAGE_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg")
+
+
+def _number(text: str, kind=float):
+    try:
+        v = kind(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if kind is float and not math.isfinite(v):
+        raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
+    return v
+
+
+def finite_float(text: str) -> float:
+    """Any finite real number."""
+    return _number(text)
+
+
+def positive_float(text: str) -> float:
+    """A finite number > 0."""
+    v = _number(text)
+    if not v > 0:
+        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
+    return v
+
+
+def nonnegative_float(text: str) -> float:
+    """A finite number >= 0."""
+    v = _number(text)
+    if not v >= 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {text}")
+    return v
+
+
+def float_in(lo: float, hi: float, *, lo_open: bool = False, hi_open: bool = False):
+    """A finite number in the interval (lo|[lo, hi]|hi)."""
+
+    def parse(text: str) -> float:
+        v = _number(text)
+        ok = (v > lo if lo_open else v >= lo) and (v < hi if hi_open else v <= hi)
+        if not ok:
+            interval = f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+            raise argparse.ArgumentTypeError(f"must lie in {interval}, got {text}")
+        return v
+
+    parse.__name__ = "number"
+    return parse
+
+
+def int_at_least(lo: int):
+    """An integer >= lo."""
+
+    def parse(text: str) -> int:
+        v = _number(text, int)
+        if v < lo:
+            raise argparse.ArgumentTypeError(f"must be an integer >= {lo}, got {text}")
+        return v
+
+    parse.__name__ = "integer"
+    return parse
+
+
+def image_path(text: str) -> Path:
+    """An output image path whose folder exists and is writable; the suffix names the format.
+
+    A name without a suffix gets `.png` (so the printed name is the written one).
+    """
+    p = Path(text).expanduser()
+    if p.suffix == "":
+        p = p.with_suffix(".png")
+    if p.suffix.lower() not in _IMAGE_SUFFIXES:
+        raise argparse.ArgumentTypeError(f"image format {p.suffix!r} is not one of {', '.join(_IMAGE_SUFFIXES)}")
+    folder = p.parent if str(p.parent) else Path(".")
+    if not folder.is_dir():
+        raise argparse.ArgumentTypeError(f"folder {str(folder)!r} does not exist")
+    if not os.access(folder, os.W_OK):
+        raise argparse.ArgumentTypeError(f"folder {str(folder)!r} is not writable")
+    if p.exists() and p.is_dir():
+        raise argparse.ArgumentTypeError(f"{text!r} is a folder, not a file")
+    return p
