@@ -1,0 +1,69 @@
+"""The documentation: a strict mkdocs build, the API pages cover the public names, the README's two commands."""
+
+import importlib.util
+import re
+import subprocess
+import sys
+import types
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+
+
+def _missing(*modules):
+    return [m for m in modules if importlib.util.find_spec(m) is None]
+
+
+def test_docs_build_strict(tmp_path):
+    missing = _missing("mkdocs", "material", "mkdocstrings", "mkdocstrings_handlers.python", "mkdocs_jupyter")
+    if missing:
+        pytest.skip(f"documentation packages not installed ({', '.join(missing)}); "
+                    "install them with: python -m pip install -e '.[dev]'")
+    site = tmp_path / "site"
+    # no network: MathJax is loaded by the reader's browser, not at build time; notebooks are not executed
+    proc = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--config-file",
+                           str(ROOT / "mkdocs.yml"), "--site-dir", str(site)],
+                          cwd=ROOT, capture_output=True, text=True, timeout=300,
+                          env={**__import__("os").environ, "NO_MKDOCS_2_WARNING": "1"})
+    assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-8000:]
+    assert (site / "index.html").exists()
+    api = (site / "api" / "core" / "index.html").read_text()
+    assert "jaxbelt.simulate" in api
+    # the docstrings' $...$ math reaches the page as arithmatex spans for MathJax
+    assert 'class="arithmatex"' in (site / "api" / "shaping" / "index.html").read_text()
+    assert (site / "notebooks" / "01_startup" / "index.html").exists()
+    assert (site / "references" / "index.html").exists()
+
+
+def test_api_pages_cover_the_public_names():
+    import jaxbelt
+
+    text = "\n".join(p.read_text() for p in sorted((DOCS / "api").glob("*.md")))
+    documented = set(re.findall(r"^::: jaxbelt\.(\w+)", text, re.M))
+    documented |= set(re.findall(r"^\s+heading: jaxbelt\.(\w+)", text, re.M))
+    # public: the names bound in jaxbelt/__init__.py, i.e. not the sub-modules that importing it loads as a
+    # side effect, but the ones it exports on purpose (`from . import modal as modal`)
+    exported_modules = set(re.findall(r"^from \. import (\w+) as \1", (ROOT / "jaxbelt" / "__init__.py").read_text(), re.M))
+    public = {n for n in jaxbelt.__all__ if n != "__version__" and not n.startswith("_")
+              and (not isinstance(getattr(jaxbelt, n), types.ModuleType) or n in exported_modules)}
+    missing = sorted(public - documented)
+    assert not missing, f"public names with no `::: jaxbelt.NAME` entry in docs/api/*.md: {missing}"
+
+
+def test_readme_opens_with_the_two_commands():
+    text = (ROOT / "README.md").read_text()
+    first = re.search(r"```bash\n(.*?)```", text, re.S)
+    assert first and text.index("```bash") < text.index("\n## "), "the README must open with its commands"
+    lines = [line.strip() for line in first.group(1).strip().splitlines()]
+    assert lines[0].startswith('python -m pip install -e ".[dev]" && jaxbelt ')
+    assert lines[1] == "python -m pytest -n 2 -q"  # the command CI runs (.ci/run)
+
+
+def test_user_visible_text_names_no_internal_files():
+    files = [ROOT / "README.md", *DOCS.rglob("*.md"), *sorted((ROOT / "notebooks").glob("*.ipynb"))]
+    bad = re.compile(r"NOTES\.md|seeds?[ /_]*0\d\d|\bissue \d+", re.I)
+    hits = [f"{f.relative_to(ROOT)}: {m.group(0)}" for f in files for m in bad.finditer(f.read_text())]
+    assert not hits, hits
