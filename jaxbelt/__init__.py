@@ -82,8 +82,18 @@ from .nonlinear_sweep import trajectory as nonlinear_trajectory  # noqa: E402
 
 # --- sub-modules -------------------------------------------------------------------------------
 from . import modal as modal  # noqa: E402
-from . import plots as plots  # noqa: E402
+def __getattr__(name):
+    # `jb.plots` is imported on first use: `import jaxbelt` loads no plotting library
+    if name == "plots":
+        import importlib
+
+        return importlib.import_module(".plots", __name__)
+    if name == "enable_compilation_cache":  # jaxbelt.cache; see its docstring
+        from .cache import enable_compilation_cache
+
+        return enable_compilation_cache
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 __version__ = "0.1.0"
 
-__all__ = [name for name in dir() if not name.startswith("_")]
+__all__ = [name for name in dir() if not name.startswith("_")] + ["plots"]

@@ -160,18 +160,28 @@ def residual_energy(plat, cmd, *, method: str = "quadrature", n_nodes: int = 128
     A pure scalar function: `jax.grad` (w.r.t. `cmd.gammas` or platform parameters),
     `jax.vmap` and `jax.jit` compose with it.
     """
-    cmd = _guarded(cmd)
-    if method == "quadrature":
-        F, G = convolution_integrals(plat, cmd, n_nodes)
-        H = G**2 + plat.omega_n**2 * F**2
-    elif method == "ode":
-        a, ad = _end_state_ode(plat, cmd, rtol, atol, max_steps)
-        H = (plat.omega_d / plat.lam) ** 2 * (ad**2 + plat.omega_n**2 * a**2)
-    else:
+    if method not in ("quadrature", "ode"):
         raise ValueError(f"residual_energy: `method` must be 'quadrature' or 'ode'; got {method!r}")
-    return H
+    if method == "quadrature":  # the tolerances play no part: fixed values keep one compiled program
+        rtol, atol, max_steps = 0.0, 0.0, 0
+    return _residual_energy_jit(plat, cmd, rtol, atol, method=method, n_nodes=int(n_nodes), max_steps=int(max_steps))
 
 
 def residual_energy_joules(plat, cmd, **kwargs):
     """Mechanical energy left at the end of the move, $E_{tot}(T) = h\\,\\mathcal H$ [J] (eq. 31)."""
     return plat.energy_factor * residual_energy(plat, cmd, **kwargs)
+
+
+def _residual_energy_impl(plat, cmd, rtol, atol, *, method: str, n_nodes: int, max_steps: int):
+    cmd = _guarded(cmd)
+    if method == "quadrature":
+        F, G = convolution_integrals(plat, cmd, n_nodes)
+        return G**2 + plat.omega_n**2 * F**2
+    a, ad = _end_state_ode(plat, cmd, rtol, atol, max_steps)
+    return (plat.omega_d / plat.lam) ** 2 * (ad**2 + plat.omega_n**2 * a**2)
+
+
+# One program per (shapes, method, n_nodes, max_steps): called eagerly, `residual_energy` runs it
+# instead of dispatching its few hundred operations one by one; inside a caller's jit/vmap/grad it
+# is inlined. The tolerances are traced, so a new value does not recompile.
+_residual_energy_jit = jax.jit(_residual_energy_impl, static_argnames=("method", "n_nodes", "max_steps"))

@@ -8,6 +8,7 @@ simulation (diffrax, reverse-mode) with optax.
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import equinox as eqx
 import jax
@@ -89,37 +90,24 @@ def tune_pid(
         raise ValueError(f"tune_pid: `steps` must be >= 1; got {steps}")
     train_pid = pid.with_limiter("smooth") if pid.v_limit is not None else pid
     g0 = pid.gains
-    opt = optimizer if optimizer is not None else optax.adam(learning_rate)
-    # Three parameters: forward-mode derivatives (one JVP per gain, diffrax.ForwardMode) cost about
-    # 5 forward solves, a third of reverse mode through the checkpointed solve, and compile faster.
-    sim = dict(method=method, rtol=rtol, atol=atol, dt=dt, adjoint="forward")
-
-    def metrics(p, which):
-        return closed_loop_metrics(drive, which.with_gains(g0 * jnp.exp(p)), t0, t1, temperature=temperature, **sim)
-
-    def loss_fn(p):
-        m = metrics(p, train_pid)
-        loss = m["chi_smooth"]
-        if v_max is not None:
-            loss = loss + penalty * jnp.maximum(0.0, m["v_peak"] / v_max - 1.0) ** 2
-        if i_max is not None:
-            loss = loss + penalty * jnp.maximum(0.0, m["i_peak"] / i_max - 1.0) ** 2
-        return loss, m
-
-    @eqx.filter_jit
-    def step(p, state):
-        def loss_aux(q):
-            loss, m = loss_fn(q)
-            return loss, (loss, m)
-
-        grad, (loss, m) = jax.jacfwd(loss_aux, has_aux=True)(p)
-        updates, state = opt.update(grad, state, p)
-        return optax.apply_updates(p, updates), state, loss, m
-
-    report = eqx.filter_jit(lambda p: metrics(p, pid))
-
+    if optimizer is None:
+        # one transformation object for every call; the learning rate lives in its state, so a
+        # new rate reuses the compiled step
+        opt = _default_adam()
+        state = opt.init(jnp.zeros(3))
+        state.hyperparams["learning_rate"] = jnp.asarray(learning_rate, dtype=float)
+    else:
+        opt = optimizer
+        state = opt.init(jnp.zeros(3))
+    # Values travel as arrays (traced: a new value reuses the compiled step); only what fixes the
+    # shapes or the program is static: t1 (the output grid), the method, and the RK4 step.
+    f = functools.partial(jnp.asarray, dtype=float)
+    cfg = _Config(
+        t0=f(t0), v_max=f(np.inf if v_max is None else v_max), i_max=f(np.inf if i_max is None else i_max),
+        penalty=f(penalty), temperature=f(temperature), rtol=f(rtol), atol=f(atol),
+        t1=float(t1), method=str(method), dt=float(dt) if method == "rk4" else 1e-3,
+    )
     p = jnp.zeros(3)
-    state = opt.init(p)
     hist = {k: [] for k in ("loss", "chi_smooth", "v_peak", "i_peak", "kp", "ki", "kd")}
     best = (np.inf, p, 0)
     it = range(steps)
@@ -128,8 +116,8 @@ def tune_pid(
 
         it = tqdm(it, desc="tune_pid", leave=False)
     for k in it:
-        gains = np.asarray(g0 * jnp.exp(p))
-        p_new, state, loss, m = step(p, state)
+        p_new, state, loss, m, gains = _tune_step(opt, drive, train_pid, g0, cfg, p, state)
+        loss, m, gains = jax.device_get((loss, m, gains))
         loss = float(loss)
         if not np.isfinite(loss):
             raise FloatingPointError(f"tune_pid: non-finite loss at step {k} with gains {gains.tolist()}")
@@ -142,8 +130,7 @@ def tune_pid(
             it.set_postfix(chi=f"{float(m['chi_smooth']):.4f}")
         p = p_new
     _, p_best, k_best = best
-    m0 = report(jnp.zeros(3))
-    mb = report(p_best)
+    m0, mb = jax.device_get((_tune_report(drive, pid, g0, cfg, jnp.zeros(3)), _tune_report(drive, pid, g0, cfg, p_best)))
     return PIDTuneResult(
         pid=pid.with_gains(g0 * jnp.exp(p_best)),
         chi=float(mb["chi"]),
@@ -153,3 +140,57 @@ def tune_pid(
         history={k: np.asarray(v) for k, v in hist.items()},
         best_step=int(k_best),
     )
+
+
+class _Config(eqx.Module):
+    t0: jnp.ndarray
+    v_max: jnp.ndarray
+    i_max: jnp.ndarray
+    penalty: jnp.ndarray
+    temperature: jnp.ndarray
+    rtol: jnp.ndarray
+    atol: jnp.ndarray
+    t1: float = eqx.field(static=True)
+    method: str = eqx.field(static=True)
+    dt: float = eqx.field(static=True)
+
+
+@functools.lru_cache(maxsize=None)
+def _default_adam():
+    return optax.inject_hyperparams(optax.adam)(learning_rate=0.1)
+
+
+def _metrics(drive, which, g0, cfg: _Config, p):
+    # Three parameters: forward-mode derivatives (one JVP per gain, diffrax.ForwardMode) cost about
+    # 5 forward solves, a third of reverse mode through the checkpointed solve, and compile faster.
+    return closed_loop_metrics(
+        drive, which.with_gains(g0 * jnp.exp(p)), cfg.t0, cfg.t1, temperature=cfg.temperature,
+        method=cfg.method, rtol=cfg.rtol, atol=cfg.atol, dt=cfg.dt, adjoint="forward",
+    )
+
+
+#: Number of times the tuning step has been traced (tests check that repeated calls reuse it).
+TRACE_COUNT = {"step": 0, "report": 0}
+
+
+@eqx.filter_jit
+def _tune_step(opt, drive, train_pid, g0, cfg: _Config, p, state):
+    TRACE_COUNT["step"] += 1
+
+    def loss_aux(q):
+        m = _metrics(drive, train_pid, g0, cfg, q)
+        # v_max, i_max = inf when unbounded: the penalty terms are then exactly zero
+        loss = (m["chi_smooth"]
+                + cfg.penalty * jnp.maximum(0.0, m["v_peak"] / cfg.v_max - 1.0) ** 2
+                + cfg.penalty * jnp.maximum(0.0, m["i_peak"] / cfg.i_max - 1.0) ** 2)
+        return loss, (loss, m)
+
+    grad, (loss, m) = jax.jacfwd(loss_aux, has_aux=True)(p)
+    updates, state = opt.update(grad, state, p)
+    return optax.apply_updates(p, updates), state, loss, m, g0 * jnp.exp(p)
+
+
+@eqx.filter_jit
+def _tune_report(drive, pid, g0, cfg: _Config, p):
+    TRACE_COUNT["report"] += 1
+    return _metrics(drive, pid, g0, cfg, p)

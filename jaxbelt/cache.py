@@ -1,0 +1,78 @@
+"""Opt-in persistent compilation cache: compiled XLA programs kept on disk between sessions.
+
+Most of the time of a fresh `jaxbelt` process (the CLI, a notebook kernel, a test run) is XLA
+compilation. JAX can store every compiled program on disk and load it back in a later process
+(its persistent compilation cache, `jax_compilation_cache_dir`); `enable_compilation_cache`
+switches it on with a per-user folder. The `jaxbelt` command does this by default
+(`jaxbelt --no-cache ...` to disable); in a notebook or script, call it once, before the first
+simulation:
+
+```python
+import jaxbelt as jb
+jb.enable_compilation_cache()          # ~/.cache/jaxbelt/xla (or $XDG_CACHE_HOME/jaxbelt/xla)
+```
+
+The cache is keyed by the program, the jax/jaxlib version and the device, so a stale entry is
+never used; delete the folder to reclaim the space. Treat the folder as trusted: whoever can write
+to it can make your process run code (do not share it with other users).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import jax
+
+__all__ = ["enable_compilation_cache", "disable_compilation_cache", "default_cache_dir", "compilation_cache_dir"]
+
+
+def default_cache_dir() -> Path:
+    """`$XDG_CACHE_HOME/jaxbelt/xla` (default `~/.cache/jaxbelt/xla`); `$JAXBELT_CACHE_DIR` overrides it."""
+    override = os.environ.get("JAXBELT_CACHE_DIR")
+    if override:
+        return Path(override).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "jaxbelt" / "xla"
+
+
+def enable_compilation_cache(path=None, *, min_compile_time: float = 0.0) -> Path:
+    """Store compiled programs in `path` and reuse them in later processes (JAX's persistent cache).
+
+    - `path`: the cache folder (created if missing; default `default_cache_dir()`, i.e.
+      `~/.cache/jaxbelt/xla` or `$XDG_CACHE_HOME/jaxbelt/xla`).
+    - `min_compile_time` [s]: programs that compile faster than this are not written
+      (JAX's `jax_persistent_cache_min_compile_time_secs`; JAX's own default is 1 s, which would
+      leave out most of jaxbelt's programs on a CPU).
+
+    Call it once per process before the first simulation (a notebook: in its first cell);
+    calling it again with another folder switches to that folder. Returns the folder used.
+    """
+    from jax._src import compilation_cache as _cc  # reset when the folder changes (below)
+
+    folder = Path(path).expanduser() if path is not None else default_cache_dir()
+    folder.mkdir(parents=True, exist_ok=True)
+    previous = jax.config.jax_compilation_cache_dir
+    jax.config.update("jax_enable_compilation_cache", True)
+    jax.config.update("jax_compilation_cache_dir", str(folder))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_time))
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)  # no size floor: small programs count too
+    if previous not in (None, str(folder)) and _cc.is_initialized():
+        _cc.reset_cache()  # JAX opens the cache once; make it reopen at the new folder
+    return folder
+
+
+def disable_compilation_cache() -> None:
+    """Stop reading and writing the persistent cache in this process."""
+    from jax._src import compilation_cache as _cc
+
+    jax.config.update("jax_enable_compilation_cache", False)
+    if _cc.is_initialized():
+        _cc.reset_cache()
+
+
+def compilation_cache_dir():
+    """The folder of the persistent cache in use, or None."""
+    if not jax.config.jax_enable_compilation_cache:
+        return None
+    return jax.config.jax_compilation_cache_dir
