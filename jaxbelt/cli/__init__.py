@@ -2,6 +2,10 @@
 
 Each sub-command lives in `jaxbelt/cli/<name>.py` and defines `register(subparsers)`, which adds
 its parser and sets `func` to the function that runs it.
+
+Compiled programs are kept in JAX's persistent compilation cache (`jaxbelt.cache`), so that a
+second run of a command skips most of its XLA compilation; `jaxbelt --no-cache COMMAND` runs
+without it.
 """
 
 from __future__ import annotations
@@ -25,6 +29,11 @@ def build_parser() -> argparse.ArgumentParser:
         prog="jaxbelt",
         description="Differentiable simulation of belt drives and DC-motor mechanisms (figures from the papers).",
     )
+    parser.add_argument(
+        "--no-cache", action="store_true",
+        help="do not use the persistent compilation cache (default: compiled programs are kept in "
+        "~/.cache/jaxbelt/xla, or $XDG_CACHE_HOME/jaxbelt/xla, and reused by later runs)",
+    )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in SUBCOMMANDS:
         try:
@@ -39,6 +48,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    if not args.no_cache and args.command != "bench":
+        from ..cache import enable_compilation_cache
+
+        try:
+            enable_compilation_cache()
+        except OSError as e:  # an unwritable cache folder costs time, not the result
+            print(f"jaxbelt: compilation cache disabled ({e})", file=sys.stderr)
     try:
         return int(args.func(args) or 0)
     except ValueError as e:  # bad parameters: say which, no traceback

@@ -1,0 +1,144 @@
+"""Compile once, import fast: repeated calls reuse their compiled programs, `import jaxbelt` loads no
+plotting library, and the persistent compilation cache stores programs where it is told to."""
+
+import contextlib
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import jax
+import jax.monitoring
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxbelt as jb
+from jaxbelt.optimise import pid as pid_mod
+
+ROOT = Path(__file__).resolve().parents[1]
+_COMPILE = "/jax/core/compile/backend_compile_duration"
+
+
+@contextlib.contextmanager
+def count_compiles():
+    """Number of XLA compilations inside the block (every jit, eager op or lowering counts)."""
+    box = {"n": 0}
+
+    def listener(name, duration, **kw):
+        if name == _COMPILE:
+            box["n"] += 1
+
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        yield box
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+
+
+def _subprocess(code, **env):
+    full = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""), **env)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=full, timeout=300)
+    assert out.returncode == 0, out.stderr
+    return out.stdout
+
+
+def test_tune_pid_compiles_its_step_once():
+    drive = jb.FourBarDrive()
+    pid = jb.PID(v_limit=40.0)
+    kw = dict(t0=0.05, t1=0.1, steps=2, progress=False)
+    first = jb.tune_pid(drive, pid, **kw)
+    traces = dict(pid_mod.TRACE_COUNT)
+    # new values of the same shapes: learning rate, window start, bounds, tolerances, gains
+    with count_compiles() as c:
+        second = jb.tune_pid(drive, jb.PID(kp=60.0, v_limit=45.0), t0=0.06, t1=0.1, steps=3, progress=False,
+                             learning_rate=0.05, v_max=44.0, i_max=20.0, rtol=1e-8)
+        third = jb.tune_pid(drive, pid, **kw)
+    assert pid_mod.TRACE_COUNT == traces
+    assert c["n"] == 0
+    # same inputs, same numbers; a different learning rate takes a different path
+    np.testing.assert_array_equal(first.history["loss"], third.history["loss"])
+    assert first.chi == third.chi
+    assert second.history["loss"].shape == (3,)
+    assert not np.allclose(second.history["kp"][:2], first.history["kp"])
+
+
+def test_tune_pid_learning_rate_matches_plain_adam():
+    # the default optimiser (adam with the rate in its state) takes the steps of optax.adam(rate)
+    import optax
+
+    drive, pid = jb.FourBarDrive(), jb.PID()
+    kw = dict(t0=0.05, t1=0.1, steps=3, progress=False)
+    a = jb.tune_pid(drive, pid, learning_rate=0.07, **kw)
+    b = jb.tune_pid(drive, pid, optimizer=optax.adam(0.07), **kw)
+    np.testing.assert_allclose(a.history["kp"], b.history["kp"], rtol=1e-12)
+    np.testing.assert_allclose(a.history["loss"], b.history["loss"], rtol=1e-12)
+
+
+def test_residual_energy_eager_is_one_program():
+    plat = jb.BeltPlatform()
+    cmd = jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]))
+    h = jb.residual_energy(plat, cmd)
+    h_jit = jax.jit(lambda p, c: jb.residual_energy(p, c))(plat, cmd)
+    np.testing.assert_allclose(h, h_jit, rtol=1e-13)
+    with count_compiles() as c:
+        h2 = jb.residual_energy(plat, jb.PseudoPolynomial(jnp.array([3.5, 4.5, 6.0])))
+    assert c["n"] == 0
+    assert float(h2) != float(h)
+    # the ODE evaluation agrees (independent method), and a new tolerance does not recompile
+    h_ode = jb.residual_energy(plat, cmd, method="ode")
+    with count_compiles() as c:
+        h_ode2 = jb.residual_energy(plat, cmd, method="ode", rtol=1e-11, atol=1e-14)
+    assert c["n"] == 0
+    np.testing.assert_allclose([h_ode, h_ode2], [h, h], rtol=1e-8)
+    with pytest.raises(ValueError, match="method"):
+        jb.residual_energy(plat, cmd, method="euler")
+
+
+def test_optimise_command_reuses_its_step():
+    plat = jb.BeltPlatform()
+    jb.optimise_command(plat, jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0])), max_steps=3, progress=False)
+    with count_compiles() as c:
+        res = jb.optimise_command(plat, jb.PseudoPolynomial(jnp.array([3.2, 4.1, 5.3])), max_steps=3,
+                                  progress=False)
+    assert c["n"] == 0
+    assert float(res.relative) < 1.0
+
+
+def test_import_loads_no_plotting_library():
+    out = _subprocess(
+        "import sys, jaxbelt as jb; print('matplotlib' in sys.modules, 'jaxbelt.plots' in sys.modules); "
+        "jb.plots.draw_startup; print('jaxbelt.plots' in sys.modules)"
+    )
+    assert out.split() == ["False", "False", "True"]
+
+
+def test_compilation_cache_writes_to_the_folder(tmp_path):
+    code = (
+        "import jax, jax.numpy as jnp, jaxbelt as jb; "
+        f"d = jb.enable_compilation_cache({str(tmp_path / 'xla')!r}); print(d); "
+        "jax.jit(lambda x: jnp.sin(x) ** 2 + x)(jnp.arange(3.0)).block_until_ready()"
+    )
+    out = _subprocess(code)
+    assert out.strip() == str(tmp_path / "xla")
+    assert any((tmp_path / "xla").iterdir())
+
+
+def test_default_cache_folder_respects_xdg(tmp_path, monkeypatch):
+    from jaxbelt.cache import default_cache_dir
+
+    monkeypatch.delenv("JAXBELT_CACHE_DIR", raising=False)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    assert default_cache_dir() == tmp_path / "jaxbelt" / "xla"
+    monkeypatch.delenv("XDG_CACHE_HOME")
+    assert default_cache_dir() == Path.home() / ".cache" / "jaxbelt" / "xla"
+    monkeypatch.setenv("JAXBELT_CACHE_DIR", str(tmp_path / "x"))
+    assert default_cache_dir() == tmp_path / "x"
+
+
+def test_cli_has_a_no_cache_switch():
+    from jaxbelt.cli import build_parser
+
+    args = build_parser().parse_args(["--no-cache", "startup"])
+    assert args.no_cache and args.command == "startup"
+    assert not build_parser().parse_args(["startup"]).no_cache
