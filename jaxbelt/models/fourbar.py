@@ -21,7 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_nonnegative, check_positive, is_concrete
+from .._checks import check_fields
 from .._checks import as_float_array as _arr
 from .base import AbstractModel, integrand, observable
 from ..commands import AbstractVoltageSource, MotorState
@@ -120,32 +120,37 @@ class FourBarDrive(AbstractModel):
 
     def __check_init__(self):
         o = "FourBarDrive"
-        for name in ("a", "b", "c"):
-            check_positive(name, getattr(self, name), "m", o)
-        for name in ("f1", "f2", "f3"):
-            check_nonnegative(name, getattr(self, name), "m", o)
-        for name in ("m1", "m2", "m3"):
-            check_nonnegative(name, getattr(self, name), "kg", o)
-        for name in ("jg1", "jg2", "jg3", "jm", "ja", "jb"):
-            check_positive(name, getattr(self, name), "kg m^2", o)
-        check_nonnegative("g", self.g, "m/s^2", o)
-        check_positive("R", self.R, "ohm", o)
-        check_positive("L", self.L, "H", o)
-        check_positive("km", self.km, "N m/A", o)
-        check_positive("z", self.z, "", o)
-        check_nonnegative("T0", self.T0, "N m", o)
-        check_nonnegative("lam", self.lam, "N m s/rad", o)
         if self.assembly not in (1, -1):
             raise ValueError(f"{o}: `assembly` (k of Appendix A) must be +1 or -1; got {self.assembly!r}")
-        if is_concrete(self):
-            self._check_geometry()
+        spec = (
+            [(n, "positive", "m") for n in ("a", "b", "c")]
+            + [(n, "nonnegative", "m") for n in ("f1", "f2", "f3")]
+            + [(n, "nonnegative", "kg") for n in ("m1", "m2", "m3")]
+            + [(n, "positive", "kg m^2") for n in ("jg1", "jg2", "jg3", "jm", "ja", "jb")]
+            + [("g", "nonnegative", "m/s^2"), ("R", "positive", "ohm"), ("L", "positive", "H"),
+               ("km", "positive", "N m/A"), ("z", "positive", ""), ("T0", "nonnegative", "N m"),
+               ("lam", "nonnegative", "N m s/rad"), ("hx", "finite", "m"), ("hy", "finite", "m")]
+        )
+        # one transfer for every field; the geometry check reuses the host values
+        vals = check_fields(o, [(n, getattr(self, n), kind, unit) for n, kind, unit in spec])
+        if vals is not None:
+            host = dict(zip([n for n, _, _ in spec], vals))
+            self._check_geometry(*(host[n] for n in ("a", "b", "c", "hx", "hy")))
 
-    def _check_geometry(self):
+    def _check_geometry(self, a, b, c, hx, hy):
+        # numpy on the host values: a construction check, not part of any traced program
         al = np.linspace(0.0, 2 * np.pi, _N_CHECK, endpoint=False)
-        A, B, C, D2 = (np.asarray(x) for x in self._abcd(jnp.asarray(al)))
-        geo = f"a={float(self.a):g}, b={float(self.b):g}, c={float(self.c):g}, hx={float(self.hx):g}, hy={float(self.hy):g} m"
+        shape = np.broadcast_shapes(*(np.shape(x) for x in (a, b, c, hx, hy)))
+        al_b = al.reshape((-1,) + (1,) * len(shape))  # a model with batched fields: every member
+        sa, ca = np.sin(al_b), np.cos(al_b)
+        A = 2 * c * (hy - a * sa)
+        B = 2 * c * (hx - a * ca)
+        C = a**2 - b**2 + c**2 + hx**2 + hy**2 - 2 * a * (hx * ca + hy * sa)
+        D2 = A**2 + B**2 - C**2
+        geo = ", ".join(f"{n}={float(np.ravel(x)[0]):g}" if np.size(x) == 1 else f"{n}={np.ravel(x).tolist()}"
+                        for n, x in zip(("a", "b", "c", "hx", "hy"), (a, b, c, hx, hy))) + " m"
         if np.any(D2 < 0):
-            i = int(np.argmin(D2))
+            i = int(np.argmin(D2)) // max(int(np.prod(shape)), 1)
             raise ValueError(
                 f"FourBarDrive: the linkage ({geo}) cannot be assembled over a full crank turn: "
                 f"D^2 = A^2 + B^2 - C^2 < 0 at alpha = {np.degrees(al[i]):.1f} deg (the crank must be the "
@@ -154,41 +159,59 @@ class FourBarDrive(AbstractModel):
         # |sin(gamma - beta)| = D / sqrt(A^2 + B^2): zero where coupler and rocker align.
         s = np.sqrt(D2 / (A**2 + B**2))
         if np.min(s) < _DEAD_TOL:
-            i = int(np.argmin(s))
+            i = int(np.argmin(s)) // max(int(np.prod(shape)), 1)
             raise ValueError(
                 f"FourBarDrive: the linkage ({geo}) passes a dead point (coupler and rocker aligned, "
-                f"|sin(gamma - beta)| = {s[i]:.2e} < {_DEAD_TOL:g}) at alpha = {np.degrees(al[i]):.1f} deg; "
+                f"|sin(gamma - beta)| = {np.min(s):.2e} < {_DEAD_TOL:g}) at alpha = {np.degrees(al[i]):.1f} deg; "
                 "the crank cannot drive it through"
             )
 
     # --- kinematics (Appendix A-B) ----------------------------------------------------------
+    # The vector field works with sines and cosines only: sin and cos of alpha are computed once,
+    # those of beta and gamma follow algebraically from the loop closure (no arctan2), and the
+    # differences (alpha - beta, gamma - beta, ...) by the addition formulas. One evaluation of
+    # F(alpha, ...) costs two transcendental calls and a square root instead of ~27.
     def _abcd(self, alpha):
+        return self._abcd_sc(jnp.sin(alpha), jnp.cos(alpha))
+
+    def _abcd_sc(self, sa, ca):
         a, b, c, hx, hy = self.a, self.b, self.c, self.hx, self.hy
-        sa, ca = jnp.sin(alpha), jnp.cos(alpha)
         A = 2 * c * (hy - a * sa)
         B = 2 * c * (hx - a * ca)
         C = a**2 - b**2 + c**2 + hx**2 + hy**2 - 2 * a * (hx * ca + hy * sa)
         return A, B, C, A**2 + B**2 - C**2
 
-    def angles(self, alpha):
-        """Coupler and rocker angles $(\\beta(\\alpha), \\gamma(\\alpha))$ [rad] (Appendix A), elementwise."""
-        alpha = jnp.asarray(alpha, dtype=float)
-        A, B, C, D2 = self._abcd(alpha)
+    def _trig(self, sa, ca):
+        """$(\sin\beta, \cos\beta, \sin\gamma, \cos\gamma)$ from $(\sin\alpha, \cos\alpha)$ (Appendix A)."""
+        A, B, C, D2 = self._abcd_sc(sa, ca)
         D = jnp.sqrt(D2)
         k = float(self.assembly)
-        den = A**2 + B**2
-        sg = -(A * C + k * B * D) / den
-        cg = -(B * C - k * A * D) / den
-        sb = (self.hy + self.c * sg - self.a * jnp.sin(alpha)) / self.b
-        cb = (self.hx + self.c * cg - self.a * jnp.cos(alpha)) / self.b
+        inv = 1.0 / (A**2 + B**2)
+        sg = -(A * C + k * B * D) * inv
+        cg = -(B * C - k * A * D) * inv
+        inv_b = 1.0 / self.b
+        sb = (self.hy + self.c * sg - self.a * sa) * inv_b
+        cb = (self.hx + self.c * cg - self.a * ca) * inv_b
+        return sb, cb, sg, cg
+
+    def angles(self, alpha):
+        """Coupler and rocker angles $(\beta(\alpha), \gamma(\alpha))$ [rad] (Appendix A), elementwise."""
+        alpha = jnp.asarray(alpha, dtype=float)
+        sb, cb, sg, cg = self._trig(jnp.sin(alpha), jnp.cos(alpha))
         return jnp.arctan2(sb, cb), jnp.arctan2(sg, cg)
 
+    def _ratios_sc(self, sa, ca, sb, cb, sg, cg):
+        s = sg * cb - cg * sb  # sin(gamma - beta)
+        sab = sa * cb - ca * sb  # sin(alpha - beta)
+        Q = self.a * (sa * cg - ca * sg) / (self.b * s)
+        Rr = self.a * sab / (self.c * s)
+        return Q, Rr, sab
+
     def velocity_ratios(self, alpha):
-        """$(Q(\\alpha), R(\\alpha)) = (d\\beta/d\\alpha, d\\gamma/d\\alpha)$ in closed form (Appendix B)."""
-        beta, gamma = self.angles(alpha)
-        s = jnp.sin(gamma - beta)
-        Q = self.a * jnp.sin(alpha - gamma) / (self.b * s)
-        Rr = self.a * jnp.sin(alpha - beta) / (self.c * s)
+        """$(Q(\alpha), R(\alpha)) = (d\beta/d\alpha, d\gamma/d\alpha)$ in closed form (Appendix B)."""
+        alpha = jnp.asarray(alpha, dtype=float)
+        sa, ca = jnp.sin(alpha), jnp.cos(alpha)
+        Q, Rr, _ = self._ratios_sc(sa, ca, *self._trig(sa, ca))
         return Q, Rr
 
     def points(self, alpha):
@@ -209,21 +232,27 @@ class FourBarDrive(AbstractModel):
         return {"A": pA, "B": pB, "C": pC, "D": pD, "G1": g1, "G2": g2, "G3": g3}
 
     def _energy_coeffs(self, alpha):
-        # J and Ep from one evaluation of the angles (the vector field differentiates this).
-        beta, gamma = self.angles(alpha)
-        s = jnp.sin(gamma - beta)
-        Q = self.a * jnp.sin(alpha - gamma) / (self.b * s)
-        Rr = self.a * jnp.sin(alpha - beta) / (self.c * s)
+        return self._energy_sc(jnp.sin(alpha), jnp.cos(alpha))
+
+    def _energy_sc(self, sa, ca):
+        # J and Ep as algebraic functions of (sin alpha, cos alpha): the vector field
+        # differentiates this along (cos alpha, -sin alpha) without any further sin/cos
+        sb, cb, sg, cg = self._trig(sa, ca)
+        Q, Rr, sab = self._ratios_sc(sa, ca, sb, cb, sg, cg)
+        cab = ca * cb + sa * sb  # cos(alpha - beta)
+        c1, s1 = jnp.cos(self.theta1), jnp.sin(self.theta1)
+        c2, s2 = jnp.cos(self.theta2), jnp.sin(self.theta2)
+        c3, s3 = jnp.cos(self.theta3), jnp.sin(self.theta3)
         JA = self.jg1 + self.m1 * self.f1**2
         JB = self.jg2 + self.m2 * self.f2**2
         JD = self.jg3 + self.m3 * self.f3**2
         J = (
             JA + JD * Rr**2 + self.m2 * self.a**2 + JB * Q**2
-            + 2 * self.a * self.f2 * self.m2 * Q * jnp.cos(alpha - beta - self.theta2)
+            + 2 * self.a * self.f2 * self.m2 * Q * (cab * c2 + sab * s2)  # cos(alpha - beta - theta2)
         )
-        y1 = self.f1 * jnp.sin(alpha + self.theta1)
-        y2 = self.a * jnp.sin(alpha) + self.f2 * jnp.sin(beta + self.theta2)
-        y3 = self.hy + self.f3 * jnp.sin(gamma + self.theta3)
+        y1 = self.f1 * (sa * c1 + ca * s1)  # f1 sin(alpha + theta1)
+        y2 = self.a * sa + self.f2 * (sb * c2 + cb * s2)
+        y3 = self.hy + self.f3 * (sg * c3 + cg * s3)
         return J, self.g * (self.m1 * y1 + self.m2 * y2 + self.m3 * y3)
 
     def inertia(self, alpha):
@@ -241,7 +270,9 @@ class FourBarDrive(AbstractModel):
     def inertia_and_potential(self, alpha):
         """`(J, Ep, dJ/dalpha, dEp/dalpha)` elementwise; the derivatives by forward-mode AD."""
         alpha = jnp.asarray(alpha, dtype=float)
-        (J, Ep), (dJ, dEp) = jax.jvp(self._energy_coeffs, (alpha,), (jnp.ones_like(alpha),))
+        sa, ca = jnp.sin(alpha), jnp.cos(alpha)
+        # d/dalpha acts on (sin, cos) as the tangent (cos, -sin): a JVP of an algebraic function
+        (J, Ep), (dJ, dEp) = jax.jvp(self._energy_sc, (sa, ca), (ca, -sa))
         return J, Ep, dJ, dEp
 
     def dinertia(self, alpha):

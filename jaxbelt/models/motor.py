@@ -13,7 +13,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._checks import check_finite, check_nonnegative, check_positive
+from .._checks import check_fields, check_nonnegative
 from .._checks import as_float_array as _arr
 from ..commands import AbstractController, MotorState
 
@@ -67,15 +67,13 @@ class PID(AbstractController):
 
     def __check_init__(self):
         o = "PID"
-        check_finite("kp", self.kp, o)
-        check_finite("ki", self.ki, o)
-        check_finite("kd", self.kd, o)
-        check_finite("omega_ref", self.omega_ref, o)
-        if self.v_limit is not None:
-            check_positive("v_limit", self.v_limit, "V", o)
-        check_positive("v_smooth", self.v_smooth, "V", o)
         if self.limiter not in _LIMITERS:
             raise ValueError(f"{o}: `limiter` must be one of {_LIMITERS}; got {self.limiter!r}")
+        checks = [(n, getattr(self, n), "finite", "") for n in ("kp", "ki", "kd", "omega_ref")]
+        if self.v_limit is not None:
+            checks.append(("v_limit", self.v_limit, "positive", "V"))
+        checks.append(("v_smooth", self.v_smooth, "positive", "V"))
+        check_fields(o, checks)  # one transfer for all the fields
 
     def raw_voltage(self, t, phi, phi_dot, phi_ddot):
         """Regulator output before the limiter [V] (eq. 16 with the constant set point)."""
