@@ -133,15 +133,19 @@ def exp_input_batch(A, F, s, x0, t0, ts, f_var, s_var, *, uniform: bool = False,
         if n_chunks == 1:
             return separated_chunk(s_var, q)
         # chunks keep the intermediates of one GEMM in cache instead of streaming B x N x n
-        # arrays through memory several times
-        # equal chunks of at most `chunk` elements; padding (and the copy that removes it) only
-        # when no such split exists
-        pad = n_chunks * size - nb
-        s_p = jnp.concatenate([s_var, jnp.repeat(s_var[-1:], pad)]).reshape(n_chunks, size)
-        q_p = jnp.concatenate([q, jnp.repeat(q[-1:], pad, axis=0)]).reshape(n_chunks, size, -1)
-        xs = jax.lax.map(lambda a: separated_chunk(*a), (s_p, q_p))
-        xs = xs.reshape(n_chunks * size, *xs.shape[2:])
-        return xs if pad == 0 else xs[:nb]
+        # arrays through memory several times. Each chunk is written into the output in place
+        # (a loop of dynamic_update_slice): no padded copy of the batch. The last chunk starts at
+        # B - size, overlapping its predecessor when `size` does not divide B; the overlap is
+        # recomputed from the same inputs and written with the same values.
+        out = jnp.zeros((nb, tau.shape[0], A.shape[0]), dtype=shared.dtype)
+
+        def body(i, out):
+            start = jnp.minimum(i * size, nb - size)
+            s_c = jax.lax.dynamic_slice_in_dim(s_var, start, size)
+            q_c = jax.lax.dynamic_slice_in_dim(q, start, size)
+            return jax.lax.dynamic_update_slice_in_dim(out, separated_chunk(s_c, q_c), start, axis=0)
+
+        return jax.lax.fori_loop(0, n_chunks, body, out)
 
     def exact():
         return shared[None] + jax.lax.map(lambda a: _exact_one(lam, X, a[0], a[1], tau), (q, s_var))

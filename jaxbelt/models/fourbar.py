@@ -182,7 +182,7 @@ class FourBarDrive(AbstractModel):
         return A, B, C, A**2 + B**2 - C**2
 
     def _trig(self, sa, ca):
-        """$(\sin\beta, \cos\beta, \sin\gamma, \cos\gamma)$ from $(\sin\alpha, \cos\alpha)$ (Appendix A)."""
+        """$(\\sin\\beta, \\cos\\beta, \\sin\\gamma, \\cos\\gamma)$ from $(\\sin\\alpha, \\cos\\alpha)$ (Appendix A)."""
         A, B, C, D2 = self._abcd_sc(sa, ca)
         D = jnp.sqrt(D2)
         k = float(self.assembly)
@@ -195,7 +195,7 @@ class FourBarDrive(AbstractModel):
         return sb, cb, sg, cg
 
     def angles(self, alpha):
-        """Coupler and rocker angles $(\beta(\alpha), \gamma(\alpha))$ [rad] (Appendix A), elementwise."""
+        """Coupler and rocker angles $(\\beta(\\alpha), \\gamma(\\alpha))$ [rad] (Appendix A), elementwise."""
         alpha = jnp.asarray(alpha, dtype=float)
         sb, cb, sg, cg = self._trig(jnp.sin(alpha), jnp.cos(alpha))
         return jnp.arctan2(sb, cb), jnp.arctan2(sg, cg)
@@ -208,7 +208,7 @@ class FourBarDrive(AbstractModel):
         return Q, Rr, sab
 
     def velocity_ratios(self, alpha):
-        """$(Q(\alpha), R(\alpha)) = (d\beta/d\alpha, d\gamma/d\alpha)$ in closed form (Appendix B)."""
+        """$(Q(\\alpha), R(\\alpha)) = (d\\beta/d\\alpha, d\\gamma/d\\alpha)$ in closed form (Appendix B)."""
         alpha = jnp.asarray(alpha, dtype=float)
         sa, ca = jnp.sin(alpha), jnp.cos(alpha)
         Q, Rr, _ = self._ratios_sc(sa, ca, *self._trig(sa, ca))
