@@ -22,7 +22,19 @@ from pathlib import Path
 import jax
 import numpy as np
 
-RESULTS = Path(__file__).resolve().parent / "results"
+COMMITTED = Path(__file__).resolve().parent / "results"
+#: Scratch folder of `run_all.py --quick` (git-ignored): quick figures never overwrite the committed ones.
+QUICK_RESULTS = COMMITTED / "quick"
+#: Where JSON and PNG files go: `$JAXBELT_BENCH_OUT` when set (run_all sets it), else `results/`.
+RESULTS = Path(os.environ["JAXBELT_BENCH_OUT"]) if os.environ.get("JAXBELT_BENCH_OUT") else COMMITTED
+
+
+def results_dir(quick: bool = False) -> Path:
+    """Where a benchmark writes: `$JAXBELT_BENCH_OUT` if set (run_all sets it), else `results/quick/`
+    for a quick run and `results/` for a full one."""
+    if os.environ.get("JAXBELT_BENCH_OUT"):
+        return RESULTS
+    return QUICK_RESULTS if quick else COMMITTED
 
 
 def block(x):
@@ -81,11 +93,12 @@ def machine_info() -> dict:
 
 
 def write_results(scene: str, rows: list, headline: list, quick: bool, extra: dict | None = None) -> Path:
-    RESULTS.mkdir(parents=True, exist_ok=True)
+    out = results_dir(quick)
+    out.mkdir(parents=True, exist_ok=True)
     data = {"scene": scene, "machine": machine_info(), "quick": bool(quick), "rows": rows, "headline": headline}
     if extra:
         data.update(extra)
-    path = RESULTS / f"{scene}.json"
+    path = out / f"{scene}.json"
     path.write_text(json.dumps(data, indent=2, default=float))
     return path
 

@@ -6,19 +6,22 @@ scene's compile caches and memory do not affect the next), and finally calls
 `readme_table.update_readme()`.
 
 Run: `python benchmarks/run_all.py [--quick] [--only startup fourbar]` (also `jaxbelt bench`).
-`--quick` is the CI size: the whole run stays under 2 minutes on 2 cores.
+`--quick` is the CI size: the whole run stays under 2 minutes on 2 cores. Its figures go to the
+git-ignored scratch folder `benchmarks/results/quick/` and leave the committed results and the
+README table alone; `--update` writes them over the committed ones (and regenerates the table).
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-HELPERS = {"run_all", "readme_table", "shortcuts"}
+HELPERS = {"run_all", "readme_table", "shortcuts", "coldstart"}  # coldstart: minutes of cold CLI runs, run alone
 
 
 def discover() -> list[str]:
@@ -30,6 +33,8 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true", help="CI-sized runs (< 2 minutes in all on 2 cores)")
     p.add_argument("--only", nargs="+", metavar="SCENE", help="run only these scenes")
     p.add_argument("--timeout", type=float, default=None, help="per-scene time limit [s]")
+    p.add_argument("--update", action="store_true",
+                   help="with --quick: overwrite the committed results and README table (default: scratch folder)")
     args = p.parse_args(argv)
     scenes = discover()
     if args.only:
@@ -40,21 +45,30 @@ def main(argv=None) -> int:
         scenes = [s for s in scenes if s in args.only]
     failed = []
     t0 = time.perf_counter()
+    scratch = args.quick and not args.update
+    env = dict(os.environ)
+    if scratch:
+        env["JAXBELT_BENCH_OUT"] = str(HERE / "results" / "quick")
+    else:
+        env.pop("JAXBELT_BENCH_OUT", None)
     for scene in scenes:
         cmd = [sys.executable, str(HERE / f"{scene}.py")] + (["--quick"] if args.quick else [])
         print(f"=== {scene}: {' '.join(cmd[1:])}", flush=True)
         t = time.perf_counter()
         try:
-            rc = subprocess.run(cmd, cwd=HERE.parent, timeout=args.timeout).returncode
+            rc = subprocess.run(cmd, cwd=HERE.parent, timeout=args.timeout, env=env).returncode
         except subprocess.TimeoutExpired:
             rc = "timeout"
         print(f"=== {scene}: {'ok' if rc == 0 else f'FAILED ({rc})'} in {time.perf_counter() - t:.1f} s", flush=True)
         if rc != 0:
             failed.append(scene)
-    sys.path.insert(0, str(HERE))
-    import readme_table
+    if scratch:
+        print(f"run_all: quick results in {env['JAXBELT_BENCH_OUT']} (committed results untouched; --update to overwrite)")
+    else:
+        sys.path.insert(0, str(HERE))
+        import readme_table
 
-    readme_table.update_readme()
+        readme_table.update_readme()
     print(f"run_all: {len(scenes) - len(failed)}/{len(scenes)} benchmarks ran in {time.perf_counter() - t0:.1f} s"
           + (f"; failed: {failed}" if failed else ""))
     return 1 if failed else 0

@@ -1,0 +1,318 @@
+"""Cold start and throughput: imports, CLI with and without the compilation cache, compile-once,
+eager dispatch, construction costs, the batched closed form's memory and the four-bar sweep.
+
+Writes `benchmarks/results/coldstart.json` (+ `.png`). Every ratio is measured in the same run
+(medians of repeats); the machine is shared with other work, so absolute times are noisy.
+
+Run: `python benchmarks/coldstart.py [--quick] [--cli startup fourbar ...]` (not part of
+`run_all.py`: the cold CLI runs alone take minutes).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(ROOT))
+
+from _common import RESULTS, machine_info, results_dir, time_jax  # noqa: E402
+
+ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""), MPLBACKEND="Agg")
+CLI_ARGS = {
+    "startup": [], "fourbar": [], "string": [], "shaping": [], "nonlinear": [],
+}
+
+
+def wall(cmd, env=ENV) -> float:
+    t = time.perf_counter()
+    out = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=tempfile.gettempdir())
+    if out.returncode != 0:
+        raise RuntimeError(f"{cmd}: {out.stderr[-2000:]}")
+    return time.perf_counter() - t
+
+
+def imports(repeats: int) -> dict:
+    base, ours = [], []
+    for _ in range(repeats):  # interleaved, so that load changes hit both
+        base.append(wall([sys.executable, "-c", "import jax, diffrax, equinox, optax"]))
+        ours.append(wall([sys.executable, "-c", "import jaxbelt"]))
+    b, o = float(np.median(base)), float(np.median(ours))
+    return {"deps_s": b, "jaxbelt_s": o, "ratio": o / b, "repeats": repeats}
+
+
+def cli(commands, repeats: int) -> dict:
+    out = {}
+    for name in commands:
+        cold, warm, nocache = [], [], []
+        for _ in range(repeats):
+            with tempfile.TemporaryDirectory() as d:
+                env = dict(ENV, JAXBELT_CACHE_DIR=d)
+                png = str(Path(d) / "out.png")
+                cmd = [sys.executable, "-m", "jaxbelt", name, *CLI_ARGS[name], "--out", png]
+                cold.append(wall(cmd, env))  # empty cache: compiles and writes
+                warm.append(wall(cmd, env))  # same cache folder: loads
+                nocache.append(wall([sys.executable, "-m", "jaxbelt", "--no-cache", name, *CLI_ARGS[name],
+                                     "--out", png], env))
+        c, w, n = (float(np.median(x)) for x in (cold, warm, nocache))
+        out[name] = {"cold_s": c, "warm_s": w, "no_cache_s": n, "warm_over_cold": w / c, "repeats": repeats}
+        print(f"cli {name}: cold {c:.1f} s, warm {w:.1f} s ({w / c:.2f}x), --no-cache {n:.1f} s", flush=True)
+    return out
+
+
+def compile_once(quick: bool) -> dict:
+    import jax
+    import jax.numpy as jnp
+
+    import jaxbelt as jb
+
+    res = {}
+    drive, pid = jb.FourBarDrive(), jb.PID(v_limit=40.0)
+    steps = 4 if quick else 12
+    t = time.perf_counter()
+    jb.tune_pid(drive, pid, steps=steps, progress=False)
+    first = time.perf_counter() - t
+    seconds = []
+    for lr in (0.05, 0.08, 0.12):
+        t = time.perf_counter()
+        jb.tune_pid(drive, jb.PID(kp=70.0, v_limit=40.0), steps=steps, progress=False, learning_rate=lr)
+        seconds.append(time.perf_counter() - t)
+    second = float(np.median(seconds))
+    res["tune_pid"] = {"steps": steps, "first_s": first, "second_s": second, "ratio": second / first}
+
+    plat = jb.BeltPlatform()
+    cmd = jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]))
+    eager = lambda: jb.residual_energy(plat, cmd)  # noqa: E731
+    jitted = jax.jit(lambda p, c: jb.residual_energy(p, c))
+    t_e, _, _ = time_jax(eager, repeats=15, min_time=0.05)
+    t_j, _, _ = time_jax(jitted, plat, cmd, repeats=15, min_time=0.05)
+    res["residual_energy"] = {"eager_s": t_e, "jit_s": t_j, "ratio": t_e / t_j}
+
+    t = time.perf_counter()
+    jb.optimise_command(plat, cmd, progress=False, max_steps=30)
+    first = time.perf_counter() - t
+    t = time.perf_counter()
+    jb.optimise_command(plat, jb.PseudoPolynomial(jnp.array([3.2, 4.1, 5.3])), progress=False, max_steps=30)
+    res["optimise_command"] = {"first_s": first, "second_s": time.perf_counter() - t}
+    res["optimise_command"]["ratio"] = res["optimise_command"]["second_s"] / first
+    return res
+
+
+def construction() -> dict:
+    import jax.numpy as jnp
+
+    import jaxbelt as jb
+
+    ts = np.linspace(0.0, 0.5, 501)
+    makers = {
+        "FourBarDrive()": jb.FourBarDrive,
+        "PID()": jb.PID,
+        "BeltPlatform()": jb.BeltPlatform,
+        "BeltStartup()": jb.BeltStartup,
+        "PseudoPolynomial(3 exponents)": lambda: jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0])),
+        "Scene(FourBarDrive, PID, ts)": lambda: jb.Scene(jb.FourBarDrive(), jb.PID(), ts=ts),
+    }
+    out = {}
+    for name, make in makers.items():
+        make()
+        samples = []
+        for _ in range(7):
+            t = time.perf_counter()
+            for _ in range(20):
+                make()
+            samples.append((time.perf_counter() - t) / 20)
+        out[name] = {"median_s": float(np.median(samples))}
+    return out
+
+
+def closed_form(quick: bool) -> dict:
+    import jax
+    import jax.numpy as jnp
+
+    import jaxbelt as jb
+    from jaxbelt.fast import startup_gamma_batch
+
+    model = jb.BeltStartup()
+    ts = jnp.linspace(0.0, 0.5, 501)
+    res = {}
+    for n in ((1000, 100_000) if not quick else (1000, 100_000)):
+        g = jnp.linspace(0.01, 0.1, n)
+        c = jax.jit(lambda g: startup_gamma_batch(model, g, ts)).lower(g).compile()
+        ma = c.memory_analysis()
+        out_bytes = n * ts.shape[0] * model.linear_system()[0].shape[0] * 8
+        res[f"batch_{n}"] = {"output_bytes": out_bytes, "temp_bytes": ma.temp_size_in_bytes,
+                             "peak_over_output": (ma.output_size_in_bytes + ma.temp_size_in_bytes) / out_bytes}
+    # process high-water mark (RSS) at 100 000: a fresh process, baseline without the call
+    code = ("import resource, jax, jax.numpy as jnp, jaxbelt as jb; from jaxbelt.fast import startup_gamma_batch;"
+            "m = jb.BeltStartup(); ts = jnp.linspace(0, 0.5, 501); g = jnp.linspace(0.01, 0.1, {n});"
+            "f = jax.jit(lambda g: startup_gamma_batch(m, g, ts)); c = f.lower(g).compile();"
+            "r0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss; y = c(g).block_until_ready();"
+            "print(r0, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)")
+    out = subprocess.run([sys.executable, "-c", code.format(n=100_000)], env=ENV, capture_output=True, text=True)
+    if out.returncode == 0:
+        r0, r1 = (int(x) * 1024 for x in out.stdout.split())
+        res["batch_100000"].update(rss_before_bytes=r0, rss_peak_bytes=r1,
+                                   rss_growth_over_output=(r1 - r0) / res["batch_100000"]["output_bytes"])
+    # one closed-form simulate call against its compiled program (depends on solve.py's dispatch)
+    scene = jb.Scene(model, jb.ExponentialVoltage(24.0, 0.04), ts=np.asarray(ts))
+    call = lambda: jb.simulate(scene).ys  # noqa: E731
+    prog = jax.jit(lambda s: jb.simulate(s).ys)
+    t_c, _, _ = time_jax(call, repeats=15, min_time=0.05)
+    t_p, _, _ = time_jax(prog, scene, repeats=15, min_time=0.05)
+    res["single_call"] = {"simulate_s": t_c, "jit_program_s": t_p, "ratio": t_c / t_p}
+    return res
+
+
+def fourbar_sweep(quick: bool) -> dict:
+    """χ of n PID gain sets: diffrax (Tsit5, rtol 1e-6) and the paper's RK4 at 1 ms, against a tight
+    reference (rtol 1e-10) and a scipy LSODA loop at about the same χ error."""
+    import jax
+    import jax.numpy as jnp
+
+    import jaxbelt as jb
+    from fourbar import KD, KI, KP, W0, chi_np, np_rhs_factory, scipy_solve
+    from jaxbelt.objectives.fluctuation import closed_loop_metrics
+
+    drive = jb.FourBarDrive()
+    n = 200 if quick else 1000
+    rng = np.random.default_rng(0)
+    gains = jnp.asarray(np.array([KP, KI, KD]) * np.exp(rng.uniform(-0.7, 0.7, size=(n, 3))))
+    base = jb.PID(kp=KP, ki=KI, kd=KD, omega_ref=W0)
+
+    def chi(method, **kw):
+        return lambda g: closed_loop_metrics(drive, base.with_gains(g), 0.375, 0.5, method=method, **kw)["chi"]
+
+    n_ref = 20
+    ref = np.asarray(jax.jit(jax.vmap(chi("ode", rtol=1e-10, atol=1e-10)))(gains[:n_ref]))
+    out = {"n": n, "devices": len(jax.local_devices())}
+    for name, f in (("diffrax Tsit5 rtol 1e-6", chi("ode", rtol=1e-6, atol=1e-6)),
+                    ("RK4 dt 1 ms (paper)", chi("rk4", dt=1e-3))):
+        t, c, chis = time_jax(lambda g, f=f: jb.sweep(f, g), gains, repeats=1 if quick else 3, min_time=0.0)
+        err = float(np.max(np.abs(np.asarray(chis)[:n_ref] - ref)))
+        out[name] = {"time_s": t, "compile_s": c, "chi_abs_error": err}
+        print(f"four-bar sweep {name}: {t:.2f} s for {n}, chi error {err:.1e}", flush=True)
+    rhs = np_rhs_factory(drive)
+    ts = np.linspace(0.0, 0.5, 1001)
+    for rtol in (1e-6, 1e-8):
+        t0 = time.perf_counter()
+        chis = []
+        for g in np.asarray(gains[:n_ref]):
+            ys = scipy_solve(rhs, ts, "LSODA", rtol, gains=(g[0], g[1], g[2], W0))
+            chis.append(chi_np(ts, ys[:, 1], 0.375, 0.5))
+        t = (time.perf_counter() - t0) / n_ref * n
+        out[f"scipy LSODA rtol {rtol:g}"] = {"time_s": t, "chi_abs_error": float(np.max(np.abs(np.array(chis) - ref))),
+                                             "timed_runs": n_ref}
+    return out
+
+
+def plot(data, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+    cli_d = data.get("cli", {})
+    names = list(cli_d)
+    x = np.arange(len(names))
+    ax = axes[0]
+    ax.bar(x - 0.25, [cli_d[k]["no_cache_s"] for k in names], 0.25, label="--no-cache")
+    ax.bar(x, [cli_d[k]["cold_s"] for k in names], 0.25, label="cold cache")
+    ax.bar(x + 0.25, [cli_d[k]["warm_s"] for k in names], 0.25, label="warm cache")
+    ax.set_xticks(x, names)
+    ax.set_ylabel("wall time [s]")
+    ax.set_title("jaxbelt CLI")
+    ax.legend()
+    ax = axes[1]
+    labels, vals = [], []
+    for k, v in data["compile_once"].items():
+        labels.append(f"{k}\n2nd/1st" if "first_s" in v else f"{k}\neager/jit")
+        vals.append(v["ratio"])
+    labels.append("import\njaxbelt/deps")
+    vals.append(data["imports"]["ratio"])
+    ax.bar(range(len(vals)), vals)
+    ax.set_xticks(range(len(vals)), labels, fontsize=8)
+    ax.set_yscale("log")
+    ax.set_title("ratios (lower is better)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--quick", action="store_true", help="fewer repeats, two CLI commands, a 200-gain sweep")
+    p.add_argument("--cli", nargs="*", default=None, help="CLI commands to time cold/warm (default: all; quick: startup)")
+    p.add_argument("--skip", nargs="*", default=(), help="parts to skip: imports cli compile construction closed sweep")
+    args = p.parse_args(argv)
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+    commands = args.cli if args.cli is not None else (["startup"] if args.quick else list(CLI_ARGS))
+    data = {"scene": "coldstart", "machine": machine_info(), "quick": bool(args.quick),
+            "shared_machine": "2 CPU cores shared with other developers' jobs while measuring: absolute times are "
+                              "noisy; compare the ratios, each measured in the same run (medians of repeats)"}
+    parts = {
+        "imports": lambda: imports(3 if args.quick else 7),
+        "cli": lambda: cli(commands, 1),
+        "compile_once": lambda: compile_once(args.quick),
+        "construction": construction,
+        "closed_form": lambda: closed_form(args.quick),
+        "fourbar_sweep": lambda: fourbar_sweep(args.quick),
+    }
+    for name, fn in parts.items():
+        if name in args.skip:
+            continue
+        t = time.perf_counter()
+        data[name] = fn()
+        print(f"{name}: {time.perf_counter() - t:.1f} s", flush=True)
+    data["rows"] = []
+    head = []
+    if "compile_once" in data:
+        co = data["compile_once"]
+        head += [
+            {"what": "tune_pid: second call / first", "unit": "x", "value": co["tune_pid"]["ratio"], "target": "<= 0.2"},
+            {"what": "residual_energy: eager / jitted program", "unit": "x", "value": co["residual_energy"]["ratio"],
+             "target": "<= 3"},
+        ]
+    if "imports" in data:
+        head.append({"what": "import jaxbelt / import jax+diffrax+equinox+optax", "unit": "x",
+                     "value": data["imports"]["ratio"], "target": "<= 1.1"})
+    for k, v in data.get("cli", {}).items():
+        head.append({"what": f"CLI {k}: warm cache / cold", "unit": "x", "value": v["warm_over_cold"], "target": "<= 0.5"})
+    if "closed_form" in data:
+        cf = data["closed_form"]
+        head.append({"what": "start-up batch of 100 000: peak / output (XLA)", "unit": "x",
+                     "value": cf["batch_100000"]["peak_over_output"], "target": "<= 1.15"})
+        head.append({"what": "single closed-form simulate / compiled program", "unit": "x",
+                     "value": cf["single_call"]["ratio"], "target": "<= 1.5"})
+    if "fourbar_sweep" in data:
+        fs = data["fourbar_sweep"]
+        best = min(fs["diffrax Tsit5 rtol 1e-6"]["time_s"], fs["RK4 dt 1 ms (paper)"]["time_s"])
+        head.append({"what": f"four-bar {fs['n']}-gain sweep: scipy LSODA rtol 1e-6 / jaxbelt", "unit": "x",
+                     "value": fs["scipy LSODA rtol 1e-6"]["time_s"] / best, "target": ">= 50"})
+    data["headline"] = head
+    import json
+
+    out_dir = results_dir(args.quick)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    path = out_dir / "coldstart.json"
+    path.write_text(json.dumps(data, indent=2, default=float))
+    print("wrote", path)
+    for h in head:
+        print(f"  {h['what']}: {h['value']:.3g} (target {h['target']})")
+    if "compile_once" in data and "imports" in data:
+        plot(data, out_dir / "coldstart.png")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
