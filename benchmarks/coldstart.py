@@ -209,7 +209,7 @@ def fourbar_sweep(quick: bool) -> dict:
             ys = scipy_solve(rhs, ts, "LSODA", rtol, gains=(g[0], g[1], g[2], W0))
             chis.append(chi_np(ts, ys[:, 1], 0.375, 0.5))
         t = (time.perf_counter() - t0) / n_ref * n
-        out[f"scipy LSODA rtol {rtol:g}"] = {"time_s": t, "chi_abs_error": float(np.max(np.abs(np.array(chis) - ref))),
+        out[f"scipy LSODA rtol {rtol:.0e}".replace("e-0", "e-")] = {"time_s": t, "chi_abs_error": float(np.max(np.abs(np.array(chis) - ref))),
                                              "timed_runs": n_ref}
     return out
 
@@ -261,7 +261,7 @@ def main(argv=None) -> int:
             "shared_machine": "2 CPU cores shared with other developers' jobs while measuring: absolute times are "
                               "noisy; compare the ratios, each measured in the same run (medians of repeats)"}
     parts = {
-        "imports": lambda: imports(3 if args.quick else 7),
+        "imports": lambda: imports(3 if args.quick else 5),
         "cli": lambda: cli(commands, 1),
         "compile_once": lambda: compile_once(args.quick),
         "construction": construction,
