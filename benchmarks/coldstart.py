@@ -296,9 +296,14 @@ def main(argv=None) -> int:
                      "value": cf["single_call"]["ratio"], "target": "<= 1.5"})
     if "fourbar_sweep" in data:
         fs = data["fourbar_sweep"]
-        best = min(fs["diffrax Tsit5 rtol 1e-6"]["time_s"], fs["RK4 dt 1 ms (paper)"]["time_s"])
-        head.append({"what": f"four-bar {fs['n']}-gain sweep: scipy LSODA rtol 1e-6 / jaxbelt", "unit": "x",
-                     "value": fs["scipy LSODA rtol 1e-6"]["time_s"] / best, "target": ">= 50"})
+        # matched error: Tsit5 rtol 1e-6 and LSODA rtol 1e-6 reach about the same chi error (~5e-7);
+        # the paper's RK4 is faster but 200x less accurate, reported on its own
+        sp = fs["scipy LSODA rtol 1e-6"]["time_s"]
+        head.append({"what": f"four-bar {fs['n']}-gain sweep at matched chi error: scipy LSODA / diffrax Tsit5",
+                     "unit": "x", "value": sp / fs["diffrax Tsit5 rtol 1e-6"]["time_s"], "target": ">= 50"})
+        head.append({"what": f"four-bar {fs['n']}-gain sweep, paper's RK4 1 ms (chi error "
+                             f"{fs['RK4 dt 1 ms (paper)']['chi_abs_error']:.0e}): scipy LSODA rtol 1e-6 / RK4",
+                     "unit": "x", "value": sp / fs["RK4 dt 1 ms (paper)"]["time_s"], "target": None})
     data["headline"] = head
     import json
 
