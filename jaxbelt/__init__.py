@@ -25,8 +25,8 @@ from .models import AbstractLinearModel as AbstractLinearModel  # noqa: E402
 from .models import integrand as integrand  # noqa: E402
 from .models import observable as observable  # noqa: E402
 from .scene import Scene as Scene  # noqa: E402
-from .solve import Solution as Solution  # noqa: E402
-from .solve import SolveError as SolveError  # noqa: E402
+from .solution import Solution as Solution  # noqa: E402
+from .solution import SolveError as SolveError  # noqa: E402
 from .solve import simulate as simulate  # noqa: E402
 from .sweep import sweep as sweep  # noqa: E402
 

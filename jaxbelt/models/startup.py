@@ -145,14 +145,12 @@ class _BeltDriveBase(AbstractLinearModel):
         nz = mag[mag > 1e-9 * mag.max()]
         return float(nz.max() / nz.min())
 
+    def accepts_output(self, name: str) -> bool:
+        """Accelerations `alpha3`, `alpha4`, ... of longer chains (`alpha1`, `alpha2` are declared)."""
+        return name.startswith("alpha") and name[5:].isdigit() and 1 <= int(name[5:]) <= self.n_shafts
+
     def output(self, name, t, y, inp):
-        # accelerations alpha3, alpha4, ... of longer chains (alpha1, alpha2 are methods below)
-        if (
-            name not in self.output_names()
-            and name.startswith("alpha")
-            and name[5:].isdigit()
-            and 1 <= int(name[5:]) <= self.n_shafts
-        ):
+        if name not in self.output_names() and self.accepts_output(name):
             return self._accel(t, y, inp)[int(name[5:]) - 1]
         return super().output(name, t, y, inp)
 
