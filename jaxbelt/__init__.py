@@ -25,6 +25,7 @@ from .models import AbstractLinearModel as AbstractLinearModel  # noqa: E402
 from .models import integrand as integrand  # noqa: E402
 from .models import observable as observable  # noqa: E402
 from .scene import Scene as Scene  # noqa: E402
+from .scene import TracedGridWarning as TracedGridWarning  # noqa: E402
 from .solution import Solution as Solution  # noqa: E402
 from .solution import SolveError as SolveError  # noqa: E402
 from .solve import simulate as simulate  # noqa: E402

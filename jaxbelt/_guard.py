@@ -14,11 +14,13 @@ modules inside them) and collects each check as `(ok, message)`, `ok` a boolean 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import threading
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ._checks import is_concrete
 
@@ -71,6 +73,38 @@ def traced_checks(*trees) -> list:
     return found
 
 
+@functools.partial(jax.custom_jvp, nondiff_argnums=(2,))
+def _checked(x, pred, message):
+    return eqx.error_if(x, pred, message)
+
+
+@_checked.defjvp
+def _checked_jvp(message, primals, tangents):
+    x, pred = primals
+    tx, _ = tangents
+    # The tangent is scaled by a guarded 1: the backward pass of `grad` needs that factor, so the
+    # check runs even when the caller keeps only the gradient (a check on the primal output alone
+    # would be removed as dead code in `jit(grad(f))`).
+    one = eqx.error_if(jnp.ones((), dtype=x.dtype), pred, message)
+    return eqx.error_if(x, pred, message), tx * one
+
+
+def error_if(value, pred, message: str):
+    """`eqx.error_if` on every inexact leaf of `value` that also guards derivatives.
+
+    Under `jax.grad`/`jax.jacfwd` the check runs in the derivative program too, so an invalid
+    value raises whether the caller keeps the value, its gradient or both.
+    """
+    pred = jnp.asarray(pred)
+
+    def one(x):
+        if isinstance(x, (jax.Array, np.ndarray)) and jnp.issubdtype(x.dtype, jnp.inexact) and x.size:
+            return _checked(x, pred, message)
+        return x
+
+    return jax.tree_util.tree_map(one, value)
+
+
 def all_ok(checks):
     """Conjunction of the checks' flags (True when there are none)."""
     ok = jnp.array(True)
@@ -89,7 +123,7 @@ def guard(value, checks, throw: bool = True):
         return value, ok
     if throw:
         for c, msg in checks:
-            value = eqx.error_if(value, ~c, msg)
+            value = error_if(value, ~c, msg)
         return value, ok
     return nan_where(value, ok), ok
 

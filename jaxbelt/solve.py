@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._checks import is_concrete
-from ._guard import guard, nan_where, traced_checks
+from ._guard import error_if, guard, nan_where, traced_checks
 from .commands import AbstractExponentialVoltage
 from .fast import batched_exponential_scene
 from .modal import expm_solve, modal_solve
@@ -89,8 +89,7 @@ def _closed(model, inp, y0, t0, times, method, uniform):
     return solve(A, F, s, y0, t0, times, uniform)
 
 
-@eqx.filter_jit
-def _run(scene: Scene, method: str, solver, rtol, atol, dt0, max_steps: int, progress: bool, adjoint):
+def _run_impl(scene: Scene, method: str, solver, rtol, atol, dt0, max_steps: int, progress: bool, adjoint):
     model, inp = scene.model, scene.input
     integrals = tuple(n for n in scene.observe if n in type(model).integral_names())
     pointwise = tuple(n for n in scene.observe if n not in integrals)
@@ -147,6 +146,11 @@ def _run(scene: Scene, method: str, solver, rtol, atol, dt0, max_steps: int, pro
         ts=times, ys=ys if scene.state else None, outputs=outputs, success=success, stats=stats,
         state_names=tuple(model.state_names), method=method,
     )
+
+
+# One compiled program per shape and static option; `eqx.debug.get_num_traces(_run_traced)` counts them.
+_run_traced = eqx.debug.assert_max_traces(_run_impl, max_traces=None)
+_run = eqx.filter_jit(_run_traced)
 
 
 def _describe(scene: Scene, method: str) -> str:
@@ -288,7 +292,7 @@ def _finish(sol: Solution, checks, throw: bool, what: str, hint: str) -> Solutio
                 where = f" (batch elements {bad.tolist()[:10]})" if np.ndim(success) else ""
                 raise SolveError(f"simulate failed for the scene {what}{where}. {hint}")
         else:
-            values = eqx.error_if(values, ~success, f"jaxbelt.simulate failed for the scene {what}. {hint}")
+            values = error_if(values, ~success, f"jaxbelt.simulate failed for the scene {what}. {hint}")
     else:
         values = nan_where(values, success)
     ys, outputs = values

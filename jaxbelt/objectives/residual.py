@@ -40,7 +40,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..commands import PseudoPolynomial, ShapedCommand, falling_factorial
+from .._checks import is_concrete
+from .._guard import error_if, guard, traced_checks
+from ..commands import MIN_EXPONENT_GAP, PseudoPolynomial, ShapedCommand, falling_factorial
 
 _P = 4  # substitution power u = v**p
 
@@ -57,9 +59,10 @@ def _guard_exponents(cmd: PseudoPolynomial) -> PseudoPolynomial:
     g = cmd.gammas
     lo = max(cmd.order, 2)
     diff = jnp.abs(g[:, None] - g[None, :]) + jnp.eye(g.shape[0])
-    bad = jnp.any(g <= lo) | jnp.any(diff <= 0)
-    g = eqx.error_if(
-        g, bad, f"PseudoPolynomial: exponents must be distinct and each > {lo} (eq. 23 singular or acceleration infinite at T)"
+    bad = jnp.any(g <= lo) | jnp.any(diff < MIN_EXPONENT_GAP)
+    g = error_if(
+        g, bad, f"PseudoPolynomial: exponents must be at least {MIN_EXPONENT_GAP:g} apart and each > {lo} "
+        "(eq. 23 singular or ill-conditioned, or acceleration infinite at T)"
     )
     return eqx.tree_at(lambda c: c.gammas, cmd, g)
 
@@ -128,6 +131,30 @@ def _w_quadrature(plat, cmd, n_nodes: int):
     )
 
 
+#: Largest accepted quadrature error estimate, relative to the integral of |acceleration| (see `quadrature_error`).
+QUADRATURE_TOL = 1e-8
+
+
+def quadrature_error(plat, cmd, n_nodes: int = 128):
+    """Error estimate of the `n_nodes` quadrature of W, relative to $\\int_0^T|\\ddot\\varphi_m|d\\tau$-like scale.
+
+    The rule is compared with one of 3/4 as many nodes: Gauss-Legendre converges geometrically once
+    the oscillation $e^{i\\omega_d(T-\\tau)}$ is resolved, so a small difference means the finer
+    rule is far more accurate still; a move that holds many vibration periods (large
+    $\\omega_d T$) shows up as a large difference. The scale is the sum of the magnitudes of the
+    acceleration's terms, $|\\Phi/T|\\sum_i |a_i|/(\\gamma_i - 1)$, so that an $\\mathcal H$ near zero
+    (a well shaped command) is judged by the accuracy of its cancelling parts.
+    """
+    base = cmd.base if isinstance(cmd, ShapedCommand) else cmd
+    if not isinstance(base, PseudoPolynomial):
+        return jnp.zeros(())
+    re1, im1 = _pseudo_poly_w(plat, base, n_nodes)
+    re2, im2 = _pseudo_poly_w(plat, base, max(8, (3 * n_nodes) // 4))
+    coef = falling_factorial(base.gammas, 2) * base.coefficients
+    scale = jnp.abs(base.displacement / base.duration) * jnp.sum(jnp.abs(coef) / (base.gammas - 1.0))
+    return jnp.hypot(re1 - re2, im1 - im2) / scale
+
+
 def convolution_integrals(plat, cmd, n_nodes: int = 128):
     """`(F, G)` of eq. (30) [rad/s] by the Gauss-Legendre rule described in the module docstring."""
     re, im = _w_quadrature(plat, cmd, n_nodes)
@@ -164,12 +191,31 @@ def residual_energy(plat, cmd, *, method: str = "quadrature", n_nodes: int = 128
     if method == "quadrature":
         F, G = convolution_integrals(plat, cmd, n_nodes)
         H = G**2 + plat.omega_n**2 * F**2
+        err = quadrature_error(plat, cmd, n_nodes)
+        if is_concrete(err):
+            if not float(err) <= QUADRATURE_TOL:
+                raise ValueError(
+                    f"residual_energy: the {n_nodes}-node quadrature does not resolve the vibration during the move "
+                    f"(omega_d*T = {float(plat.omega_d * _end(cmd)):.0f} rad, estimated relative error {float(err):.1e} > "
+                    f"{QUADRATURE_TOL:g}); pass n_nodes >= {int(8 * float(plat.omega_d * _end(cmd))) + 64} or method='ode'"
+                )
+        else:
+            H = error_if(
+                H, ~(err <= QUADRATURE_TOL),
+                f"residual_energy: the {n_nodes}-node quadrature does not resolve the vibration during the move "
+                "(estimated relative error above 1e-8): pass a larger n_nodes (about 8*omega_d*T) or method='ode'",
+            )
     elif method == "ode":
         a, ad = _end_state_ode(plat, cmd, rtol, atol, max_steps)
         H = (plat.omega_d / plat.lam) ** 2 * (ad**2 + plat.omega_n**2 * a**2)
     else:
         raise ValueError(f"residual_energy: `method` must be 'quadrature' or 'ode'; got {method!r}")
+    H, _ = guard(H, traced_checks(plat, cmd), throw=True)
     return H
+
+
+def _end(cmd):
+    return cmd.base.duration if isinstance(cmd, ShapedCommand) else cmd.duration
 
 
 def residual_energy_joules(plat, cmd, **kwargs):
