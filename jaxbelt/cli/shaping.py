@@ -44,7 +44,7 @@ def run(args) -> int:
     cmd0 = PseudoPolynomial(jnp.asarray(args.gammas, dtype=float), phi, args.duration)
     res = optimise_command(plat, cmd0, progress=progress)
     h0 = float(residual_energy(plat, cmd0))
-    print(f"H(start {list(args.gammas)}) = {h0:.6g} rad^2/s^2, E(T) = {h0 * float(plat.energy_factor):.4g} J")
+    print(f"H(start {list(args.gammas)}) = {h0:.6g} rad^2/s^4, E(T) = {h0 * float(plat.energy_factor):.4g} J")
     g = ", ".join(f"{x:.4f}" for x in res.gammas.tolist())
     print(f"optimised exponents ({g}): H = {float(res.value):.3g} (H/H0 = {float(res.value) / h0:.2e}, "
           f"{res.n_steps} L-BFGS steps)")
