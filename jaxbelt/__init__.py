@@ -81,6 +81,10 @@ from .nonlinear_sweep import steady_state as nonlinear_steady_state  # noqa: E40
 from .nonlinear_sweep import sweep as nonlinear_sweep  # noqa: E402
 from .nonlinear_sweep import trajectory as nonlinear_trajectory  # noqa: E402
 
+# --- parameter identification (weighted least squares, optimistix) -------------------------------
+from .identify import IdentifyResult as IdentifyResult  # noqa: E402
+from .identify import identify as identify  # noqa: E402
+
 # --- sub-modules -------------------------------------------------------------------------------
 from . import modal as modal  # noqa: E402
 from . import plots as plots  # noqa: E402

@@ -9,7 +9,7 @@ $\\mathcal H = G^2 + \\omega_n^2F^2$, $h = \\tfrac12 J(\\lambda/\\omega_d)^2$,
 with the convolution integrals (eq. 6, 29, 30)
 $F = \\int_0^T \\ddot\\varphi_m(\\tau)e^{-\\xi\\omega_n(T-\\tau)}\\sin[\\omega_d(T-\\tau)]\\,d\\tau$ and
 $G = \\int_0^T \\omega_n\\ddot\\varphi_m(\\tau)e^{-\\xi\\omega_n(T-\\tau)}\\cos[\\omega_d(T-\\tau)+\\delta]\\,d\\tau$.
-$\\mathcal H$ has units rad²/s² (motor angle); $E$ is in J.
+$\\mathcal H$ has units rad²/s⁴ ($F$ in rad/s, $G$ in rad/s²; motor angle); $E$ is in J.
 
 Two independent evaluations:
 
@@ -156,7 +156,7 @@ def quadrature_error(plat, cmd, n_nodes: int = 128):
 
 
 def convolution_integrals(plat, cmd, n_nodes: int = 128):
-    """`(F, G)` of eq. (30) [rad/s] by the Gauss-Legendre rule described in the module docstring."""
+    """`(F, G)` of eq. (30) ($F$ [rad/s], $G$ [rad/s²]) by the Gauss-Legendre rule described in the module docstring."""
     re, im = _w_quadrature(plat, cmd, n_nodes)
     sigma = plat.damping_ratio * plat.omega_n
     F = im
@@ -177,7 +177,7 @@ def _end_state_ode(plat, cmd, rtol, atol, max_steps):
 
 def residual_energy(plat, cmd, *, method: str = "quadrature", n_nodes: int = 128,
                     rtol=1e-12, atol=1e-15, max_steps: int = 100_000):
-    """Target $\\mathcal H = G^2 + \\omega_n^2F^2$ of eq. (30)-(32) [rad²/s²] for platform `plat`
+    """Target $\\mathcal H = G^2 + \\omega_n^2F^2$ of eq. (30)-(32) [rad²/s⁴] for platform `plat`
     driven by motion command `cmd`; $E_{tot}(T) = h\\mathcal H$ (see `residual_energy_joules`).
 
     - `method`: `"quadrature"` (fixed Gauss-Legendre rule, default) or `"ode"` (diffrax Dopri8
