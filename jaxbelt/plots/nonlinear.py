@@ -17,8 +17,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from ..models.nonlinear import NonlinearBelt
-from ..nonlinear_kbm import backbone_speed, steady_amplitudes
-from ..nonlinear_sweep import basins, sweep, trajectory
+from ..models.nonlinear.kbm import backbone_speed, kbm_amplitudes
+from ..models.nonlinear.steady import nonlinear_basins, nonlinear_sweep, nonlinear_trajectory
 
 
 def plot_speed_response(ax, speeds, up, down, *, label_jumps=True):
@@ -37,8 +37,8 @@ def response_sweeps(belt: NonlinearBelt, speeds, **kw):
     """(up, down) `SweepResult`s for ascending `speeds`, as in the experiment: the decreasing
     sweep starts from the final state of the increasing one; down is returned in ascending order."""
     speeds = jnp.asarray(speeds, dtype=float)
-    up = sweep(belt, speeds, **kw)
-    dn = sweep(belt, speeds[::-1], up.steady.z[-1], up.steady.theta[-1], **kw)
+    up = nonlinear_sweep(belt, speeds, **kw)
+    dn = nonlinear_sweep(belt, speeds[::-1], up.steady.z[-1], up.steady.theta[-1], **kw)
     return up, _reverse(dn)
 
 
@@ -48,9 +48,9 @@ def _reverse(res):
 
 def plot_phase_plane(ax, belt: NonlinearBelt, speed, z0s, periods=150):
     """Trajectories in the $\\zeta^R_1$-$\\zeta^I_1$ plane from each row of `z0s` at `speed`."""
-    ss = basins(belt, speed, z0s)
+    ss = nonlinear_basins(belt, speed, z0s)
     for i, z0 in enumerate(np.asarray(z0s)):
-        _, zs = trajectory(belt, speed, z0, periods=periods)
+        _, zs = nonlinear_trajectory(belt, speed, z0, periods=periods)
         zs = np.asarray(zs)
         ax.plot(zs[:, 0], zs[:, belt.n_modes], lw=0.4, alpha=0.6, color=f"C{i}")
         ax.plot(zs[-200:, 0], zs[-200:, belt.n_modes], lw=1.8, color=f"C{i}",
@@ -72,7 +72,7 @@ def plot_backbone(ax, belt: NonlinearBelt, speeds, up=None, down=None):
     ax.plot(s, np.asarray(up.steady.amplitude[:, 0]), "o", ms=3.5, color="k", label="simulation, up")
     ax.plot(s, np.asarray(down.steady.amplitude[:, 0]), "o", ms=5, mfc="none", color="C3", label="simulation, down")
     fine = np.linspace(s.min(), s.max(), 200)
-    pts = [(sp, a) for sp in fine for a in steady_amplitudes(belt, sp)]
+    pts = [(sp, a) for sp in fine for a in kbm_amplitudes(belt, sp)]
     if pts:
         p = np.array(pts)
         ax.plot(p[:, 0], p[:, 1], ".", ms=1.5, color="C0", label="KBM eq. (31)")

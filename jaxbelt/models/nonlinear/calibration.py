@@ -1,0 +1,3 @@
+MEASUREMENTS = None
+def calibrate(*a, **k):
+    raise NotImplementedError
