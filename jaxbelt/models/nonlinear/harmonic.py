@@ -93,7 +93,7 @@ def _residual(Y, speed, belt: NonlinearBelt, H: int):
     """Scaled HB residual (flat) for scaled coefficients Y (flat, (2N)(2H+1)) at speed [m/s]."""
     phis, E, proj, D = _fourier(H)
     s = _scale(belt)
-    sys = belt.modal(speed)
+    sys = belt._modal_v(speed / belt.wave_speed)
     X = s * Y.reshape(2 * belt.n_modes, 2 * H + 1)
     zs = X @ E  # (2N, nt)
     th0 = jnp.asarray(phis)
@@ -130,7 +130,7 @@ _N_EVAL = 512  # phases at which the peak-to-peak and modal amplitudes are read 
 def _observe(belt: NonlinearBelt, speed, Y, H: int, at=0.01):
     """(pp [m] at `at` from the sensor pulley, modal amplitudes (N,)) of scaled coefficients Y."""
     n = belt.n_modes
-    sys = belt.modal(speed)
+    sys = belt._modal_v(speed / belt.wave_speed)
     X = _scale(belt) * Y.reshape(2 * n, 2 * H + 1)
     phis = 2 * jnp.pi * jnp.arange(_N_EVAL) / _N_EVAL
     zs = X @ _basis(H, phis)
@@ -218,10 +218,12 @@ def _continue(belt, v0, v1, H: int, max_points: int, ds0, ds_max):
         sol = corrector(u_pred, t)
         u_new = sol.value
         nsteps = sol.stats["num_steps"]
-        ok = (sol.result == optx.RESULTS.successful) & jnp.all(jnp.isfinite(u_new)) \
-            & (jnp.linalg.norm(u_new - u_pred) < 0.5 * ds + 1e-12)
-        accept = ok & ~done
         t_new = _tangent(_jac(belt, H)(u_new), t)
+        # reject too large corrections and turns (two close folds must not be stepped over)
+        ok = (sol.result == optx.RESULTS.successful) & jnp.all(jnp.isfinite(u_new)) \
+            & (jnp.linalg.norm(u_new - u_pred) < 0.5 * ds + 1e-12) & (t_new @ t > 0.97) \
+            & (u_new[-1] > 0) & (u_new[-1] < belt.wave_speed)
+        accept = ok & ~done
         ds_new = jnp.where(ok, jnp.where(nsteps <= 3, jnp.minimum(1.6 * ds, ds_max), ds), 0.5 * ds)
         u_out = jnp.where(accept, u_new, u)
         t_out = jnp.where(accept, t_new, t)
@@ -261,7 +263,7 @@ _T_STEPS = 96  # RK4-like fixed steps per period for the monodromy matrix (Tsit5
 def _floquet(belt, speed, Y, H: int):
     """Floquet multipliers (2N,) of the HB solution Y at `speed` (variational equation, diffrax)."""
     n = belt.n_modes
-    sys = belt.modal(speed)
+    sys = belt._modal_v(speed / belt.wave_speed)
     X = _scale(belt) * Y.reshape(2 * n, 2 * H + 1)
     W = sys.Omega[0]
     T = 2 * jnp.pi / W

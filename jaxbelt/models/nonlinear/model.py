@@ -331,6 +331,10 @@ class NonlinearBelt(AbstractModel):
         self.check_speed(speed)
         v = self.dimensionless_speed(speed)
         v = eqx.error_if(v, (v < 0) | (v >= 1), "NonlinearBelt: running speed must be sub-critical, 0 <= V < wave_speed")
+        return self._modal_v(v)
+
+    def _modal_v(self, v) -> ModalSystem:
+        # no range check: Newton iterates may visit any speed; the caller checks its result
         x, wq = _gauss(self.n_modes)
         psi, dpsi = mode_shapes(x, v, self.n_modes)
         Phi = jnp.concatenate([psi.real, psi.imag])
