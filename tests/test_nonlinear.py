@@ -19,7 +19,7 @@ XI = 0.015  # modal damping ratio used for the 004 acceptance checks
 
 def belt(**kw):
     base = dict(span=0.86, wave_speed=41.0, v_l=50.0, pulley_radii=(0.063, 0.063),
-                runout=(0.355e-3, 0.21e-3), phase=jnp.deg2rad(240.0), damping=XI, n_modes=1)
+                runout=(0.355e-3, 0.21e-3), phase=jnp.deg2rad(240.0), damping=XI, n_modes=1, sensor_pulley="drive")
     base.update(kw)
     return jb.NonlinearBelt(**base)
 
