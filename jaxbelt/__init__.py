@@ -69,17 +69,26 @@ from .optimise.command import tolerance_band as tolerance_band  # noqa: E402
 # --- non-linear belt vibration (Moon & Wickert, 1997) ------------------------------------------------------
 from .models.nonlinear import NonlinearBelt as NonlinearBelt  # noqa: E402
 from .models.nonlinear import RunningSpeed as RunningSpeed  # noqa: E402
-from .nonlinear_kbm import amplitude_coefficients as kbm_coefficients  # noqa: E402
-from .nonlinear_kbm import backbone_amplitude as backbone_amplitude  # noqa: E402
-from .nonlinear_kbm import backbone_frequency as backbone_frequency  # noqa: E402
-from .nonlinear_kbm import backbone_speed as backbone_speed  # noqa: E402
-from .nonlinear_kbm import steady_amplitudes as kbm_amplitudes  # noqa: E402
-from .nonlinear_sweep import SteadyStateError as SteadyStateError  # noqa: E402
-from .nonlinear_sweep import basins as nonlinear_basins  # noqa: E402
-from .nonlinear_sweep import speed_sweep as speed_sweep  # noqa: E402
-from .nonlinear_sweep import steady_state as nonlinear_steady_state  # noqa: E402
-from .nonlinear_sweep import sweep as nonlinear_sweep  # noqa: E402
-from .nonlinear_sweep import trajectory as nonlinear_trajectory  # noqa: E402
+from .models.nonlinear import SpeedRamp as SpeedRamp  # noqa: E402
+from .models.nonlinear import kbm_coefficients as kbm_coefficients  # noqa: E402
+from .models.nonlinear import backbone_amplitude as backbone_amplitude  # noqa: E402
+from .models.nonlinear import backbone_frequency as backbone_frequency  # noqa: E402
+from .models.nonlinear import backbone_speed as backbone_speed  # noqa: E402
+from .models.nonlinear import kbm_amplitudes as kbm_amplitudes  # noqa: E402
+from .models.nonlinear import SteadyStateError as SteadyStateError  # noqa: E402
+from .models.nonlinear import nonlinear_basins as nonlinear_basins  # noqa: E402
+from .models.nonlinear import speed_sweep as speed_sweep  # noqa: E402
+from .models.nonlinear import nonlinear_steady_state as nonlinear_steady_state  # noqa: E402
+from .models.nonlinear import nonlinear_sweep as nonlinear_sweep  # noqa: E402
+from .models.nonlinear import nonlinear_trajectory as nonlinear_trajectory  # noqa: E402
+from .models.nonlinear import ResponseCurve as ResponseCurve  # noqa: E402
+from .models.nonlinear import response_curve as response_curve  # noqa: E402
+from .models.nonlinear import fold_speeds as fold_speeds  # noqa: E402
+from .models.nonlinear import harmonic_balance as harmonic_balance  # noqa: E402
+from .models.nonlinear import speed_ramp as speed_ramp  # noqa: E402
+from .models.nonlinear import MEASUREMENTS as MEASUREMENTS  # noqa: E402
+from .models.nonlinear import calibrate as calibrate  # noqa: E402
+from .models.nonlinear import jumps as jumps  # noqa: E402
 
 # --- parameter identification (weighted least squares, optimistix) -------------------------------
 from .identify import IdentifyResult as IdentifyResult  # noqa: E402
