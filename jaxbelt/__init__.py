@@ -1,11 +1,21 @@
 """jaxbelt: differentiable simulation and optimisation of belt drives and DC-motor mechanisms.
 
-float64 is switched on at import (the papers' checks need it); see README for the scenes.
+**Precision.** `import jaxbelt` switches JAX to float64 (`jax_enable_x64`), which the papers'
+checks need (closed forms to 1e-12, energy balances); `jaxbelt.X64_SWITCHED_ON` says whether this
+import changed the setting. To keep JAX's float32 default, set the environment variable
+`JAXBELT_X64=0` before the import (or build models and inputs inside `jax.enable_x64(False)`):
+every scene then runs in float32, with the accuracy the stress tests measure.
 """
+
+import os as _os
 
 import jax as _jax
 
-_jax.config.update("jax_enable_x64", True)
+#: True when `import jaxbelt` switched JAX to float64 (it was off and `JAXBELT_X64` is not "0").
+X64_SWITCHED_ON = False
+if _os.environ.get("JAXBELT_X64", "1") != "0" and not _jax.config.jax_enable_x64:
+    _jax.config.update("jax_enable_x64", True)
+    X64_SWITCHED_ON = True
 
 # --- core: scenes, simulation, commands --------------------------------------------------------
 from .commands import AbstractInput as AbstractInput  # noqa: E402

@@ -10,6 +10,9 @@ with `throw=False`).
 
 from __future__ import annotations
 
+import contextlib
+import threading
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -27,10 +30,28 @@ def is_concrete(x) -> bool:
     return not any(isinstance(leaf, jax.core.Tracer) for leaf in leaves)
 
 
-def _record(ok, message: str) -> None:
-    from ._guard import record
+_collector = threading.local()
 
-    record(ok, message)
+
+def record(ok, message: str) -> None:
+    """Record a traced check while `collecting()` is active (see `jaxbelt._guard.traced_checks`)."""
+    found = getattr(_collector, "found", None)
+    if found is not None:
+        found.append((jnp.asarray(ok, dtype=bool), message))
+
+
+@contextlib.contextmanager
+def collecting():
+    """Collect the checks recorded inside the block as a list of `(ok, message)`."""
+    prev = getattr(_collector, "found", None)
+    _collector.found = found = []
+    try:
+        yield found
+    finally:
+        _collector.found = prev
+
+
+_record = record
 
 
 def _interval(lo, hi, lo_open, hi_open) -> str:

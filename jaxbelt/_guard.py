@@ -15,24 +15,13 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import threading
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import is_concrete
-
-_state = threading.local()
-
-
-def record(ok, message: str) -> None:
-    """Record a traced check (called by the `_checks` helpers); ignored when nobody collects."""
-    found = getattr(_state, "found", None)
-    if found is not None:
-        found.append((jnp.asarray(ok, dtype=bool), message))
-
+from ._checks import collecting, is_concrete
 
 def _modules(tree):
     out = []
@@ -58,9 +47,7 @@ def traced_checks(*trees) -> list:
 
     Concrete modules were checked when they were built and add nothing here.
     """
-    prev = getattr(_state, "found", None)
-    _state.found = found = []
-    try:
+    with collecting() as found:
         for m in _modules(trees):
             if is_concrete(m):
                 continue
@@ -68,8 +55,6 @@ def traced_checks(*trees) -> list:
                 check = klass.__dict__.get("__check_init__")
                 if check is not None:
                     check(m)
-    finally:
-        _state.found = prev
     return found
 
 

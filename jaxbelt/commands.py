@@ -17,6 +17,8 @@ scene is solved in closed form (no time stepping). The question is answered by t
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import abc
 from typing import NamedTuple
 
@@ -25,7 +27,7 @@ import jax
 import jax.numpy as jnp
 import numpy as _np
 
-from ._checks import check_finite, check_nonnegative, check_positive, check_range, is_concrete
+from ._checks import check_finite, check_nonnegative, check_positive, check_range, is_concrete, record
 from ._checks import as_float_array as _arr
 
 
@@ -180,8 +182,6 @@ MIN_EXPONENT_GAP = 1e-3
 
 
 def _record_check(ok, message):
-    from ._guard import record
-
     record(ok, message)
 
 
@@ -206,6 +206,8 @@ class PseudoPolynomial(AbstractMotionCommand):
     `cmd(t)` is the position [rad]; before t = 0 the axis is at 0, after T it holds at $\\Phi$.
     Everything is differentiable with respect to `gammas` (and Φ, T).
     """
+
+    array_fields: ClassVar[tuple[str, ...]] = ("gammas",)
 
     gammas: jnp.ndarray = eqx.field(converter=_arr)
     displacement: jnp.ndarray = eqx.field(converter=_arr, default=15 * 2 * 3.141592653589793)
@@ -304,6 +306,8 @@ class ShapedCommand(AbstractMotionCommand):
     - `base`: a command with `derivative(t, k)` and `end_time` (e.g. `PseudoPolynomial`).
     - `times` [s] (>= 0, increasing) and `amplitudes` (summing to 1).
     """
+
+    array_fields: ClassVar[tuple[str, ...]] = ("times", "amplitudes")
 
     base: AbstractMotionCommand
     times: jnp.ndarray = eqx.field(converter=_arr)

@@ -19,6 +19,7 @@ A start-up scene whose `ExponentialVoltage` carries a 1-D array of time constant
 
 from __future__ import annotations
 
+import dataclasses
 from typing import ClassVar
 
 import diffrax
@@ -28,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._checks import is_concrete
-from ._guard import error_if, guard, nan_where, traced_checks
+from ._guard import _modules, error_if, guard, nan_where, traced_checks
 from .commands import AbstractExponentialVoltage
 from .fast import batched_exponential_scene
 from .modal import expm_solve, modal_solve
@@ -221,6 +222,8 @@ def simulate(
     model, inp = scene.model, scene.input
     if isinstance(inp, AbstractExponentialVoltage) and _batched_input(inp):
         return _simulate_batch(scene, method, throw)
+    _check_scalar_fields(model)
+    _check_scalar_fields(inp)
     integrals = [n for n in scene.observe if n in type(model).integral_names()]
     lin = isinstance(model, AbstractLinearModel) and isinstance(inp, AbstractExponentialVoltage)
     if method == "auto":
@@ -264,6 +267,24 @@ def simulate(
         None if dt0 is None else jnp.asarray(dt0, dtype=float), int(max_steps), bool(progress), adjoint,
     )
     return _finish(sol, checks, throw, _describe(scene, method), _failure_hint(method))
+
+
+def _check_scalar_fields(obj) -> None:
+    """Parameters are scalars inside `simulate` (a batch is a `jax.vmap`/`jb.sweep` over them).
+
+    Fields a class declares in `array_fields` (e.g. the exponents of a `PseudoPolynomial`) are
+    exempt; nested modules are checked too."""
+    for m in _modules(obj):
+        allowed = getattr(type(m), "array_fields", ())
+        for f in dataclasses.fields(m):
+            v = getattr(m, f.name, None)
+            if f.name in allowed or not hasattr(v, "shape") or isinstance(v, eqx.Module):
+                continue
+            if jnp.ndim(v) != 0:
+                raise ValueError(
+                    f"simulate: parameter `{f.name}` of {type(m).__name__} must be a scalar; got shape {jnp.shape(v)}. "
+                    "For a batch of values use jax.vmap or jaxbelt.sweep over scalar parameters."
+                )
 
 
 def _value_checks(scene, method, rtol, atol, dt0):

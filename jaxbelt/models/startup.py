@@ -299,6 +299,8 @@ class BeltChain(_BeltDriveBase):
     `BeltChain.from_startup(BeltStartup())` is the paper's 2-DOF drive.
     """
 
+    array_fields: ClassVar[tuple[str, ...]] = ("inertias", "k", "c", "r_drive", "r_driven")
+
     inertias: jnp.ndarray = eqx.field(converter=_arr)
     k: jnp.ndarray = eqx.field(converter=_arr)
     c: jnp.ndarray = eqx.field(converter=_arr)

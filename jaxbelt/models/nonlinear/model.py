@@ -250,6 +250,8 @@ class NonlinearBelt(AbstractModel):
     1 cm from the sensor pulley; `"speed"` [m/s].
     """
 
+    array_fields: ClassVar[tuple[str, ...]] = ("pulley_radii", "runout")
+
     span: jnp.ndarray = eqx.field(converter=_arr, default=0.86)
     wave_speed: jnp.ndarray = eqx.field(converter=_arr, default=37.44)
     v_l: jnp.ndarray = eqx.field(converter=_arr, default=50.0)
