@@ -1,11 +1,21 @@
 """jaxbelt: differentiable simulation and optimisation of belt drives and DC-motor mechanisms.
 
-float64 is switched on at import (the papers' checks need it); see README for the scenes.
+**Precision.** `import jaxbelt` switches JAX to float64 (`jax_enable_x64`), which the papers'
+checks need (closed forms to 1e-12, energy balances); `jaxbelt.X64_SWITCHED_ON` says whether this
+import changed the setting. To keep JAX's float32 default, set the environment variable
+`JAXBELT_X64=0` before the import (or build models and inputs inside `jax.enable_x64(False)`):
+every scene then runs in float32, with the accuracy the stress tests measure.
 """
+
+import os as _os
 
 import jax as _jax
 
-_jax.config.update("jax_enable_x64", True)
+#: True when `import jaxbelt` switched JAX to float64 (it was off and `JAXBELT_X64` is not "0").
+X64_SWITCHED_ON = False
+if _os.environ.get("JAXBELT_X64", "1") != "0" and not _jax.config.jax_enable_x64:
+    _jax.config.update("jax_enable_x64", True)
+    X64_SWITCHED_ON = True
 
 # --- core: scenes, simulation, commands --------------------------------------------------------
 from .commands import AbstractInput as AbstractInput  # noqa: E402
@@ -25,8 +35,9 @@ from .models import AbstractLinearModel as AbstractLinearModel  # noqa: E402
 from .models import integrand as integrand  # noqa: E402
 from .models import observable as observable  # noqa: E402
 from .scene import Scene as Scene  # noqa: E402
-from .solve import Solution as Solution  # noqa: E402
-from .solve import SolveError as SolveError  # noqa: E402
+from .scene import TracedGridWarning as TracedGridWarning  # noqa: E402
+from .solution import Solution as Solution  # noqa: E402
+from .solution import SolveError as SolveError  # noqa: E402
 from .solve import simulate as simulate  # noqa: E402
 from .sweep import sweep as sweep  # noqa: E402
 
@@ -68,17 +79,30 @@ from .optimise.command import tolerance_band as tolerance_band  # noqa: E402
 # --- non-linear belt vibration (Moon & Wickert, 1997) ------------------------------------------------------
 from .models.nonlinear import NonlinearBelt as NonlinearBelt  # noqa: E402
 from .models.nonlinear import RunningSpeed as RunningSpeed  # noqa: E402
-from .nonlinear_kbm import amplitude_coefficients as kbm_coefficients  # noqa: E402
-from .nonlinear_kbm import backbone_amplitude as backbone_amplitude  # noqa: E402
-from .nonlinear_kbm import backbone_frequency as backbone_frequency  # noqa: E402
-from .nonlinear_kbm import backbone_speed as backbone_speed  # noqa: E402
-from .nonlinear_kbm import steady_amplitudes as kbm_amplitudes  # noqa: E402
-from .nonlinear_sweep import SteadyStateError as SteadyStateError  # noqa: E402
-from .nonlinear_sweep import basins as nonlinear_basins  # noqa: E402
-from .nonlinear_sweep import speed_sweep as speed_sweep  # noqa: E402
-from .nonlinear_sweep import steady_state as nonlinear_steady_state  # noqa: E402
-from .nonlinear_sweep import sweep as nonlinear_sweep  # noqa: E402
-from .nonlinear_sweep import trajectory as nonlinear_trajectory  # noqa: E402
+from .models.nonlinear import SpeedRamp as SpeedRamp  # noqa: E402
+from .models.nonlinear import kbm_coefficients as kbm_coefficients  # noqa: E402
+from .models.nonlinear import backbone_amplitude as backbone_amplitude  # noqa: E402
+from .models.nonlinear import backbone_frequency as backbone_frequency  # noqa: E402
+from .models.nonlinear import backbone_speed as backbone_speed  # noqa: E402
+from .models.nonlinear import kbm_amplitudes as kbm_amplitudes  # noqa: E402
+from .models.nonlinear import SteadyStateError as SteadyStateError  # noqa: E402
+from .models.nonlinear import nonlinear_basins as nonlinear_basins  # noqa: E402
+from .models.nonlinear import speed_sweep as speed_sweep  # noqa: E402
+from .models.nonlinear import nonlinear_steady_state as nonlinear_steady_state  # noqa: E402
+from .models.nonlinear import nonlinear_sweep as nonlinear_sweep  # noqa: E402
+from .models.nonlinear import nonlinear_trajectory as nonlinear_trajectory  # noqa: E402
+from .models.nonlinear import ResponseCurve as ResponseCurve  # noqa: E402
+from .models.nonlinear import response_curve as response_curve  # noqa: E402
+from .models.nonlinear import fold_speeds as fold_speeds  # noqa: E402
+from .models.nonlinear import harmonic_balance as harmonic_balance  # noqa: E402
+from .models.nonlinear import speed_ramp as speed_ramp  # noqa: E402
+from .models.nonlinear import MEASUREMENTS as MEASUREMENTS  # noqa: E402
+from .models.nonlinear import calibrate as calibrate  # noqa: E402
+from .models.nonlinear import jumps as jumps  # noqa: E402
+
+# --- parameter identification (weighted least squares, optimistix) -------------------------------
+from .identify import IdentifyResult as IdentifyResult  # noqa: E402
+from .identify import identify as identify  # noqa: E402
 
 # --- sub-modules -------------------------------------------------------------------------------
 from . import modal as modal  # noqa: E402

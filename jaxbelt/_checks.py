@@ -1,14 +1,18 @@
 """Parameter checks shared by every model and command.
 
-Checks run when values are concrete (construction outside `jit`/`vmap`); under a
-transformation the values are tracers and the checks are skipped there, so that
-constructing a model inside `jax.vmap` stays cheap. Invariants that matter under
-`jit` are guarded with `eqx.error_if` where they are used.
+Checks run when values are concrete (construction outside `jit`/`vmap`) and raise
+`ValueError` naming the parameter and its valid range. Under a transformation the values are
+tracers: the check is then *recorded* (when `jaxbelt._guard.traced_checks` is collecting) as a
+boolean array and a message, and `simulate` and the objectives attach it with `eqx.error_if` to
+the values they return, so an invalid traced parameter still raises at run time (or is flagged
+with `throw=False`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
+import threading
 
 import jax
 import jax.numpy as jnp
@@ -46,6 +50,36 @@ def is_concrete(x) -> bool:
     return not any(isinstance(leaf, jax.core.Tracer) for leaf in leaves)
 
 
+_collector = threading.local()
+
+
+def record(ok, message: str) -> None:
+    """Record a traced check while `collecting()` is active (see `jaxbelt._guard.traced_checks`)."""
+    found = getattr(_collector, "found", None)
+    if found is not None:
+        found.append((jnp.asarray(ok, dtype=bool), message))
+
+
+@contextlib.contextmanager
+def collecting():
+    """Collect the checks recorded inside the block as a list of `(ok, message)`."""
+    prev = getattr(_collector, "found", None)
+    _collector.found = found = []
+    try:
+        yield found
+    finally:
+        _collector.found = prev
+
+
+_record = record
+
+
+def _interval(lo, hi, lo_open, hi_open) -> str:
+    lb = "-inf" if lo is None else f"{lo:g}"
+    ub = "inf" if hi is None else f"{hi:g}"
+    return f"{'(' if lo_open or lo is None else '['}{lb}, {ub}{')' if hi_open or hi is None else ']'}"
+
+
 def _values(x):
     return np.asarray(jax.device_get(x), dtype=float)
 
@@ -53,6 +87,9 @@ def _values(x):
 def check_positive(name: str, value, unit: str = "", owner: str = "") -> None:
     """Raise `ValueError` unless every element of `value` is finite and > 0."""
     if not is_concrete(value):
+        v = jnp.asarray(value)
+        where = f"{owner}: " if owner else ""
+        _record(jnp.all(jnp.isfinite(v) & (v > 0)), f"{where}parameter `{name}` must be finite and > 0{(' ' + unit) if unit else ''}")
         return
     v = _values(value)
     if not np.all(np.isfinite(v)) or np.any(v <= 0):
@@ -66,6 +103,9 @@ def check_positive(name: str, value, unit: str = "", owner: str = "") -> None:
 def check_nonnegative(name: str, value, unit: str = "", owner: str = "") -> None:
     """Raise `ValueError` unless every element of `value` is finite and >= 0."""
     if not is_concrete(value):
+        v = jnp.asarray(value)
+        where = f"{owner}: " if owner else ""
+        _record(jnp.all(jnp.isfinite(v) & (v >= 0)), f"{where}parameter `{name}` must be finite and >= 0{(' ' + unit) if unit else ''}")
         return
     v = _values(value)
     if not np.all(np.isfinite(v)) or np.any(v < 0):
@@ -79,6 +119,8 @@ def check_nonnegative(name: str, value, unit: str = "", owner: str = "") -> None
 def check_finite(name: str, value, owner: str = "") -> None:
     """Raise `ValueError` unless every element of `value` is finite."""
     if not is_concrete(value):
+        where = f"{owner}: " if owner else ""
+        _record(jnp.all(jnp.isfinite(jnp.asarray(value))), f"{where}parameter `{name}` must be finite")
         return
     v = _values(value)
     if not np.all(np.isfinite(v)):
@@ -89,6 +131,14 @@ def check_finite(name: str, value, owner: str = "") -> None:
 def check_range(name: str, value, lo=None, hi=None, *, lo_open=False, hi_open=False, unit="", owner="") -> None:
     """Raise `ValueError` unless lo (<|<=) value (<|<=) hi elementwise."""
     if not is_concrete(value):
+        v = jnp.asarray(value)
+        ok = jnp.all(jnp.isfinite(v))
+        if lo is not None:
+            ok &= jnp.all(v > lo) if lo_open else jnp.all(v >= lo)
+        if hi is not None:
+            ok &= jnp.all(v < hi) if hi_open else jnp.all(v <= hi)
+        where = f"{owner}: " if owner else ""
+        _record(ok, f"{where}parameter `{name}` must lie in {_interval(lo, hi, lo_open, hi_open)}{(' ' + unit) if unit else ''}")
         return
     v = _values(value)
     ok = np.all(np.isfinite(v))
@@ -97,9 +147,7 @@ def check_range(name: str, value, lo=None, hi=None, *, lo_open=False, hi_open=Fa
     if hi is not None:
         ok &= bool(np.all(v < hi) if hi_open else np.all(v <= hi))
     if not ok:
-        lb = "-inf" if lo is None else f"{lo:g}"
-        ub = "inf" if hi is None else f"{hi:g}"
-        interval = f"{'(' if lo_open or lo is None else '['}{lb}, {ub}{')' if hi_open or hi is None else ']'}"
+        interval = _interval(lo, hi, lo_open, hi_open)
         where = f"{owner}: " if owner else ""
         raise ValueError(
             f"{where}parameter `{name}` must lie in {interval}{(' ' + unit) if unit else ''}; "
@@ -130,6 +178,13 @@ def check_fields(owner: str, checks) -> list | None:
     checks = list(checks)
     vals = host_values([c[1] for c in checks])
     if vals is None:
+        # traced: record each check (see `jaxbelt._guard.traced_checks`), so it is enforced at run time
+        single = {"positive": check_positive, "nonnegative": check_nonnegative}
+        for name, value, kind, unit in checks:
+            if kind == "finite":
+                check_finite(name, value, owner=owner)
+            else:
+                single[kind](name, value, unit, owner=owner)
         return None
     for (name, _, kind, unit), v in zip(checks, vals):
         ok, what = _KINDS[kind]

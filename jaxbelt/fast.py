@@ -196,7 +196,7 @@ def batched_exponential_scene(scene):
     """
     from .commands import ExponentialVoltage
     from .models.base import AbstractLinearModel
-    from .solve import Solution
+    from .solution import Solution
 
     model, inp = scene.model, scene.input
     if scene.ts is None or not isinstance(inp, ExponentialVoltage) or not isinstance(model, AbstractLinearModel):

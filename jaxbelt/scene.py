@@ -7,6 +7,8 @@ outputs only when named in `observe`, integrals as augmented states.
 
 from __future__ import annotations
 
+import warnings
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
@@ -22,20 +24,34 @@ def _as_tuple(observe):
     return tuple(observe)
 
 
+class TracedGridWarning(UserWarning):
+    """A scene's output times are traced, so `simulate` cannot see that they are evenly spaced."""
+
+
 class Scene(eqx.Module):
     """A simulation request.
 
     - `model`: a jaxbelt model (e.g. `BeltStartup()`).
-    - `input`: its command or controller (e.g. `ExponentialVoltage(24.0, 0.02)`, `PID(...)`).
-    - `ts`: increasing output times [s], shape (N,). The initial state holds at `ts[0]`.
+    - `input`: its input, of a kind the model accepts (`model.input_types`), e.g.
+      `ExponentialVoltage(24.0, 0.02)` or `PID(...)`; any other kind raises `TypeError`.
+    - `ts`: strictly increasing output times [s], shape (N,).
+    - `t0`: start time [s], where the initial state holds (default `ts[0]`; must be <= `ts[0]`).
     - `t1`: final time [s] when `ts` is not given: only the state at `t1` is returned
-      (no dense buffer). `t0` is then the start time (default 0).
+      (no dense buffer); `t0` then defaults to 0.
     - `observe`: names of outputs to compute besides the state (e.g. `("current",
-      "electric_power", "alpha2")`, or integral outputs such as `"electric_energy"`).
-      Nothing that is not named is computed. `"state"` is implied unless `state=False`.
-    - `y0`: initial state (default: the model's rest state).
+      "electric_power", "alpha2")`, or integral outputs such as `"electric_energy"`; see
+      `type(model).output_names()` and `integral_names()`). Nothing that is not named is computed.
+    - `y0`: initial state (default: the model's rest state), shape `(model.n_states,)`.
     - `state`: whether the full state history `ys` is returned (set `False` to get only
       the observed outputs).
+    - `uniform`: whether `ts` is evenly spaced. Default `None`: read from the values when they are
+      concrete. Under `jax.jit` with a traced `ts` the spacing cannot be seen; the closed form then
+      takes one matrix exponential per output time (slower) and a `TracedGridWarning` says so, unless
+      you pass `uniform=True` (a promise: the spacing is taken as `(ts[-1] - ts[0]) / (N - 1)`) or
+      `uniform=False` (explicitly the general path, no warning).
+
+    Times and the initial state are data: a new grid, start time or initial state of the same
+    shape does not recompile `simulate`.
     """
 
     model: eqx.Module
@@ -47,9 +63,8 @@ class Scene(eqx.Module):
     y0: jnp.ndarray | None = None
     state: bool = eqx.field(static=True, default=True)
     uniform: bool = eqx.field(static=True, default=False)
-    max_spacing: float | None = eqx.field(static=True, default=None)
 
-    def __init__(self, model, input, ts=None, *, t0=None, t1=None, observe=None, y0=None, state=True):
+    def __init__(self, model, input, ts=None, *, t0=None, t1=None, observe=None, y0=None, state=True, uniform=None):
         types = getattr(type(model), "input_types", None)
         if types is None:
             raise TypeError(f"Scene: `model` must be a jaxbelt model (an AbstractModel); got {type(model).__name__}")
@@ -61,50 +76,82 @@ class Scene(eqx.Module):
         self.model = model
         self.input = input
         self.observe = _as_tuple(observe)
+        for name in self.observe:
+            if not isinstance(name, str):
+                raise TypeError(f"Scene: `observe` holds output names (str); got {name!r}")
+        known = tuple(model.state_names) + type(model).output_names() + type(model).integral_names()
+        unknown = [n for n in self.observe if n not in known and not _dynamic_output(model, n)]
+        if unknown:
+            raise ValueError(f"Scene: {type(model).__name__} has no output {unknown[0]!r}; available: {known}")
         self.state = bool(state)
-        self.y0 = None if y0 is None else jnp.asarray(y0, dtype=float)
+        n = model.n_states
+        if y0 is None:
+            self.y0 = None
+        else:
+            self.y0 = jnp.asarray(y0, dtype=float)
+            if self.y0.shape != (n,):
+                raise ValueError(f"Scene: `y0` must have shape ({n},) for {type(model).__name__}; got {self.y0.shape}")
+            if is_concrete(self.y0) and not np.all(np.isfinite(np.asarray(self.y0))):
+                raise ValueError(f"Scene: `y0` must be finite; got {np.asarray(self.y0).tolist()}")
         if ts is None and t1 is None:
             raise ValueError("Scene needs either `ts` (output times, s) or `t1` (final time, s)")
         if ts is not None and t1 is not None:
             raise ValueError("Scene takes `ts` (output times) or `t1` (final time only), not both")
         if ts is not None:
-            # Check the values before converting: inside `jit` even a numpy constant becomes a tracer
-            # once passed through jnp, and the grid's spacing must stay known (RK4 substeps, uniform grids).
             raw = ts
             ts = jnp.asarray(ts, dtype=float)
             if ts.ndim != 1 or ts.shape[0] < 1:
-                raise ValueError(f"Scene: `ts` must be a 1-D array of output times; got shape {ts.shape}")
-            uniform = False
-            max_spacing = None
+                raise ValueError(f"Scene: `ts` must be a 1-D array of output times [s]; got shape {ts.shape}")
             if is_concrete(raw):
                 tv = np.asarray(raw, dtype=float)
-                d = np.diff(tv)
                 if not np.all(np.isfinite(tv)):
                     raise ValueError("Scene: `ts` must be finite")
+                d = np.diff(tv)
                 if np.any(d <= 0):
                     i = int(np.argmax(d <= 0))
                     raise ValueError(
                         f"Scene: `ts` must be strictly increasing; ts[{i}] = {tv[i]} >= ts[{i + 1}] = {tv[i + 1]}"
                     )
-                uniform = bool(d.size > 0 and np.allclose(d, d[0], rtol=1e-12, atol=0.0))
-                max_spacing = float(d.max()) if d.size else 0.0
+                seen = bool(d.size > 0 and np.allclose(d, d[0], rtol=1e-12, atol=0.0))
+                if uniform is None:
+                    uniform = seen
+                elif uniform and not seen:
+                    raise ValueError("Scene: `uniform=True` but `ts` is not evenly spaced")
+            elif uniform is None:
+                if ts.shape[0] > 2:
+                    warnings.warn(
+                        "Scene: `ts` is traced, so its spacing cannot be checked; a closed-form solve takes one "
+                        "matrix exponential per output time. Pass uniform=True if the grid is evenly spaced "
+                        "(or uniform=False to silence this warning).",
+                        TracedGridWarning,
+                        stacklevel=2,
+                    )
+                uniform = False
             self.ts = ts
-            self.uniform = uniform
-            self.max_spacing = max_spacing
+            self.uniform = bool(uniform)
             self.t0 = ts[0] if t0 is None else jnp.asarray(t0, dtype=float)
+            if jnp.ndim(self.t0) != 0:
+                raise ValueError(f"Scene: `t0` must be a scalar time [s]; got shape {jnp.shape(self.t0)}")
+            if t0 is not None and is_concrete(self.t0) and is_concrete(raw):
+                if not np.isfinite(float(self.t0)) or float(self.t0) > float(np.asarray(raw)[0]):
+                    raise ValueError(
+                        f"Scene: `t0` (start time, s) must be finite and <= ts[0] = {float(np.asarray(raw)[0])}; "
+                        f"got {float(self.t0)}"
+                    )
             self.t1 = None
         else:
             self.ts = None
             self.uniform = False
-            self.max_spacing = None
             self.t0 = jnp.asarray(0.0 if t0 is None else t0, dtype=float)
             self.t1 = jnp.asarray(t1, dtype=float)
-            if is_concrete(self.t1) and is_concrete(self.t0) and not float(self.t1) > float(self.t0):
-                raise ValueError(f"Scene: `t1` must be > t0 = {float(self.t0)} s; got {float(self.t1)}")
-        if self.y0 is not None and is_concrete(self.y0):
-            n = getattr(model, "n_states", None)
-            if n is not None and self.y0.shape != (n,):
-                raise ValueError(f"Scene: `y0` must have shape ({n},) for {type(model).__name__}; got {self.y0.shape}")
+            for name, v in (("t0", self.t0), ("t1", self.t1)):
+                if jnp.ndim(v) != 0:
+                    raise ValueError(f"Scene: `{name}` must be a scalar time [s]; got shape {jnp.shape(v)}")
+            if is_concrete(self.t1) and is_concrete(self.t0):
+                if not (np.isfinite(float(self.t0)) and np.isfinite(float(self.t1)) and float(self.t1) > float(self.t0)):
+                    raise ValueError(
+                        f"Scene: `t1` (final time, s) must be finite and > t0 = {float(self.t0)}; got {float(self.t1)}"
+                    )
 
     @property
     def final_only(self) -> bool:
@@ -114,3 +161,22 @@ class Scene(eqx.Module):
     def times(self):
         """Output times: `ts`, or `[t1]` for a final-state scene."""
         return self.ts if self.ts is not None else self.t1[None]
+
+    def time_errors(self):
+        """`[(ok, message)]` for the time checks that values decide (evaluated under `jit` too)."""
+        t_first = self.times[0]
+        checks = [(jnp.isfinite(self.t0) & (self.t0 <= t_first), "Scene: `t0` must be finite and <= the first output time")]
+        if self.ts is not None and self.ts.shape[0] > 1:
+            checks.append((jnp.all(jnp.diff(self.ts) > 0) & jnp.all(jnp.isfinite(self.ts)),
+                           "Scene: `ts` must be finite and strictly increasing"))
+        elif self.ts is None:
+            checks.append((jnp.isfinite(self.t1) & (self.t1 > self.t0), "Scene: `t1` must be finite and > t0"))
+        if self.y0 is not None:
+            checks.append((jnp.all(jnp.isfinite(self.y0)), "Scene: `y0` must be finite"))
+        return checks
+
+
+def _dynamic_output(model, name: str) -> bool:
+    """Outputs a model resolves by pattern (e.g. `alpha3` of a longer belt chain)."""
+    accepts = getattr(model, "accepts_output", None)
+    return bool(accepts and accepts(name))

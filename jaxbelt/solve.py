@@ -19,6 +19,9 @@ A start-up scene whose `ExponentialVoltage` carries a 1-D array of time constant
 
 from __future__ import annotations
 
+import dataclasses
+from typing import ClassVar
+
 import diffrax
 import equinox as eqx
 import jax
@@ -26,11 +29,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._checks import is_concrete
-from .commands import AbstractExponentialVoltage, ExponentialVoltage
+from ._guard import _modules, error_if, guard, nan_where, traced_checks
+from .commands import AbstractExponentialVoltage
 from .fast import batched_exponential_scene
 from .modal import expm_solve, modal_solve
 from .models.base import AbstractLinearModel
 from .scene import Scene
+from .solution import Solution, SolveError
 
 _CLOSED = ("closed", "expm", "modal")
 _METHODS = ("auto", "ode", "rk4") + _CLOSED
@@ -39,87 +44,55 @@ _METHODS = ("auto", "ode", "rk4") + _CLOSED
 _batched_exponential_scene = eqx.filter_jit(batched_exponential_scene)
 
 
-class SolveError(RuntimeError):
-    """A simulation failed (solver did not reach the final time, or produced non-finite values)."""
+class RK4(diffrax.AbstractERK):
+    """The classical fourth-order Runge-Kutta method as a diffrax solver (fixed step, no error estimate).
 
-
-class Solution(eqx.Module):
-    """Result of `simulate`.
-
-    - `ts` (N,): output times [s];
-    - `ys` (N, n_states): state history in the model's order (None if `Scene(state=False)`);
-    - `outputs`: dict of observed outputs, each (N,) (integrals: value at each output time);
-    - `success`: bool (array; per element under `vmap`);
-    - `stats`: solver statistics (`num_steps` for ODE methods).
-
-    Named access: `sol.current`, `sol["omega2"]`, `sol.electric_power` for any state or
-    observed output.
+    Incerti (2014) checks the modal solution with it at a 0.1 ms step, Incerti (2012) integrates the
+    four-bar with it at 1 ms. `simulate(..., method="rk4", dt=...)` uses it with a constant step;
+    the output times are read off the cubic Hermite interpolant between steps.
     """
 
-    ts: jnp.ndarray
-    ys: jnp.ndarray | None
-    outputs: dict
-    success: jnp.ndarray
-    stats: dict
-    state_names: tuple = eqx.field(static=True, default=())
-    method: str = eqx.field(static=True, default="")
+    tableau: ClassVar[diffrax.ButcherTableau] = diffrax.ButcherTableau(
+        c=np.array([0.5, 0.5, 1.0]),
+        b_sol=np.array([1 / 6, 1 / 3, 1 / 3, 1 / 6]),
+        b_error=np.zeros(4),
+        a_lower=(np.array([0.5]), np.array([0.0, 0.5]), np.array([0.0, 0.0, 1.0])),
+    )
+    interpolation_cls: ClassVar = diffrax.ThirdOrderHermitePolynomialInterpolation.from_k
 
-    def __getitem__(self, name: str):
-        if name in self.outputs:
-            return self.outputs[name]
-        if self.ys is not None and name in self.state_names:
-            return self.ys[..., self.state_names.index(name)]
-        raise KeyError(
-            f"{name!r} is not in this solution; states: {self.state_names}, outputs: {tuple(self.outputs)}. "
-            "Derived outputs are computed only when named in Scene(observe=...)."
-        )
-
-    def __getattr__(self, name: str):
-        if name.startswith("_") or name in ("ts", "ys", "outputs", "success", "stats", "state_names", "method"):
-            raise AttributeError(name)
-        try:
-            return self[name]
-        except KeyError as e:
-            raise AttributeError(str(e)) from None
-
-    @property
-    def y_final(self):
-        """State at the last output time."""
-        return None if self.ys is None else self.ys[..., -1, :]
+    def order(self, terms):
+        return 4
 
 
-def _rk4_substeps(max_spacing: float, dt) -> int:
-    """RK4 steps per output interval so that no step exceeds `dt` [s]."""
-    return max(int(np.ceil(max_spacing / float(dt) - 1e-9)), 1)
+#: |R(h lambda)| of RK4 may exceed max(1, |exp(h lambda)|) by this much before the step is called unstable.
+_RK4_GROWTH_TOL = 1e-6
 
 
-def _rk4(f, y0, ts, n_sub: int, inp):
-    """Fixed-step RK4, `n_sub` equal steps between successive output times."""
-    if ts.shape[0] < 2:
-        return y0[None]
+def rk4_growth(model, t, y, inp, dt):
+    """Largest excess amplification of one RK4 step over the exact flow, from the Jacobian's eigenvalues.
 
-    def one(y, t, h):
-        k1 = f(t, y, inp)
-        k2 = f(t + h / 2, y + h / 2 * k1, inp)
-        k3 = f(t + h / 2, y + h / 2 * k2, inp)
-        k4 = f(t + h, y + h * k3, inp)
-        return y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-
-    def interval(y, tt):
-        ta, tb = tt
-        h = (tb - ta) / n_sub
-        y = jax.lax.fori_loop(0, n_sub, lambda i, yy: one(yy, ta + i * h, h), y)
-        return y, y
-
-    ts = jnp.asarray(ts)
-    _, ys = jax.lax.scan(interval, y0, (ts[:-1], ts[1:]))
-    return jnp.concatenate([y0[None], ys], axis=0)
+    $R(z) = 1 + z + z^2/2 + z^3/6 + z^4/24$ with $z = \\Delta t\\,\\lambda_i$ for the eigenvalues
+    $\\lambda_i$ of $\\partial f/\\partial y$ at `(t, y)`; the step is stable for the linearised
+    dynamics when $|R(z)| \\le \\max(1, |e^{z}|)$ for every eigenvalue. Returns
+    `max_i |R(z_i)| - max(1, |e^{z_i}|)` and the spectral radius of the Jacobian [1/s].
+    """
+    J = jax.lax.stop_gradient(jax.jacfwd(lambda yy: model.vector_field(t, yy, inp))(y))
+    lam = jnp.linalg.eigvals(J)
+    z = jnp.asarray(dt, dtype=lam.dtype) * lam
+    R = 1 + z + z**2 / 2 + z**3 / 6 + z**4 / 24
+    bound = jnp.maximum(1.0, jnp.abs(jnp.exp(z)))
+    return jnp.max(jnp.abs(R) - bound), jnp.max(jnp.abs(lam))
 
 
-@eqx.filter_jit
-def _run(scene: Scene, method: str, solver, rtol, atol, dt0, n_sub: int, max_steps: int, progress: bool, adjoint):
+def _closed(model, inp, y0, t0, times, method, uniform):
+    A, F, s = model.exponential_form(inp)
+    solve = modal_solve if method == "modal" else expm_solve
+    return solve(A, F, s, y0, t0, times, uniform)
+
+
+def _run_impl(scene: Scene, method: str, solver, rtol, atol, dt0, max_steps: int, progress: bool, adjoint):
     model, inp = scene.model, scene.input
-    integrals = tuple(n for n in scene.observe if n in model.integral_names())
+    integrals = tuple(n for n in scene.observe if n in type(model).integral_names())
     pointwise = tuple(n for n in scene.observe if n not in integrals)
     y0 = scene.y0 if scene.y0 is not None else model.initial_state(inp)
     times = scene.times
@@ -128,15 +101,7 @@ def _run(scene: Scene, method: str, solver, rtol, atol, dt0, n_sub: int, max_ste
     integral_vals = {}
     success = jnp.array(True)
     if method in _CLOSED:
-        A, F, s = model.exponential_form(inp)
-        if method == "modal":
-            ys = modal_solve(A, F, s, y0, t0, times, scene.uniform)
-        else:
-            ys = expm_solve(A, F, s, y0, t0, times, scene.uniform)
-    elif method == "rk4":
-        if scene.final_only:
-            raise ValueError("method='rk4' needs output times `ts` (use Scene(..., ts=...))")
-        ys = _rk4(model.vector_field, y0, times, n_sub, inp)
+        ys = _closed(model, inp, y0, t0, times, method, scene.uniform)
     else:
         if integrals:
             def vf(t, y, args):
@@ -147,18 +112,14 @@ def _run(scene: Scene, method: str, solver, rtol, atol, dt0, n_sub: int, max_ste
         else:
             vf = lambda t, y, args: model.vector_field(t, y, args)  # noqa: E731
             y_init = y0
-        t_end = times[-1]
-        if scene.final_only:
-            saveat = diffrax.SaveAt(t1=True)
-        else:
-            saveat = diffrax.SaveAt(ts=times)
-        if isinstance(solver, diffrax.AbstractAdaptiveSolver):
+        saveat = diffrax.SaveAt(t1=True) if scene.final_only else diffrax.SaveAt(ts=times)
+        if isinstance(solver, diffrax.AbstractAdaptiveSolver) and not isinstance(solver, RK4):
             controller = diffrax.PIDController(rtol=rtol, atol=atol)
         else:
             controller = diffrax.ConstantStepSize()
         meter = diffrax.TqdmProgressMeter() if progress else diffrax.NoProgressMeter()
         sol = diffrax.diffeqsolve(
-            diffrax.ODETerm(vf), solver, t0, t_end, dt0, y_init, args=inp, saveat=saveat,
+            diffrax.ODETerm(vf), solver, t0, times[-1], dt0, y_init, args=inp, saveat=saveat,
             stepsize_controller=controller, max_steps=max_steps, throw=False, progress_meter=meter,
             adjoint=adjoint,
         )
@@ -169,14 +130,43 @@ def _run(scene: Scene, method: str, solver, rtol, atol, dt0, n_sub: int, max_ste
             ys = sol.ys
         success = sol.result == diffrax.RESULTS.successful
         stats = {"num_steps": sol.stats["num_steps"]}
+        if method == "rk4":
+            g0, rho0 = rk4_growth(model, t0, y0, inp, dt0)
+            g1, rho1 = rk4_growth(model, times[-1], ys[-1], inp, dt0)
+            stable = jnp.isfinite(g0) & jnp.isfinite(g1) & (jnp.maximum(g0, g1) <= _RK4_GROWTH_TOL)
+            stats["rk4_stable"] = stable
+            stats["spectral_radius"] = jnp.maximum(rho0, rho1)
+            success = success & stable
     success = success & jnp.all(jnp.isfinite(ys))
     outputs = dict(integral_vals)
     for name in pointwise:
         outputs[name] = jax.vmap(lambda t, y: model.output(name, t, y, inp))(times, ys)
+    for v in outputs.values():
+        success = success & jnp.all(jnp.isfinite(v))
     return Solution(
         ts=times, ys=ys if scene.state else None, outputs=outputs, success=success, stats=stats,
         state_names=tuple(model.state_names), method=method,
     )
+
+
+# One compiled program per shape and static option; `eqx.debug.get_num_traces(_run_traced)` counts them.
+_run_traced = eqx.debug.assert_max_traces(_run_impl, max_traces=None)
+_run = eqx.filter_jit(_run_traced)
+
+
+def _describe(scene: Scene, method: str) -> str:
+    return f"{type(scene.model).__name__} driven by {type(scene.input).__name__} (method={method!r})"
+
+
+def _failure_hint(method: str) -> str:
+    if method == "rk4":
+        return ("The fixed RK4 step is too large for the fastest mode of this scene (dt * spectral radius beyond "
+                "RK4's stability region), or the solution is not finite. Use a smaller `dt` or method='ode'.")
+    if method == "ode":
+        return ("The solver did not reach the final time (step budget `max_steps` exhausted or step size collapsed) "
+                "or produced non-finite values. Try an implicit solver (diffrax.Kvaerno5()), looser tolerances or a "
+                "larger max_steps.")
+    return "The closed form produced non-finite values (check the parameters)."
 
 
 def simulate(
@@ -187,7 +177,7 @@ def simulate(
     rtol=1e-8,
     atol=1e-10,
     dt0=None,
-    dt: float = 1e-4,
+    dt=1e-4,
     max_steps: int = 100_000,
     throw: bool = True,
     progress: bool = False,
@@ -200,13 +190,21 @@ def simulate(
     scene: what to compute (model, input, times, observed outputs).
     method: `"auto"`, `"closed"`, `"expm"`, `"modal"`, `"ode"` or `"rk4"` (see module docs).
     solver: diffrax solver for `method="ode"` (default: `scene.model.default_solver()`).
-    rtol, atol: tolerances of the adaptive step-size controller (ODE method).
+    rtol, atol: tolerances of the adaptive step-size controller (ODE method), > 0. Arrays: a new
+        value does not recompile.
     dt0: initial step [s] for the ODE method (default: chosen automatically; required for
         fixed-step diffrax solvers).
-    dt: step [s] of `method="rk4"` (default 0.1 ms, the check of Incerti (2014)).
-    max_steps: step budget of the ODE method.
-    throw: raise `SolveError` when the solve fails (outside `jit`/`vmap`), or an
-        `eqx.error_if` runtime error inside them. With `throw=False`, check `sol.success`.
+    dt: step [s] of `method="rk4"` (default 0.1 ms, the check of Incerti, 2014), > 0; a new
+        value does not recompile. The step is checked against RK4's stability region using the
+        eigenvalues of the Jacobian at the first and last state: an unstable step fails the solve.
+    max_steps: step budget of the ODE and RK4 methods (static: a new value recompiles).
+    throw: what a failure does (see "Errors and guarantees" in the docs):
+        `True` — raise `SolveError` when called eagerly; under `jit`/`vmap`/`grad` the states and
+        outputs carry an `eqx.error_if`, so the program raises at run time whichever of them the
+        caller keeps. Invalid traced parameters (e.g. a negative stiffness inside `jit`) raise the
+        same way, naming the parameter and its range.
+        `False` — never raise for values: failed elements get `success=False` and NaN states and
+        outputs (never finite garbage); shape and type errors still raise.
     progress: show a tqdm progress bar for the ODE method.
     adjoint: how the ODE method is differentiated: `None` (reverse mode with recursive
         checkpointing, diffrax's default), `"forward"` (`diffrax.ForwardMode()`: use with
@@ -214,31 +212,19 @@ def simulate(
 
     Works under `jax.jit`, `jax.vmap` and `jax.grad` (the modal method differentiates with
     respect to the input's parameters only: JAX does not differentiate eigenvectors).
+    Compiles once per shape and static option: new times, tolerances, steps or parameter values
+    of the same shapes reuse the compiled program.
     """
     if method not in _METHODS:
         raise ValueError(f"simulate: `method` must be one of {_METHODS}; got {method!r}")
     if not isinstance(scene, Scene):
-        raise ValueError(f"simulate expects a jaxbelt.Scene; got {type(scene).__name__}")
+        raise TypeError(f"simulate expects a jaxbelt.Scene; got {type(scene).__name__}")
     model, inp = scene.model, scene.input
-    if isinstance(inp, ExponentialVoltage) and jnp.ndim(inp.gamma) == 1:
-        # A batch of time constants in one command: solved together by the batched closed form
-        # (shared modal decomposition, only the exp(-t/gamma) response differs per element).
-        if method not in ("auto", "closed"):
-            raise ValueError(
-                f"simulate: a command with a batch of gammas (shape {jnp.shape(inp.gamma)}) is solved by the "
-                f"batched closed form (method='auto'); for method={method!r} use jax.vmap over scalar gammas"
-            )
-        batched = _batched_exponential_scene(scene)
-        if batched is None:
-            raise ValueError(
-                "simulate: a batch of gammas needs a belt start-up model with scalar parameters, output times `ts` "
-                "and no integral outputs; otherwise use jax.vmap over scalar gammas"
-            )
-        if throw and is_concrete(batched.success) and not bool(np.all(np.asarray(batched.success))):
-            bad = np.flatnonzero(~np.asarray(batched.success))
-            raise SolveError(f"simulate: non-finite values in the batched start-up scene at elements {bad.tolist()}")
-        return batched
-    integrals = [n for n in scene.observe if n in model.integral_names()]
+    if isinstance(inp, AbstractExponentialVoltage) and _batched_input(inp):
+        return _simulate_batch(scene, method, throw)
+    _check_scalar_fields(model)
+    _check_scalar_fields(inp)
+    integrals = [n for n in scene.observe if n in type(model).integral_names()]
     lin = isinstance(model, AbstractLinearModel) and isinstance(inp, AbstractExponentialVoltage)
     if method == "auto":
         method = "closed" if (lin and not integrals) else "ode"
@@ -253,45 +239,104 @@ def simulate(
         if integrals:
             raise ValueError(f"simulate: integral outputs {integrals} need method='ode' (they are augmented states)")
     if method == "rk4":
-        if scene.ts is None:
-            raise ValueError("simulate: method='rk4' needs output times `ts` (use Scene(..., ts=...))")
-        if scene.max_spacing is None:
-            raise ValueError(
-                "simulate: method='rk4' needs output times whose values are known when the Scene is built "
-                "(a numpy array or a concrete jax array, not a traced one)"
-            )
-        if not is_concrete(dt) or not float(dt) > 0:
-            raise ValueError(f"simulate: `dt` (RK4 step, s) must be a concrete number > 0; got {dt}")
+        if jnp.ndim(dt) != 0:
+            raise ValueError(f"simulate: `dt` (RK4 step, s) must be a scalar; got shape {jnp.shape(dt)}")
+        if is_concrete(dt) and not (np.isfinite(float(dt)) and float(dt) > 0):
+            raise ValueError(f"simulate: `dt` (RK4 step, s) must be finite and > 0; got {float(dt)}")
+        solver, dt0 = RK4(), dt
     if solver is None and method == "ode":
         solver = model.default_solver()
     if method == "ode" and dt0 is None and not isinstance(solver, diffrax.AbstractAdaptiveSolver):
         raise ValueError(f"simulate: fixed-step solver {type(solver).__name__} needs `dt0` (step, s)")
-    for name in ("rtol", "atol"):
-        v = rtol if name == "rtol" else atol
-        if is_concrete(v) and not float(np.asarray(v)) > 0:
-            raise ValueError(f"simulate: `{name}` must be > 0; got {v}")
+    for name, v in (("rtol", rtol), ("atol", atol)):
+        if jnp.ndim(v) != 0:
+            raise ValueError(f"simulate: `{name}` must be a scalar; got shape {jnp.shape(v)}")
+        if is_concrete(v) and not (np.isfinite(float(v)) and float(v) > 0):
+            raise ValueError(f"simulate: `{name}` must be finite and > 0; got {float(v)}")
+    if not isinstance(max_steps, (int, np.integer)) or isinstance(max_steps, bool) or max_steps < 1:
+        raise ValueError(f"simulate: `max_steps` must be an integer >= 1; got {max_steps!r}")
     if adjoint is None:
         adjoint = diffrax.RecursiveCheckpointAdjoint()
-    elif adjoint == "forward":
+    elif isinstance(adjoint, str) and adjoint == "forward":
         adjoint = diffrax.ForwardMode()
     elif not isinstance(adjoint, diffrax.AbstractAdjoint):
         raise ValueError(f"simulate: `adjoint` must be None, 'forward' or a diffrax adjoint; got {adjoint!r}")
+    checks = traced_checks(model, inp) + _value_checks(scene, method, rtol, atol, dt0)
     sol = _run(
         scene, method, solver, jnp.asarray(rtol, dtype=float), jnp.asarray(atol, dtype=float),
-        None if dt0 is None else jnp.asarray(dt0, dtype=float),
-        _rk4_substeps(scene.max_spacing, dt) if method == "rk4" else 1,
-        int(max_steps), bool(progress), adjoint,
+        None if dt0 is None else jnp.asarray(dt0, dtype=float), int(max_steps), bool(progress), adjoint,
     )
-    if throw:
-        what = f"{type(model).__name__} driven by {type(inp).__name__} (method={method!r})"
-        if is_concrete(sol.success):
-            if not bool(np.all(np.asarray(sol.success))):
-                raise SolveError(
-                    f"simulate failed for the scene {what}: the solver did not reach the final time or produced "
-                    "non-finite values. Try method='ode' with an implicit solver (diffrax.Kvaerno5()), "
-                    "looser tolerances or a larger max_steps."
+    return _finish(sol, checks, throw, _describe(scene, method), _failure_hint(method))
+
+
+def _check_scalar_fields(obj) -> None:
+    """Parameters are scalars inside `simulate` (a batch is a `jax.vmap`/`jb.sweep` over them).
+
+    Fields a class declares in `array_fields` (e.g. the exponents of a `PseudoPolynomial`) are
+    exempt; nested modules are checked too."""
+    for m in _modules(obj):
+        allowed = getattr(type(m), "array_fields", ())
+        for f in dataclasses.fields(m):
+            v = getattr(m, f.name, None)
+            if f.name in allowed or not hasattr(v, "shape") or isinstance(v, eqx.Module):
+                continue
+            if jnp.ndim(v) != 0:
+                raise ValueError(
+                    f"simulate: parameter `{f.name}` of {type(m).__name__} must be a scalar; got shape {jnp.shape(v)}. "
+                    "For a batch of values use jax.vmap or jaxbelt.sweep over scalar parameters."
                 )
+
+
+def _value_checks(scene, method, rtol, atol, dt0):
+    """Checks of values that may be traced: times, tolerances and the RK4 step."""
+    checks = [] if is_concrete((scene.ts, scene.t0, scene.t1, scene.y0)) else scene.time_errors()
+    if method == "ode":
+        for name, v in (("rtol", rtol), ("atol", atol)):
+            if not is_concrete(v):
+                v = jnp.asarray(v)
+                checks.append((jnp.isfinite(v) & (v > 0), f"simulate: `{name}` must be finite and > 0"))
+    if method == "rk4" and not is_concrete(dt0):
+        v = jnp.asarray(dt0)
+        checks.append((jnp.isfinite(v) & (v > 0), "simulate: `dt` (RK4 step, s) must be finite and > 0"))
+    return checks
+
+
+def _finish(sol: Solution, checks, throw: bool, what: str, hint: str) -> Solution:
+    """Apply the failure policy to a solution (see `simulate`'s `throw`)."""
+    values = (sol.ys, sol.outputs)
+    values, ok = guard(values, checks, throw)
+    success = sol.success & ok
+    if throw:
+        if is_concrete(success):
+            if not bool(np.all(np.asarray(success))):
+                bad = np.flatnonzero(~np.asarray(success).ravel())
+                where = f" (batch elements {bad.tolist()[:10]})" if np.ndim(success) else ""
+                raise SolveError(f"simulate failed for the scene {what}{where}. {hint}")
         else:
-            msg = f"jaxbelt.simulate failed for the scene {what} (non-finite values or step budget exhausted)"
-            sol = eqx.tree_at(lambda s: s.success, sol, eqx.error_if(sol.success, ~sol.success, msg))
-    return sol
+            values = error_if(values, ~success, f"jaxbelt.simulate failed for the scene {what}. {hint}")
+    else:
+        values = nan_where(values, success)
+    ys, outputs = values
+    return eqx.tree_at(lambda s: (s.ys, s.outputs, s.success), sol, (ys, outputs, success), is_leaf=lambda x: x is None)
+
+
+def _batched_input(inp) -> bool:
+    amps, rates = inp.exp_terms()
+    return jnp.ndim(rates) == 2
+
+
+def _simulate_batch(scene: Scene, method: str, throw: bool) -> Solution:
+    """A command carrying a batch of exponential inputs: one batched closed form (`jaxbelt.fast`)."""
+    if method not in ("auto", "closed"):
+        raise ValueError(
+            f"simulate: a command with a batch of parameters is solved by the batched closed form "
+            f"(method='auto'); for method={method!r} use jax.vmap over scalar commands"
+        )
+    sol = _batched_exponential_scene(scene)
+    if sol is None:
+        raise ValueError(
+            "simulate: a batched command needs a linear model (AbstractLinearModel) with scalar parameters, "
+            "output times `ts` and no integral outputs; otherwise use jax.vmap over scalar commands"
+        )
+    checks = traced_checks(scene.model, scene.input)
+    return _finish(sol, checks, throw, _describe(scene, "closed"), _failure_hint("closed"))

@@ -60,7 +60,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .solve import SolveError
+from .solution import SolveError
 
 _MAX_LISTED = 10
 

@@ -1,7 +1,7 @@
 """Linear steady-state references for the non-linear belt (v_l = 0): frequency domain, no stepping.
 
 Test references only: numpy, complex harmonic solves, no code path shared with the time
-integration of `jaxbelt.nonlinear_sweep`. (The library's own linear response is
+integration of `jaxbelt.nonlinear_sweep` (`jaxbelt.models.nonlinear.steady`). (The library's own linear response is
 `jaxbelt.linear_runout_response`; tests/test_cross_scene.py compares the two scenes.)
 
 - `modal_harmonic_pp(belt, speed)`: steady peak-to-peak displacement [m] of the *linearised

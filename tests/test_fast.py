@@ -120,5 +120,5 @@ def test_simulate_routes_a_batch_of_gammas_to_the_fast_path():
         np.testing.assert_allclose(sol.ys[i], one.ys, rtol=0, atol=1e-10 * float(jnp.max(jnp.abs(one.ys))))
         np.testing.assert_allclose(sol.electric_power[i], one.electric_power, rtol=0,
                                    atol=1e-10 * float(jnp.max(jnp.abs(one.electric_power))))
-    with pytest.raises(ValueError, match="jax.vmap over scalar gammas"):
+    with pytest.raises(ValueError, match="jax.vmap over scalar commands"):
         jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, gammas), ts=TS), method="ode")

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import jaxbelt as jb
-from jaxbelt.nonlinear_kbm import kappa, steady_amplitudes
+from jaxbelt.models.nonlinear.kbm import kappa, kbm_amplitudes
 from nonlinear_reference import modal_harmonic_pp, string_exact_pp
 
 XI = 0.015  # modal damping ratio used for the 004 acceptance checks
@@ -19,7 +19,7 @@ XI = 0.015  # modal damping ratio used for the 004 acceptance checks
 
 def belt(**kw):
     base = dict(span=0.86, wave_speed=41.0, v_l=50.0, pulley_radii=(0.063, 0.063),
-                runout=(0.355e-3, 0.21e-3), phase=jnp.deg2rad(240.0), damping=XI, n_modes=1)
+                runout=(0.355e-3, 0.21e-3), phase=jnp.deg2rad(240.0), damping=XI, n_modes=1, sensor_pulley="drive")
     base.update(kw)
     return jb.NonlinearBelt(**base)
 
@@ -134,7 +134,7 @@ def test_simulated_branches_match_kbm_and_backbone_between(stand_sweeps):
     au, ad = np.asarray(up.steady.amplitude[:, 0]), np.asarray(dn.steady.amplitude[:, 0])
     nband = 0
     for s, u, d in zip(speeds, au, ad):
-        roots = steady_amplitudes(b, s)
+        roots = kbm_amplitudes(b, s)
         if abs(u - d) > 0.2 * max(u, d):
             nband += 1
             assert len(roots) == 3
@@ -152,7 +152,7 @@ def test_basins_two_branches(stand_sweeps):
     i = int(np.argmax(au - ad))
     z0s = jnp.stack([jnp.zeros(2), 1.1 * up.steady.z[i]])
     ss = jb.nonlinear_basins(b, speeds[i], z0s)
-    roots = steady_amplitudes(b, speeds[i])
+    roots = kbm_amplitudes(b, speeds[i])
     a = np.asarray(ss.amplitude[:, 0])
     assert abs(a[0] / roots[0] - 1) < 0.05 and abs(a[1] / roots[2] - 1) < 0.05
 

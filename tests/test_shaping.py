@@ -329,3 +329,27 @@ def test_platform_free_vibration_after_the_move_matches_closed_form():
                       method="ode", rtol=1e-12, atol=1e-14)
     np.testing.assert_allclose(sol.alpha[1:], alpha, rtol=0, atol=1e-7 * float(jnp.max(jnp.abs(alpha))))
     np.testing.assert_allclose(sol.theta[1:], PHI * lam + alpha, rtol=1e-9)
+
+
+def test_fig2_profiles_drawn_from_the_commands(tmp_path):
+    """Fig. 2 (T = 1 s, Phi = 1 rad): the 3-4-5 polynomial peaks at 15/8 rad/s and 10/sqrt(3) rad/s²
+    (closed form of 10u^3 - 15u^4 + 6u^5); the figure draws exactly the arrays it is given; the CLI writes it."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from jaxbelt.cli import main
+    from jaxbelt.plots.shaping import plot_profiles
+
+    t = jnp.linspace(0.0, 1.0, 2001)
+    c = jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]), 1.0, 1.0)
+    assert float(jnp.max(c.velocity(t))) == pytest.approx(15 / 8, rel=1e-12)
+    assert float(jnp.max(c.acceleration(t))) == pytest.approx(10 / np.sqrt(3), rel=1e-6)
+    p = jb.PseudoPolynomial(jnp.array([4.5, 6.2, 8.4]), 1.0, 1.0)
+    profiles = {"3-4-5": (c(t), c.velocity(t), c.acceleration(t)), "4.5-6.2-8.4": (p(t), p.velocity(t), p.acceleration(t))}
+    axes = plot_profiles(t, profiles)
+    np.testing.assert_array_equal(axes[2].lines[1].get_ydata(), np.asarray(p.acceleration(t)))
+    plt.close("all")
+    assert main(["shaping", "--figure", "profiles", "--out", str(tmp_path / "fig2.png")]) == 0
+    assert (tmp_path / "fig2.png").stat().st_size > 10_000

@@ -304,3 +304,26 @@ def test_errors_response_inputs():
         jb.linear_runout_response(5.0, damping_ratio=-0.1, **MW)
     with pytest.raises(ValueError, match="pulley_radii"):
         jb.crossing_speeds(0.86, (0.063, 0.0), 41.0)
+
+
+def test_table1_observations_and_table2_measured():
+    """Belt-vibration report, Table 1 (9 observed speeds) and Table 2 (the 7 with a transverse vibration)."""
+    from jaxbelt.models.string import TABLE1_OBSERVATIONS, TABLE2_MEASURED_RPM
+
+    rpm = [r for r, _ in TABLE1_OBSERVATIONS]
+    assert rpm == [730, 810, 910, 1020, 1090, 1180, 1271, 1400, 1720]
+    relevant = [r for r, what in TABLE1_OBSERVATIONS if what != "Not relevant vibration"]
+    assert relevant == [r for r, _ in TABLE2_MEASURED_RPM]
+    assert dict(TABLE1_OBSERVATIONS)[1090] == dict(TABLE1_OBSERVATIONS)[1271] == "Not relevant vibration"
+
+
+def test_critical_rotor_speed_eq53(span):
+    w_cr = float(span.critical_rotor_speed(0.1166))
+    assert w_cr == pytest.approx(np.sqrt(140.0 / 0.05) / 0.1166, rel=1e-14)  # eq. 53
+    # eq. (51) at omega_U -> omega_CR: omega_n = (n pi / L) V_cr (1 - x^2) with x = 0.999
+    wn = np.asarray(span.natural_frequencies(0.999 * w_cr * 0.1166, 3))
+    np.testing.assert_allclose(wn, np.arange(1, 4) * np.pi / 0.2621 * np.sqrt(2800.0) * (1 - 0.999**2), rtol=1e-12)
+    # every exciting speed of eq. (55) lies below omega_CR
+    assert all(float(jb.exciting_speeds(span, 0.1166, n, m)) < w_cr for n in (1, 2, 3) for m in (1, 5, 9))
+    with pytest.raises(ValueError, match="pulley_radius"):
+        span.critical_rotor_speed(0.0)

@@ -4,24 +4,30 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ._args import finite_float, image_path, nonnegative_float, positive_float
+
 
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "fourbar",
         help="four-bar linkage + DC motor + PID: Fig. 4 and speed-fluctuation indices",
         description="Simulate the four-bar drive open loop (constant voltage) and with the PID of the paper, "
-        "print the fluctuation indices and write Fig. 4. Geometry, link masses and R are ASSUMED "
-        "(the paper's Table I was lost).",
+        "print the fluctuation indices and write Fig. 4. The paper's Table I was lost: crank length and R are "
+        "identified from its two published indices, the other lost values assumed.",
     )
-    p.add_argument("--out", default="fourbar.png", help="Fig. 4 image (default fourbar.png)")
-    p.add_argument("--strip", default=None, help="also write a linkage snapshot strip to this image")
-    p.add_argument("--voltage", type=float, default=25.0, help="open-loop voltage [V] (paper: 25)")
-    p.add_argument("--kp", type=float, default=80.0, help="Kp [V/rad], multiplies t (paper: 80)")
-    p.add_argument("--ki", type=float, default=32.0, help="Ki [V/rad] (paper: 32)")
-    p.add_argument("--kd", type=float, default=0.015, help="Kd [V/(rad/s^2)] (paper: 0.015)")
-    p.add_argument("--omega-ref", type=float, default=30.0, help="motor speed set point [rad/s] (paper: 30)")
-    p.add_argument("--v-limit", type=float, default=None, help="voltage limiter [V] (default: none)")
-    p.add_argument("--t1", type=float, default=1.0, help="simulated time [s]")
+    p.add_argument("--out", type=image_path, default="fourbar.png", help="Fig. 4 image (default fourbar.png)")
+    p.add_argument("--strip", type=image_path, default=None, help="also write a linkage snapshot strip to this image")
+    p.add_argument("--regulators", type=image_path, default=None,
+                   help="also write the comparison of the ramped-gain PID (eq. 16) with a constant-gain PID (eq. 14)")
+    p.add_argument("--kp-constant", type=nonnegative_float, default=35.0,
+                   help="Kp [V s/rad] of the constant-gain PID in --regulators (default 35: Kp t at t = 0.44 s)")
+    p.add_argument("--voltage", type=finite_float, default=25.0, help="open-loop voltage [V] (paper: 25)")
+    p.add_argument("--kp", type=nonnegative_float, default=80.0, help="Kp [V/rad], multiplies t (paper: 80)")
+    p.add_argument("--ki", type=nonnegative_float, default=32.0, help="Ki [V/rad] (paper: 32)")
+    p.add_argument("--kd", type=nonnegative_float, default=0.015, help="Kd [V/(rad/s^2)] (paper: 0.015)")
+    p.add_argument("--omega-ref", type=positive_float, default=30.0, help="motor speed set point [rad/s] (paper: 30)")
+    p.add_argument("--v-limit", type=positive_float, default=None, help="voltage limiter [V] (default: none)")
+    p.add_argument("--t1", type=positive_float, default=1.0, help="simulated time [s], > 0.5")
     p.set_defaults(func=run)
 
 
@@ -44,6 +50,21 @@ def run(args) -> int:
     fig = fourbar_figure(open_, closed, omega_ref=args.omega_ref, voltage=args.voltage)
     fig.savefig(Path(args.out), dpi=120)
     print(f"wrote {args.out}")
+    if args.regulators:
+        import matplotlib.pyplot as plt
+
+        from jaxbelt.plots.fourbar import FIG4_OUTPUTS, plot_regulators
+
+        const = jb.PID(kp=args.kp_constant, ki=args.ki, kd=args.kd, omega_ref=args.omega_ref,
+                       v_limit=args.v_limit, gain="constant")
+        sol_c = jb.simulate(jb.Scene(drive, const, ts=closed.ts, observe=FIG4_OUTPUTS))
+        chi_c = float(jb.fluctuation_index(sol_c, 0.375, 0.5))
+        print(f"closed loop PID, constant Kp = {args.kp_constant:g} V s/rad: chi = {100 * chi_c:.2f} % over 0.375-0.5 s")
+        fig, ax = plt.subplots(figsize=(8, 4), constrained_layout=True)
+        plot_regulators({f"ramped, Kp t = {args.kp:g} t": closed, f"constant, Kp = {args.kp_constant:g}": sol_c},
+                        omega_ref=args.omega_ref, ax=ax)
+        fig.savefig(Path(args.regulators), dpi=120)
+        print(f"wrote {args.regulators}")
     if args.strip:
         linkage_strip(drive).savefig(Path(args.strip), dpi=120)
         print(f"wrote {args.strip}")

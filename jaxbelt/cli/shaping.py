@@ -8,9 +8,15 @@ band widths, and writes the figure (paper's Fig. 3 + sensitivity plot).
 from __future__ import annotations
 
 
+from ._args import image_path
+
+
 def register(subparsers):
     p = subparsers.add_parser("shaping", help="pseudo-polynomial command shaping of a belt-driven platform (Incerti, pseudo-polynomial commands)")
-    p.add_argument("--out", default="shaping.png", help="figure file (default shaping.png)")
+    p.add_argument("--out", type=image_path, default="shaping.png", help="figure file (default shaping.png)")
+    p.add_argument("--figure", choices=["overview", "profiles"], default="overview",
+                   help="overview: optimisation, Fig. 3 and sensitivity (default); profiles: the paper's Fig. 2, "
+                        "3-4-5 polynomial vs 4.5-6.2-8.4 pseudo-polynomial (T = 1 s, Phi = 1 rad), with C_i printed")
     p.add_argument("--gammas", type=float, nargs="+", default=[3.0, 4.0, 5.0], help="start exponents (default 3 4 5)")
     p.add_argument("--duration", type=float, default=1.0, help="motion time T [s] (default 1)")
     p.add_argument("--revolutions", type=float, default=15.0, help="motor displacement [rev] (default 15)")
@@ -38,13 +44,15 @@ def run(args) -> int:
     from ..optimise.command import optimise_command, optimise_robust, sensitivity_curve, shaped_commands, tolerance_band
     from ..plots.shaping import shaping_figure
 
+    if args.figure == "profiles":
+        return _profiles(args)
     progress = not args.no_progress
     plat = BeltPlatform()
     phi = args.revolutions * 2 * jnp.pi
     cmd0 = PseudoPolynomial(jnp.asarray(args.gammas, dtype=float), phi, args.duration)
     res = optimise_command(plat, cmd0, progress=progress)
     h0 = float(residual_energy(plat, cmd0))
-    print(f"H(start {list(args.gammas)}) = {h0:.6g} rad^2/s^2, E(T) = {h0 * float(plat.energy_factor):.4g} J")
+    print(f"H(start {list(args.gammas)}) = {h0:.6g} rad^2/s^4, E(T) = {h0 * float(plat.energy_factor):.4g} J")
     g = ", ".join(f"{x:.4f}" for x in res.gammas.tolist())
     print(f"optimised exponents ({g}): H = {float(res.value):.3g} (H/H0 = {float(res.value) / h0:.2e}, "
           f"{res.n_steps} L-BFGS steps)")
@@ -71,5 +79,27 @@ def run(args) -> int:
     fig = shaping_figure(plat, cmd0, res.command, omegas, curves, reference=label0)
     fig.savefig(args.out, dpi=120)
     plt.close(fig)
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _profiles(args) -> int:
+    import jax.numpy as jnp
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    from ..commands import PseudoPolynomial
+    from ..plots.shaping import plot_profiles
+
+    t = jnp.linspace(0.0, 1.0, 401)
+    profiles = {}
+    for g in ((3.0, 4.0, 5.0), (4.5, 6.2, 8.4)):
+        cmd = PseudoPolynomial(jnp.asarray(g), 1.0, 1.0)  # Fig. 2: Phi = 1 rad, T = 1 s
+        label = "-".join(f"{x:g}" for x in g)
+        profiles[label] = (cmd(t), cmd.velocity(t), cmd.acceleration(t))
+        print(f"gammas {label}: C = {np.round(np.asarray(cmd.coefficients), 3).tolist()}")
+    fig, axes = plt.subplots(1, 3, figsize=(13, 3.4), constrained_layout=True)
+    plot_profiles(t, profiles, axes=axes)
+    fig.savefig(args.out, dpi=110)
     print(f"wrote {args.out}")
     return 0

@@ -1,6 +1,9 @@
-"""`jaxbelt string`: the belt-span figures (belt-vibration report figs. 40, 41, 43; Moon & Wickert Fig. 5)."""
+"""`jaxbelt string`: the belt-span figures (belt-vibration report figs. 37-43, eq. 51-53; Moon & Wickert Fig. 5)."""
 
 from __future__ import annotations
+
+
+from ._args import float_in, image_path, positive_float
 
 
 def register(subparsers):
@@ -9,9 +12,16 @@ def register(subparsers):
         help="belt spans: contact pressure, span frequencies, exciting speeds, crossing diagram, run-out response",
         description="Belt spans as axially moving strings (the belt-vibration report and Moon & Wickert): writes one figure.",
     )
-    p.add_argument("--out", default="string.png", help="output image (default: string.png)")
-    p.add_argument("--contact-radius", type=float, default=0.025,
+    p.add_argument("--out", type=image_path, default="string.png", help="output image (default: string.png)")
+    p.add_argument("--figure", choices=["overview", "modes"], default="overview",
+                   help="overview: pressure, exciting speeds, crossings, run-out (default); modes: the first three "
+                        "mode shapes of the moving span (report figs. 37-39) and omega_n(omega_U) with omega_CR (eq. 51, 53)")
+    p.add_argument("--contact-radius", type=positive_float, default=0.025,
                    help="motor pulley radius [m] for the pressure plot (not in the belt-vibration report; default 0.025)")
+    p.add_argument("--belt-speed", type=float_in(0.0, 52.9), default=20.0,
+                   help="belt speed V [m/s] of the mode-shape snapshots, below sqrt(T/rho) = 52.9 m/s (default 20)")
+    p.add_argument("--pulley-radius", type=positive_float, default=0.1166,
+                   help="driven pulley radius R_U [m] for omega_CR (fitted to Table 2; default 0.1166)")
     p.set_defaults(func=run)
 
 
@@ -24,10 +34,37 @@ def run(args) -> int:
     from ..plots.string import string_figure
 
     span = jb.MovingString(tension=140.0, density=0.05, length=0.2621)
+    if args.figure == "modes":
+        return _modes(args, span)
     vc = jb.crossing_speeds(length=0.86, pulley_radii=(0.063, 0.063), wave_speed=41.0, n_modes=2)
     fig = string_figure(contact_radius=args.contact_radius)
     fig.savefig(args.out, dpi=110)
     print(f"critical speed (belt-vibration report span): {float(span.critical_speed):.3f} m/s")
     print(f"Moon & Wickert crossings: mode 1 {float(vc[0, 0, 0]):.3f} m/s, mode 2 {float(vc[1, 0, 0]):.3f} m/s")
+    print(f"wrote {args.out}")
+    return 0
+
+
+def _modes(args, span) -> int:
+    import jax.numpy as jnp
+    import numpy as np
+
+    from ..plots.string import RPM, modes_figure
+
+    x = np.linspace(0.0, float(span.length), 201)
+    shapes, times = [], []
+    for n in (1, 2, 3):
+        w = float(span.natural_frequencies(args.belt_speed, n)[n - 1])
+        t = np.linspace(0.0, np.pi / w, 7)  # half a period of the mode, 7 snapshots
+        shapes.append(np.asarray(span.mode_shape(x[None, :], t[:, None], args.belt_speed, n)))
+        times.append(t)
+    w_cr = float(span.critical_rotor_speed(args.pulley_radius))
+    rotor = np.linspace(0.0, w_cr, 300)
+    freqs = np.asarray(span.natural_frequencies(jnp.asarray(rotor[:-1] * args.pulley_radius), 3))
+    freqs = np.vstack([freqs, np.zeros((1, 3))])  # eq. (51) is exactly zero at omega_CR
+    fig = modes_figure(x, times[0], np.stack(shapes), rotor * RPM, freqs, w_cr * RPM,
+                       title=f"moving span, V = {args.belt_speed:g} m/s")
+    fig.savefig(args.out, dpi=110)
+    print(f"critical rotor speed omega_CR = {w_cr:.1f} rad/s = {w_cr * RPM:.0f} rpm (eq. 53, R_U = {args.pulley_radius:g} m)")
     print(f"wrote {args.out}")
     return 0

@@ -1,4 +1,4 @@
-"""Speed controller of a DC motor: the PID law with time-varying proportional gain (Incerti, 2012).
+"""Speed controller of a DC motor: the PID law with constant or time-varying proportional gain (Incerti, 2012).
 
 The controller is not a command: a command is a known function of time (`ConstantVoltage`,
 `inp(t)`), whereas the controller's voltage depends on the state of the drive it is attached to.
@@ -24,18 +24,26 @@ def _opt_arr(x):
 
 
 _LIMITERS = ("hard", "smooth")
+_GAINS = ("ramped", "constant")
 
 
 class PID(AbstractController):
-    """PID speed regulator with time-varying proportional gain (Incerti, 2012, eq. 15-16).
+    """PID speed regulator with a ramped or constant proportional gain (Incerti, 2012, eq. 14-16).
 
-    For a constant speed set point $\\dot\\varphi_{ref} = \\omega_0$, $\\varphi_{ref} = \\omega_0 t$,
-    $\\ddot\\varphi_{ref} = 0$ (Sec. II-D):
+    For a constant speed set point $\\dot\\varphi_{ref} = \\omega_0$ (Sec. II-D) the reference angle
+    starts at the motor angle $\\varphi_0$ of the scene start, $\\varphi_{ref} = \\varphi_0 + \\omega_0 t$,
+    and $\\ddot\\varphi_{ref} = 0$:
 
-    $V_a(t) = K_p t\\,(\\omega_0 - \\dot\\varphi) + K_i(\\omega_0 t - \\varphi) - K_d\\ddot\\varphi$
+    - `gain="ramped"` (default, the paper's regulator, eq. 15-16):
+      $V_a(t) = K_p t\\,(\\omega_0 - \\dot\\varphi) + K_i(\\omega_0 t - (\\varphi - \\varphi_0)) - K_d\\ddot\\varphi$;
+    - `gain="constant"` (the textbook PID, eq. 14):
+      $V_a(t) = K_p(\\omega_0 - \\dot\\varphi) + K_i(\\omega_0 t - (\\varphi - \\varphi_0)) - K_d\\ddot\\varphi$.
 
-    where $\\varphi = z\\alpha$ is the motor angle. The integral term is written with the angle
-    itself (eq. 16), so no extra state is needed; the derivative term needs the motor
+    $K_i(\\omega_0 t - (\\varphi - \\varphi_0)) = K_i\\int_0^t e\\,dt$ is the integral of the speed error
+    $e = \\omega_0 - \\dot\\varphi$ (eq. 14), so no extra state is needed; it vanishes at $t = 0$
+    whatever the initial angle. $\\varphi = z\\alpha$ is the motor angle and $\\varphi_0$ is handed
+    over by the drive (`MotorState.angle0`; `FourBarDrive` takes it from its `alpha0`). Time $t$
+    is measured from the start of the regulation, $t = 0$. The derivative term needs the motor
     acceleration, which the drive supplies from its equation of motion (eq. 10-11; it does not
     depend on $V_a$, so there is no algebraic loop).
 
@@ -49,12 +57,14 @@ class PID(AbstractController):
 
     | field | symbol | unit | paper value |
     |---|---|---|---|
-    | `kp` | $K_p$ (multiplies $t$) | V/rad | 80 |
+    | `kp` | $K_p$ (ramped: multiplies $t$) | V/rad (ramped), V s/rad (constant) | 80 |
     | `ki` | $K_i$ | V/rad | 32 |
     | `kd` | $K_d$ | V/(rad s⁻²) | 0.015 |
     | `omega_ref` | $\\omega_0$ motor speed set point | rad/s | 30 |
     | `v_limit` | $V_{lim}$ (None: no limiter) | V | – |
+    | `limiter` | `"hard"` or `"smooth"` (static) | – | – |
     | `v_smooth` | width $s$ of the smooth limiter | V | 0.5 |
+    | `gain` | `"ramped"` ($K_p t$, eq. 16) or `"constant"` ($K_p$, eq. 14) (static) | – | ramped |
     """
 
     kp: jnp.ndarray = eqx.field(converter=_arr, default=80.0)
@@ -64,6 +74,7 @@ class PID(AbstractController):
     v_limit: jnp.ndarray | None = eqx.field(converter=_opt_arr, default=None)
     limiter: str = eqx.field(static=True, default="hard")
     v_smooth: jnp.ndarray = eqx.field(converter=_arr, default=0.5)
+    gain: str = eqx.field(static=True, default="ramped")
 
     def __check_init__(self):
         o = "PID"
@@ -74,11 +85,19 @@ class PID(AbstractController):
             checks.append(("v_limit", self.v_limit, "positive", "V"))
         checks.append(("v_smooth", self.v_smooth, "positive", "V"))
         check_fields(o, checks)  # one transfer for all the fields
+        if self.gain not in _GAINS:
+            raise ValueError(f"{o}: `gain` must be one of {_GAINS} (eq. 16 or eq. 14); got {self.gain!r}")
 
-    def raw_voltage(self, t, phi, phi_dot, phi_ddot):
-        """Regulator output before the limiter [V] (eq. 16 with the constant set point)."""
+    def proportional_gain(self, t):
+        """Proportional gain at time `t`: $K_p t$ (ramped, eq. 16) or $K_p$ (constant, eq. 14) [V s/rad]."""
+        return self.kp * t if self.gain == "ramped" else self.kp * jnp.ones_like(jnp.asarray(t, dtype=float))
+
+    def raw_voltage(self, t, phi, phi_dot, phi_ddot, phi0=0.0):
+        """Regulator output before the limiter [V] (eq. 14 or 16 with the constant set point);
+        `phi0` is the motor angle at $t = 0$ [rad]."""
         w0 = self.omega_ref
-        return self.kp * t * (w0 - phi_dot) + self.ki * (w0 * t - phi) - self.kd * phi_ddot
+        return (self.proportional_gain(t) * (w0 - phi_dot) + self.ki * (w0 * t - (phi - phi0))
+                - self.kd * phi_ddot)
 
     def limit(self, v):
         """Apply the voltage limiter (identity when `v_limit is None`)."""
@@ -92,11 +111,11 @@ class PID(AbstractController):
 
     def voltage_at(self, t, motor: MotorState):
         """Armature voltage $V_a$ [V] at time `t` for the motor state `motor`."""
-        return self.limit(self.raw_voltage(t, motor.angle, motor.speed, motor.acceleration))
+        return self.limit(self.raw_voltage(t, motor.angle, motor.speed, motor.acceleration, motor.angle0))
 
     def with_limiter(self, limiter: str) -> "PID":
         """The same regulator with the `"hard"` or `"smooth"` limiter."""
-        return PID(self.kp, self.ki, self.kd, self.omega_ref, self.v_limit, limiter, self.v_smooth)
+        return PID(self.kp, self.ki, self.kd, self.omega_ref, self.v_limit, limiter, self.v_smooth, self.gain)
 
     @property
     def gains(self):

@@ -110,7 +110,7 @@ class BeltPlatform(AbstractModel):
 
     @property
     def energy_factor(self):
-        """$h = \\tfrac12 J (\\lambda/\\omega_d)^2$ of eq. (31): $E_{tot}(T) = h\\,\\mathcal H$."""
+        """$h = \\tfrac12 J (\\lambda/\\omega_d)^2$ of eq. (31) [kg m² s²]: $E_{tot}(T) = h\\,\\mathcal H$ [J] with $\\mathcal H$ [rad²/s⁴]."""
         return 0.5 * self.J * (self.lam / self.omega_d) ** 2
 
     def with_natural_frequency(self, omega_n):

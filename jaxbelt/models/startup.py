@@ -145,14 +145,12 @@ class _BeltDriveBase(AbstractLinearModel):
         nz = mag[mag > 1e-9 * mag.max()]
         return float(nz.max() / nz.min())
 
+    def accepts_output(self, name: str) -> bool:
+        """Accelerations `alpha3`, `alpha4`, ... of longer chains (`alpha1`, `alpha2` are declared)."""
+        return name.startswith("alpha") and name[5:].isdigit() and 1 <= int(name[5:]) <= self.n_shafts
+
     def output(self, name, t, y, inp):
-        # accelerations alpha3, alpha4, ... of longer chains (alpha1, alpha2 are methods below)
-        if (
-            name not in self.output_names()
-            and name.startswith("alpha")
-            and name[5:].isdigit()
-            and 1 <= int(name[5:]) <= self.n_shafts
-        ):
+        if name not in self.output_names() and self.accepts_output(name):
             return self._accel(t, y, inp)[int(name[5:]) - 1]
         return super().output(name, t, y, inp)
 
@@ -300,6 +298,8 @@ class BeltChain(_BeltDriveBase):
     the last shaft. State: angles (n+1), speeds (n+1), current: 2n + 3 states.
     `BeltChain.from_startup(BeltStartup())` is the paper's 2-DOF drive.
     """
+
+    array_fields: ClassVar[tuple[str, ...]] = ("inertias", "k", "c", "r_drive", "r_driven")
 
     inertias: jnp.ndarray = eqx.field(converter=_arr)
     k: jnp.ndarray = eqx.field(converter=_arr)

@@ -47,9 +47,24 @@ __all__ = [
     "runout_phasors",
     "galerkin_runout_system",
     "simulate_runout_response",
+    "TABLE1_OBSERVATIONS",
     "TABLE2_COMPUTED_RPM",
     "TABLE2_MEASURED_RPM",
 ]
+
+#: Belt-vibration report, Table 1: driven-rotor speed [rpm] and the belt behaviour seen with a
+#: stroboscope (direct observation). Table 2's measured column is the rows with a vibration.
+TABLE1_OBSERVATIONS = (
+    (730, "Low vibrations"),
+    (810, "Torsion of the passive side plus transverse vibration of the active"),
+    (910, "Transverse vibration of the active side"),
+    (1020, "Transverse vibration of the active side"),
+    (1090, "Not relevant vibration"),
+    (1180, "Transverse vibration of the active side"),
+    (1271, "Not relevant vibration"),
+    (1400, "Transverse vibration of the active side"),
+    (1720, "Transverse vibration of the active side"),
+)
 
 #: Belt-vibration report, Table 2, computed column: (mode n, harmonic m) -> exciting rotor speed [rpm].
 TABLE2_COMPUTED_RPM = {
@@ -114,6 +129,13 @@ class MovingString(eqx.Module):
         return jnp.sqrt(self.tension / self.density)
 
     wave_speed = critical_speed
+
+    def critical_rotor_speed(self, pulley_radius):
+        """$\\omega_{CR} = \\sqrt{T/\\rho}/R_U$ [rad/s] (belt-vibration report, eq. 53): the rotor speed at
+        which the belt speed $\\omega_U R_U$ (eq. 50) reaches $V_{cr}$ and every $\\omega_n$ of eq. (51)
+        vanishes. `pulley_radius` $R_U$ [m] > 0."""
+        check_positive("pulley_radius", pulley_radius, "m", "MovingString.critical_rotor_speed")
+        return self.critical_speed / jnp.asarray(pulley_radius, dtype=float)
 
     def natural_frequencies(self, speed=0.0, n_modes: int = 3):
         """$\\omega_n(V) = (n\\pi/L) V_{cr} (1 - V^2/V_{cr}^2)$ [rad/s] (eq. 39), $n = 1..n\\_modes$.

@@ -1,7 +1,15 @@
 """Speed-fluctuation index χ of a motor-driven mechanism (Incerti, 2012, eq. 22).
 
 $\\chi = \\dfrac{\\dot\\varphi_{max} - \\dot\\varphi_{min}}{\\dot\\varphi_{av}}$ over a time window
-$[t_0, t_1]$, with $\\dot\\varphi$ the motor speed. Max and min make the exact index
+$[t_0, t_1]$, with $\\dot\\varphi$ the motor speed. The paper calls $\\dot\\varphi_{av}$ "its average
+value" without saying which: `average="mean"` (default) is the time mean
+$\\frac{1}{t_1 - t_0}\\int_{t_0}^{t_1}\\dot\\varphi\\,dt$ (trapezoid rule on the samples),
+`average="midrange"` is $(\\dot\\varphi_{max} + \\dot\\varphi_{min})/2$, for which
+$\\chi = 2(\\max - \\min)/(\\max + \\min)$. They differ at second order in the fluctuation (for the
+open-loop run of the paper by a few points of χ). The paper's closed-loop window 0.375-0.5 s is
+its own choice: at 30 rad/s it covers 0.6 of a crank turn, not a whole one.
+
+Max and min make the exact index
 non-smooth (its gradient only sees the two extreme samples and jumps when they move); the
 smooth index replaces them by time-weighted log-mean-exp at temperature
 $\\tau = \\text{temperature}\\cdot\\dot\\varphi_{av}$:
@@ -45,13 +53,20 @@ def _check_window(inside, w):
             raise ValueError("fluctuation index: the window [t0, t1] must contain at least two output times")
 
 
-def chi_from_samples(ts, speed, t0=None, t1=None, *, smooth: bool = False, temperature=3e-4):
+_AVERAGES = ("mean", "midrange")
+
+
+def chi_from_samples(ts, speed, t0=None, t1=None, *, smooth: bool = False, temperature=3e-4, average="mean"):
     """χ of the sampled signal `speed` (..., N) at times `ts` (N,) over [t0, t1].
+
+    `average`: `"mean"` (time mean, default) or `"midrange"` ((max + min)/2) for $\\dot\\varphi_{av}$.
 
     `smooth=False`: exact $(\\max - \\min)/\\text{average}$ over the samples in the window (time
     average by the trapezoid rule). `smooth=True`: log-mean-exp max and min at temperature
     `temperature` × average speed (dimensionless, default 3e-4).
     """
+    if average not in _AVERAGES:
+        raise ValueError(f"fluctuation index: `average` must be one of {_AVERAGES}; got {average!r}")
     speed = jnp.asarray(speed, dtype=float)
     inside, w = _node_weights(ts, t0, t1)
     _check_window(inside, w)
@@ -60,6 +75,8 @@ def chi_from_samples(ts, speed, t0=None, t1=None, *, smooth: bool = False, tempe
     if not smooth:
         vmax = jnp.max(jnp.where(inside, speed, -jnp.inf), axis=-1)
         vmin = jnp.min(jnp.where(inside, speed, jnp.inf), axis=-1)
+        if average == "midrange":
+            avg = 0.5 * (vmax + vmin)
         return (vmax - vmin) / avg
     tau = temperature * jnp.abs(avg)
     x = speed / tau[..., None] if jnp.ndim(tau) else speed / tau
@@ -68,6 +85,8 @@ def chi_from_samples(ts, speed, t0=None, t1=None, *, smooth: bool = False, tempe
     xn_in = jnp.where(w > 0, -x, -jnp.inf)
     smax = jax.nn.logsumexp(x_in + logw, axis=-1)
     smin = -jax.nn.logsumexp(xn_in + logw, axis=-1)
+    if average == "midrange":
+        avg = 0.5 * tau * (smax + smin)
     return tau * (smax - smin) / avg
 
 
@@ -82,14 +101,15 @@ def _speed(sol):
     )
 
 
-def fluctuation_index(sol, t0=None, t1=None, *, smooth: bool = False, temperature=3e-4):
+def fluctuation_index(sol, t0=None, t1=None, *, smooth: bool = False, temperature=3e-4, average="mean"):
     """Fluctuation index χ (eq. 22) of the motor speed in a `Solution`, over [t0, t1] [s].
 
     Uses the observed `motor_speed` output, else the crank speed state (the gear ratio cancels
     in the ratio). `smooth=True` gives the log-sum-exp version (see module docstring).
+    `average` is `"mean"` (time mean, default) or `"midrange"` (see module docstring).
     Returns a dimensionless scalar (0.543 means 54.3 %).
     """
-    return chi_from_samples(sol.ts, _speed(sol), t0, t1, smooth=smooth, temperature=temperature)
+    return chi_from_samples(sol.ts, _speed(sol), t0, t1, smooth=smooth, temperature=temperature, average=average)
 
 
 def _grid(t1, dt_save):

@@ -9,7 +9,7 @@ $\\mathcal H = G^2 + \\omega_n^2F^2$, $h = \\tfrac12 J(\\lambda/\\omega_d)^2$,
 with the convolution integrals (eq. 6, 29, 30)
 $F = \\int_0^T \\ddot\\varphi_m(\\tau)e^{-\\xi\\omega_n(T-\\tau)}\\sin[\\omega_d(T-\\tau)]\\,d\\tau$ and
 $G = \\int_0^T \\omega_n\\ddot\\varphi_m(\\tau)e^{-\\xi\\omega_n(T-\\tau)}\\cos[\\omega_d(T-\\tau)+\\delta]\\,d\\tau$.
-$\\mathcal H$ has units rad²/s² (motor angle); $E$ is in J.
+$\\mathcal H$ has units rad²/s⁴ ($F$ in rad/s, $G$ in rad/s²; motor angle); $E$ is in J.
 
 Two independent evaluations:
 
@@ -40,7 +40,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..commands import PseudoPolynomial, ShapedCommand, falling_factorial
+from .._checks import is_concrete
+from .._guard import error_if, guard, traced_checks
+from ..commands import MIN_EXPONENT_GAP, PseudoPolynomial, ShapedCommand, falling_factorial
 
 _P = 4  # substitution power u = v**p
 
@@ -57,9 +59,10 @@ def _guard_exponents(cmd: PseudoPolynomial) -> PseudoPolynomial:
     g = cmd.gammas
     lo = max(cmd.order, 2)
     diff = jnp.abs(g[:, None] - g[None, :]) + jnp.eye(g.shape[0])
-    bad = jnp.any(g <= lo) | jnp.any(diff <= 0)
-    g = eqx.error_if(
-        g, bad, f"PseudoPolynomial: exponents must be distinct and each > {lo} (eq. 23 singular or acceleration infinite at T)"
+    bad = jnp.any(g <= lo) | jnp.any(diff < MIN_EXPONENT_GAP)
+    g = error_if(
+        g, bad, f"PseudoPolynomial: exponents must be at least {MIN_EXPONENT_GAP:g} apart and each > {lo} "
+        "(eq. 23 singular or ill-conditioned, or acceleration infinite at T)"
     )
     return eqx.tree_at(lambda c: c.gammas, cmd, g)
 
@@ -128,8 +131,32 @@ def _w_quadrature(plat, cmd, n_nodes: int):
     )
 
 
+#: Largest accepted quadrature error estimate, relative to the integral of |acceleration| (see `quadrature_error`).
+QUADRATURE_TOL = 1e-8
+
+
+def quadrature_error(plat, cmd, n_nodes: int = 128):
+    """Error estimate of the `n_nodes` quadrature of W, relative to $\\int_0^T|\\ddot\\varphi_m|d\\tau$-like scale.
+
+    The rule is compared with one of 3/4 as many nodes: Gauss-Legendre converges geometrically once
+    the oscillation $e^{i\\omega_d(T-\\tau)}$ is resolved, so a small difference means the finer
+    rule is far more accurate still; a move that holds many vibration periods (large
+    $\\omega_d T$) shows up as a large difference. The scale is the sum of the magnitudes of the
+    acceleration's terms, $|\\Phi/T|\\sum_i |a_i|/(\\gamma_i - 1)$, so that an $\\mathcal H$ near zero
+    (a well shaped command) is judged by the accuracy of its cancelling parts.
+    """
+    base = cmd.base if isinstance(cmd, ShapedCommand) else cmd
+    if not isinstance(base, PseudoPolynomial):
+        return jnp.zeros(())
+    re1, im1 = _pseudo_poly_w(plat, base, n_nodes)
+    re2, im2 = _pseudo_poly_w(plat, base, max(8, (3 * n_nodes) // 4))
+    coef = falling_factorial(base.gammas, 2) * base.coefficients
+    scale = jnp.abs(base.displacement / base.duration) * jnp.sum(jnp.abs(coef) / (base.gammas - 1.0))
+    return jnp.hypot(re1 - re2, im1 - im2) / scale
+
+
 def convolution_integrals(plat, cmd, n_nodes: int = 128):
-    """`(F, G)` of eq. (30) [rad/s] by the Gauss-Legendre rule described in the module docstring."""
+    """`(F, G)` of eq. (30) ($F$ [rad/s], $G$ [rad/s²]) by the Gauss-Legendre rule described in the module docstring."""
     re, im = _w_quadrature(plat, cmd, n_nodes)
     sigma = plat.damping_ratio * plat.omega_n
     F = im
@@ -150,7 +177,7 @@ def _end_state_ode(plat, cmd, rtol, atol, max_steps):
 
 def residual_energy(plat, cmd, *, method: str = "quadrature", n_nodes: int = 128,
                     rtol=1e-12, atol=1e-15, max_steps: int = 100_000):
-    """Target $\\mathcal H = G^2 + \\omega_n^2F^2$ of eq. (30)-(32) [rad²/s²] for platform `plat`
+    """Target $\\mathcal H = G^2 + \\omega_n^2F^2$ of eq. (30)-(32) [rad²/s⁴] for platform `plat`
     driven by motion command `cmd`; $E_{tot}(T) = h\\mathcal H$ (see `residual_energy_joules`).
 
     - `method`: `"quadrature"` (fixed Gauss-Legendre rule, default) or `"ode"` (diffrax Dopri8
@@ -164,7 +191,28 @@ def residual_energy(plat, cmd, *, method: str = "quadrature", n_nodes: int = 128
         raise ValueError(f"residual_energy: `method` must be 'quadrature' or 'ode'; got {method!r}")
     if method == "quadrature":  # the tolerances play no part: fixed values keep one compiled program
         rtol, atol, max_steps = 0.0, 0.0, 0
-    return _residual_energy_jit(plat, cmd, rtol, atol, method=method, n_nodes=int(n_nodes), max_steps=int(max_steps))
+    checks = traced_checks(plat, cmd)  # empty when the values are concrete (checked at construction)
+    H, err = _residual_energy_jit(plat, cmd, rtol, atol, method=method, n_nodes=int(n_nodes), max_steps=int(max_steps))
+    if is_concrete(err):
+        if not float(err) <= QUADRATURE_TOL:
+            wT = float(plat.omega_d * _end(cmd))
+            raise ValueError(
+                f"residual_energy: the {n_nodes}-node quadrature does not resolve the vibration during the move "
+                f"(omega_d*T = {wT:.0f} rad, estimated relative error {float(err):.1e} > {QUADRATURE_TOL:g}); "
+                f"pass n_nodes >= {int(8 * wT) + 64} or method='ode'"
+            )
+    else:
+        H = error_if(
+            H, ~(err <= QUADRATURE_TOL),
+            f"residual_energy: the {n_nodes}-node quadrature does not resolve the vibration during the move "
+            "(estimated relative error above 1e-8): pass a larger n_nodes (about 8*omega_d*T) or method='ode'",
+        )
+    H, _ = guard(H, checks, throw=True)
+    return H
+
+
+def _end(cmd):
+    return cmd.base.duration if isinstance(cmd, ShapedCommand) else cmd.duration
 
 
 def residual_energy_joules(plat, cmd, **kwargs):
@@ -173,12 +221,13 @@ def residual_energy_joules(plat, cmd, **kwargs):
 
 
 def _residual_energy_impl(plat, cmd, rtol, atol, *, method: str, n_nodes: int, max_steps: int):
+    """`(H, quadrature error estimate)`; the estimate is 0 for the ODE method."""
     cmd = _guarded(cmd)
     if method == "quadrature":
         F, G = convolution_integrals(plat, cmd, n_nodes)
-        return G**2 + plat.omega_n**2 * F**2
+        return G**2 + plat.omega_n**2 * F**2, quadrature_error(plat, cmd, n_nodes)
     a, ad = _end_state_ode(plat, cmd, rtol, atol, max_steps)
-    return (plat.omega_d / plat.lam) ** 2 * (ad**2 + plat.omega_n**2 * a**2)
+    return (plat.omega_d / plat.lam) ** 2 * (ad**2 + plat.omega_n**2 * a**2), jnp.zeros(())
 
 
 # One program per (shapes, method, n_nodes, max_steps): called eagerly, `residual_energy` runs it

@@ -95,7 +95,7 @@ class ShapingProblem(eqx.Module):
         return PseudoPolynomial(self.gammas(theta), self.displacement, self.duration)
 
     def raw(self, theta):
-        """Unscaled objective: H [rad²/s²] (nominal) or the band measure (dimensionless)."""
+        """Unscaled objective: H [rad²/s⁴] (nominal) or the band measure (dimensionless)."""
         cmd = self.command(theta)
         if self.kind == "nominal":
             return residual_energy(self.plat, cmd, n_nodes=self.n_nodes)
@@ -127,7 +127,7 @@ class CommandOptimResult(eqx.Module):
     """Result of `optimise_command` / `optimise_robust`.
 
     - `gammas`: final exponents (sorted); `command`: the optimised `PseudoPolynomial`;
-    - `value`: final objective: $\\mathcal H$ [rad²/s²] for `optimise_command`, the band
+    - `value`: final objective: $\\mathcal H$ [rad²/s⁴] for `optimise_command`, the band
       measure for `optimise_robust`; `initial_value`: the same at the start point;
     - `history`: objective after each iteration (index 0: start), `gammas_history` likewise;
       the result is the best iterate (lowest objective), normally the last;
@@ -310,7 +310,7 @@ def optimise_command(plat, cmd: PseudoPolynomial, *, optimizer="lbfgs", learning
     - `margin`, `gap`, `max_step`: bounds of the reparametrisation (module docstring).
     - `progress`: tqdm bar.
 
-    Returns a `CommandOptimResult`; `value` is $\\mathcal H$ [rad²/s²]. The zero set of
+    Returns a `CommandOptimResult`; `value` is $\\mathcal H$ [rad²/s⁴]. The zero set of
     $\\mathcal H$ is a curve, so judge success by `value / initial_value`, not by the exponents.
     """
     if not isinstance(cmd, PseudoPolynomial):

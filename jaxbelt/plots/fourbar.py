@@ -11,7 +11,7 @@ FIG4_OUTPUTS = ("motor_speed", "voltage", "mechanical_power", "electric_power")
 def simulate_fig4(drive=None, pid=None, *, voltage: float = 25.0, t1: float = 1.0, n: int = 2001, **kw):
     """The two runs of Fig. 4: open loop at constant `voltage` [V] and closed loop with `pid`.
 
-    Defaults: `FourBarDrive()` (assumed Table I values) and the paper's PID (Kp 80, Ki 32,
+    Defaults: `FourBarDrive()` (identified and assumed Table I values) and the paper's PID (Kp 80, Ki 32,
     Kd 0.015, ω0 30 rad/s). Returns `(open_sol, closed_sol)` with the Fig. 4 outputs observed.
     """
     from ..commands import ConstantVoltage
@@ -111,3 +111,26 @@ def linkage_strip(drive=None, alphas=None, *, n: int = 8, ax=None):
     ax.axis("off")
     ax.set_title("four-bar linkage over one crank turn (A, D fixed pivots; x: centres of mass)", fontsize=9)
     return fig
+
+
+def plot_regulators(solutions: dict, *, omega_ref: float = 30.0, chi_window=(0.375, 0.5), ax=None):
+    """Motor speed under several regulators, e.g. the ramped gain $K_p t$ (Incerti, 2012, eq. 16)
+    against a constant gain (eq. 14). `solutions`: `{label: Solution}` observing `motor_speed`
+    (computed beforehand); the legend gives χ over `chi_window` [s] (time-mean average)."""
+    import matplotlib.pyplot as plt
+
+    from ..objectives.fluctuation import fluctuation_index
+
+    if ax is None:
+        _, ax = plt.subplots(figsize=(8, 4), constrained_layout=True)
+    for label, sol in solutions.items():
+        chi = float(fluctuation_index(sol, *chi_window))
+        ax.plot(np.asarray(sol.ts), np.asarray(sol.motor_speed), label=f"{label}: χ = {100 * chi:.2f} %")
+    ax.axhline(omega_ref, color="k", ls="--", lw=0.8)
+    ax.axvspan(*chi_window, color="0.9")
+    ax.set_ylim(0.0, 1.5 * omega_ref)
+    ax.set_xlabel("t [s]")
+    ax.set_ylabel("motor speed [rad/s]")
+    ax.set_title("PID with ramped (eq. 16) and constant (eq. 14) proportional gain")
+    ax.legend(fontsize=8)
+    return ax

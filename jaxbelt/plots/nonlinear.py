@@ -17,8 +17,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from ..models.nonlinear import NonlinearBelt
-from ..nonlinear_kbm import backbone_speed, steady_amplitudes
-from ..nonlinear_sweep import basins, sweep, trajectory
+from ..models.nonlinear.kbm import backbone_speed, kbm_amplitudes
+from ..models.nonlinear.steady import nonlinear_basins, nonlinear_sweep, nonlinear_trajectory
 
 
 def plot_speed_response(ax, speeds, up, down, *, label_jumps=True):
@@ -37,8 +37,8 @@ def response_sweeps(belt: NonlinearBelt, speeds, **kw):
     """(up, down) `SweepResult`s for ascending `speeds`, as in the experiment: the decreasing
     sweep starts from the final state of the increasing one; down is returned in ascending order."""
     speeds = jnp.asarray(speeds, dtype=float)
-    up = sweep(belt, speeds, **kw)
-    dn = sweep(belt, speeds[::-1], up.steady.z[-1], up.steady.theta[-1], **kw)
+    up = nonlinear_sweep(belt, speeds, **kw)
+    dn = nonlinear_sweep(belt, speeds[::-1], up.steady.z[-1], up.steady.theta[-1], **kw)
     return up, _reverse(dn)
 
 
@@ -48,9 +48,9 @@ def _reverse(res):
 
 def plot_phase_plane(ax, belt: NonlinearBelt, speed, z0s, periods=150):
     """Trajectories in the $\\zeta^R_1$-$\\zeta^I_1$ plane from each row of `z0s` at `speed`."""
-    ss = basins(belt, speed, z0s)
+    ss = nonlinear_basins(belt, speed, z0s)
     for i, z0 in enumerate(np.asarray(z0s)):
-        _, zs = trajectory(belt, speed, z0, periods=periods)
+        _, zs = nonlinear_trajectory(belt, speed, z0, periods=periods)
         zs = np.asarray(zs)
         ax.plot(zs[:, 0], zs[:, belt.n_modes], lw=0.4, alpha=0.6, color=f"C{i}")
         ax.plot(zs[-200:, 0], zs[-200:, belt.n_modes], lw=1.8, color=f"C{i}",
@@ -72,7 +72,7 @@ def plot_backbone(ax, belt: NonlinearBelt, speeds, up=None, down=None):
     ax.plot(s, np.asarray(up.steady.amplitude[:, 0]), "o", ms=3.5, color="k", label="simulation, up")
     ax.plot(s, np.asarray(down.steady.amplitude[:, 0]), "o", ms=5, mfc="none", color="C3", label="simulation, down")
     fine = np.linspace(s.min(), s.max(), 200)
-    pts = [(sp, a) for sp in fine for a in steady_amplitudes(belt, sp)]
+    pts = [(sp, a) for sp in fine for a in kbm_amplitudes(belt, sp)]
     if pts:
         p = np.array(pts)
         ax.plot(p[:, 0], p[:, 1], ".", ms=1.5, color="C0", label="KBM eq. (31)")
@@ -140,3 +140,57 @@ def _summary(belt, speeds, up, dn):
         lines.append(f"hysteresis band {band.min():.2f}-{band.max():.2f} m/s")
     lines.append(f"all converged: {bool(np.all(up.converged) and np.all(dn.converged))}")
     return "\n".join(lines)
+
+
+# --- response curve by continuation, ramps, measurements (computed by the caller) -------------------------
+def plot_response_curve(ax, curve, measurements=None, *, title="response curve (HB + continuation)"):
+    """A `ResponseCurve`: stable points solid, unstable (saddle) dashed, folds as vertical lines;
+    with `measurements` (the `MEASUREMENTS` table) the measured jumps as arrows (Fig. 8 analogue)."""
+    s, p, st = np.asarray(curve.speed), 1e3 * np.asarray(curve.pp), np.asarray(curve.stable)
+    ps = np.where(st, p, np.nan)
+    pu = np.where(~st | np.r_[~st[1:], False] | np.r_[False, ~st[:-1]], p, np.nan)
+    ax.plot(s, ps, "-", color="C0", lw=1.6, label="stable (Floquet)")
+    ax.plot(s, pu, "--", color="C3", lw=1.2, label="unstable")
+    for k, f in enumerate(np.asarray(curve.folds)):
+        ax.axvline(f, color="0.5", lw=0.8, ls=":", label="folds" if k == 0 else None)
+    if measurements is not None:
+        m = {x.quantity: x.value for x in measurements}
+        ax.annotate("", xy=(m["up_jump_speed"], 1e3 * m["up_jump_pp_after"]),
+                    xytext=(m["up_jump_speed"], 1e3 * m["up_jump_pp_before"]), arrowprops=dict(arrowstyle="->", color="k"))
+        ax.annotate("", xy=(m["down_jump_speed"], 1e3 * m["down_jump_pp_after"]),
+                    xytext=(m["down_jump_speed"], 1e3 * m["down_jump_pp_before"]),
+                    arrowprops=dict(arrowstyle="->", color="C2"))
+        ax.plot([m["up_jump_speed"]] * 2, [1e3 * m["up_jump_pp_before"], 1e3 * m["up_jump_pp_after"]], "ko", ms=5,
+                label="measured, increasing (Sec. 2)")
+        ax.plot([m["down_jump_speed"]] * 2, [1e3 * m["down_jump_pp_before"], 1e3 * m["down_jump_pp_after"]], "o",
+                color="C2", mfc="none", ms=6, label="measured, decreasing (Sec. 2)")
+    ax.set_xlabel("running speed V [m/s]")
+    ax.set_ylabel("peak-to-peak at 1 cm [mm]")
+    ax.set_title(title)
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+
+
+def plot_ramp(ax, record, *, title=None):
+    """A `RampRecord`: displacement [mm] 1 cm from the sensor pulley against the belt speed (Fig. 3)."""
+    ax.plot(np.asarray(record.speed), 1e3 * np.asarray(record.w), lw=0.3)
+    v0, v1 = float(record.speed[0]), float(record.speed[-1])
+    ax.set_xlabel("running speed V [m/s] (ramped in time)")
+    ax.set_ylabel("w at 1 cm [mm]")
+    ax.set_title(title or f"speed ramp {v0:g} -> {v1:g} m/s in {float(record.t[-1]):g} s (Fig. 3)")
+    ax.grid(alpha=0.3)
+    if v0 > v1:
+        ax.invert_xaxis()
+
+
+def response_figure(curve, ramp_up, ramp_down, measurements, summary: str = ""):
+    """One page: the response curve with its unstable branch, folds and the measured jumps,
+    and the up/down ramp records (all computed by the caller). Returns the figure."""
+    fig, axes = plt.subplots(1, 3, figsize=(16, 4.8))
+    plot_response_curve(axes[0], curve, measurements, title="predicted vs measured (Fig. 8 analogue)")
+    plot_ramp(axes[1], ramp_up)
+    plot_ramp(axes[2], ramp_down)
+    if summary:
+        axes[0].text(0.02, 0.98, summary, transform=axes[0].transAxes, fontsize=7, va="top", family="monospace")
+    fig.tight_layout()
+    return fig

@@ -95,3 +95,29 @@ def shaping_figure(plat, cmd_before, cmd_after, omegas, curves: dict, *, referen
     plot_fig3(plat, cmd_before, cmd_after, axes=axes)
     plot_sensitivity(omegas, curves, plat.omega_n, ax=fig.add_subplot(gs[4, :]), reference=reference)
     return fig
+
+
+def plot_profiles(t, profiles: dict, *, axes=None, styles=("-", "--", ":", "-.")):
+    """Incerti (pseudo-polynomial commands), Fig. 2: displacement, velocity and acceleration of motion commands.
+
+    `t` (N,) [s]; `profiles`: `{label: (position [rad], velocity [rad/s], acceleration [rad/s²])}`,
+    each (N,) (computed, e.g., from `PseudoPolynomial(...)(t)`, `.velocity(t)`, `.acceleration(t)`).
+    The paper's figure: 3-4-5 polynomial (solid) and 4.5-6.2-8.4 pseudo-polynomial (dashed), T = 1 s,
+    Φ = 1 rad.
+    """
+    import matplotlib.pyplot as plt
+
+    if axes is None:
+        _, axes = plt.subplots(1, 3, figsize=(13, 3.4))
+    t = np.asarray(t)
+    names = ("a) displacement [rad]", "b) velocity [rad/s]", "c) acceleration [rad/s²]")
+    for j, (label, curves) in enumerate(profiles.items()):
+        for k in range(3):
+            axes[k].plot(t, np.asarray(curves[k]), styles[j % len(styles)], color="k" if j == 0 else f"C{j}",
+                         label=label)
+    for k in range(3):
+        axes[k].set_xlabel("t [s]")
+        axes[k].set_ylabel(names[k])
+        axes[k].grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    return axes

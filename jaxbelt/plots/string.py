@@ -24,6 +24,9 @@ __all__ = [
     "plot_crossing_diagram",
     "plot_runout_response",
     "string_figure",
+    "plot_mode_shapes",
+    "plot_span_frequencies",
+    "modes_figure",
 ]
 
 RPM = 30.0 / np.pi  # rad/s -> rpm
@@ -201,3 +204,58 @@ def _galerkin_panel(ax, speed: float = 20.0):
     ax.set_title(f"Galerkin vs eq. (39), V = {speed:g} m/s")
     ax.legend(fontsize=8)
     return ax
+
+
+def plot_mode_shapes(x, t, shapes, *, axes=None, labels=None):
+    """Belt-vibration report, Figs. 37-39: snapshots of the travelling mode shapes of eq. (49).
+
+    `x` (Nx,) [m] along the span, `t` (Nt,) [s] snapshot times, `shapes` (n_modes, Nt, Nx): the
+    deflection $y(x, t)$ of each mode (computed, e.g., by `MovingString.mode_shape`). Draws one
+    panel per mode; the points of the belt do not cross zero at the same time.
+    """
+    x, t, shapes = np.asarray(x), np.asarray(t), np.asarray(shapes)
+    n = shapes.shape[0]
+    if axes is None:
+        _, axes = plt.subplots(1, n, figsize=(4.5 * n, 3.2))
+    axes = np.atleast_1d(axes)
+    cmap = plt.get_cmap("viridis")
+    for i in range(n):
+        ax = axes[i]
+        for k in range(t.size):
+            ax.plot(1e3 * x, shapes[i, k], color=cmap(k / max(t.size - 1, 1)), lw=1.0)
+        ax.axhline(0.0, color="k", lw=0.5)
+        ax.set_xlabel("x along the span [mm]")
+        ax.set_ylabel("y [units of B1]")
+        ax.set_title(labels[i] if labels is not None else f"mode {i + 1} (Fig. {37 + i})")
+    return axes
+
+
+def plot_span_frequencies(rotor_rpm, frequencies, critical_rpm, *, ax=None):
+    """Belt-vibration report, eq. (51) and (53): span frequencies $\\omega_n$ against rotor speed
+    $\\omega_U$, falling to zero at the critical rotor speed $\\omega_{CR}$.
+
+    `rotor_rpm` (N,), `frequencies` (N, n_modes) [rad/s], `critical_rpm` [rpm] (computed values).
+    """
+    ax = _ax(ax)
+    rotor_rpm, frequencies = np.asarray(rotor_rpm), np.asarray(frequencies)
+    for i in range(frequencies.shape[1]):
+        ax.plot(rotor_rpm, frequencies[:, i] * RPM, label=f"n = {i + 1}")
+    ax.axvline(float(critical_rpm), color="k", ls="--", lw=0.8)
+    ax.annotate(f"ω_CR = {float(critical_rpm):.0f} rpm", (float(critical_rpm), 0.0), textcoords="offset points",
+                xytext=(-4, 8), ha="right", fontsize=8)
+    ax.set_xlabel("rotor speed ω_U [rpm]")
+    ax.set_ylabel("span frequency ω_n [rpm]")
+    ax.set_title("Eq. (51): ω_n(ω_U R_U); eq. (53): ω_CR")
+    ax.legend(fontsize=8)
+    return ax
+
+
+def modes_figure(x, t, shapes, rotor_rpm, frequencies, critical_rpm, *, title=None):
+    """Figs. 37-39 and the eq. (51)/(53) panel on one page (the `jaxbelt string --figure modes` figure)."""
+    fig, axs = plt.subplots(2, 2, figsize=(11, 7.5))
+    plot_mode_shapes(x, t, shapes, axes=axs.ravel()[:3])
+    plot_span_frequencies(rotor_rpm, frequencies, critical_rpm, ax=axs[1, 1])
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    return fig

@@ -33,7 +33,7 @@ equations (28)-(29) ($\\dot a = \\dot\\theta - \\Omega = 0$) satisfy, with $\\si
 
 $\\kappa^2 (a^2)^3 - 2\\sigma\\kappa (a^2)^2 + (\\sigma^2 + \\xi^2\\omega_n^2)(a^2) - |g|^2 = 0$,
 
-the cubic in $a^2$ of eq. (31) (`amplitude_coefficients` returns $C_3..C_0$). Below the fold
+the cubic in $a^2$ of eq. (31) (`kbm_coefficients` returns $C_3..C_0$). Below the fold
 there is one real root, above it three; the middle one is the saddle (unrealisable).
 The forcing of the eccentric pulleys is the one derived in `jaxbelt.models.nonlinear`:
 $\\hat F = -i e_0\\Omega_0^2(1-x) + 2v e_0\\Omega_0 + e^{i\\phi}(-i e_1\\Omega_1^2 x - 2v e_1\\Omega_1)$
@@ -47,7 +47,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .models.nonlinear import NonlinearBelt, _gauss, mode_shapes
+from .model import NonlinearBelt, _gauss, mode_shapes
 
 
 def kappa(v, v_l, n: int = 1):
@@ -112,7 +112,7 @@ def forcing_coefficient(belt: NonlinearBelt, speed, n: int = 1):
     return om / (2 * mu) * jnp.sum(pb * F)
 
 
-def amplitude_coefficients(belt: NonlinearBelt, speed, n: int = 1):
+def kbm_coefficients(belt: NonlinearBelt, speed, n: int = 1):
     """$(C_3, C_2, C_1, C_0)$ of eq. (31), $\\sum_i C_i (a^2)^i = 0$, with modal damping kept."""
     v = jnp.asarray(speed, dtype=float) / belt.wave_speed
     g = forcing_coefficient(belt, speed, n)
@@ -124,12 +124,12 @@ def amplitude_coefficients(belt: NonlinearBelt, speed, n: int = 1):
     return jnp.stack([kap**2, -2 * sig * kap, sig**2 + (belt.damping * om) ** 2, -jnp.abs(g) ** 2])
 
 
-def steady_amplitudes(belt: NonlinearBelt, speed, n: int = 1):
+def kbm_amplitudes(belt: NonlinearBelt, speed, n: int = 1):
     """Real positive steady modal amplitudes $a$ of eq. (31) at one speed, ascending (1 or 3).
 
     With three, the middle one is the saddle. Uses `numpy.roots` (not differentiable).
     """
-    C = np.asarray(amplitude_coefficients(belt, speed, n), dtype=float)
+    C = np.asarray(kbm_coefficients(belt, speed, n), dtype=float)
     if C[0] == 0.0:  # linear belt (v_l = 0): C1 a^2 + C0 = 0
         return np.sqrt(np.array([-C[3] / C[2]]))
     r = np.roots(C)

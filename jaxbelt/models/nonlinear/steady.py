@@ -1,20 +1,20 @@
 """Steady-state response and quasi-static speed sweeps of the non-linear belt (Moon & Wickert, 1997).
 
-- `steady_state(belt, speed)`: integrate whole forcing periods until the transient has decayed,
+- `nonlinear_steady_state(belt, speed)`: integrate whole forcing periods until the transient has decayed,
   then report the peak-to-peak displacement at a point (default 1 cm from the driven pulley, as
   in the experiment) and the modal amplitudes.
 - `speed_sweep(belt, speeds)`: the contract call; peak-to-peak amplitudes [m] of a quasi-static
   sweep (a `lax.scan` over speeds, each speed started from the previous final state, so the
-  jump and the hysteresis band appear). `sweep(...)` returns everything (states, flags).
-- `basins(belt, speed, z0s)`: steady states reached from several initial conditions (Fig. 6).
-- `trajectory(belt, speed, z0, periods)`: modal state history for phase-plane plots.
+  jump and the hysteresis band appear). `nonlinear_sweep(...)` returns everything (states, flags).
+- `nonlinear_basins(belt, speed, z0s)`: steady states reached from several initial conditions (Fig. 6).
+- `nonlinear_trajectory(belt, speed, z0, periods)`: modal state history for phase-plane plots.
 
 ## Integration and convergence criterion
 
 Time is dimensionless ($\\tau = t v_t / L$). One forcing period $T = 2\\pi/\\Omega_0$ of the
-driven pulley is integrated with classical fixed-step RK4, $n = \\max(n_{min}, \\lceil T\\,\\omega_N/0.25\\rceil)$
-steps (so $\\omega_N h \\le 0.25$ for the highest mode), sampling $w(x_m)$ at every step; the peak
-and trough are refined by a parabola through the three samples around them. Periods are
+pulley at x = 0 is integrated with `diffrax` (adaptive Tsit5, rtol 1e-9, atol 1e-9 of the
+run-out), sampling $w(x_m)$ at `steps_per_period` equal steps; the peak and trough are refined
+by a parabola through the three samples around them. Periods are
 integrated inside `lax.while_loop` until the change of the per-period peak-to-peak
 $p_k$ satisfies
 
@@ -35,13 +35,14 @@ from __future__ import annotations
 
 import functools
 
+import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import is_concrete
-from .models.nonlinear import ModalSystem, NonlinearBelt, _gauss, mode_shapes
+from ..._checks import is_concrete
+from .model import ModalSystem, NonlinearBelt, _gauss, mode_shapes
 
 
 class SteadyStateError(RuntimeError):
@@ -82,13 +83,20 @@ class SweepResult(eqx.Module):
 
 
 # ----------------------------------------------------------------------------------------------
-def _rk4_step(sys: ModalSystem, z, tau, h, theta00):
-    f = sys.rhs
-    k1 = f(tau, z, theta00)
-    k2 = f(tau + h / 2, z + h / 2 * k1, theta00)
-    k3 = f(tau + h / 2, z + h / 2 * k2, theta00)
-    k4 = f(tau + h, z + h * k3, theta00)
-    return z + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+_SOLVER = diffrax.Tsit5()
+
+
+def _solve_period(sys: ModalSystem, z, tau0, T, theta00, n_save: int, rtol, atol):
+    """diffrax solve of the modal system over [tau0, tau0 + T], saved at `n_save` equal steps."""
+    ts = tau0 + T * jnp.arange(1, n_save + 1) / n_save
+    term = diffrax.ODETerm(lambda tau, zz, args: sys.rhs(tau, zz, theta00))
+    sol = diffrax.diffeqsolve(
+        term, _SOLVER, t0=tau0, t1=tau0 + T, dt0=T / n_save, y0=z,
+        saveat=diffrax.SaveAt(ts=ts), stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
+        max_steps=16 * n_save, throw=False,
+    )
+    ok = sol.result == diffrax.RESULTS.successful
+    return ts, jnp.where(ok, sol.ys, jnp.nan)
 
 
 def _refined(p2, p1, p0, sign):
@@ -101,9 +109,7 @@ def _refined(p2, p1, p0, sign):
 
 
 def _steps_per_period(sys: ModalSystem, min_steps: int, periods_per_chunk: int):
-    T = periods_per_chunk * 2 * jnp.pi / sys.Omega[0]
-    n = jnp.maximum(min_steps * periods_per_chunk, jnp.ceil(T * sys.omega[-1] / 0.25))
-    return T, n.astype(jnp.int32)
+    return periods_per_chunk * 2 * jnp.pi / sys.Omega[0], min_steps * periods_per_chunk
 
 
 def _point_shape(sys: ModalSystem, xm, n_modes):
@@ -111,28 +117,23 @@ def _point_shape(sys: ModalSystem, xm, n_modes):
     return jnp.concatenate([psi.real[:, 0], psi.imag[:, 0]])
 
 
+# integration tolerances of the diffrax solve (relative; absolute relative to the run-out)
+_ODE_RTOL, _ODE_ATOL = 1e-9, 1e-9
+
+
 def _chunk(sys: ModalSystem, xm, phi_m, z, tau0, theta00, window, T, n_steps):
-    """Integrate one measurement chunk; returns new state, time, window and (max, min, amp)."""
+    """Integrate one measurement chunk (diffrax, adaptive Tsit5); returns new state, time,
+    window and (peak-to-peak, modal amplitudes) from `n_steps` samples refined by parabolas."""
     n = sys.n_modes
-    h = T / n_steps
-
-    def w_at(zz, tau):
-        return phi_m @ zz + sys.boundary(xm, tau, theta00)
-
-    def body(k, c):
-        zz, p2, p1, mx, mn, amp = c
-        tau = tau0 + k * h
-        zz = _rk4_step(sys, zz, tau, h, theta00)
-        p0 = w_at(zz, tau + h)
-        mx = jnp.maximum(mx, _refined(p2, p1, p0, 1.0))
-        mn = jnp.minimum(mn, _refined(p2, p1, p0, -1.0))
-        amp = jnp.maximum(amp, jnp.sqrt(zz[:n] ** 2 + zz[n:] ** 2))
-        return zz, p1, p0, mx, mn, amp
-
+    atol = _ODE_ATOL * (sys.e[0] + sys.e[1] + 1e-300)
+    ts, zs = _solve_period(sys, z, tau0, T, theta00, n_steps, _ODE_RTOL, atol)
+    ws = zs @ phi_m + jax.vmap(lambda tau: sys.boundary(xm, tau, theta00))(ts)
     p2, p1 = window
-    init = (z, p2, p1, -jnp.inf, jnp.inf, jnp.zeros((n,)))
-    z, p2, p1, mx, mn, amp = jax.lax.fori_loop(0, n_steps, body, init)
-    return z, tau0 + T, (p2, p1), mx - mn, amp
+    seq = jnp.concatenate([jnp.stack([p2, p1]), ws])
+    mx = jnp.max(_refined(seq[:-2], seq[1:-1], seq[2:], 1.0))
+    mn = jnp.min(_refined(seq[:-2], seq[1:-1], seq[2:], -1.0))
+    amp = jnp.max(jnp.sqrt(zs[:, :n] ** 2 + zs[:, n:] ** 2), axis=0)
+    return zs[-1], tau0 + T, (ws[-2], ws[-1]), mx - mn, amp
 
 
 def _steady_core(belt: NonlinearBelt, sys: ModalSystem, z0, theta00, xm, rtol, atol_rel,
@@ -219,7 +220,7 @@ def _steady_jit(belt, speed, z0, theta0, xm, rtol, atol, *, min_periods, max_per
     return _steady_core(belt, sys, z0, theta0, xm, rtol, atol, min_periods, max_periods, min_steps, periods_per_chunk)
 
 
-def steady_state(belt: NonlinearBelt, speed, z0=None, theta0=0.0, *, at=0.01, rtol=1e-4, atol=1e-7,
+def nonlinear_steady_state(belt: NonlinearBelt, speed, z0=None, theta0=0.0, *, at=0.01, rtol=1e-4, atol=1e-7,
                  min_periods: int = 4, max_periods: int = 3000, steps_per_period: int = 64,
                  periods_per_chunk: int = 1) -> SteadyState:
     """Steady state at running speed `speed` [m/s] from modal state `z0` (default: rest).
@@ -230,7 +231,7 @@ def steady_state(belt: NonlinearBelt, speed, z0=None, theta0=0.0, *, at=0.01, rt
     """
     _check_common(belt, speed, at)
     return _steady_jit(belt, jnp.asarray(speed, dtype=float), _z0(belt, z0), jnp.asarray(theta0, dtype=float),
-                       jnp.asarray(at, dtype=float) / belt.span, jnp.asarray(rtol, dtype=float),
+                       belt.sensor_x(at), jnp.asarray(rtol, dtype=float),
                        jnp.asarray(atol, dtype=float), min_periods=min_periods, max_periods=max_periods,
                        min_steps=steps_per_period, periods_per_chunk=periods_per_chunk)
 
@@ -254,7 +255,7 @@ def _sweep_jit(belt, speeds, z0, theta0, xm, rtol, atol, *, min_periods, max_per
     return _sweep_core(belt, speeds, z0, theta0, xm, rtol, atol, min_periods, max_periods, min_steps, periods_per_chunk)
 
 
-def sweep(belt: NonlinearBelt, speeds, z0=None, theta0=0.0, *, at=0.01, rtol=1e-4, atol=1e-7,
+def nonlinear_sweep(belt: NonlinearBelt, speeds, z0=None, theta0=0.0, *, at=0.01, rtol=1e-4, atol=1e-7,
           min_periods: int = 4, max_periods: int = 3000, steps_per_period: int = 64,
           periods_per_chunk: int = 1) -> SweepResult:
     """Quasi-static sweep over `speeds` [m/s] (in the given order), each speed started from the
@@ -266,7 +267,7 @@ def sweep(belt: NonlinearBelt, speeds, z0=None, theta0=0.0, *, at=0.01, rtol=1e-
         raise ValueError(f"`speeds` must be a 1-D array of running speeds [m/s]; got shape {speeds.shape}")
     _check_common(belt, speeds, at)
     return _sweep_jit(belt, speeds, _z0(belt, z0), jnp.asarray(theta0, dtype=float),
-                      jnp.asarray(at, dtype=float) / belt.span, jnp.asarray(rtol, dtype=float),
+                      belt.sensor_x(at), jnp.asarray(rtol, dtype=float),
                       jnp.asarray(atol, dtype=float), min_periods=min_periods, max_periods=max_periods,
                       min_steps=steps_per_period, periods_per_chunk=periods_per_chunk)
 
@@ -297,7 +298,7 @@ def speed_sweep(belt: NonlinearBelt, speeds, z0=None, *, at=0.01, rtol=1e-4, ato
     Raises `SteadyStateError` naming the speeds where the steady state was not reached
     (`throw=False` returns the amplitudes anyway; under `jit`/`vmap` an `eqx.error_if` fires).
     """
-    res = sweep(belt, speeds, z0, at=at, rtol=rtol, atol=atol, min_periods=min_periods,
+    res = nonlinear_sweep(belt, speeds, z0, at=at, rtol=rtol, atol=atol, min_periods=min_periods,
                 max_periods=max_periods, steps_per_period=steps_per_period, periods_per_chunk=periods_per_chunk)
     pp = res.pp
     if throw:
@@ -305,11 +306,11 @@ def speed_sweep(belt: NonlinearBelt, speeds, z0=None, *, at=0.01, rtol=1e-4, ato
             check_converged(res, max_periods=max_periods)
         else:
             pp = eqx.error_if(pp, ~jnp.all(res.converged),
-                              "speed_sweep: no steady state reached at some speed; call jaxbelt.sweep to see which")
+                              "speed_sweep: no steady state reached at some speed; call jaxbelt.nonlinear_sweep to see which")
     return pp
 
 
-def basins(belt: NonlinearBelt, speed, z0s, *, at=0.01, rtol=1e-4, atol=1e-7, min_periods: int = 4,
+def nonlinear_basins(belt: NonlinearBelt, speed, z0s, *, at=0.01, rtol=1e-4, atol=1e-7, min_periods: int = 4,
            max_periods: int = 3000, steps_per_period: int = 64) -> SteadyState:
     """Steady states at one speed reached from each initial modal state in `z0s` (shape (K, 2N)),
     computed with `vmap` (Fig. 6: in the hysteresis band, two stable branches)."""
@@ -317,7 +318,7 @@ def basins(belt: NonlinearBelt, speed, z0s, *, at=0.01, rtol=1e-4, atol=1e-7, mi
     _z0(belt, z0s)
     _check_common(belt, speed, at)
     f = lambda z: _steady_jit(belt, jnp.asarray(speed, dtype=float), z, jnp.asarray(0.0),  # noqa: E731
-                              jnp.asarray(at, dtype=float) / belt.span, jnp.asarray(rtol, dtype=float),
+                              belt.sensor_x(at), jnp.asarray(rtol, dtype=float),
                               jnp.asarray(atol, dtype=float), min_periods=min_periods, max_periods=max_periods,
                               min_steps=steps_per_period, periods_per_chunk=1)
     return jax.vmap(f)(z0s)
@@ -327,25 +328,17 @@ def basins(belt: NonlinearBelt, speed, z0s, *, at=0.01, rtol=1e-4, atol=1e-7, mi
 def _trajectory_jit(belt, speed, z0, *, periods, steps_per_period):
     sys = belt.modal(speed)
     T = 2 * jnp.pi / sys.Omega[0]
-    h = T / steps_per_period
-
-    def step(z, k):
-        z = _rk4_step(sys, z, k * h, h, 0.0)
-        return z, z
-
-    _, zs = jax.lax.scan(step, z0, jnp.arange(periods * steps_per_period))
-    taus = h * jnp.arange(1, periods * steps_per_period + 1)
+    n = periods * steps_per_period
+    atol = 1e-3 * _ODE_ATOL * (sys.e[0] + sys.e[1] + 1e-300)
+    taus, zs = _solve_period(sys, z0, 0.0, periods * T, 0.0, n, 1e-3 * _ODE_RTOL, atol)
     return taus * belt.span / belt.wave_speed, jnp.concatenate([z0[None], zs]), sys
 
 
-def trajectory(belt: NonlinearBelt, speed, z0=None, periods: int = 200, steps_per_period: int = 64):
+def nonlinear_trajectory(belt: NonlinearBelt, speed, z0=None, periods: int = 200, steps_per_period: int = 64):
     """Modal state history from `z0` at a fixed speed: `(t [s], zs (periods*steps+1, 2N))`,
-    for phase-plane plots ($\\zeta^R_1$ against $\\zeta^I_1$, Fig. 6)."""
+    for phase-plane plots ($\\zeta^R_1$ against $\\zeta^I_1$, Fig. 6). diffrax (Tsit5, tight
+    tolerances), saved `steps_per_period` times per forcing period."""
     _check_common(belt, speed, None)
-    sys = belt.modal(speed)
-    if is_concrete(sys.omega):
-        need = int(np.ceil(2 * np.pi / float(sys.Omega[0]) * float(sys.omega[-1]) / 0.25))
-        steps_per_period = max(steps_per_period, need)
     ts, zs, _ = _trajectory_jit(belt, jnp.asarray(speed, dtype=float), _z0(belt, z0), periods=periods,
                                 steps_per_period=steps_per_period)
     return jnp.concatenate([jnp.zeros((1,)), ts]), zs

@@ -1,0 +1,520 @@
+"""Harmonic balance, continuation in belt speed, stability and folds of the non-linear belt.
+
+Steady periodic response of the N-mode Galerkin model of Moon & Wickert (1997), eq. (35)-(36)
+(see `jaxbelt.models.nonlinear.model`), with equal pulley radii so that both run-outs force at
+the pulley rate $\\Omega = vL/r$.
+
+## Harmonic balance (alternating frequency/time)
+
+In the forcing phase $\\varphi = \\Omega\\tau$ the modal state is a truncated Fourier series
+$z(\\varphi) = X\\,e(\\varphi)$, $e = (1, \\cos\\varphi, .., \\cos H\\varphi, \\sin\\varphi, .., \\sin H\\varphi)$,
+$X \\in \\mathbb{R}^{2N\\times(2H+1)}$. The residual
+
+$R(X, V) = \\Omega\\,X D - \\mathcal{F}\\big[\\,\\dot z(\\varphi_j) = f(z(\\varphi_j), \\varphi_j)\\,\\big]$
+
+compares the derivative of the series ($D$: derivative in coefficient space) with the discrete
+Fourier projection of the vector field evaluated at $n_t \\ge 4H + 4$ equally spaced phases
+(AFT; the cubic stretching term is then projected without aliasing). $R = 0$ is solved by
+Newton's method (`optimistix.Newton`, `lineax` linear solves).
+
+## Continuation, stability, folds
+
+Pseudo-arclength continuation in the running speed $V$: predictor along the unit tangent of
+$\\{R = 0\\}$ in $(X/s, V)$ ($s$ the pulleys' summed dimensionless run-out), corrector: Newton on
+$R = 0$ plus the arclength condition, step halved on failure and grown on quick convergence.
+A fold (saddle-node, where a quasi-static sweep jumps) is where the tangent's speed component
+changes sign; it is refined by Newton on the extended system
+$R = 0,\\ R_X\\phi = 0,\\ c\\cdot\\phi = 1$, whose solution is differentiable in every belt
+parameter by the implicit function theorem (`optimistix.ImplicitAdjoint`), so `jax.grad` of a
+jump speed works. Stability: the Floquet multipliers $\\mu$ of each periodic solution, the
+eigenvalues of the monodromy matrix of the variational equation over one forcing period
+(integrated with diffrax); the solution is stable when $\\max|\\mu| < 1$.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import lineax as lx
+import numpy as np
+import optimistix as optx
+
+from ..._checks import is_concrete
+from .model import ModalSystem, NonlinearBelt, mode_shapes
+
+__all__ = ["HarmonicSolution", "ResponseCurve", "Jumps", "harmonic_balance", "response_curve", "fold_speeds",
+           "jumps"]
+
+
+# --- Fourier machinery ---------------------------------------------------------------------------------
+def _n_time(H: int) -> int:
+    return max(4 * H + 4, 16)
+
+
+def _basis(H: int, phis):
+    k = jnp.arange(1, H + 1, dtype=float)[:, None]
+    return jnp.concatenate([jnp.ones((1, phis.shape[0])), jnp.cos(k * phis), jnp.sin(k * phis)])  # (2H+1, nt)
+
+
+@functools.lru_cache(maxsize=None)
+def _fourier(H: int):
+    nt = _n_time(H)
+    phis = 2 * np.pi * np.arange(nt) / nt
+    k = np.arange(1, H + 1, dtype=float)[:, None]
+    E = np.concatenate([np.ones((1, nt)), np.cos(k * phis), np.sin(k * phis)])
+    proj = E.T * (2.0 / nt)  # (nt, 2H+1): discrete Fourier projection
+    proj[:, 0] = 1.0 / nt
+    D = np.zeros((2 * H + 1, 2 * H + 1))  # d/dphi in coefficient space: X @ D
+    for k in range(1, H + 1):
+        D[H + k, k] = k  # sin coefficient s_k -> cos coefficient k s_k
+        D[k, H + k] = -k  # cos coefficient c_k -> sin coefficient -k c_k
+    return phis, E, proj, D
+
+
+def _scale(belt: NonlinearBelt):
+    return (belt.runout[0] + belt.runout[1]) / belt.span + 1e-30
+
+
+def _check_equal_radii(belt):
+    if is_concrete(belt.pulley_radii):
+        r = np.asarray(belt.pulley_radii)
+        if not np.isclose(r[0], r[1], rtol=1e-12):
+            raise ValueError(
+                "harmonic balance: parameter `pulley_radii` must be equal (a single forcing frequency); "
+                f"got {r.tolist()} m. Use the time-domain `nonlinear_sweep` for unequal pulleys."
+            )
+
+
+def _residual(Y, speed, belt: NonlinearBelt, H: int):
+    """Scaled HB residual (flat) for scaled coefficients Y (flat, (2N)(2H+1)) at speed [m/s]."""
+    phis, E, proj, D = _fourier(H)
+    s = _scale(belt)
+    sys = belt._modal_v(speed / belt.wave_speed)
+    X = s * Y.reshape(2 * belt.n_modes, 2 * H + 1)
+    zs = X @ E  # (2N, nt)
+    th0 = jnp.asarray(phis)
+    th1 = th0 + sys.phase
+    f = jax.vmap(sys.rhs_angles, in_axes=(1, 0, 0), out_axes=1)(zs, th0, th1)
+    R = sys.Omega[0] * (X @ D) - f @ proj
+    return (R / (s * sys.omega[0])).ravel()
+
+
+def _hb_solver(rtol=1e-10, atol=1e-10):
+    return optx.Newton(rtol=rtol, atol=atol, linear_solver=lx.AutoLinearSolver(well_posed=True))
+
+
+# --- one speed -----------------------------------------------------------------------------------------
+class HarmonicSolution(eqx.Module):
+    """Steady periodic response at one speed by harmonic balance.
+
+    - `speed` [m/s]; `coefficients`: (2N, 2H+1) Fourier coefficients of the modal state
+      $(\\zeta^R, \\zeta^I)$ over $(1, \\cos k\\varphi, \\sin k\\varphi)$, dimensionless;
+    - `pp`: peak-to-peak displacement [m] 1 cm from the sensor pulley; `amplitude` (N,) modal amplitudes;
+    - `success`: Newton converged.
+    """
+
+    speed: jnp.ndarray
+    coefficients: jnp.ndarray
+    pp: jnp.ndarray
+    amplitude: jnp.ndarray
+    success: jnp.ndarray
+
+
+_N_EVAL = 512  # phases at which the peak-to-peak and modal amplitudes are read off a solution
+
+
+def _observe(belt: NonlinearBelt, speed, Y, H: int, at=0.01):
+    """(pp [m] at `at` from the sensor pulley, modal amplitudes (N,)) of scaled coefficients Y."""
+    n = belt.n_modes
+    sys = belt._modal_v(speed / belt.wave_speed)
+    X = _scale(belt) * Y.reshape(2 * n, 2 * H + 1)
+    phis = 2 * jnp.pi * jnp.arange(_N_EVAL) / _N_EVAL
+    zs = X @ _basis(H, phis)
+    w = jax.vmap(lambda z, p: belt.sensor_displacement(z, p, p + sys.phase, sys, at), in_axes=(1, 0))(zs, phis)
+    amp = jnp.max(jnp.sqrt(zs[:n] ** 2 + zs[n:] ** 2), axis=1)
+    return jnp.max(w) - jnp.min(w), amp
+
+
+@functools.partial(eqx.filter_jit)
+def _hb_point(belt, speed, Y0, H: int, max_steps: int):
+    sol = optx.root_find(lambda Y, a: _residual(Y, a[0], a[1], H), _hb_solver(), Y0, args=(speed, belt),
+                         max_steps=max_steps, throw=False)
+    ok = sol.result == optx.RESULTS.successful
+    pp, amp = _observe(belt, speed, sol.value, H)
+    return sol.value, pp, amp, ok
+
+
+def harmonic_balance(belt: NonlinearBelt, speed, n_harmonics: int = 3, guess=None, *, max_steps: int = 50,
+                     throw: bool = True) -> HarmonicSolution:
+    """Steady periodic response at `speed` [m/s] by harmonic balance with `n_harmonics` harmonics.
+
+    `guess`: initial (2N, 2H+1) coefficients (default: rest, which reaches the branch that is
+    unique away from the hysteresis band; inside it pick the branch by the guess, or use
+    `response_curve`). Raises `RuntimeError` when Newton fails (`throw=False`: `success=False`
+    and NaN values; under jit an `eqx.error_if` on the returned values fires instead).
+    """
+    H = _check_h(n_harmonics)
+    _check_equal_radii(belt)
+    belt.check_speed(speed)
+    n = belt.n_modes
+    Y0 = jnp.zeros(2 * n * (2 * H + 1)) if guess is None else jnp.ravel(jnp.asarray(guess, float)) / _scale(belt)
+    speed = jnp.asarray(speed, dtype=float)
+    Y, pp, amp, ok = _hb_point(belt, speed, Y0, H, max_steps)
+    if throw:
+        if is_concrete(ok):
+            if not bool(ok):
+                raise RuntimeError(f"harmonic_balance: Newton did not converge at {float(speed):g} m/s "
+                                   f"(n_harmonics={H}); give a guess near the wanted branch")
+        else:
+            pp = eqx.error_if(pp, ~ok, "harmonic_balance: Newton did not converge")
+    nanif = lambda a: jnp.where(ok, a, jnp.nan)  # noqa: E731
+    return HarmonicSolution(speed=speed, coefficients=nanif(_scale(belt) * Y.reshape(2 * n, 2 * H + 1)),
+                            pp=nanif(pp), amplitude=nanif(amp), success=ok)
+
+
+def _check_h(n_harmonics):
+    if not isinstance(n_harmonics, (int, np.integer)) or isinstance(n_harmonics, bool) or n_harmonics < 1:
+        raise ValueError(f"parameter `n_harmonics` must be an integer >= 1; got {n_harmonics!r}")
+    return int(n_harmonics)
+
+
+# --- continuation --------------------------------------------------------------------------------------
+def _jac(belt, H):
+    """Jacobian of the residual w.r.t. (Y, V), shape (n, n+1)."""
+    def full(u):
+        return _residual(u[:-1], u[-1], belt, H)
+    return jax.jacfwd(full)
+
+
+def _tangent(J, t_prev):
+    """Unit tangent of {R = 0} with t . t_prev > 0: solve [J; t_prev^T] t = [0; 1]."""
+    A = jnp.concatenate([J, t_prev[None]], axis=0)
+    rhs = jnp.zeros(A.shape[0]).at[-1].set(1.0)
+    t = lx.linear_solve(lx.MatrixLinearOperator(A), rhs, lx.LU(), throw=False).value
+    return t / jnp.linalg.norm(t)
+
+
+def _continue(belt, v0, v1, H: int, max_points: int, ds0, ds_max):
+    n = 2 * belt.n_modes * (2 * H + 1)
+    solver = _hb_solver()
+    # start: Newton at v0 from rest
+    s0 = optx.root_find(lambda Y, a: _residual(Y, v0, belt, H), solver, jnp.zeros(n), max_steps=50, throw=False)
+    u0 = jnp.concatenate([s0.value, v0[None]])
+    start_ok = s0.result == optx.RESULTS.successful
+    t0 = _tangent(_jac(belt, H)(u0), jnp.zeros(n + 1).at[-1].set(1.0))
+
+    def corrector(u_pred, t):
+        def fn(u, _):
+            return jnp.concatenate([_residual(u[:-1], u[-1], belt, H), (t @ (u - u_pred))[None]])
+        return optx.root_find(fn, solver, u_pred, max_steps=12, throw=False)
+
+    def step(carry, _):
+        u, t, ds, done = carry
+        u_pred = u + ds * t
+        sol = corrector(u_pred, t)
+        u_new = sol.value
+        nsteps = sol.stats["num_steps"]
+        t_new = _tangent(_jac(belt, H)(u_new), t)
+        # reject too large corrections and turns (two close folds must not be stepped over)
+        ok = (sol.result == optx.RESULTS.successful) & jnp.all(jnp.isfinite(u_new)) \
+            & (jnp.linalg.norm(u_new - u_pred) < 0.5 * ds + 1e-12) & (t_new @ t > 0.97) \
+            & (u_new[-1] > 0) & (u_new[-1] < belt.wave_speed)
+        accept = ok & ~done
+        ds_new = jnp.where(ok, jnp.where(nsteps <= 3, jnp.minimum(1.6 * ds, ds_max), ds), 0.5 * ds)
+        u_out = jnp.where(accept, u_new, u)
+        t_out = jnp.where(accept, t_new, t)
+        V = u_out[-1]
+        done_new = done | (accept & ((V > v1) | (V < v0))) | (ds_new < 1e-7)
+        return (u_out, t_out, jnp.where(done, ds, ds_new), done_new), (u_out, t_out, accept)
+
+    us0 = jnp.zeros((max_points, n + 1)).at[0].set(u0)
+    ts0 = jnp.zeros((max_points, n + 1)).at[0].set(t0)
+    acc0 = jnp.zeros((max_points,), bool).at[0].set(start_ok)
+
+    def cond(c):
+        k, _, _, _, done, _, _, _ = c
+        return (k < max_points) & ~done
+
+    def body(c):
+        k, u, t, ds, done, us, ts, acc = c
+        (u, t, ds, done), (u_o, t_o, a) = step((u, t, ds, done), None)
+        us = jnp.where(a, us.at[k].set(u_o), us)
+        ts = jnp.where(a, ts.at[k].set(t_o), ts)
+        acc = acc.at[k].set(a)
+        return k + a.astype(k.dtype), u, t, ds, done, us, ts, acc
+
+    init = (jnp.asarray(1), u0, t0, ds0, ~start_ok, us0, ts0, acc0)
+    k, _, _, _, _, us, ts, acc = jax.lax.while_loop(cond, body, init)
+    # rows past the last accepted point repeat it (not accepted)
+    last = jnp.maximum(k - 1, 0)
+    fill = jnp.arange(max_points) >= k
+    us = jnp.where(fill[:, None], us[last], us)
+    ts = jnp.where(fill[:, None], ts[last], ts)
+    return us, ts, acc
+
+
+_T_STEPS = 96  # RK4-like fixed steps per period for the monodromy matrix (Tsit5)
+
+
+def _floquet(belt, speed, Y, H: int):
+    """Floquet multipliers (2N,) of the HB solution Y at `speed` (variational equation, diffrax)."""
+    n = belt.n_modes
+    sys = belt._modal_v(speed / belt.wave_speed)
+    X = _scale(belt) * Y.reshape(2 * n, 2 * H + 1)
+    W = sys.Omega[0]
+    T = 2 * jnp.pi / W
+
+    def rhs(tau, M, _):
+        phi = W * tau
+        z = X @ _basis(H, jnp.atleast_1d(phi))[:, 0]
+        J = jax.jacfwd(lambda zz: sys.rhs_angles(zz, phi, phi + sys.phase))(z)
+        return J @ M
+
+    steps = _T_STEPS * n
+    sol = diffrax.diffeqsolve(diffrax.ODETerm(rhs), diffrax.Tsit5(), 0.0, T, T / steps, jnp.eye(2 * n),
+                              stepsize_controller=diffrax.ConstantStepSize(), max_steps=steps + 1)
+    return jnp.linalg.eigvals(sol.ys[-1])
+
+
+def _fold_system(belt, H: int, c):
+    def fn(w, b):
+        n = c.shape[0]
+        Y, V, phi = w[:n], w[n], w[n + 1:]
+        R = _residual(Y, V, b, H)
+        JY = jax.jvp(lambda yy: _residual(yy, V, b, H), (Y,), (phi,))[1]
+        return jnp.concatenate([R, JY, (c @ phi - 1.0)[None]])
+    return fn
+
+
+def _refine_fold(belt, u, t, H: int):
+    """Newton on the extended fold system from (u, t); differentiable in `belt` (implicit)."""
+    n = u.shape[0] - 1
+    phi0 = t[:-1] / (jnp.linalg.norm(t[:-1]) + 1e-300)
+    c = jax.lax.stop_gradient(phi0)
+    w0 = jax.lax.stop_gradient(jnp.concatenate([u, phi0]))
+    fn = _fold_system(belt, H, c)
+    sol = optx.root_find(fn, _hb_solver(1e-11, 1e-11), w0, args=belt, max_steps=30, throw=False)
+    ok = sol.result == optx.RESULTS.successful
+    return sol.value[:n], sol.value[n], ok
+
+
+def _locate_folds(us, ts, acc, n_folds: int):
+    sV = jnp.sign(ts[:, -1])
+    valid = acc
+    # consecutive accepted points (acc marks accepted; rejected rows repeat the previous point)
+    idx_acc = jnp.cumsum(acc) - 1
+    change = valid[1:] & (sV[1:] != sV[:-1]) & (idx_acc[1:] != idx_acc[:-1])
+    count = jnp.sum(change)
+    where = jnp.nonzero(change, size=n_folds, fill_value=0)[0]
+    # of the two points around the sign change take the one with the smaller |t_V|
+    a, b = where, where + 1
+    pick = jnp.where(jnp.abs(ts[a, -1]) < jnp.abs(ts[b, -1]), a, b)
+    return pick, count
+
+
+@functools.partial(eqx.filter_jit)
+def _fold_jit(belt, v0, v1, H, n_folds, max_points, ds0, ds_max):
+    b_sg = jax.lax.stop_gradient(belt)
+    us, ts, acc = _continue(b_sg, v0, v1, H, max_points, ds0, ds_max)
+    pick, count = _locate_folds(us, ts, acc, n_folds)
+    Ys, Vs, oks = jax.vmap(lambda u, t: _refine_fold(belt, u, t, H))(us[pick], ts[pick])
+    ok = oks & (jnp.arange(n_folds) < count)
+    return Ys, Vs, ok
+
+
+def _check_range_speeds(belt, speed_range):
+    v0, v1 = speed_range
+    belt.check_speed(jnp.asarray([v0, v1], float))
+    if is_concrete(v0) and is_concrete(v1) and not float(v0) < float(v1):
+        raise ValueError(f"parameter `speed_range` must be increasing (v0 < v1) [m/s]; got {(float(v0), float(v1))}")
+    if is_concrete(v0) and float(v0) <= 0:
+        raise ValueError(f"parameter `speed_range` must start above 0 m/s; got {float(v0)}")
+    return jnp.asarray(v0, float), jnp.asarray(v1, float)
+
+
+def fold_speeds(belt: NonlinearBelt, speed_range=(7.5, 10.5), n_harmonics: int = 3, n_folds: int = 2, *,
+                max_points: int = 200, throw: bool = True):
+    """Fold (saddle-node) speeds [m/s] of the response curve in `speed_range`, ascending, shape (n_folds,).
+
+    For a hardening resonance the lower fold is where a decreasing sweep jumps up and the upper
+    fold where an increasing sweep jumps down. Differentiable w.r.t. every array field of `belt`
+    (implicit function theorem on the fold condition): `jax.grad(lambda b: fold_speeds(b)[1])(belt)`.
+    Fewer than `n_folds` folds in the range: `ValueError` (concrete) / `eqx.error_if` (traced);
+    `throw=False` returns NaN for the missing ones.
+    """
+    H = _check_h(n_harmonics)
+    _check_equal_radii(belt)
+    v0, v1 = _check_range_speeds(belt, speed_range)
+    _, Vs, ok = _fold_jit(belt, v0, v1, H, int(n_folds), int(max_points), jnp.asarray(0.05), jnp.asarray(0.25))
+    Vs = belt.wave_speed * 0.0 + Vs  # keep the belt's dtype
+    if throw:
+        if is_concrete(ok):
+            if not bool(np.all(np.asarray(ok))):
+                raise ValueError(f"fold_speeds: found {int(np.sum(np.asarray(ok)))} of n_folds={n_folds} folds in "
+                                 f"speed_range {tuple(float(x) for x in (v0, v1))} m/s (no hysteresis there, or "
+                                 "refinement failed); widen the range or lower `damping`")
+        else:
+            Vs = eqx.error_if(Vs, ~jnp.all(ok), "fold_speeds: fewer folds than n_folds in speed_range")
+    Vs = jnp.where(ok, Vs, jnp.nan)
+    order = jnp.argsort(jnp.where(ok, Vs, jnp.inf))
+    return Vs[order]
+
+
+# --- jumps (fold + the branch the sweep lands on) -------------------------------------------------------
+class Jumps(eqx.Module):
+    """Jumps of quasi-static sweeps at the folds, ascending in speed (all differentiable).
+
+    - `speed` (K,) fold speeds [m/s]; `pp_before` (K,) peak-to-peak [m] at the fold (the branch that
+      ends there); `pp_after` (K,) peak-to-peak [m] on the branch the sweep lands on, same speed.
+    For a hardening resonance, index 0 is the decreasing sweep's jump (up), index 1 the
+    increasing sweep's jump (down).
+    """
+
+    speed: jnp.ndarray
+    pp_before: jnp.ndarray
+    pp_after: jnp.ndarray
+
+
+@functools.partial(eqx.filter_jit)
+def _jumps_jit(belt, v0, v1, H, n_folds, max_points, ds0, ds_max):
+    b_sg = jax.lax.stop_gradient(belt)
+    us, ts, acc = _continue(b_sg, v0, v1, H, max_points, ds0, ds_max)
+    pick, count = _locate_folds(us, ts, acc, n_folds)
+    Ys, Vs, oks = jax.vmap(lambda u, t: _refine_fold(belt, u, t, H))(us[pick], ts[pick])
+    ok = oks & (jnp.arange(n_folds) < count)
+    pp_b = jax.vmap(lambda V, Y: _observe(belt, V, Y, H)[0])(Vs, Ys)
+
+    # landing branch: the accepted continuation point at the same speed farthest (in Y) from the fold
+    Vc = jax.lax.stop_gradient(us[:, -1])
+
+    def landing(Vf, Yf):
+        Vf_ = jax.lax.stop_gradient(Vf)
+        # candidate points: accepted, within the local segment bracket of the fold speed
+        seg = acc[1:] & ((Vc[1:] - Vf_) * (Vc[:-1] - Vf_) <= 0)
+        dist = jnp.linalg.norm(us[1:, :-1] - jax.lax.stop_gradient(Yf), axis=1)
+        k = jnp.argmax(jnp.where(seg, dist, -1.0))
+        lam = (Vf_ - Vc[k]) / (Vc[k + 1] - Vc[k] + 1e-300)
+        Yg = us[k, :-1] + lam * (us[k + 1, :-1] - us[k, :-1])
+        sol = optx.root_find(lambda Y, a: _residual(Y, a[0], a[1], H), _hb_solver(), Yg, args=(Vf, belt),
+                             max_steps=30, throw=False)
+        return _observe(belt, Vf, sol.value, H)[0], sol.result == optx.RESULTS.successful
+
+    pp_a, ok_a = jax.vmap(landing)(Vs, Ys)
+    return Vs, pp_b, pp_a, ok & ok_a
+
+
+def jumps(belt: NonlinearBelt, speed_range=(7.5, 10.5), n_harmonics: int = 3, n_folds: int = 2, *,
+          max_points: int = 200, throw: bool = True) -> Jumps:
+    """Fold speeds and the peak-to-peak before and after each jump (see `Jumps`); differentiable."""
+    H = _check_h(n_harmonics)
+    _check_equal_radii(belt)
+    v0, v1 = _check_range_speeds(belt, speed_range)
+    Vs, ppb, ppa, ok = _jumps_jit(belt, v0, v1, H, int(n_folds), int(max_points), jnp.asarray(0.02),
+                                  jnp.asarray(0.08))
+    if throw:
+        if is_concrete(ok):
+            if not bool(np.all(np.asarray(ok))):
+                raise ValueError(f"jumps: found {int(np.sum(np.asarray(ok)))} of n_folds={n_folds} jumps in "
+                                 f"speed_range {tuple(float(x) for x in (v0, v1))} m/s")
+        else:
+            Vs = eqx.error_if(Vs, ~jnp.all(ok), "jumps: fewer folds than n_folds in speed_range")
+    nanif = lambda a: jnp.where(ok, a, jnp.nan)  # noqa: E731
+    order = jnp.argsort(jnp.where(ok, Vs, jnp.inf))
+    return Jumps(speed=nanif(Vs)[order], pp_before=nanif(ppb)[order], pp_after=nanif(ppa)[order])
+
+
+# --- response curve ------------------------------------------------------------------------------------
+class ResponseCurve(eqx.Module):
+    """A response curve traced by continuation in belt speed (points in arclength order).
+
+    - `speed` (M,) [m/s]; `pp` (M,) peak-to-peak [m] 1 cm from the sensor pulley;
+    - `amplitude` (M, N) modal amplitudes $\\max_\\varphi|\\zeta_n|$ (dimensionless);
+    - `stable` (M,) bool ($\\max|\\mu| < 1$); `multipliers` (M, 2N) Floquet multipliers;
+    - `coefficients` (M, 2N, 2H+1) Fourier coefficients; `folds` (K,) fold speeds [m/s], ascending.
+    """
+
+    speed: jnp.ndarray
+    pp: jnp.ndarray
+    amplitude: jnp.ndarray
+    stable: jnp.ndarray
+    multipliers: jnp.ndarray
+    coefficients: jnp.ndarray
+    folds: jnp.ndarray
+
+    def branch(self, direction: str = "up"):
+        """(speeds, pp) a quasi-static sweep follows: `"up"` (increasing speed) or `"down"`, each
+        ascending in speed: the stable points reachable without passing a fold in the wrong way."""
+        s, p, st = (np.asarray(a) for a in (self.speed, self.pp, self.stable))
+        if direction not in ("up", "down"):
+            raise ValueError(f"parameter `direction` must be 'up' or 'down'; got {direction!r}")
+        # walk along the curve: the up sweep keeps the stable points whose speed is a running maximum,
+        # the down sweep the stable points whose speed is a running minimum from the end
+        if direction == "up":
+            keep = st & (s >= np.maximum.accumulate(s) - 1e-12)
+        else:
+            keep = st & (s <= np.minimum.accumulate(s[::-1])[::-1] + 1e-12)
+        return s[keep], p[keep]
+
+
+@functools.partial(eqx.filter_jit)
+def _curve_jit(belt, v0, v1, H, max_points, ds0, ds_max):
+    us, ts, acc = _continue(belt, v0, v1, H, max_points, ds0, ds_max)
+    pp, amp = jax.vmap(lambda u: _observe(belt, u[-1], u[:-1], H))(us)
+    mult = jax.vmap(lambda u: _floquet(belt, u[-1], u[:-1], H))(us)
+    return us, ts, acc, pp, amp, mult
+
+
+def response_curve(belt: NonlinearBelt, speed_range=(7.5, 10.5), n_harmonics: int = 3, *,
+                   max_points: int = 200, step: float = 0.05, max_step: float = 0.25) -> ResponseCurve:
+    """Response curve over `speed_range` [m/s] by harmonic balance (`n_harmonics`) and
+    pseudo-arclength continuation in speed, through the folds, with the Floquet stability of
+    every point and the fold speeds. `step`/`max_step`: initial/largest arclength step in the
+    scaled (coefficients / run-out, speed [m/s]) space. Raises `RuntimeError` if the curve does
+    not reach the end of the range within `max_points` points.
+    """
+    H = _check_h(n_harmonics)
+    _check_equal_radii(belt)
+    v0, v1 = _check_range_speeds(belt, speed_range)
+    us, ts, acc, pp, amp, mult = _curve_jit(belt, v0, v1, H, int(max_points), jnp.asarray(step, float),
+                                            jnp.asarray(max_step, float))
+    acc = np.asarray(acc)
+    us_n = np.asarray(us)
+    if not acc[0] or not np.any(us_n[acc, -1] >= float(v1)):
+        raise RuntimeError(f"response_curve: continuation stopped before {float(v1):g} m/s (reached "
+                           f"{float(us_n[acc, -1].max()) if acc.any() else float(v0):g} m/s in {max_points} points); "
+                           "raise max_points or max_step")
+    keep = acc & (us_n[:, -1] <= float(v1) + 1e-9)
+    ts_n = np.asarray(ts)[keep]
+    sV = np.sign(ts_n[:, -1])
+    ch = np.nonzero(sV[1:] != sV[:-1])[0]
+    n = belt.n_modes
+    folds = []
+    if ch.size:
+        kept_u, kept_t = us_n[keep], ts_n
+        picks = [i if abs(kept_t[i, -1]) < abs(kept_t[i + 1, -1]) else i + 1 for i in ch]
+        for i in picks:
+            _, V, ok = _refine_fold_jit(belt, jnp.asarray(kept_u[i]), jnp.asarray(kept_t[i]), H)
+            folds.append(float(V) if bool(ok) else np.nan)
+    mult = np.asarray(mult)[keep]
+    return ResponseCurve(
+        speed=jnp.asarray(us_n[keep, -1]), pp=jnp.asarray(np.asarray(pp)[keep]),
+        amplitude=jnp.asarray(np.asarray(amp)[keep]), stable=jnp.asarray(np.max(np.abs(mult), axis=1) < 1.0),
+        multipliers=jnp.asarray(mult),
+        coefficients=jnp.asarray(_scale(belt) * us_n[keep, :-1].reshape(-1, 2 * n, 2 * H + 1)),
+        folds=jnp.asarray(np.sort(np.asarray(folds, float))),
+    )
+
+
+@functools.partial(eqx.filter_jit)
+def _refine_fold_jit(belt, u, t, H):
+    return _refine_fold(belt, u, t, H)
+
+
+def point_shape(belt: NonlinearBelt, sys: ModalSystem, at=0.01):
+    """Modal shape vector at the sensor point (2N,)."""
+    psi, _ = mode_shapes(jnp.atleast_1d(belt.sensor_x(at)), sys.v, belt.n_modes)
+    return jnp.concatenate([psi.real[:, 0], psi.imag[:, 0]])

@@ -1,0 +1,76 @@
+"""The belt speed ramped through resonance: time records at the sensor (Moon & Wickert (1997), Fig. 3).
+
+`speed_ramp(belt, v_start, v_end, duration)` starts on the steady periodic response at
+`v_start` (harmonic balance), then integrates the model's vector field in physical time with
+diffrax while $V(t)$ rises or falls linearly to `v_end` over `duration` (the `SpeedRamp` input;
+the pulley angles are the integral of the pulley speeds). The same record is what
+`jb.simulate(jb.Scene(belt, SpeedRamp(v_start, v_end, duration), ts, y0=...))` returns as the
+`"w_sensor"` output.
+"""
+
+from __future__ import annotations
+
+import functools
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..._checks import check_positive, is_concrete
+from .harmonic import _basis, harmonic_balance
+from .model import NonlinearBelt, SpeedRamp
+
+__all__ = ["RampRecord", "speed_ramp", "ramp_initial_state"]
+
+
+class RampRecord(eqx.Module):
+    """A speed-ramp time record: `t` [s], `speed` [m/s], `w` [m] displacement 1 cm from the sensor
+    pulley, `z` (len(t), 2N) modal state."""
+
+    t: jnp.ndarray
+    speed: jnp.ndarray
+    w: jnp.ndarray
+    z: jnp.ndarray
+
+
+def ramp_initial_state(belt: NonlinearBelt, speed, n_harmonics: int = 5):
+    """Modal state (2N,) on the steady periodic response at `speed` [m/s], at pulley angle 0
+    (harmonic balance from rest, i.e. the branch reached away from the hysteresis band)."""
+    hb = harmonic_balance(belt, speed, n_harmonics)
+    return hb.coefficients @ _basis(n_harmonics, jnp.zeros(1))[:, 0]
+
+
+@functools.partial(eqx.filter_jit)
+def _ramp_jit(belt, ramp, z0, ts, rtol, atol):
+    term = diffrax.ODETerm(lambda t, y, inp: belt.vector_field(t, y, inp))
+    T = 2 * jnp.pi * belt.pulley_radii[0] / jnp.maximum(ramp.v_start, ramp.v_end)
+    sol = diffrax.diffeqsolve(term, diffrax.Tsit5(), ts[0], ts[-1], T / 32, z0, args=ramp,
+                              saveat=diffrax.SaveAt(ts=ts), stepsize_controller=diffrax.PIDController(rtol=rtol,
+                              atol=atol), max_steps=None, throw=False)
+    ok = sol.result == diffrax.RESULTS.successful
+    zs = sol.ys
+    w = jax.vmap(lambda t, z: belt._out_w_sensor(t, z, ramp))(ts, zs)
+    w = eqx.error_if(w, ~ok, "speed_ramp: the diffrax solve failed")
+    return zs, w
+
+
+def speed_ramp(belt: NonlinearBelt, v_start, v_end, duration, *, samples_per_period: int = 24,
+               rtol: float = 1e-8, z0=None) -> RampRecord:
+    """Displacement at the sensor while the belt speed ramps linearly from `v_start` to `v_end`
+    [m/s] in `duration` [s] (Moon & Wickert (1997), Fig. 3). Starts on the steady response at
+    `v_start` (or at modal state `z0`); sampled `samples_per_period` times per pulley revolution."""
+    check_positive("duration", duration, "s", "speed_ramp")
+    belt.check_speed(jnp.asarray([v_start, v_end], float))
+    ramp = SpeedRamp(v_start, v_end, duration)
+    if z0 is None:
+        z0 = ramp_initial_state(belt, v_start)
+    if not (is_concrete(duration) and is_concrete(v_start) and is_concrete(v_end)):
+        raise ValueError("speed_ramp: `v_start`, `v_end` and `duration` must be concrete (they set the sampling)")
+    vmax = max(float(v_start), float(v_end))
+    n = int(np.ceil(float(duration) * vmax / (2 * np.pi * float(belt.pulley_radii[0])) * samples_per_period)) + 1
+    ts = jnp.linspace(0.0, float(duration), n)
+    atol = 1e-9 * float((belt.runout[0] + belt.runout[1]) / belt.span)
+    zs, w = _ramp_jit(belt, ramp, jnp.asarray(z0, float), ts, jnp.asarray(rtol), jnp.asarray(atol))
+    return RampRecord(t=ts, speed=ramp.speed_at(ts), w=w, z=zs)

@@ -1,0 +1,237 @@
+"""No silent wrong answer: every failure raises a clear error or is flagged, under jit, vmap and grad.
+
+Each test is one of the ways a hostile but realistic user broke an earlier version; the expected
+outcome is stated in the test (an exception naming the parameter, or `success=False` with NaN).
+"""
+
+import subprocess
+import sys
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxbelt as jb
+from jaxbelt.solve import _run_traced
+
+TS = jnp.linspace(0.0, 0.5, 101)
+# What an `eqx.error_if` raises at run time: EquinoxRuntimeError under eqx.filter_jit; under plain
+# jax.jit the CPU callback wraps it in a ValueError/JaxRuntimeError. Each test matches our message.
+RUNTIME = (eqx.EquinoxRuntimeError, jax.errors.JaxRuntimeError, ValueError)
+
+
+@pytest.fixture(scope="module")
+def model():
+    return jb.BeltStartup()
+
+
+def _ys_last(model, gamma):
+    return jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, gamma), ts=TS)).ys[-1]
+
+
+def test_traced_invalid_gamma_raises_naming_it(model):
+    f = jax.jit(lambda g: _ys_last(model, g))
+    assert np.all(np.isfinite(np.asarray(f(0.02))))
+    for bad in (0.0, -0.02, jnp.nan):
+        with pytest.raises(RUNTIME, match="gamma"):
+            jax.block_until_ready(f(bad))
+
+
+def test_traced_negative_stiffness_raises_naming_it():
+    def final_speed(k):
+        m = jb.BeltStartup(k=k)
+        return jb.simulate(jb.Scene(m, jb.ExponentialVoltage(24.0, 0.02), ts=TS)).ys[-1, 3]
+
+    f = jax.jit(final_speed)
+    # valid k: the jitted value equals the eager one
+    assert float(f(1.2e5)) == pytest.approx(float(final_speed(1.2e5)), rel=1e-12)
+    with pytest.raises(RUNTIME, match=r"`k` must be finite and > 0"):
+        jax.block_until_ready(f(-1.2e5))
+    # and under grad: the error fires in the forward pass of the gradient program
+    with pytest.raises(RUNTIME, match=r"`k`"):
+        jax.block_until_ready(jax.jit(jax.grad(final_speed))(-1.2e5))
+
+
+def test_traced_negative_rtol_raises(model):
+    scene = jb.Scene(model, jb.ExponentialVoltage(24.0, 0.02), ts=TS)
+    f = jax.jit(lambda r: jb.simulate(scene, "ode", rtol=r).ys[-1])
+    with pytest.raises(RUNTIME, match="rtol"):
+        jax.block_until_ready(f(-1e-8))
+    with pytest.raises(ValueError, match="rtol"):
+        jb.simulate(scene, "ode", rtol=-1e-8)
+
+
+def test_vmap_throw_false_flags_only_the_bad_element(model):
+    def run(g):
+        return jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, g), ts=TS, observe=("current",)), throw=False)
+
+    gammas = jnp.array([0.02, -0.01, 0.04])
+    sol = jax.jit(jax.vmap(run))(gammas)
+    assert np.asarray(sol.success).tolist() == [True, False, True]
+    assert np.all(np.isnan(np.asarray(sol.ys[1]))) and np.all(np.isnan(np.asarray(sol.current[1])))
+    # the good elements equal the eager, scalar solve
+    ref = jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, 0.04), ts=TS))
+    np.testing.assert_allclose(sol.ys[2], ref.ys, rtol=1e-12, atol=1e-12)
+
+
+def test_vmap_throw_true_raises_if_any_element_is_bad(model):
+    f = jax.jit(jax.vmap(lambda g: _ys_last(model, g)))
+    with pytest.raises(RUNTIME, match="gamma"):
+        jax.block_until_ready(f(jnp.array([0.02, -0.01])))
+
+
+def test_exhausted_step_budget_raises_on_the_states_under_jit(model):
+    scene = jb.Scene(model, jb.ExponentialVoltage(24.0, 0.02), ts=TS)
+    f = jax.jit(lambda r: jb.simulate(scene, "ode", rtol=r, max_steps=5).ys[-1])
+    with pytest.raises(RUNTIME, match="did not reach the final time"):
+        jax.block_until_ready(f(1e-8))
+    sol = jb.simulate(scene, "ode", max_steps=5, throw=False)
+    assert not bool(sol.success) and np.all(np.isnan(np.asarray(sol.ys)))
+
+
+def test_fluctuation_objective_gradient_with_exhausted_budget_raises():
+    drive, pid = jb.FourBarDrive(), jb.PID()
+    g = jax.jit(jax.grad(lambda kp: jb.fluctuation_objective(drive, eqx.tree_at(lambda p: p.kp, pid, kp), max_steps=4)))
+    with pytest.raises(RUNTIME, match="did not reach the final time"):
+        jax.block_until_ready(g(80.0))
+
+
+def test_t0_after_first_output_time_is_refused(model):
+    with pytest.raises(ValueError, match="t0"):
+        jb.Scene(model, jb.ExponentialVoltage(24.0, 0.02), ts=TS, t0=0.1)
+    f = jax.jit(lambda t0: jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, 0.02), ts=TS, t0=t0)).ys[-1])
+    with pytest.raises(RUNTIME, match="t0"):
+        jax.block_until_ready(f(0.1))
+    # a start before the grid is valid: the state at ts[0] is the state reached from rest at t0
+    early = jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, 0.02), ts=TS[50:], t0=0.0))
+    full = jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, 0.02), ts=TS))
+    np.testing.assert_allclose(early.ys, full.ys[50:], rtol=1e-9, atol=1e-9)
+
+
+def test_unstable_rk4_step_fails_instead_of_returning_garbage(model):
+    scene = jb.Scene(model, jb.ExponentialVoltage(24.0, 0.02), ts=TS)
+    with pytest.raises(jb.SolveError, match="RK4"):
+        jb.simulate(scene, "rk4", dt=1.0)
+    sol = jb.simulate(scene, "rk4", dt=1.0, throw=False)
+    assert not bool(sol.success) and np.all(np.isnan(np.asarray(sol.ys)))
+    # a stable step is accurate: RK4 at 0.1 ms against the closed form
+    ref = jb.simulate(scene)
+    rk = jb.simulate(scene, "rk4", dt=1e-4)
+    assert bool(rk.stats["rk4_stable"])
+    assert float(jnp.max(jnp.abs(rk.ys - ref.ys))) < 1e-6 * float(jnp.max(jnp.abs(ref.ys)))
+
+
+def test_rk4_stability_bound_matches_the_theoretical_limit():
+    """RK4's real-axis stability limit is dt*|lambda| = 2.785: just below passes, just above fails."""
+    m = jb.BeltStartup()
+    A, _, _ = m.linear_system()
+    rho = float(np.max(np.abs(np.linalg.eigvals(np.asarray(A)))))
+    lam = np.linalg.eigvals(np.asarray(A))
+    assert abs(lam[np.argmax(np.abs(lam))].imag) < 1e-9 * rho  # the fastest mode is the real armature pole
+    scene = jb.Scene(m, jb.ExponentialVoltage(24.0, 0.02), ts=jnp.linspace(0.0, 0.01, 11))
+    ok = jb.simulate(scene, "rk4", dt=2.70 / rho, throw=False)
+    bad = jb.simulate(scene, "rk4", dt=2.85 / rho, throw=False)
+    assert bool(ok.success) and not bool(bad.success)
+
+
+def test_wrong_input_kind_is_a_type_error():
+    with pytest.raises(TypeError, match="AbstractVoltageSource"):
+        jb.Scene(jb.FourBarDrive(), jb.PseudoPolynomial([3.0, 4.0, 5.0]), ts=TS)
+    with pytest.raises(TypeError, match="AbstractMotionCommand"):
+        jb.Scene(jb.BeltPlatform(), jb.ConstantVoltage(24.0), ts=TS)
+    with pytest.raises(TypeError, match="AbstractVoltageCommand"):
+        jb.Scene(jb.BeltStartup(), jb.PID(), ts=TS)
+
+
+def test_unknown_output_is_refused_at_scene_construction(model):
+    with pytest.raises(ValueError, match="no output 'currant'"):
+        jb.Scene(model, jb.ExponentialVoltage(24.0, 0.02), ts=TS, observe=("currant",))
+
+
+def test_new_grid_tolerance_and_parameters_do_not_recompile(model):
+    def run(ts, g, k, rtol, method):
+        m = eqx.tree_at(lambda mm: mm.k, model, jnp.asarray(k))
+        return jb.simulate(jb.Scene(m, jb.ExponentialVoltage(24.0, g), ts=ts), method, rtol=rtol, dt=1e-4)
+
+    for method in ("expm", "ode", "rk4"):
+        run(TS, 0.02, 1.2e5, 1e-8, method)
+        n = eqx.debug.get_num_traces(_run_traced)
+        run(jnp.linspace(0.0, 0.4, 101), 0.03, 1.1e5, 1e-9, method)  # new grid spacing, gamma, k, rtol
+        run(jnp.linspace(0.1, 0.35, 101), 0.05, 1.3e5, 1e-7, method)
+        assert eqx.debug.get_num_traces(_run_traced) == n, method
+
+
+def test_traced_grid_warns_unless_uniform_is_declared(model):
+    cmd = jb.ExponentialVoltage(24.0, 0.02)
+    with pytest.warns(jb.TracedGridWarning):
+        jax.jit(lambda ts: jb.simulate(jb.Scene(model, cmd, ts=ts)).ys)(TS)
+    fast = jax.jit(lambda ts: jb.simulate(jb.Scene(model, cmd, ts=ts, uniform=True)).ys)(TS)
+    np.testing.assert_allclose(fast, jb.simulate(jb.Scene(model, cmd, ts=TS)).ys, rtol=1e-10, atol=1e-10)
+    with pytest.raises(ValueError, match="not evenly spaced"):
+        jb.Scene(model, cmd, ts=jnp.array([0.0, 0.1, 0.3]), uniform=True)
+
+
+def test_quadrature_h_refuses_a_move_it_cannot_resolve():
+    plat = jb.BeltPlatform()
+    long_move = jb.PseudoPolynomial([3.0, 4.0, 5.0], duration=10.0)
+    with pytest.raises(ValueError, match="n_nodes"):
+        jb.residual_energy(plat, long_move)
+    ref = float(jb.residual_energy(plat, long_move, method="ode"))
+    fine = float(jb.residual_energy(plat, long_move, n_nodes=2600))
+    assert fine == pytest.approx(ref, rel=1e-8)
+    # under jit the same refusal is a run-time error
+    f = jax.jit(lambda T: jb.residual_energy(plat, jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]), duration=T)))
+    assert float(f(1.0)) == pytest.approx(float(jb.residual_energy(plat, jb.PseudoPolynomial([3.0, 4.0, 5.0]), method="ode")), rel=1e-10)
+    with pytest.raises(RUNTIME, match="n_nodes"):
+        jax.block_until_ready(f(10.0))
+
+
+def test_nearly_equal_exponents_are_refused_and_gradients_are_right_at_the_limit():
+    with pytest.raises(ValueError, match="at least 0.001"):
+        jb.PseudoPolynomial([3.0, 4.0, 4.0 + 1e-6])
+    plat = jb.BeltPlatform()
+
+    def H(g):
+        return jb.residual_energy(plat, jb.PseudoPolynomial(g))
+
+    g = jnp.array([3.0, 4.0, 4.0 + 2e-3])
+    grad = np.asarray(jax.grad(H)(g))
+    # reference: central differences of the independent ODE evaluation of H
+    h = 1e-4
+
+    def Hode(gg):
+        return float(jb.residual_energy(plat, jb.PseudoPolynomial(gg), method="ode"))
+
+    fd = np.array([(Hode(g.at[i].add(h)) - Hode(g.at[i].add(-h))) / (2 * h) for i in (0, 1)])
+    np.testing.assert_allclose(grad[:2], fd, rtol=1e-4)
+    with pytest.raises(RUNTIME, match="at least 0.001"):
+        jax.block_until_ready(jax.jit(H)(jnp.array([3.0, 4.0, 4.0 + 1e-6])))
+
+
+@pytest.mark.parametrize(
+    "argv, needle",
+    [
+        (["startup", "--gamma", "-1"], "--gamma: must be > 0"),
+        (["startup", "--gamma", "nan"], "--gamma: expected a finite number"),
+        (["startup", "--points", "1"], "--points: must be an integer >= 2"),
+        (["startup", "--out", "/nonexistent-folder/x.png"], "does not exist"),
+        (["startup", "--out", "figure.txt"], "image format"),
+    ],
+)
+def test_cli_refuses_bad_arguments_before_computing(argv, needle):
+    r = subprocess.run([sys.executable, "-m", "jaxbelt", *argv], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and needle in lines[0], r.stderr
+
+
+def test_cli_output_without_suffix_prints_the_written_name(tmp_path):
+    r = subprocess.run(
+        [sys.executable, "-m", "jaxbelt", "startup", "--gamma", "0.02", "--points", "51", "--out", str(tmp_path / "fig")],
+        capture_output=True, text=True, timeout=300,
+    )
+    assert r.returncode == 0, r.stderr
+    written = tmp_path / "fig.png"
+    assert written.exists() and f"wrote {written}" in r.stdout

@@ -1,0 +1,106 @@
+"""The package's import graph has no cycle, and `import jaxbelt` has no surprising side effects."""
+
+import ast
+import os
+import pathlib
+import subprocess
+import sys
+
+import jaxbelt
+
+PKG = pathlib.Path(jaxbelt.__file__).parent
+
+
+def _module_name(path: pathlib.Path) -> str:
+    rel = path.relative_to(PKG.parent).with_suffix("")
+    parts = list(rel.parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def _imports(path: pathlib.Path, name: str) -> set:
+    """Every jaxbelt module that `path` imports, at module level or inside functions."""
+    is_pkg = path.name == "__init__.py"
+    base = name.split(".") if is_pkg else name.split(".")[:-1]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found |= {a.name for a in node.names if a.name.startswith("jaxbelt")}
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                root = base[: len(base) - (node.level - 1)]
+                mod = ".".join(root + ([node.module] if node.module else []))
+            else:
+                mod = node.module or ""
+            if not mod.startswith("jaxbelt"):
+                continue
+            found.add(mod)
+            for a in node.names:  # `from . import x` may name a submodule
+                found.add(f"{mod}.{a.name}")
+    return found
+
+
+def _graph():
+    modules = {_module_name(p): p for p in PKG.rglob("*.py")}
+    graph = {}
+    for name, path in modules.items():
+        deps = {d for d in _imports(path, name) if d in modules and d != name}
+        # importing a.b.c runs a/__init__ and a/b/__init__ first: that is Python's doing, not an edge
+        graph[name] = {d for d in deps if not name.startswith(d + ".")}
+    return graph
+
+
+def _cycle(graph):
+    state = {}
+
+    def visit(n, stack):
+        state[n] = 1
+        stack.append(n)
+        for d in sorted(graph[n]):
+            if state.get(d) == 1:
+                return stack[stack.index(d):] + [d]
+            if d not in state:
+                c = visit(d, stack)
+                if c:
+                    return c
+        stack.pop()
+        state[n] = 2
+        return None
+
+    for n in sorted(graph):
+        if n not in state:
+            c = visit(n, [])
+            if c:
+                return c
+    return None
+
+
+def test_import_graph_has_no_cycle():
+    # package __init__ files re-export their children; edges out of them are re-exports, not dependencies
+    graph = {n: (set() if (PKG.parent / n.replace(".", "/") / "__init__.py").exists() else deps)
+             for n, deps in _graph().items()}
+    graph = {n: {d for d in deps if not (PKG.parent / d.replace(".", "/") / "__init__.py").exists()}
+             for n, deps in graph.items()}
+    assert len(graph) > 30
+    assert _cycle(graph) is None, f"import cycle: {' -> '.join(_cycle(graph))}"
+
+
+def test_cycle_detector_finds_a_cycle():
+    assert _cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert _cycle({"a": {"b"}, "b": set()}) is None
+
+
+def test_import_loads_no_plotting_library_and_announces_float64():
+    code = (
+        "import sys, jax; import jaxbelt as jb; "
+        "print('matplotlib' in sys.modules, jax.config.jax_enable_x64, jb.X64_SWITCHED_ON)"
+    )
+    env = {k: v for k, v in os.environ.items() if k != "JAXBELT_X64"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == ["False", "True", "True"]
+    # the opt-out leaves JAX's default (float32) alone
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env={**env, "JAXBELT_X64": "0"}, timeout=120)
+    assert out.stdout.split() == ["False", "False", "False"], out.stderr
