@@ -1,4 +1,4 @@
-"""`sweep(fn, params)`: a `vmap` over a batch of parameters, sharded over devices.
+"""`sweep(fn, params)`: a `vmap` over a batch of parameters, sharded over devices (module `jaxbelt.batch`).
 
 ```python
 import jax.numpy as jnp, jaxbelt as jb
