@@ -231,12 +231,12 @@ class PseudoPolynomial(AbstractMotionCommand):
         if is_concrete(self.gammas):
             g = _np.sort(_np.asarray(self.gammas, dtype=float))
             gap = _np.min(_np.diff(g))
-            if not gap >= MIN_EXPONENT_GAP:
+            if not gap >= MIN_EXPONENT_GAP * (1 - 1e-9):
                 raise ValueError(f"{msg}; got {self.gammas.tolist()}")
         else:
             g = self.gammas
             diff = jnp.abs(g[:, None] - g[None, :]) + MIN_EXPONENT_GAP * jnp.eye(g.shape[0])
-            _record_check(jnp.all(diff >= MIN_EXPONENT_GAP), msg)
+            _record_check(jnp.all(diff >= MIN_EXPONENT_GAP * (1 - 1e-9)), msg)
 
     @property
     def order(self) -> int:

@@ -313,7 +313,8 @@ def _finish(sol: Solution, checks, throw: bool, what: str, hint: str) -> Solutio
                 where = f" (batch elements {bad.tolist()[:10]})" if np.ndim(success) else ""
                 raise SolveError(f"simulate failed for the scene {what}{where}. {hint}")
         else:
-            values = error_if(values, ~success, f"jaxbelt.simulate failed for the scene {what}. {hint}")
+            # only where the parameters are valid: an invalid one raises its own, more precise error
+            values = error_if(values, ~sol.success & ok, f"jaxbelt.simulate failed for the scene {what}. {hint}")
     else:
         values = nan_where(values, success)
     ys, outputs = values

@@ -59,7 +59,7 @@ def _guard_exponents(cmd: PseudoPolynomial) -> PseudoPolynomial:
     g = cmd.gammas
     lo = max(cmd.order, 2)
     diff = jnp.abs(g[:, None] - g[None, :]) + jnp.eye(g.shape[0])
-    bad = jnp.any(g <= lo) | jnp.any(diff < MIN_EXPONENT_GAP)
+    bad = jnp.any(g <= lo) | jnp.any(diff < MIN_EXPONENT_GAP * (1 - 1e-9))
     g = error_if(
         g, bad, f"PseudoPolynomial: exponents must be at least {MIN_EXPONENT_GAP:g} apart and each > {lo} "
         "(eq. 23 singular or ill-conditioned, or acceleration infinite at T)"
