@@ -46,6 +46,7 @@ from .optimise.pid import tune_pid as tune_pid  # noqa: E402
 # --- belt spans: contact, moving string, crossing diagrams (belt-vibration report; Moon & Wickert, 1997) --------------------
 from .models import BeltPulleyContact as BeltPulleyContact  # noqa: E402
 from .models import MovingString as MovingString  # noqa: E402
+from .models import RunoutRig as RunoutRig  # noqa: E402
 from .models import SlipError as SlipError  # noqa: E402
 from .models import SlipReport as SlipReport  # noqa: E402
 from .models import crossing_diagram as crossing_diagram  # noqa: E402
