@@ -120,8 +120,9 @@ def main(quick: bool):
 
     @jax.jit
     def jax_diagram(V):
-        nat, load = jb.crossing_diagram(V, L, RADII, VT, N_MODES, HARM)
-        return nat, load, jb.crossing_speeds(L, RADII, VT, N_MODES, HARM)
+        rig = jb.RunoutRig(length=L, pulley_radii=RADII, wave_speed=VT)
+        nat, load = jb.crossing_diagram(rig, V, N_MODES, HARM)
+        return nat, load, jb.crossing_speeds(rig, N_MODES, HARM)
 
     t_jax, c_jax, (nat, load, cross) = time_jax(jax_diagram, jnp.asarray(speeds), repeats=reps)
     t_np, (nat0, load0, cross0) = time_py(np_crossing_loop, speeds, repeats=max(1, reps // 3))
@@ -132,7 +133,7 @@ def main(quick: bool):
                      median_s=t_jax, compile_s=c_jax, repeats=reps, n_speeds=n_speeds, n_modes=N_MODES))
     rows.append(dict(name="crossing diagram", method="numpy loop + scipy brentq", error=0.0, median_s=t_np,
                      compile_s=None, repeats=max(1, reps // 3), n_speeds=n_speeds, n_modes=N_MODES))
-    mw = np.asarray(jb.crossing_speeds(0.86, (0.063, 0.063), 41.0, 2))
+    mw = np.asarray(jb.crossing_speeds(jb.RunoutRig(), 2))
     headline += [
         dict(what=f"crossing diagram {n_speeds} speeds x {N_MODES} modes, jaxbelt", value=t_jax, unit="s", target=None),
         dict(what="crossing diagram speed-up over numpy/scipy loop", value=t_np / t_jax, unit="x", target=None),
@@ -149,7 +150,8 @@ def main(quick: bool):
     t_exact, _ = time_py(np_exact_loop, sw, repeats=max(1, reps // 3))
     wp = []
     for nm in (8, 16, 32, 64, 128, 256):
-        f = jax.jit(lambda V, nm=nm: jb.linear_runout_response(V, L, VT, RADII, RUNOUTS, PHASE, 0.0, 0.25, nm))
+        rig = jb.RunoutRig(length=L, wave_speed=VT, pulley_radii=RADII, runouts=RUNOUTS, phase=PHASE, position=0.25)
+        f = jax.jit(lambda V, nm=nm, rig=rig: jb.linear_runout_response(rig, V, nm))
         t, c, out = time_jax(f, jnp.asarray(sw), repeats=reps)
         err = float(np.max(np.abs(np.asarray(out) - ref) / ref))
         rows.append(dict(name="linear response sweep", method=f"jaxbelt modal, {nm} modes", error=err, median_s=t,

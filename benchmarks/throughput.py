@@ -90,7 +90,7 @@ def pid_batch(gs):
 
 
 def runout_batch(speeds):
-    return jb.linear_runout_response(speeds, **RUNOUT)
+    return jb.linear_runout_response(jb.RunoutRig(**RUNOUT), speeds)
 
 
 def span_freqs_batch(speeds):
@@ -136,7 +136,7 @@ def batch_and_reference(scene: str, x):
         f = jax.jit(pid_one)
         ref = np.array([float(f(g)) for g in x])
     elif scene == "runout":
-        f = jax.jit(lambda v: jb.linear_runout_response(v, **RUNOUT))
+        f = jax.jit(lambda v: jb.linear_runout_response(jb.RunoutRig(**RUNOUT), v))
         ref = np.array([float(f(v)) for v in x])
     else:
         ref = span_freqs_closed_form(x)
@@ -269,7 +269,7 @@ def gradient_costs(quick: bool) -> list[dict]:
         return jnp.mean(jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V_MAX, gs), ts=TS)).ys[..., 3], axis=-1)
 
     def runout(v):
-        return jb.linear_runout_response(v, **RUNOUT)
+        return jb.linear_runout_response(jb.RunoutRig(**RUNOUT), v)
 
     def freqs(v):
         return jb.MovingString(**SPAN).natural_frequencies(v, n_modes=3)[..., 0]

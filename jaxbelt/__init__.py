@@ -44,9 +44,11 @@ from .batch import sweep as sweep  # noqa: E402
 # --- start-up of a belt drive (Incerti, 2014) ---------------------------------------------------------
 from .models import BeltChain as BeltChain  # noqa: E402
 from .models import BeltStartup as BeltStartup  # noqa: E402
+from .models.startup import startup_curves as startup_curves  # noqa: E402
 
 # --- four-bar linkage + PID-controlled DC motor (Incerti, 2012) -------------------------------------
 from .models.fourbar import FourBarDrive as FourBarDrive  # noqa: E402
+from .models.fourbar import simulate_fig4 as simulate_fig4  # noqa: E402
 from .models.motor import PID as PID  # noqa: E402
 from .objectives.fluctuation import fluctuation_index as fluctuation_index  # noqa: E402
 from .objectives.fluctuation import fluctuation_objective as fluctuation_objective  # noqa: E402
@@ -56,6 +58,7 @@ from .optimise.pid import tune_pid as tune_pid  # noqa: E402
 # --- belt spans: contact, moving string, crossing diagrams (belt-vibration report; Moon & Wickert, 1997) --------------------
 from .models import BeltPulleyContact as BeltPulleyContact  # noqa: E402
 from .models import MovingString as MovingString  # noqa: E402
+from .models import RunoutRig as RunoutRig  # noqa: E402
 from .models import SlipError as SlipError  # noqa: E402
 from .models import SlipReport as SlipReport  # noqa: E402
 from .models import crossing_diagram as crossing_diagram  # noqa: E402
@@ -67,6 +70,7 @@ from .models import simulate_runout_response as simulate_runout_response  # noqa
 
 # --- command shaping of a belt-driven platform (Incerti, pseudo-polynomial commands) --------------------------------------
 from .models import BeltPlatform as BeltPlatform  # noqa: E402
+from .models.platform import platform_response as platform_response  # noqa: E402
 from .objectives.residual import residual_energy as residual_energy  # noqa: E402
 from .objectives.residual import residual_energy_joules as residual_energy_joules  # noqa: E402
 from .optimise.command import CommandOptimResult as CommandOptimResult  # noqa: E402

@@ -1,4 +1,4 @@
-"""The `jaxbelt startup` command and the Fig. 3 plot: the drawn curves are the simulated ones."""
+"""The `jaxbelt startup` command, `startup_curves` and the Fig. 3 plot: the drawn curves are the simulated ones."""
 
 import numpy as np
 import pytest
@@ -25,7 +25,8 @@ def test_plot_panels_hold_the_simulated_data():
     matplotlib.use("Agg")
     from test_startup import reference
 
-    fig = jb.plots.plot_startup(gammas=(0.03,), t_end=0.2, n_points=201)
+    ts, curves = jb.startup_curves(gammas=(0.03,), t_end=0.2, n_points=201)
+    fig = jb.plots.draw_startup(ts, curves, (0.03,))
     axes = fig.axes
     assert len(axes) == 8
     ref = reference(jb.BeltStartup(), jb.ExponentialVoltage(24.0, 0.03), np.linspace(0.0, 0.2, 201))
@@ -36,7 +37,9 @@ def test_plot_panels_hold_the_simulated_data():
 
 
 def test_cli_bad_argument_is_a_clear_error(capsys):
-    assert main(["startup", "--t-end", "-1"]) == 2
-    assert "--t-end must be > 0" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:
+        main(["startup", "--t-end", "-1"])
+    assert e.value.code == 2
+    assert "argument --t-end: must be > 0, got -1" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["startup", "--method", "euler"])

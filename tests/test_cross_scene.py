@@ -16,8 +16,9 @@ def test_nonlinear_belt_with_vl_zero_matches_linear_runout_response():
     down = np.asarray(jb.speed_sweep(belt, speeds[::-1]))[::-1]
     lin = np.asarray(
         jb.linear_runout_response(
-            speeds, length=0.86, wave_speed=41.0, pulley_radii=(0.063, 0.063), runouts=(0.355e-3, 0.21e-3),
-            phase=jnp.deg2rad(240.0), damping_ratio=0.01, position=0.01,
+            jb.RunoutRig(length=0.86, wave_speed=41.0, pulley_radii=(0.063, 0.063), runouts=(0.355e-3, 0.21e-3),
+                         phase=jnp.deg2rad(240.0), damping_ratio=0.01, position=0.01),
+            speeds,
         )
     )
     np.testing.assert_allclose(up, down, rtol=1e-3)

@@ -102,7 +102,7 @@ def test_mode_shape_solves_eq24(span, n):
 
 # --- crossing diagram (Moon & Wickert, 1997) ------------------------------------------------------------------
 def test_crossing_speeds_moon_wickert():
-    vc = np.asarray(jb.crossing_speeds(length=0.86, pulley_radii=(0.063, 0.063), wave_speed=41.0, n_modes=2))
+    vc = np.asarray(jb.crossing_speeds(jb.RunoutRig(), n_modes=2))
     assert vc.shape == (2, 2, 1)
     np.testing.assert_allclose(vc[0], 9.0, atol=0.05)
     np.testing.assert_allclose(vc[1], 16.0, atol=0.1)
@@ -110,7 +110,7 @@ def test_crossing_speeds_moon_wickert():
 
 def test_crossing_speeds_vs_brentq():
     Lm, r, vt = 0.86, (0.063, 0.045), 41.0
-    vc = np.asarray(jb.crossing_speeds(Lm, r, vt, n_modes=4, harmonics=(1, 2, 3)))
+    vc = np.asarray(jb.crossing_speeds(jb.RunoutRig(length=Lm, pulley_radii=r, wave_speed=vt), n_modes=4, harmonics=(1, 2, 3)))
     for i, n in enumerate(range(1, 5)):
         for j, rj in enumerate(r):
             for k, h in enumerate((1, 2, 3)):
@@ -120,7 +120,7 @@ def test_crossing_speeds_vs_brentq():
 
 def test_crossing_is_exciting_speed(span):
     # harmonic m of a pulley of radius R_U meets mode n at V = omega_U R_U (eq. 50 + 55)
-    vc = np.asarray(jb.crossing_speeds(L, (RU,), span.critical_speed, n_modes=3, harmonics=9))
+    vc = np.asarray(jb.crossing_speeds(jb.RunoutRig(length=L, pulley_radii=(RU,), wave_speed=span.critical_speed), n_modes=3, harmonics=9))
     wu = np.asarray(jb.exciting_speeds(span, RU, np.arange(1, 4)[:, None], np.arange(1, 10)[None, :]))
     np.testing.assert_allclose(vc[:, 0, :], wu * RU, rtol=1e-12)
 
@@ -128,7 +128,7 @@ def test_crossing_is_exciting_speed(span):
 def test_crossing_gradient_fd_and_vmap():
     @jax.jit
     def f(vt):
-        return jb.crossing_speeds(0.86, (0.063, 0.063), vt, 2)[1, 0, 0]
+        return jb.crossing_speeds(jb.RunoutRig(wave_speed=vt), 2)[1, 0, 0]
 
     g = jax.grad(f)(41.0)
     h = 1e-4
@@ -140,9 +140,30 @@ def test_crossing_gradient_fd_and_vmap():
     np.testing.assert_allclose(np.asarray(gv), np.asarray(fdv), rtol=1e-7)
 
 
+def test_runout_rig_defaults_are_the_moon_wickert_stand():
+    r = jb.RunoutRig()
+    np.testing.assert_allclose(float(r.length), 0.86)
+    np.testing.assert_allclose(np.asarray(r.pulley_radii), [0.063, 0.063])
+    np.testing.assert_allclose(2 * np.asarray(r.runouts), [0.71e-3, 0.42e-3])  # peak-to-peak run-out
+    np.testing.assert_allclose(float(r.phase), np.radians(240.0), rtol=1e-6)
+    assert float(r.damping_ratio) == 0.0 and float(r.position) == 0.01
+
+
+def test_crossings_batched_over_rigs_match_the_quadratic():
+    """vmap over a batch of rigs (eqx.Module) vs the positive root of (n pi / L) v_t (1 - V^2/v_t^2) = V / r."""
+    vts = jnp.array([35.0, 41.0, 48.0])
+    rigs = jax.vmap(lambda vt: jb.RunoutRig(wave_speed=vt))(vts)
+    vc = np.asarray(jax.vmap(lambda r: jb.crossing_speeds(r, 3))(rigs))
+    for b, vt in enumerate(np.asarray(vts)):
+        for i, n in enumerate((1, 2, 3)):
+            a, s, c = n * np.pi / 0.86 / vt, 1 / 0.063, n * np.pi / 0.86 * vt  # a V^2 + s V - c = 0
+            ref = 2 * c / (s + np.sqrt(s * s + 4 * a * c))
+            np.testing.assert_allclose(vc[b, i, :, 0], ref, rtol=1e-13)
+
+
 def test_crossing_diagram_shapes_and_values():
     V = jnp.linspace(0, 20, 7)
-    nat, load = jb.crossing_diagram(V, 0.86, (0.063, 0.05), 41.0, n_modes=5, harmonics=3)
+    nat, load = jb.crossing_diagram(jb.RunoutRig(pulley_radii=(0.063, 0.05)), V, n_modes=5, harmonics=3)
     assert nat.shape == (7, 5) and load.shape == (7, 2, 3)
     np.testing.assert_allclose(np.asarray(load[:, 1, 2]), 3 * np.asarray(V) / 0.05, rtol=1e-14)
     ref = 5 * np.pi / 0.86 * 41.0 * (1 - (np.asarray(V) / 41) ** 2)
@@ -153,6 +174,11 @@ def test_crossing_diagram_shapes_and_values():
 MW = dict(length=0.86, wave_speed=41.0, pulley_radii=(0.063, 0.063), runouts=(0.355e-3, 0.21e-3), phase=np.radians(240))
 
 
+def rig(**kw):
+    """The Moon & Wickert stand with the given changes."""
+    return jb.RunoutRig(**{**MW, **kw})
+
+
 @pytest.mark.parametrize("V", [2.0, 6.5, 12.0, 19.0])
 @pytest.mark.parametrize("x", [0.01, 0.3, 0.61])
 def test_modal_response_matches_travelling_wave_solution(V, x):
@@ -160,24 +186,24 @@ def test_modal_response_matches_travelling_wave_solution(V, x):
     Lm, vt, r, e, ph = MW["length"], MW["wave_speed"], MW["pulley_radii"][0], MW["runouts"], MW["phase"]
     v, Om = V / vt, V / r * Lm / vt
     ref = _exact_phasor(v, Om, -1j * e[0] / Lm, -1j * e[1] * np.exp(1j * ph) / Lm, x / Lm) * Lm
-    W0, W1 = jb.runout_phasors(V, position=x, damping_ratio=0.0, n_modes=256, **MW)
+    W0, W1 = jb.runout_phasors(rig(position=x, damping_ratio=0.0), V, n_modes=256)
     assert abs(complex(W0 + W1) - complex(ref)) < 1e-5 * abs(ref)
-    pp = float(jb.linear_runout_response(V, position=x, n_modes=256, **MW))
+    pp = float(jb.linear_runout_response(rig(position=x), V, n_modes=256))
     assert pp == pytest.approx(float(2 * abs(ref)), rel=1e-5)
-    W0, W1 = jb.runout_phasors(V, position=x, damping_ratio=0.0, n_modes=64, **MW)
+    W0, W1 = jb.runout_phasors(rig(position=x, damping_ratio=0.0), V, n_modes=64)
     assert abs(complex(W0 + W1) - complex(ref)) < 1e-4 * abs(ref)
 
 
 def test_modal_response_at_the_pulley_is_the_runout():
     # at x = 0 only pulley 0 moves the belt: peak-to-peak = 2 e0
-    pp = jb.linear_runout_response(jnp.array([3.0, 11.0]), position=0.0, damping_ratio=0.02, **MW)
+    pp = jb.linear_runout_response(rig(position=0.0, damping_ratio=0.02), jnp.array([3.0, 11.0]))
     np.testing.assert_allclose(np.asarray(pp), 0.71e-3, rtol=1e-12)
 
 
 def test_response_gradient_fd():
     @jax.jit
     def f(V):
-        return jb.linear_runout_response(V, position=0.2, damping_ratio=0.02, n_modes=16, **MW)
+        return jb.linear_runout_response(rig(position=0.2, damping_ratio=0.02), V, n_modes=16)
 
     for V in (5.0, 12.0):
         h = 1e-4
@@ -189,16 +215,16 @@ def test_response_gradient_fd():
 @pytest.mark.parametrize("V", [4.0, 12.5])
 def test_modal_response_matches_galerkin_time_simulation(V):
     """Formula vs a diffrax run of the 24-mode Galerkin model to steady state: within 1 % (off resonance)."""
-    kw = dict(MW, damping_ratio=0.05, position=0.25)
-    ref = float(jb.simulate_runout_response(V, n_basis=24, **kw))
-    got = float(jb.linear_runout_response(V, **kw))
+    r = rig(damping_ratio=0.05, position=0.25)
+    ref = float(jb.simulate_runout_response(r, V, n_basis=24))
+    got = float(jb.linear_runout_response(r, V))
     assert got == pytest.approx(ref, rel=0.01)
 
 
 def test_different_radii_peak_to_peak_is_sum_of_amplitudes():
-    kw = dict(MW, pulley_radii=(0.063, 0.05), damping_ratio=0.01, position=0.3)
-    W0, W1 = jb.runout_phasors(7.0, **kw)
-    pp = jb.linear_runout_response(7.0, **kw)
+    r = rig(pulley_radii=(0.063, 0.05), damping_ratio=0.01, position=0.3)
+    W0, W1 = jb.runout_phasors(r, 7.0)
+    pp = jb.linear_runout_response(r, 7.0)
     # long-time max - min of Re(W0 e^{i a t} + W1 e^{i b t}) with incommensurate a, b
     t = np.linspace(0, 4000, 2_000_001)
     sig = np.real(complex(W0) * np.exp(1j * t) + complex(W1) * np.exp(1j * np.sqrt(2) * t))
@@ -264,9 +290,9 @@ def test_errors_speed_at_or_above_critical(span):
     with pytest.raises(ValueError, match="critical speed"):
         span.natural_frequencies(jnp.array([1.0, 70.0]), 2)
     with pytest.raises(ValueError, match="critical speed"):
-        jb.linear_runout_response(41.0, **MW)
+        jb.linear_runout_response(rig(), 41.0)
     with pytest.raises(ValueError, match="critical speed"):
-        jb.crossing_diagram(jnp.array([50.0]), 0.86, (0.063,), 41.0)
+        jb.crossing_diagram(jb.RunoutRig(pulley_radii=(0.063,)), jnp.array([50.0]))
     with pytest.raises(Exception, match="critical speed"):
         jax.jit(lambda v: span.natural_frequencies(v, 2))(60.0).block_until_ready()
 
@@ -299,11 +325,15 @@ def test_errors_contact_parameters(kw, name):
 
 def test_errors_response_inputs():
     with pytest.raises(ValueError, match="position"):
-        jb.linear_runout_response(5.0, position=1.0, **MW)
+        rig(position=1.0)
     with pytest.raises(ValueError, match="damping_ratio"):
-        jb.linear_runout_response(5.0, damping_ratio=-0.1, **MW)
+        rig(damping_ratio=-0.1)
     with pytest.raises(ValueError, match="pulley_radii"):
-        jb.crossing_speeds(0.86, (0.063, 0.0), 41.0)
+        jb.RunoutRig(pulley_radii=(0.063, 0.0))
+    with pytest.raises(ValueError, match="runouts"):
+        rig(runouts=(-1e-3, 0.0))
+    with pytest.raises(ValueError, match="two values"):
+        jb.linear_runout_response(jb.RunoutRig(pulley_radii=(0.063,)), 5.0)
 
 
 def test_table1_observations_and_table2_measured():

@@ -36,7 +36,8 @@ def run(args) -> int:
 
     matplotlib.use("Agg")
     import jaxbelt as jb
-    from jaxbelt.plots.fourbar import fourbar_figure, linkage_strip, simulate_fig4
+    from jaxbelt.models.fourbar import FIG4_OUTPUTS, simulate_fig4
+    from jaxbelt.plots.fourbar import fourbar_figure, linkage_strip
 
     drive = jb.FourBarDrive()
     pid = jb.PID(kp=args.kp, ki=args.ki, kd=args.kd, omega_ref=args.omega_ref, v_limit=args.v_limit)
@@ -53,7 +54,7 @@ def run(args) -> int:
     if args.regulators:
         import matplotlib.pyplot as plt
 
-        from jaxbelt.plots.fourbar import FIG4_OUTPUTS, plot_regulators
+        from jaxbelt.plots.fourbar import plot_regulators
 
         const = jb.PID(kp=args.kp_constant, ki=args.ki, kd=args.kd, omega_ref=args.omega_ref,
                        v_limit=args.v_limit, gain="constant")

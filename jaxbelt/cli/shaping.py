@@ -39,7 +39,7 @@ def run(args) -> int:
     import matplotlib.pyplot as plt
 
     from ..commands import PseudoPolynomial
-    from ..models.platform import BeltPlatform
+    from ..models.platform import BeltPlatform, platform_response
     from ..objectives.residual import residual_energy
     from ..optimise.command import optimise_command, optimise_robust, sensitivity_curve, shaped_commands, tolerance_band
     from ..plots.shaping import shaping_figure
@@ -76,7 +76,9 @@ def run(args) -> int:
         w = tolerance_band(omegas, e, curves[label0], plat.omega_n)
         edge = ">=" if w >= 2 * args.spread * (1 - 1e-9) else "  "  # the band fills the whole sweep
         print(f"  {name:34s} {edge}{w:6.3f}   move time {float(c.end_time):.3f} s")
-    fig = shaping_figure(plat, cmd0, res.command, omegas, curves, reference=label0)
+    before, after = platform_response(plat, cmd0), platform_response(plat, res.command)
+    fig = shaping_figure(before, after, omegas, curves, plat.omega_n, reference=label0,
+                         move_times=(float(cmd0.end_time), float(res.command.end_time)))
     fig.savefig(args.out, dpi=120)
     plt.close(fig)
     print(f"wrote {args.out}")

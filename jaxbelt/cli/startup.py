@@ -27,8 +27,8 @@ def run(args) -> int:
     import matplotlib
 
     matplotlib.use("Agg")
-    from ..models.startup import BeltStartup
-    from ..plots.startup import draw_startup, startup_curves
+    from ..models.startup import BeltStartup, startup_curves
+    from ..plots.startup import draw_startup
 
     model = BeltStartup()
     t = time.perf_counter()

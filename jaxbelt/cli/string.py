@@ -29,6 +29,9 @@ def run(args) -> int:
     import matplotlib
 
     matplotlib.use("Agg")
+    import jax.numpy as jnp
+    import numpy as np
+
     import jaxbelt as jb
 
     from ..plots.string import string_figure
@@ -36,11 +39,32 @@ def run(args) -> int:
     span = jb.MovingString(tension=140.0, density=0.05, length=0.2621)
     if args.figure == "modes":
         return _modes(args, span)
-    vc = jb.crossing_speeds(length=0.86, pulley_radii=(0.063, 0.063), wave_speed=41.0, n_modes=2)
-    fig = string_figure(contact_radius=args.contact_radius)
+    # Moon & Wickert (1997) test stand: crossing diagram (Fig. 5a) and linear run-out response (Fig. 5b)
+    rig = jb.RunoutRig(damping_ratio=0.01)
+    vmax = 0.55 * float(rig.wave_speed)
+    V = jnp.linspace(0.0, vmax, 400)
+    natural, load = jb.crossing_diagram(rig, V, n_modes=3)
+    crossings = jb.crossing_speeds(rig, n_modes=3)
+    Vr = jnp.linspace(0.05, vmax, 1500)
+    responses = {
+        f"ζ = {float(rig.damping_ratio):g}, x = {1e3 * float(rig.position):.0f} mm": jb.linear_runout_response(rig, Vr),
+        f"ζ = {float(rig.damping_ratio):g}, x = L/4": jb.linear_runout_response(
+            jb.RunoutRig(damping_ratio=rig.damping_ratio, position=rig.length / 4), Vr),
+    }
+    # Galerkin frequencies (belt-vibration report, eq. 24) against eq. (39) at 20 m/s
+    n_basis = np.array([4, 8, 16, 32, 64])
+    exact = np.asarray(jb.MovingString().natural_frequencies(20.0, 3))
+    errors = np.array([np.abs(np.asarray(jb.MovingString().galerkin_frequencies(20.0, n, 3)) - exact) / exact
+                       for n in n_basis])
+    fig = string_figure(
+        diagram=dict(speeds=V, natural=natural, load=load, crossings=crossings, pulley_radii=rig.pulley_radii),
+        response=dict(speeds=Vr, responses=responses, crossings=crossings),
+        galerkin=dict(n_basis=n_basis, errors=errors, speed=20.0),
+        contact=jb.BeltPulleyContact(radius=args.contact_radius),
+    )
     fig.savefig(args.out, dpi=110)
     print(f"critical speed (belt-vibration report span): {float(span.critical_speed):.3f} m/s")
-    print(f"Moon & Wickert crossings: mode 1 {float(vc[0, 0, 0]):.3f} m/s, mode 2 {float(vc[1, 0, 0]):.3f} m/s")
+    print(f"Moon & Wickert crossings: mode 1 {float(crossings[0, 0, 0]):.3f} m/s, mode 2 {float(crossings[1, 0, 0]):.3f} m/s")
     print(f"wrote {args.out}")
     return 0
 

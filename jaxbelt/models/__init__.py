@@ -11,6 +11,7 @@ from .contact import BeltPulleyContact as BeltPulleyContact
 from .contact import SlipError as SlipError
 from .contact import SlipReport as SlipReport
 from .string import MovingString as MovingString
+from .string import RunoutRig as RunoutRig
 from .string import crossing_diagram as crossing_diagram
 from .string import crossing_speeds as crossing_speeds
 from .string import exciting_speeds as exciting_speeds

@@ -169,3 +169,31 @@ class BeltPlatform(AbstractModel):
     @observable("command_acceleration")
     def _out_command_acceleration(self, t, y, inp):
         return self.lam * inp.acceleration(t)
+
+
+#: The time histories returned by `platform_response` besides `t` and `velocity`.
+PLATFORM_OUTPUTS = ("acceleration", "kinetic_energy", "elastic_energy", "command_velocity", "command_acceleration")
+
+
+def platform_response(platform, command, t_end: float | None = None, n: int = 901, *, rtol=1e-10, atol=1e-12):
+    """The platform's motion under `command` over $[0, t_{end}]$ (Incerti, pseudo-polynomial commands, Fig. 3).
+
+    `t_end` [s] defaults to 1.5 × the move time (so the residual vibration shows); `n` equally
+    spaced output times; solved as an ODE at `rtol`, `atol`. Returns a dict of numpy arrays of
+    shape `(n,)`: `t` [s], platform `velocity` [rad/s] and `acceleration` [rad/s²], the rigid-body
+    commands $\\lambda\\dot\\varphi_m$ (`command_velocity` [rad/s]) and $\\lambda\\ddot\\varphi_m$
+    (`command_acceleration` [rad/s²]), `kinetic_energy` and `elastic_energy` [J].
+    """
+    import numpy as np
+
+    from ..scene import Scene
+    from ..solve import simulate
+
+    if t_end is None:
+        t_end = 1.5 * float(command.end_time)
+    check_positive("t_end", t_end, "s", "platform_response")
+    ts = jnp.linspace(0.0, float(t_end), int(n))
+    sol = simulate(Scene(platform, command, ts=ts, observe=PLATFORM_OUTPUTS), method="ode", rtol=rtol, atol=atol)
+    out = {"t": np.asarray(ts), "velocity": np.asarray(sol.omega)}
+    out.update({k: np.asarray(sol[k]) for k in PLATFORM_OUTPUTS})
+    return out

@@ -348,3 +348,38 @@ class BeltChain(_BeltDriveBase):
 
     def _stage_radii(self):
         return self.r_drive, self.r_driven
+
+
+#: The eight time histories of Incerti (2014), Fig. 3, in the paper's panel order (a-h).
+STARTUP_OUTPUTS = (
+    "voltage", "current", "electric_power", "mechanical_power", "omega1", "omega2", "alpha1", "alpha2",
+)
+
+
+def startup_curves(model=None, gammas=(0.02, 0.04, 0.06), v_max=24.0, t_end=0.5, n_points=501, method="auto"):
+    """The eight time histories of Incerti (2014), Fig. 3, for each voltage time constant, as numpy arrays.
+
+    The motor voltage is $V(t) = V_{max}(1 - e^{-t/\\gamma})$ (Incerti, 2014, eq. 30) with
+    `v_max` $V_{max}$ [V] and each $\\gamma$ of `gammas` [s]; the drive starts at rest and is
+    simulated over $[0, t_{end}]$ [s] on `n_points` equally spaced times (one `jax.vmap` over
+    $\\gamma$; closed form by default, `method` as in `simulate`).
+
+    Returns `(ts, curves)`: `ts` [s] of shape `(n_points,)` and `curves[name]` of shape
+    `(len(gammas), n_points)` for each name of `STARTUP_OUTPUTS`: voltage [V], current [A],
+    electric and mechanical power [W], pulley speeds [rad/s] and accelerations [rad/s²].
+    Default model: `BeltStartup()` (Incerti, 2014, Table I).
+    """
+    from ..commands import ExponentialVoltage
+    from ..scene import Scene
+    from ..solve import simulate
+
+    model = BeltStartup() if model is None else model
+    ts = jnp.linspace(0.0, float(t_end), int(n_points))
+    observe = tuple(n for n in STARTUP_OUTPUTS if n not in model.state_names)
+
+    def one(g):
+        sol = simulate(Scene(model, ExponentialVoltage(v_max, g), ts=ts, observe=observe), method=method)
+        return {n: sol[n] for n in STARTUP_OUTPUTS}
+
+    out = jax.vmap(one)(jnp.asarray(gammas, dtype=float))
+    return np.asarray(ts), {k: np.asarray(v) for k, v in out.items()}

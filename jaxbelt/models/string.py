@@ -17,7 +17,7 @@ What lives here:
 - `exciting_speeds`: the rotor speeds of eq. (55) at which harmonic $m$ of the pulley rotation meets
   mode $n$.
 - `crossing_speeds`, `crossing_diagram`: the frequency-crossing (Campbell) diagram of Moon & Wickert
-  (Moon & Wickert, 1997, sec. 4, Fig. 5); crossings by Newton iteration on each load line.
+  (Moon & Wickert, 1997, sec. 4, Fig. 5); crossings by Newton's method (`optimistix`) on each load line.
 - `linear_runout_response`: the steady-state peak-to-peak transverse displacement of the linear span
   excited by eccentric pulleys (Moon & Wickert eq. 3 boundary motion), from the exact complex modes.
 - `galerkin_runout_system`, `simulate_runout_response`: the same forced problem as a Galerkin
@@ -34,12 +34,14 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import optimistix as optx
 
 from .._checks import check_nonnegative, check_positive, check_range, is_concrete
 from .._checks import as_float_array as _arr
 
 __all__ = [
     "MovingString",
+    "RunoutRig",
     "exciting_speeds",
     "crossing_speeds",
     "crossing_diagram",
@@ -259,73 +261,120 @@ def exciting_speeds(span: MovingString, pulley_radius, n=1, m=1):
     return span.critical_speed / (2.0 * n * jnp.pi * R**2) * root
 
 
-def _crossing_newton(n_pi_over_L, vt, slope, iters: int = 40):
-    """Root of $f(V) = (n\\pi/L) v_t (1 - V^2/v_t^2) - s V$ on $(0, v_t)$ by Newton from $V = v_t$.
+class RunoutRig(eqx.Module):
+    """A belt span between two eccentric pulleys: the run-out test stand of Moon & Wickert (1997, sec. 2).
+
+    The belt runs from pulley 0 ($x = 0$) to pulley 1 ($x = L$); pulley $j$ of radius $r_j$ turns at
+    $\\Omega_j = V/r_j$ and moves the span end by $e_j\\sin(\\Omega_j t + \\phi_j)$, $\\phi_0 = 0$,
+    $\\phi_1 = \\phi$ (Moon & Wickert, 1997, eq. 3).
+
+    | field | symbol | unit | default |
+    |---|---|---|---|
+    | `length` | $L$ free span length | m | 0.86 (Moon & Wickert, 1997, test stand) |
+    | `pulley_radii` | $(r_0, r_1)$ pulley pitch radii | m | (0.063, 0.063) (test stand) |
+    | `wave_speed` | $v_t = \\sqrt{P/\\rho A}$ transverse wave speed | m/s | 41.0 (ASSUMED: not in the text; puts the first crossing at 9.0 m/s) |
+    | `runouts` | $(e_0, e_1)$ run-out amplitudes, half the peak-to-peak | m | (0.355e-3, 0.21e-3) (test stand: 0.71 and 0.42 mm peak-to-peak) |
+    | `phase` | $\\phi$ of pulley 1's run-out | rad | 4.18879 = 240° (test stand; its sign is ASSUMED) |
+    | `damping_ratio` | $\\zeta$ modal damping ratio, in $[0, 1)$ | – | 0.0 (ASSUMED: the paper's linear analysis is undamped) |
+    | `position` | $x_m$ sensor distance from pulley 0, in $[0, L]$ | m | 0.01 ("1 cm from the driven pulley"; which pulley is ASSUMED) |
+
+    The crossing functions (`crossing_speeds`, `crossing_diagram`) use `length`, `pulley_radii`
+    (one or more pulleys) and `wave_speed`; the response functions (`runout_phasors`,
+    `linear_runout_response`, `galerkin_runout_system`, `simulate_runout_response`) use all fields
+    and need exactly two pulleys. The non-linear belt of the same stand is `NonlinearBelt`, whose
+    wave speed is identified from the measured jumps (37.44 m/s).
+    """
+
+    length: jnp.ndarray = eqx.field(converter=_arr, default=0.86)
+    pulley_radii: jnp.ndarray = eqx.field(converter=_arr, default=(0.063, 0.063))
+    wave_speed: jnp.ndarray = eqx.field(converter=_arr, default=41.0)
+    runouts: jnp.ndarray = eqx.field(converter=_arr, default=(0.355e-3, 0.21e-3))
+    phase: jnp.ndarray = eqx.field(converter=_arr, default=4.18879)
+    damping_ratio: jnp.ndarray = eqx.field(converter=_arr, default=0.0)
+    position: jnp.ndarray = eqx.field(converter=_arr, default=0.01)
+
+    def __check_init__(self):
+        o = "RunoutRig"
+        check_positive("length", self.length, "m", o)
+        check_positive("pulley_radii", self.pulley_radii, "m", o)
+        check_positive("wave_speed", self.wave_speed, "m/s", o)
+        check_nonnegative("runouts", self.runouts, "m", o)
+        check_range("damping_ratio", self.damping_ratio, 0.0, 1.0, hi_open=True, owner=o)
+        if is_concrete(self.position) and is_concrete(self.length):
+            check_range("position", self.position, 0.0, float(np.min(np.asarray(self.length))), unit="m", owner=o)
+
+
+def _crossing_root(n_pi_over_L, vt, slope):
+    """Root of $f(V) = (n\\pi/L) v_t (1 - V^2/v_t^2) - s V$ on $(0, v_t)$: `optimistix.Newton` from $V = v_t$.
 
     f is concave and strictly decreasing there with f(0) > 0 > f(v_t); Newton started at the right
     end therefore decreases monotonically onto the unique root and never leaves $[V^*, v_t]$.
+    Elementwise over the broadcast arguments (one scalar root find per element, `jax.vmap`);
+    gradients by the implicit function theorem.
     """
-
-    def f_df(V):
-        f = n_pi_over_L * vt * (1.0 - (V / vt) ** 2) - slope * V
-        df = -2.0 * n_pi_over_L * V / vt - slope
-        return f, df
-
-    def body(_, V):
-        f, df = f_df(V)
-        return V - f / df
-
     shape = jnp.broadcast_shapes(jnp.shape(slope), jnp.shape(n_pi_over_L), jnp.shape(vt))
-    return jax.lax.fori_loop(0, iters, body, jnp.broadcast_to(vt, shape) * 1.0)
+    args = [jnp.ravel(jnp.broadcast_to(jnp.asarray(a, dtype=float), shape)) for a in (n_pi_over_L, vt, slope)]
+    # stops once a Newton step is below 1e-12 relative (1e-9 m/s) and |f| below 1e-9 rad/s; convergence is
+    # quadratic, so the returned root is exact to rounding
+    solver = optx.Newton(rtol=1e-12, atol=1e-9)
+
+    def f(V, a):
+        k, c, s = a
+        return k * c * (1.0 - (V / c) ** 2) - s * V
+
+    def one(k, c, s):
+        return optx.root_find(f, solver, c, args=(k, c, s), max_steps=64).value
+
+    return jax.vmap(one)(*args).reshape(shape)
 
 
-def _check_span_inputs(owner, length, pulley_radii, wave_speed):
-    check_positive("length", length, "m", owner)
-    check_positive("pulley_radii", pulley_radii, "m", owner)
-    check_positive("wave_speed", wave_speed, "m/s", owner)
+def _harmonics(harmonics, owner):
+    ks = jnp.arange(1, int(harmonics) + 1, dtype=float) if np.ndim(harmonics) == 0 else _arr(harmonics)
+    check_range("harmonics", ks, 1, None, owner=owner)
+    return ks
 
 
-def crossing_speeds(length=0.86, pulley_radii=(0.063, 0.063), wave_speed=41.0, n_modes: int = 2, harmonics=1):
+def crossing_speeds(rig: RunoutRig, n_modes: int = 2, harmonics=1):
     """Belt speeds [m/s] where the pulley load lines cross the natural-frequency loci (Moon & Wickert, 1997, Fig. 5).
 
     A pulley of radius $r$ turns at $\\Omega = V/r$; its harmonic $k$ meets mode $n$ where
-    $k V / r = (n\\pi/L)\\, v_t (1 - V^2/v_t^2)$. Each crossing is found by Newton iteration on that
-    equation (not read off a grid), started at $V = v_t$ where it converges monotonically.
+    $k V / r = (n\\pi/L)\\, v_t (1 - V^2/v_t^2)$. Each crossing is a root of that equation found
+    by Newton's method (`optimistix.root_find`, not read off a grid), started at $V = v_t$ where it
+    converges monotonically.
 
-    - `length` $L$ [m], `pulley_radii` [m] (one or more pulleys), `wave_speed` $v_t = \\sqrt{T/\\rho}$ [m/s];
+    - `rig`: a `RunoutRig`; its `length` $L$ [m], `pulley_radii` [m] (one or more pulleys) and
+      `wave_speed` $v_t$ [m/s] are used;
     - `harmonics`: an int $K$ (harmonics $1..K$) or a sequence of harmonic orders.
 
     Returns an array of shape `(n_modes, n_pulleys, n_harmonics)`; `[n-1, j, i]` is the crossing of
-    mode n with harmonic `harmonics[i]` of pulley j. Moon & Wickert's stand (L = 0.86 m,
-    r = 0.063 m, v_t = 41.0 m/s): 8.98 m/s (mode 1), 16.02 m/s (mode 2).
+    mode n with harmonic `harmonics[i]` of pulley j. Moon & Wickert's stand (`RunoutRig()`:
+    L = 0.86 m, r = 0.063 m, v_t = 41.0 m/s): 8.98 m/s (mode 1), 16.02 m/s (mode 2).
     """
     o = "crossing_speeds"
-    _check_span_inputs(o, length, pulley_radii, wave_speed)
     if int(n_modes) < 1:
         raise ValueError(f"{o}: `n_modes` must be >= 1; got {n_modes}")
-    ks = jnp.arange(1, int(harmonics) + 1, dtype=float) if np.ndim(harmonics) == 0 else _arr(harmonics)
-    check_range("harmonics", ks, 1, None, owner=o)
-    r = jnp.atleast_1d(_arr(pulley_radii))
+    ks = _harmonics(harmonics, o)
+    r = jnp.atleast_1d(rig.pulley_radii)
     n = jnp.arange(1, int(n_modes) + 1, dtype=float)
     slope = ks[None, None, :] / r[None, :, None]
-    return _crossing_newton(n[:, None, None] * jnp.pi / _arr(length), _arr(wave_speed), slope)
+    return _crossing_root(n[:, None, None] * jnp.pi / rig.length, rig.wave_speed, slope)
 
 
-def crossing_diagram(speed, length=0.86, pulley_radii=(0.063, 0.063), wave_speed=41.0, n_modes: int = 2, harmonics=1):
+def crossing_diagram(rig: RunoutRig, speed, n_modes: int = 2, harmonics=1):
     """Loci of the crossing diagram at belt speeds `speed` [m/s] (Moon & Wickert, 1997, Fig. 5a).
 
-    Returns `(natural, load)`: natural frequencies $\\omega_n(V)$ [rad/s] of shape
+    `rig`: a `RunoutRig` (its `length`, `pulley_radii`, `wave_speed` are used); `harmonics` as in
+    `crossing_speeds`. Returns `(natural, load)`: natural frequencies $\\omega_n(V)$ [rad/s] of shape
     `speed.shape + (n_modes,)` and pulley excitation frequencies $kV/r_j$ [rad/s] of shape
     `speed.shape + (n_pulleys, n_harmonics)`.
     """
     o = "crossing_diagram"
-    _check_span_inputs(o, length, pulley_radii, wave_speed)
-    vt = _arr(wave_speed)
+    vt = rig.wave_speed
     speed = _check_subcritical(speed, vt, o)
-    ks = jnp.arange(1, int(harmonics) + 1, dtype=float) if np.ndim(harmonics) == 0 else _arr(harmonics)
-    r = jnp.atleast_1d(_arr(pulley_radii))
+    ks = _harmonics(harmonics, o)
+    r = jnp.atleast_1d(rig.pulley_radii)
     n = jnp.arange(1, int(n_modes) + 1, dtype=float)
-    natural = (jnp.pi / _arr(length)) * vt * (1.0 - (speed / vt) ** 2)[..., None] * n
+    natural = (jnp.pi / rig.length) * vt * (1.0 - (speed / vt) ** 2)[..., None] * n
     load = speed[..., None, None] * ks / r[:, None]
     return natural, load
 
@@ -372,34 +421,25 @@ def _modal_phasor(v, Om, shat_at0, shat_at1, zeta, xm, n_modes: int):
     return shat_at0 * (1.0 - xm) + shat_at1 * xm + u
 
 
-def _check_response_inputs(o, speed, length, wave_speed, pulley_radii, runouts, damping_ratio, position):
-    _check_span_inputs(o, length, pulley_radii, wave_speed)
-    if np.shape(pulley_radii) != (2,) or np.shape(runouts) != (2,):
+def _check_response_inputs(o, rig: RunoutRig, speed):
+    if np.shape(rig.pulley_radii) != (2,) or np.shape(rig.runouts) != (2,):
         raise ValueError(
-            f"{o}: `pulley_radii` and `runouts` must each hold two values (pulley 0 at x = 0, pulley 1 at "
-            f"x = length); got shapes {np.shape(pulley_radii)} and {np.shape(runouts)}"
+            f"{o}: the rig's `pulley_radii` and `runouts` must each hold two values (pulley 0 at x = 0, pulley 1 "
+            f"at x = length); got shapes {np.shape(rig.pulley_radii)} and {np.shape(rig.runouts)}"
         )
-    check_nonnegative("runouts", runouts, "m", o)
-    check_range("damping_ratio", damping_ratio, 0.0, 1.0, hi_open=True, owner=o)
-    if is_concrete(position) and is_concrete(length):
-        check_range("position", position, 0.0, float(np.asarray(length)), unit="m", owner=o)
-    return _check_subcritical(speed, _arr(wave_speed), o)
+    return _check_subcritical(speed, rig.wave_speed, o)
 
 
-def runout_phasors(
-    speed, length=0.86, wave_speed=41.0, pulley_radii=(0.063, 0.063), runouts=(0.355e-3, 0.21e-3),
-    phase=4.18879, damping_ratio=0.0, position=0.01, n_modes: int = 64,
-):
-    """Complex amplitudes [m] of the steady response at `position` to each pulley's run-out.
+def runout_phasors(rig: RunoutRig, speed, n_modes: int = 64):
+    """Complex amplitudes [m] of the steady response at the rig's `position` to each pulley's run-out.
 
-    Returns `(W0, W1)`, each shaped like `speed`: the response at `position` is
+    Returns `(W0, W1)`, each shaped like `speed` [m/s]: the response at `position` is
     $\\mathrm{Re}(W_0 e^{i\\Omega_0 t} + W_1 e^{i\\Omega_1 t})$, $\\Omega_j = V/r_j$.
     Arguments as in `linear_runout_response`.
     """
-    o = "runout_phasors"
-    speed = _check_response_inputs(o, speed, length, wave_speed, pulley_radii, runouts, damping_ratio, position)
-    return _phasors(speed, _arr(length), _arr(wave_speed), _arr(pulley_radii), _arr(runouts), _arr(phase),
-                    _arr(damping_ratio), _arr(position), int(n_modes))
+    speed = _check_response_inputs("runout_phasors", rig, speed)
+    return _phasors(speed, rig.length, rig.wave_speed, rig.pulley_radii, rig.runouts, rig.phase,
+                    rig.damping_ratio, rig.position, int(n_modes))
 
 
 @eqx.filter_jit
@@ -422,10 +462,7 @@ def _phasors(speed, L, vt, radii, runouts, phase, zeta, position, nm):
     return W0.reshape(speed.shape), W1.reshape(speed.shape)
 
 
-def linear_runout_response(
-    speed, length=0.86, wave_speed=41.0, pulley_radii=(0.063, 0.063), runouts=(0.355e-3, 0.21e-3),
-    phase=4.18879, damping_ratio=0.0, position=0.01, n_modes: int = 64,
-):
+def linear_runout_response(rig: RunoutRig, speed, n_modes: int = 64):
     """Steady peak-to-peak transverse displacement [m] of the linear span driven by eccentric pulleys.
 
     Problem (Moon & Wickert, 1997, eq. 2-3 with $v_l = 0$), in SI units:
@@ -450,12 +487,10 @@ def linear_runout_response(
 
     Arguments (SI):
 
+    - `rig`: a `RunoutRig`: span `length` $L$ [m], `wave_speed` $v_t = \\sqrt{P/\\rho A}$ [m/s],
+      `pulley_radii` $(r_0, r_1)$ [m], `runouts` $(e_0, e_1)$ [m] (half the peak-to-peak run-out),
+      `phase` $\\phi$ [rad], `damping_ratio` $\\zeta \\in [0, 1)$, `position` $x_m$ [m] from pulley 0;
     - `speed` $V$ [m/s], any shape, $|V| < v_t$ (`ValueError` otherwise);
-    - `length` span $L$ [m]; `wave_speed` $v_t = \\sqrt{P/\\rho A}$ [m/s];
-    - `pulley_radii` $(r_0, r_1)$ [m]; `runouts` $(e_0, e_1)$ [m], half the peak-to-peak run-out
-      (Moon & Wickert: 0.71 and 0.42 mm peak-to-peak, so (0.355e-3, 0.21e-3));
-    - `phase` $\\phi$ [rad] of pulley 1's run-out (about 240 deg = 4.18879 rad on their stand);
-    - `damping_ratio` $\\zeta \\in [0, 1)$; `position` $x_m$ [m] from pulley 0, in $[0, L]$;
     - `n_modes`: number of complex modes kept (static).
 
     Returns the peak-to-peak displacement [m] at $x_m$, shaped like `speed`. With equal radii
@@ -463,8 +498,8 @@ def linear_runout_response(
     long-time peak-to-peak of a two-frequency signal with incommensurate frequencies
     (see `runout_phasors` for the complex amplitudes).
     """
-    W0, W1 = runout_phasors(speed, length, wave_speed, pulley_radii, runouts, phase, damping_ratio, position, n_modes)
-    r = _arr(pulley_radii)
+    W0, W1 = runout_phasors(rig, speed, n_modes)
+    r = rig.pulley_radii
     same = r[0] == r[1]
     return jnp.where(same, 2.0 * jnp.abs(W0 + W1), 2.0 * (jnp.abs(W0) + jnp.abs(W1)))
 
@@ -485,32 +520,30 @@ def _exact_phasor(v, Om, s0, s1, xm):
 
 
 # --- Galerkin model of the forced problem (independent check by time stepping) --------------------
-def galerkin_runout_system(
-    speed, length=0.86, wave_speed=41.0, pulley_radii=(0.063, 0.063), runouts=(0.355e-3, 0.21e-3),
-    phase=4.18879, damping_ratio=0.0, n_basis: int = 24,
-):
+def galerkin_runout_system(rig: RunoutRig, speed, n_basis: int = 24):
     """First-order Galerkin model of the run-out problem in $N$ sine modes of $u = w - s$ (SI time, metres).
 
+    `rig`: a `RunoutRig` (`position` unused); `speed` [m/s] a scalar.
     Returns `(A, forcing, shift)`: $\\dot z = A z + $ `forcing(t)` for $z = (q, \\dot q)$ with
     $u = \\sum_k q_k\\sin(k\\pi x/L)$, and `shift(t, x)` $= s(x, t)$, so $w = s + u$. Modal damping
     is put in the eigen-decomposition of $A$: each eigenvalue $\\pm i\\omega$ becomes
     $\\pm i\\omega - \\zeta\\omega$ (the convention of `linear_runout_response`).
     """
     o = "galerkin_runout_system"
-    speed = _check_response_inputs(o, speed, length, wave_speed, pulley_radii, runouts, damping_ratio, 0.0)
-    L = _arr(length)
-    vt = _arr(wave_speed)
+    speed = _check_response_inputs(o, rig, speed)
+    L = rig.length
+    vt = rig.wave_speed
     V = speed
     span = MovingString(tension=vt**2, density=1.0, length=L)
     M, G, K = span.galerkin_matrices(V, n_basis)
     A = _first_order(M, G, K)
     lam, vec = jnp.linalg.eig(A)
-    lam_d = lam - _arr(damping_ratio) * jnp.abs(jnp.imag(lam))
+    lam_d = lam - rig.damping_ratio * jnp.abs(jnp.imag(lam))
     A = jnp.real(vec @ jnp.diag(lam_d) @ jnp.linalg.inv(vec))
-    r0, r1 = _arr(pulley_radii)[0], _arr(pulley_radii)[1]
-    e0, e1 = _arr(runouts)[0], _arr(runouts)[1]
+    r0, r1 = rig.pulley_radii[0], rig.pulley_radii[1]
+    e0, e1 = rig.runouts[0], rig.runouts[1]
     W0, W1 = V / r0, V / r1
-    ph = _arr(phase)
+    ph = rig.phase
     k = jnp.arange(1, int(n_basis) + 1, dtype=float)
     # sine projections over [0, L] of 1, x/L and 1 - x/L
     c1 = L * (1.0 - (-1.0) ** k) / (k * jnp.pi)
@@ -537,30 +570,26 @@ def galerkin_runout_system(
 
 
 def simulate_runout_response(
-    speed, length=0.86, wave_speed=41.0, pulley_radii=(0.063, 0.063), runouts=(0.355e-3, 0.21e-3),
-    phase=4.18879, damping_ratio=0.05, position=0.01, n_basis: int = 24, n_periods_settle=None,
-    n_periods_measure: int = 4, rtol=1e-8, atol=1e-12,
+    rig: RunoutRig, speed, n_basis: int = 24, n_periods_settle=None, n_periods_measure: int = 4, rtol=1e-8, atol=1e-12,
 ):
     """Peak-to-peak displacement [m] at `position` from a diffrax run of the Galerkin model, from rest.
 
     Runs until the slowest mode's transient $e^{-\\zeta\\omega_1 t}$ has fallen below 1e-8, then
     takes max - min of $w(x_m, t)$ over `n_periods_measure` periods of pulley 0, sampled at
-    200 points per period. Needs `damping_ratio` > 0. Equal pulley radii are assumed for the
-    sampling window (the comparison case of `linear_runout_response`).
+    200 points per period. `rig`: a `RunoutRig` with `damping_ratio` > 0; `speed` [m/s] a scalar.
+    Equal pulley radii are assumed for the sampling window (the comparison case of `linear_runout_response`).
     """
     import diffrax
 
     o = "simulate_runout_response"
-    check_range("damping_ratio", damping_ratio, 0.0, 1.0, lo_open=True, hi_open=True, owner=o)
-    A, forcing, shift = galerkin_runout_system(
-        speed, length, wave_speed, pulley_radii, runouts, phase, damping_ratio, n_basis
-    )
-    L = _arr(length)
+    check_range("damping_ratio", rig.damping_ratio, 0.0, 1.0, lo_open=True, hi_open=True, owner=o)
+    A, forcing, shift = galerkin_runout_system(rig, speed, n_basis)
+    L = rig.length
     V = _arr(speed)
-    vt = _arr(wave_speed)
+    vt = rig.wave_speed
     w1 = jnp.pi / L * vt * (1.0 - (V / vt) ** 2)
-    T0 = 2.0 * jnp.pi * _arr(pulley_radii)[0] / V
-    t_settle = np.log(1e8) / (float(damping_ratio) * float(w1))
+    T0 = 2.0 * jnp.pi * rig.pulley_radii[0] / V
+    t_settle = np.log(1e8) / (float(rig.damping_ratio) * float(w1))
     if n_periods_settle is not None:
         t_settle = float(n_periods_settle) * float(T0)
     t_end = t_settle + n_periods_measure * float(T0)
@@ -576,6 +605,6 @@ def simulate_runout_response(
         max_steps=2_000_000,
     )
     k = jnp.arange(1, nb + 1, dtype=float)
-    xm = _arr(position)
+    xm = rig.position
     w = shift(ts, xm) + sol.ys[:, :nb] @ jnp.sin(k * jnp.pi * xm / L)
     return jnp.max(w) - jnp.min(w)

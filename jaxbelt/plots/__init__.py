@@ -1,30 +1,21 @@
 """Matplotlib figures: the papers' figures and more. One module per scene.
 
-The functions are loaded on first use (module `__getattr__`), so that `import jaxbelt.plots`
-costs nothing until a figure is drawn.
+Plot functions draw results computed beforehand by the library (`startup_curves`, `simulate_fig4`,
+`platform_response`, `crossing_speeds`, ...); they never run a simulation. Matplotlib is imported
+only when a figure is drawn.
 """
-
-import importlib as _importlib
-
-_WHERE = {
-    "plot_startup": "startup", "startup_curves": "startup", "draw_startup": "startup",
-    "plot_contact_pressure": "string", "plot_crossing_diagram": "string", "plot_exciting_speeds": "string",
-    "plot_frequency_harmonics": "string", "plot_runout_response": "string", "string_figure": "string",
-    "nonlinear_figure": "nonlinear",
-    "plot_fig3": "shaping", "plot_sensitivity": "shaping", "shaping_figure": "shaping",
-    "fourbar_figure": "fourbar", "linkage_strip": "fourbar", "simulate_fig4": "fourbar",
-}
-
-__all__ = sorted(_WHERE)
-
-
-def __getattr__(name):
-    if name in _WHERE:
-        value = getattr(_importlib.import_module(f".{_WHERE[name]}", __name__), name)
-        globals()[name] = value
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
-
-def __dir__():
-    return sorted(set(globals()) | set(_WHERE))
+from .startup import draw_startup as draw_startup
+from .string import plot_contact_pressure as plot_contact_pressure
+from .string import plot_crossing_diagram as plot_crossing_diagram
+from .string import plot_exciting_speeds as plot_exciting_speeds
+from .string import plot_frequency_harmonics as plot_frequency_harmonics
+from .string import plot_galerkin_convergence as plot_galerkin_convergence
+from .string import plot_runout_response as plot_runout_response
+from .string import string_figure as string_figure
+from .nonlinear import nonlinear_figure as nonlinear_figure
+from .shaping import plot_fig3 as plot_fig3
+from .shaping import plot_sensitivity as plot_sensitivity
+from .shaping import shaping_figure as shaping_figure
+from .fourbar import fourbar_figure as fourbar_figure
+from .fourbar import linkage_strip as linkage_strip
+from .fourbar import plot_regulators as plot_regulators

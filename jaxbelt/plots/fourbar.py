@@ -1,48 +1,27 @@
-"""Figures of the four-bar drive (Incerti, 2012): the paper's Fig. 4 and a linkage snapshot strip."""
+"""Figures of the four-bar drive (Incerti, 2012): the paper's Fig. 4 and a linkage snapshot strip.
+
+Drawing only: the runs come from `jaxbelt.simulate_fig4` (or `jaxbelt.simulate`).
+"""
 
 from __future__ import annotations
 
 import jax.numpy as jnp
 import numpy as np
 
-FIG4_OUTPUTS = ("motor_speed", "voltage", "mechanical_power", "electric_power")
 
-
-def simulate_fig4(drive=None, pid=None, *, voltage: float = 25.0, t1: float = 1.0, n: int = 2001, **kw):
-    """The two runs of Fig. 4: open loop at constant `voltage` [V] and closed loop with `pid`.
-
-    Defaults: `FourBarDrive()` (identified and assumed Table I values) and the paper's PID (Kp 80, Ki 32,
-    Kd 0.015, ω0 30 rad/s). Returns `(open_sol, closed_sol)` with the Fig. 4 outputs observed.
-    """
-    from ..commands import ConstantVoltage
-    from ..models.fourbar import FourBarDrive
-    from ..models.motor import PID
-    from ..scene import Scene
-    from ..solve import simulate
-
-    drive = FourBarDrive() if drive is None else drive
-    pid = PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0) if pid is None else pid
-    ts = jnp.linspace(0.0, t1, n)
-    open_ = simulate(Scene(drive, ConstantVoltage(voltage), ts=ts, observe=FIG4_OUTPUTS), **kw)
-    closed = simulate(Scene(drive, pid, ts=ts, observe=FIG4_OUTPUTS), **kw)
-    return open_, closed
-
-
-def fourbar_figure(open_sol=None, closed_sol=None, *, omega_ref: float = 30.0, voltage: float = 25.0,
-                   chi_window=(0.375, 0.5), title: str | None = None, **sim_kw):
+def fourbar_figure(open_sol, closed_sol, *, omega_ref: float = 30.0, voltage: float = 25.0,
+                   chi_window=(0.375, 0.5), title: str | None = None):
     """Paper Fig. 4: open loop (left) and closed loop (right), rows a-b motor speed with the set
     point, c-d voltage, e-f current, g-h mechanical and electric power.
 
-    Pass two `Solution`s that observe `FIG4_OUTPUTS`, or nothing to simulate the defaults
-    (`simulate_fig4`). The χ of each run is written in its speed panel (open loop: over the
+    `open_sol`, `closed_sol`: the two `Solution`s of `jaxbelt.simulate_fig4` (computed beforehand;
+    they observe `FIG4_OUTPUTS`). The χ of each run is written in its speed panel (open loop: over the
     second half of the run; closed loop: over `chi_window`). Returns the matplotlib `Figure`.
     """
     import matplotlib.pyplot as plt
 
     from ..objectives.fluctuation import fluctuation_index
 
-    if open_sol is None or closed_sol is None:
-        open_sol, closed_sol = simulate_fig4(voltage=voltage, **sim_kw)
     fig, axes = plt.subplots(4, 2, figsize=(10, 10), sharex="col", constrained_layout=True)
     letters = iter("abcdefgh")
     for col, (sol, label) in enumerate(((open_sol, f"open loop, {voltage:g} V"), (closed_sol, "closed loop, PID"))):

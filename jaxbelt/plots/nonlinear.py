@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-import matplotlib.pyplot as plt
 import numpy as np
 
 from ..models.nonlinear import NonlinearBelt
@@ -95,6 +94,8 @@ def nonlinear_figure(belt: NonlinearBelt | None = None, *, quick: bool = False, 
                        runout=belt.runout, phase=belt.phase, damping=belt.damping, n_modes=n_modes)
     b1 = NonlinearBelt(span=belt.span, wave_speed=belt.wave_speed, v_l=belt.v_l, pulley_radii=belt.pulley_radii,
                        runout=belt.runout, phase=belt.phase, damping=belt.damping, n_modes=1)
+    import matplotlib.pyplot as plt
+
     fig, axes = plt.subplots(2, 3, figsize=(15, 8.5))
     step = 0.25 if quick else 0.1
     fine = 0.05 if quick else 0.02  # the hysteresis band near the first crossing is narrow
@@ -186,6 +187,8 @@ def plot_ramp(ax, record, *, title=None):
 def response_figure(curve, ramp_up, ramp_down, measurements, summary: str = ""):
     """One page: the response curve with its unstable branch, folds and the measured jumps,
     and the up/down ramp records (all computed by the caller). Returns the figure."""
+    import matplotlib.pyplot as plt
+
     fig, axes = plt.subplots(1, 3, figsize=(16, 4.8))
     plot_response_curve(axes[0], curve, measurements, title="predicted vs measured (Fig. 8 analogue)")
     plot_ramp(axes[1], ramp_up)

@@ -1,32 +1,22 @@
-"""Figures of the command-shaping scene (Incerti, pseudo-polynomial commands): the paper's Fig. 3 and the sensitivity plot."""
+"""Figures of the command-shaping scene (Incerti, pseudo-polynomial commands): the paper's Fig. 3 and the sensitivity plot.
+
+Drawing only: the responses come from `jaxbelt.platform_response`, the sensitivity curves from
+`jaxbelt.sensitivity_curve`.
+"""
 
 from __future__ import annotations
 
-import jax.numpy as jnp
 import numpy as np
 
-from ..scene import Scene
-from ..solve import simulate
 
+def plot_fig3(before: dict, after: dict, *, move_times=None, axes=None, titles=("3-4-5 polynomial", "optimised")):
+    """Paper's Fig. 3 (Incerti, pseudo-polynomial commands): platform velocity and acceleration (solid) with
+    the rigid-body commands $\\lambda\\dot\\varphi_m$, $\\lambda\\ddot\\varphi_m$ (dashed), kinetic and
+    elastic energy, for the command before (left column) and after (right column) the optimisation.
 
-def platform_response(plat, cmd, t_end: float | None = None, n: int = 901):
-    """Simulate the platform over [0, t_end] (default 1.5 × the move) and return a dict of numpy
-    arrays: `t`, `velocity`, `acceleration`, `command_velocity`, `command_acceleration`,
-    `kinetic_energy`, `elastic_energy`."""
-    if t_end is None:
-        t_end = 1.5 * float(cmd.end_time)
-    ts = jnp.linspace(0.0, t_end, n)
-    obs = ("acceleration", "kinetic_energy", "elastic_energy", "command_velocity", "command_acceleration")
-    sol = simulate(Scene(plat, cmd, ts=ts, observe=obs), method="ode", rtol=1e-10, atol=1e-12)
-    out = {"t": np.asarray(ts), "velocity": np.asarray(sol.omega)}
-    out.update({k: np.asarray(sol[k]) for k in obs})
-    return out
-
-
-def plot_fig3(plat, cmd_before, cmd_after, *, axes=None, t_end=None, titles=("3-4-5 polynomial", "optimised")):
-    """Paper's Fig. 3: platform velocity and acceleration (solid) with the rigid-body commands
-    $\\lambda\\dot\\varphi_m$, $\\lambda\\ddot\\varphi_m$ (dashed), kinetic and elastic energy, for the
-    command before (left column) and after (right column) the optimisation. `axes`: a 4 × 2 array."""
+    `before`, `after`: the dicts of `jaxbelt.platform_response` (computed beforehand);
+    `move_times`: the two move times [s], marked by a vertical line; `axes`: a 4 × 2 array.
+    """
     import matplotlib.pyplot as plt
 
     if axes is None:
@@ -38,14 +28,15 @@ def plot_fig3(plat, cmd_before, cmd_after, *, axes=None, t_end=None, titles=("3-
         ("kinetic_energy", None, "kinetic energy [J]"),
         ("elastic_energy", None, "elastic energy [J]"),
     ]
-    for col, (cmd, title) in enumerate(zip((cmd_before, cmd_after), titles)):
-        r = platform_response(plat, cmd, t_end)
+    move_times = (None, None) if move_times is None else move_times
+    for col, (r, title, t_move) in enumerate(zip((before, after), titles, move_times)):
         for row, (key, dashed, label) in enumerate(rows):
             ax = axes[row, col]
             ax.plot(r["t"], r[key], "C0-", lw=1.2)
             if dashed is not None:
                 ax.plot(r["t"], r[dashed], "k--", lw=0.9)
-            ax.axvline(float(cmd.end_time), color="0.6", lw=0.6)
+            if t_move is not None:
+                ax.axvline(float(t_move), color="0.6", lw=0.6)
             ax.grid(alpha=0.3)
             if col == 0:
                 ax.set_ylabel(label)
@@ -82,8 +73,11 @@ def plot_sensitivity(omegas, curves: dict, omega0, *, ax=None, reference: str | 
     return ax
 
 
-def shaping_figure(plat, cmd_before, cmd_after, omegas, curves: dict, *, reference: str | None = None):
-    """One figure: Fig. 3 (rows 1-4) and the sensitivity plot (row 5). Returns the Figure."""
+def shaping_figure(before: dict, after: dict, omegas, curves: dict, omega_n, *, move_times=None,
+                   reference: str | None = None):
+    """One figure: Fig. 3 (rows 1-4, from the `jaxbelt.platform_response` dicts `before`, `after`) and the
+    sensitivity plot (row 5: `omegas` [rad/s], `curves` {label: E(T) [J]}, design `omega_n` [rad/s]).
+    Returns the Figure."""
     import matplotlib.pyplot as plt
 
     fig = plt.figure(figsize=(10, 12), constrained_layout=True)
@@ -92,8 +86,8 @@ def shaping_figure(plat, cmd_before, cmd_after, omegas, curves: dict, *, referen
     for i in range(4):
         for j in range(2):
             axes[i, j] = fig.add_subplot(gs[i, j], sharex=axes[0, 0] if (i, j) != (0, 0) else None)
-    plot_fig3(plat, cmd_before, cmd_after, axes=axes)
-    plot_sensitivity(omegas, curves, plat.omega_n, ax=fig.add_subplot(gs[4, :]), reference=reference)
+    plot_fig3(before, after, move_times=move_times, axes=axes)
+    plot_sensitivity(omegas, curves, omega_n, ax=fig.add_subplot(gs[4, :]), reference=reference)
     return fig
 
 

@@ -1,21 +1,18 @@
-"""Figures of the belt-span scene: belt-vibration report figs. 40, 41, 43 and Moon & Wickert's Fig. 5."""
+"""Figures of the belt-span scene: belt-vibration report figs. 37-43 and Moon & Wickert's Fig. 5.
+
+Drawing only: crossing diagrams, run-out responses and Galerkin errors are computed beforehand
+(`jaxbelt.crossing_diagram`, `jaxbelt.crossing_speeds`, `jaxbelt.linear_runout_response`,
+`MovingString.galerkin_frequencies`); the closed-form contact pressure (eq. 10), span frequencies
+(eq. 51) and exciting speeds (eq. 55) are evaluated here.
+"""
 
 from __future__ import annotations
 
 import jax.numpy as jnp
-import matplotlib.pyplot as plt
 import numpy as np
 
 from ..models.contact import BeltPulleyContact
-from ..models.string import (
-    TABLE2_COMPUTED_RPM,
-    TABLE2_MEASURED_RPM,
-    MovingString,
-    crossing_diagram,
-    crossing_speeds,
-    exciting_speeds,
-    linear_runout_response,
-)
+from ..models.string import TABLE2_COMPUTED_RPM, TABLE2_MEASURED_RPM, MovingString, exciting_speeds
 
 __all__ = [
     "plot_contact_pressure",
@@ -23,6 +20,7 @@ __all__ = [
     "plot_exciting_speeds",
     "plot_crossing_diagram",
     "plot_runout_response",
+    "plot_galerkin_convergence",
     "string_figure",
     "plot_mode_shapes",
     "plot_span_frequencies",
@@ -33,6 +31,8 @@ RPM = 30.0 / np.pi  # rad/s -> rpm
 
 
 def _ax(ax):
+    import matplotlib.pyplot as plt
+
     if ax is None:
         _, ax = plt.subplots(figsize=(5.5, 4))
     return ax
@@ -66,6 +66,8 @@ def plot_frequency_harmonics(span: MovingString | None = None, pulley_radius: fl
     the crossings are the exciting speeds of eq. (55) (dots).
     """
     span = MovingString() if span is None else span
+    import matplotlib.pyplot as plt
+
     ax = _ax(ax)
     rpm = np.linspace(0.0, max_rpm, 400)
     wn = np.asarray(span.natural_frequencies(jnp.asarray(rpm / RPM * pulley_radius), n_modes))
@@ -111,31 +113,32 @@ def plot_exciting_speeds(span: MovingString | None = None, pulley_radius: float 
     return ax
 
 
-def plot_crossing_diagram(length=0.86, pulley_radii=(0.063, 0.063), wave_speed=41.0, n_modes: int = 3,
-                          harmonics=1, max_speed=None, ax=None):
-    """Moon & Wickert, Fig. 5(a): natural frequencies and pulley load lines against running speed.
+def plot_crossing_diagram(speeds, natural, load, crossings, pulley_radii, *, harmonics=None, ax=None):
+    """Moon & Wickert (1997), Fig. 5(a): natural frequencies and pulley load lines against running speed.
 
-    Crossings (dots) come from `crossing_speeds` (Newton root finding).
+    `speeds` (N,) [m/s]; `natural` (N, n_modes) and `load` (N, n_pulleys, n_harmonics) [rad/s] from
+    `jaxbelt.crossing_diagram`; `crossings` (n_modes, n_pulleys, n_harmonics) [m/s] from
+    `jaxbelt.crossing_speeds` (dots); `pulley_radii` [m]; `harmonics`: the harmonic orders (default 1, 2, ...).
     """
     ax = _ax(ax)
-    vmax = 0.55 * wave_speed if max_speed is None else max_speed
-    V = np.linspace(0.0, vmax, 400)
-    nat, load = crossing_diagram(jnp.asarray(V), length, pulley_radii, wave_speed, n_modes, harmonics)
-    nat, load = np.asarray(nat) / (2 * np.pi), np.asarray(load) / (2 * np.pi)
-    for i in range(n_modes):
+    V = np.asarray(speeds)
+    vmax = float(V[-1])
+    nat, load = np.asarray(natural) / (2 * np.pi), np.asarray(load) / (2 * np.pi)
+    radii = np.atleast_1d(np.asarray(pulley_radii, dtype=float))
+    vc = np.asarray(crossings)
+    ks = np.arange(1, load.shape[2] + 1) if harmonics is None else np.atleast_1d(np.asarray(harmonics))
+    for i in range(nat.shape[1]):
         ax.plot(V, nat[:, i], "k", lw=1.2, label="ω_n / 2π" if i == 0 else None)
     ls = ["-", "--", ":", "-."]
     for j in range(load.shape[1]):
         for k in range(load.shape[2]):
             ax.plot(V, load[:, j, k], ls[j % 4], color=f"C{k}", lw=0.9,
-                    label=f"pulley {j} (r = {1e3 * pulley_radii[j]:.0f} mm), harmonic {k + 1}" if k < 3 else None)
-    vc = np.asarray(crossing_speeds(length, pulley_radii, wave_speed, n_modes, harmonics))
-    ks = np.arange(1, vc.shape[2] + 1)
-    for i in range(n_modes):
+                    label=f"pulley {j} (r = {1e3 * radii[j]:.0f} mm), harmonic {ks[k]:g}" if k < 3 else None)
+    for i in range(vc.shape[0]):
         for j in range(vc.shape[1]):
             for k in range(vc.shape[2]):
                 if vc[i, j, k] <= vmax:
-                    f = ks[k] * vc[i, j, k] / pulley_radii[j] / (2 * np.pi)
+                    f = ks[k] * vc[i, j, k] / radii[j] / (2 * np.pi)
                     ax.plot(vc[i, j, k], f, "o", color="C3", ms=4)
                     if j == 0 and k == 0:
                         ax.annotate(f"{vc[i, j, k]:.2f} m/s", (vc[i, j, k], f), textcoords="offset points",
@@ -149,24 +152,22 @@ def plot_crossing_diagram(length=0.86, pulley_radii=(0.063, 0.063), wave_speed=4
     return ax
 
 
-def plot_runout_response(length=0.86, wave_speed=41.0, pulley_radii=(0.063, 0.063), runouts=(0.355e-3, 0.21e-3),
-                         phase=np.radians(240.0), damping_ratio=0.01, position=0.01, max_speed=None, mid_span=True,
-                         ax=None):
-    """Moon & Wickert, Fig. 5(b): linear steady peak-to-peak response [mm] against running speed."""
+def plot_runout_response(speeds, responses: dict, crossings=None, *, ax=None):
+    """Moon & Wickert (1997), Fig. 5(b): linear steady peak-to-peak response [mm] against running speed.
+
+    `speeds` (N,) [m/s]; `responses`: `{label: peak-to-peak [m] of shape (N,)}` (from
+    `jaxbelt.linear_runout_response`); `crossings` [m/s] (any shape; e.g. `jaxbelt.crossing_speeds`)
+    are marked by dotted lines.
+    """
     ax = _ax(ax)
-    vmax = 0.55 * wave_speed if max_speed is None else max_speed
-    V = np.linspace(0.05, vmax, 1500)
-    pp = np.asarray(linear_runout_response(jnp.asarray(V), length, wave_speed, pulley_radii, runouts, phase,
-                                           damping_ratio, position))
-    ax.semilogy(V, 1e3 * pp, label=f"ζ = {damping_ratio:g}, x = {1e3 * position:.0f} mm")
-    if mid_span:
-        pq = np.asarray(linear_runout_response(jnp.asarray(V), length, wave_speed, pulley_radii, runouts, phase,
-                                               damping_ratio, length / 4))
-        ax.semilogy(V, 1e3 * pq, lw=0.9, label=f"ζ = {damping_ratio:g}, x = L/4")
-    vc = np.asarray(crossing_speeds(length, pulley_radii, wave_speed, 3))
-    for v in np.unique(np.round(vc.ravel(), 9)):
-        if v <= vmax:
-            ax.axvline(v, color="C3", lw=0.6, ls=":")
+    V = np.asarray(speeds)
+    vmax = float(V[-1])
+    for label, pp in responses.items():
+        ax.semilogy(V, 1e3 * np.asarray(pp), lw=1.2 if not ax.lines else 0.9, label=label)
+    if crossings is not None:
+        for v in np.unique(np.round(np.asarray(crossings).ravel(), 9)):
+            if v <= vmax:
+                ax.axvline(v, color="C3", lw=0.6, ls=":")
     ax.set_xlim(0, vmax)
     ax.set_xlabel("running speed V [m/s]")
     ax.set_ylabel("peak-to-peak displacement [mm]")
@@ -175,35 +176,46 @@ def plot_runout_response(length=0.86, wave_speed=41.0, pulley_radii=(0.063, 0.06
     return ax
 
 
-def string_figure(contact_radius: float = 0.025):
-    """All figures of the scene on one page (the `jaxbelt string` CLI figure)."""
-    fig, axs = plt.subplots(2, 3, figsize=(16, 9.5))
-    plot_contact_pressure(BeltPulleyContact(radius=contact_radius), ax=axs[0, 0])
-    plot_frequency_harmonics(ax=axs[0, 1])
-    plot_exciting_speeds(ax=axs[0, 2])
-    plot_crossing_diagram(ax=axs[1, 0])
-    plot_runout_response(ax=axs[1, 1])
-    _galerkin_panel(axs[1, 2])
-    fig.tight_layout()
-    return fig
+def plot_galerkin_convergence(n_basis, errors, speed, *, ax=None):
+    """Relative error of the Galerkin frequencies against eq. (39) versus the number of sine modes.
 
-
-def _galerkin_panel(ax, speed: float = 20.0):
-    """Relative error of the Galerkin frequencies against eq. (39) versus the number of sine modes."""
-    span = MovingString()
-    exact = np.asarray(span.natural_frequencies(speed, 3))
-    Ns = [4, 8, 16, 32, 64]
-    err = np.array([np.abs(np.asarray(span.galerkin_frequencies(speed, N, 3)) - exact) / exact for N in Ns])
-    for i in range(3):
+    `n_basis` (K,) numbers of sine modes, `errors` (K, n_modes) relative frequency errors (computed
+    from `MovingString.galerkin_frequencies` and `MovingString.natural_frequencies`), `speed` [m/s].
+    """
+    ax = _ax(ax)
+    Ns = np.asarray(n_basis)
+    err = np.asarray(errors)
+    for i in range(err.shape[1]):
         ax.loglog(Ns, err[:, i], "o-", label=f"mode {i + 1}")
-    ax.loglog(Ns, 0.5 * err[0, 0] * (np.array(Ns) / Ns[0]) ** -3.0, "k:", label="N^-3")
+    ax.loglog(Ns, 0.5 * err[0, 0] * (Ns / Ns[0]) ** -3.0, "k:", label="N^-3")
     ax.set_xticks(Ns, [str(n) for n in Ns])
     ax.minorticks_off()
     ax.set_xlabel("number of sine modes N")
     ax.set_ylabel("relative frequency error")
-    ax.set_title(f"Galerkin vs eq. (39), V = {speed:g} m/s")
+    ax.set_title(f"Galerkin vs eq. (39), V = {float(speed):g} m/s")
     ax.legend(fontsize=8)
     return ax
+
+
+def string_figure(diagram: dict, response: dict, galerkin: dict, *, contact: BeltPulleyContact | None = None,
+                  span: MovingString | None = None, pulley_radius: float = 0.1166):
+    """All figures of the scene on one page (the `jaxbelt string` CLI figure), from computed results.
+
+    `diagram`: keyword arguments of `plot_crossing_diagram`; `response`: of `plot_runout_response`;
+    `galerkin`: of `plot_galerkin_convergence`. `contact`, `span`, `pulley_radius` [m] for the
+    closed-form panels (pressure, Fig. 41, Fig. 43).
+    """
+    import matplotlib.pyplot as plt
+
+    fig, axs = plt.subplots(2, 3, figsize=(16, 9.5))
+    plot_contact_pressure(contact, ax=axs[0, 0])
+    plot_frequency_harmonics(span, pulley_radius, ax=axs[0, 1])
+    plot_exciting_speeds(span, pulley_radius, ax=axs[0, 2])
+    plot_crossing_diagram(**diagram, ax=axs[1, 0])
+    plot_runout_response(**response, ax=axs[1, 1])
+    plot_galerkin_convergence(**galerkin, ax=axs[1, 2])
+    fig.tight_layout()
+    return fig
 
 
 def plot_mode_shapes(x, t, shapes, *, axes=None, labels=None):
@@ -213,6 +225,8 @@ def plot_mode_shapes(x, t, shapes, *, axes=None, labels=None):
     deflection $y(x, t)$ of each mode (computed, e.g., by `MovingString.mode_shape`). Draws one
     panel per mode; the points of the belt do not cross zero at the same time.
     """
+    import matplotlib.pyplot as plt
+
     x, t, shapes = np.asarray(x), np.asarray(t), np.asarray(shapes)
     n = shapes.shape[0]
     if axes is None:
@@ -252,6 +266,8 @@ def plot_span_frequencies(rotor_rpm, frequencies, critical_rpm, *, ax=None):
 
 def modes_figure(x, t, shapes, rotor_rpm, frequencies, critical_rpm, *, title=None):
     """Figs. 37-39 and the eq. (51)/(53) panel on one page (the `jaxbelt string --figure modes` figure)."""
+    import matplotlib.pyplot as plt
+
     fig, axs = plt.subplots(2, 2, figsize=(11, 7.5))
     plot_mode_shapes(x, t, shapes, axes=axs.ravel()[:3])
     plot_span_frequencies(rotor_rpm, frequencies, critical_rpm, ax=axs[1, 1])
