@@ -108,6 +108,9 @@ from .models.nonlinear import jumps as jumps  # noqa: E402
 from .identify import IdentifyResult as IdentifyResult  # noqa: E402
 from .identify import identify as identify  # noqa: E402
 
+# --- persistent compilation cache (opt-in; the CLI switches it on) --------------------------------
+from .cache import enable_compilation_cache as enable_compilation_cache  # noqa: E402
+
 # --- sub-modules -------------------------------------------------------------------------------
 from . import modal as modal  # noqa: E402
 def __getattr__(name):
@@ -116,10 +119,6 @@ def __getattr__(name):
         import importlib
 
         return importlib.import_module(".plots", __name__)
-    if name == "enable_compilation_cache":  # jaxbelt.cache; see its docstring
-        from .cache import enable_compilation_cache
-
-        return enable_compilation_cache
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 __version__ = "0.1.0"
