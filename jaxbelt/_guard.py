@@ -47,6 +47,8 @@ def traced_checks(*trees) -> list:
 
     Concrete modules were checked when they were built and add nothing here.
     """
+    if is_concrete(trees):
+        return []
     with collecting() as found:
         for m in _modules(trees):
             if is_concrete(m):

@@ -162,7 +162,7 @@ def exp_input_batch(A, F, s, x0, t0, ts, f_var, s_var, *, uniform: bool = False,
     return jax.lax.switch(branch, [separated, exact, expm_path])
 
 
-def startup_gamma_batch(model, gammas, ts, v_max=24.0, y0=None, *, n_fix: int = 8, chunk: int = 256):
+def startup_gamma_batch(model, gammas, ts, v_max=24.0, y0=None, *, t0=None, n_fix: int = 8, chunk: int = 256):
     """State histories of a belt start-up model for a batch of voltage time constants.
 
     $V_b(t) = V_{max}(1 - e^{-t/\\gamma_b})$ (Incerti, 2014, eq. 30) drives `model` (a `BeltStartup`
@@ -182,7 +182,8 @@ def startup_gamma_batch(model, gammas, ts, v_max=24.0, y0=None, *, n_fix: int = 
     if is_concrete(ts) and ts.shape[0] > 1:
         d = np.diff(np.asarray(ts))
         uniform = bool(np.allclose(d, d[0], rtol=1e-12, atol=0.0))
-    return exp_input_batch(A, F, s, x0, ts[0], ts, f_var, -1.0 / gammas, uniform=uniform, n_fix=n_fix, chunk=chunk)
+    t0 = ts[0] if t0 is None else jnp.asarray(t0, dtype=float)
+    return exp_input_batch(A, F, s, x0, t0, ts, f_var, -1.0 / gammas, uniform=uniform, n_fix=n_fix, chunk=chunk)
 
 
 def batched_exponential_scene(scene):
@@ -207,7 +208,7 @@ def batched_exponential_scene(scene):
         return None
     if any(n in model.integral_names() for n in scene.observe):
         return None
-    ys = startup_gamma_batch(model, inp.gamma, scene.ts, v_max=inp.v_max, y0=scene.y0)
+    ys = startup_gamma_batch(model, inp.gamma, scene.ts, v_max=inp.v_max, y0=scene.y0, t0=scene.start_time)
     outputs = {}
     for name in scene.observe:
         def one(g, yb, name=name):

@@ -35,7 +35,8 @@ class Scene(eqx.Module):
     - `input`: its input, of a kind the model accepts (`model.input_types`), e.g.
       `ExponentialVoltage(24.0, 0.02)` or `PID(...)`; any other kind raises `TypeError`.
     - `ts`: strictly increasing output times [s], shape (N,).
-    - `t0`: start time [s], where the initial state holds (default `ts[0]`; must be <= `ts[0]`).
+    - `t0`: start time [s], where the initial state holds (default `ts[0]`; must be <= `ts[0]`);
+      `scene.start_time` is the start in either case.
     - `t1`: final time [s] when `ts` is not given: only the state at `t1` is returned
       (no dense buffer); `t0` then defaults to 0.
     - `observe`: names of outputs to compute besides the state (e.g. `("current",
@@ -129,8 +130,9 @@ class Scene(eqx.Module):
                 uniform = False
             self.ts = ts
             self.uniform = bool(uniform)
-            self.t0 = ts[0] if t0 is None else jnp.asarray(t0, dtype=float)
-            if jnp.ndim(self.t0) != 0:
+            # None: the start is ts[0], taken inside the compiled program (no device op here)
+            self.t0 = None if t0 is None else jnp.asarray(t0, dtype=float)
+            if self.t0 is not None and jnp.ndim(self.t0) != 0:
                 raise ValueError(f"Scene: `t0` must be a scalar time [s]; got shape {jnp.shape(self.t0)}")
             if t0 is not None and is_concrete(self.t0) and is_concrete(raw):
                 if not np.isfinite(float(self.t0)) or float(self.t0) > float(np.asarray(raw)[0]):
@@ -158,6 +160,11 @@ class Scene(eqx.Module):
         return self.ts is None
 
     @property
+    def start_time(self):
+        """Time [s] at which the initial state holds: `t0`, or `ts[0]` when `t0` was not given."""
+        return self.ts[0] if self.t0 is None else self.t0
+
+    @property
     def times(self):
         """Output times: `ts`, or `[t1]` for a final-state scene."""
         return self.ts if self.ts is not None else self.t1[None]
@@ -165,7 +172,8 @@ class Scene(eqx.Module):
     def time_errors(self):
         """`[(ok, message)]` for the time checks that values decide (evaluated under `jit` too)."""
         t_first = self.times[0]
-        checks = [(jnp.isfinite(self.t0) & (self.t0 <= t_first), "Scene: `t0` must be finite and <= the first output time")]
+        t0 = self.start_time
+        checks = [(jnp.isfinite(t0) & (t0 <= t_first), "Scene: `t0` must be finite and <= the first output time")]
         if self.ts is not None and self.ts.shape[0] > 1:
             checks.append((jnp.all(jnp.diff(self.ts) > 0) & jnp.all(jnp.isfinite(self.ts)),
                            "Scene: `ts` must be finite and strictly increasing"))

@@ -96,7 +96,7 @@ def _run_impl(scene: Scene, method: str, solver, rtol, atol, dt0, max_steps: int
     pointwise = tuple(n for n in scene.observe if n not in integrals)
     y0 = scene.y0 if scene.y0 is not None else model.initial_state(inp)
     times = scene.times
-    t0 = scene.t0
+    t0 = scene.start_time
     stats = {}
     integral_vals = {}
     success = jnp.array(True)
@@ -274,6 +274,8 @@ def _check_scalar_fields(obj) -> None:
 
     Fields a class declares in `array_fields` (e.g. the exponents of a `PseudoPolynomial`) are
     exempt; nested modules are checked too."""
+    if all(jnp.ndim(leaf) == 0 for leaf in jax.tree_util.tree_leaves(obj)):
+        return
     for m in _modules(obj):
         allowed = getattr(type(m), "array_fields", ())
         for f in dataclasses.fields(m):
@@ -303,6 +305,9 @@ def _value_checks(scene, method, rtol, atol, dt0):
 
 def _finish(sol: Solution, checks, throw: bool, what: str, hint: str) -> Solution:
     """Apply the failure policy to a solution (see `simulate`'s `throw`)."""
+    if throw and not checks and is_concrete(sol.success):
+        if bool(np.all(np.asarray(sol.success))):
+            return sol  # the common eager case: nothing to attach, nothing to raise
     values = (sol.ys, sol.outputs)
     values, ok = guard(values, checks, throw)
     success = sol.success & ok
@@ -322,8 +327,13 @@ def _finish(sol: Solution, checks, throw: bool, what: str, hint: str) -> Solutio
 
 
 def _batched_input(inp) -> bool:
-    amps, rates = inp.exp_terms()
-    return jnp.ndim(rates) == 2
+    """A command whose parameters carry a leading batch axis (decided from shapes, nothing computed)."""
+    allowed = getattr(type(inp), "array_fields", ())
+    return any(
+        hasattr(v, "shape") and jnp.ndim(v) >= 1
+        for f in dataclasses.fields(inp) if f.name not in allowed
+        for v in (getattr(inp, f.name, None),)
+    )
 
 
 def _simulate_batch(scene: Scene, method: str, throw: bool) -> Solution:
