@@ -220,3 +220,24 @@ def test_bad_inputs():
         jb.SpeedRamp(8.0, 9.0, -1.0)
     with pytest.raises(ValueError, match="sensor_pulley"):
         jb.NonlinearBelt(sensor_pulley="left")
+
+
+@pytest.mark.slow
+def test_cli_nonlinear_quick(tmp_path, curve):
+    """`jaxbelt nonlinear --quick --out F` exits 0, prints the written name exactly and the fold
+    speeds, which equal the library's `response_curve` folds to the printed 1e-4 m/s."""
+    import os
+    import re
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    out = tmp_path / "nl.png"
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)}
+    p = subprocess.run([sys.executable, "-m", "jaxbelt", "nonlinear", "--quick", "--out", str(out)],
+                       capture_output=True, text=True, env=env, timeout=600)
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert f"wrote {out}" in p.stdout.splitlines()
+    assert out.stat().st_size > 10_000
+    folds = [float(x) for x in re.search(r"folds ([\d.]+), ([\d.]+) m/s", p.stdout).groups()]
+    np.testing.assert_allclose(folds, np.asarray(curve.folds), atol=1.5e-4)
