@@ -317,13 +317,43 @@ def _locate_folds(us, ts, acc, n_folds: int):
 
 
 @functools.partial(eqx.filter_jit)
-def _fold_jit(belt, v0, v1, H, n_folds, max_points, ds0, ds_max):
-    b_sg = jax.lax.stop_gradient(belt)
-    us, ts, acc = _continue(b_sg, v0, v1, H, max_points, ds0, ds_max)
-    pick, count = _locate_folds(us, ts, acc, n_folds)
+def _continue_jit(belt, v0, v1, H, max_points, ds0, ds_max):
+    """The continuation, compiled once per (belt structure, H, max_points) and shared by
+    `response_curve`, `fold_speeds` and `jumps` (not differentiated: the folds are refined apart)."""
+    return _continue(belt, v0, v1, H, max_points, ds0, ds_max)
+
+
+def _trace(belt, v0, v1, H, max_points, ds0, ds_max):
+    b = jax.lax.stop_gradient(belt)
+    v0, v1, ds0, ds_max = (jax.lax.stop_gradient(jnp.asarray(x, float)) for x in (v0, v1, ds0, ds_max))
+    return _continue_jit(b, v0, v1, H, max_points, ds0, ds_max)
+
+
+_MAX_FOLDS = 6  # folds located and refined per curve (one compiled refinement for every caller)
+
+
+@functools.partial(eqx.filter_jit)
+def _folds_jit(belt, us, ts, acc, H):
+    """Up to `_MAX_FOLDS` folds (in arclength order) refined on the extended system; `ok` marks real ones."""
+    pick, count = _locate_folds(us, ts, acc, _MAX_FOLDS)
+    real = jnp.arange(_MAX_FOLDS) < count
+    pick = jnp.where(real, pick, pick[0])  # padding repeats the first fold (converges as fast, masked)
     Ys, Vs, oks = jax.vmap(lambda u, t: _refine_fold(belt, u, t, H))(us[pick], ts[pick])
-    ok = oks & (jnp.arange(n_folds) < count)
-    return Ys, Vs, ok
+    return Ys, Vs, oks & real
+
+
+def _fold_jit(belt, v0, v1, H, n_folds, max_points, ds0, ds_max):
+    us, ts, acc = _trace(belt, v0, v1, H, max_points, ds0, ds_max)
+    return _folds_from(belt, us, ts, acc, v0, v1, H, n_folds)
+
+
+def _folds_from(belt, us, ts, acc, v0, v1, H, n_folds):
+    acc = acc & (us[:, -1] <= v1 + 1e-9) & (us[:, -1] >= v0 - 1e-9)
+    Ys, Vs, ok = _folds_jit(belt, us, ts, acc, H)
+    return Ys[:n_folds], Vs[:n_folds], ok[:n_folds]
+
+
+_DS0, _DS_MAX = 0.05, 0.25  # default initial / largest arclength step (scaled coefficients, m/s)
 
 
 def _check_range_speeds(belt, speed_range):
@@ -349,7 +379,7 @@ def fold_speeds(belt: NonlinearBelt, speed_range=(7.5, 10.5), n_harmonics: int =
     H = _check_h(n_harmonics)
     _check_equal_radii(belt)
     v0, v1 = _check_range_speeds(belt, speed_range)
-    _, Vs, ok = _fold_jit(belt, v0, v1, H, int(n_folds), int(max_points), jnp.asarray(0.05), jnp.asarray(0.25))
+    _, Vs, ok = _fold_jit(belt, v0, v1, H, int(n_folds), int(max_points), jnp.asarray(_DS0), jnp.asarray(_DS_MAX))
     Vs = belt.wave_speed * 0.0 + Vs  # keep the belt's dtype
     if throw:
         if is_concrete(ok):
@@ -380,30 +410,35 @@ class Jumps(eqx.Module):
 
 
 @functools.partial(eqx.filter_jit)
-def _jumps_jit(belt, v0, v1, H, n_folds, max_points, ds0, ds_max):
-    b_sg = jax.lax.stop_gradient(belt)
-    us, ts, acc = _continue(b_sg, v0, v1, H, max_points, ds0, ds_max)
-    pick, count = _locate_folds(us, ts, acc, n_folds)
-    Ys, Vs, oks = jax.vmap(lambda u, t: _refine_fold(belt, u, t, H))(us[pick], ts[pick])
-    ok = oks & (jnp.arange(n_folds) < count)
-    pp_b = jax.vmap(lambda V, Y: _observe(belt, V, Y, H)[0])(Vs, Ys)
-
-    # landing branch: the accepted continuation point at the same speed farthest (in Y) from the fold
-    Vc = jax.lax.stop_gradient(us[:, -1])
+def _landing_jit(belt, us, acc, Vs, Ys, H):
+    """pp [m] (and success) of the branch a sweep lands on at each fold speed `Vs` (differentiable)."""
+    Vc = us[:, -1]
 
     def landing(Vf, Yf):
         Vf_ = jax.lax.stop_gradient(Vf)
-        # candidate points: accepted, within the local segment bracket of the fold speed
-        seg = acc[1:] & ((Vc[1:] - Vf_) * (Vc[:-1] - Vf_) <= 0)
-        dist = jnp.linalg.norm(us[1:, :-1] - jax.lax.stop_gradient(Yf), axis=1)
+        # candidate segments: both ends accepted, bracketing the fold speed; the sweep lands on the
+        # one farthest (in Y) from the fold
+        seg = acc[1:] & acc[:-1] & ((Vc[1:] - Vf_) * (Vc[:-1] - Vf_) <= 0) & (Vc[1:] != Vc[:-1])
+        dist = jnp.linalg.norm(0.5 * (us[1:, :-1] + us[:-1, :-1]) - jax.lax.stop_gradient(Yf), axis=1)
         k = jnp.argmax(jnp.where(seg, dist, -1.0))
-        lam = (Vf_ - Vc[k]) / (Vc[k + 1] - Vc[k] + 1e-300)
+        lam = jnp.clip((Vf_ - Vc[k]) / (Vc[k + 1] - Vc[k]), 0.0, 1.0)
         Yg = us[k, :-1] + lam * (us[k + 1, :-1] - us[k, :-1])
         sol = optx.root_find(lambda Y, a: _residual(Y, a[0], a[1], H), _hb_solver(), Yg, args=(Vf, belt),
                              max_steps=30, throw=False)
-        return _observe(belt, Vf, sol.value, H)[0], sol.result == optx.RESULTS.successful
+        ok = (sol.result == optx.RESULTS.successful) & jnp.any(seg)
+        # the landing branch must differ from the fold's own state
+        ok = ok & (jnp.linalg.norm(sol.value - Yf) > 1e-3 * (jnp.linalg.norm(Yf) + 1e-30))
+        return _observe(belt, Vf, sol.value, H)[0], ok
 
+    pp_b = jax.vmap(lambda V, Y: _observe(belt, V, Y, H)[0])(Vs, Ys)
     pp_a, ok_a = jax.vmap(landing)(Vs, Ys)
+    return pp_b, pp_a, ok_a
+
+
+def _jumps_jit(belt, v0, v1, H, n_folds, max_points, ds0, ds_max):
+    us, ts, acc = _trace(belt, v0, v1, H, max_points, ds0, ds_max)
+    Ys, Vs, ok = _folds_from(belt, us, ts, acc, v0, v1, H, n_folds)
+    pp_b, pp_a, ok_a = _landing_jit(belt, us, acc, Vs, Ys, H)
     return Vs, pp_b, pp_a, ok & ok_a
 
 
@@ -413,8 +448,8 @@ def jumps(belt: NonlinearBelt, speed_range=(7.5, 10.5), n_harmonics: int = 3, n_
     H = _check_h(n_harmonics)
     _check_equal_radii(belt)
     v0, v1 = _check_range_speeds(belt, speed_range)
-    Vs, ppb, ppa, ok = _jumps_jit(belt, v0, v1, H, int(n_folds), int(max_points), jnp.asarray(0.02),
-                                  jnp.asarray(0.08))
+    Vs, ppb, ppa, ok = _jumps_jit(belt, v0, v1, H, int(n_folds), int(max_points), jnp.asarray(_DS0),
+                                  jnp.asarray(_DS_MAX))
     if throw:
         if is_concrete(ok):
             if not bool(np.all(np.asarray(ok))):
@@ -461,11 +496,24 @@ class ResponseCurve(eqx.Module):
 
 
 @functools.partial(eqx.filter_jit)
-def _curve_jit(belt, v0, v1, H, max_points, ds0, ds_max):
-    us, ts, acc = _continue(belt, v0, v1, H, max_points, ds0, ds_max)
-    pp, amp = jax.vmap(lambda u: _observe(belt, u[-1], u[:-1], H))(us)
-    mult = jax.vmap(lambda u: _floquet(belt, u[-1], u[:-1], H))(us)
-    return us, ts, acc, pp, amp, mult
+def _curve_post_jit(belt, us, acc, H):
+    """pp, modal amplitudes and Floquet multipliers of the accepted points (a sequential map:
+    the rows past the last accepted point cost nothing)."""
+    n2 = 2 * belt.n_modes
+
+    def one(arg):
+        u, a = arg
+
+        def yes(u):
+            pp, amp = _observe(belt, u[-1], u[:-1], H)
+            return pp, amp, _floquet(belt, u[-1], u[:-1], H)
+
+        def no(u):
+            return (jnp.nan * u[0], jnp.full((belt.n_modes,), jnp.nan),
+                    jnp.full((n2,), jnp.nan, dtype=complex))
+        return jax.lax.cond(a, yes, no, u)
+
+    return jax.lax.map(one, (us, acc))
 
 
 def response_curve(belt: NonlinearBelt, speed_range=(7.5, 10.5), n_harmonics: int = 3, *,
@@ -479,33 +527,25 @@ def response_curve(belt: NonlinearBelt, speed_range=(7.5, 10.5), n_harmonics: in
     H = _check_h(n_harmonics)
     _check_equal_radii(belt)
     v0, v1 = _check_range_speeds(belt, speed_range)
-    us, ts, acc, pp, amp, mult = _curve_jit(belt, v0, v1, H, int(max_points), jnp.asarray(step, float),
-                                            jnp.asarray(max_step, float))
-    acc = np.asarray(acc)
+    us, ts, acc = _trace(belt, v0, v1, H, int(max_points), step, max_step)
+    acc_n = np.asarray(acc)
     us_n = np.asarray(us)
-    if not acc[0] or not np.any(us_n[acc, -1] >= float(v1)):
+    if not acc_n[0] or not np.any(us_n[acc_n, -1] >= float(v1)):
         raise RuntimeError(f"response_curve: continuation stopped before {float(v1):g} m/s (reached "
-                           f"{float(us_n[acc, -1].max()) if acc.any() else float(v0):g} m/s in {max_points} points); "
-                           "raise max_points or max_step")
-    keep = acc & (us_n[:, -1] <= float(v1) + 1e-9)
-    ts_n = np.asarray(ts)[keep]
-    sV = np.sign(ts_n[:, -1])
-    ch = np.nonzero(sV[1:] != sV[:-1])[0]
+                           f"{float(us_n[acc_n, -1].max()) if acc_n.any() else float(v0):g} m/s in {max_points} "
+                           "points); raise max_points or max_step")
+    keep = acc_n & (us_n[:, -1] <= float(v1) + 1e-9)
+    pp, amp, mult = _curve_post_jit(belt, us, jnp.asarray(keep), H)
+    _, Vf, okf = _folds_jit(belt, us, ts, jnp.asarray(keep), H)
+    Vf, okf = np.asarray(Vf), np.asarray(okf)
     n = belt.n_modes
-    folds = []
-    if ch.size:
-        kept_u, kept_t = us_n[keep], ts_n
-        picks = [i if abs(kept_t[i, -1]) < abs(kept_t[i + 1, -1]) else i + 1 for i in ch]
-        for i in picks:
-            _, V, ok = _refine_fold_jit(belt, jnp.asarray(kept_u[i]), jnp.asarray(kept_t[i]), H)
-            folds.append(float(V) if bool(ok) else np.nan)
     mult = np.asarray(mult)[keep]
     return ResponseCurve(
         speed=jnp.asarray(us_n[keep, -1]), pp=jnp.asarray(np.asarray(pp)[keep]),
         amplitude=jnp.asarray(np.asarray(amp)[keep]), stable=jnp.asarray(np.max(np.abs(mult), axis=1) < 1.0),
         multipliers=jnp.asarray(mult),
         coefficients=jnp.asarray(_scale(belt) * us_n[keep, :-1].reshape(-1, 2 * n, 2 * H + 1)),
-        folds=jnp.asarray(np.sort(np.asarray(folds, float))),
+        folds=jnp.asarray(np.sort(Vf[okf])),
     )
 
 

@@ -244,6 +244,15 @@ class NonlinearBelt(AbstractModel):
     (see the report of `jaxbelt.models.nonlinear.calibration`): 1 cm from a pulley the modal
     part of the response is small (the mode shape is $\\approx 0.05$ there).
 
+    Second mode: the linear crossings of the default belt are 8.20 and 14.61 m/s; their ratio
+    (1.78) depends on $L/r$ only, so $v_t$ cannot move the second band without moving the first.
+    With `n_modes=2` the response curve over 14-17.5 m/s (harmonic balance, continuation steps
+    <= 0.05) has no fold for the default damping nor with the second mode's damping lowered to
+    0.004 or 0.0015 (`damping` as an (N,) array of per-mode ratios): the second-mode amplitude
+    stays below 0.0037, grows monotonically to the end of the range and hardly depends on its
+    damping, i.e. no second-mode resonance is seen near the 14.6 m/s crossing, so the measured
+    second-mode hysteresis (15.5-16.3 m/s) is not reproduced with these defaults (not yet explained).
+
     The running speed $V$ [m/s] is given per call (`modal(speed)`, `RunningSpeed(V)` as the
     scene input). State: $(\\zeta^R_1..\\zeta^R_N, \\zeta^I_1..\\zeta^I_N)$, dimensionless modal
     coordinates; `vector_field` uses physical time [s]. Outputs `"w_sensor"`: displacement [m]

@@ -56,12 +56,15 @@ def _ramp_jit(belt, ramp, z0, ts, rtol, atol):
     return zs, w
 
 
-def speed_ramp(belt: NonlinearBelt, v_start, v_end, duration, *, samples_per_period: int = 24,
+def speed_ramp(belt: NonlinearBelt, v_start, v_end, duration, *, hold: float = 0.0, samples_per_period: int = 24,
                rtol: float = 1e-8, z0=None) -> RampRecord:
     """Displacement at the sensor while the belt speed ramps linearly from `v_start` to `v_end`
-    [m/s] in `duration` [s] (Moon & Wickert (1997), Fig. 3). Starts on the steady response at
-    `v_start` (or at modal state `z0`); sampled `samples_per_period` times per pulley revolution."""
+    [m/s] in `duration` [s] (Moon & Wickert (1997), Fig. 3), then held at `v_end` for `hold` [s].
+    Starts on the steady response at `v_start` (or at modal state `z0`); sampled
+    `samples_per_period` times per pulley revolution."""
     check_positive("duration", duration, "s", "speed_ramp")
+    if not (is_concrete(hold) and float(hold) >= 0):
+        raise ValueError(f"speed_ramp: parameter `hold` must be a concrete number >= 0 [s]; got {hold!r}")
     belt.check_speed(jnp.asarray([v_start, v_end], float))
     ramp = SpeedRamp(v_start, v_end, duration)
     if z0 is None:
@@ -69,8 +72,9 @@ def speed_ramp(belt: NonlinearBelt, v_start, v_end, duration, *, samples_per_per
     if not (is_concrete(duration) and is_concrete(v_start) and is_concrete(v_end)):
         raise ValueError("speed_ramp: `v_start`, `v_end` and `duration` must be concrete (they set the sampling)")
     vmax = max(float(v_start), float(v_end))
-    n = int(np.ceil(float(duration) * vmax / (2 * np.pi * float(belt.pulley_radii[0])) * samples_per_period)) + 1
-    ts = jnp.linspace(0.0, float(duration), n)
+    t_end = float(duration) + float(hold)
+    n = int(np.ceil(t_end * vmax / (2 * np.pi * float(belt.pulley_radii[0])) * samples_per_period)) + 1
+    ts = jnp.linspace(0.0, t_end, n)
     atol = 1e-9 * float((belt.runout[0] + belt.runout[1]) / belt.span)
     zs, w = _ramp_jit(belt, ramp, jnp.asarray(z0, float), ts, jnp.asarray(rtol), jnp.asarray(atol))
     return RampRecord(t=ts, speed=ramp.speed_at(ts), w=w, z=zs)

@@ -89,6 +89,7 @@ _SOLVER = diffrax.Tsit5()
 def _solve_period(sys: ModalSystem, z, tau0, T, theta00, n_save: int, rtol, atol):
     """diffrax solve of the modal system over [tau0, tau0 + T], saved at `n_save` equal steps."""
     ts = tau0 + T * jnp.arange(1, n_save + 1) / n_save
+    ts = jnp.minimum(ts, tau0 + T).at[-1].set(tau0 + T)  # rounding must not put a save time past t1
     term = diffrax.ODETerm(lambda tau, zz, args: sys.rhs(tau, zz, theta00))
     sol = diffrax.diffeqsolve(
         term, _SOLVER, t0=tau0, t1=tau0 + T, dt0=T / n_save, y0=z,
