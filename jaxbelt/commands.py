@@ -287,10 +287,15 @@ class PseudoPolynomial(AbstractMotionCommand):
 
 def _damped_half_period_and_ratio(omega_n, zeta):
     """$(\\pi/\\omega_d, K = e^{-\\zeta\\pi/\\sqrt{1-\\zeta^2}})$ of a mode, shared by ZV and ZVD."""
+    check_positive("omega_n", omega_n, "rad/s", owner="ShapedCommand")
+    check_range("zeta", zeta, lo=0.0, hi=1.0, hi_open=True, owner="ShapedCommand")
     omega_n = jnp.asarray(omega_n, dtype=float)
     zeta = jnp.asarray(zeta, dtype=float)
     wd = omega_n * jnp.sqrt(1.0 - zeta**2)
-    return jnp.pi / wd, jnp.exp(-zeta * jnp.pi / jnp.sqrt(1.0 - zeta**2))
+    # traced invalid values (not checked above) give NaN times, which the shaper's recorded checks refuse
+    valid = jnp.isfinite(omega_n) & (omega_n > 0) & jnp.isfinite(zeta) & (zeta >= 0) & (zeta < 1)
+    half = jnp.where(valid, jnp.pi / wd, jnp.nan)
+    return half, jnp.exp(-zeta * jnp.pi / jnp.sqrt(1.0 - zeta**2))
 
 
 class ShapedCommand(AbstractMotionCommand):
@@ -321,9 +326,19 @@ class ShapedCommand(AbstractMotionCommand):
             )
         check_nonnegative("times", self.times, "s", owner=o)
         check_finite("amplitudes", self.amplitudes, owner=o)
-        if is_concrete(self.amplitudes):
+        order_msg = f"{o}: parameter `times` must be non-decreasing (impulse times in order, the last one ends the move)"
+        sum_msg = f"{o}: parameter `amplitudes` must sum to 1"
+        if is_concrete((self.times, self.amplitudes)):
+            t = _np.asarray(self.times, dtype=float)
+            if t.size > 1 and not _np.all(_np.diff(t) >= 0):
+                raise ValueError(f"{order_msg}; got {t.tolist()}")
             if abs(float(_np.sum(_np.asarray(self.amplitudes))) - 1.0) > 1e-9:
-                raise ValueError(f"{o}: `amplitudes` must sum to 1; got {self.amplitudes.tolist()}")
+                raise ValueError(f"{sum_msg}; got {self.amplitudes.tolist()}")
+        else:
+            if self.times.shape[0] > 1:
+                _record_check(jnp.all(jnp.diff(self.times) >= 0), order_msg)
+            tol = max(1e-9, 100 * float(jnp.finfo(self.amplitudes.dtype).eps))
+            _record_check(jnp.abs(jnp.sum(self.amplitudes) - 1.0) <= tol, sum_msg)
 
     @classmethod
     def zv(cls, base, omega_n, zeta=0.0):

@@ -177,11 +177,10 @@ def test_shaped_command_bad_times_or_amplitudes(t, bad):
 @given(omega=st.one_of(st.sampled_from([nan, 0.0]), NEGATIVE), zeta=st.one_of(NONFINITE, st.floats(1.0, 10.0)))
 @fuzz(8)
 def test_shapers_of_an_invalid_mode_are_refused(omega, zeta):
-    # (the message names the shaper's `times`, not `omega_n`/`zeta`; omega_n = ±inf passes: see the xfail below)
     for make in (jb.ShapedCommand.zv, jb.ShapedCommand.zvd):
-        with pytest.raises(ValueError, match=named("times")):
+        with pytest.raises(ValueError, match=named("omega_n")):
             make(PP, omega)
-        with pytest.raises(ValueError, match=named("times")):
+        with pytest.raises(ValueError, match=named("zeta")):
             make(PP, 10.0, zeta)
 
 
@@ -244,17 +243,17 @@ _exciting_jit = jax.jit(lambda R, n, m: jb.exciting_speeds(jb.MovingString(), R,
 def test_crossing_speeds_concrete_bad_arguments(which, bad, h):
     arg = (0.063, bad) if which == "pulley_radii" else bad
     with pytest.raises(ValueError, match=named(which)):
-        jb.crossing_speeds(**{which: arg})
+        jb.crossing_speeds(jb.RunoutRig(**{which: arg}))
     with pytest.raises(ValueError, match=named("harmonics")):
-        jb.crossing_speeds(harmonics=[1.0, h])
+        jb.crossing_speeds(jb.RunoutRig(), harmonics=[1.0, h])
     with pytest.raises(ValueError, match=named("n_modes")):
-        jb.crossing_speeds(n_modes=int(min(h, 0.0)) if math.isfinite(h) else 0)
+        jb.crossing_speeds(jb.RunoutRig(), n_modes=int(min(h, 0.0)) if math.isfinite(h) else 0)
 
 
 @given(L=st.floats(0.3, 2.0), r=st.floats(0.02, 0.2), vt=st.floats(20.0, 60.0))
 @fuzz(10)
 def test_crossing_speeds_valid_are_roots_in_range(L, r, vt):
-    V = np.asarray(jb.crossing_speeds(L, (r,), vt, n_modes=2, harmonics=2))
+    V = np.asarray(jb.crossing_speeds(jb.RunoutRig(length=L, pulley_radii=(r,), wave_speed=vt), n_modes=2, harmonics=2))
     n = np.arange(1, 3)[:, None, None]
     k = np.arange(1, 3)[None, None, :]
     assert V.shape == (2, 1, 2) and np.all((V > 0) & (V < vt))
@@ -820,12 +819,27 @@ def _xfail(reason):
     return pytest.mark.xfail(strict=True, reason=reason)
 
 
-@_xfail("ShapedCommand.zv/zvd do not check `omega_n`/`zeta`: omega_n=inf gives a silent zero-delay (identity) "
-        "shaper; a negative omega_n or zeta >= 1 is refused with a message about `times`, not the argument given")
-@pytest.mark.parametrize("omega, zeta", [(inf, 0.0), (-inf, 0.0), (-10.0, 0.0), (10.0, 1.5)])
+# fixed: ShapedCommand.zv/zvd did not check `omega_n`/`zeta` (omega_n=inf gave a silent identity shaper;
+# a negative omega_n or zeta >= 1 was refused with a message about `times`)
+@pytest.mark.parametrize("omega, zeta", [(inf, 0.0), (-inf, 0.0), (-10.0, 0.0), (0.0, 0.0), (nan, 0.0),
+                                         (10.0, 1.5), (10.0, 1.0), (10.0, -0.1), (10.0, nan)])
 def test_bug_shaper_mode_arguments_not_checked(omega, zeta):
-    with pytest.raises(ValueError, match="omega_n" if zeta == 0.0 else "zeta"):
-        jb.ShapedCommand.zv(PP, omega, zeta)
+    for make in (jb.ShapedCommand.zv, jb.ShapedCommand.zvd):
+        with pytest.raises(ValueError, match=named("omega_n") if zeta == 0.0 else named("zeta")):
+            make(PP, omega, zeta)
+
+
+_shaped_times = jax.jit(lambda t: jb.residual_energy(PLAT, jb.ShapedCommand(PP, t, jnp.array([0.5, 0.5]))))
+_zv_omega = jax.jit(lambda w: jb.residual_energy(PLAT, jb.ShapedCommand.zv(PP, w)))
+
+
+def test_shaper_traced_invalid_times_or_mode_refused():
+    with pytest.raises(RUNTIME, match=named("times")):
+        run(_shaped_times, jnp.array([0.02, 0.01]))
+    with pytest.raises(RUNTIME, match=named("times")):  # omega_n = inf: no silent identity shaper under jit
+        run(_zv_omega, inf)
+    rel_close(run(_shaped_times, jnp.array([0.0, 0.01])),
+              jb.residual_energy(PLAT, jb.ShapedCommand(PP, [0.0, 0.01], [0.5, 0.5])))
 
 
 @_xfail("BeltStartup/BeltChain do not check `tau_r0`: NaN/inf accepted, simulate fails with an unnamed SolveError")
@@ -884,11 +898,12 @@ def test_bug_traced_negative_rk4_step_message():
         run(_rk4_throw, -1e-4)
 
 
-@_xfail("ShapedCommand accepts decreasing `times`: end_time and residual_energy then use times[-1] as the last "
-        "impulse (quadrature 10325 vs ode 11154 for times=[0.02, 0.01])")
-def test_bug_shaped_command_decreasing_times():
+# fixed: ShapedCommand accepted decreasing `times` (end_time and residual_energy then used times[-1] as the
+# last impulse: quadrature 10325 vs ode 11154 for times=[0.02, 0.01])
+@pytest.mark.parametrize("times", [[0.02, 0.01], [0.0, 0.02, 0.01]])
+def test_bug_shaped_command_decreasing_times(times):
     with pytest.raises(ValueError, match=named("times")):
-        jb.ShapedCommand(jb.PseudoPolynomial([3.0, 4.0, 5.0]), [0.02, 0.01], [0.5, 0.5])
+        jb.ShapedCommand(jb.PseudoPolynomial([3.0, 4.0, 5.0]), times, [1.0 / len(times)] * len(times))
 
 
 @_xfail("residual_energy(method='ode') does not check rtol/atol: rtol=-1 returns finite garbage (0.5 % off)")
@@ -930,22 +945,37 @@ def test_bug_residual_energy_traced_message_names_parameter(case):
 
 
 _exciting_R = jax.jit(lambda R: jb.exciting_speeds(jb.MovingString(), R))
-_crossing_L = jax.jit(lambda L: jb.crossing_speeds(length=L))
+_exciting_T = jax.jit(lambda T: jb.exciting_speeds(jb.MovingString(tension=T), 0.1))
+_crossing_L = jax.jit(lambda L: jb.crossing_speeds(jb.RunoutRig(length=L)))
+_crossing_h = jax.jit(lambda h: jb.crossing_speeds(jb.RunoutRig(), harmonics=h))
 
 
-@_xfail("exciting_speeds/crossing_speeds under jit: invalid values are not checked (R=-0.1 gives 352.6 rad/s, "
-        "length=-1 gives negative speeds)")
-@pytest.mark.parametrize("case", ["exciting", "crossing"])
+# fixed: exciting_speeds/crossing_speeds under jit returned finite values for invalid inputs
+# (R=-0.1 gave 352.6 rad/s, length=-1 negative speeds, a negative tension a silent NaN)
+@pytest.mark.parametrize("case", ["exciting", "tension", "crossing", "harmonics"])
 def test_bug_span_functions_traced_values_not_checked(case):
-    with pytest.raises(RUNTIME, match=named("pulley_radius") if case == "exciting" else named("length")):
-        run(_exciting_R, -0.1) if case == "exciting" else run(_crossing_L, -1.0)
+    f, arg, name = {
+        "exciting": (_exciting_R, -0.1, "pulley_radius"),
+        "tension": (_exciting_T, -1.0, "tension"),
+        "crossing": (_crossing_L, -1.0, "length"),
+        "harmonics": (_crossing_h, jnp.array([1.0, 0.5]), "harmonics"),
+    }[case]
+    with pytest.raises(RUNTIME, match=named(name)):
+        run(f, arg)
 
 
-@_xfail("crossing_speeds(harmonics=0) returns an empty array; harmonics=2.5 / n_modes=1.5 are truncated silently")
-@pytest.mark.parametrize("kw", [dict(harmonics=0), dict(harmonics=2.5), dict(n_modes=1.5)])
+def test_span_functions_traced_valid_values_equal_eager():
+    rel_close(run(_exciting_R, 0.1166), jb.exciting_speeds(jb.MovingString(), 0.1166))
+    rel_close(run(_crossing_L, 0.86), jb.crossing_speeds(jb.RunoutRig()))
+
+
+# fixed: crossing_speeds(harmonics=0) returned an empty array; harmonics=2.5 / n_modes=1.5 were truncated
+@pytest.mark.parametrize("kw", [dict(harmonics=0), dict(harmonics=2.5), dict(n_modes=1.5), dict(n_modes=0)])
 def test_bug_crossing_speeds_integer_arguments(kw):
     with pytest.raises(ValueError, match=named(next(iter(kw)))):
-        jb.crossing_speeds(**kw)
+        jb.crossing_speeds(jb.RunoutRig(), **kw)
+    with pytest.raises(ValueError, match=named(next(iter(kw)))):
+        jb.crossing_diagram(jb.RunoutRig(), 5.0, **kw)
 
 
 @_xfail("fluctuation_index does not check `temperature`: <= 0 or NaN gives NaN or a finite negative chi")

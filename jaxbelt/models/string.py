@@ -36,8 +36,11 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from .._checks import check_nonnegative, check_positive, check_range, is_concrete
+import numbers
+
+from .._checks import check_nonnegative, check_positive, check_range, collecting, is_concrete, record
 from .._checks import as_float_array as _arr
+from .._guard import all_ok, guard, traced_checks
 
 __all__ = [
     "MovingString",
@@ -248,9 +251,13 @@ def exciting_speeds(span: MovingString, pulley_radius, n=1, m=1):
     Example (belt-vibration report, Table 2): `exciting_speeds(MovingString(), 0.1166, n=1, m=8)` is 77.0 rad/s
     (735 rpm).
     """
-    check_positive("pulley_radius", pulley_radius, "m", "exciting_speeds")
-    check_range("n", n, 1, None, owner="exciting_speeds")
-    check_range("m", m, 1, None, owner="exciting_speeds")
+    if not isinstance(span, MovingString):
+        raise TypeError(f"exciting_speeds: `span` must be a MovingString; got {type(span).__name__}")
+    with collecting() as checks:  # concrete: raise now; traced: recorded, attached to the result below
+        check_positive("pulley_radius", pulley_radius, "m", "exciting_speeds")
+        check_range("n", n, 1, None, owner="exciting_speeds")
+        check_range("m", m, 1, None, owner="exciting_speeds")
+    checks = checks + traced_checks(span)
     R = jnp.asarray(pulley_radius, dtype=float)
     n = jnp.asarray(n, dtype=float)
     m = jnp.asarray(m, dtype=float)
@@ -258,7 +265,8 @@ def exciting_speeds(span: MovingString, pulley_radius, n=1, m=1):
     a = 2.0 * n * jnp.pi * R
     # sqrt((mL)^2 + a^2) - mL written without cancellation for large m
     root = a**2 / (jnp.sqrt((m * L) ** 2 + a**2) + m * L)
-    return span.critical_speed / (2.0 * n * jnp.pi * R**2) * root
+    out = span.critical_speed / (2.0 * n * jnp.pi * R**2) * root
+    return guard(out, checks, throw=True)[0]
 
 
 class RunoutRig(eqx.Module):
@@ -302,6 +310,9 @@ class RunoutRig(eqx.Module):
         check_range("damping_ratio", self.damping_ratio, 0.0, 1.0, hi_open=True, owner=o)
         if is_concrete(self.position) and is_concrete(self.length):
             check_range("position", self.position, 0.0, float(np.min(np.asarray(self.length))), unit="m", owner=o)
+        else:
+            record(jnp.all(jnp.isfinite(self.position) & (self.position >= 0) & (self.position <= jnp.min(self.length))),
+                   f"{o}: parameter `position` must lie in [0, length] m")
 
 
 def _crossing_root(n_pi_over_L, vt, slope):
@@ -328,8 +339,26 @@ def _crossing_root(n_pi_over_L, vt, slope):
     return jax.vmap(one)(*args).reshape(shape)
 
 
+def _positive_int(value, name, owner) -> int:
+    """A positive integer argument (static): anything else, a fraction included, is refused, not truncated."""
+    ok = False
+    if not isinstance(value, bool) and np.ndim(value) == 0 and is_concrete(value):
+        try:
+            v = float(value)
+            ok = np.isfinite(v) and v >= 1 and v == int(v)
+        except (TypeError, ValueError):
+            ok = False
+    if not ok:
+        raise ValueError(f"{owner}: parameter `{name}` must be a positive integer; got {value!r}")
+    return int(value)
+
+
 def _harmonics(harmonics, owner):
-    ks = jnp.arange(1, int(harmonics) + 1, dtype=float) if np.ndim(harmonics) == 0 else _arr(harmonics)
+    if np.ndim(harmonics) == 0 and is_concrete(harmonics):
+        return jnp.arange(1, _positive_int(harmonics, "harmonics", owner) + 1, dtype=float)
+    ks = _arr(harmonics)
+    if ks.ndim != 1 or ks.shape[0] < 1:
+        raise ValueError(f"{owner}: `harmonics` must be a positive integer or a 1-D sequence of orders; got shape {ks.shape}")
     check_range("harmonics", ks, 1, None, owner=owner)
     return ks
 
@@ -351,13 +380,22 @@ def crossing_speeds(rig: RunoutRig, n_modes: int = 2, harmonics=1):
     L = 0.86 m, r = 0.063 m, v_t = 41.0 m/s): 8.98 m/s (mode 1), 16.02 m/s (mode 2).
     """
     o = "crossing_speeds"
-    if int(n_modes) < 1:
-        raise ValueError(f"{o}: `n_modes` must be >= 1; got {n_modes}")
-    ks = _harmonics(harmonics, o)
+    if not isinstance(rig, RunoutRig):
+        raise TypeError(f"{o}: `rig` must be a RunoutRig; got {type(rig).__name__}")
+    n_modes = _positive_int(n_modes, "n_modes", o)
+    with collecting() as checks:  # concrete: raise now; traced: recorded, attached to the result below
+        ks = _harmonics(harmonics, o)
+    checks = checks + traced_checks(rig)
     r = jnp.atleast_1d(rig.pulley_radii)
-    n = jnp.arange(1, int(n_modes) + 1, dtype=float)
+    L, vt = rig.length, rig.wave_speed
+    if checks:  # traced: the root finder gets valid stand-ins where a check fails; the result is refused
+        ok = all_ok(checks)
+        ks, r = jnp.where(ok, ks, 1.0), jnp.where(ok, r, 1.0)
+        L, vt = jnp.where(ok, L, 1.0), jnp.where(ok, vt, 1.0)
+    n = jnp.arange(1, n_modes + 1, dtype=float)
     slope = ks[None, None, :] / r[None, :, None]
-    return _crossing_root(n[:, None, None] * jnp.pi / rig.length, rig.wave_speed, slope)
+    out = _crossing_root(n[:, None, None] * jnp.pi / L, vt, slope)
+    return guard(out, checks, throw=True)[0]
 
 
 def crossing_diagram(rig: RunoutRig, speed, n_modes: int = 2, harmonics=1):
@@ -369,14 +407,19 @@ def crossing_diagram(rig: RunoutRig, speed, n_modes: int = 2, harmonics=1):
     `speed.shape + (n_pulleys, n_harmonics)`.
     """
     o = "crossing_diagram"
+    if not isinstance(rig, RunoutRig):
+        raise TypeError(f"{o}: `rig` must be a RunoutRig; got {type(rig).__name__}")
+    n_modes = _positive_int(n_modes, "n_modes", o)
+    with collecting() as checks:
+        ks = _harmonics(harmonics, o)
+    checks = checks + traced_checks(rig)
     vt = rig.wave_speed
     speed = _check_subcritical(speed, vt, o)
-    ks = _harmonics(harmonics, o)
     r = jnp.atleast_1d(rig.pulley_radii)
-    n = jnp.arange(1, int(n_modes) + 1, dtype=float)
+    n = jnp.arange(1, n_modes + 1, dtype=float)
     natural = (jnp.pi / rig.length) * vt * (1.0 - (speed / vt) ** 2)[..., None] * n
     load = speed[..., None, None] * ks / r[:, None]
-    return natural, load
+    return guard((natural, load), checks, throw=True)[0]
 
 
 # --- linear forced response to pulley run-out ------------------------------------------------------

@@ -40,9 +40,12 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import is_concrete
-from .._guard import error_if, guard, traced_checks
-from ..commands import MIN_EXPONENT_GAP, PseudoPolynomial, ShapedCommand, falling_factorial
+import numbers
+
+from .._checks import check_positive, is_concrete
+from .._guard import all_ok, error_if, guard, traced_checks
+from ..commands import AbstractMotionCommand, MIN_EXPONENT_GAP, PseudoPolynomial, ShapedCommand, falling_factorial
+from ..models.platform import BeltPlatform
 
 _P = 4  # substitution power u = v**p
 
@@ -59,7 +62,7 @@ def _guard_exponents(cmd: PseudoPolynomial) -> PseudoPolynomial:
     g = cmd.gammas
     lo = max(cmd.order, 2)
     diff = jnp.abs(g[:, None] - g[None, :]) + jnp.eye(g.shape[0])
-    bad = jnp.any(g <= lo) | jnp.any(diff < MIN_EXPONENT_GAP * (1 - 1e-9))
+    bad = ~(jnp.all(g > lo) & jnp.all(diff >= MIN_EXPONENT_GAP * (1 - 1e-9)))  # NaN counts as bad
     g = error_if(
         g, bad, f"PseudoPolynomial: exponents must be at least {MIN_EXPONENT_GAP:g} apart and each > {lo} "
         "(eq. 23 singular or ill-conditioned, or acceleration infinite at T)"
@@ -187,12 +190,30 @@ def residual_energy(plat, cmd, *, method: str = "quadrature", n_nodes: int = 128
     A pure scalar function: `jax.grad` (w.r.t. `cmd.gammas` or platform parameters),
     `jax.vmap` and `jax.jit` compose with it.
     """
+    o = "residual_energy"
+    if not isinstance(plat, BeltPlatform):
+        raise TypeError(f"{o}: `plat` must be a BeltPlatform; got {type(plat).__name__}")
+    if not isinstance(cmd, AbstractMotionCommand):
+        raise TypeError(
+            f"{o}: `cmd` must be a motion command (PseudoPolynomial, ShapedCommand, ...); got {type(cmd).__name__}"
+        )
     if method not in ("quadrature", "ode"):
         raise ValueError(f"residual_energy: `method` must be 'quadrature' or 'ode'; got {method!r}")
+    _check_int(o, "n_nodes", n_nodes, _MIN_NODES)
     if method == "quadrature":  # the tolerances play no part: fixed values keep one compiled program
         rtol, atol, max_steps = 0.0, 0.0, 0
-    checks = traced_checks(plat, cmd)  # empty when the values are concrete (checked at construction)
+        checks = traced_checks(plat, cmd)  # empty when the values are concrete (checked at construction)
+    else:
+        _check_int(o, "max_steps", max_steps, 1)
+        tol_checks = _tolerance_checks(o, rtol, atol)
+        if tol_checks:  # traced: the solver gets safe tolerances, the result is refused by the checks
+            tol_ok = all_ok(tol_checks)
+            rtol, atol = jnp.where(tol_ok, rtol, 1e-12), jnp.where(tol_ok, atol, 1e-15)
+        checks = traced_checks(plat, cmd) + tol_checks
+    params_ok = all_ok(checks)
     H, err = _residual_energy_jit(plat, cmd, rtol, atol, method=method, n_nodes=int(n_nodes), max_steps=int(max_steps))
+    # the parameter checks first: an invalid parameter is reported as such, not as a quadrature failure
+    H, _ = guard(H, checks, throw=True)
     if is_concrete(err):
         if not float(err) <= QUADRATURE_TOL:
             wT = float(plat.omega_d * _end(cmd))
@@ -203,12 +224,31 @@ def residual_energy(plat, cmd, *, method: str = "quadrature", n_nodes: int = 128
             )
     else:
         H = error_if(
-            H, ~(err <= QUADRATURE_TOL),
+            H, ~(err <= QUADRATURE_TOL) & params_ok,
             f"residual_energy: the {n_nodes}-node quadrature does not resolve the vibration during the move "
             "(estimated relative error above 1e-8): pass a larger n_nodes (about 8*omega_d*T) or method='ode'",
         )
-    H, _ = guard(H, checks, throw=True)
     return H
+
+
+#: Fewest Gauss-Legendre nodes of the quadrature (its error estimate compares with a rule of 3/4 as many).
+_MIN_NODES = 8
+
+
+def _check_int(owner, name, value, lo):
+    """Refuse anything but an integer >= lo (a float or a bool is refused, not truncated)."""
+    if isinstance(value, bool) or not isinstance(value, (numbers.Integral, np.integer)) or int(value) < lo:
+        raise ValueError(f"{owner}: parameter `{name}` must be an integer >= {lo}; got {value!r}")
+
+
+def _tolerance_checks(owner, rtol, atol):
+    """Check `rtol`/`atol` (finite and > 0): raise when concrete, return the recorded checks when traced."""
+    from .._checks import collecting
+
+    with collecting() as found:
+        check_positive("rtol", rtol, owner=owner)
+        check_positive("atol", atol, owner=owner)
+    return found
 
 
 def _end(cmd):
