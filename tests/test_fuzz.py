@@ -906,31 +906,48 @@ def test_bug_shaped_command_decreasing_times(times):
         jb.ShapedCommand(jb.PseudoPolynomial([3.0, 4.0, 5.0]), times, [1.0 / len(times)] * len(times))
 
 
-@_xfail("residual_energy(method='ode') does not check rtol/atol: rtol=-1 returns finite garbage (0.5 % off)")
-@pytest.mark.parametrize("bad", [-1.0])
+_H_ode_tol = jax.jit(lambda rtol, atol: jb.residual_energy(PLAT, PP, method="ode", rtol=rtol, atol=atol, max_steps=4096))
+
+
+# fixed: residual_energy(method='ode') did not check rtol/atol (rtol=-1 returned finite garbage, 0.5 % off)
+@pytest.mark.parametrize("bad", [-1.0, 0.0, nan, inf])
 def test_bug_residual_energy_ode_tolerances_not_checked(bad):
     with pytest.raises(ValueError, match=named("rtol")):
         jb.residual_energy(PLAT, PP, method="ode", rtol=bad)
+    with pytest.raises(ValueError, match=named("atol")):
+        jb.residual_energy(PLAT, PP, method="ode", atol=bad)
+    with pytest.raises(RUNTIME, match=named("rtol")):
+        run(_H_ode_tol, bad, 1e-12)
+    with pytest.raises(RUNTIME, match=named("atol")):
+        run(_H_ode_tol, 1e-10, bad)
 
 
-@_xfail("residual_energy n_nodes <= 0 raises numpy's 'deg must be a positive integer', not naming `n_nodes`")
-@pytest.mark.parametrize("bad", [0, -5])
+@pytest.mark.parametrize("bad", [0, -3, 2.5, None])
+def test_residual_energy_ode_max_steps_checked(bad):
+    with pytest.raises(ValueError, match=named("max_steps")):
+        jb.residual_energy(PLAT, PP, method="ode", max_steps=bad)
+
+
+# fixed: residual_energy n_nodes <= 0 raised numpy's 'deg must be a positive integer'
+@pytest.mark.parametrize("bad", [0, -5, 4, 64.5])
 def test_bug_residual_energy_n_nodes_message(bad):
     with pytest.raises(ValueError, match=named("n_nodes")):
         jb.residual_energy(PLAT, PP, n_nodes=bad)
 
 
-@_xfail("residual_energy of a non-platform model raises AttributeError ('damping_ratio'), not TypeError")
+# fixed: residual_energy of a non-platform model raised AttributeError ('damping_ratio')
 def test_bug_residual_energy_wrong_model_type():
-    with pytest.raises(TypeError):
+    with pytest.raises(TypeError, match="BeltPlatform"):
         jb.residual_energy(jb.BeltStartup(), PP)
+    with pytest.raises(TypeError, match="motion command"):
+        jb.residual_energy(PLAT, jb.ConstantVoltage(1.0))
 
 
 _H_k = jax.jit(lambda k: jb.residual_energy(jb.BeltPlatform(k=k), jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]))))
 
 
-@_xfail("traced invalid platform `k`/`J` or NaN `gammas`: residual_energy raises the quadrature-resolution message "
-        "first, which does not name the parameter (the guard on exponents is NaN-blind)")
+# fixed: traced invalid platform `k`/`c` or NaN `gammas` raised the quadrature-resolution message first
+# (the guard on exponents was NaN-blind)
 @pytest.mark.parametrize("case", ["k", "c", "gammas"])
 def test_bug_residual_energy_traced_message_names_parameter(case):
     if case == "k":
