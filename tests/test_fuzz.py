@@ -995,14 +995,44 @@ def test_bug_crossing_speeds_integer_arguments(kw):
         jb.crossing_diagram(jb.RunoutRig(), 5.0, **kw)
 
 
-@_xfail("fluctuation_index does not check `temperature`: <= 0 or NaN gives NaN or a finite negative chi")
-@pytest.mark.parametrize("bad", [-1.0, 0.0, nan])
+_chi_temperature = jax.jit(lambda sol, t: jb.fluctuation_index(sol, 0.02, 0.05, smooth=True, temperature=t))
+
+
+# fixed: fluctuation_index did not check `temperature` (<= 0 or NaN gave NaN or a finite negative chi)
+@pytest.mark.parametrize("bad", [-1.0, 0.0, nan, inf])
 def test_bug_fluctuation_temperature_not_checked(fb_solution, bad):
     with pytest.raises(ValueError, match=named("temperature")):
         jb.fluctuation_index(fb_solution, 0.02, 0.05, smooth=True, temperature=bad)
+    with pytest.raises(RUNTIME, match=named("temperature")):
+        run(_chi_temperature, fb_solution, bad)
 
 
-@_xfail("fluctuation_index under jit with a window holding < 2 samples returns a silent NaN (no run-time check)")
-def test_bug_fluctuation_traced_empty_window(fb_solution):
+def test_fluctuation_traced_temperature_valid_equals_eager(fb_solution):
+    rel_close(run(_chi_temperature, fb_solution, 3e-4),
+              jb.fluctuation_index(fb_solution, 0.02, 0.05, smooth=True, temperature=3e-4))
+
+
+# fixed: fluctuation_index under jit with a window holding < 2 samples returned a silent NaN
+@pytest.mark.parametrize("t0, t1", [(0.06, 0.07), (0.0301, 0.0302), (-1.0, -0.5)])
+def test_bug_fluctuation_traced_empty_window(fb_solution, t0, t1):
     with pytest.raises(RUNTIME, match="window"):
-        run(_chi_window, fb_solution, 0.06, 0.07)
+        run(_chi_window, fb_solution, t0, t1)
+
+
+# fixed: an infinite window bound was accepted (it silently meant the first/last sample)
+@pytest.mark.parametrize("t0, t1", [(-inf, 0.05), (0.02, inf), (nan, 0.05)])
+def test_fluctuation_index_infinite_bound_refused(fb_solution, t0, t1):
+    name = "t0" if not math.isfinite(t0) else "t1"
+    with pytest.raises(ValueError, match=named(name)):
+        jb.fluctuation_index(fb_solution, t0, t1)
+    with pytest.raises(RUNTIME, match=named(name)):
+        run(_chi_window, fb_solution, t0, t1)
+
+
+# fixed: fluctuation_objective(..., average=...) raised a TypeError from an inner function
+def test_fluctuation_objective_average():
+    drive, pid = jb.FourBarDrive(), jb.PID()
+    with pytest.raises(ValueError, match=named("average")):
+        jb.fluctuation_objective(drive, pid, average="median")
+    with pytest.raises(ValueError, match=named("average")):
+        jb.objectives.closed_loop_metrics(drive, pid, average="median")

@@ -30,8 +30,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import check_positive, collecting, is_concrete, record
+from .._guard import guard
 from ..scene import Scene
 from ..solve import simulate
+
+_O = "fluctuation index"
+_WINDOW_MSG = f"{_O}: the window [t0, t1] must contain at least two output times"
 
 
 def _node_weights(ts, t0, t1):
@@ -48,9 +53,23 @@ def _node_weights(ts, t0, t1):
 
 
 def _check_window(inside, w):
-    if not isinstance(inside, jax.core.Tracer) and not isinstance(w, jax.core.Tracer):
+    """Raise (concrete) or record (traced) the check that the window holds at least two samples."""
+    if is_concrete((inside, w)):
         if int(np.sum(np.asarray(inside))) < 2 or not float(np.sum(np.asarray(w))) > 0:
-            raise ValueError("fluctuation index: the window [t0, t1] must contain at least two output times")
+            raise ValueError(_WINDOW_MSG)
+    else:
+        record((jnp.sum(inside) >= 2) & (jnp.sum(w) > 0), _WINDOW_MSG)
+
+
+def _check_bound(name, value):
+    """A window bound must be finite (an infinite one would silently mean 'from the first sample')."""
+    msg = f"{_O}: parameter `{name}` (a bound of the window [t0, t1]) must be finite"
+    if is_concrete(value):
+        v = np.asarray(value, dtype=float)
+        if not np.all(np.isfinite(v)):
+            raise ValueError(f"{msg}; got {v.tolist()}")
+    else:
+        record(jnp.all(jnp.isfinite(jnp.asarray(value, dtype=float))), msg)
 
 
 _AVERAGES = ("mean", "midrange")
@@ -68,8 +87,19 @@ def chi_from_samples(ts, speed, t0=None, t1=None, *, smooth: bool = False, tempe
     if average not in _AVERAGES:
         raise ValueError(f"fluctuation index: `average` must be one of {_AVERAGES}; got {average!r}")
     speed = jnp.asarray(speed, dtype=float)
-    inside, w = _node_weights(ts, t0, t1)
-    _check_window(inside, w)
+    # concrete: each check raises at once; traced: recorded and attached to the result (a run-time error)
+    with collecting() as checks:
+        for name, bound in (("t0", t0), ("t1", t1)):
+            if bound is not None:
+                _check_bound(name, bound)
+        if smooth:
+            check_positive("temperature", temperature, owner=_O)
+        inside, w = _node_weights(ts, t0, t1)
+        _check_window(inside, w)
+    return guard(_chi(speed, inside, w, smooth, temperature, average), checks, throw=True)[0]
+
+
+def _chi(speed, inside, w, smooth, temperature, average):
     wsum = jnp.sum(w)
     avg = jnp.sum(w * speed, axis=-1) / wsum
     if not smooth:
@@ -120,14 +150,17 @@ def _grid(t1, dt_save):
 
 def closed_loop_metrics(
     drive, pid, t0=0.375, t1=0.5, *, temperature=3e-4, peak_temperature=0.5, dt_save=5e-4,
-    method="ode", rtol=1e-8, atol=1e-8, dt=1e-3, max_steps=100_000, adjoint=None,
+    method="ode", rtol=1e-8, atol=1e-8, dt=1e-3, max_steps=100_000, adjoint=None, average="mean",
 ):
     """χ (exact and smooth) over [t0, t1] and peak |voltage| and |current| over [0, t1].
 
     Simulates `drive` with the controller (or command) `pid` from rest at t = 0. Peaks are given
     exact (`v_peak`, `i_peak`) and smooth (`v_peak_smooth`, `i_peak_smooth`: log-sum-exp with
-    temperature `peak_temperature` in V or A, >= the exact peak). Returns a dict of scalars.
+    temperature `peak_temperature` in V or A, >= the exact peak). `average` as in `chi_from_samples`.
+    Returns a dict of scalars.
     """
+    if average not in _AVERAGES:
+        raise ValueError(f"{_O}: `average` must be one of {_AVERAGES}; got {average!r}")
     ts = _grid(t1, dt if method == "rk4" else dt_save)
     scene = Scene(drive, pid, ts=ts, observe=("motor_speed", "voltage"))
     sol = simulate(scene, method=method, rtol=rtol, atol=atol, dt=dt, max_steps=max_steps, adjoint=adjoint)
@@ -138,8 +171,8 @@ def closed_loop_metrics(
         return peak_temperature * jax.nn.logsumexp(jnp.abs(x) / peak_temperature)
 
     return {
-        "chi": chi_from_samples(ts, speed, t0, t1),
-        "chi_smooth": chi_from_samples(ts, speed, t0, t1, smooth=True, temperature=temperature),
+        "chi": chi_from_samples(ts, speed, t0, t1, average=average),
+        "chi_smooth": chi_from_samples(ts, speed, t0, t1, smooth=True, temperature=temperature, average=average),
         "v_peak": jnp.max(jnp.abs(v)),
         "i_peak": jnp.max(jnp.abs(i)),
         "v_peak_smooth": speak(v),
@@ -153,6 +186,7 @@ def fluctuation_objective(drive, pid, t0=0.375, t1=0.5, *, smooth=True, temperat
     Simulates from rest (diffrax by default; `method="rk4", dt=1e-3` reproduces the paper's
     integration) and returns the smooth χ (default) or the exact one. Differentiable with
     respect to every array field of `drive` and `pid` (use `eqx.filter_grad`), and `vmap`-able.
+    Other keywords (`average`, `method`, `dt`, ...) go to `closed_loop_metrics`.
     """
     m = closed_loop_metrics(drive, pid, t0, t1, temperature=temperature, **kw)
     return m["chi_smooth"] if smooth else m["chi"]
