@@ -37,9 +37,14 @@ def as_float_array(x):
         key = (x, math.copysign(1.0, x), dtype)
         hit = _SCALARS.get(key)
         if hit is None:
+            # made outside any trace: a cached tracer would leak into later, unrelated programs
+            with jax.ensure_compile_time_eval():
+                hit = jnp.asarray(x, dtype=dtype)
+            if isinstance(hit, jax.core.Tracer):
+                return hit
             if len(_SCALARS) >= _SCALARS_MAX:
                 _SCALARS.clear()
-            hit = _SCALARS[key] = jnp.asarray(x, dtype=dtype)
+            _SCALARS[key] = hit
         return hit
     return jnp.asarray(x, dtype=float)
 

@@ -167,8 +167,20 @@ def identify(
             raise ValueError("identify: `sigma` (noise standard deviation, data units) must be finite and > 0")
         w = 1.0 / sig
     is_log, scale = _transform(p0)
-    u, r, jac, ok, steps = _fit(predict, names, jnp.asarray(p0), jnp.asarray(data), jnp.asarray(w),
-                                jnp.asarray(is_log), jnp.asarray(scale), solver, jac, rtol, atol, int(max_steps))
+    args = (predict, names, jnp.asarray(p0), jnp.asarray(data), jnp.asarray(w), jnp.asarray(is_log),
+            jnp.asarray(scale), solver)
+    try:
+        u, r, jac, ok, steps = _fit(*args, jac, rtol, atol, int(max_steps))
+    except TypeError as e:
+        if jac != "fwd" or "custom_vjp" not in str(e):
+            raise
+        # `predict` holds a reverse-mode-only solve (diffrax's default adjoint): use a reverse Jacobian
+        warnings.warn(
+            "identify: `predict` cannot be differentiated in forward mode (a simulate(...) with the default "
+            "reverse-mode adjoint); using jac='bwd'. Pass adjoint='forward' to simulate for the faster forward Jacobian.",
+            stacklevel=2,
+        )
+        u, r, jac, ok, steps = _fit(*args, "bwd", rtol, atol, int(max_steps))
     u, r, jac = np.asarray(u), np.asarray(r), np.asarray(jac)
     if not bool(ok):
         raise RuntimeError(

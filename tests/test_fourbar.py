@@ -298,8 +298,9 @@ def test_identify_recovers_default_from_published_indices():
 
     def indices(p):
         d = eqx.tree_at(lambda m: (m.a, m.R), base, (p["a"], p["R"]))
-        o = closed_loop_metrics(d, jb.ConstantVoltage(25.0), 0.5, 1.0, method="rk4", dt=1e-3)["chi"]
-        c = closed_loop_metrics(d, jb.PID(), 0.375, 0.5, method="rk4", dt=1e-3)["chi"]
+        # forward-mode derivatives through the solve: identify's Jacobian is a jacfwd
+        o = closed_loop_metrics(d, jb.ConstantVoltage(25.0), 0.5, 1.0, method="rk4", dt=1e-3, adjoint="forward")["chi"]
+        c = closed_loop_metrics(d, jb.PID(), 0.375, 0.5, method="rk4", dt=1e-3, adjoint="forward")["chi"]
         return jnp.stack([o, c])
 
     res = jb.identify(indices, {"a": 0.0884 * 1.05, "R": 0.886 * 0.95}, np.array([0.543, 0.026]),

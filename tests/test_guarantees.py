@@ -235,3 +235,20 @@ def test_cli_output_without_suffix_prints_the_written_name(tmp_path):
     assert r.returncode == 0, r.stderr
     written = tmp_path / "fig.png"
     assert written.exists() and f"wrote {written}" in r.stdout
+
+
+def test_no_tracer_leaks_between_programs():
+    """Models built inside one jitted program must not leak values into another (a cached constant made
+    inside a trace once broke every later program with 'Execution supplied 1 arguments ...')."""
+    ts = jnp.linspace(0.0, 0.5, 51)
+
+    def batch(gammas):
+        return jb.simulate(jb.Scene(jb.BeltStartup(), jb.ExponentialVoltage(24.0, gammas), ts=ts)).ys
+
+    def scalar(gamma):
+        return jb.simulate(jb.Scene(jb.BeltStartup(), jb.ExponentialVoltage(24.0, gamma), ts=ts), method="expm").ys
+
+    x = jnp.array([0.013, 0.027])
+    out = jax.jit(batch)(x)
+    ref = np.stack([np.asarray(jax.jit(scalar)(g)) for g in x])
+    np.testing.assert_allclose(out, ref, rtol=1e-9, atol=1e-9 * float(np.max(np.abs(ref))))

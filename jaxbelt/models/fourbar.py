@@ -29,7 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_fields
+from .._checks import check_fields, check_positive
 from .._checks import as_float_array as _arr
 from .base import AbstractModel, integrand, observable
 from ..commands import AbstractVoltageSource, MotorState

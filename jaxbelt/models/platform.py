@@ -13,9 +13,11 @@ from __future__ import annotations
 from typing import ClassVar
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
+import numpy as np
 
-from .._checks import check_nonnegative, check_positive, is_concrete
+from .._checks import check_nonnegative, check_positive, is_concrete, record
 from .._checks import as_float_array as _arr
 from ..commands import AbstractMotionCommand
 from .base import AbstractModel, integrand, observable
@@ -71,11 +73,15 @@ class BeltPlatform(AbstractModel):
         check_positive("r", self.r, "m", o)
         check_positive("R", self.R, "m", o)
         check_positive("z", self.z, "", o)
-        if is_concrete(self) and not bool(jnp.all(self.damping_ratio < 1.0)):
-            raise ValueError(
-                f"{o}: the platform must be underdamped (damping ratio xi = c_t / (2 J omega_n) < 1); "
-                f"got xi = {jnp.asarray(self.damping_ratio).tolist()} (lower `c` or raise `k`)"
-            )
+        msg = (f"{o}: the platform must be underdamped (damping ratio xi = c_t / (2 J omega_n) < 1); "
+               "lower `c` or raise `k`")
+        if is_concrete(self):
+            with jax.ensure_compile_time_eval():  # host values even when built inside a trace
+                xi = np.asarray(self.damping_ratio)
+            if not np.all(xi < 1.0):
+                raise ValueError(f"{msg}; got xi = {xi.tolist()}")
+        else:
+            record(jnp.all(self.damping_ratio < 1.0), msg)
 
     # --- derived constants ------------------------------------------------------------------
     @property

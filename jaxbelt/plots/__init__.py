@@ -12,7 +12,7 @@ from .string import plot_frequency_harmonics as plot_frequency_harmonics
 from .string import plot_galerkin_convergence as plot_galerkin_convergence
 from .string import plot_runout_response as plot_runout_response
 from .string import string_figure as string_figure
-from .nonlinear import nonlinear_figure as nonlinear_figure
+from .nonlinear import response_figure as response_figure
 from .shaping import plot_fig3 as plot_fig3
 from .shaping import plot_sensitivity as plot_sensitivity
 from .shaping import shaping_figure as shaping_figure

@@ -5,7 +5,7 @@ computed by the caller (`jaxbelt.models.nonlinear`); nothing here simulates.
 - `plot_phase_plane`: $\\zeta^R_1$-$\\zeta^I_1$ trajectories ending on two limit cycles (Fig. 6);
 - `plot_backbone`: modal amplitudes of the sweeps, KBM amplitudes (eq. 31) and backbone (eq. 33) (Fig. 7);
 - `plot_response_curve`: a `ResponseCurve` with its unstable branch, folds and the measured jumps (Fig. 8 analogue);
-- `plot_ramp`: a `RampRecord` (Fig. 3); `response_figure` (alias `nonlinear_figure`): the page of `jaxbelt nonlinear`.
+- `plot_ramp`: a `RampRecord` (Fig. 3); `response_figure`: the page of `jaxbelt nonlinear`.
 """
 
 from __future__ import annotations
@@ -123,4 +123,3 @@ def response_figure(curve, ramp_up, ramp_down, measurements, summary: str = "", 
     return fig
 
 
-nonlinear_figure = response_figure
