@@ -262,6 +262,11 @@ def simulate(
     elif not isinstance(adjoint, diffrax.AbstractAdjoint):
         raise ValueError(f"simulate: `adjoint` must be None, 'forward' or a diffrax adjoint; got {adjoint!r}")
     checks = traced_checks(model, inp) + _value_checks(scene, method, rtol, atol, dt0)
+    if method == "rk4" and not is_concrete(dt0):
+        # a traced invalid step is refused by the recorded check; diffrax gets a harmless stand-in
+        # (one step over the whole span) instead of failing inside on `(t1 - t0) * dt0 >= 0`
+        dt0 = jnp.asarray(dt0, dtype=float)
+        dt0 = jnp.where(jnp.isfinite(dt0) & (dt0 > 0), dt0, 1.0)
     sol = _run(
         scene, method, solver, jnp.asarray(rtol, dtype=float), jnp.asarray(atol, dtype=float),
         None if dt0 is None else jnp.asarray(dt0, dtype=float), int(max_steps), bool(progress), adjoint,

@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_nonnegative, check_positive, is_concrete
+from .._checks import check_finite, check_nonnegative, check_positive, is_concrete
 from .._checks import as_float_array as _arr
 from ..commands import AbstractVoltageCommand
 from .base import AbstractLinearModel, integrand, observable
@@ -90,6 +90,8 @@ class _BeltDriveBase(AbstractLinearModel):
         check_positive("k", self.k, "N/m", owner)
         check_nonnegative("c", self.c, "N s/m", owner)
         check_nonnegative("mu", self.mu, "N m s/rad", owner)
+        # constant part of the load torque tau_r = tau_r0 + mu * omega (Incerti, 2014): any finite value
+        check_finite("tau_r0", self.tau_r0, owner=owner)
         check_positive("z", self.z, "", owner)
         check_positive("R", self.R, "ohm", owner)
         check_positive("L", self.L, "H", owner)

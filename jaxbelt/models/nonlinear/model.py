@@ -70,7 +70,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..._checks import check_nonnegative, check_positive, check_range, is_concrete
+from ..._checks import check_nonnegative, check_positive, check_range, is_concrete, record
 from ..._checks import as_float_array as _arr
 from ...commands import AbstractRunningSpeed
 from ..base import AbstractModel, integrand, observable
@@ -85,6 +85,10 @@ class RunningSpeed(AbstractRunningSpeed):
     """Input of a `NonlinearBelt` scene: the constant belt running speed $V$ [m/s]."""
 
     speed: jnp.ndarray = eqx.field(converter=_arr)
+
+    def __check_init__(self):
+        # the sub-critical bound (speed < the belt's wave speed) is the belt's: `NonlinearBelt.check_speed`
+        check_nonnegative("speed", self.speed, "m/s", "RunningSpeed")
 
     def speed_at(self, t):
         return self.speed + 0.0 * jnp.asarray(t, dtype=float)
@@ -294,6 +298,8 @@ class NonlinearBelt(AbstractModel):
                     f"{o}: parameter `runout` must be small against the span (< 0.1 span = "
                     f"{0.1 * float(self.span):g} m); got {np.asarray(self.runout).tolist()}"
                 )
+        else:  # traced: recorded, attached to the results by `simulate` (see `jaxbelt._guard`)
+            record(jnp.all(self.runout < 0.1 * self.span), f"{o}: parameter `runout` must be small against the span (< 0.1 span)")
 
     input_types: ClassVar[tuple[type, ...]] = (AbstractRunningSpeed,)
 
@@ -311,7 +317,7 @@ class NonlinearBelt(AbstractModel):
             bad = s[~np.isfinite(s) | (s < 0) | (s >= np.min(np.asarray(self.wave_speed)))]
             if bad.size:
                 raise ValueError(
-                    f"NonlinearBelt: running speed must lie in [0, wave_speed) = [0, {vt:g}) m/s "
+                    f"NonlinearBelt: parameter `speed` (running speed) must lie in [0, wave_speed) = [0, {vt:g}) m/s "
                     f"(sub-critical travelling string); got {bad.tolist()} m/s"
                 )
 
