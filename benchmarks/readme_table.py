@@ -174,8 +174,8 @@ def update_readme(readme: Path | None = None, results_dir: Path = RESULTS, print
     if docs_page is not None:
         update_docs_page(docs_page, results_dir)
     if not _replace_block(readme, table):
-        print(f"readme_table: {readme.name} has no '{START}' ... '{END}' markers; the table is:\n")
-        print(table)
+        print(f"readme_table: {readme.name} has no '{START}' ... '{END}' markers; the tables are:\n")
+        print(build_table(results_dir))
         return False
     print(f"readme_table: updated the benchmark table in {readme}")
     return True
