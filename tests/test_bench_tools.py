@@ -24,14 +24,20 @@ def test_readme_table_replaces_only_the_marked_block(tmp_path):
     results = _result(tmp_path, "startup", [{"what": "per trajectory", "value": 7.25, "unit": "us", "target": "<= 20 us"},
                                             {"what": "error", "value": 3.1e-13, "unit": "rel", "target": None}])
     readme = tmp_path / "README.md"
-    readme.write_text("# title\n\nintro\n<!-- bench:start -->\nold table\n<!-- bench:end -->\ntail\n")
-    assert readme_table.update_readme(readme, results)
-    text = readme.read_text()
-    assert text.startswith("# title\n\nintro\n<!-- bench:start -->\n")
-    assert text.endswith("<!-- bench:end -->\ntail\n")
-    assert "old table" not in text
+    page = tmp_path / "benchmarks.md"
+    for f in (readme, page):
+        f.write_text("# title\n\nintro\n<!-- bench:start -->\nold table\n<!-- bench:end -->\ntail\n")
+    assert readme_table.update_readme(readme, results, docs_page=page)
+    for f in (readme, page):
+        text = f.read_text()
+        assert text.startswith("# title\n\nintro\n<!-- bench:start -->\n")
+        assert text.endswith("<!-- bench:end -->\ntail\n")
+        assert "old table" not in text
+    # the docs page holds every headline row; the README links to it
+    text = page.read_text()
     assert "| startup | per trajectory | 7.25 us | <= 20 us | cpu, 2 cores | quick |" in text
     assert "| startup | error | 3.1e-13 rel | – |" in text
+    assert "docs/benchmarks.md" in readme.read_text()
 
 
 def test_readme_without_markers_is_left_alone(tmp_path, capsys):

@@ -8,7 +8,7 @@ band widths, and writes the figure (paper's Fig. 3 + sensitivity plot).
 from __future__ import annotations
 
 
-from ._args import image_path
+from ._args import float_in, image_path, positive_float
 
 
 def register(subparsers):
@@ -17,16 +17,16 @@ def register(subparsers):
     p.add_argument("--figure", choices=["overview", "profiles"], default="overview",
                    help="overview: optimisation, Fig. 3 and sensitivity (default); profiles: the paper's Fig. 2, "
                         "3-4-5 polynomial vs 4.5-6.2-8.4 pseudo-polynomial (T = 1 s, Phi = 1 rad), with C_i printed")
-    p.add_argument("--gammas", type=float, nargs="+", default=[3.0, 4.0, 5.0], help="start exponents (default 3 4 5)")
-    p.add_argument("--duration", type=float, default=1.0, help="motion time T [s] (default 1)")
-    p.add_argument("--revolutions", type=float, default=15.0, help="motor displacement [rev] (default 15)")
+    p.add_argument("--gammas", type=float_in(2.0, 100.0, lo_open=True), nargs="+", default=[3.0, 4.0, 5.0], help="start exponents (default 3 4 5)")
+    p.add_argument("--duration", type=positive_float, default=1.0, help="motion time T [s] (default 1)")
+    p.add_argument("--revolutions", type=positive_float, default=15.0, help="motor displacement [rev] (default 15)")
     p.add_argument("--robust-order", type=int, nargs="*", default=[4], choices=[2, 3, 4, 5],
                    help="orders n of band-robust commands to add (none: --robust-order with no value; default 4)")
     p.add_argument("--robust-mode", default="mean", choices=["mean", "max"],
                    help="robust objective over the band: mean or smooth worst case (default mean)")
-    p.add_argument("--band", type=float, nargs=2, default=[0.8, 1.2],
+    p.add_argument("--band", type=float_in(0.0, 10.0, lo_open=True), nargs=2, default=[0.8, 1.2],
                    help="robust band as fractions of omega_n (default 0.8 1.2)")
-    p.add_argument("--spread", type=float, default=0.3, help="sensitivity sweep +-spread around omega_n (default 0.3)")
+    p.add_argument("--spread", type=float_in(0.0, 1.0, lo_open=True, hi_open=True), default=0.3, help="sensitivity sweep +-spread around omega_n (default 0.3)")
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
     p.set_defaults(func=run)
 
