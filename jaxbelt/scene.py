@@ -76,6 +76,10 @@ class Scene(eqx.Module):
             )
         self.model = model
         self.input = input
+        if is_concrete((model, input)):
+            for ok, message in model.input_checks(input):
+                if not bool(np.all(np.asarray(ok))):
+                    raise ValueError(message)
         self.observe = _as_tuple(observe)
         for name in self.observe:
             if not isinstance(name, str):

@@ -262,6 +262,8 @@ def simulate(
     elif not isinstance(adjoint, diffrax.AbstractAdjoint):
         raise ValueError(f"simulate: `adjoint` must be None, 'forward' or a diffrax adjoint; got {adjoint!r}")
     checks = traced_checks(model, inp) + _value_checks(scene, method, rtol, atol, dt0)
+    if not is_concrete((model, inp)):
+        checks = checks + model.input_checks(inp)
     if method == "rk4" and not is_concrete(dt0):
         # a traced invalid step is refused by the recorded check; diffrax gets a harmless stand-in
         # (one step over the whole span) instead of failing inside on `(t1 - t0) * dt0 >= 0`

@@ -863,8 +863,7 @@ def test_running_speed_is_checked_at_construction(bad):
         jb.RunningSpeed(bad)
 
 
-@_xfail("a super-critical RunningSpeed (>= the belt's wave speed) is accepted by Scene: the bound is the belt's, "
-        "and Scene/simulate have no hook where the model checks its input")
+# fixed: a super-critical RunningSpeed was accepted by Scene (the bound is the belt's: `input_checks`)
 @pytest.mark.parametrize("bad", [50.0])
 def test_bug_running_speed_is_not_checked_at_construction(bad):
     with pytest.raises(ValueError, match="speed"):
@@ -880,11 +879,13 @@ def test_bug_running_speed_nan_eager_message():
 _belt_flag = jax.jit(lambda v: jb.simulate(jb.Scene(jb.NonlinearBelt(), jb.RunningSpeed(v), ts=TS), throw=False))
 
 
-@_xfail("throw=False is not honoured for a traced negative/super-critical RunningSpeed: it raises instead of flagging")
+# fixed: throw=False was not honoured for a traced negative/super-critical RunningSpeed (it raised)
 @pytest.mark.parametrize("bad", [-1.0, 50.0])
 def test_bug_running_speed_throw_false_raises(bad):
     sol = run(_belt_flag, bad)
     assert not bool(sol.success) and np.all(np.isnan(np.asarray(sol.ys)))
+    good = run(_belt_flag, 8.0)
+    assert bool(good.success) and np.all(np.isfinite(np.asarray(good.ys)))
 
 
 _belt_runout = jax.jit(lambda r: jb.simulate(jb.Scene(jb.NonlinearBelt(runout=r), jb.RunningSpeed(8.0), ts=TS)).ys)

@@ -79,6 +79,12 @@ class AbstractModel(eqx.Module):
     def initial_state(self, inp):
         return jnp.zeros((self.n_states,))
 
+    def input_checks(self, inp) -> list:
+        """Checks that need the model and its input together (e.g. a running speed below the belt's
+        critical speed), as `[(ok, message)]`; `ok` a boolean array. `Scene` raises `ValueError` for a
+        concrete failure; `simulate` attaches traced ones to its results. Default: none."""
+        return []
+
     def default_solver(self):
         """The diffrax solver `simulate(..., method="ode")` uses when none is given."""
         import diffrax

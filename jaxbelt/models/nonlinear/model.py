@@ -389,11 +389,22 @@ class NonlinearBelt(AbstractModel):
         dist = distance_travelled(inp, t)
         return dist / radii[0], dist / radii[1] + phase
 
+    def input_checks(self, inp) -> list:
+        """The running speed must be sub-critical, $0 \\le V < v_t$, over the whole scene."""
+        speeds = jnp.stack([inp.v_start, inp.v_end]) if isinstance(inp, SpeedRamp) else jnp.atleast_1d(inp.speed_at(0.0))
+        ok = jnp.all(jnp.isfinite(speeds) & (speeds >= 0) & (speeds < self.wave_speed))
+        return [(ok, "NonlinearBelt: parameter `speed` (running speed) must lie in [0, wave_speed) m/s "
+                     "(sub-critical travelling string)")]
+
     def vector_field(self, t, y, inp):
         """$dz/dt$ [1/s]. The speed may vary (`SpeedRamp`): the modes follow the current speed
         quasi-statically (the terms in $\\dot V$ are neglected: $\\dot V L / v_t^2 \\ll 1$), and the
         pulley angles are the integral of the pulley speeds."""
-        sys = self.modal(inp.speed_at(t))
+        speed = inp.speed_at(t)
+        # an invalid speed is reported by `input_checks` through simulate's guards (raise or flag);
+        # here a safe stand-in keeps the solve finite instead of failing inside the vector field
+        valid = jnp.isfinite(speed) & (speed >= 0) & (speed < self.wave_speed)
+        sys = self.modal(jnp.where(valid, speed, 0.5 * self.wave_speed))
         th0, th1 = self._angles(sys, t, inp)
         return (self.wave_speed / self.span) * sys.rhs_angles(y, th0, th1)
 
