@@ -299,8 +299,9 @@ def test_identify_recovers_default_from_published_indices():
     def indices(p):
         d = eqx.tree_at(lambda m: (m.a, m.R), base, (p["a"], p["R"]))
         # forward-mode derivatives through the solve: identify's Jacobian is a jacfwd
-        o = closed_loop_metrics(d, jb.ConstantVoltage(25.0), 0.5, 1.0, method="rk4", dt=1e-3, adjoint="forward")["chi"]
-        c = closed_loop_metrics(d, jb.PID(), 0.375, 0.5, method="rk4", dt=1e-3, adjoint="forward")["chi"]
+        o = closed_loop_metrics(d, jb.ConstantVoltage(25.0), 0.5, 1.0, method="rk4", dt=1e-3, adjoint="forward",
+                                max_steps=1024)["chi"]
+        c = closed_loop_metrics(d, jb.PID(), 0.375, 0.5, method="rk4", dt=1e-3, adjoint="forward", max_steps=1024)["chi"]
         return jnp.stack([o, c])
 
     res = jb.identify(indices, {"a": 0.0884 * 1.05, "R": 0.886 * 0.95}, np.array([0.543, 0.026]),
@@ -383,7 +384,9 @@ def test_exact_chi_closed_form():
 def _obj(drive, x):
     """Smooth χ over 0.1-0.2 s (paper's RK4, 1 ms) as a function of x = (Kp, Ki, Kd, R)."""
     pid = jb.PID(v_limit=60.0, limiter="smooth").with_gains(x[:3])
-    return jb.fluctuation_objective(eqx.tree_at(lambda d: d.R, drive, x[3]), pid, 0.1, 0.2, method="rk4", dt=1e-3)
+    # 200 fixed steps: a step budget of 256 keeps the reverse-mode checkpointing small
+    return jb.fluctuation_objective(eqx.tree_at(lambda d: d.R, drive, x[3]), pid, 0.1, 0.2, method="rk4", dt=1e-3,
+                                    max_steps=256)
 
 
 @pytest.mark.slow

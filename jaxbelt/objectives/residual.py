@@ -220,13 +220,13 @@ def residual_energy(plat, cmd, *, method: str = "quadrature", n_nodes: int = 128
             raise ValueError(
                 f"residual_energy: the {n_nodes}-node quadrature does not resolve the vibration during the move "
                 f"(omega_d*T = {wT:.0f} rad, estimated relative error {float(err):.1e} > {QUADRATURE_TOL:g}); "
-                f"pass n_nodes >= {int(8 * wT) + 64} or method='ode'"
+                f"pass n_nodes >= {int(2.5 * wT) + 32} or method='ode'"
             )
     else:
         H = error_if(
             H, ~(err <= QUADRATURE_TOL) & params_ok,
             f"residual_energy: the {n_nodes}-node quadrature does not resolve the vibration during the move "
-            "(estimated relative error above 1e-8): pass a larger n_nodes (about 8*omega_d*T) or method='ode'",
+            "(estimated relative error above 1e-8): pass a larger n_nodes (about 2.5*omega_d*T + 32) or method='ode'",
         )
     return H
 
