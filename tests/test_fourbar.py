@@ -384,9 +384,7 @@ def test_exact_chi_closed_form():
 def _obj(drive, x):
     """Smooth χ over 0.1-0.2 s (paper's RK4, 1 ms) as a function of x = (Kp, Ki, Kd, R)."""
     pid = jb.PID(v_limit=60.0, limiter="smooth").with_gains(x[:3])
-    # 200 fixed steps: a step budget of 256 keeps the reverse-mode checkpointing small
-    return jb.fluctuation_objective(eqx.tree_at(lambda d: d.R, drive, x[3]), pid, 0.1, 0.2, method="rk4", dt=1e-3,
-                                    max_steps=256)
+    return jb.fluctuation_objective(eqx.tree_at(lambda d: d.R, drive, x[3]), pid, 0.1, 0.2, method="rk4", dt=1e-3)
 
 
 @pytest.mark.slow
