@@ -10,15 +10,13 @@ the pulley angles are the integral of the pulley speeds). The same record is wha
 
 from __future__ import annotations
 
-import functools
-
 import diffrax
-import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 from ..._checks import check_positive, is_concrete
+from ...scene import Scene
+from ...solve import simulate
 from .harmonic import _basis, harmonic_balance
 from .model import NonlinearBelt, SpeedRamp
 
@@ -42,20 +40,6 @@ def ramp_initial_state(belt: NonlinearBelt, speed, n_harmonics: int = 5):
     return hb.coefficients @ _basis(n_harmonics, jnp.zeros(1))[:, 0]
 
 
-@functools.partial(eqx.filter_jit)
-def _ramp_jit(belt, ramp, z0, ts, rtol, atol):
-    term = diffrax.ODETerm(lambda t, y, inp: belt.vector_field(t, y, inp))
-    T = 2 * jnp.pi * belt.pulley_radii[0] / jnp.maximum(ramp.v_start, ramp.v_end)
-    sol = diffrax.diffeqsolve(term, diffrax.Tsit5(), ts[0], ts[-1], T / 32, z0, args=ramp,
-                              saveat=diffrax.SaveAt(ts=ts), stepsize_controller=diffrax.PIDController(rtol=rtol,
-                              atol=atol), max_steps=None, throw=False)
-    ok = sol.result == diffrax.RESULTS.successful
-    zs = sol.ys
-    w = jax.vmap(lambda t, z: belt._out_w_sensor(t, z, ramp))(ts, zs)
-    w = eqx.error_if(w, ~ok, "speed_ramp: the diffrax solve failed")
-    return zs, w
-
-
 def speed_ramp(belt: NonlinearBelt, v_start, v_end, duration, *, hold: float = 0.0, samples_per_period: int = 24,
                rtol: float = 1e-8, z0=None) -> RampRecord:
     """Displacement at the sensor while the belt speed ramps linearly from `v_start` to `v_end`
@@ -76,5 +60,12 @@ def speed_ramp(belt: NonlinearBelt, v_start, v_end, duration, *, hold: float = 0
     n = int(np.ceil(t_end * vmax / (2 * np.pi * float(belt.pulley_radii[0])) * samples_per_period)) + 1
     ts = jnp.linspace(0.0, t_end, n)
     atol = 1e-9 * float((belt.runout[0] + belt.runout[1]) / belt.span)
-    zs, w = _ramp_jit(belt, ramp, jnp.asarray(z0, float), ts, jnp.asarray(rtol), jnp.asarray(atol))
-    return RampRecord(t=ts, speed=ramp.speed_at(ts), w=w, z=zs)
+    # the ramp is a scene like any other: one protocol, the same guards and failure policy
+    scene = Scene(belt, ramp, ts=ts, y0=jnp.asarray(z0, float), observe=("w_sensor",))
+    sol = simulate(scene, "ode", solver=diffrax.Tsit5(), rtol=jnp.asarray(rtol), atol=jnp.asarray(atol),
+                   max_steps=_RAMP_MAX_STEPS)
+    return RampRecord(t=ts, speed=ramp.speed_at(ts), w=sol.outputs["w_sensor"], z=sol.ys)
+
+
+#: step budget of a ramp solve (static: one compiled program for every ramp of the same sampling)
+_RAMP_MAX_STEPS = 400_000
