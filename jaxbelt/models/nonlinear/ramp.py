@@ -11,6 +11,7 @@ the pulley angles are the integral of the pulley speeds). The same record is wha
 from __future__ import annotations
 
 import diffrax
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
