@@ -95,7 +95,7 @@ def plot_ramp(ax, record, *, title=None):
     v0, v1 = float(record.speed[0]), float(record.speed[-1])
     ax.set_xlabel("running speed V [m/s] (ramped in time)")
     ax.set_ylabel("w at 1 cm [mm]")
-    ax.set_title(title or f"speed ramp {v0:g} -> {v1:g} m/s in {float(record.t[-1]):g} s (Fig. 3)")
+    ax.set_title(title or f"speed ramp {v0:.2f} -> {v1:.2f} m/s in {float(record.t[-1]):.3g} s (Fig. 3)")
     ax.grid(alpha=0.3)
     if v0 > v1:
         ax.invert_xaxis()
