@@ -76,8 +76,6 @@ def collecting():
         _collector.found = prev
 
 
-_record = record
-
 
 def _interval(lo, hi, lo_open, hi_open) -> str:
     lb = "-inf" if lo is None else f"{lo:g}"
@@ -89,82 +87,79 @@ def _values(x):
     return np.asarray(jax.device_get(x), dtype=float)
 
 
-def check_positive(name: str, value, unit: str = "", owner: str = "") -> None:
-    """Raise `ValueError` unless every element of `value` is finite and > 0."""
+def _message(name: str, what: str, unit: str, owner: str) -> str:
+    where = f"{owner}: " if owner else ""
+    return f"{where}parameter `{name}` {what}{(' ' + unit) if unit else ''}"
+
+
+def _check_host(name: str, v, what: str, unit: str, owner: str, ok) -> None:
+    """Raise `ValueError` ("parameter `name` what unit; got ...") unless `ok(v, numpy)` for host values `v`."""
+    if not bool(ok(v, np)):
+        raise ValueError(f"{_message(name, what, unit, owner)}; got {v.tolist() if v.ndim else float(v)}")
+
+
+def _enforce(name: str, value, what: str, unit: str, owner: str, ok) -> None:
+    """The one rule of every check: concrete values raise `ValueError`; traced ones are recorded (see
+    `collecting`). `ok(v, xp)` tests all elements with `xp` = numpy (host values) or jax.numpy (tracers)."""
     if not is_concrete(value):
-        v = jnp.asarray(value)
-        where = f"{owner}: " if owner else ""
-        _record(jnp.all(jnp.isfinite(v) & (v > 0)), f"{where}parameter `{name}` must be finite and > 0{(' ' + unit) if unit else ''}")
+        record(ok(jnp.asarray(value), jnp), _message(name, what, unit, owner))
         return
-    v = _values(value)
-    if not np.all(np.isfinite(v)) or np.any(v <= 0):
-        where = f"{owner}: " if owner else ""
-        raise ValueError(
-            f"{where}parameter `{name}` must be finite and > 0{(' ' + unit) if unit else ''}; "
-            f"got {v.tolist() if v.ndim else float(v)}"
-        )
+    _check_host(name, _values(value), what, unit, owner, ok)
+
+
+def _positive(v, xp):
+    return xp.all(xp.isfinite(v) & (v > 0))
+
+
+def _nonnegative(v, xp):
+    return xp.all(xp.isfinite(v) & (v >= 0))
+
+
+def _finite(v, xp):
+    return xp.all(xp.isfinite(v))
+
+
+#: kind -> (what the message says, test) for `check_fields`
+_RULES = {"positive": ("must be finite and > 0", _positive), "nonnegative": ("must be finite and >= 0", _nonnegative),
+          "finite": ("must be finite", _finite)}
+
+
+def check_positive(name: str, value, unit: str = "", owner: str = "") -> None:
+    """Raise `ValueError` unless every element of `value` is finite and > 0 (recorded when traced)."""
+    _enforce(name, value, _RULES["positive"][0], unit, owner, _positive)
 
 
 def check_nonnegative(name: str, value, unit: str = "", owner: str = "") -> None:
-    """Raise `ValueError` unless every element of `value` is finite and >= 0."""
-    if not is_concrete(value):
-        v = jnp.asarray(value)
-        where = f"{owner}: " if owner else ""
-        _record(jnp.all(jnp.isfinite(v) & (v >= 0)), f"{where}parameter `{name}` must be finite and >= 0{(' ' + unit) if unit else ''}")
-        return
-    v = _values(value)
-    if not np.all(np.isfinite(v)) or np.any(v < 0):
-        where = f"{owner}: " if owner else ""
-        raise ValueError(
-            f"{where}parameter `{name}` must be finite and >= 0{(' ' + unit) if unit else ''}; "
-            f"got {v.tolist() if v.ndim else float(v)}"
-        )
+    """Raise `ValueError` unless every element of `value` is finite and >= 0 (recorded when traced)."""
+    _enforce(name, value, _RULES["nonnegative"][0], unit, owner, _nonnegative)
 
 
 def check_finite(name: str, value, owner: str = "") -> None:
-    """Raise `ValueError` unless every element of `value` is finite."""
-    if not is_concrete(value):
-        where = f"{owner}: " if owner else ""
-        _record(jnp.all(jnp.isfinite(jnp.asarray(value))), f"{where}parameter `{name}` must be finite")
-        return
-    v = _values(value)
-    if not np.all(np.isfinite(v)):
-        where = f"{owner}: " if owner else ""
-        raise ValueError(f"{where}parameter `{name}` must be finite; got {v.tolist() if v.ndim else float(v)}")
+    """Raise `ValueError` unless every element of `value` is finite (recorded when traced)."""
+    _enforce(name, value, _RULES["finite"][0], "", owner, _finite)
 
 
 def check_range(name: str, value, lo=None, hi=None, *, lo_open=False, hi_open=False, unit="", owner="") -> None:
-    """Raise `ValueError` unless lo (<|<=) value (<|<=) hi elementwise."""
-    if not is_concrete(value):
-        v = jnp.asarray(value)
-        ok = jnp.all(jnp.isfinite(v))
+    """Raise `ValueError` unless lo (<|<=) value (<|<=) hi elementwise (recorded when traced)."""
+
+    def ok(v, xp):
+        good = xp.all(xp.isfinite(v))
         if lo is not None:
-            ok &= jnp.all(v > lo) if lo_open else jnp.all(v >= lo)
+            good = good & (xp.all(v > lo) if lo_open else xp.all(v >= lo))
         if hi is not None:
-            ok &= jnp.all(v < hi) if hi_open else jnp.all(v <= hi)
-        where = f"{owner}: " if owner else ""
-        _record(ok, f"{where}parameter `{name}` must lie in {_interval(lo, hi, lo_open, hi_open)}{(' ' + unit) if unit else ''}")
-        return
-    v = _values(value)
-    ok = np.all(np.isfinite(v))
-    if lo is not None:
-        ok &= bool(np.all(v > lo) if lo_open else np.all(v >= lo))
-    if hi is not None:
-        ok &= bool(np.all(v < hi) if hi_open else np.all(v <= hi))
-    if not ok:
-        interval = _interval(lo, hi, lo_open, hi_open)
-        where = f"{owner}: " if owner else ""
-        raise ValueError(
-            f"{where}parameter `{name}` must lie in {interval}{(' ' + unit) if unit else ''}; "
-            f"got {v.tolist() if v.ndim else float(v)}"
-        )
+            good = good & (xp.all(v < hi) if hi_open else xp.all(v <= hi))
+        return good
+
+    _enforce(name, value, f"must lie in {_interval(lo, hi, lo_open, hi_open)}", unit, owner, ok)
 
 
-_KINDS = {
-    "positive": (lambda v: np.all(np.isfinite(v)) and not np.any(v <= 0), "must be finite and > 0"),
-    "nonnegative": (lambda v: np.all(np.isfinite(v)) and not np.any(v < 0), "must be finite and >= 0"),
-    "finite": (lambda v: np.all(np.isfinite(v)), "must be finite"),
-}
+def positive_checks(owner: str, **values) -> list:
+    """`check_positive` on each named value: raises when concrete; returns the checks recorded for
+    the traced ones (to attach with `jaxbelt._guard.guard`)."""
+    with collecting() as found:
+        for name, v in values.items():
+            check_positive(name, v, owner=owner)
+    return found
 
 
 def host_values(values):
@@ -178,25 +173,14 @@ def check_fields(owner: str, checks) -> list | None:
     """Check many fields at once: `checks` is a sequence of `(name, value, kind, unit)` with kind
     `"positive"`, `"nonnegative"` or `"finite"`. One transfer for all the values (a construction costs
     one device round trip, not one per field); the first failure raises the `ValueError` of the
-    corresponding `check_*`. Returns the host values (None under a trace: nothing is checked).
+    corresponding `check_*`. Returns the host values (None under a trace, where the checks are recorded).
     """
     checks = list(checks)
     vals = host_values([c[1] for c in checks])
-    if vals is None:
-        # traced: record each check (see `jaxbelt._guard.traced_checks`), so it is enforced at run time
-        single = {"positive": check_positive, "nonnegative": check_nonnegative}
-        for name, value, kind, unit in checks:
-            if kind == "finite":
-                check_finite(name, value, owner=owner)
-            else:
-                single[kind](name, value, unit, owner=owner)
-        return None
-    for (name, _, kind, unit), v in zip(checks, vals):
-        ok, what = _KINDS[kind]
-        if not ok(v):
-            where = f"{owner}: " if owner else ""
-            raise ValueError(
-                f"{where}parameter `{name}` {what}{(' ' + unit) if unit else ''}; "
-                f"got {v.tolist() if v.ndim else float(v)}"
-            )
+    for k, (name, value, kind, unit) in enumerate(checks):
+        what, ok = _RULES[kind]
+        if vals is None:
+            _enforce(name, value, what, unit, owner, ok)  # traced: recorded
+        else:
+            _check_host(name, vals[k], what, unit, owner, ok)  # the host copy: no transfer per field
     return vals

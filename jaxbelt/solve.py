@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import is_concrete
+from ._checks import is_concrete, positive_checks
 from ._guard import _modules, error_if, guard, nan_where, traced_checks
 from .commands import AbstractExponentialVoltage
 from .fast import batched_exponential_scene
@@ -238,11 +238,11 @@ def simulate(
             )
         if integrals:
             raise ValueError(f"simulate: integral outputs {integrals} need method='ode' (they are augmented states)")
+    step_checks = []
     if method == "rk4":
         if jnp.ndim(dt) != 0:
             raise ValueError(f"simulate: `dt` (RK4 step, s) must be a scalar; got shape {jnp.shape(dt)}")
-        if is_concrete(dt) and not (np.isfinite(float(dt)) and float(dt) > 0):
-            raise ValueError(f"simulate: `dt` (RK4 step, s) must be finite and > 0; got {float(dt)}")
+        step_checks = positive_checks("simulate (RK4 step, s)", dt=dt)  # raises now, or recorded when traced
         solver, dt0 = RK4(), dt
     if solver is None and method == "ode":
         solver = model.default_solver()
@@ -251,8 +251,7 @@ def simulate(
     for name, v in (("rtol", rtol), ("atol", atol)):
         if jnp.ndim(v) != 0:
             raise ValueError(f"simulate: `{name}` must be a scalar; got shape {jnp.shape(v)}")
-        if is_concrete(v) and not (np.isfinite(float(v)) and float(v) > 0):
-            raise ValueError(f"simulate: `{name}` must be finite and > 0; got {float(v)}")
+    tol_checks = positive_checks("simulate", rtol=rtol, atol=atol)  # raises now, or recorded when traced
     if not isinstance(max_steps, (int, np.integer)) or isinstance(max_steps, bool) or max_steps < 1:
         raise ValueError(f"simulate: `max_steps` must be an integer >= 1; got {max_steps!r}")
     if adjoint is None:
@@ -261,7 +260,7 @@ def simulate(
         adjoint = diffrax.ForwardMode()
     elif not isinstance(adjoint, diffrax.AbstractAdjoint):
         raise ValueError(f"simulate: `adjoint` must be None, 'forward' or a diffrax adjoint; got {adjoint!r}")
-    checks = traced_checks(model, inp) + _value_checks(scene, method, rtol, atol, dt0)
+    checks = traced_checks(model, inp) + _time_checks(scene) + (tol_checks if method == "ode" else []) + step_checks
     if not is_concrete((model, inp)):
         checks = checks + model.input_checks(inp)
     if method == "rk4" and not is_concrete(dt0):
@@ -296,18 +295,9 @@ def _check_scalar_fields(obj) -> None:
                 )
 
 
-def _value_checks(scene, method, rtol, atol, dt0):
-    """Checks of values that may be traced: times, tolerances and the RK4 step."""
-    checks = [] if is_concrete((scene.ts, scene.t0, scene.t1, scene.y0)) else scene.time_errors()
-    if method == "ode":
-        for name, v in (("rtol", rtol), ("atol", atol)):
-            if not is_concrete(v):
-                v = jnp.asarray(v)
-                checks.append((jnp.isfinite(v) & (v > 0), f"simulate: `{name}` must be finite and > 0"))
-    if method == "rk4" and not is_concrete(dt0):
-        v = jnp.asarray(dt0)
-        checks.append((jnp.isfinite(v) & (v > 0), "simulate: `dt` (RK4 step, s) must be finite and > 0"))
-    return checks
+def _time_checks(scene):
+    """Checks of times and initial state that may be traced (concrete ones were checked by `Scene`)."""
+    return [] if is_concrete((scene.ts, scene.t0, scene.t1, scene.y0)) else scene.time_errors()
 
 
 def _finish(sol: Solution, checks, throw: bool, what: str, hint: str) -> Solution:

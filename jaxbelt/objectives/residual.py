@@ -34,15 +34,15 @@ being $T + t_{last}$.
 
 from __future__ import annotations
 
+import numbers
+
 import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-import numbers
-
-from .._checks import check_positive, is_concrete
+from .._checks import is_concrete, positive_checks
 from .._guard import all_ok, error_if, guard, traced_checks
 from ..commands import AbstractMotionCommand, MIN_EXPONENT_GAP, PseudoPolynomial, ShapedCommand, falling_factorial
 from ..models.platform import BeltPlatform
@@ -205,7 +205,7 @@ def residual_energy(plat, cmd, *, method: str = "quadrature", n_nodes: int = 128
         checks = traced_checks(plat, cmd)  # empty when the values are concrete (checked at construction)
     else:
         _check_int(o, "max_steps", max_steps, 1)
-        tol_checks = _tolerance_checks(o, rtol, atol)
+        tol_checks = positive_checks(o, rtol=rtol, atol=atol)
         if tol_checks:  # traced: the solver gets safe tolerances, the result is refused by the checks
             tol_ok = all_ok(tol_checks)
             rtol, atol = jnp.where(tol_ok, rtol, 1e-12), jnp.where(tol_ok, atol, 1e-15)
@@ -239,16 +239,6 @@ def _check_int(owner, name, value, lo):
     """Refuse anything but an integer >= lo (a float or a bool is refused, not truncated)."""
     if isinstance(value, bool) or not isinstance(value, (numbers.Integral, np.integer)) or int(value) < lo:
         raise ValueError(f"{owner}: parameter `{name}` must be an integer >= {lo}; got {value!r}")
-
-
-def _tolerance_checks(owner, rtol, atol):
-    """Check `rtol`/`atol` (finite and > 0): raise when concrete, return the recorded checks when traced."""
-    from .._checks import collecting
-
-    with collecting() as found:
-        check_positive("rtol", rtol, owner=owner)
-        check_positive("atol", atol, owner=owner)
-    return found
 
 
 def _end(cmd):

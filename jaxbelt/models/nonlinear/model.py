@@ -389,11 +389,14 @@ class NonlinearBelt(AbstractModel):
         dist = distance_travelled(inp, t)
         return dist / radii[0], dist / radii[1] + phase
 
+    def _subcritical(self, speed):
+        """Elementwise $0 \\le V < v_t$ (and finite) for running speeds `speed` [m/s]."""
+        return jnp.isfinite(speed) & (speed >= 0) & (speed < self.wave_speed)
+
     def input_checks(self, inp) -> list:
         """The running speed must be sub-critical, $0 \\le V < v_t$, over the whole scene."""
         speeds = jnp.stack([inp.v_start, inp.v_end]) if isinstance(inp, SpeedRamp) else jnp.atleast_1d(inp.speed_at(0.0))
-        ok = jnp.all(jnp.isfinite(speeds) & (speeds >= 0) & (speeds < self.wave_speed))
-        return [(ok, "NonlinearBelt: parameter `speed` (running speed) must lie in [0, wave_speed) m/s "
+        return [(jnp.all(self._subcritical(speeds)), "NonlinearBelt: parameter `speed` (running speed) must lie in [0, wave_speed) m/s "
                      "(sub-critical travelling string)")]
 
     def vector_field(self, t, y, inp):
@@ -403,8 +406,7 @@ class NonlinearBelt(AbstractModel):
         speed = inp.speed_at(t)
         # an invalid speed is reported by `input_checks` through simulate's guards (raise or flag);
         # here a safe stand-in keeps the solve finite instead of failing inside the vector field
-        valid = jnp.isfinite(speed) & (speed >= 0) & (speed < self.wave_speed)
-        sys = self.modal(jnp.where(valid, speed, 0.5 * self.wave_speed))
+        sys = self.modal(jnp.where(self._subcritical(speed), speed, 0.5 * self.wave_speed))
         th0, th1 = self._angles(sys, t, inp)
         return (self.wave_speed / self.span) * sys.rhs_angles(y, th0, th1)
 
