@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import jaxbelt as jb
+from jaxbelt.models.nonlinear.calibration import MODE2_RANGE, model_fold_speeds
 from jaxbelt.models.nonlinear.kbm import kbm_amplitudes
 from jaxbelt.models.nonlinear.model import distance_travelled
 
@@ -74,6 +75,64 @@ def test_default_belt_jumps_at_measured_speeds(belt, curve):
     assert abs(f[1] - m["up_jump_speed"].value) <= m["up_jump_speed"].tolerance
     assert abs(f[0] - m["down_jump_speed"].value) <= m["down_jump_speed"].tolerance
     np.testing.assert_allclose(np.asarray(jb.fold_speeds(belt, RANGE, 3)), f, atol=1e-8)
+
+
+@pytest.fixture(scope="module")
+def belt2():
+    return jb.NonlinearBelt(n_modes=2)
+
+
+@pytest.fixture(scope="module")
+def curve2(belt2):
+    """The two-mode default belt over the second resonance."""
+    return jb.response_curve(belt2, MODE2_RANGE, 3, max_points=400)
+
+
+def test_default_two_mode_belt_meets_all_four_measured_jump_speeds(belt2, curve2):
+    """The identified defaults, two modes: first-mode jumps at 8.5 / 8.9 +- 0.15 m/s and the
+    second-mode hysteresis inside the measured band 15.5-16.3 m/s (15.7 / 16.1 +- 0.2; Moon &
+    Wickert (1997), Sec. 2); the refined folds equal the curve's folds to 1e-8 m/s."""
+    m = {x.quantity: x for x in jb.MEASUREMENTS}
+    f = np.asarray(model_fold_speeds(belt2))
+    for value, q in zip(f, ("down_jump_speed", "up_jump_speed", "mode2_band_low", "mode2_band_high")):
+        assert abs(value - m[q].value) <= m[q].tolerance, (q, value)
+    assert 15.5 <= f[2] < f[3] <= 16.3
+    np.testing.assert_allclose(np.asarray(curve2.folds), f[2:], atol=1e-8)
+    # between the folds the middle branch is unstable (Floquet), outside there is one stable branch
+    s, st = np.asarray(curve2.speed), np.asarray(curve2.stable)
+    assert not np.all(st) and np.all(st[(s < f[2] - 0.02) | (s > f[3] + 0.02)])
+
+
+def test_second_mode_bistability_matches_time_domain(belt2, curve2):
+    """Independent check of the second-mode hysteresis: at a speed between the folds the diffrax
+    time-domain steady states started on the two stable HB branches stay there, with the HB
+    peak-to-peak to 1e-3 relative, and the two differ (two coexisting stable responses)."""
+    lo, hi = (float(x) for x in curve2.folds)
+    speed = 0.5 * (lo + hi)
+    pps = []
+    for direction in ("up", "down"):
+        hb = _branch_state(belt2, curve2, speed, direction)
+        z0 = np.asarray(hb.coefficients) @ np.r_[1.0, np.ones(3), np.zeros(3)]  # the state at phase 0
+        td = jb.nonlinear_steady_state(belt2, speed, z0, rtol=1e-7)
+        assert bool(td.converged)
+        assert abs(float(td.pp) / float(hb.pp) - 1) < 1e-3, (direction, td.pp, hb.pp)
+        pps.append(float(td.pp))
+    assert abs(pps[0] / pps[1] - 1) > 0.2, pps
+
+
+@pytest.mark.slow
+def test_calibrate_recovers_the_identified_defaults():
+    """`calibrate` (Levenberg-Marquardt through the implicit fold derivatives) from the former
+    defaults (v_t 37.44 m/s, xi (0.0112, 0.0255)) lands on the defaults of `NonlinearBelt` to
+    their rounding (5e-4 relative), with the four fold speeds inside the measured tolerances."""
+    start = jb.NonlinearBelt(wave_speed=37.44, damping=(0.0112, 0.0255))
+    fit = jb.calibrate(start)
+    d = jb.NonlinearBelt()
+    assert bool(fit.success)
+    np.testing.assert_allclose(float(fit.belt.wave_speed), float(d.wave_speed), rtol=5e-4)
+    np.testing.assert_allclose(np.asarray(fit.belt.damping), np.asarray(d.damping), rtol=5e-4)
+    assert np.all(np.abs(np.asarray(fit.residuals)) < 1.0)  # each speed within its reading tolerance
+    assert float(fit.cost) < 0.5
 
 
 def test_curve_folds_and_stability_match_time_domain_sweeps(belt, curve, sweeps):
@@ -152,13 +211,21 @@ def test_fold_speed_gradient_matches_finite_differences(belt):
     central differences of `fold_speeds` (h = 1e-4 relative): 1e-4 relative."""
     f = lambda bb: jb.fold_speeds(bb, RANGE, 3)[1]  # noqa: E731
     g = jax.grad(f)(belt)
+    # the one-mode belt uses the first of the per-mode damping ratios only
+    assert float(g.damping[1]) == 0.0
     for name in ("damping", "v_l", "wave_speed"):
-        x = float(getattr(belt, name))
+        x0 = np.asarray(getattr(belt, name), dtype=float)
+        x = float(x0.ravel()[0])
         h = 1e-4 * x
-        fp = float(f(belt.__class__(**{**_fields(belt), name: x + h})))
-        fm = float(f(belt.__class__(**{**_fields(belt), name: x - h})))
+
+        def at(xx):  # the parameter with its first entry replaced
+            return np.r_[xx, x0.ravel()[1:]].reshape(x0.shape)
+
+        fp = float(f(belt.__class__(**{**_fields(belt), name: at(x + h)})))
+        fm = float(f(belt.__class__(**{**_fields(belt), name: at(x - h)})))
         fd = (fp - fm) / (2 * h)
-        assert abs(float(getattr(g, name)) - fd) <= 1e-4 * abs(fd) + 1e-9, (name, float(getattr(g, name)), fd)
+        gi = float(np.ravel(getattr(g, name))[0])
+        assert abs(gi - fd) <= 1e-4 * abs(fd) + 1e-9, (name, gi, fd)
 
 
 def _fields(b):

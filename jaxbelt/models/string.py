@@ -290,7 +290,7 @@ class RunoutRig(eqx.Module):
     (one or more pulleys) and `wave_speed`; the response functions (`runout_phasors`,
     `linear_runout_response`, `galerkin_runout_system`, `simulate_runout_response`) use all fields
     and need exactly two pulleys. The non-linear belt of the same stand is `NonlinearBelt`, whose
-    wave speed is identified from the measured jumps (37.44 m/s).
+    wave speed is identified from the measured jump speeds (37.94 m/s).
     """
 
     length: jnp.ndarray = eqx.field(converter=_arr, default=0.86)

@@ -61,9 +61,10 @@ def plot_backbone(ax, speeds, amp_up, amp_down, kbm=None, backbone=None, title="
 
 
 # --- response curve by continuation, ramps, measurements (computed by the caller) -------------------------
-def plot_response_curve(ax, curve, measurements=None, *, title="response curve (HB + continuation)"):
+def plot_response_curve(ax, curve, measurements=None, *, title="response curve (HB + continuation)", mode: int = 1):
     """A `ResponseCurve`: stable points solid, unstable (saddle) dashed, folds as vertical lines;
-    with `measurements` (the `MEASUREMENTS` table) the measured jumps as arrows (Fig. 8 analogue)."""
+    with `measurements` (the `MEASUREMENTS` table) the measured jumps as arrows (Fig. 8 analogue),
+    or for `mode=2` the measured second-mode hysteresis band as a shaded span."""
     s, p, st = np.asarray(curve.speed), 1e3 * np.asarray(curve.pp), np.asarray(curve.stable)
     ps = np.where(st, p, np.nan)
     pu = np.where(~st | np.r_[~st[1:], False] | np.r_[False, ~st[:-1]], p, np.nan)
@@ -71,7 +72,11 @@ def plot_response_curve(ax, curve, measurements=None, *, title="response curve (
     ax.plot(s, pu, "--", color="C3", lw=1.2, label="unstable")
     for k, f in enumerate(np.asarray(curve.folds)):
         ax.axvline(f, color="0.5", lw=0.8, ls=":", label="folds" if k == 0 else None)
-    if measurements is not None:
+    if measurements is not None and mode == 2:
+        m = {x.quantity: x.value for x in measurements}
+        ax.axvspan(m["mode2_band_low"], m["mode2_band_high"], color="C2", alpha=0.15,
+                   label="measured hysteresis band (Sec. 2)")
+    elif measurements is not None:
         m = {x.quantity: x.value for x in measurements}
         ax.annotate("", xy=(m["up_jump_speed"], 1e3 * m["up_jump_pp_after"]),
                     xytext=(m["up_jump_speed"], 1e3 * m["up_jump_pp_before"]), arrowprops=dict(arrowstyle="->", color="k"))
@@ -101,13 +106,20 @@ def plot_ramp(ax, record, *, title=None):
         ax.invert_xaxis()
 
 
-def response_figure(curve, ramp_up, ramp_down, measurements, summary: str = "", jumps=None):
+def response_figure(curve, ramp_up, ramp_down, measurements, summary: str = "", jumps=None, curve2=None):
     """One page: the response curve with its unstable branch, folds and the measured jumps
-    (with `jumps`, a `Jumps`, the predicted jumps as arrows too), and the up/down ramp records
-    (all computed by the caller). Returns the figure."""
+    (with `jumps`, a `Jumps`, the predicted jumps as arrows too), the up/down ramp records and,
+    with `curve2` (the two-mode curve over the second resonance), the second-mode curve against
+    the measured band (all computed by the caller). Returns the figure."""
     import matplotlib.pyplot as plt  # on first use: `import jaxbelt` loads no plotting library
 
-    fig, axes = plt.subplots(1, 3, figsize=(16, 4.8))
+    if curve2 is None:
+        fig, axes = plt.subplots(1, 3, figsize=(16, 4.8))
+    else:
+        fig, grid = plt.subplots(2, 2, figsize=(14, 9))
+        axes = [grid[0, 0], grid[1, 0], grid[1, 1]]
+        plot_response_curve(grid[0, 1], curve2, measurements, mode=2,
+                            title="second mode (2-mode model) vs the measured band")
     plot_response_curve(axes[0], curve, measurements, title="predicted vs measured (Fig. 8 analogue)")
     if jumps is not None:
         for k, (V, b, a) in enumerate(zip(*(np.asarray(x) for x in (jumps.speed, jumps.pp_before, jumps.pp_after)))):

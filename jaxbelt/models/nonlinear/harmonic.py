@@ -297,9 +297,21 @@ def _refine_fold(belt, u, t, H: int):
     c = jax.lax.stop_gradient(phi0)
     w0 = jax.lax.stop_gradient(jnp.concatenate([u, phi0]))
     fn = _fold_system(belt, H, c)
-    sol = optx.root_find(fn, _hb_solver(1e-11, 1e-11), w0, args=belt, max_steps=30, throw=False)
-    ok = sol.result == optx.RESULTS.successful
-    return sol.value[:n], sol.value[n], ok
+    b0 = jax.lax.stop_gradient(belt)
+    sol = optx.root_find(fn, _hb_solver(1e-11, 1e-11), w0, args=b0, max_steps=30, throw=False)
+    w = jax.lax.stop_gradient(sol.value)
+    ok = (sol.result == optx.RESULTS.successful) & jnp.all(jnp.isfinite(w))
+    w = jnp.where(ok, w, w0)  # failed (or padding) candidates: a finite stand-in, masked by `ok`
+    # implicit function theorem by hand: w(θ) = w* - F_w^{-1} (F(w*, θ) - F(w*, θ0)) has the value
+    # w* and the derivative -F_w^{-1} F_θ. Done here rather than by the root finder's implicit
+    # adjoint so that a failed candidate (vmapped beside the real folds) can be masked before
+    # any linear solve sees it: a non-finite linear solve inside an optimiser's loop is fatal.
+    Fw = jax.jacfwd(lambda ww: fn(ww, b0))(w)
+    Fw = jnp.where(ok & jnp.all(jnp.isfinite(Fw)), Fw, jnp.eye(w.shape[0]))
+    r = fn(w, belt)
+    dr = jnp.where(ok, r - jax.lax.stop_gradient(r), 0.0)
+    w = w - jnp.linalg.solve(jax.lax.stop_gradient(Fw), dr)
+    return w[:n], w[n], ok
 
 
 def _locate_folds(us, ts, acc, n_folds: int):

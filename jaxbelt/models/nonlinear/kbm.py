@@ -121,7 +121,7 @@ def kbm_coefficients(belt: NonlinearBelt, speed, n: int = 1):
     Om = jnp.where(jnp.abs(W0 - om) <= jnp.abs(W1 - om), W0, W1)
     sig = Om - om
     kap = kappa(v, belt.v_l, n)
-    return jnp.stack([kap**2, -2 * sig * kap, sig**2 + (belt.damping * om) ** 2, -jnp.abs(g) ** 2])
+    return jnp.stack([kap**2, -2 * sig * kap, sig**2 + (belt.mode_damping(n)[n - 1] * om) ** 2, -jnp.abs(g) ** 2])
 
 
 def kbm_amplitudes(belt: NonlinearBelt, speed, n: int = 1):

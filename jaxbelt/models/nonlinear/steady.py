@@ -142,7 +142,7 @@ def _steady_core(belt: NonlinearBelt, sys: ModalSystem, z0, theta00, xm, rtol, a
     n = belt.n_modes
     phi_m = _point_shape(sys, xm, n)
     T, n_steps = _steps_per_period(sys, min_steps, periods_per_chunk)
-    rho = jnp.exp(-sys.damping * sys.omega[0] * T)
+    rho = jnp.exp(-jnp.min(sys.damping * sys.omega) * T)  # the slowest-decaying mode
     scale = 2.0 * (sys.e[0] + sys.e[1]) + 1e-300
     atol = atol_rel * scale
     w0 = phi_m @ z0 + sys.boundary(xm, 0.0, theta00)
