@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._checks import as_float_array, is_concrete, positive_checks
-from ._guard import _modules, error_if, guard, nan_where, traced_checks
+from ._guard import _modules, error_if, guard, host_checked, nan_where, traced_checks
 from .commands import AbstractExponentialVoltage
 from .fast import batched_exponential_scene
 from .modal import expm_solve, modal_solve
@@ -372,10 +372,17 @@ def _make_plan(scene, treedef, method, solver, dt0, adjoint, max_steps, progress
 
 
 def _program(*static):
-    """The compiled program of one structure; plans that resolve to the same method share it."""
+    """The compiled program of one structure; plans that resolve to the same method share it.
+
+    The time-stepping programs are `host_checked`: diffrax's checks of its inputs come back as values
+    instead of host callbacks, so that the persistent compilation cache keeps them."""
     program = _PROGRAMS.get(static)
     if program is None:
-        program = jax.jit(functools.partial(_run_flat, *static), static_argnums=(4,))
+        fun = functools.partial(_run_flat, *static)
+        if static[1] in _CLOSED:
+            program = jax.jit(fun, static_argnums=(4,))
+        else:
+            program = host_checked(fun, jit=jax.jit, static_argnums=(4,))
         if len(_PROGRAMS) >= _PLANS_MAX:
             _PROGRAMS.clear()
         _PROGRAMS[static] = program
