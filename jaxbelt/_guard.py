@@ -94,6 +94,44 @@ class _Off:
 #: True while jaxbelt traces or runs a `host_checked` program (part of JAX's jit cache keys, so that a
 #: program traced with checkify checks is never reused where the caller expects `eqx.error_if`).
 _host_checks = jax.make_user_context(default_value=False) if hasattr(jax, "make_user_context") else _Off()
+#: True while jaxbelt traces a diffrax solve whose inputs it has checked itself (see `validated_inputs`).
+_validated = jax.make_user_context(default_value=False) if hasattr(jax, "make_user_context") else _Off()
+
+#: diffrax's own checks of `SaveAt(ts=...)`, which `Scene` and `simulate` make too (strictly increasing
+#: finite output times, start time <= the first of them; traced values: recorded checks on the results)
+_VALIDATED_BY_JAXBELT = frozenset({
+    "saveat.ts must be increasing or decreasing.",
+    "saveat.ts must lie between t0 and t1.",
+})
+
+
+def validated_inputs():
+    """Context of a diffrax solve whose output times jaxbelt has checked: diffrax's repeat of those
+    checks (`_VALIDATED_BY_JAXBELT`, matched by message) is left out of the program.
+
+    Each would be an `eqx.error_if`, i.e. a host callback, and a program holding one is never stored by
+    the persistent compilation cache. Any other check stays; an unknown message (another diffrax
+    version) keeps its check, so the only cost of a mismatch is a program that is not cached.
+    """
+    _equinox_errors_as_checks()
+    return _validated(True)
+
+
+def has_host_callbacks(jaxpr) -> bool:
+    """Whether a (closed) jaxpr holds a host callback anywhere, sub-programs included."""
+    todo = [getattr(jaxpr, "jaxpr", jaxpr)]
+    while todo:
+        j = todo.pop()
+        for eqn in j.eqns:
+            if "callback" in eqn.primitive.name:
+                return True
+            for param in eqn.params.values():
+                for sub in param if isinstance(param, (list, tuple)) else (param,):
+                    if hasattr(sub, "eqns"):
+                        todo.append(sub)
+                    elif hasattr(getattr(sub, "jaxpr", None), "eqns"):
+                        todo.append(sub.jaxpr)
+    return False
 _EAGER_TRACE = type(jax.extend.core.find_top_trace(()))
 
 
@@ -137,13 +175,14 @@ def _as_check(pred, message: str) -> None:
 
 
 def _equinox_errors_as_checks() -> None:
-    """Inside a `host_checked` program, `eqx.error_if` records a checkify check as well.
+    """Inside a `host_checked` program, `eqx.error_if` records a checkify check as well; inside
+    `validated_inputs`, diffrax's repeat of jaxbelt's own checks is left out.
 
-    diffrax calls `equinox.internal.error_if` for its own checks of its inputs (e.g. that the output
-    times of `SaveAt(ts=...)` increase and lie within the span): traced, each is a host callback, and a
-    program holding one is never stored by the persistent compilation cache. Installed once, the
-    wrapper leaves every call outside a `host_checked` program (another thread, the caller's own
-    jit) to equinox unchanged; `_host_checks` is thread-local and part of JAX's jit cache keys.
+    diffrax, optimistix and the models call `eqx.error_if` (diffrax as `equinox.internal.error_if`) for
+    their checks: traced, each is a host callback, and a program holding one is never stored by the
+    persistent compilation cache. Installed once, the wrapper leaves every call outside those two
+    contexts (another thread, the caller's own jit) to equinox unchanged: the contexts are
+    thread-local and part of JAX's jit cache keys.
     """
     if getattr(eqx.error_if, "_jaxbelt_checks", False):
         return
@@ -153,9 +192,12 @@ def _equinox_errors_as_checks() -> None:
 
     @functools.wraps(original)
     def error_if(x, pred, msg, *, on_error="default"):
-        if on_error in ("default", "raise") and _host_checks.value:
-            _as_check(pred, msg)
-            return x
+        if on_error in ("default", "raise"):
+            if _validated.value and msg in _VALIDATED_BY_JAXBELT:
+                return x
+            if _host_checks.value:
+                _as_check(pred, msg)
+                return x
         return original(x, pred, msg, on_error=on_error)
 
     error_if._jaxbelt_checks = True

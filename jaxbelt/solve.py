@@ -30,8 +30,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import as_float_array, is_concrete, positive_checks
-from ._guard import _modules, error_if, guard, host_checked, nan_where, traced_checks
+from ._checks import as_float_array, concrete_array_type, is_concrete, positive_checks
+from ._guard import _modules, error_if, guard, has_host_callbacks, host_checked, nan_where, traced_checks, validated_inputs
 from .commands import AbstractExponentialVoltage
 from .fast import batched_exponential_scene
 from .modal import expm_solve, modal_solve
@@ -120,11 +120,12 @@ def _run_impl(scene: Scene, method: str, solver, rtol, atol, dt0, max_steps: int
         else:
             controller = diffrax.ConstantStepSize()
         meter = diffrax.TqdmProgressMeter() if progress else diffrax.NoProgressMeter()
-        sol = diffrax.diffeqsolve(
-            diffrax.ODETerm(vf), solver, t0, times[-1], dt0, y_init, args=inp, saveat=saveat,
-            stepsize_controller=controller, max_steps=max_steps, throw=False, progress_meter=meter,
-            adjoint=adjoint,
-        )
+        with validated_inputs():  # the output times were checked by Scene (or are checked on the results)
+            sol = diffrax.diffeqsolve(
+                diffrax.ODETerm(vf), solver, t0, times[-1], dt0, y_init, args=inp, saveat=saveat,
+                stepsize_controller=controller, max_steps=max_steps, throw=False, progress_meter=meter,
+                adjoint=adjoint,
+            )
         if integrals:
             ys, acc = sol.ys
             integral_vals = {n: acc[:, i] for i, n in enumerate(integrals)}
@@ -156,6 +157,7 @@ _run_traced = eqx.debug.assert_max_traces(_run_impl, max_traces=None)
 _run = eqx.filter_jit(_run_traced)
 _RK4 = RK4()
 _DEFAULT_ADJOINT = diffrax.RecursiveCheckpointAdjoint()
+_FORWARD = diffrax.ForwardMode()
 
 
 def _describe(scene: Scene, method: str) -> str:
@@ -313,8 +315,6 @@ def _check_max_steps(max_steps) -> None:
 # not arrays, tolerances given as arrays) takes the general path above.
 # ------------------------------------------------------------------------------------------------
 
-#: leaf types that are concrete arrays (jax array types are added when first seen)
-_CONCRETE_TYPES: set = {np.ndarray}
 _PLANS: dict = {}
 _PROGRAMS: dict = {}
 _PLANS_MAX = 512
@@ -332,21 +332,22 @@ class _Plan:
 
 
 def _concrete_leaves(leaves) -> bool:
-    for t in set(map(type, leaves)):
-        if t not in _CONCRETE_TYPES:
-            if issubclass(t, jax.Array) and not issubclass(t, jax.core.Tracer):
-                _CONCRETE_TYPES.add(t)
-            else:
-                return False
-    return True
+    return all(map(concrete_array_type, set(map(type, leaves))))
 
 
 def _number(v) -> bool:
-    return type(v) in (float, int)
+    """A plain number or a concrete 0-d array (a tolerance or step on the fast path)."""
+    t = type(v)
+    return t is float or t is int or (concrete_array_type(t) and v.ndim == 0)
 
 
 def _positive_number(v) -> bool:
+    v = float(v)
     return math.isfinite(v) and v > 0
+
+
+def _as_time(v):
+    return as_float_array(float(v) if type(v) is int else v)
 
 
 def _run_flat(treedef, method, max_steps, progress, adjoint, leaves, rtol, atol, dt0, solver):
@@ -366,23 +367,39 @@ def _make_plan(scene, treedef, method, solver, dt0, adjoint, max_steps, progress
         default_solver = solver is None
         if not default_solver:
             _check_fixed_step(method, solver, dt0)
-    else:
+    if method in _CLOSED:
         solver, adjoint = None, None  # not used by the closed forms
+    else:
+        # nothing on this path is differentiated (every input is a concrete value): the plain forward
+        # loop, which traces and compiles faster than a checkpointed one and takes the same steps
+        adjoint = _FORWARD
     return _Plan(False, method, solver, default_solver, _program(treedef, method, int(max_steps), bool(progress), adjoint))
 
 
-def _program(*static):
-    """The compiled program of one structure; plans that resolve to the same method share it.
+class _Program:
+    """The compiled program of one structure (shared by the plans that resolve to it), in two versions:
+    plain, and `host_checked` for a program that holds a host callback (an `eqx.error_if` in a model,
+    or a diffrax check jaxbelt does not make itself), which the persistent cache would not store."""
 
-    The time-stepping programs are `host_checked`: diffrax's checks of its inputs come back as values
-    instead of host callbacks, so that the persistent compilation cache keeps them."""
+    __slots__ = ("plain", "checked", "callbacks")
+
+    def __init__(self, fun):
+        self.plain = jax.jit(fun, static_argnums=(4,))
+        self.checked = host_checked(fun, jit=jax.jit, static_argnums=(4,))
+        self.callbacks = {}  # solver -> whether the traced program holds a host callback
+
+    def __call__(self, *args):
+        solver = args[4]
+        callbacks = self.callbacks.get(solver)
+        if callbacks is None:  # first call with this solver: trace (the call below reuses the trace)
+            callbacks = self.callbacks[solver] = has_host_callbacks(self.plain.trace(*args).jaxpr)
+        return (self.checked if callbacks else self.plain)(*args)
+
+
+def _program(*static) -> _Program:
     program = _PROGRAMS.get(static)
     if program is None:
-        fun = functools.partial(_run_flat, *static)
-        if static[1] in _CLOSED:
-            program = jax.jit(fun, static_argnums=(4,))
-        else:
-            program = host_checked(fun, jit=jax.jit, static_argnums=(4,))
+        program = _Program(functools.partial(_run_flat, *static))
         if len(_PROGRAMS) >= _PLANS_MAX:
             _PROGRAMS.clear()
         _PROGRAMS[static] = program
@@ -424,8 +441,8 @@ def _simulate_concrete(scene, method, solver, rtol, atol, dt0, dt, max_steps, pr
     if method in _CLOSED:
         rtol = atol = dt0 = None  # not used: the program takes no tolerances
     else:
-        rtol, atol = as_float_array(float(rtol)), as_float_array(float(atol))
-        dt0 = None if dt0 is None else as_float_array(float(dt0))
+        rtol, atol = _as_time(rtol), _as_time(atol)
+        dt0 = None if dt0 is None else _as_time(dt0)
     return plan.program(leaves, rtol, atol, dt0, solver)
 
 
