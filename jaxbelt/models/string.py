@@ -193,8 +193,12 @@ class MovingString(eqx.Module):
         nb = int(n_basis)
         if nb < 1:
             raise ValueError(f"MovingString.galerkin_matrices: `n_basis` must be >= 1; got {n_basis}")
+        speed = _check_subcritical(speed, self.critical_speed, "MovingString.galerkin_matrices")
+        return self._galerkin_matrices(speed, nb)
+
+    def _galerkin_matrices(self, speed, nb: int):
+        """`galerkin_matrices` for a speed already checked against the critical speed."""
         vc = self.critical_speed
-        speed = _check_subcritical(speed, vc, "MovingString.galerkin_matrices")
         L = self.length
         k = jnp.arange(1, nb + 1, dtype=float)
         j = k[:, None]
@@ -222,9 +226,10 @@ class MovingString(eqx.Module):
         return _galerkin_frequencies(self, speed, int(n_basis), int(n_modes))
 
 
-@host_checked
+@eqx.filter_jit
 def _galerkin_frequencies(span, speed, n_basis, n_modes):
-    M, G, K = span.galerkin_matrices(speed, n_basis)
+    # `speed` was checked by the caller: no guard in here, so the program holds no host callback
+    M, G, K = span._galerkin_matrices(speed, n_basis)
     lam = jnp.linalg.eigvals(_first_order(M, G, K))
     w = jnp.sort(jnp.abs(jnp.imag(lam)))
     # eigenvalues come in +/- pairs: take every other one
@@ -493,7 +498,7 @@ def runout_phasors(rig: RunoutRig, speed, n_modes: int = 64):
                     rig.damping_ratio, rig.position, int(n_modes))
 
 
-@host_checked
+@eqx.filter_jit
 def _phasors(speed, L, vt, radii, runouts, phase, zeta, position, nm):
     r0, r1 = radii[0], radii[1]
     e0, e1 = runouts[0], runouts[1]

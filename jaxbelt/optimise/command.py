@@ -163,7 +163,7 @@ def _named_optimizer(name: str, learning_rate):
     raise ValueError(f"optimiser name must be 'lbfgs' or 'adam' (or pass an optax transformation); got {name!r}")
 
 
-@host_checked
+@eqx.filter_jit
 def _init(opt, problem, theta):
     # strong-typed leaves: optax initialises some line-search statistics as weak-typed Python
     # scalars, which would make the first update's state differ in type and compile the step twice
