@@ -312,7 +312,7 @@ def _check_max_steps(max_steps) -> None:
 # `jax.jit` program that takes the flat array leaves; a call flattens the scene, checks the few
 # per-call numbers (tolerances, step) and runs the program. Values stay data: a new grid, tolerance,
 # step or parameter of the same shape reuses the program. Anything else (tracers, leaves that are
-# not arrays, tolerances given as arrays) takes the general path above.
+# not arrays, traced or non-scalar tolerances) takes the general path above.
 # ------------------------------------------------------------------------------------------------
 
 _PLANS: dict = {}
@@ -346,7 +346,8 @@ def _positive_number(v) -> bool:
     return math.isfinite(v) and v > 0
 
 
-def _as_time(v):
+def _as_scalar(v):
+    """A tolerance or step as a float array (a Python number from the cache of `as_float_array`)."""
     return as_float_array(float(v) if type(v) is int else v)
 
 
@@ -442,8 +443,8 @@ def _simulate_concrete(scene, method, solver, rtol, atol, dt0, dt, max_steps, pr
     if method in _CLOSED:
         rtol = atol = dt0 = None  # not used: the program takes no tolerances
     else:
-        rtol, atol = _as_time(rtol), _as_time(atol)
-        dt0 = None if dt0 is None else _as_time(dt0)
+        rtol, atol = _as_scalar(rtol), _as_scalar(atol)
+        dt0 = None if dt0 is None else _as_scalar(dt0)
     return plan.program(leaves, rtol, atol, dt0, solver)
 
 
