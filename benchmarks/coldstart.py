@@ -25,7 +25,7 @@ ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
 sys.path.insert(0, str(ROOT))
 
-from _common import RESULTS, machine_info, results_dir, time_jax  # noqa: E402
+from _common import RESULTS, block, machine_info, results_dir, time_jax  # noqa: E402
 
 ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""), MPLBACKEND="Agg")
 CLI_ARGS = {
@@ -51,6 +51,9 @@ def imports(repeats: int) -> dict:
 
 
 def cli(commands, repeats: int) -> dict:
+    """Each repeat: a cold run (empty cache folder), a warm run (the same folder) and a --no-cache run, back
+    to back, so that the two runs of a ratio see about the same load; `warm_over_cold` is the median of the
+    per-repeat ratios."""
     out = {}
     for name in commands:
         cold, warm, nocache = [], [], []
@@ -64,9 +67,35 @@ def cli(commands, repeats: int) -> dict:
                 nocache.append(wall([sys.executable, "-m", "jaxbelt", "--no-cache", name, *CLI_ARGS[name],
                                      "--out", png], env))
         c, w, n = (float(np.median(x)) for x in (cold, warm, nocache))
-        out[name] = {"cold_s": c, "warm_s": w, "no_cache_s": n, "warm_over_cold": w / c, "repeats": repeats}
-        print(f"cli {name}: cold {c:.1f} s, warm {w:.1f} s ({w / c:.2f}x), --no-cache {n:.1f} s", flush=True)
+        r = float(np.median(np.array(warm) / np.array(cold)))
+        out[name] = {"cold_s": c, "warm_s": w, "no_cache_s": n, "warm_over_cold": r, "repeats": repeats,
+                     "ratios": (np.array(warm) / np.array(cold)).tolist()}
+        print(f"cli {name}: cold {c:.1f} s, warm {w:.1f} s ({r:.2f}x), --no-cache {n:.1f} s", flush=True)
     return out
+
+
+def interleaved(fns: dict, rounds: int = 25, min_time: float = 0.02) -> dict:
+    """Median time [s] of each callable and median ratio to the first one, timed in alternating rounds (each a
+    mean over enough calls to last `min_time`), so that a change of load hits all of them alike."""
+    for f in fns.values():
+        block(f())
+        block(f())
+    inner = {}
+    for k, f in fns.items():
+        t = time.perf_counter()
+        block(f())
+        inner[k] = max(1, int(min_time / max(time.perf_counter() - t, 1e-7)))
+    samples = {k: [] for k in fns}
+    for _ in range(rounds):
+        for k, f in fns.items():
+            t = time.perf_counter()
+            for _ in range(inner[k]):
+                block(f())
+            samples[k].append((time.perf_counter() - t) / inner[k])
+    first = next(iter(fns))
+    ref = np.array(samples[first])
+    return {k: {"median_s": float(np.median(v)), "ratio_to_" + first: float(np.median(np.array(v) / ref))}
+            for k, v in samples.items()}
 
 
 def compile_once(quick: bool) -> dict:
@@ -162,13 +191,23 @@ def closed_form(quick: bool) -> dict:
         r0, r1 = (int(x) * 1024 for x in out.stdout.split())
         res["batch_100000"].update(rss_before_bytes=r0, rss_peak_bytes=r1,
                                    rss_growth_over_output=(r1 - r0) / res["batch_100000"]["output_bytes"])
-    # one closed-form simulate call against its compiled program (depends on solve.py's dispatch)
+    # one closed-form simulate call against its compiled program (depends on solve.py's dispatch); and the
+    # same call with the model, command and scene built in it
     scene = jb.Scene(model, jb.ExponentialVoltage(24.0, 0.04), ts=np.asarray(ts))
-    call = lambda: jb.simulate(scene).ys  # noqa: E731
     prog = jax.jit(lambda s: jb.simulate(s).ys)
-    t_c, _, _ = time_jax(call, repeats=15, min_time=0.05)
-    t_p, _, _ = time_jax(prog, scene, repeats=15, min_time=0.05)
-    res["single_call"] = {"simulate_s": t_c, "jit_program_s": t_p, "ratio": t_c / t_p}
+    t = interleaved({
+        "program": lambda: prog(scene),
+        "simulate": lambda: jb.simulate(scene).ys,
+        "built_and_simulated": lambda: jb.simulate(jb.Scene(jb.BeltStartup(), jb.ExponentialVoltage(24.0, 0.04),
+                                                            ts=ts)).ys,
+    }, rounds=9 if quick else 25)
+    res["single_call"] = {"simulate_s": t["simulate"]["median_s"], "jit_program_s": t["program"]["median_s"],
+                          "ratio": t["simulate"]["ratio_to_program"],
+                          "built_and_simulated_s": t["built_and_simulated"]["median_s"],
+                          "built_and_simulated_ratio": t["built_and_simulated"]["ratio_to_program"]}
+    print(f"single closed-form call: simulate {1e6 * t['simulate']['median_s']:.0f} us, program "
+          f"{1e6 * t['program']['median_s']:.0f} us ({res['single_call']['ratio']:.2f}x); with construction "
+          f"{res['single_call']['built_and_simulated_ratio']:.2f}x", flush=True)
     return res
 
 
@@ -251,7 +290,8 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="fewer repeats, two CLI commands, a 200-gain sweep")
     p.add_argument("--cli", nargs="*", default=None, help="CLI commands to time cold/warm (default: all; quick: startup)")
-    p.add_argument("--skip", nargs="*", default=(), help="parts to skip: imports cli compile construction closed sweep")
+    p.add_argument("--skip", nargs="*", default=(), help="parts to skip: imports cli compile_once construction closed_form fourbar_sweep")
+    p.add_argument("--cli-repeats", type=int, default=None, help="cold/warm pairs per CLI command (default 3; quick: 1)")
     args = p.parse_args(argv)
     import jax
 
@@ -262,7 +302,7 @@ def main(argv=None) -> int:
                               "noisy; compare the ratios, each measured in the same run (medians of repeats)"}
     parts = {
         "imports": lambda: imports(3 if args.quick else 5),
-        "cli": lambda: cli(commands, 1),
+        "cli": lambda: cli(commands, args.cli_repeats or (1 if args.quick else 3)),
         "compile_once": lambda: compile_once(args.quick),
         "construction": construction,
         "closed_form": lambda: closed_form(args.quick),
@@ -294,6 +334,8 @@ def main(argv=None) -> int:
                      "value": cf["batch_100000"]["peak_over_output"], "target": "<= 1.15"})
         head.append({"what": "single closed-form simulate / compiled program", "unit": "x",
                      "value": cf["single_call"]["ratio"], "target": "<= 1.5"})
+        head.append({"what": "the same call with model, command and scene built in it / compiled program",
+                     "unit": "x", "value": cf["single_call"]["built_and_simulated_ratio"], "target": None})
     if "fourbar_sweep" in data:
         fs = data["fourbar_sweep"]
         # matched error: Tsit5 rtol 1e-6 and LSODA rtol 1e-6 reach about the same chi error (~5e-7);

@@ -21,6 +21,8 @@ import numpy as np
 
 _SCALARS: dict = {}
 _SCALARS_MAX = 4096
+#: id -> (array, its value) of the arrays in `_SCALARS`: checks read a cached default without a transfer
+_HOST: dict = {}
 
 
 def as_float_array(x):
@@ -31,9 +33,10 @@ def as_float_array(x):
     common cases are short-cut: an array that already has the float dtype is returned as is, and
     Python scalars (defaults, literals) come from a cache of immutable device arrays."""
     dtype = jax.dtypes.canonicalize_dtype(float)
-    if isinstance(x, jax.Array) and not isinstance(x, jax.core.Tracer) and x.dtype == dtype and not x.weak_type:
+    t = type(x)
+    if t is not np.ndarray and concrete_array_type(t) and x.dtype == dtype and not x.weak_type:
         return x
-    if type(x) in (float, int):
+    if t is float or t is int:
         key = (x, math.copysign(1.0, x), dtype)
         hit = _SCALARS.get(key)
         if hit is None:
@@ -44,9 +47,25 @@ def as_float_array(x):
                 return hit
             if len(_SCALARS) >= _SCALARS_MAX:
                 _SCALARS.clear()
+                _HOST.clear()
             _SCALARS[key] = hit
+            _HOST[id(hit)] = (hit, float(x))
         return hit
     return jnp.asarray(x, dtype=float)
+
+
+#: leaf types known to be concrete arrays (jax's array types are added when first seen)
+_ARRAY_TYPES: set = {np.ndarray}
+
+
+def concrete_array_type(t) -> bool:
+    """True when `t` is the type of a concrete array (numpy, or a jax array that is not a tracer)."""
+    if t in _ARRAY_TYPES:
+        return True
+    if issubclass(t, jax.Array) and not issubclass(t, jax.core.Tracer):
+        _ARRAY_TYPES.add(t)
+        return True
+    return False
 
 
 def is_concrete(x) -> bool:
@@ -98,9 +117,32 @@ def _check_host(name: str, v, what: str, unit: str, owner: str, ok) -> None:
         raise ValueError(f"{_message(name, what, unit, owner)}; got {v.tolist() if v.ndim else float(v)}")
 
 
+class _Scalar:
+    """The `xp` of a check on one Python float (a scalar parameter: no numpy call per check)."""
+
+    all = staticmethod(bool)
+    isfinite = staticmethod(math.isfinite)
+
+
 def _enforce(name: str, value, what: str, unit: str, owner: str, ok) -> None:
     """The one rule of every check: concrete values raise `ValueError`; traced ones are recorded (see
-    `collecting`). `ok(v, xp)` tests all elements with `xp` = numpy (host values) or jax.numpy (tracers)."""
+    `collecting`). `ok(v, xp)` tests all elements with `xp` = numpy (host values) or jax.numpy (tracers).
+
+    A model's construction checks a dozen scalar fields: numbers and concrete 0-d arrays are tested as
+    one Python float (a jax array keeps its host copy after the first read, so a cached default costs no
+    transfer)."""
+    t = type(value)
+    known = _HOST.get(id(value))
+    if known is not None and known[0] is value:
+        v = known[1]
+    elif t is float or t is int or (concrete_array_type(t) and value.ndim == 0):
+        v = float(value)
+    else:
+        v = None
+    if v is not None:
+        if not ok(v, _Scalar):
+            raise ValueError(f"{_message(name, what, unit, owner)}; got {v}")
+        return
     if not is_concrete(value):
         record(ok(jnp.asarray(value), jnp), _message(name, what, unit, owner))
         return

@@ -9,6 +9,13 @@ modules inside them) and collects each check as `(ok, message)`, `ok` a boolean 
   parameter and its range, whatever part of the result the caller keeps (under `vmap`, if any
   element is bad);
 - `throw=False`: the bad elements are set to NaN and reported through the returned flag.
+
+`eqx.error_if` raises through a host callback, and JAX's persistent compilation cache never stores
+a program that holds one: every new process (a CLI run, a notebook kernel) would compile it again.
+The programs jaxbelt runs eagerly on the caller's behalf are therefore `host_checked`: called
+outside any trace they run a version whose guards are `checkify` checks (values, no callback) and
+raise the failed check's message on the host; inside a caller's jit/vmap/grad they are the plain
+program with `eqx.error_if` guards.
 """
 
 from __future__ import annotations
@@ -18,8 +25,10 @@ import functools
 
 import equinox as eqx
 import jax
+import jax.extend.core
 import jax.numpy as jnp
 import numpy as np
+from jax.experimental import checkify
 
 from ._checks import collecting, is_concrete
 
@@ -76,13 +85,138 @@ def _checked_jvp(message, primals, tangents):
     return eqx.error_if(x, pred, message), tx * one
 
 
+class _Off:
+    """Stand-in for `_host_checks` where JAX has no user contexts (jax < 0.6): host checks are off."""
+
+    value = False
+
+
+#: True while jaxbelt traces or runs a `host_checked` program (part of JAX's jit cache keys, so that a
+#: program traced with checkify checks is never reused where the caller expects `eqx.error_if`).
+_host_checks = jax.make_user_context(default_value=False) if hasattr(jax, "make_user_context") else _Off()
+#: True while jaxbelt traces a diffrax solve whose inputs it has checked itself (see `validated_inputs`).
+_validated = jax.make_user_context(default_value=False) if hasattr(jax, "make_user_context") else _Off()
+
+#: diffrax's own checks of `SaveAt(ts=...)`, which `Scene` and `simulate` make too (strictly increasing
+#: finite output times, start time <= the first of them; traced values: recorded checks on the results)
+_VALIDATED_BY_JAXBELT = frozenset({
+    "saveat.ts must be increasing or decreasing.",
+    "saveat.ts must lie between t0 and t1.",
+})
+
+
+def validated_inputs():
+    """Context of a diffrax solve whose output times jaxbelt has checked: diffrax's repeat of those
+    checks (`_VALIDATED_BY_JAXBELT`, matched by message) is left out of the program.
+
+    Each would be an `eqx.error_if`, i.e. a host callback, and a program holding one is never stored by
+    the persistent compilation cache. Any other check stays; an unknown message (another diffrax
+    version) keeps its check, so the only cost of a mismatch is a program that is not cached.
+    """
+    _equinox_errors_as_checks()
+    return _validated(True)
+
+
+def has_host_callbacks(jaxpr) -> bool:
+    """Whether a (closed) jaxpr holds a host callback anywhere, sub-programs included."""
+    todo = [getattr(jaxpr, "jaxpr", jaxpr)]
+    while todo:
+        j = todo.pop()
+        for eqn in j.eqns:
+            if "callback" in eqn.primitive.name:
+                return True
+            for param in eqn.params.values():
+                for sub in param if isinstance(param, (list, tuple)) else (param,):
+                    if hasattr(sub, "eqns"):
+                        todo.append(sub)
+                    elif hasattr(getattr(sub, "jaxpr", None), "eqns"):
+                        todo.append(sub.jaxpr)
+    return False
+_EAGER_TRACE = type(jax.extend.core.find_top_trace(()))
+
+
+def eager() -> bool:
+    """True outside every jit/vmap/grad trace."""
+    return type(jax.extend.core.find_top_trace(())) is _EAGER_TRACE
+
+
+def host_checked(fun=None, *, jit=eqx.filter_jit, **jit_kwargs):
+    """`jit(fun, **jit_kwargs)` for a program jaxbelt runs eagerly: its guards come back as values.
+
+    Called outside any trace, the program that runs is `checkify`-transformed: `error_if` (and so
+    `guard`) record checkify checks instead of host callbacks, so the compiled program is stored by
+    the persistent compilation cache, and the first failed check raises here with its message
+    (`jax.errors.JaxRuntimeError`, a `ValueError`). Inside a caller's jit/vmap/grad, or inside
+    another `host_checked` program, it is the plain program.
+    """
+    if fun is None:
+        return functools.partial(host_checked, jit=jit, **jit_kwargs)
+    plain = jit(fun, **jit_kwargs)
+    if isinstance(_host_checks, _Off):
+        return plain
+    checked = jit(checkify.checkify(fun, errors=checkify.user_checks), **jit_kwargs)
+
+    @functools.wraps(fun)
+    def call(*args, **kwargs):
+        if _host_checks.value or not eager():
+            return plain(*args, **kwargs)
+        _equinox_errors_as_checks()
+        with _host_checks(True):
+            err, out = checked(*args, **kwargs)
+        err.throw()
+        return out
+
+    return call
+
+
+def _as_check(pred, message: str) -> None:
+    """A checkify check that fails where any element of `pred` is True (inside a `host_checked` program)."""
+    checkify.check(~jnp.any(jnp.asarray(pred)), message.replace("{", "{{").replace("}", "}}"))
+
+
+def _equinox_errors_as_checks() -> None:
+    """Inside a `host_checked` program, `eqx.error_if` records a checkify check as well; inside
+    `validated_inputs`, diffrax's repeat of jaxbelt's own checks is left out.
+
+    diffrax, optimistix and the models call `eqx.error_if` (diffrax as `equinox.internal.error_if`) for
+    their checks: traced, each is a host callback, and a program holding one is never stored by the
+    persistent compilation cache. Installed once, the wrapper leaves every call outside those two
+    contexts (another thread, the caller's own jit) to equinox unchanged: the contexts are
+    thread-local and part of JAX's jit cache keys.
+    """
+    if getattr(eqx.error_if, "_jaxbelt_checks", False):
+        return
+    import equinox.internal as eqxi
+
+    original = eqx.error_if
+
+    @functools.wraps(original)
+    def error_if(x, pred, msg, *, on_error="default"):
+        if on_error in ("default", "raise"):
+            if _validated.value and msg in _VALIDATED_BY_JAXBELT:
+                return x
+            if _host_checks.value:
+                _as_check(pred, msg)
+                return x
+        return original(x, pred, msg, on_error=on_error)
+
+    error_if._jaxbelt_checks = True
+    eqx.error_if = error_if
+    if getattr(eqxi, "error_if", None) is original:
+        eqxi.error_if = error_if
+
+
 def error_if(value, pred, message: str):
     """`eqx.error_if` on every inexact leaf of `value` that also guards derivatives.
 
     Under `jax.grad`/`jax.jacfwd` the check runs in the derivative program too, so an invalid
-    value raises whether the caller keeps the value, its gradient or both.
+    value raises whether the caller keeps the value, its gradient or both. Inside a `host_checked`
+    program it is a checkify check (the whole program, derivatives included, is checked).
     """
     pred = jnp.asarray(pred)
+    if _host_checks.value:
+        _as_check(pred, message)
+        return value
 
     def one(x):
         if isinstance(x, (jax.Array, np.ndarray)) and jnp.issubdtype(x.dtype, jnp.inexact) and x.size:

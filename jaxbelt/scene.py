@@ -13,7 +13,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import is_concrete
+from ._checks import as_float_array, is_concrete
 
 
 def _as_tuple(observe):
@@ -80,44 +80,46 @@ class Scene(eqx.Module):
             for ok, message in model.input_checks(input):
                 if not bool(np.all(np.asarray(ok))):
                     raise ValueError(message)
-        self.observe = _as_tuple(observe)
-        for name in self.observe:
+        self.observe = observe = _as_tuple(observe)
+        for name in observe:
             if not isinstance(name, str):
                 raise TypeError(f"Scene: `observe` holds output names (str); got {name!r}")
-        known = tuple(model.state_names) + type(model).output_names() + type(model).integral_names()
-        unknown = [n for n in self.observe if n not in known and not _dynamic_output(model, n)]
-        if unknown:
-            raise ValueError(f"Scene: {type(model).__name__} has no output {unknown[0]!r}; available: {known}")
+        if observe:
+            known = tuple(model.state_names) + type(model).output_names() + type(model).integral_names()
+            unknown = [n for n in observe if n not in known and not _dynamic_output(model, n)]
+            if unknown:
+                raise ValueError(f"Scene: {type(model).__name__} has no output {unknown[0]!r}; available: {known}")
         self.state = bool(state)
-        n = model.n_states
         if y0 is None:
             self.y0 = None
         else:
-            self.y0 = jnp.asarray(y0, dtype=float)
-            if self.y0.shape != (n,):
-                raise ValueError(f"Scene: `y0` must have shape ({n},) for {type(model).__name__}; got {self.y0.shape}")
-            if is_concrete(self.y0) and not np.all(np.isfinite(np.asarray(self.y0))):
-                raise ValueError(f"Scene: `y0` must be finite; got {np.asarray(self.y0).tolist()}")
+            n = model.n_states
+            self.y0 = y0 = jnp.asarray(y0, dtype=float)
+            if y0.shape != (n,):
+                raise ValueError(f"Scene: `y0` must have shape ({n},) for {type(model).__name__}; got {y0.shape}")
+            if is_concrete(y0) and not np.all(np.isfinite(np.asarray(y0))):
+                raise ValueError(f"Scene: `y0` must be finite; got {np.asarray(y0).tolist()}")
         if ts is None and t1 is None:
             raise ValueError("Scene needs either `ts` (output times, s) or `t1` (final time, s)")
         if ts is not None and t1 is not None:
             raise ValueError("Scene takes `ts` (output times) or `t1` (final time only), not both")
         if ts is not None:
             raw = ts
-            ts = jnp.asarray(ts, dtype=float)
+            ts = as_float_array(ts)
             if ts.ndim != 1 or ts.shape[0] < 1:
                 raise ValueError(f"Scene: `ts` must be a 1-D array of output times [s]; got shape {ts.shape}")
             if is_concrete(raw):
                 tv = np.asarray(raw, dtype=float)
-                if not np.all(np.isfinite(tv)):
+                if not np.isfinite(tv).all():
                     raise ValueError("Scene: `ts` must be finite")
                 d = np.diff(tv)
-                if np.any(d <= 0):
+                if d.size and d.min() <= 0:
                     i = int(np.argmax(d <= 0))
                     raise ValueError(
                         f"Scene: `ts` must be strictly increasing; ts[{i}] = {tv[i]} >= ts[{i + 1}] = {tv[i + 1]}"
                     )
-                seen = bool(d.size > 0 and np.allclose(d, d[0], rtol=1e-12, atol=0.0))
+                # evenly spaced to 1e-12 relative (np.allclose(d, d[0], rtol=1e-12, atol=0), without its overhead)
+                seen = bool(d.size > 0 and np.abs(d - d[0]).max() <= 1e-12 * abs(d[0]))
                 if uniform is None:
                     uniform = seen
                 elif uniform and not seen:
@@ -135,14 +137,14 @@ class Scene(eqx.Module):
             self.ts = ts
             self.uniform = bool(uniform)
             # None: the start is ts[0], taken inside the compiled program (no device op here)
-            self.t0 = None if t0 is None else jnp.asarray(t0, dtype=float)
-            if self.t0 is not None and jnp.ndim(self.t0) != 0:
-                raise ValueError(f"Scene: `t0` must be a scalar time [s]; got shape {jnp.shape(self.t0)}")
-            if t0 is not None and is_concrete(self.t0) and is_concrete(raw):
-                if not np.isfinite(float(self.t0)) or float(self.t0) > float(np.asarray(raw)[0]):
+            self.t0 = start = None if t0 is None else jnp.asarray(t0, dtype=float)
+            if start is not None and jnp.ndim(start) != 0:
+                raise ValueError(f"Scene: `t0` must be a scalar time [s]; got shape {jnp.shape(start)}")
+            if start is not None and is_concrete(start) and is_concrete(raw):
+                if not np.isfinite(float(start)) or float(start) > float(np.asarray(raw)[0]):
                     raise ValueError(
                         f"Scene: `t0` (start time, s) must be finite and <= ts[0] = {float(np.asarray(raw)[0])}; "
-                        f"got {float(self.t0)}"
+                        f"got {float(start)}"
                     )
             self.t1 = None
         else:

@@ -124,6 +124,44 @@ def test_compilation_cache_writes_to_the_folder(tmp_path):
     assert any((tmp_path / "xla").iterdir())
 
 
+def test_eager_programs_hold_no_host_callback(tmp_path):
+    # JAX's persistent cache never stores a program that holds a host callback (eqx.error_if): the
+    # programs jaxbelt runs eagerly return their checks as values instead, so a second process loads them
+    code = (
+        "import jax, jax.numpy as jnp, jaxbelt as jb; "
+        f"jb.enable_compilation_cache({str(tmp_path / 'xla')!r}); "
+        "jax.config.update('jax_explain_cache_misses', True); "
+        "jb.models.fourbar.simulate_fig4(jb.FourBarDrive(), n=201); "
+        "plat, cmd = jb.BeltPlatform(), jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0])); "
+        "jb.residual_energy(plat, cmd); jb.optimise_command(plat, cmd, max_steps=2, progress=False); "
+        "jb.crossing_speeds(jb.RunoutRig(), n_modes=2); jb.MovingString().galerkin_frequencies(20.0, 8, 3)"
+    )
+    full = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=full, timeout=600)
+    assert out.returncode == 0, out.stderr
+    assert "Writing" in out.stderr  # the explanations are on
+    assert "host callbacks" not in out.stderr, [line for line in out.stderr.splitlines() if "host callbacks" in line]
+
+
+def test_host_checked_programs_raise_on_the_host():
+    import equinox as eqx
+
+    from jaxbelt._guard import error_if, host_checked
+
+    own = host_checked(lambda x: error_if(x, x < 0, "x must be >= 0 {sic}"))
+    third_party = host_checked(lambda x: eqx.error_if(x, x > 1, "x must be <= 1"))
+    assert float(own(0.5)) == float(third_party(0.5)) == 0.5
+    with pytest.raises(ValueError, match="x must be >= 0 {sic}"):  # checkify's JaxRuntimeError
+        own(-1.0)
+    with pytest.raises(ValueError, match="x must be <= 1"):
+        third_party(2.0)
+    # inside the caller's jit: the plain program, whose eqx.error_if raises at run time
+    with pytest.raises((eqx.EquinoxRuntimeError, jax.errors.JaxRuntimeError), match="x must be >= 0"):
+        jax.block_until_ready(jax.jit(own)(-1.0))
+    with pytest.raises((eqx.EquinoxRuntimeError, jax.errors.JaxRuntimeError), match="x must be <= 1"):
+        jax.block_until_ready(jax.jit(lambda x: eqx.error_if(x, x > 1, "x must be <= 1"))(2.0))
+
+
 def test_default_cache_folder_respects_xdg(tmp_path, monkeypatch):
     from jaxbelt.cache import default_cache_dir
 

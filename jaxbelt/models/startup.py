@@ -363,8 +363,8 @@ def startup_curves(model=None, gammas=(0.02, 0.04, 0.06), v_max=24.0, t_end=0.5,
 
     The motor voltage is $V(t) = V_{max}(1 - e^{-t/\\gamma})$ (Incerti, 2014, eq. 30) with
     `v_max` $V_{max}$ [V] and each $\\gamma$ of `gammas` [s]; the drive starts at rest and is
-    simulated over $[0, t_{end}]$ [s] on `n_points` equally spaced times (one `jax.vmap` over
-    $\\gamma$; closed form by default, `method` as in `simulate`).
+    simulated over $[0, t_{end}]$ [s] on `n_points` equally spaced times (one compiled program, run for
+    each $\\gamma$; closed form by default, `method` as in `simulate`).
 
     Returns `(ts, curves)`: `ts` [s] of shape `(n_points,)` and `curves[name]` of shape
     `(len(gammas), n_points)` for each name of `STARTUP_OUTPUTS`: voltage [V], current [A],
@@ -378,10 +378,9 @@ def startup_curves(model=None, gammas=(0.02, 0.04, 0.06), v_max=24.0, t_end=0.5,
     model = BeltStartup() if model is None else model
     ts = jnp.linspace(0.0, float(t_end), int(n_points))
     observe = tuple(n for n in STARTUP_OUTPUTS if n not in model.state_names)
-
-    def one(g):
+    rows = []
+    for g in np.atleast_1d(np.asarray(gammas, dtype=float)).tolist():
         sol = simulate(Scene(model, ExponentialVoltage(v_max, g), ts=ts, observe=observe), method=method)
-        return {n: sol[n] for n in STARTUP_OUTPUTS}
-
-    out = jax.vmap(one)(jnp.asarray(gammas, dtype=float))
-    return np.asarray(ts), {k: np.asarray(v) for k, v in out.items()}
+        rows.append([sol[n] for n in STARTUP_OUTPUTS])
+    rows = jax.device_get(rows)
+    return np.asarray(ts), {n: np.stack([r[i] for r in rows]) for i, n in enumerate(STARTUP_OUTPUTS)}

@@ -40,7 +40,7 @@ import numbers
 
 from .._checks import check_nonnegative, check_positive, check_range, collecting, is_concrete, record
 from .._checks import as_float_array as _arr
-from .._guard import all_ok, guard, traced_checks
+from .._guard import all_ok, error_if, guard, host_checked, traced_checks
 
 __all__ = [
     "MovingString",
@@ -97,7 +97,7 @@ def _check_subcritical(speed, critical, owner: str, name: str = "speed"):
                 f"(at and above it the span has no stiffness, eq. 39); got |{name}| up to {worst:.6g} m/s"
             )
         return speed
-    return eqx.error_if(
+    return error_if(
         speed,
         jnp.any(~(jnp.abs(speed) < critical)),
         f"{owner}: `{name}` must be below the critical speed sqrt(T/rho)",
@@ -193,8 +193,12 @@ class MovingString(eqx.Module):
         nb = int(n_basis)
         if nb < 1:
             raise ValueError(f"MovingString.galerkin_matrices: `n_basis` must be >= 1; got {n_basis}")
+        speed = _check_subcritical(speed, self.critical_speed, "MovingString.galerkin_matrices")
+        return self._galerkin_matrices(speed, nb)
+
+    def _galerkin_matrices(self, speed, nb: int):
+        """`galerkin_matrices` for a speed already checked against the critical speed."""
         vc = self.critical_speed
-        speed = _check_subcritical(speed, vc, "MovingString.galerkin_matrices")
         L = self.length
         k = jnp.arange(1, nb + 1, dtype=float)
         j = k[:, None]
@@ -224,7 +228,8 @@ class MovingString(eqx.Module):
 
 @eqx.filter_jit
 def _galerkin_frequencies(span, speed, n_basis, n_modes):
-    M, G, K = span.galerkin_matrices(speed, n_basis)
+    # `speed` was checked by the caller: no guard in here, so the program holds no host callback
+    M, G, K = span._galerkin_matrices(speed, n_basis)
     lam = jnp.linalg.eigvals(_first_order(M, G, K))
     w = jnp.sort(jnp.abs(jnp.imag(lam)))
     # eigenvalues come in +/- pairs: take every other one
@@ -325,6 +330,11 @@ def _crossing_root(n_pi_over_L, vt, slope):
     """
     shape = jnp.broadcast_shapes(jnp.shape(slope), jnp.shape(n_pi_over_L), jnp.shape(vt))
     args = [jnp.ravel(jnp.broadcast_to(jnp.asarray(a, dtype=float), shape)) for a in (n_pi_over_L, vt, slope)]
+    return _roots(*args).reshape(shape)
+
+
+@host_checked
+def _roots(k, c, s):
     # stops once a Newton step is below 1e-12 relative (1e-9 m/s) and |f| below 1e-9 rad/s; convergence is
     # quadratic, so the returned root is exact to rounding
     solver = optx.Newton(rtol=1e-12, atol=1e-9)
@@ -334,9 +344,12 @@ def _crossing_root(n_pi_over_L, vt, slope):
         return k * c * (1.0 - (V / c) ** 2) - s * V
 
     def one(k, c, s):
-        return optx.root_find(f, solver, c, args=(k, c, s), max_steps=64).value
+        # throw=False: a failure is reported by jaxbelt's guard (no optimistix host callback in the program)
+        sol = optx.root_find(f, solver, c, args=(k, c, s), max_steps=64, throw=False)
+        return error_if(sol.value, sol.result != optx.RESULTS.successful,
+                        "crossing_speeds: Newton's method did not converge to the crossing speed")
 
-    return jax.vmap(one)(*args).reshape(shape)
+    return jax.vmap(one)(k, c, s)
 
 
 def _positive_int(value, name, owner) -> int:

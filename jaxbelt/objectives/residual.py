@@ -43,7 +43,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import is_concrete, positive_checks
-from .._guard import all_ok, error_if, guard, traced_checks
+from .._guard import all_ok, error_if, guard, host_checked, traced_checks
 from ..commands import AbstractMotionCommand, MIN_EXPONENT_GAP, PseudoPolynomial, ShapedCommand, falling_factorial
 from ..models.platform import BeltPlatform
 
@@ -261,6 +261,7 @@ def _residual_energy_impl(plat, cmd, rtol, atol, *, method: str, n_nodes: int, m
 
 
 # One program per (shapes, method, n_nodes, max_steps): called eagerly, `residual_energy` runs it
-# instead of dispatching its few hundred operations one by one; inside a caller's jit/vmap/grad it
-# is inlined. The tolerances are traced, so a new value does not recompile.
-_residual_energy_jit = jax.jit(_residual_energy_impl, static_argnames=("method", "n_nodes", "max_steps"))
+# instead of dispatching its few hundred operations one by one (its guards come back as values, see
+# `host_checked`); inside a caller's jit/vmap/grad it is inlined. The tolerances are traced, so a new
+# value does not recompile.
+_residual_energy_jit = host_checked(_residual_energy_impl, jit=jax.jit, static_argnames=("method", "n_nodes", "max_steps"))

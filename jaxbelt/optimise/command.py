@@ -32,6 +32,7 @@ import numpy as np
 import optax
 
 from ..commands import PseudoPolynomial, ShapedCommand
+from .._guard import host_checked
 from ..objectives.residual import residual_energy, residual_energy_joules
 
 
@@ -172,12 +173,12 @@ def _init(opt, problem, theta):
     )
 
 
-@eqx.filter_jit
+@host_checked
 def _evaluate(problem, theta):
     return problem(theta), problem.gammas(theta)
 
 
-@eqx.filter_jit
+@host_checked
 def _step(opt, problem, theta, state, use_state_value: bool):
     if use_state_value:
         value, grad = optax.value_and_grad_from_state(problem)(theta, state=state)
@@ -238,7 +239,7 @@ def _run(problem: ShapingProblem, theta0, optimizer, learning_rate, max_steps, t
     return best_theta, np.asarray(hist), np.stack(ghist), n, converged
 
 
-@eqx.filter_jit
+@host_checked
 def _final(problem, theta, theta0):
     cmd = problem.command(theta)
     ts = jnp.linspace(0.0, 1.0, 2001) * cmd.duration
@@ -266,12 +267,17 @@ def _finish(problem, theta, theta0, hist, ghist, n, converged):
 _params_jit = jax.jit(params_from_gammas)
 
 
-@eqx.filter_jit
+@host_checked
+def _raw(problem, theta):
+    return problem.raw(theta)
+
+
+@host_checked
 def _residual_jit(plat, cmd, n_nodes):
     return residual_energy(plat, cmd, n_nodes=n_nodes)
 
 
-@eqx.filter_jit
+@host_checked
 def _band_reference(plat, reference, omegas, n_nodes):
     return jax.vmap(lambda w: residual_energy_joules(plat.with_natural_frequency(w), reference, n_nodes=n_nodes))(omegas)
 
@@ -370,7 +376,7 @@ def optimise_robust(plat, cmd: PseudoPolynomial, *, band=(0.8, 1.2), n_freq: int
         max_accel=None if max_accel is None else jnp.asarray(max_accel, dtype=float),
         penalty=jnp.asarray(penalty, dtype=float), kind="band", mode=mode, n_nodes=n_nodes,
     )
-    problem = eqx.tree_at(lambda p: p.scale, problem, eqx.filter_jit(ShapingProblem.raw)(problem, theta0))
+    problem = eqx.tree_at(lambda p: p.scale, problem, _raw(problem, theta0))
     theta, hist, ghist, n, conv = _run(problem, theta0, optimizer, learning_rate, max_steps, tol, gtol, progress,
                                        "optimise_robust")
     return _finish(problem, theta, theta0, hist, ghist, n, conv)
@@ -396,9 +402,7 @@ def sensitivity_curve(plat, commands: dict, *, rel: float = 0.3, n: int = 121, n
     omegas = jnp.linspace(1.0 - rel, 1.0 + rel, int(n)) * plat.omega_n
     out = {}
     for name, cmd in commands.items():
-        out[name] = jax.vmap(lambda w, c=cmd: residual_energy_joules(plat.with_natural_frequency(w), c, n_nodes=n_nodes))(
-            omegas
-        )
+        out[name] = _band_reference(plat, cmd, omegas, n_nodes)
     return omegas, out
 
 
