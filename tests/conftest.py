@@ -7,5 +7,93 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 import jax  # noqa: E402
+import pytest  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
+
+
+# --- distribution over xdist workers (`pytest -n 2`) ------------------------------------------
+# Most of the suite's time is XLA compilation, and a compiled program is reused only inside the
+# process that compiled it (jaxbelt's programs carry `eqx.error_if` host callbacks, which JAX's
+# persistent cache does not store). So the tests are handed to the workers in groups that share
+# programs: one file per group, and each notebook (executed in the worker, see test_notebooks.py)
+# with the test file of its scene; the groups start heaviest first so that no long group starts last.
+
+#: test file or test id (prefix) -> group, where a group is more than one file
+_GROUPS = {
+    "tests/test_notebooks.py::test_notebook_executes[01_startup]": "tests/test_startup.py",
+    "tests/test_notebooks.py::test_notebook_executes[02_shaping]": "tests/test_shaping.py",
+    "tests/test_notebooks.py::test_notebook_executes[03_fourbar]": "tests/test_fourbar.py",
+    "tests/test_notebooks.py::test_notebook_executes[04_belt_spans]": "tests/test_string.py",
+    "tests/test_notebooks.py::test_notebook_executes[05_nonlinear_belt]": "tests/test_nonlinear_harmonic.py",
+    # the same tuning programs as test_fourbar.py's tune_pid test
+    "tests/test_coldstart.py::test_tune_pid_": "tests/test_fourbar.py",
+}
+
+#: approximate seconds of one core per group (measured); only the order matters
+_COST = {
+    "tests/test_fourbar.py": 150,
+    "tests/test_startup.py": 80,
+    "tests/test_shaping.py": 75,
+    "tests/test_fuzz.py": 70,
+    "tests/stress/test_startup_stress.py": 65,
+    "tests/test_guarantees.py": 65,
+    "tests/test_fast.py": 60,
+    "tests/test_nonlinear_harmonic.py": 60,
+    "tests/test_string.py": 50,
+    "tests/test_nonlinear.py": 50,
+    "tests/stress/test_scene_corners.py": 35,
+    "tests/test_identify.py": 25,
+    "tests/test_coldstart.py": 20,
+    "tests/test_shortcuts.py": 15,
+    "tests/test_docs.py": 15,
+}
+
+
+def scene_group(nodeid: str) -> str:
+    """The group of a test id: its file, unless `_GROUPS` attaches it to another file."""
+    for prefix, group in _GROUPS.items():
+        if nodeid.startswith(prefix):
+            return group
+    return nodeid.split("::", 1)[0]
+
+
+def _group_cost(group: str, n_tests: int) -> float:
+    return _COST.get(group, 0.2 * n_tests)
+
+
+def _scene_scheduling(config) -> bool:
+    """Controller: xdist's default distribution (`-n N` with no --dist), which SceneScheduling replaces."""
+    return config.getoption("dist", "no") == "load"
+
+
+@pytest.hookimpl(optionalhook=True)  # xdist hooks: optional without pytest-xdist
+def pytest_configure_node(node):
+    node.workerinput["jaxbelt_scene_groups"] = _scene_scheduling(node.config)
+
+
+def pytest_collection_modifyitems(config, items):
+    # only in xdist workers under SceneScheduling: a plain run keeps the file order
+    if not getattr(config, "workerinput", {}).get("jaxbelt_scene_groups"):
+        return
+    members = {}
+    for item in items:
+        members.setdefault(scene_group(item.nodeid), []).append(item)
+    order = sorted(members, key=lambda g: -_group_cost(g, len(members[g])))  # stable: ties keep file order
+    items[:] = [item for g in order for item in members[g]]
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    if not _scene_scheduling(config):  # an explicit --dist mode is the caller's choice
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class SceneScheduling(LoadScopeScheduling):
+        """xdist's scope scheduling with `scene_group` as the scope, in collection order."""
+
+        def _split_scope(self, nodeid):
+            return scene_group(nodeid)
+
+    config.option.loadscopereorder = False  # keep the heaviest-first order of the collection
+    return SceneScheduling(config, log)

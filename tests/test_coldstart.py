@@ -43,15 +43,21 @@ def _subprocess(code, **env):
     return out.stdout
 
 
+# The paper's window and a limited regulator, as in test_fourbar.py's tuning test and the four-bar
+# notebook: the same programs (conftest.py runs these tests in the same worker).
+TUNE_PID = jb.PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0, v_limit=60.0)
+TUNE_WINDOW = dict(t0=0.375, t1=0.5)
+
+
 def test_tune_pid_compiles_its_step_once():
     drive = jb.FourBarDrive()
-    pid = jb.PID(v_limit=40.0)
-    kw = dict(t0=0.05, t1=0.1, steps=2, progress=False)
+    pid = TUNE_PID
+    kw = dict(TUNE_WINDOW, steps=2, progress=False)
     first = jb.tune_pid(drive, pid, **kw)
     traces = dict(pid_mod.TRACE_COUNT)
     # new values of the same shapes: learning rate, window start, bounds, tolerances, gains
     with count_compiles() as c:
-        second = jb.tune_pid(drive, jb.PID(kp=60.0, v_limit=45.0), t0=0.06, t1=0.1, steps=3, progress=False,
+        second = jb.tune_pid(drive, jb.PID(kp=60.0, v_limit=45.0), t0=0.4, t1=0.5, steps=3, progress=False,
                              learning_rate=0.05, v_max=44.0, i_max=20.0, rtol=1e-8)
         third = jb.tune_pid(drive, pid, **kw)
     assert pid_mod.TRACE_COUNT == traces
@@ -67,8 +73,8 @@ def test_tune_pid_learning_rate_matches_plain_adam():
     # the default optimiser (adam with the rate in its state) takes the steps of optax.adam(rate)
     import optax
 
-    drive, pid = jb.FourBarDrive(), jb.PID()
-    kw = dict(t0=0.05, t1=0.1, steps=3, progress=False)
+    drive, pid = jb.FourBarDrive(), TUNE_PID
+    kw = dict(TUNE_WINDOW, steps=3, progress=False)
     a = jb.tune_pid(drive, pid, learning_rate=0.07, **kw)
     b = jb.tune_pid(drive, pid, optimizer=optax.adam(0.07), **kw)
     np.testing.assert_allclose(a.history["kp"], b.history["kp"], rtol=1e-12)
