@@ -20,6 +20,7 @@ program with `eqx.error_if` guards.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 
@@ -113,6 +114,8 @@ def validated_inputs():
     the persistent compilation cache. Any other check stays; an unknown message (another diffrax
     version) keeps its check, so the only cost of a mismatch is a program that is not cached.
     """
+    if isinstance(_validated, _Off):
+        return contextlib.nullcontext()
     _equinox_errors_as_checks()
     return _validated(True)
 
@@ -132,6 +135,8 @@ def has_host_callbacks(jaxpr) -> bool:
                     elif hasattr(getattr(sub, "jaxpr", None), "eqns"):
                         todo.append(sub.jaxpr)
     return False
+
+
 _EAGER_TRACE = type(jax.extend.core.find_top_trace(()))
 
 
@@ -146,7 +151,7 @@ def host_checked(fun=None, *, jit=eqx.filter_jit, **jit_kwargs):
     Called outside any trace, the program that runs is `checkify`-transformed: `error_if` (and so
     `guard`) record checkify checks instead of host callbacks, so the compiled program is stored by
     the persistent compilation cache, and the first failed check raises here with its message
-    (`jax.errors.JaxRuntimeError`, a `ValueError`). Inside a caller's jit/vmap/grad, or inside
+    (checkify's `JaxRuntimeError`, a `ValueError`). Inside a caller's jit/vmap/grad, or inside
     another `host_checked` program, it is the plain program.
     """
     if fun is None:
