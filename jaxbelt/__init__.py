@@ -39,6 +39,7 @@ from .scene import TracedGridWarning as TracedGridWarning  # noqa: E402
 from .solution import Solution as Solution  # noqa: E402
 from .solution import SolveError as SolveError  # noqa: E402
 from .solve import simulate as simulate  # noqa: E402
+from .batch import cpu_devices as cpu_devices  # noqa: E402
 from .batch import sweep as sweep  # noqa: E402
 
 # --- start-up of a belt drive (Incerti, 2014) ---------------------------------------------------------

@@ -16,11 +16,13 @@ sol = jb.sweep(run, jnp.linspace(0.01, 0.1, 10_000))   # a batched Solution, lea
 - The batch is the leading axis of every leaf of `params` (any pytree: an array, a tuple, a dict,
   a model built with array fields...). `fn(p)` is called on one element; it must be traceable
   (jit/vmap-able).
-- With several local devices (GPUs, TPU cores, or CPU devices made with
-  `XLA_FLAGS=--xla_force_host_platform_device_count=N`), the batch is padded to a multiple of the
+- With several local devices (GPUs, TPU cores, or CPU devices: call `jb.cpu_devices()` before
+  any other JAX work to get one CPU device per core), the batch is padded to a multiple of the
   device count (by repeating its last element), laid out with
-  `jax.sharding.NamedSharding(Mesh(devices, ("batch",)), PartitionSpec("batch"))`, computed in
-  one jitted `vmap` (each device runs its slice; no communication), and the padding is dropped.
+  `jax.sharding.NamedSharding(Mesh(devices, ("batch",)), PartitionSpec("batch"))`, and each
+  device runs `jax.vmap(fn)` on its own slice under `jax.shard_map`: no communication at all, so
+  each device's adaptive solves stop when *its* slowest element is done (a plain sharded `vmap`
+  would synchronise the devices at every solver step). The padding is dropped.
   With one device this is `jax.jit(jax.vmap(fn))(params)`.
 - Failures: when the result has a `success` field (a `jb.Solution`, a dict or any pytree with
   that key/attribute), elements with `success == False` are reported in a `SolveError` that lists
@@ -109,6 +111,53 @@ def _vmapped(fn, params):
     return jax.vmap(fn)(params)
 
 
+@eqx.filter_jit
+def _sharded(fn, params, mesh):
+    from jax.sharding import PartitionSpec
+
+    static = []
+
+    def local(p):  # one device's slice; shard_map wants array outputs, the rest is static
+        dyn, stat = eqx.partition(jax.vmap(fn)(p), eqx.is_array)
+        static.append(stat)
+        return dyn
+
+    spec = PartitionSpec("batch")
+    dyn = jax.shard_map(local, mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)(params)
+    return eqx.combine(dyn, static[0])
+
+
+def cpu_devices(n: int | None = None) -> int:
+    """Split the CPU into `n` JAX devices (default: one per core this process may use) so that
+    `sweep` runs its slices in parallel. Returns the number of CPU devices.
+
+    JAX starts with one CPU device, whose programs use about one core for the small element-wise
+    work of a batched ODE solve; `sweep` over `n` devices runs `n` slices at once (measured: 2.0x
+    on 2 cores for the four-bar gain sweep, benchmarks/coldstart.py). It must be called before
+    JAX creates its CPU backend (before the first array is made); afterwards it cannot change the
+    count and raises `RuntimeError`. Nothing else changes: unsharded programs still run on the
+    first device.
+    """
+    import os
+
+    if n is None:
+        n = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise ValueError(f"cpu_devices: `n` (number of CPU devices) must be an integer >= 1; got {n!r}")
+    try:
+        jax.config.update("jax_num_cpu_devices", int(n))  # refused once the backend has started
+    except RuntimeError:
+        pass
+    have = len(jax.devices("cpu"))
+    if have != n:
+        raise RuntimeError(
+            f"cpu_devices: JAX's CPU backend already started with {have} device(s); call "
+            f"jb.cpu_devices({n}) before any other JAX computation (or set "
+            f"XLA_FLAGS=--xla_force_host_platform_device_count={n} before starting Python)"
+        )
+    return have
+
+
 def sweep(fn, params, *, devices=None, check: bool = True, name: str | None = None):
     """Evaluate `fn` on every element of the batch `params` (leading axis), sharded over devices.
 
@@ -133,7 +182,7 @@ def sweep(fn, params, *, devices=None, check: bool = True, name: str | None = No
         padded = _pad(params, n_pad)
         sharding = NamedSharding(Mesh(np.asarray(devices), ("batch",)), PartitionSpec("batch"))
         padded = jax.device_put(padded, sharding)
-        out = _vmapped(fn, padded)
+        out = _sharded(fn, padded, sharding.mesh)
         if not all(getattr(x, "is_fully_addressable", True) for x in jax.tree_util.tree_leaves(out)):
             from jax.experimental import multihost_utils
 

@@ -380,6 +380,19 @@ def test_exact_chi_closed_form():
     assert abs(float(chi_from_samples(ts, v, smooth=True, temperature=tau)) - 2 * (smax - 1.0)) < 1e-8
 
 
+def test_fluctuation_objective_is_closed_loop_metrics_chi(drive):
+    """The objective stores only the window's samples; its χ (exact and smooth) is the full run's to rounding."""
+    from jaxbelt.objectives import closed_loop_metrics
+
+    pid = jb.PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0)
+    m = closed_loop_metrics(drive, pid, 0.375, 0.5, rtol=1e-6, atol=1e-6, average="midrange")
+    for smooth, key in ((False, "chi"), (True, "chi_smooth")):
+        chi = jb.fluctuation_objective(drive, pid, 0.375, 0.5, smooth=smooth, rtol=1e-6, atol=1e-6, average="midrange")
+        assert abs(float(chi) - float(m[key])) <= 1e-12 * abs(float(m[key])), (key, float(chi), float(m[key]))
+    with pytest.raises(TypeError, match="rtl"):
+        jb.fluctuation_objective(drive, pid, rtl=1e-6)
+
+
 # --- gradients ------------------------------------------------------------------------------
 def _obj(drive, x):
     """Smooth χ over 0.1-0.2 s (paper's RK4, 1 ms) as a function of x = (Kp, Ki, Kd, R)."""

@@ -21,6 +21,12 @@ SCRIPT = textwrap.dedent(
     import json, sys
     import diffrax, jax, jax.numpy as jnp, numpy as np
     import jaxbelt as jb
+    assert jb.cpu_devices(4) == 4          # before any JAX work: 4 CPU devices
+    try:
+        jb.cpu_devices(3)                  # too late to change: a clear error
+        late = None
+    except RuntimeError as e:
+        late = str(e)
     model = jb.BeltStartup()
     ts = jnp.linspace(0.0, 0.3, 31)
     def run(g):
@@ -31,6 +37,7 @@ SCRIPT = textwrap.dedent(
     one = jb.sweep(run, gammas, devices=jax.local_devices()[:1])
     print(json.dumps({
         "n_devices": len(jax.local_devices()),
+        "late": late,
         "shards": len(sharded.ys.sharding.device_set) if hasattr(sharded.ys, "sharding") else 1,
         "shape": list(sharded.ys.shape),
         "max_rel_diff": float(np.max(np.abs(np.asarray(sharded.ys) - np.asarray(one.ys)) / np.max(np.abs(np.asarray(one.ys)), axis=(0, 1)))),
@@ -41,12 +48,13 @@ SCRIPT = textwrap.dedent(
 
 
 def test_sharded_sweep_over_4_cpu_devices_equals_unsharded():
-    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4", JAX_PLATFORMS="cpu",
+    env = dict(os.environ, JAX_PLATFORMS="cpu",
                PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     res = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True, env=env, timeout=300, cwd=ROOT)
     assert res.returncode == 0, res.stderr[-3000:]
     out = json.loads(res.stdout.strip().splitlines()[-1])
     assert out["n_devices"] == 4
+    assert out["late"] is not None and "already started with 4 device(s)" in out["late"], out["late"]
     assert out["shards"] == 4
     assert out["shape"] == [10, 31, 5]
     # the same program on each slice: equal to rounding (XLA may fuse differently per batch size)
