@@ -28,6 +28,9 @@ sys.path.insert(0, str(ROOT))
 from _common import RESULTS, block, machine_info, results_dir, time_jax  # noqa: E402
 
 ENV = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""), MPLBACKEND="Agg")
+# Python's own default: bytecode is cached, as pip caches it for the dependencies at install time
+# (with PYTHONDONTWRITEBYTECODE set, jaxbelt alone would be compiled from source at every import)
+ENV.pop("PYTHONDONTWRITEBYTECODE", None)
 CLI_ARGS = {
     "startup": [], "fourbar": [], "string": [], "shaping": [], "nonlinear": [],
 }
@@ -35,7 +38,8 @@ CLI_ARGS = {
 
 def wall(cmd, env=ENV) -> float:
     t = time.perf_counter()
-    out = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=tempfile.gettempdir())
+    with tempfile.TemporaryDirectory() as cwd:  # an empty folder: no stray module can shadow the stdlib
+        out = subprocess.run(cmd, env=env, capture_output=True, text=True, cwd=cwd)
     if out.returncode != 0:
         raise RuntimeError(f"{cmd}: {out.stderr[-2000:]}")
     return time.perf_counter() - t
@@ -43,6 +47,7 @@ def wall(cmd, env=ENV) -> float:
 
 def imports(repeats: int) -> dict:
     base, ours = [], []
+    wall([sys.executable, "-c", "import jaxbelt"])  # writes jaxbelt's bytecode cache
     for _ in range(repeats):  # interleaved, so that load changes hit both
         base.append(wall([sys.executable, "-c", "import jax, diffrax, equinox, optax"]))
         ours.append(wall([sys.executable, "-c", "import jaxbelt"]))

@@ -240,6 +240,10 @@ def simulate(
             raise ValueError(f"simulate: `dt` (RK4 step, s) must be a scalar; got shape {jnp.shape(dt)}")
         step_checks = positive_checks("simulate (RK4 step, s)", dt=dt)  # raises now, or recorded when traced
         solver, dt0 = _RK4, dt
+    elif method == "ode" and dt0 is not None:
+        if jnp.ndim(dt0) != 0:
+            raise ValueError(f"simulate: `dt0` (initial step, s) must be a scalar; got shape {jnp.shape(dt0)}")
+        step_checks = positive_checks("simulate (initial step, s)", dt0=dt0)  # raises now, or recorded when traced
     if solver is None and method == "ode":
         solver = model.default_solver()
     _check_fixed_step(method, solver, dt0)
@@ -251,7 +255,7 @@ def simulate(
     checks = traced_checks(model, inp) + _time_checks(scene) + (tol_checks if method == "ode" else []) + step_checks
     if not is_concrete((model, inp)):
         checks = checks + model.input_checks(inp)
-    if method == "rk4" and not is_concrete(dt0):
+    if dt0 is not None and not is_concrete(dt0):
         # a traced invalid step is refused by the recorded check; diffrax gets a harmless stand-in
         # (one step over the whole span) instead of failing inside on `(t1 - t0) * dt0 >= 0`
         dt0 = jnp.asarray(dt0, dtype=float)
@@ -437,9 +441,12 @@ def _simulate_concrete(scene, method, solver, rtol, atol, dt0, dt, max_steps, pr
         if not _positive_number(dt):
             positive_checks("simulate (RK4 step, s)", dt=dt)  # raises
         dt0 = dt
-    elif method == "ode" and plan.default_solver:
-        solver = scene.model.default_solver()
-        _check_fixed_step(method, solver, dt0)
+    elif method == "ode":
+        if dt0 is not None and not _positive_number(dt0):
+            positive_checks("simulate (initial step, s)", dt0=dt0)  # raises
+        if plan.default_solver:
+            solver = scene.model.default_solver()
+            _check_fixed_step(method, solver, dt0)
     if method in _CLOSED:
         rtol = atol = dt0 = None  # not used: the program takes no tolerances
     else:

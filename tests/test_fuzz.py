@@ -916,6 +916,19 @@ def test_bug_traced_negative_rk4_step_message(bad):
         run(_rk4_throw, bad)
 
 
+_ode_dt0_throw = jax.jit(lambda dt0: jb.simulate(SCENE, "ode", dt0=dt0).ys)
+
+
+# fixed: a non-positive initial step `dt0` of the ODE method failed inside diffrax ('(t1 - t0) * dt0 >= 0'),
+# a message that does not name the parameter (concrete) or a solver failure (traced)
+@pytest.mark.parametrize("bad", [-1e-4, 0.0, nan])
+def test_bug_ode_initial_step_named(bad):
+    with pytest.raises(ValueError, match=named("dt0")):
+        jb.simulate(SCENE, "ode", dt0=bad)
+    with pytest.raises(RUNTIME, match=named("dt0")):
+        run(_ode_dt0_throw, bad)
+
+
 # fixed: ShapedCommand accepted decreasing `times` (end_time and residual_energy then used times[-1] as the
 # last impulse: quadrature 10325 vs ode 11154 for times=[0.02, 0.01])
 @pytest.mark.parametrize("times", [[0.02, 0.01], [0.0, 0.02, 0.01]])

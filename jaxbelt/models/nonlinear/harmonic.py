@@ -44,6 +44,7 @@ import numpy as np
 import optimistix as optx
 
 from ..._checks import is_concrete
+from ..._guard import validated_inputs
 from .model import ModalSystem, NonlinearBelt, mode_shapes
 
 __all__ = ["HarmonicSolution", "ResponseCurve", "Jumps", "harmonic_balance", "response_curve", "fold_speeds",
@@ -275,9 +276,14 @@ def _floquet(belt, speed, Y, H: int):
         return J @ M
 
     steps = _T_STEPS * n
-    sol = diffrax.diffeqsolve(diffrax.ODETerm(rhs), diffrax.Tsit5(), 0.0, T, T / steps, jnp.eye(2 * n),
-                              stepsize_controller=diffrax.ConstantStepSize(), max_steps=steps + 1)
-    return jnp.linalg.eigvals(sol.ys[-1])
+    # throw=False: no host callback, so the programs holding this solve can be kept in JAX's persistent
+    # cache; the fixed-step solve only fails on non-finite values, which give NaN multipliers (not stable)
+    with validated_inputs():  # dt0 = T / steps has the sign of T - 0
+        sol = diffrax.diffeqsolve(diffrax.ODETerm(rhs), diffrax.Tsit5(), 0.0, T, T / steps, jnp.eye(2 * n),
+                                  stepsize_controller=diffrax.ConstantStepSize(), max_steps=steps + 1, throw=False)
+    M = sol.ys[-1]
+    ok = (sol.result == diffrax.RESULTS.successful) & jnp.all(jnp.isfinite(M))
+    return jnp.where(ok, jnp.linalg.eigvals(jnp.where(ok, M, jnp.eye(2 * n))), jnp.nan)
 
 
 def _fold_system(belt, H: int, c):
