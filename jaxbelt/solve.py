@@ -290,7 +290,7 @@ def _structure(scene: Scene, method: str, adjoint):
     if adjoint is None:
         adjoint = _DEFAULT_ADJOINT
     elif isinstance(adjoint, str) and adjoint == "forward":
-        adjoint = diffrax.ForwardMode()
+        adjoint = _FORWARD
     elif not isinstance(adjoint, diffrax.AbstractAdjoint):
         raise ValueError(f"simulate: `adjoint` must be None, 'forward' or a diffrax adjoint; got {adjoint!r}")
     return method, adjoint

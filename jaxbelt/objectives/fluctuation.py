@@ -39,11 +39,14 @@ _O = "fluctuation index"
 _WINDOW_MSG = f"{_O}: the window [t0, t1] must contain at least two output times"
 
 
+#: a sample belongs to the window [t0, t1] within this fraction of max(|last time|, 1 s)
+_WINDOW_RTOL = 1e-9
+
+
 def _node_weights(ts, t0, t1):
     """Trapezoid weights of the samples inside [t0, t1] (zero outside)."""
     ts = jnp.asarray(ts, dtype=float)
-    span = jnp.maximum(jnp.abs(ts[-1]), 1.0)
-    tol = 1e-9 * span
+    tol = _WINDOW_RTOL * jnp.maximum(jnp.abs(ts[-1]), 1.0)
     lo = ts[0] if t0 is None else t0
     hi = ts[-1] if t1 is None else t1
     inside = (ts >= lo - tol) & (ts <= hi + tol)
@@ -148,6 +151,12 @@ def _grid(t1, dt_save):
     return np.linspace(0.0, t1, n)
 
 
+def _run_from_rest(drive, pid, ts, observe, state, method, rtol, atol, dt, max_steps, adjoint):
+    """`simulate` of `drive` under `pid` from rest at t = 0, with outputs at the times `ts`."""
+    scene = Scene(drive, pid, ts=ts, t0=0.0, observe=observe, state=state)
+    return simulate(scene, method=method, rtol=rtol, atol=atol, dt=dt, max_steps=max_steps, adjoint=adjoint)
+
+
 def closed_loop_metrics(
     drive, pid, t0=0.375, t1=0.5, *, temperature=3e-4, peak_temperature=0.5, dt_save=5e-4,
     method="ode", rtol=1e-8, atol=1e-8, dt=1e-3, max_steps=100_000, adjoint=None, average="mean",
@@ -162,8 +171,7 @@ def closed_loop_metrics(
     if average not in _AVERAGES:
         raise ValueError(f"{_O}: `average` must be one of {_AVERAGES}; got {average!r}")
     ts = _grid(t1, dt if method == "rk4" else dt_save)
-    scene = Scene(drive, pid, ts=ts, observe=("motor_speed", "voltage"))
-    sol = simulate(scene, method=method, rtol=rtol, atol=atol, dt=dt, max_steps=max_steps, adjoint=adjoint)
+    sol = _run_from_rest(drive, pid, ts, ("motor_speed", "voltage"), True, method, rtol, atol, dt, max_steps, adjoint)
     speed, v, ys = sol.outputs["motor_speed"], sol.outputs["voltage"], sol.ys
     i = ys[:, 2]
 
@@ -180,32 +188,31 @@ def closed_loop_metrics(
     }
 
 
-def fluctuation_objective(drive, pid, t0=0.375, t1=0.5, *, smooth=True, temperature=3e-4, **kw):
+def fluctuation_objective(
+    drive, pid, t0=0.375, t1=0.5, *, smooth=True, temperature=3e-4, peak_temperature=0.5, dt_save=5e-4,
+    method="ode", rtol=1e-8, atol=1e-8, dt=1e-3, max_steps=100_000, adjoint=None, average="mean",
+):
     """Pure scalar objective $\\chi(\\text{drive}, \\text{pid})$ over [t0, t1] for optimisers.
 
     Simulates from rest (diffrax by default; `method="rk4", dt=1e-3` reproduces the paper's
     integration) and returns the smooth χ (default) or the exact one. Differentiable with
     respect to every array field of `drive` and `pid` (use `eqx.filter_grad`), and `vmap`-able.
-    Other keywords (`average`, `method`, `rtol`, `atol`, `dt`, `dt_save`, `max_steps`, `adjoint`)
-    are those of `closed_loop_metrics`, and the value is its `chi_smooth` (or `chi`) exactly: the
-    same samples, but only the motor speed at the samples inside the window is stored (a quarter
-    of them for the paper's window), which makes a batched sweep about 25 % faster.
+    The keywords are those of `closed_loop_metrics` (`peak_temperature` has no effect on χ), and the
+    value is its `chi_smooth` (or `chi`) exactly: the same samples, but only the motor speed at the
+    samples inside the window is stored (a quarter of them for the paper's window), which makes a
+    batched sweep about 25 % faster.
     """
-    kw_metrics = {k: v for k, v in kw.items() if k in ("average",)}
-    sim = {k: v for k, v in kw.items() if k not in kw_metrics}
-    unknown = set(sim) - {"method", "rtol", "atol", "dt", "dt_save", "max_steps", "adjoint", "peak_temperature"}
-    if unknown:
-        raise TypeError(f"fluctuation_objective: unexpected keyword(s) {sorted(unknown)}")
     if not (is_concrete(t0) and is_concrete(t1)):  # a traced window: the whole grid, as closed_loop_metrics
-        m = closed_loop_metrics(drive, pid, t0, t1, temperature=temperature, **kw)
+        m = closed_loop_metrics(drive, pid, t0, t1, temperature=temperature, peak_temperature=peak_temperature,
+                                dt_save=dt_save, method=method, rtol=rtol, atol=atol, dt=dt, max_steps=max_steps,
+                                adjoint=adjoint, average=average)
         return m["chi_smooth"] if smooth else m["chi"]
-    method = sim.get("method", "ode")
-    ts = _grid(t1, sim.get("dt", 1e-3) if method == "rk4" else sim.get("dt_save", 5e-4))
+    if average not in _AVERAGES:
+        raise ValueError(f"{_O}: `average` must be one of {_AVERAGES}; got {average!r}")
+    ts = _grid(t1, dt if method == "rk4" else dt_save)
     _check_bound("t0", t0)
-    keep = ts >= float(t0) - 1e-9 * max(abs(float(ts[-1])), 1.0)  # the tolerance of `_node_weights`
+    keep = ts >= float(t0) - _WINDOW_RTOL * max(abs(float(ts[-1])), 1.0)  # as `_node_weights` decides
     window = ts[keep] if keep.sum() >= 2 else ts  # fewer than two: chi_from_samples names the error
-    scene = Scene(drive, pid, ts=window, t0=0.0, observe=("motor_speed",), state=False)
-    sol = simulate(scene, method=method, rtol=sim.get("rtol", 1e-8), atol=sim.get("atol", 1e-8),
-                   dt=sim.get("dt", 1e-3), max_steps=sim.get("max_steps", 100_000), adjoint=sim.get("adjoint"))
+    sol = _run_from_rest(drive, pid, window, ("motor_speed",), False, method, rtol, atol, dt, max_steps, adjoint)
     return chi_from_samples(window, sol.outputs["motor_speed"], t0, t1, smooth=smooth, temperature=temperature,
-                            **kw_metrics)
+                            average=average)
