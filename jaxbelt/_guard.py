@@ -31,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.experimental import checkify
 
+from . import _store
 from ._checks import collecting, is_concrete
 
 def _modules(tree):
@@ -97,6 +98,7 @@ class _Off:
 _host_checks = jax.make_user_context(default_value=False) if hasattr(jax, "make_user_context") else _Off()
 #: True while jaxbelt traces a diffrax solve whose inputs it has checked itself (see `validated_inputs`).
 _validated = jax.make_user_context(default_value=False) if hasattr(jax, "make_user_context") else _Off()
+_store.CONTEXTS.append(lambda: (bool(_host_checks.value), bool(_validated.value)))
 
 #: diffrax's own checks of `SaveAt(ts=...)`, which `Scene` and `simulate` make too (strictly increasing
 #: finite output times, start time <= the first of them; traced values: recorded checks on the results)
@@ -148,7 +150,7 @@ def eager() -> bool:
     return type(jax.extend.core.find_top_trace(())) is _EAGER_TRACE
 
 
-def host_checked(fun=None, *, jit=eqx.filter_jit, **jit_kwargs):
+def host_checked(fun=None, *, jit=eqx.filter_jit, store: bool = False, **jit_kwargs):
     """`jit(fun, **jit_kwargs)` for a program jaxbelt runs eagerly: its guards come back as values.
 
     Called outside any trace, the program that runs is `checkify`-transformed: `error_if` (and so
@@ -156,13 +158,22 @@ def host_checked(fun=None, *, jit=eqx.filter_jit, **jit_kwargs):
     the persistent compilation cache, and the first failed check raises here with its message
     (checkify's `JaxRuntimeError`, a `ValueError`). Inside a caller's jit/vmap/grad, or inside
     another `host_checked` program, it is the plain program.
+
+    `store=True` (with the default `eqx.filter_jit`): the checked program is also kept in the
+    program store (`jaxbelt._store`) while the compilation cache is on. Left off where a program's
+    callers trace other checked programs that share its inner functions: checkify numbers its
+    checks from one process-wide counter, so skipping this program's trace would renumber theirs
+    and make them miss the persistent cache once.
     """
     if fun is None:
-        return functools.partial(host_checked, jit=jit, **jit_kwargs)
+        return functools.partial(host_checked, jit=jit, store=store, **jit_kwargs)
     plain = jit(fun, **jit_kwargs)
     if isinstance(_host_checks, _Off):
         return plain
-    checked = jit(checkify.checkify(fun, errors=checkify.user_checks), **jit_kwargs)
+    checkified = checkify.checkify(fun, errors=checkify.user_checks)
+    checked = jit(checkified, **jit_kwargs)
+    name = f"{getattr(fun, '__module__', '?')}.{getattr(fun, '__qualname__', '?')}"
+    storable = store and jit is eqx.filter_jit  # the store's static/dynamic split is filter_jit's
 
     @functools.wraps(fun)
     def call(*args, **kwargs):
@@ -170,11 +181,29 @@ def host_checked(fun=None, *, jit=eqx.filter_jit, **jit_kwargs):
             return plain(*args, **kwargs)
         _equinox_errors_as_checks()
         with _host_checks(True):
-            err, out = checked(*args, **kwargs)
+            if storable and not kwargs and _store.folder() is not None:
+                err, out = _store.call(name, checkified, args, checked)
+            else:
+                err, out = checked(*args, **kwargs)
         err.throw()
         return out
 
     return call
+
+
+def stored_jit(fun):
+    """`eqx.filter_jit(fun)` whose calls outside any trace go through the program store
+    (`jaxbelt._store`) while the compilation cache is on: a later process runs it untraced."""
+    jitted = eqx.filter_jit(fun)
+    name = f"{fun.__module__}.{fun.__qualname__}"
+
+    @functools.wraps(fun)
+    def wrapper(*args, **kwargs):
+        if kwargs or _store.folder() is None or not eager():
+            return jitted(*args, **kwargs)
+        return _store.call(name, fun, args, jitted)
+
+    return wrapper
 
 
 def _as_check(pred, message: str) -> None:

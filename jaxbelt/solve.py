@@ -30,6 +30,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _store
 from ._checks import as_float_array, concrete_array_type, is_concrete, positive_checks
 from ._guard import _modules, error_if, guard, has_host_callbacks, host_checked, nan_where, traced_checks, validated_inputs
 from .commands import AbstractExponentialVoltage
@@ -361,6 +362,10 @@ def _run_flat(treedef, method, max_steps, progress, adjoint, leaves, rtol, atol,
     return _run(scene, method, solver, rtol, atol, dt0, max_steps, progress, adjoint)
 
 
+def _run_stored(scene, rtol, atol, dt0, solver, adjoint, method, max_steps, progress):
+    return _run(scene, method, solver, rtol, atol, dt0, max_steps, progress, adjoint)
+
+
 def _make_plan(scene, treedef, method, solver, dt0, adjoint, max_steps, progress) -> _Plan:
     inp = scene.input
     if isinstance(inp, AbstractExponentialVoltage) and _batched_input(inp):
@@ -387,14 +392,24 @@ class _Program:
     plain, and `host_checked` for a program that holds a host callback (an `eqx.error_if` in a model,
     or a diffrax check jaxbelt does not make itself), which the persistent cache would not store."""
 
-    __slots__ = ("plain", "checked", "callbacks")
+    __slots__ = ("plain", "checked", "callbacks", "static")
 
-    def __init__(self, fun):
+    def __init__(self, fun, static):
+        self.static = static  # (treedef, method, max_steps, progress, adjoint)
         self.plain = jax.jit(fun, static_argnums=(4,))
         self.checked = host_checked(fun, jit=jax.jit, static_argnums=(4,))
         self.callbacks = {}  # solver -> whether the traced program holds a host callback
 
     def __call__(self, *args):
+        if _store.folder() is not None:  # the program stored on disk, called untraced (jaxbelt.cache)
+            treedef, method, max_steps, progress, adjoint = self.static
+            scene = jax.tree_util.tree_unflatten(treedef, args[0])
+            return _store.call("jaxbelt.solve.simulate", _run_stored,
+                               (scene, args[1], args[2], args[3], args[4], adjoint, method, max_steps, progress),
+                               lambda *_: self._traced(*args))
+        return self._traced(*args)
+
+    def _traced(self, *args):
         solver = args[4]
         callbacks = self.callbacks.get(solver)
         if callbacks is None:  # first call with this solver: trace (the call below reuses the trace)
@@ -405,7 +420,7 @@ class _Program:
 def _program(*static) -> _Program:
     program = _PROGRAMS.get(static)
     if program is None:
-        program = _Program(functools.partial(_run_flat, *static))
+        program = _Program(functools.partial(_run_flat, *static), static)
         if len(_PROGRAMS) >= _PLANS_MAX:
             _PROGRAMS.clear()
         _PROGRAMS[static] = program

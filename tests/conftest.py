@@ -5,6 +5,14 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 os.environ.setdefault("MPLBACKEND", "Agg")
+# a CLI run inside a test (or its subprocesses) never writes into the user's own cache folder
+if "JAXBELT_CACHE_DIR" not in os.environ:
+    import atexit
+    import shutil
+    import tempfile
+
+    os.environ["JAXBELT_CACHE_DIR"] = tempfile.mkdtemp(prefix="jaxbelt-test-cache-")
+    atexit.register(shutil.rmtree, os.environ["JAXBELT_CACHE_DIR"], True)
 
 import jax  # noqa: E402
 import pytest  # noqa: E402

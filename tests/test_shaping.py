@@ -351,5 +351,5 @@ def test_fig2_profiles_drawn_from_the_commands(tmp_path):
     axes = plot_profiles(t, profiles)
     np.testing.assert_array_equal(axes[2].lines[1].get_ydata(), np.asarray(p.acceleration(t)))
     plt.close("all")
-    assert main(["shaping", "--figure", "profiles", "--out", str(tmp_path / "fig2.png")]) == 0
+    assert main(["--no-cache", "shaping", "--figure", "profiles", "--out", str(tmp_path / "fig2.png")]) == 0
     assert (tmp_path / "fig2.png").stat().st_size > 10_000

@@ -40,7 +40,7 @@ import numbers
 
 from .._checks import check_nonnegative, check_positive, check_range, collecting, is_concrete, record
 from .._checks import as_float_array as _arr
-from .._guard import all_ok, error_if, guard, host_checked, traced_checks
+from .._guard import all_ok, error_if, guard, host_checked, stored_jit, traced_checks
 
 __all__ = [
     "MovingString",
@@ -226,7 +226,7 @@ class MovingString(eqx.Module):
         return _galerkin_frequencies(self, speed, int(n_basis), int(n_modes))
 
 
-@eqx.filter_jit
+@stored_jit
 def _galerkin_frequencies(span, speed, n_basis, n_modes):
     # `speed` was checked by the caller: no guard in here, so the program holds no host callback
     M, G, K = span._galerkin_matrices(speed, n_basis)
@@ -333,7 +333,7 @@ def _crossing_root(n_pi_over_L, vt, slope):
     return _roots(*args).reshape(shape)
 
 
-@host_checked
+@host_checked(store=True)
 def _roots(k, c, s):
     # stops once a Newton step is below 1e-12 relative (1e-9 m/s) and |f| below 1e-9 rad/s; convergence is
     # quadratic, so the returned root is exact to rounding
@@ -498,7 +498,7 @@ def runout_phasors(rig: RunoutRig, speed, n_modes: int = 64):
                     rig.damping_ratio, rig.position, int(n_modes))
 
 
-@eqx.filter_jit
+@stored_jit
 def _phasors(speed, L, vt, radii, runouts, phase, zeta, position, nm):
     r0, r1 = radii[0], radii[1]
     e0, e1 = runouts[0], runouts[1]

@@ -1,0 +1,360 @@
+"""Stored programs: the lowered form of jaxbelt's eager programs kept on disk, called untraced.
+
+JAX's persistent compilation cache (`jaxbelt.cache`) skips XLA compilation in a later process, but
+not tracing and lowering: JAX must rebuild the program to compute the cache key. For a diffrax
+solve that is most of a warm run (~0.7 s for one four-bar simulation). The store keeps, next to
+that cache, each program jaxbelt runs eagerly as a `jax.export.Exported` (its StableHLO module,
+input and output types), keyed by everything that determines it; a later process calls the stored
+module directly (`Exported.call`): no Python tracing, and XLA's compilation comes from JAX's own
+persistent cache as before (0.25 s instead of 0.7 s for that simulation).
+
+The key is the function's name, the tree structure and static values of its arguments, the shapes
+and dtypes of its arrays, a fingerprint of jaxbelt's own source and of the versions of its
+dependencies, and the JAX settings that change a traced program (x64, matmul precision, XLA flags,
+jaxbelt's check contexts). A program is stored only when every node type in its arguments comes
+from jaxbelt, equinox or diffrax and every static value is a plain number, string or tuple of
+them: a user's own model class (whose code jaxbelt cannot fingerprint) always takes the traced
+path. A program JAX cannot export (a host callback) is marked so, and later processes trace it as
+before. Any failure to load or call a stored program falls back to the traced path, which computes
+the same result.
+
+Used only on a single-device CPU backend, and only while `jaxbelt.enable_compilation_cache` is on.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import io
+import os
+import pickle
+import sys
+import tempfile
+from pathlib import Path
+
+import jax
+import numpy as np
+
+
+_FORMAT = 1
+_state = {"folder": None, "usable": None, "fingerprint": None, "lapack": False}
+_MEMO: dict = {}  # (fun id, structure key) -> _Entry (in this process), or False: not storable
+_MEMO_MAX = 1024
+
+_TRUSTED_PREFIXES = ("jaxbelt.", "equinox.", "diffrax.")
+_PLAIN_TYPES = (str, int, float, bool, complex, type(None))
+_MISSING = None
+try:  # equinox marks absent fields of a module's flattened form with a private singleton
+    from equinox._module._flatten import MISSING as _MISSING
+except Exception:  # noqa: BLE001 - another equinox layout: modules still work, their trees are not pickled
+    pass
+
+
+def enable(folder) -> None:
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    if folder != _state["folder"]:
+        _MEMO.clear()
+    _state["folder"] = folder
+    _state["usable"] = None
+
+
+def disable() -> None:
+    _state["folder"] = None
+    _MEMO.clear()
+
+
+def folder():
+    return _state["folder"]
+
+
+def _usable() -> bool:
+    if _state["folder"] is None:
+        return False
+    if _state["usable"] is None:
+        try:
+            _state["usable"] = jax.default_backend() == "cpu" and jax.device_count() == 1
+        except Exception:  # noqa: BLE001
+            _state["usable"] = False
+    return _state["usable"]
+
+
+def _fingerprint() -> str:
+    """jaxbelt's source and the versions of everything that shapes a compiled program."""
+    if _state["fingerprint"] is None:
+        import importlib.metadata as md
+
+        h = hashlib.sha256()
+        root = Path(__file__).resolve().parent
+        for p in sorted(root.rglob("*.py")):
+            h.update(str(p.relative_to(root)).encode())
+            h.update(p.read_bytes())
+        for dist in ("jax", "jaxlib", "equinox", "diffrax", "optimistix", "lineax", "numpy"):
+            try:
+                h.update(f"{dist}={md.version(dist)};".encode())
+            except md.PackageNotFoundError:
+                h.update(f"{dist}=?;".encode())
+        h.update(sys.version.encode())
+        h.update(repr(jax.devices()[0].device_kind).encode())
+        _state["fingerprint"] = h.hexdigest()
+    return _state["fingerprint"]
+
+
+#: functions returning the values of jaxbelt's tracing contexts (registered by `_guard`): they change
+#: what a traced program holds, so they are part of the key
+CONTEXTS: list = []
+
+
+def _settings() -> tuple:
+    c = jax.config
+    return (bool(c.jax_enable_x64), str(c.jax_default_matmul_precision), str(c.jax_numpy_dtype_promotion),
+            os.environ.get("XLA_FLAGS", ""), tuple(f() for f in CONTEXTS))
+
+
+def _trusted_type(t) -> bool:
+    return t in (tuple, list, dict, type(None)) or t.__module__.startswith(_TRUSTED_PREFIXES) or (
+        t.__module__ in ("jaxbelt", "equinox", "diffrax"))
+
+
+def _plain(v) -> bool:
+    if v is _MISSING and _MISSING is not None:
+        return True
+    if type(v) in _PLAIN_TYPES:
+        return True
+    if type(v) in (tuple, list, frozenset):
+        return all(map(_plain, v))
+    return False
+
+
+def _trusted_tree(treedef) -> bool:
+    todo = [treedef]
+    while todo:
+        t = todo.pop()
+        node = t.node_data()
+        if node is not None:
+            typ, aux = node
+            if not _trusted_type(typ) or not _plain(aux):
+                return False
+        todo.extend(t.children())
+    return True
+
+
+def _is_array(x) -> bool:
+    return isinstance(x, (jax.Array, np.ndarray))
+
+
+def _aval(x) -> tuple:
+    return (x.shape, str(x.dtype), bool(getattr(x, "weak_type", False)))
+
+
+try:  # what a checkify error keeps of the Python stack where its check was written
+    from jax._src.lib import _jax as _jaxlib_ext
+
+    _TRACEBACK = _jaxlib_ext.Traceback
+except Exception:  # noqa: BLE001 - another jaxlib layout: such outputs are not written, only used in-process
+    _TRACEBACK = None
+
+
+class _Pickler(pickle.Pickler):
+    """Pickles the output structure of a program: equinox's marker of absent fields by name, and the
+    Python traceback a checkify error carries (where its check was traced) as a placeholder: a
+    loaded program's error shows the stack of the process that loaded it."""
+
+    def persistent_id(self, obj):
+        if obj is _MISSING and _MISSING is not None:
+            return "equinox.MISSING"
+        if _TRACEBACK is not None and type(obj) is _TRACEBACK:
+            return "traceback"
+        return None
+
+
+class _Unpickler(pickle.Unpickler):
+    def persistent_load(self, pid):
+        if pid == "equinox.MISSING" and _MISSING is not None:
+            return _MISSING
+        if pid == "traceback":  # checkify formats one when it raises: the loading process's own stack
+            return _TRACEBACK.get_traceback()
+        raise pickle.UnpicklingError(f"unknown persistent id {pid!r}")
+
+
+def _dumps(obj) -> bytes:
+    with io.BytesIO() as f:
+        _Pickler(f, protocol=pickle.HIGHEST_PROTOCOL).dump(obj)
+        return f.getvalue()
+
+
+def _ensure_lapack() -> None:
+    # LAPACK's kernels are bound when JAX lowers a linear-algebra op from Python; a stored module
+    # that calls them must bind them itself before it runs (else a null kernel is called)
+    if not _state["lapack"]:
+        from jaxlib import lapack
+
+        lapack.prepare_lapack_call("getrf_ffi", np.dtype("float64"))
+        _state["lapack"] = True
+
+
+class _Entry:
+    """A stored program: `jit` of the exported module's call, and the structure of its output."""
+
+    __slots__ = ("fn", "out_tree", "lapack")
+
+    def __init__(self, exported, out_tree, lapack):
+        self.fn, self.out_tree, self.lapack = jax.jit(exported.call), out_tree, lapack
+
+    def __call__(self, dynamic):
+        if self.lapack:
+            _ensure_lapack()
+        return jax.tree_util.tree_unflatten(self.out_tree, self.fn(*dynamic))
+
+
+def _codes_used(before=None) -> int:
+    """checkify numbers the checks it traces from one process-wide counter, so the program traced
+    after a stored one would differ (and miss JAX's persistent cache) if loading the stored one
+    skipped its numbers: read the counter (`before=None`), or how many numbers were used since."""
+    try:
+        from jax._src import checkify as _checkify
+
+        now = _checkify.next_code()
+    except Exception:  # noqa: BLE001 - another JAX layout: at worst one more compilation, once
+        return 0
+    return now if before is None else now - before + 1
+
+
+def _skip_codes(n: int) -> None:
+    try:
+        from jax._src import checkify as _checkify
+
+        for _ in range(n):
+            _checkify.next_code()
+    except Exception:  # noqa: BLE001
+        pass
+
+
+def _exported_fields(exported) -> dict:
+    fields = {f.name: getattr(exported, f.name) for f in dataclasses.fields(exported)}
+    fields["_get_vjp"] = None  # jaxbelt differentiates its traced programs, never a stored one
+    return fields
+
+
+def _load(path: Path, key: str):
+    with open(path, "rb") as f:
+        data = _Unpickler(f).load()
+    if data[0] != _FORMAT or data[1] != key:
+        return None
+    _skip_codes(data[2])  # the numbers the first process used tracing this program
+    if data[3] is None:  # marked: this program cannot be stored
+        return False
+    fields, out_tree, lapack = data[3:]
+    return _Entry(jax.export.Exported(**fields), out_tree, lapack)
+
+
+def _write(path: Path, data) -> None:
+    blob = _dumps(data)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(blob)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def _debug(message: str) -> None:
+    if os.environ.get("JAXBELT_STORE_DEBUG"):
+        print(f"jaxbelt store: {message}", file=sys.stderr)
+
+
+def _export(fun, name, static_leaves, treedef, dynamic, key, path):
+    """Trace and export `fun` at these arguments and write it; False (and a mark on disk) when JAX
+    cannot export it."""
+    positions = [i for i, v in enumerate(static_leaves) if v is _DYNAMIC]
+    out_box = []
+
+    def flat(*dyn):
+        leaves = list(static_leaves)
+        for i, v in zip(positions, dyn):
+            leaves[i] = v
+        out = fun(*jax.tree_util.tree_unflatten(treedef, leaves))
+        out_leaves, out_tree = jax.tree_util.tree_flatten(out)
+        out_box.append(out_tree)
+        return out_leaves
+
+    before = _codes_used()
+    try:
+        exported = jax.export.export(jax.jit(flat))(*dynamic)
+    except NotImplementedError as e:  # a host callback (e.g. a progress bar, an eqx.error_if)
+        _debug(f"{name}: not exportable: {e}")
+        try:
+            _write(path, (_FORMAT, key, _codes_used(before), None))
+        except OSError:
+            pass
+        return False
+    codes = _codes_used(before)
+    out_tree = out_box[-1]
+    lapack = "lapack_" in exported.mlir_module()
+    try:
+        _write(path, (_FORMAT, key, codes, _exported_fields(exported), out_tree, lapack))
+    except Exception as e:  # noqa: BLE001 - not picklable or not writable: this process still uses it
+        _debug(f"{name}: not written: {type(e).__name__}: {e}")
+    return _Entry(exported, out_tree, lapack)
+
+
+class _Dynamic:
+    def __repr__(self):
+        return "<array>"
+
+
+_DYNAMIC = _Dynamic()
+
+
+def call(name: str, fun, args: tuple, fallback):
+    """`fun(*args)` through a stored program when the store is on and the arguments allow it;
+    `fallback(*args)` (the traced path, same result) otherwise. Call it outside any trace only.
+
+    `name` identifies `fun` (module and qualified name, plus anything the caller bound into it);
+    array leaves of `args` are the program's inputs, every other leaf a static value of the key.
+    """
+    if not _usable():
+        return fallback(*args)
+    leaves, treedef = jax.tree_util.tree_flatten(args)
+    dynamic = [v for v in leaves if _is_array(v)]
+    static_leaves = [_DYNAMIC if _is_array(v) else v for v in leaves]
+    try:
+        memo_key = (name, treedef, tuple(map(_aval, dynamic)), tuple(repr(v) for v in static_leaves), _settings())
+        entry = _MEMO.get(memo_key)
+    except TypeError:
+        return fallback(*args)
+    if entry is None:
+        entry = _lookup(name, fun, treedef, static_leaves, dynamic, memo_key)
+        if len(_MEMO) >= _MEMO_MAX:
+            _MEMO.clear()
+        _MEMO[memo_key] = entry
+    if entry is False:
+        return fallback(*args)
+    try:
+        return entry(dynamic)
+    except Exception as e:  # noqa: BLE001 - e.g. an argument committed to another device: the traced path
+        _debug(f"{name}: call failed, traced instead: {type(e).__name__}: {e}")
+        _MEMO[memo_key] = False
+        return fallback(*args)
+
+
+def _lookup(name, fun, treedef, static_leaves, dynamic, memo_key):
+    if not _trusted_tree(treedef) or not all(_plain(v) for v in static_leaves if v is not _DYNAMIC):
+        _debug(f"{name}: arguments from outside jaxbelt or not plain: {treedef}")
+        return False
+    key = repr((_FORMAT, _fingerprint(), memo_key[0], repr(treedef), memo_key[2], memo_key[3], memo_key[4]))
+    path = _state["folder"] / (hashlib.sha256(key.encode()).hexdigest() + ".jaxbelt-program")
+    if path.exists():
+        try:
+            entry = _load(path, key)
+            if entry is not None:
+                return entry
+        except Exception as e:  # noqa: BLE001 - unreadable or from another build: export it again
+            _debug(f"{name}: not loaded: {type(e).__name__}: {e}")
+    try:
+        return _export(fun, name, static_leaves, treedef, dynamic, key, path)
+    except Exception as e:  # noqa: BLE001 - the traced path reports any error the program has
+        _debug(f"{name}: {type(e).__name__}: {e}")
+        return False
