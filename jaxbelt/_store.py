@@ -37,7 +37,7 @@ import numpy as np
 
 
 _FORMAT = 1
-_state = {"folder": None, "usable": None, "fingerprint": None, "lapack": False}
+_state = {"folder": None, "usable": None, "fingerprint": None, "lapack": False, "generation": 0}
 _MEMO: dict = {}  # (fun id, structure key) -> _Entry (in this process), or False: not storable
 _MEMO_MAX = 1024
 
@@ -54,14 +54,24 @@ def enable(folder) -> None:
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     if folder != _state["folder"]:
-        _MEMO.clear()
+        forget()
     _state["folder"] = folder
     _state["usable"] = None
 
 
 def disable() -> None:
     _state["folder"] = None
+    forget()
+
+
+def forget() -> None:
+    """Drop this process's loaded programs (the next call reads the folder again)."""
     _MEMO.clear()
+    _state["generation"] += 1
+
+
+def generation() -> int:
+    return _state["generation"]
 
 
 def folder():
@@ -105,7 +115,7 @@ def _fingerprint() -> str:
 CONTEXTS: list = []
 
 
-def _settings() -> tuple:
+def settings() -> tuple:
     c = jax.config
     return (bool(c.jax_enable_x64), str(c.jax_default_matmul_precision), str(c.jax_numpy_dtype_promotion),
             os.environ.get("XLA_FLAGS", ""), tuple(f() for f in CONTEXTS))
@@ -143,7 +153,7 @@ def _is_array(x) -> bool:
     return isinstance(x, (jax.Array, np.ndarray))
 
 
-def _aval(x) -> tuple:
+def aval(x) -> tuple:
     return (x.shape, str(x.dtype), bool(getattr(x, "weak_type", False)))
 
 
@@ -308,35 +318,42 @@ class _Dynamic:
 _DYNAMIC = _Dynamic()
 
 
-def call(name: str, fun, args: tuple, fallback):
-    """`fun(*args)` through a stored program when the store is on and the arguments allow it;
-    `fallback(*args)` (the traced path, same result) otherwise. Call it outside any trace only.
+def lookup(name: str, fun, args: tuple):
+    """The stored program of `fun(*args)`, or False where it cannot be stored (or the store is off).
 
-    `name` identifies `fun` (module and qualified name, plus anything the caller bound into it);
-    array leaves of `args` are the program's inputs, every other leaf a static value of the key.
+    `name` identifies `fun` (module and qualified name); array leaves of `args` are the program's
+    inputs (`entry(dynamic)` takes them in their flattened order), every other leaf a static value
+    of the key. Call it outside any trace only.
     """
     if not _usable():
-        return fallback(*args)
+        return False
     leaves, treedef = jax.tree_util.tree_flatten(args)
     dynamic = [v for v in leaves if _is_array(v)]
     static_leaves = [_DYNAMIC if _is_array(v) else v for v in leaves]
     try:
-        memo_key = (name, treedef, tuple(map(_aval, dynamic)), tuple(repr(v) for v in static_leaves), _settings())
+        memo_key = (name, treedef, tuple(map(aval, dynamic)), tuple(repr(v) for v in static_leaves), settings())
         entry = _MEMO.get(memo_key)
     except TypeError:
-        return fallback(*args)
+        return False
     if entry is None:
         entry = _lookup(name, fun, treedef, static_leaves, dynamic, memo_key)
         if len(_MEMO) >= _MEMO_MAX:
             _MEMO.clear()
         _MEMO[memo_key] = entry
+    return entry
+
+
+def call(name: str, fun, args: tuple, fallback):
+    """`fun(*args)` through its stored program (see `lookup`); `fallback(*args)` (the traced path, same
+    result) where there is none. Call it outside any trace only."""
+    entry = lookup(name, fun, args)
     if entry is False:
         return fallback(*args)
+    dynamic = [v for v in jax.tree_util.tree_leaves(args) if _is_array(v)]
     try:
         return entry(dynamic)
     except Exception as e:  # noqa: BLE001 - e.g. an argument committed to another device: the traced path
         _debug(f"{name}: call failed, traced instead: {type(e).__name__}: {e}")
-        _MEMO[memo_key] = False
         return fallback(*args)
 
 

@@ -392,22 +392,42 @@ class _Program:
     plain, and `host_checked` for a program that holds a host callback (an `eqx.error_if` in a model,
     or a diffrax check jaxbelt does not make itself), which the persistent cache would not store."""
 
-    __slots__ = ("plain", "checked", "callbacks", "static")
+    __slots__ = ("plain", "checked", "callbacks", "static", "stored")
 
     def __init__(self, fun, static):
         self.static = static  # (treedef, method, max_steps, progress, adjoint)
         self.plain = jax.jit(fun, static_argnums=(4,))
         self.checked = host_checked(fun, jit=jax.jit, static_argnums=(4,))
         self.callbacks = {}  # solver -> whether the traced program holds a host callback
+        self.stored = {}  # (solver, input types, options, settings, store generation) -> stored program or False
 
     def __call__(self, *args):
-        if _store.folder() is not None:  # the program stored on disk, called untraced (jaxbelt.cache)
-            treedef, method, max_steps, progress, adjoint = self.static
-            scene = jax.tree_util.tree_unflatten(treedef, args[0])
-            return _store.call("jaxbelt.solve.simulate", _run_stored,
-                               (scene, args[1], args[2], args[3], args[4], adjoint, method, max_steps, progress),
-                               lambda *_: self._traced(*args))
+        if _store.folder() is not None:
+            return self._stored(*args)
         return self._traced(*args)
+
+    def _stored(self, leaves, rtol, atol, dt0, solver):
+        """Through the program store (`jaxbelt.cache`): a program stored by an earlier process runs untraced."""
+        try:
+            key = (solver, tuple(map(_store.aval, leaves)), rtol is None, dt0 is None, _store.settings(),
+                   _store.generation())
+            entry = self.stored.get(key)
+        except (TypeError, AttributeError):  # an unhashable solver, a leaf that is not an array
+            return self._traced(leaves, rtol, atol, dt0, solver)
+        if entry is None:
+            treedef, method, max_steps, progress, adjoint = self.static
+            scene = jax.tree_util.tree_unflatten(treedef, leaves)
+            args = (scene, rtol, atol, dt0, solver, adjoint, method, max_steps, progress)
+            # the stored program's inputs are the array leaves in order: here the scene's leaves, then the numbers
+            arrays = all(isinstance(leaf, (jax.Array, np.ndarray)) for leaf in leaves)
+            entry = _store.lookup("jaxbelt.solve.simulate", _run_stored, args) if arrays else False
+            self.stored[key] = entry
+        if entry is not False:
+            try:
+                return entry([*leaves, *(v for v in (rtol, atol, dt0) if v is not None)])
+            except Exception:  # noqa: BLE001 - the traced path, which computes the same
+                self.stored[key] = False
+        return self._traced(leaves, rtol, atol, dt0, solver)
 
     def _traced(self, *args):
         solver = args[4]

@@ -46,7 +46,7 @@ def test_stored_simulation_is_the_traced_one_and_loads_untraced(tmp_path):
     with store_in(tmp_path / "xla") as folder:
         first = jb.simulate(scene)  # exported, written, run
         assert len(_programs(folder)) == 1
-        _store._MEMO.clear()  # as in a new process: the program comes from the file
+        _store.forget()  # as in a new process: the program comes from the file
         traces = eqx.debug.get_num_traces(solve._run_traced)
         second = jb.simulate(_fourbar_scene())
         assert eqx.debug.get_num_traces(solve._run_traced) == traces  # not traced again
@@ -58,28 +58,32 @@ def test_stored_simulation_is_the_traced_one_and_loads_untraced(tmp_path):
         assert bool(sol.success)
 
 
+def _startup_scene(n=21, gamma=0.04, **kw):
+    return jb.Scene(jb.BeltStartup(), jb.ExponentialVoltage(24.0, gamma), ts=jnp.linspace(0.0, 0.3, n), **kw)
+
+
 def test_new_values_reuse_the_stored_program_and_new_structure_gets_its_own(tmp_path):
     with store_in(tmp_path / "xla") as folder:
-        jb.simulate(_fourbar_scene())
-        # new parameter values, times and tolerances of the same shapes: the same program
-        drive = jb.FourBarDrive(R=1.2)
-        scene = jb.Scene(drive, jb.PID(kp=60.0, ki=30.0, kd=0.01, omega_ref=25.0), ts=jnp.linspace(0.0, 0.3, 41))
-        sol = jb.simulate(scene, rtol=1e-7, atol=1e-9)
+        jb.simulate(_startup_scene())
+        # new parameter values and times of the same shapes: the same program
+        scene = jb.Scene(jb.BeltStartup(k=2.0e5), jb.ExponentialVoltage(20.0, 0.02), ts=jnp.linspace(0.0, 0.5, 21))
+        sol = jb.simulate(scene)
         assert len(_programs(folder)) == 1
-        # another grid length, another observed set: new programs
-        jb.simulate(_fourbar_scene(n=21))
-        jb.simulate(_fourbar_scene(observe=("voltage",)))
-        assert len(_programs(folder)) == 3
-    ref = jb.simulate(scene, rtol=1e-7, atol=1e-9)
+        # another grid length, another observed set, another method: new programs
+        jb.simulate(_startup_scene(n=11))
+        jb.simulate(_startup_scene(observe=("current",)))
+        jb.simulate(_startup_scene(), method="modal")
+        assert len(_programs(folder)) == 4
+    ref = jb.simulate(scene)
     np.testing.assert_allclose(np.asarray(sol.ys), np.asarray(ref.ys), rtol=1e-12, atol=0)
 
 
-class _OwnDrive(jb.FourBarDrive):
+class _OwnStartup(jb.BeltStartup):
     """A user's subclass: jaxbelt cannot fingerprint its code, so it is never stored."""
 
 
 def test_classes_from_outside_jaxbelt_are_never_stored(tmp_path):
-    scene = jb.Scene(_OwnDrive(), jb.ConstantVoltage(25.0), ts=jnp.linspace(0.0, 0.1, 11))
+    scene = jb.Scene(_OwnStartup(), jb.ExponentialVoltage(24.0, 0.04), ts=jnp.linspace(0.0, 0.3, 21))
     with store_in(tmp_path / "xla") as folder:
         sol = jb.simulate(scene)
         assert _programs(folder) == []
@@ -88,12 +92,12 @@ def test_classes_from_outside_jaxbelt_are_never_stored(tmp_path):
 
 
 def test_a_damaged_file_is_replaced(tmp_path):
-    scene = _fourbar_scene(n=11)
+    scene = _startup_scene()
     with store_in(tmp_path / "xla") as folder:
         jb.simulate(scene)
         (path,) = _programs(folder)
         path.write_bytes(b"not a program")
-        _store._MEMO.clear()
+        _store.forget()
         sol = jb.simulate(scene)
         assert path.stat().st_size > 1000  # written again
     ref = jb.simulate(scene)
@@ -109,22 +113,23 @@ def test_a_stored_checked_program_still_raises_its_message(tmp_path):
     with store_in(tmp_path / "xla") as folder:
         assert float(_checked_sqrt(jnp.asarray(4.0))) == 2.0
         assert len(_programs(folder)) == 1
-        _store._MEMO.clear()  # from the file: the check's message travels with the program
+        _store.forget()  # from the file: the check's message travels with the program
         assert float(_checked_sqrt(jnp.asarray(9.0))) == 3.0
         with pytest.raises(ValueError, match="x must be >= 0"):
             _checked_sqrt(jnp.asarray(-1.0))
 
 
 def test_programs_holding_a_host_callback_are_marked_and_traced(tmp_path):
-    scene = _fourbar_scene(n=11)
+    scene = _startup_scene(n=11)
     with store_in(tmp_path / "xla") as folder:
-        sol = jb.simulate(scene, progress=True)  # a tqdm bar: host callbacks, not exportable
+        sol = jb.simulate(scene, method="ode", progress=True)  # a tqdm bar: host callbacks, not exportable
         (mark,) = _programs(folder)
-        _store._MEMO.clear()
         with open(mark, "rb") as f:
             assert _store._Unpickler(f).load()[3] is None  # marked: not storable, nothing to load
-        sol2 = jb.simulate(scene, progress=True)
-    ref = jb.simulate(scene)
+        _store.forget()
+        sol2 = jb.simulate(scene, method="ode", progress=True)
+        assert _programs(folder) == [mark]
+    ref = jb.simulate(scene, method="ode")
     for s in (sol, sol2):
         np.testing.assert_allclose(np.asarray(s.ys), np.asarray(ref.ys), rtol=1e-12, atol=0)
 
@@ -132,7 +137,7 @@ def test_programs_holding_a_host_callback_are_marked_and_traced(tmp_path):
 def test_off_unless_the_cache_is_on(tmp_path):
     jb.enable_compilation_cache(tmp_path / "xla", programs=False)
     try:
-        jb.simulate(_fourbar_scene(n=11))
+        jb.simulate(_startup_scene(n=11))
         assert not (tmp_path / "xla" / "jaxbelt-programs").exists() or _programs(tmp_path / "xla" / "jaxbelt-programs") == []
     finally:
         disable_compilation_cache()
