@@ -35,7 +35,6 @@ from pathlib import Path
 import jax
 import numpy as np
 
-
 _FORMAT = 1
 _state = {"folder": None, "usable": None, "fingerprint": None, "lapack": False, "generation": 0}
 _MEMO: dict = {}  # (fun id, structure key) -> _Entry (in this process), or False: not storable
@@ -46,7 +45,7 @@ _PLAIN_TYPES = (str, int, float, bool, complex, type(None))
 _MISSING = None
 try:  # equinox marks absent fields of a module's flattened form with a private singleton
     from equinox._module._flatten import MISSING as _MISSING
-except Exception:  # noqa: BLE001 - another equinox layout: modules still work, their trees are not pickled
+except Exception:  # noqa: BLE001 - another equinox layout: programs taking modules are then never stored
     pass
 
 
