@@ -173,7 +173,8 @@ def host_checked(fun=None, *, jit=eqx.filter_jit, store: bool = False, **jit_kwa
     checkified = checkify.checkify(fun, errors=checkify.user_checks)
     checked = jit(checkified, **jit_kwargs)
     name = f"{getattr(fun, '__module__', '?')}.{getattr(fun, '__qualname__', '?')}"
-    storable = store and jit is eqx.filter_jit  # the store's static/dynamic split is filter_jit's
+    # the store's static/dynamic split is filter_jit's; only jaxbelt's own module-level functions are stored
+    storable = store and jit is eqx.filter_jit and _store.storable_function(fun)
 
     @functools.wraps(fun)
     def call(*args, **kwargs):
@@ -196,6 +197,8 @@ def stored_jit(fun):
     (`jaxbelt._store`) while the compilation cache is on: a later process runs it untraced."""
     jitted = eqx.filter_jit(fun)
     name = f"{fun.__module__}.{fun.__qualname__}"
+    if not _store.storable_function(fun):
+        return jitted
 
     @functools.wraps(fun)
     def wrapper(*args, **kwargs):

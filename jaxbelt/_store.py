@@ -24,6 +24,7 @@ Used only on a single-device CPU backend, and only while `jaxbelt.enable_compila
 from __future__ import annotations
 
 import dataclasses
+import enum
 import hashlib
 import io
 import os
@@ -37,7 +38,7 @@ import numpy as np
 
 _FORMAT = 1
 _state = {"folder": None, "usable": None, "fingerprint": None, "lapack": False, "generation": 0}
-_MEMO: dict = {}  # (fun id, structure key) -> _Entry (in this process), or False: not storable
+_MEMO: dict = {}  # (name, structure, input types, static values, settings) -> _Entry, or False: not storable
 _MEMO_MAX = 1024
 
 _TRUSTED_PREFIXES = ("jaxbelt.", "equinox.", "diffrax.")
@@ -115,14 +116,27 @@ CONTEXTS: list = []
 
 
 def settings() -> tuple:
+    """JAX's settings that change a traced program (its trace context: x64, dtype and rank promotion,
+    jaxbelt's own check contexts...), XLA's flags and equinox's error mode."""
     c = jax.config
-    return (bool(c.jax_enable_x64), str(c.jax_default_matmul_precision), str(c.jax_numpy_dtype_promotion),
-            os.environ.get("XLA_FLAGS", ""), tuple(f() for f in CONTEXTS))
+    try:
+        from jax._src import config as _config
+
+        # its plain values and enums; an object without a value repr (the axis environment, empty
+        # outside a trace, where the store is used) by its type
+        trace = tuple(v if _plain(v) or isinstance(v, enum.Enum) else type(v).__qualname__
+                      for v in _config.trace_context())
+    except Exception:  # noqa: BLE001 - another JAX layout: the settings jaxbelt knows of
+        trace = (bool(c.jax_enable_x64), str(c.jax_default_matmul_precision), str(c.jax_numpy_dtype_promotion),
+                 str(c.jax_numpy_rank_promotion))
+    return (trace, os.environ.get("XLA_FLAGS", ""), os.environ.get("EQX_ON_ERROR", "raise"),
+            tuple(f() for f in CONTEXTS))
 
 
 def _trusted_type(t) -> bool:
-    return t in (tuple, list, dict, type(None)) or t.__module__.startswith(_TRUSTED_PREFIXES) or (
-        t.__module__ in ("jaxbelt", "equinox", "diffrax"))
+    module = getattr(t, "__module__", None) or ""
+    return t in (tuple, list, dict, type(None)) or module.startswith(_TRUSTED_PREFIXES) or (
+        module in ("jaxbelt", "equinox", "diffrax"))
 
 
 def _plain(v) -> bool:
@@ -135,17 +149,29 @@ def _plain(v) -> bool:
     return False
 
 
-def _trusted_tree(treedef) -> bool:
-    todo = [treedef]
+def _describe_tree(treedef):
+    """Every node of `treedef` as (module.qualname, repr of its static data), or None when a node type
+    comes from outside jaxbelt, equinox and diffrax or its static data is not plain. (The tree's own
+    repr names classes by their short name: `jaxbelt.Solution` and `diffrax.Solution` would look alike.)"""
+    nodes, todo = [], [treedef]
     while todo:
         t = todo.pop()
         node = t.node_data()
         if node is not None:
             typ, aux = node
             if not _trusted_type(typ) or not _plain(aux):
-                return False
+                return None
+            nodes.append((f"{typ.__module__}.{typ.__qualname__}", repr(aux)))
         todo.extend(t.children())
-    return True
+    return tuple(nodes)
+
+
+def storable_function(fun) -> bool:
+    """A module-level function of jaxbelt (its code is in the fingerprint; a closure or a function defined
+    elsewhere could change without changing the key)."""
+    module, qualname = getattr(fun, "__module__", None) or "", getattr(fun, "__qualname__", None) or ""
+    return (module == "jaxbelt" or module.startswith("jaxbelt.")) and "<locals>" not in qualname and (
+        getattr(fun, "__closure__", None) is None) and callable(fun) and hasattr(fun, "__code__")
 
 
 def _is_array(x) -> bool:
@@ -182,7 +208,10 @@ class _Unpickler(pickle.Unpickler):
         if pid == "equinox.MISSING" and _MISSING is not None:
             return _MISSING
         if pid == "traceback":  # checkify formats one when it raises: the loading process's own stack
-            return _TRACEBACK.get_traceback()
+            tb = _TRACEBACK.get_traceback() if _TRACEBACK is not None else None
+            if tb is None:
+                raise pickle.UnpicklingError("no traceback to stand in for the stored one")
+            return tb
         raise pickle.UnpicklingError(f"unknown persistent id {pid!r}")
 
 
@@ -292,8 +321,9 @@ def _export(fun, name, static_leaves, treedef, dynamic, key, path):
     before = _codes_used()
     try:
         exported = jax.export.export(jax.jit(flat))(*dynamic)
-    except NotImplementedError as e:  # a host callback (e.g. a progress bar, an eqx.error_if)
-        _debug(f"{name}: not exportable: {e}")
+    except Exception as e:  # noqa: BLE001 - a host callback (a progress bar, an eqx.error_if), or an error the
+        # traced path raises as well (it runs next): later processes skip the attempt
+        _debug(f"{name}: not exportable: {type(e).__name__}: {e}")
         try:
             _write(path, (_FORMAT, key, _codes_used(before), None))
         except OSError:
@@ -320,26 +350,29 @@ _DYNAMIC = _Dynamic()
 def lookup(name: str, fun, args: tuple):
     """The stored program of `fun(*args)`, or False where it cannot be stored (or the store is off).
 
-    `name` identifies `fun` (module and qualified name); array leaves of `args` are the program's
-    inputs (`entry(dynamic)` takes them in their flattened order), every other leaf a static value
-    of the key. Call it outside any trace only.
+    `name` identifies `fun` (module and qualified name; `storable_function(fun)` must hold); array
+    leaves of `args` are the program's inputs (`entry(dynamic)` takes them in their flattened order),
+    every other leaf a static value of the key. Call it outside any trace only. Never raises.
     """
     if not _usable():
         return False
-    leaves, treedef = jax.tree_util.tree_flatten(args)
-    dynamic = [v for v in leaves if _is_array(v)]
-    static_leaves = [_DYNAMIC if _is_array(v) else v for v in leaves]
     try:
-        memo_key = (name, treedef, tuple(map(aval, dynamic)), tuple(repr(v) for v in static_leaves), settings())
+        leaves, treedef = jax.tree_util.tree_flatten(args)
+        dynamic = [v for v in leaves if _is_array(v)]
+        static_leaves = [_DYNAMIC if _is_array(v) else v for v in leaves]
+        if not all(_plain(v) for v in static_leaves if v is not _DYNAMIC):
+            return False
+        memo_key = (name, treedef, tuple(map(aval, dynamic)), tuple(map(repr, static_leaves)), settings())
         entry = _MEMO.get(memo_key)
-    except TypeError:
+        if entry is None:
+            entry = _lookup(name, fun, treedef, static_leaves, dynamic, memo_key)
+            if len(_MEMO) >= _MEMO_MAX:
+                _MEMO.clear()
+            _MEMO[memo_key] = entry
+        return entry
+    except Exception as e:  # noqa: BLE001 - the store never stands between the user and the traced path
+        _debug(f"{name}: {type(e).__name__}: {e}")
         return False
-    if entry is None:
-        entry = _lookup(name, fun, treedef, static_leaves, dynamic, memo_key)
-        if len(_MEMO) >= _MEMO_MAX:
-            _MEMO.clear()
-        _MEMO[memo_key] = entry
-    return entry
 
 
 def call(name: str, fun, args: tuple, fallback):
@@ -357,11 +390,13 @@ def call(name: str, fun, args: tuple, fallback):
 
 
 def _lookup(name, fun, treedef, static_leaves, dynamic, memo_key):
-    if not _trusted_tree(treedef) or not all(_plain(v) for v in static_leaves if v is not _DYNAMIC):
+    nodes = _describe_tree(treedef)
+    folder = _state["folder"]
+    if nodes is None or folder is None:
         _debug(f"{name}: arguments from outside jaxbelt or not plain: {treedef}")
         return False
-    key = repr((_FORMAT, _fingerprint(), memo_key[0], repr(treedef), memo_key[2], memo_key[3], memo_key[4]))
-    path = _state["folder"] / (hashlib.sha256(key.encode()).hexdigest() + ".jaxbelt-program")
+    key = repr((_FORMAT, _fingerprint(), memo_key[0], nodes, repr(treedef), memo_key[2], memo_key[3], memo_key[4]))
+    path = folder / (hashlib.sha256(key.encode()).hexdigest() + ".jaxbelt-program")
     if path.exists():
         try:
             entry = _load(path, key)
@@ -369,8 +404,4 @@ def _lookup(name, fun, treedef, static_leaves, dynamic, memo_key):
                 return entry
         except Exception as e:  # noqa: BLE001 - unreadable or from another build: export it again
             _debug(f"{name}: not loaded: {type(e).__name__}: {e}")
-    try:
-        return _export(fun, name, static_leaves, treedef, dynamic, key, path)
-    except Exception as e:  # noqa: BLE001 - the traced path reports any error the program has
-        _debug(f"{name}: {type(e).__name__}: {e}")
-        return False
+    return _export(fun, name, static_leaves, treedef, dynamic, key, path)

@@ -56,7 +56,7 @@ def enable_compilation_cache(path=None, *, min_compile_time: float = 0.0, progra
       leave out most of jaxbelt's programs on a CPU).
     - `programs`: also keep the compiled programs of `simulate` and of jaxbelt's other eager entry
       points in `path/jaxbelt-programs`, with what is needed to call them without tracing (a
-      later process skips tracing and lowering as well as compilation: 0.07 s instead of 0.7 s for
+      later process skips tracing as well as compilation: 0.25 s instead of 0.7 s for
       a four-bar simulation). Used on a single-device CPU backend, for scenes built from jaxbelt's
       own classes; keyed by jaxbelt's source, the dependency versions and JAX's settings, so an
       edited jaxbelt or a new JAX never picks up an old program.

@@ -32,7 +32,8 @@ import numpy as np
 
 from . import _store
 from ._checks import as_float_array, concrete_array_type, is_concrete, positive_checks
-from ._guard import _modules, error_if, guard, has_host_callbacks, host_checked, nan_where, traced_checks, validated_inputs
+from ._guard import (_modules, eager, error_if, guard, has_host_callbacks, host_checked, nan_where, traced_checks,
+                     validated_inputs)
 from .commands import AbstractExponentialVoltage
 from .fast import batched_exponential_scene
 from .modal import expm_solve, modal_solve
@@ -399,18 +400,19 @@ class _Program:
         self.plain = jax.jit(fun, static_argnums=(4,))
         self.checked = host_checked(fun, jit=jax.jit, static_argnums=(4,))
         self.callbacks = {}  # solver -> whether the traced program holds a host callback
-        self.stored = {}  # (solver, input types, options, settings, store generation) -> stored program or False
+        self.stored = {}  # (solver, input types, options, settings) -> stored program or False
 
     def __call__(self, *args):
-        if _store.folder() is not None:
+        if _store.folder() is not None and eager():  # (a concrete scene closed over inside a user's jit: traced)
             return self._stored(*args)
         return self._traced(*args)
 
     def _stored(self, leaves, rtol, atol, dt0, solver):
         """Through the program store (`jaxbelt.cache`): a program stored by an earlier process runs untraced."""
         try:
-            key = (solver, tuple(map(_store.aval, leaves)), rtol is None, dt0 is None, _store.settings(),
-                   _store.generation())
+            key = (solver, tuple(map(_store.aval, leaves)), rtol is None, dt0 is None, _store.settings())
+            if self.stored.get("generation") != _store.generation():  # the store was switched or forgotten
+                self.stored = {"generation": _store.generation()}
             entry = self.stored.get(key)
         except (TypeError, AttributeError):  # an unhashable solver, a leaf that is not an array
             return self._traced(leaves, rtol, atol, dt0, solver)

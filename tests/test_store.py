@@ -35,6 +35,13 @@ def _programs(folder):
     return sorted(folder.glob("*.jaxbelt-program"))
 
 
+def _same(sol, ref):
+    """Two results with the same structure and values equal to rounding (the same XLA program)."""
+    assert jax.tree_util.tree_structure(sol) == jax.tree_util.tree_structure(ref)
+    for a, b in zip(jax.tree_util.tree_leaves(sol), jax.tree_util.tree_leaves(ref)):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=0)
+
+
 def _fourbar_scene(n=41, **kw):
     return jb.Scene(jb.FourBarDrive(), jb.PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0),
                     ts=jnp.linspace(0.0, 0.2, n), **kw)
@@ -51,10 +58,8 @@ def test_stored_simulation_is_the_traced_one_and_loads_untraced(tmp_path):
         second = jb.simulate(_fourbar_scene())
         assert eqx.debug.get_num_traces(solve._run_traced) == traces  # not traced again
     for sol in (first, second):
-        assert sol.method == reference.method and sol.state_names == reference.state_names
-        assert set(sol.outputs) == set(reference.outputs)
-        # the same XLA program: equal to rounding (tolerance: a few ulps of the speeds, ~30 rad/s)
-        np.testing.assert_allclose(np.asarray(sol.ys), np.asarray(reference.ys), rtol=1e-12, atol=0)
+        # times, states, outputs, success and solver statistics: equal to rounding (the same XLA program)
+        _same(sol, reference)
         assert bool(sol.success)
 
 
@@ -63,19 +68,19 @@ def _startup_scene(n=21, gamma=0.04, **kw):
 
 
 def test_new_values_reuse_the_stored_program_and_new_structure_gets_its_own(tmp_path):
+    # new parameter values and times of the same shapes: the same program
+    same = jb.Scene(jb.BeltStartup(k=2.0e5), jb.ExponentialVoltage(20.0, 0.02), ts=jnp.linspace(0.0, 0.5, 21))
+    # another grid length, another observed set, another method: new programs
+    calls = [(same, {}), (_startup_scene(n=11), {}), (_startup_scene(observe=("current",)), {}),
+             (_startup_scene(), {"method": "modal"})]
     with store_in(tmp_path / "xla") as folder:
         jb.simulate(_startup_scene())
-        # new parameter values and times of the same shapes: the same program
-        scene = jb.Scene(jb.BeltStartup(k=2.0e5), jb.ExponentialVoltage(20.0, 0.02), ts=jnp.linspace(0.0, 0.5, 21))
-        sol = jb.simulate(scene)
+        stored = [jb.simulate(scene, **kw) for scene, kw in calls[:1]]
         assert len(_programs(folder)) == 1
-        # another grid length, another observed set, another method: new programs
-        jb.simulate(_startup_scene(n=11))
-        jb.simulate(_startup_scene(observe=("current",)))
-        jb.simulate(_startup_scene(), method="modal")
+        stored += [jb.simulate(scene, **kw) for scene, kw in calls[1:]]
         assert len(_programs(folder)) == 4
-    ref = jb.simulate(scene)
-    np.testing.assert_allclose(np.asarray(sol.ys), np.asarray(ref.ys), rtol=1e-12, atol=0)
+    for sol, (scene, kw) in zip(stored, calls):
+        _same(sol, jb.simulate(scene, **kw))
 
 
 class _OwnStartup(jb.BeltStartup):
@@ -87,8 +92,7 @@ def test_classes_from_outside_jaxbelt_are_never_stored(tmp_path):
     with store_in(tmp_path / "xla") as folder:
         sol = jb.simulate(scene)
         assert _programs(folder) == []
-    ref = jb.simulate(scene)
-    np.testing.assert_allclose(np.asarray(sol.ys), np.asarray(ref.ys), rtol=1e-12, atol=0)
+    _same(sol, jb.simulate(scene))
 
 
 def test_a_damaged_file_is_replaced(tmp_path):
@@ -100,23 +104,67 @@ def test_a_damaged_file_is_replaced(tmp_path):
         _store.forget()
         sol = jb.simulate(scene)
         assert path.stat().st_size > 1000  # written again
-    ref = jb.simulate(scene)
-    np.testing.assert_allclose(np.asarray(sol.ys), np.asarray(ref.ys), rtol=1e-12, atol=0)
-
-
-@host_checked(store=True)
-def _checked_sqrt(x):
-    return jnp.sqrt(error_if(x, x < 0, "x must be >= 0 (got a negative value)"))
+    _same(sol, jb.simulate(scene))
 
 
 def test_a_stored_checked_program_still_raises_its_message(tmp_path):
+    from jaxbelt.models.string import _roots  # a checked program of jaxbelt's, kept in the store
+
+    k, c, s = (jnp.array([1.0, 2.0]) for _ in range(3))
+    bad = jnp.array([jnp.nan, 1.0])  # Newton cannot converge on NaN: the program's check fails
     with store_in(tmp_path / "xla") as folder:
-        assert float(_checked_sqrt(jnp.asarray(4.0))) == 2.0
+        good = _roots(k, c, s)
         assert len(_programs(folder)) == 1
         _store.forget()  # from the file: the check's message travels with the program
-        assert float(_checked_sqrt(jnp.asarray(9.0))) == 3.0
-        with pytest.raises(ValueError, match="x must be >= 0"):
-            _checked_sqrt(jnp.asarray(-1.0))
+        np.testing.assert_array_equal(np.asarray(_roots(k, c, s)), np.asarray(good))
+        with pytest.raises(ValueError, match="Newton's method did not converge"):
+            _roots(bad, c, s)
+        assert any(isinstance(e, _store._Entry) for e in _store._MEMO.values())  # ran the loaded program
+    # the root of k c (1 - V^2/c^2) = s V with k = c = s: V = c (sqrt(5) - 1) / 2
+    np.testing.assert_allclose(np.asarray(good), np.asarray(c) * (np.sqrt(5.0) - 1) / 2, rtol=1e-12)
+
+
+def test_only_jaxbelt_functions_are_stored(tmp_path):
+    own = host_checked(lambda x: jnp.sqrt(error_if(x, x < 0, "x must be >= 0")), store=True)
+
+    def closure(x):
+        return x * 2.0
+
+    assert not _store.storable_function(own) and not _store.storable_function(closure)
+    from jaxbelt.models.string import _galerkin_frequencies, _roots
+
+    assert _store.storable_function(_roots.__wrapped__) and _store.storable_function(_galerkin_frequencies.__wrapped__)
+    with store_in(tmp_path / "xla") as folder:
+        assert float(own(jnp.asarray(4.0))) == 2.0
+        assert _programs(folder) == []
+
+
+def test_belt_span_functions_through_the_store(tmp_path):
+    rig, span = jb.RunoutRig(), jb.MovingString()
+    speeds = jnp.linspace(1.0, 20.0, 7)
+
+    def run():
+        return (span.galerkin_frequencies(20.0, 8, 3), jb.linear_runout_response(rig, speeds, n_modes=8),
+                jb.crossing_speeds(rig, n_modes=2))
+
+    reference = run()
+    with store_in(tmp_path / "xla") as folder:
+        run()
+        assert len(_programs(folder)) == 3
+        _store.forget()
+        stored = run()
+    _same(stored, reference)
+
+
+def test_the_key_holds_module_names_and_error_mode(monkeypatch):
+    tree = jax.tree_util.tree_structure(_startup_scene())
+    names = [n for n, _ in _store._describe_tree(tree)]
+    assert "jaxbelt.scene.Scene" in names and "jaxbelt.models.startup.BeltStartup" in names
+    assert _store._describe_tree(jax.tree_util.tree_structure(jb.Scene(_OwnStartup(), jb.ExponentialVoltage(24.0, 0.04),
+                                                                       ts=jnp.linspace(0.0, 0.3, 3)))) is None
+    before = _store.settings()
+    monkeypatch.setenv("EQX_ON_ERROR", "nan")  # equinox's checks become NaNs: another program
+    assert _store.settings() != before
 
 
 def test_programs_holding_a_host_callback_are_marked_and_traced(tmp_path):
@@ -131,7 +179,7 @@ def test_programs_holding_a_host_callback_are_marked_and_traced(tmp_path):
         assert _programs(folder) == [mark]
     ref = jb.simulate(scene, method="ode")
     for s in (sol, sol2):
-        np.testing.assert_allclose(np.asarray(s.ys), np.asarray(ref.ys), rtol=1e-12, atol=0)
+        _same(s, ref)
 
 
 def test_off_unless_the_cache_is_on(tmp_path):
