@@ -290,21 +290,19 @@ def test_bad_inputs():
 
 
 @pytest.mark.slow
-def test_cli_nonlinear_quick(tmp_path, curve):
+def test_cli_nonlinear_quick(tmp_path, curve, capsys):
     """`jaxbelt nonlinear --quick --out F` exits 0, prints the written name exactly and the fold
-    speeds, which equal the library's `response_curve` folds to the printed 1e-4 m/s."""
-    import os
+    speeds, which equal the library's `response_curve` folds to the printed 1e-4 m/s. (Run in this
+    process, without the compilation cache: the `jaxbelt` command as a fresh process is tested by
+    test_guarantees.py, and timed with and without the cache by benchmarks/coldstart.py.)"""
     import re
-    import subprocess
-    import sys
-    from pathlib import Path
+
+    from jaxbelt.cli import main
 
     out = tmp_path / "nl.png"
-    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parent.parent)}
-    p = subprocess.run([sys.executable, "-m", "jaxbelt", "nonlinear", "--quick", "--out", str(out)],
-                       capture_output=True, text=True, env=env, timeout=600)
-    assert p.returncode == 0, p.stderr[-2000:]
-    assert f"wrote {out}" in p.stdout.splitlines()
+    assert main(["--no-cache", "nonlinear", "--quick", "--out", str(out)]) == 0
+    stdout = capsys.readouterr().out
+    assert f"wrote {out}" in stdout.splitlines()
     assert out.stat().st_size > 10_000
-    folds = [float(x) for x in re.search(r"folds ([\d.]+), ([\d.]+) m/s", p.stdout).groups()]
+    folds = [float(x) for x in re.search(r"folds ([\d.]+), ([\d.]+) m/s", stdout).groups()]
     np.testing.assert_allclose(folds, np.asarray(curve.folds), atol=1.5e-4)
