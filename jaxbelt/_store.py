@@ -354,14 +354,19 @@ def lookup(name: str, fun, args: tuple):
     leaves of `args` are the program's inputs (`entry(dynamic)` takes them in their flattened order),
     every other leaf a static value of the key. Call it outside any trace only. Never raises.
     """
+    return _resolve(name, fun, args)[0]
+
+
+def _resolve(name: str, fun, args: tuple):
+    """`(lookup(name, fun, args), the program's inputs)`: the arguments are flattened once."""
     if not _usable():
-        return False
+        return False, None
     try:
         leaves, treedef = jax.tree_util.tree_flatten(args)
         dynamic = [v for v in leaves if _is_array(v)]
         static_leaves = [_DYNAMIC if _is_array(v) else v for v in leaves]
         if not all(_plain(v) for v in static_leaves if v is not _DYNAMIC):
-            return False
+            return False, None
         memo_key = (name, treedef, tuple(map(aval, dynamic)), tuple(map(repr, static_leaves)), settings())
         entry = _MEMO.get(memo_key)
         if entry is None:
@@ -369,19 +374,18 @@ def lookup(name: str, fun, args: tuple):
             if len(_MEMO) >= _MEMO_MAX:
                 _MEMO.clear()
             _MEMO[memo_key] = entry
-        return entry
+        return entry, dynamic
     except Exception as e:  # noqa: BLE001 - the store never stands between the user and the traced path
         _debug(f"{name}: {type(e).__name__}: {e}")
-        return False
+        return False, None
 
 
 def call(name: str, fun, args: tuple, fallback):
     """`fun(*args)` through its stored program (see `lookup`); `fallback(*args)` (the traced path, same
     result) where there is none. Call it outside any trace only."""
-    entry = lookup(name, fun, args)
+    entry, dynamic = _resolve(name, fun, args)
     if entry is False:
         return fallback(*args)
-    dynamic = [v for v in jax.tree_util.tree_leaves(args) if _is_array(v)]
     try:
         return entry(dynamic)
     except Exception as e:  # noqa: BLE001 - e.g. an argument committed to another device: the traced path

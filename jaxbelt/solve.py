@@ -393,7 +393,7 @@ class _Program:
     plain, and `host_checked` for a program that holds a host callback (an `eqx.error_if` in a model,
     or a diffrax check jaxbelt does not make itself), which the persistent cache would not store."""
 
-    __slots__ = ("plain", "checked", "callbacks", "static", "stored")
+    __slots__ = ("plain", "checked", "callbacks", "static", "stored", "stored_generation")
 
     def __init__(self, fun, static):
         self.static = static  # (treedef, method, max_steps, progress, adjoint)
@@ -401,6 +401,7 @@ class _Program:
         self.checked = host_checked(fun, jit=jax.jit, static_argnums=(4,))
         self.callbacks = {}  # solver -> whether the traced program holds a host callback
         self.stored = {}  # (solver, input types, options, settings) -> stored program or False
+        self.stored_generation = None  # the store's generation `stored` belongs to
 
     def __call__(self, *args):
         if _store.folder() is not None and eager():  # (a concrete scene closed over inside a user's jit: traced)
@@ -411,8 +412,8 @@ class _Program:
         """Through the program store (`jaxbelt.cache`): a program stored by an earlier process runs untraced."""
         try:
             key = (solver, tuple(map(_store.aval, leaves)), rtol is None, dt0 is None, _store.settings())
-            if self.stored.get("generation") != _store.generation():  # the store was switched or forgotten
-                self.stored = {"generation": _store.generation()}
+            if self.stored_generation != _store.generation():  # the store was switched or forgotten
+                self.stored, self.stored_generation = {}, _store.generation()
             entry = self.stored.get(key)
         except (TypeError, AttributeError):  # an unhashable solver, a leaf that is not an array
             return self._traced(leaves, rtol, atol, dt0, solver)
