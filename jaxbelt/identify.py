@@ -91,8 +91,11 @@ def _fit(predict, names, p0, data, w, is_log, scale, solver_kind, jac_mode, rtol
         p = _to_params(u, p0, is_log, scale)
         return {n: p[i] for i, n in enumerate(names)}
 
+    # traced once: the solver and the Jacobians below call it several times, each a re-trace otherwise
+    predict_once = jax.jit(predict)
+
     def resid(u, _):
-        pred = jnp.asarray(predict(unpack(u)), dtype=float)
+        pred = jnp.asarray(predict_once(unpack(u)), dtype=float)
         return jnp.ravel((pred - data) * w)
 
     if solver_kind == "lm":
@@ -102,8 +105,8 @@ def _fit(predict, names, p0, data, w, is_log, scale, solver_kind, jac_mode, rtol
     sol = optx.least_squares(resid, solver, jnp.zeros_like(p0), options={"jac": jac_mode},
                              max_steps=max_steps, throw=False)
     u = sol.value
-    r = resid(u, None)
-    jac = (jax.jacfwd if jac_mode == "fwd" else jax.jacrev)(resid)(u, None)
+    # the residual at the solution comes with its Jacobian (one evaluation of the prediction)
+    jac, r = (jax.jacfwd if jac_mode == "fwd" else jax.jacrev)(lambda v: (resid(v, None),) * 2, has_aux=True)(u)
     return u, r, jac, sol.result == optx.RESULTS.successful, sol.stats["num_steps"]
 
 
