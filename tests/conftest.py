@@ -16,13 +16,15 @@ if "JAXBELT_CACHE_DIR" not in os.environ:
 
 # --- XLA's quicker CPU compilation for the test run --------------------------------------------
 # Two thirds of the suite's time is XLA compiling its ~2800 programs. XLA's classic CPU emitters at
-# LLVM optimisation level 0 compile them 2-3x faster (the suite: under 5 instead of 8 minutes on 2
+# LLVM optimisation level 0, without splitting a program for parallel code generation, compile them 2-3x faster (the suite: under 5 instead of 8 minutes on 2
 # cores). The programs (HLO) are the same; their floating-point results agree with XLA's default
 # settings to rounding, which test_xla_flags.py checks on each kind of solver in a process with
 # XLA's defaults. `JAXBELT_TEST_XLA_DEFAULTS=1` runs the whole suite with XLA's defaults. The caller's
 # own XLA_FLAGS are kept (and win); subprocesses of the tests inherit the flags. A JAX whose XLA no
 # longer knows a flag (XLA aborts on unknown flags) runs with its defaults.
-FAST_COMPILE_FLAGS = ("--xla_cpu_use_fusion_emitters=false", "--xla_backend_optimization_level=0")
+FAST_COMPILE_FLAGS = ("--xla_cpu_use_fusion_emitters=false", "--xla_backend_optimization_level=0",
+                      # one LLVM module per program: both cores already run a test worker each
+                      "--xla_cpu_parallel_codegen_split_count=1")
 
 
 def _use_fast_compile_flags() -> None:
