@@ -16,8 +16,8 @@ if "JAXBELT_CACHE_DIR" not in os.environ:
 
 # --- XLA's quicker CPU compilation for the test run --------------------------------------------
 # Two thirds of the suite's time is XLA compiling its ~2800 programs. XLA's classic CPU emitters at
-# LLVM optimisation level 0, without splitting a program for parallel code generation, compile them 2-3x faster (the suite: under 5 instead of 8 minutes on 2
-# cores). The programs (HLO) are the same; their floating-point results agree with XLA's default
+# LLVM optimisation level 0, without splitting a program for parallel code generation, compile them
+# 2-3x faster (the suite: under 5 instead of 8 minutes on 2 cores). The programs (HLO) are the same; their floating-point results agree with XLA's default
 # settings to rounding, which test_xla_flags.py checks on each kind of solver in a process with
 # XLA's defaults. `JAXBELT_TEST_XLA_DEFAULTS=1` runs the whole suite with XLA's defaults. The caller's
 # own XLA_FLAGS are kept (and win); subprocesses of the tests inherit the flags. A JAX whose XLA no

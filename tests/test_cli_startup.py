@@ -1,7 +1,6 @@
 """The `jaxbelt startup` command, `startup_curves` and the Fig. 3 plot: the drawn curves are the simulated ones."""
 
 import numpy as np
-import pytest
 
 import jaxbelt as jb
 from jaxbelt.cli import main
@@ -34,12 +33,3 @@ def test_plot_panels_hold_the_simulated_data():
     np.testing.assert_allclose(axes[5].lines[0].get_ydata(), ref[:, 3], atol=1e-8)  # omega2
     v = 24 * (1 - np.exp(-np.linspace(0, 0.2, 201) / 0.03))
     np.testing.assert_allclose(axes[2].lines[0].get_ydata(), v * ref[:, 4], atol=1e-6)  # V I
-
-
-def test_cli_bad_argument_is_a_clear_error(capsys):
-    with pytest.raises(SystemExit) as e:
-        main(["startup", "--t-end", "-1"])
-    assert e.value.code == 2
-    assert "argument --t-end: must be > 0, got -1" in capsys.readouterr().err
-    with pytest.raises(SystemExit):
-        main(["startup", "--method", "euler"])

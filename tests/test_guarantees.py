@@ -222,6 +222,8 @@ def test_nearly_equal_exponents_are_refused_and_gradients_are_right_at_the_limit
         (["startup", "--points", "1"], "--points: must be an integer >= 2"),
         (["startup", "--out", "/nonexistent-folder/x.png"], "does not exist"),
         (["startup", "--out", "figure.txt"], "image format"),
+        (["startup", "--t-end", "-1"], "argument --t-end: must be > 0, got -1"),
+        (["startup", "--method", "euler"], "argument --method: invalid choice: 'euler'"),
     ],
 )
 def test_cli_refuses_bad_arguments_before_computing(argv, needle, capsys):

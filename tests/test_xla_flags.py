@@ -5,14 +5,9 @@ residual energy, the non-linear four-bar under PID."""
 
 import json
 import os
-import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
-
-ROOT = Path(__file__).resolve().parents[1]
 
 # one program of each kind; leaves a dict of lists of floats in `out`
 PROBE = r"""
@@ -35,11 +30,10 @@ out["fourbar_pid"] = [float(fb.alpha_dot[-1]), float(jb.fluctuation_index(fb, 0.
 
 
 def _run_with_xla_flags(flags: str) -> dict:
-    env = dict(os.environ, XLA_FLAGS=flags, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    code = PROBE + '\nimport json\nprint("RESULT " + json.dumps(out))\n'
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=600)
-    assert proc.returncode == 0, proc.stderr
-    line = next(ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT "))
+    from test_coldstart import _subprocess
+
+    stdout = _subprocess(PROBE + '\nimport json\nprint("RESULT " + json.dumps(out))\n', XLA_FLAGS=flags)
+    line = next(ln for ln in stdout.splitlines() if ln.startswith("RESULT "))
     return json.loads(line[len("RESULT "):])
 
 

@@ -78,6 +78,11 @@ def _check_bound(name, value):
 _AVERAGES = ("mean", "midrange")
 
 
+def _check_average(average) -> None:
+    if average not in _AVERAGES:
+        raise ValueError(f"{_O}: `average` must be one of {_AVERAGES}; got {average!r}")
+
+
 def chi_from_samples(ts, speed, t0=None, t1=None, *, smooth: bool = False, temperature=3e-4, average="mean"):
     """χ of the sampled signal `speed` (..., N) at times `ts` (N,) over [t0, t1].
 
@@ -87,8 +92,7 @@ def chi_from_samples(ts, speed, t0=None, t1=None, *, smooth: bool = False, tempe
     average by the trapezoid rule). `smooth=True`: log-mean-exp max and min at temperature
     `temperature` × average speed (dimensionless, default 3e-4).
     """
-    if average not in _AVERAGES:
-        raise ValueError(f"fluctuation index: `average` must be one of {_AVERAGES}; got {average!r}")
+    _check_average(average)
     speed = jnp.asarray(speed, dtype=float)
     # concrete: each check raises at once; traced: recorded and attached to the result (a run-time error)
     with collecting() as checks:
@@ -168,8 +172,7 @@ def closed_loop_metrics(
     temperature `peak_temperature` in V or A, >= the exact peak). `average` as in `chi_from_samples`.
     Returns a dict of scalars.
     """
-    if average not in _AVERAGES:
-        raise ValueError(f"{_O}: `average` must be one of {_AVERAGES}; got {average!r}")
+    _check_average(average)
     ts = _grid(t1, dt if method == "rk4" else dt_save)
     sol = _run_from_rest(drive, pid, ts, ("motor_speed", "voltage"), True, method, rtol, atol, dt, max_steps, adjoint)
     speed, v, ys = sol.outputs["motor_speed"], sol.outputs["voltage"], sol.ys
@@ -207,8 +210,7 @@ def fluctuation_objective(
                                 dt_save=dt_save, method=method, rtol=rtol, atol=atol, dt=dt, max_steps=max_steps,
                                 adjoint=adjoint, average=average)
         return m["chi_smooth"] if smooth else m["chi"]
-    if average not in _AVERAGES:
-        raise ValueError(f"{_O}: `average` must be one of {_AVERAGES}; got {average!r}")
+    _check_average(average)
     ts = _grid(t1, dt if method == "rk4" else dt_save)
     _check_bound("t0", t0)
     keep = ts >= float(t0) - _WINDOW_RTOL * max(abs(float(ts[-1])), 1.0)  # as `_node_weights` decides
