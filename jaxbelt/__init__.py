@@ -8,6 +8,7 @@ every scene then runs in float32, with the accuracy the stress tests measure.
 """
 
 import os as _os
+import typing as _typing
 
 import jax as _jax
 
@@ -17,111 +18,112 @@ if _os.environ.get("JAXBELT_X64", "1") != "0" and not _jax.config.jax_enable_x64
     _jax.config.update("jax_enable_x64", True)
     X64_SWITCHED_ON = True
 
-# --- core: scenes, simulation, commands --------------------------------------------------------
-from .commands import AbstractInput as AbstractInput  # noqa: E402
-from .commands import AbstractVoltageSource as AbstractVoltageSource  # noqa: E402
-from .commands import AbstractVoltageCommand as AbstractVoltageCommand  # noqa: E402
-from .commands import AbstractExponentialVoltage as AbstractExponentialVoltage  # noqa: E402
-from .commands import AbstractController as AbstractController  # noqa: E402
-from .commands import AbstractRunningSpeed as AbstractRunningSpeed  # noqa: E402
-from .commands import MotorState as MotorState  # noqa: E402
-from .commands import AbstractMotionCommand as AbstractMotionCommand  # noqa: E402
-from .commands import ConstantVoltage as ConstantVoltage  # noqa: E402
-from .commands import ExponentialVoltage as ExponentialVoltage  # noqa: E402
-from .commands import PseudoPolynomial as PseudoPolynomial  # noqa: E402
-from .commands import ShapedCommand as ShapedCommand  # noqa: E402
-from .models import AbstractModel as AbstractModel  # noqa: E402
-from .models import AbstractLinearModel as AbstractLinearModel  # noqa: E402
-from .models import integrand as integrand  # noqa: E402
-from .models import observable as observable  # noqa: E402
-from .scene import Scene as Scene  # noqa: E402
-from .scene import TracedGridWarning as TracedGridWarning  # noqa: E402
-from .solution import Solution as Solution  # noqa: E402
-from .solution import SolveError as SolveError  # noqa: E402
-from .solve import simulate as simulate  # noqa: E402
-from .batch import cpu_devices as cpu_devices  # noqa: E402
-from .batch import sweep as sweep  # noqa: E402
+# Every public name below is imported on first use (`jaxbelt._lazy`): `import jaxbelt` costs JAX's own
+# import time, and a scene loads only what it needs (the start-up closed form never loads diffrax,
+# optax or matplotlib). This block is the list of public names: type checkers and the documentation
+# read it as imports, `jaxbelt._lazy.attach` as the table of where each name lives.
+if _typing.TYPE_CHECKING:
+    # --- core: scenes, simulation, commands --------------------------------------------------------
+    from .commands import AbstractInput as AbstractInput
+    from .commands import AbstractVoltageSource as AbstractVoltageSource
+    from .commands import AbstractVoltageCommand as AbstractVoltageCommand
+    from .commands import AbstractExponentialVoltage as AbstractExponentialVoltage
+    from .commands import AbstractController as AbstractController
+    from .commands import AbstractRunningSpeed as AbstractRunningSpeed
+    from .commands import MotorState as MotorState
+    from .commands import AbstractMotionCommand as AbstractMotionCommand
+    from .commands import ConstantVoltage as ConstantVoltage
+    from .commands import ExponentialVoltage as ExponentialVoltage
+    from .commands import PseudoPolynomial as PseudoPolynomial
+    from .commands import ShapedCommand as ShapedCommand
+    from .models import AbstractModel as AbstractModel
+    from .models import AbstractLinearModel as AbstractLinearModel
+    from .models import integrand as integrand
+    from .models import observable as observable
+    from .scene import Scene as Scene
+    from .scene import TracedGridWarning as TracedGridWarning
+    from .solution import Solution as Solution
+    from .solution import SolveError as SolveError
+    from .solve import simulate as simulate
+    from .batch import cpu_devices as cpu_devices
+    from .batch import sweep as sweep
 
-# --- start-up of a belt drive (Incerti, 2014) ---------------------------------------------------------
-from .models import BeltChain as BeltChain  # noqa: E402
-from .models import BeltStartup as BeltStartup  # noqa: E402
-from .models.startup import startup_curves as startup_curves  # noqa: E402
+    # --- start-up of a belt drive (Incerti, 2014) ---------------------------------------------------------
+    from .models import BeltChain as BeltChain
+    from .models import BeltStartup as BeltStartup
+    from .models.startup import startup_curves as startup_curves
 
-# --- four-bar linkage + PID-controlled DC motor (Incerti, 2012) -------------------------------------
-from .models.fourbar import FourBarDrive as FourBarDrive  # noqa: E402
-from .models.fourbar import simulate_fig4 as simulate_fig4  # noqa: E402
-from .models.motor import PID as PID  # noqa: E402
-from .objectives.fluctuation import fluctuation_index as fluctuation_index  # noqa: E402
-from .objectives.fluctuation import fluctuation_objective as fluctuation_objective  # noqa: E402
-from .optimise.pid import PIDTuneResult as PIDTuneResult  # noqa: E402
-from .optimise.pid import tune_pid as tune_pid  # noqa: E402
+    # --- four-bar linkage + PID-controlled DC motor (Incerti, 2012) -------------------------------------
+    from .models.fourbar import FourBarDrive as FourBarDrive
+    from .models.fourbar import simulate_fig4 as simulate_fig4
+    from .models.motor import PID as PID
+    from .objectives.fluctuation import fluctuation_index as fluctuation_index
+    from .objectives.fluctuation import fluctuation_objective as fluctuation_objective
+    from .optimise.pid import PIDTuneResult as PIDTuneResult
+    from .optimise.pid import tune_pid as tune_pid
 
-# --- belt spans: contact, moving string, crossing diagrams (belt-vibration report; Moon & Wickert, 1997) --------------------
-from .models import BeltPulleyContact as BeltPulleyContact  # noqa: E402
-from .models import MovingString as MovingString  # noqa: E402
-from .models import RunoutRig as RunoutRig  # noqa: E402
-from .models import SlipError as SlipError  # noqa: E402
-from .models import SlipReport as SlipReport  # noqa: E402
-from .models import crossing_diagram as crossing_diagram  # noqa: E402
-from .models import crossing_speeds as crossing_speeds  # noqa: E402
-from .models import exciting_speeds as exciting_speeds  # noqa: E402
-from .models import linear_runout_response as linear_runout_response  # noqa: E402
-from .models import runout_phasors as runout_phasors  # noqa: E402
-from .models import simulate_runout_response as simulate_runout_response  # noqa: E402
+    # --- belt spans: contact, moving string, crossing diagrams (belt-vibration report; Moon & Wickert, 1997) --------------------
+    from .models import BeltPulleyContact as BeltPulleyContact
+    from .models import MovingString as MovingString
+    from .models import RunoutRig as RunoutRig
+    from .models import SlipError as SlipError
+    from .models import SlipReport as SlipReport
+    from .models import crossing_diagram as crossing_diagram
+    from .models import crossing_speeds as crossing_speeds
+    from .models import exciting_speeds as exciting_speeds
+    from .models import linear_runout_response as linear_runout_response
+    from .models import runout_phasors as runout_phasors
+    from .models import simulate_runout_response as simulate_runout_response
 
-# --- command shaping of a belt-driven platform (Incerti, pseudo-polynomial commands) --------------------------------------
-from .models import BeltPlatform as BeltPlatform  # noqa: E402
-from .models.platform import platform_response as platform_response  # noqa: E402
-from .objectives.residual import residual_energy as residual_energy  # noqa: E402
-from .objectives.residual import residual_energy_joules as residual_energy_joules  # noqa: E402
-from .optimise.command import CommandOptimResult as CommandOptimResult  # noqa: E402
-from .optimise.command import optimise_command as optimise_command  # noqa: E402
-from .optimise.command import optimise_robust as optimise_robust  # noqa: E402
-from .optimise.command import sensitivity_curve as sensitivity_curve  # noqa: E402
-from .optimise.command import shaped_commands as shaped_commands  # noqa: E402
-from .optimise.command import tolerance_band as tolerance_band  # noqa: E402
+    # --- command shaping of a belt-driven platform (Incerti, pseudo-polynomial commands) --------------------------------------
+    from .models import BeltPlatform as BeltPlatform
+    from .models.platform import platform_response as platform_response
+    from .objectives.residual import residual_energy as residual_energy
+    from .objectives.residual import residual_energy_joules as residual_energy_joules
+    from .optimise.command import CommandOptimResult as CommandOptimResult
+    from .optimise.command import optimise_command as optimise_command
+    from .optimise.command import optimise_robust as optimise_robust
+    from .optimise.command import sensitivity_curve as sensitivity_curve
+    from .optimise.command import shaped_commands as shaped_commands
+    from .optimise.command import tolerance_band as tolerance_band
 
-# --- non-linear belt vibration (Moon & Wickert, 1997) ------------------------------------------------------
-from .models.nonlinear import NonlinearBelt as NonlinearBelt  # noqa: E402
-from .models.nonlinear import RunningSpeed as RunningSpeed  # noqa: E402
-from .models.nonlinear import SpeedRamp as SpeedRamp  # noqa: E402
-from .models.nonlinear import kbm_coefficients as kbm_coefficients  # noqa: E402
-from .models.nonlinear import backbone_amplitude as backbone_amplitude  # noqa: E402
-from .models.nonlinear import backbone_frequency as backbone_frequency  # noqa: E402
-from .models.nonlinear import backbone_speed as backbone_speed  # noqa: E402
-from .models.nonlinear import kbm_amplitudes as kbm_amplitudes  # noqa: E402
-from .models.nonlinear import SteadyStateError as SteadyStateError  # noqa: E402
-from .models.nonlinear import nonlinear_basins as nonlinear_basins  # noqa: E402
-from .models.nonlinear import speed_sweep as speed_sweep  # noqa: E402
-from .models.nonlinear import nonlinear_steady_state as nonlinear_steady_state  # noqa: E402
-from .models.nonlinear import nonlinear_sweep as nonlinear_sweep  # noqa: E402
-from .models.nonlinear import nonlinear_trajectory as nonlinear_trajectory  # noqa: E402
-from .models.nonlinear import ResponseCurve as ResponseCurve  # noqa: E402
-from .models.nonlinear import response_curve as response_curve  # noqa: E402
-from .models.nonlinear import fold_speeds as fold_speeds  # noqa: E402
-from .models.nonlinear import harmonic_balance as harmonic_balance  # noqa: E402
-from .models.nonlinear import speed_ramp as speed_ramp  # noqa: E402
-from .models.nonlinear import MEASUREMENTS as MEASUREMENTS  # noqa: E402
-from .models.nonlinear import calibrate as calibrate  # noqa: E402
-from .models.nonlinear import jumps as jumps  # noqa: E402
+    # --- non-linear belt vibration (Moon & Wickert, 1997) ------------------------------------------------------
+    from .models.nonlinear import NonlinearBelt as NonlinearBelt
+    from .models.nonlinear import RunningSpeed as RunningSpeed
+    from .models.nonlinear import SpeedRamp as SpeedRamp
+    from .models.nonlinear import kbm_coefficients as kbm_coefficients
+    from .models.nonlinear import backbone_amplitude as backbone_amplitude
+    from .models.nonlinear import backbone_frequency as backbone_frequency
+    from .models.nonlinear import backbone_speed as backbone_speed
+    from .models.nonlinear import kbm_amplitudes as kbm_amplitudes
+    from .models.nonlinear import SteadyStateError as SteadyStateError
+    from .models.nonlinear import nonlinear_basins as nonlinear_basins
+    from .models.nonlinear import speed_sweep as speed_sweep
+    from .models.nonlinear import nonlinear_steady_state as nonlinear_steady_state
+    from .models.nonlinear import nonlinear_sweep as nonlinear_sweep
+    from .models.nonlinear import nonlinear_trajectory as nonlinear_trajectory
+    from .models.nonlinear import ResponseCurve as ResponseCurve
+    from .models.nonlinear import response_curve as response_curve
+    from .models.nonlinear import fold_speeds as fold_speeds
+    from .models.nonlinear import harmonic_balance as harmonic_balance
+    from .models.nonlinear import speed_ramp as speed_ramp
+    from .models.nonlinear import MEASUREMENTS as MEASUREMENTS
+    from .models.nonlinear import calibrate as calibrate
+    from .models.nonlinear import jumps as jumps
 
-# --- parameter identification (weighted least squares, optimistix) -------------------------------
-from .identify import IdentifyResult as IdentifyResult  # noqa: E402
-from .identify import identify as identify  # noqa: E402
+    # --- parameter identification (weighted least squares, optimistix) -------------------------------
+    from .identification import IdentifyResult as IdentifyResult
+    from .identification import identify as identify
 
-# --- persistent compilation cache (opt-in; the CLI switches it on) --------------------------------
-from .cache import enable_compilation_cache as enable_compilation_cache  # noqa: E402
+    # --- persistent compilation cache (opt-in; the CLI switches it on) --------------------------------
+    from .cache import enable_compilation_cache as enable_compilation_cache
 
-# --- sub-modules -------------------------------------------------------------------------------
-from . import modal as modal  # noqa: E402
-def __getattr__(name):
-    # `jb.plots` is imported on first use: `import jaxbelt` loads no plotting library
-    if name == "plots":
-        import importlib
+    # --- sub-modules -------------------------------------------------------------------------------
+    from . import modal as modal
+    from . import plots as plots
 
-        return importlib.import_module(".plots", __name__)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+from ._lazy import attach as _attach  # noqa: E402
 
+__getattr__, __dir__, _names = _attach(__name__, __file__)
 __version__ = "0.1.0"
-
-__all__ = [name for name in dir() if not name.startswith("_")] + ["plots"]
+__all__ = ["X64_SWITCHED_ON", *_names]

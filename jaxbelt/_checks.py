@@ -29,9 +29,11 @@ def as_float_array(x):
     """Field converter of every model and command: parameters become float arrays (float64 with x64),
     so they are traced under jit instead of being baked in as constants.
 
-    A construction converts ~30 fields; `jnp.asarray` costs tens of microseconds each, so the two
-    common cases are short-cut: an array that already has the float dtype is returned as is, and
-    Python scalars (defaults, literals) come from a cache of immutable device arrays."""
+    A construction converts ~30 fields; `jnp.asarray` costs tens of microseconds each, so the common
+    cases are short-cut: an array that already has the float dtype is returned as is, Python scalars
+    (defaults, literals) come from a cache of immutable device arrays, and numpy arrays are
+    converted on the host and transferred (`jnp.asarray` would compile a small program for each new
+    shape: ~10 ms in a fresh process)."""
     dtype = jax.dtypes.canonicalize_dtype(float)
     t = type(x)
     if t is not np.ndarray and concrete_array_type(t) and x.dtype == dtype and not x.weak_type:
@@ -42,7 +44,7 @@ def as_float_array(x):
         if hit is None:
             # made outside any trace: a cached tracer would leak into later, unrelated programs
             with jax.ensure_compile_time_eval():
-                hit = jnp.asarray(x, dtype=dtype)
+                hit = jax.device_put(np.asarray(x, dtype=dtype))
             if isinstance(hit, jax.core.Tracer):
                 return hit
             if len(_SCALARS) >= _SCALARS_MAX:
@@ -51,6 +53,9 @@ def as_float_array(x):
             _SCALARS[key] = hit
             _HOST[id(hit)] = (hit, float(x))
         return hit
+    if t is np.ndarray and x.dtype.kind in "fiub":
+        # converted on the host and transferred: `jnp.asarray` would run a small program per shape
+        return jax.device_put(np.asarray(x, dtype=dtype))
     return jnp.asarray(x, dtype=float)
 
 

@@ -22,9 +22,8 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from typing import ClassVar
+import sys
 
-import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -46,26 +45,6 @@ _METHODS = ("auto", "ode", "rk4") + _CLOSED
 
 
 _batched_exponential_scene = eqx.filter_jit(batched_exponential_scene)
-
-
-class RK4(diffrax.AbstractERK):
-    """The classical fourth-order Runge-Kutta method as a diffrax solver (fixed step, no error estimate).
-
-    Incerti (2014) checks the modal solution with it at a 0.1 ms step, Incerti (2012) integrates the
-    four-bar with it at 1 ms. `simulate(..., method="rk4", dt=...)` uses it with a constant step;
-    the output times are read off the cubic Hermite interpolant between steps.
-    """
-
-    tableau: ClassVar[diffrax.ButcherTableau] = diffrax.ButcherTableau(
-        c=np.array([0.5, 0.5, 1.0]),
-        b_sol=np.array([1 / 6, 1 / 3, 1 / 3, 1 / 6]),
-        b_error=np.zeros(4),
-        a_lower=(np.array([0.5]), np.array([0.0, 0.5]), np.array([0.0, 0.0, 1.0])),
-    )
-    interpolation_cls: ClassVar = diffrax.ThirdOrderHermitePolynomialInterpolation.from_k
-
-    def order(self, terms):
-        return 4
 
 
 #: |R(h lambda)| of RK4 may exceed max(1, |exp(h lambda)|) by this much before the step is called unstable.
@@ -116,6 +95,10 @@ def _run_impl(scene: Scene, method: str, solver, rtol, atol, dt0, max_steps: int
         else:
             vf = lambda t, y, args: model.vector_field(t, y, args)  # noqa: E731
             y_init = y0
+        import diffrax
+
+        from ._rk4 import RK4
+
         saveat = diffrax.SaveAt(t1=True) if scene.final_only else diffrax.SaveAt(ts=times)
         if isinstance(solver, diffrax.AbstractAdaptiveSolver) and not isinstance(solver, RK4):
             controller = diffrax.PIDController(rtol=rtol, atol=atol)
@@ -157,9 +140,34 @@ def _run_impl(scene: Scene, method: str, solver, rtol, atol, dt0, max_steps: int
 # One compiled program per shape and static option; `eqx.debug.get_num_traces(_run_traced)` counts them.
 _run_traced = eqx.debug.assert_max_traces(_run_impl, max_traces=None)
 _run = eqx.filter_jit(_run_traced)
-_RK4 = RK4()
-_DEFAULT_ADJOINT = diffrax.RecursiveCheckpointAdjoint()
-_FORWARD = diffrax.ForwardMode()
+
+
+# diffrax is imported where an ODE is integrated (the closed forms never load it)
+def _is_diffrax(obj, name: str) -> bool:
+    """`isinstance(obj, diffrax.<name>)`; an object cannot be one while diffrax is not imported."""
+    module = sys.modules.get("diffrax")
+    return module is not None and isinstance(obj, getattr(module, name))
+
+
+@functools.cache
+def _rk4():
+    from ._rk4 import RK4
+
+    return RK4()
+
+
+@functools.cache
+def _default_adjoint():
+    import diffrax
+
+    return diffrax.RecursiveCheckpointAdjoint()
+
+
+@functools.cache
+def _forward():
+    import diffrax
+
+    return diffrax.ForwardMode()
 
 
 def _describe(scene: Scene, method: str) -> str:
@@ -241,7 +249,7 @@ def simulate(
         if jnp.ndim(dt) != 0:
             raise ValueError(f"simulate: `dt` (RK4 step, s) must be a scalar; got shape {jnp.shape(dt)}")
         step_checks = positive_checks("simulate (RK4 step, s)", dt=dt)  # raises now, or recorded when traced
-        solver, dt0 = _RK4, dt
+        solver, dt0 = _rk4(), dt
     elif method == "ode" and dt0 is not None:
         if jnp.ndim(dt0) != 0:
             raise ValueError(f"simulate: `dt0` (initial step, s) must be a scalar; got shape {jnp.shape(dt0)}")
@@ -290,16 +298,16 @@ def _structure(scene: Scene, method: str, adjoint):
         if integrals:
             raise ValueError(f"simulate: integral outputs {integrals} need method='ode' (they are augmented states)")
     if adjoint is None:
-        adjoint = _DEFAULT_ADJOINT
+        adjoint = None if method in _CLOSED else _default_adjoint()
     elif isinstance(adjoint, str) and adjoint == "forward":
-        adjoint = _FORWARD
-    elif not isinstance(adjoint, diffrax.AbstractAdjoint):
+        adjoint = _forward()
+    elif not _is_diffrax(adjoint, "AbstractAdjoint"):
         raise ValueError(f"simulate: `adjoint` must be None, 'forward' or a diffrax adjoint; got {adjoint!r}")
     return method, adjoint
 
 
 def _check_fixed_step(method: str, solver, dt0) -> None:
-    if method == "ode" and dt0 is None and not isinstance(solver, diffrax.AbstractAdaptiveSolver):
+    if method == "ode" and dt0 is None and not _is_diffrax(solver, "AbstractAdaptiveSolver"):
         raise ValueError(f"simulate: fixed-step solver {type(solver).__name__} needs `dt0` (step, s)")
 
 
@@ -374,7 +382,7 @@ def _make_plan(scene, treedef, method, solver, dt0, adjoint, max_steps, progress
     method, adjoint = _structure(scene, method, adjoint)
     default_solver = False
     if method == "rk4":
-        solver = _RK4
+        solver = _rk4()
     elif method == "ode":
         default_solver = solver is None
         if not default_solver:
@@ -384,7 +392,7 @@ def _make_plan(scene, treedef, method, solver, dt0, adjoint, max_steps, progress
     else:
         # nothing on this path is differentiated (every input is a concrete value): the plain forward
         # loop, which traces and compiles faster than a checkpointed one and takes the same steps
-        adjoint = _FORWARD
+        adjoint = _forward()
     return _Plan(False, method, solver, default_solver, _program(treedef, method, int(max_steps), bool(progress), adjoint))
 
 

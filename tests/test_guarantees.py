@@ -249,6 +249,16 @@ def test_cli_output_without_suffix_prints_the_written_name(tmp_path):
     assert written.exists() and f"wrote {written}" in r.stdout
 
 
+def test_cli_entry_ends_the_process_with_the_commands_status_and_output():
+    # `entry` ends the process without the interpreter's teardown: the exit handlers still run, the
+    # buffered output (a pipe here) still arrives, and the command's status is the process's
+    code = ("import atexit, jaxbelt.cli as c; atexit.register(lambda: print('exit handler ran')); "
+            "c.main = lambda: (print('command output'), 3)[1]; c.entry()")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 3, r.stderr
+    assert r.stdout.splitlines() == ["command output", "exit handler ran"]
+
+
 def test_no_tracer_leaks_between_programs():
     """Models built inside one jitted program must not leak values into another (a cached constant made
     inside a trace once broke every later program with 'Execution supplied 1 arguments ...')."""

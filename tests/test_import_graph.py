@@ -6,6 +6,8 @@ import pathlib
 import subprocess
 import sys
 
+import pytest
+
 import jaxbelt
 
 PKG = pathlib.Path(jaxbelt.__file__).parent
@@ -104,3 +106,61 @@ def test_import_loads_no_plotting_library_and_announces_float64():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          env={**env, "JAXBELT_X64": "0"}, timeout=120)
     assert out.stdout.split() == ["False", "False", "False"], out.stderr
+
+
+def _loaded_after(code: str) -> set:
+    """The heavy libraries loaded by `code` in a fresh process."""
+    heavy = ("diffrax", "optax", "optimistix", "lineax", "matplotlib", "matplotlib.pyplot")
+    probe = f"import sys; {code}; print(' '.join(m for m in {heavy!r} if m in sys.modules))"
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120,
+                         env={k: v for k, v in os.environ.items() if k != "JAXBELT_X64"})
+    assert out.returncode == 0, out.stderr
+    return set(out.stdout.split())
+
+
+def test_import_and_the_startup_closed_form_load_only_what_they_use():
+    # `import jaxbelt` imports JAX alone; the start-up closed form adds equinox, never an ODE solver,
+    # an optimiser or a plotting library; the first name of another scene loads that scene's libraries
+    assert _loaded_after("import jaxbelt") == set()
+    assert _loaded_after(
+        "import jaxbelt as jb, numpy as np; ts, c = jb.startup_curves(gammas=[0.02], n_points=11); "
+        "assert np.all(np.isfinite(c['current']))") == set()
+    assert {"diffrax", "optax"} <= _loaded_after("import jaxbelt as jb; jb.tune_pid")
+
+
+def _lazy_packages():
+    from jaxbelt import _lazy
+
+    return [(name, _lazy.exports(PKG.parent / name.replace(".", "/") / "__init__.py"))
+            for name in ("jaxbelt", "jaxbelt.models", "jaxbelt.plots")]
+
+
+def test_every_lazy_name_is_the_object_its_module_defines():
+    import importlib
+
+    for package, table in _lazy_packages():
+        pkg = importlib.import_module(package)
+        assert set(table) <= set(dir(pkg)) and set(table) <= set(pkg.__all__)
+        for name, (module, attr) in table.items():
+            target = importlib.import_module(f"{package}.{module}")
+            assert getattr(pkg, name) is (target if attr is None else getattr(target, attr)), f"{package}.{name}"
+            # a name that is also a sub-module's name would be overwritten by that sub-module's import
+            if attr is not None:
+                assert not (PKG.parent / package.replace(".", "/") / f"{name}.py").exists(), f"{package}.{name}"
+                assert not (PKG.parent / package.replace(".", "/") / name).is_dir(), f"{package}.{name}"
+        with pytest.raises(AttributeError, match=f"module '{package}' has no attribute 'no_such_name'"):
+            getattr(pkg, "no_such_name")
+    # sub-modules are reached as attributes, as an eager import made them
+    assert jaxbelt.models.fourbar.FourBarDrive is jaxbelt.FourBarDrive
+
+
+def test_lazy_table_refuses_other_statements(tmp_path):
+    from jaxbelt import _lazy
+
+    init = tmp_path / "__init__.py"
+    init.write_text("import typing\nif typing.TYPE_CHECKING:\n    import numpy\n")
+    with pytest.raises(ImportError, match="TYPE_CHECKING block may hold only"):
+        _lazy.exports(init)
+    init.write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from .a import b as b\n"
+                    "    from . import c as c\n")
+    assert _lazy.exports(init) == {"b": ("a", "b"), "c": ("c", None)}

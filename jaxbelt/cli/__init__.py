@@ -11,7 +11,9 @@ without it.
 from __future__ import annotations
 
 import argparse
+import atexit
 import importlib
+import os
 import sys
 
 SUBCOMMANDS = ("startup", "shaping", "fourbar", "string", "nonlinear", "bench")
@@ -62,5 +64,20 @@ def main(argv=None) -> int:
         return 2
 
 
+def entry() -> None:
+    """The `jaxbelt` command (and `python -m jaxbelt`): `main()`, then the end of the process.
+
+    Once the command has written its outputs and the exit handlers have run, the process ends
+    without the interpreter's teardown (freeing every module and XLA's client: ~0.3 s, a sixth of
+    a warm `jaxbelt startup`). JAX's compilation cache and jaxbelt's stored programs are written
+    when they are made, not at exit.
+    """
+    code = main()
+    atexit._run_exitfuncs()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)
+
+
 if __name__ == "__main__":  # pragma: no cover
-    sys.exit(main())
+    entry()

@@ -376,11 +376,11 @@ def startup_curves(model=None, gammas=(0.02, 0.04, 0.06), v_max=24.0, t_end=0.5,
     from ..solve import simulate
 
     model = BeltStartup() if model is None else model
-    ts = jnp.linspace(0.0, float(t_end), int(n_points))
+    ts = np.linspace(0.0, float(t_end), int(n_points))
     observe = tuple(n for n in STARTUP_OUTPUTS if n not in model.state_names)
     rows = []
     for g in np.atleast_1d(np.asarray(gammas, dtype=float)).tolist():
         sol = simulate(Scene(model, ExponentialVoltage(v_max, g), ts=ts, observe=observe), method=method)
+        sol = jax.device_get(sol)  # the columns are read on the host (no program per column)
         rows.append([sol[n] for n in STARTUP_OUTPUTS])
-    rows = jax.device_get(rows)
-    return np.asarray(ts), {n: np.stack([r[i] for r in rows]) for i, n in enumerate(STARTUP_OUTPUTS)}
+    return ts, {n: np.stack([r[i] for r in rows]) for i, n in enumerate(STARTUP_OUTPUTS)}

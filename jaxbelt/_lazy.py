@@ -1,0 +1,65 @@
+"""Lazy re-exports: a package's public names are imported on first use, not by `import jaxbelt`.
+
+A package lists its public names once, as relative imports inside `if typing.TYPE_CHECKING:` (what
+type checkers, IDEs and the documentation read). `attach(__name__, __file__)` reads that block
+from the package's source and returns the module `__getattr__` and `__dir__` (PEP 562) that import
+a name's module the first time the name is used, and the names for `__all__`. A sub-module is
+imported when it is first used as an attribute (`jaxbelt.models.fourbar`), as an eager import
+would have made it available.
+
+So `import jaxbelt` costs JAX's own import time: the start-up scene never loads the ODE solvers,
+optimisers or plotting libraries that the other scenes need.
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib
+import importlib.util
+import sys
+from pathlib import Path
+
+
+def _is_type_checking(test: ast.expr) -> bool:
+    if isinstance(test, ast.Name):
+        return test.id == "TYPE_CHECKING"
+    return isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING"
+
+
+def exports(path) -> dict:
+    """`{public name: (relative module, attribute)}` from the `if TYPE_CHECKING:` block of `path`;
+    the attribute is None where the name is a sub-module (`from . import modal as modal`)."""
+    tree = ast.parse(Path(path).read_text(encoding="utf-8"))
+    table = {}
+    for node in tree.body:
+        if not (isinstance(node, ast.If) and _is_type_checking(node.test)):
+            continue
+        for stmt in node.body:
+            if not (isinstance(stmt, ast.ImportFrom) and stmt.level == 1):
+                raise ImportError(f"{path}: the TYPE_CHECKING block may hold only `from .x import y as y` lines")
+            for alias in stmt.names:
+                public = alias.asname or alias.name
+                table[public] = (alias.name, None) if stmt.module is None else (stmt.module, alias.name)
+    return table
+
+
+def attach(package: str, path):
+    """`(__getattr__, __dir__, names)` for the package `package` whose `__init__.py` is `path`."""
+    table = exports(path)
+
+    def __getattr__(name):
+        if name in table:
+            module, attr = table[name]
+        elif not name.startswith("__") and importlib.util.find_spec(f"{package}.{name}") is not None:
+            module, attr = name, None  # a sub-module: `jaxbelt.models.fourbar` works without an import
+        else:
+            raise AttributeError(f"module {package!r} has no attribute {name!r}")
+        mod = importlib.import_module(f".{module}", package)
+        value = mod if attr is None else getattr(mod, attr)
+        setattr(sys.modules[package], name, value)  # later uses skip this function
+        return value
+
+    def __dir__():
+        return sorted(set(vars(sys.modules[package])) | set(table))
+
+    return __getattr__, __dir__, list(table)
