@@ -36,10 +36,10 @@ XI = 0.015
 
 def numpy_rhs(sys_):
     """The Galerkin vector field of ModalSystem.rhs, re-written in numpy for scipy."""
-    om, mu, S, P = (np.asarray(a) for a in (sys_.omega, sys_.mu, sys_.S, sys_.P))
+    om, mu, S, P, xi = (np.asarray(a) for a in (sys_.omega, sys_.mu, sys_.S, sys_.P, sys_.damping))  # xi: per mode
     W0, W1 = np.asarray(sys_.Omega)
     e0, e1 = np.asarray(sys_.e)
-    v, phi, xi, vl = (float(a) for a in (sys_.v, sys_.phase, sys_.damping, sys_.v_l))
+    v, phi, vl = (float(a) for a in (sys_.v, sys_.phase, sys_.v_l))
     n = om.shape[0]
 
     def f(t, z):
@@ -64,7 +64,7 @@ def scipy_pp(belt, speed, rtol, atol, method="DOP853"):
     n = belt.n_modes
     W0 = float(sys_.Omega[0])
     T = 2 * np.pi / W0
-    decay = float(sys_.damping * sys_.omega[0])
+    decay = float(np.min(np.asarray(sys_.damping * sys_.omega)))  # the slowest mode sets the settling time
     periods = int(np.ceil(40.0 / decay / T)) + 1
     t_end = periods * T
     sol = solve_ivp(numpy_rhs(sys_), (0.0, t_end), np.zeros(2 * n), method=method, rtol=rtol, atol=atol,
@@ -92,8 +92,8 @@ def main(argv=None):
     speeds = jnp.linspace(7.5, 10.5, n_speeds)
     rows, headline, sweeps = [], [], {}
 
-    # 1. sweeps
-    for n in (1, 4):
+    # 1. sweeps (quick: one mode only)
+    for n in ((1,) if quick else (1, 4)):
         belt = jb.NonlinearBelt(damping=XI, n_modes=n, sensor_pulley="drive")
 
         def updown(b=belt):
@@ -109,9 +109,10 @@ def main(argv=None):
         headline.append({"what": f"{n_speeds}-speed up+down sweep, N={n}, after compile", "value": med, "unit": "s",
                          "target": None})
         print(f"N={n}: up+down {2 * n_speeds} speeds: {med:.3f} s (compile {comp:.1f} s), converged {bool(out[2])}")
-    peak1, peak4 = sweeps[1][0].max(), sweeps[4][0].max()
-    headline.append({"what": "N=1 peak-to-peak error vs N=4 (increasing sweep)", "value": float(peak1 / peak4 - 1),
-                     "unit": "-", "target": "reported"})
+    if 4 in sweeps:
+        peak1, peak4 = sweeps[1][0].max(), sweeps[4][0].max()
+        headline.append({"what": "N=1 peak-to-peak error vs N=4 (increasing sweep)", "value": float(peak1 / peak4 - 1),
+                         "unit": "-", "target": "reported"})
 
     # 2. accuracy against scipy
     check = [9.0] if quick else [8.0, 9.0, 9.6, 10.5]

@@ -9,6 +9,10 @@ Run: `python benchmarks/run_all.py [--quick] [--only startup fourbar]` (also `ja
 `--quick` is the CI size: the whole run stays under 2 minutes on 2 cores. Its figures go to the
 git-ignored scratch folder `benchmarks/results/quick/` and leave the committed results and the
 README table alone; `--update` writes them over the committed ones (and regenerates the table).
+A quick run checks that every benchmark works, and most of its time is XLA compiling: it compiles
+with XLA's quicker CPU settings (`jaxbelt._xla.FAST_COMPILE_FLAGS`; recorded in each JSON as
+`machine.xla_flags`), so its run times are slower than the library's. `--xla-defaults` keeps XLA's
+defaults; a full run always does.
 """
 
 from __future__ import annotations
@@ -33,6 +37,8 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true", help="CI-sized runs (< 2 minutes in all on 2 cores)")
     p.add_argument("--only", nargs="+", metavar="SCENE", help="run only these scenes")
     p.add_argument("--timeout", type=float, default=None, help="per-scene time limit [s]")
+    p.add_argument("--xla-defaults", action="store_true",
+                   help="with --quick: compile with XLA's default settings (default: its quicker CPU compilation)")
     p.add_argument("--update", action="store_true",
                    help="with --quick: overwrite the committed results and README table (default: scratch folder)")
     args = p.parse_args(argv)
@@ -51,6 +57,14 @@ def main(argv=None) -> int:
         env["JAXBELT_BENCH_OUT"] = str(HERE / "results" / "quick")
     else:
         env.pop("JAXBELT_BENCH_OUT", None)
+    if args.quick and not args.xla_defaults:
+        sys.path.insert(0, str(HERE.parent))
+        from jaxbelt._xla import fast_compile_xla_flags
+
+        flags = fast_compile_xla_flags(env.get("XLA_FLAGS", ""))
+        if flags is not None:
+            env["XLA_FLAGS"] = flags
+            print(f"run_all: quick run compiled with XLA_FLAGS={flags} (run times slower than the library's)")
     for scene in scenes:
         cmd = [sys.executable, str(HERE / f"{scene}.py")] + (["--quick"] if args.quick else [])
         print(f"=== {scene}: {' '.join(cmd[1:])}", flush=True)

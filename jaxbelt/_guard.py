@@ -23,6 +23,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import functools
+import threading
 
 import equinox as eqx
 import jax
@@ -142,7 +143,17 @@ def has_host_callbacks(jaxpr) -> bool:
     return False
 
 
-_EAGER_TRACE = type(jax.extend.core.find_top_trace(()))
+def _eager_trace_type():
+    # JAX's trace context is per thread: a new thread sees the trace outside every transformation, even
+    # when this module is imported inside a caller's jit (`jaxbelt` imports its modules on first use)
+    found = []
+    reader = threading.Thread(target=lambda: found.append(type(jax.extend.core.find_top_trace(()))))
+    reader.start()
+    reader.join()
+    return found[0]
+
+
+_EAGER_TRACE = _eager_trace_type()
 
 
 def eager() -> bool:

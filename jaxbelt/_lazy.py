@@ -9,6 +9,10 @@ would have made it available.
 
 So `import jaxbelt` costs JAX's own import time: the start-up scene never loads the ODE solvers,
 optimisers or plotting libraries that the other scenes need.
+
+A module may then be imported for the first time inside a caller's `jit`: its import-time code must
+not depend on the trace it runs in (no JAX arrays at module level; `_guard` finds the eager trace
+from a fresh thread). tests/test_import_graph.py checks first uses inside `jit`.
 """
 
 from __future__ import annotations
@@ -54,7 +58,7 @@ def attach(package: str, path):
             module, attr = name, None  # a sub-module: `jaxbelt.models.fourbar` works without an import
         else:
             raise AttributeError(f"module {package!r} has no attribute {name!r}")
-        mod = importlib.import_module(f".{module}", package)
+        mod = importlib.import_module(f".{module}", package)  # may run inside a caller's jit: see below
         value = mod if attr is None else getattr(mod, attr)
         setattr(sys.modules[package], name, value)  # later uses skip this function
         return value

@@ -15,16 +15,15 @@ if "JAXBELT_CACHE_DIR" not in os.environ:
     atexit.register(shutil.rmtree, os.environ["JAXBELT_CACHE_DIR"], True)
 
 # --- XLA's quicker CPU compilation for the test run --------------------------------------------
-# Two thirds of the suite's time is XLA compiling its ~2800 programs. XLA's classic CPU emitters at
-# LLVM optimisation level 0, without splitting a program for parallel code generation, compile them
-# 2-3x faster (the suite: under 5 instead of 8 minutes on 2 cores). The programs (HLO) are the same; their floating-point results agree with XLA's default
+# Two thirds of the suite's time is XLA compiling its ~2800 programs. With the flags of
+# `jaxbelt._xla.FAST_COMPILE_FLAGS` (XLA's classic CPU emitters at LLVM optimisation level 0, one LLVM
+# module per program) they compile 2-3x faster: the suite takes under 5 instead of 8 minutes on
+# 2 cores. The programs (HLO) are the same; their floating-point results agree with XLA's default
 # settings to rounding, which test_xla_flags.py checks on each kind of solver in a process with
 # XLA's defaults. `JAXBELT_TEST_XLA_DEFAULTS=1` runs the whole suite with XLA's defaults. The caller's
 # own XLA_FLAGS are kept (and win); subprocesses of the tests inherit the flags. A JAX whose XLA no
-# longer knows a flag (XLA aborts on unknown flags) runs with its defaults.
-FAST_COMPILE_FLAGS = ("--xla_cpu_use_fusion_emitters=false", "--xla_backend_optimization_level=0",
-                      # one LLVM module per program: both cores already run a test worker each
-                      "--xla_cpu_parallel_codegen_split_count=1")
+# longer knows a flag (XLA aborts on unknown flags) runs with its defaults. (Importing jaxbelt here
+# imports JAX, which reads XLA_FLAGS only when its backend starts, after this.)
 
 
 def _use_fast_compile_flags() -> None:
@@ -34,14 +33,10 @@ def _use_fast_compile_flags() -> None:
     os.environ["JAXBELT_TEST_CALLER_XLA_FLAGS"] = caller
     if os.environ.get("JAXBELT_TEST_XLA_DEFAULTS", "0") == "1":
         return
-    given = caller.split()
-    names = {f.split("=", 1)[0] for f in given}
-    flags = " ".join(given + [f for f in FAST_COMPILE_FLAGS if f.split("=", 1)[0] not in names])
-    import subprocess
+    from jaxbelt._xla import fast_compile_xla_flags
 
-    probe = subprocess.run([sys.executable, "-c", "import jax; jax.devices('cpu')"], capture_output=True,
-                           env=dict(os.environ, XLA_FLAGS=flags), timeout=300)
-    if probe.returncode == 0:
+    flags = fast_compile_xla_flags(caller)
+    if flags is not None:
         os.environ["XLA_FLAGS"] = flags
 
 

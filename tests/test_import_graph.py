@@ -164,3 +164,28 @@ def test_lazy_table_refuses_other_statements(tmp_path):
     init.write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from .a import b as b\n"
                     "    from . import c as c\n")
     assert _lazy.exports(init) == {"b": ("a", "b"), "c": ("c", None)}
+
+
+def test_first_use_inside_a_callers_jit_gives_the_eager_values():
+    # `import jaxbelt` loads a module on the first use of one of its names, which may happen inside a caller's
+    # jit: the modules' own state (e.g. which trace counts as eager) must not depend on that. Fresh process,
+    # first uses inside jit: an ODE start-up (jaxbelt's core and diffrax), then the residual energy (checks
+    # that run as host callbacks inside a trace); the same values eagerly afterwards, to 1e-12.
+    code = """
+import jax, jax.numpy as jnp, numpy as np
+import jaxbelt as jb
+ts = jnp.linspace(0.0, 0.1, 11)
+ode = jax.jit(lambda v: jb.simulate(jb.Scene(jb.BeltStartup(), jb.ExponentialVoltage(v, 0.02), ts=ts), method="ode",
+                                    rtol=1e-10, atol=1e-12).ys)
+energy = jax.jit(lambda g: jb.residual_energy(jb.BeltPlatform(), jb.PseudoPolynomial(g)))
+y_jit, h_jit = ode(24.0), energy(jnp.array([3.0, 4.0, 5.0]))
+y = jb.simulate(jb.Scene(jb.BeltStartup(), jb.ExponentialVoltage(24.0, 0.02), ts=ts), method="ode", rtol=1e-10, atol=1e-12).ys
+h = jb.residual_energy(jb.BeltPlatform(), jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0])))
+np.testing.assert_allclose(y_jit, y, rtol=1e-12, atol=1e-12)
+np.testing.assert_allclose(h_jit, h, rtol=1e-12)
+assert float(h) > 0 and np.all(np.isfinite(y))
+print("ok")
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                         env={k: v for k, v in os.environ.items() if k != "JAXBELT_X64"})
+    assert out.returncode == 0 and out.stdout.split() == ["ok"], out.stderr[-3000:]

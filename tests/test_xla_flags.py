@@ -40,7 +40,7 @@ def _run_with_xla_flags(flags: str) -> dict:
 def test_fast_compile_flags_change_results_only_by_rounding():
     """The probe in this test process (the suite's flags) against a process with the caller's XLA
     settings (XLA's defaults unless the caller set XLA_FLAGS). Measured: 1e-15 to 2e-13 relative."""
-    from conftest import FAST_COMPILE_FLAGS
+    from jaxbelt._xla import FAST_COMPILE_FLAGS
 
     if not set(FAST_COMPILE_FLAGS) <= set(os.environ.get("XLA_FLAGS", "").split()):
         pytest.skip("the suite runs with XLA's default settings (JAXBELT_TEST_XLA_DEFAULTS=1, or an XLA without these flags)")
