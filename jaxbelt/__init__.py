@@ -5,6 +5,10 @@ checks need (closed forms to 1e-12, energy balances); `jaxbelt.X64_SWITCHED_ON` 
 import changed the setting. To keep JAX's float32 default, set the environment variable
 `JAXBELT_X64=0` before the import (or build models and inputs inside `jax.enable_x64(False)`):
 every scene then runs in float32, with the accuracy the stress tests measure.
+
+**Imports.** `import jaxbelt` imports JAX alone; each public name imports its module on first use
+(`jaxbelt.simulate`, `jaxbelt.tune_pid`, ...), so a session that only solves the start-up in closed
+form never loads diffrax, optax or matplotlib.
 """
 
 import os as _os

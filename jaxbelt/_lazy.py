@@ -58,7 +58,7 @@ def attach(package: str, path):
             module, attr = name, None  # a sub-module: `jaxbelt.models.fourbar` works without an import
         else:
             raise AttributeError(f"module {package!r} has no attribute {name!r}")
-        mod = importlib.import_module(f".{module}", package)  # may run inside a caller's jit: see below
+        mod = importlib.import_module(f".{module}", package)  # may run inside a caller's jit (module docstring)
         value = mod if attr is None else getattr(mod, attr)
         setattr(sys.modules[package], name, value)  # later uses skip this function
         return value
