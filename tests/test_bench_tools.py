@@ -78,3 +78,19 @@ def test_matched_error_ratio_pairs_the_most_accurate_matched_reference():
     (m,) = readme_table.matched_error_ratios({"rows": rows})
     assert m["ref_error"] == 1e-8 and m["jax_error"] == 9e-9
     assert abs(m["ratio"] - 200.0) < 1e-12
+
+
+def test_nonlinear_benchmarks_numpy_reference_is_the_models_vector_field():
+    # benchmarks/nonlinear.py times scipy on a numpy copy of ModalSystem.rhs; the copy must follow the model
+    # (it once read the modal damping as one scalar after it became per mode, and the benchmark failed)
+    import numpy as np
+
+    import jaxbelt as jb
+    import nonlinear as bench_nonlinear
+
+    belt = jb.NonlinearBelt(n_modes=3, damping=(0.011, 0.02, 0.03), sensor_pulley="drive")
+    sys_ = belt.modal(9.0)
+    z = np.random.default_rng(0).normal(size=6) * 1e-3
+    f = bench_nonlinear.numpy_rhs(sys_)
+    for tau in (0.0, 0.37, 2.9):
+        np.testing.assert_allclose(f(tau, z), np.asarray(sys_.rhs(tau, z, 0.0)), rtol=1e-12, atol=1e-15)
