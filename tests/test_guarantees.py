@@ -192,6 +192,33 @@ def test_quadrature_h_refuses_a_move_it_cannot_resolve():
         jax.block_until_ready(f(2.0))
 
 
+@pytest.mark.parametrize("gammas", [[3.0, 4.0, 5.0], [3.022, 4.590, 5.839]])
+def test_quadrature_h_accepted_only_when_accurate(gammas):
+    """For every node count from the smallest allowed up, the quadrature H is either refused or within
+    1e-7 of the independent ODE evaluation (relative). Regression: at n_nodes=8 the error estimate compared
+    the rule with itself and returned 31 763 015 for H = 10 438.7 (3-4-5 move of 1 s)."""
+    from jaxbelt.objectives.residual import quadrature_error
+
+    plat = jb.BeltPlatform()
+    for T in (0.5, 1.0, 2.0):
+        move = jb.PseudoPolynomial(gammas, duration=T)
+        ref = float(jb.residual_energy(plat, move, method="ode"))
+        accepted = []
+        for n in (8, 9, 10, 12, 16, 24, 32, 44, 64):
+            assert float(quadrature_error(plat, move, n)) > 0.0
+            try:
+                h = float(jb.residual_energy(plat, move, n_nodes=n))
+            except ValueError as e:
+                assert "n_nodes" in str(e)
+                continue
+            accepted.append(n)
+            assert h == pytest.approx(ref, rel=1e-7), (T, n)
+        assert 8 not in accepted and 64 in accepted, (T, accepted)
+    f = jax.jit(lambda T: jb.residual_energy(plat, jb.PseudoPolynomial(jnp.asarray(gammas), duration=T), n_nodes=8))
+    with pytest.raises(RUNTIME, match="n_nodes"):
+        jax.block_until_ready(f(1.0))
+
+
 def test_nearly_equal_exponents_are_refused_and_gradients_are_right_at_the_limit():
     with pytest.raises(ValueError, match="at least 0.001"):
         jb.PseudoPolynomial([3.0, 4.0, 4.0 + 1e-6])

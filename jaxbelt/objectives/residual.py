@@ -141,18 +141,21 @@ QUADRATURE_TOL = 1e-8
 def quadrature_error(plat, cmd, n_nodes: int = 128):
     """Error estimate of the `n_nodes` quadrature of W, relative to $\\int_0^T|\\ddot\\varphi_m|d\\tau$-like scale.
 
-    The rule is compared with one of 3/4 as many nodes: Gauss-Legendre converges geometrically once
+    The rule is compared with one of 3/4 as many nodes (rounded down; always fewer than `n_nodes`):
+    Gauss-Legendre converges geometrically once
     the oscillation $e^{i\\omega_d(T-\\tau)}$ is resolved, so a small difference means the finer
     rule is far more accurate still; a move that holds many vibration periods (large
     $\\omega_d T$) shows up as a large difference. The scale is the sum of the magnitudes of the
     acceleration's terms, $|\\Phi/T|\\sum_i |a_i|/(\\gamma_i - 1)$, so that an $\\mathcal H$ near zero
     (a well shaped command) is judged by the accuracy of its cancelling parts.
     """
+    _check_int("quadrature_error", "n_nodes", n_nodes, _MIN_NODES)
     base = cmd.base if isinstance(cmd, ShapedCommand) else cmd
     if not isinstance(base, PseudoPolynomial):
         return jnp.zeros(())
     re1, im1 = _pseudo_poly_w(plat, base, n_nodes)
-    re2, im2 = _pseudo_poly_w(plat, base, max(8, (3 * n_nodes) // 4))
+    # a strictly coarser rule: comparing a rule with itself would estimate 0 and let anything through
+    re2, im2 = _pseudo_poly_w(plat, base, (3 * n_nodes) // 4)
     coef = falling_factorial(base.gammas, 2) * base.coefficients
     scale = jnp.abs(base.displacement / base.duration) * jnp.sum(jnp.abs(coef) / (base.gammas - 1.0))
     return jnp.hypot(re1 - re2, im1 - im2) / scale
