@@ -37,6 +37,26 @@ def _fmt(v) -> str:
     return f"{v:.3g}"
 
 
+def target_met(target, value):
+    """Whether `value` meets `target` ("<= 0.2", "< 1e-3", ">= 1000x", "<= 20 us", "16.0 +/- 0.1"), in the
+    headline's own unit; None when the target is not a number to compare with ("reported", none)."""
+    if not target or value is None:
+        return None
+    text = str(target).strip()
+    try:
+        if "+/-" in text:
+            centre, tol = (float(x.split()[0].rstrip("x")) for x in text.split("+/-"))
+            return abs(float(value) - centre) <= tol
+        for op in ("<=", ">=", "<", ">"):
+            if text.startswith(op):
+                bound = float(text[len(op):].split()[0].rstrip("x"))
+                v = float(value)
+                return {"<=": v <= bound, ">=": v >= bound, "<": v < bound, ">": v > bound}[op]
+    except ValueError:
+        return None
+    return None
+
+
 def _is_reference(row) -> bool:
     text = f"{row.get('method', '')} {row.get('name', '')}".lower()
     return "scipy" in text or "numpy" in text
@@ -92,15 +112,16 @@ def _load(results_dir: Path, warn: bool = False):
 
 def headline_table(results_dir: Path = RESULTS) -> list:
     """The headline rows of every JSON, one Markdown table (list of lines)."""
-    lines = ["| scene | what | value | target | machine | mode |", "|---|---|---|---|---|---|"]
+    lines = ["| scene | what | value | target | met | machine | mode |", "|---|---|---|---|---|---|---|"]
     for path, data in _load(results_dir, warn=True):
         m = data.get("machine", {})
         machine = f"{m.get('backend', '?')}, {m.get('cpu_count', '?')} cores"
         mode = "quick" if data.get("quick") else "full"
         for h in data.get("headline", []):
             value = f"{_fmt(h.get('value'))} {h.get('unit', '')}".strip()
+            met = {True: "yes", False: "**no**", None: "–"}[target_met(h.get("target"), h.get("value"))]
             lines.append(f"| {data.get('scene', path.stem)} | {h.get('what', '')} | {value} | "
-                         f"{h.get('target') or '–'} | {machine} | {mode} |")
+                         f"{h.get('target') or '–'} | {met} | {machine} | {mode} |")
     return lines
 
 
@@ -133,7 +154,9 @@ def build_table(results_dir: Path = RESULTS, fold: bool = False) -> str:
     head, matched = headline_table(results_dir), matched_table(results_dir)
     if fold:
         n = len(head) - 2
-        lines = matched + ["", f"All {n} headline numbers, with their targets: [docs/benchmarks.md](docs/benchmarks.md)."]
+        missed = [r.split(" | ")[1] for r in head[2:] if "| **no** |" in r]
+        note = f" Missed: {'; '.join(missed)}." if missed else " Every target is met."
+        lines = matched + ["", f"All {n} headline numbers, with their targets: [docs/benchmarks.md](docs/benchmarks.md).{note}"]
     else:
         lines = head + [""] + matched
     return "\n".join(lines + ["", _FOOTER])

@@ -132,7 +132,7 @@ def cpu_devices(n: int | None = None) -> int:
     `sweep` runs its slices in parallel. Returns the number of CPU devices.
 
     JAX starts with one CPU device, whose programs use about one core for the small element-wise
-    work of a batched ODE solve; `sweep` over `n` devices runs `n` slices at once (measured: 2.0x
+    work of a batched ODE solve; `sweep` over `n` devices runs `n` slices at once (measured: 2.5x
     on 2 cores for the four-bar gain sweep, benchmarks/coldstart.py). It must be called before
     JAX creates its CPU backend (before the first array is made); afterwards it cannot change the
     count and raises `RuntimeError`. Nothing else changes: unsharded programs still run on the
@@ -161,14 +161,12 @@ def cpu_devices(n: int | None = None) -> int:
 def sweep(fn, params, *, devices=None, check: bool = True, name: str | None = None):
     """Evaluate `fn` on every element of the batch `params` (leading axis), sharded over devices.
 
-    Parameters
-    ----------
-    fn: function of one batch element (traceable; e.g. returns `simulate(..., throw=False)`).
-    params: pytree of arrays sharing a leading batch axis of size B.
-    devices: devices to shard over (default: `jax.local_devices()`; pass `jax.devices()` after
-        `jax.distributed.initialize()` to use every host, see the module docstring).
-    check: raise `SolveError` listing the failing elements when the result has a `success` field.
-    name: what the sweep is, used in the error message (default: the name of `fn`).
+    - `fn`: function of one batch element (traceable; e.g. returns `simulate(..., throw=False)`).
+    - `params`: pytree of arrays sharing a leading batch axis of size B.
+    - `devices`: devices to shard over (default: `jax.local_devices()`; pass `jax.devices()` after
+      `jax.distributed.initialize()` to use every host, see `jaxbelt.batch` below).
+    - `check`: raise `SolveError` listing the failing elements when the result has a `success` field.
+    - `name`: what the sweep is, used in the error message (default: the name of `fn`).
 
     Returns the batched result of `fn` (leading axis B), as `jax.vmap(fn)(params)` would.
     """

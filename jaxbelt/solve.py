@@ -201,30 +201,29 @@ def simulate(
 ) -> Solution:
     """Simulate a `Scene` and return a `Solution`.
 
-    Parameters
-    ----------
-    scene: what to compute (model, input, times, observed outputs).
-    method: `"auto"`, `"closed"`, `"expm"`, `"modal"`, `"ode"` or `"rk4"` (see module docs).
-    solver: diffrax solver for `method="ode"` (default: `scene.model.default_solver()`).
-    rtol, atol: tolerances of the adaptive step-size controller (ODE method), > 0. Arrays: a new
-        value does not recompile.
-    dt0: initial step [s] for the ODE method (default: chosen automatically; required for
-        fixed-step diffrax solvers).
-    dt: step [s] of `method="rk4"` (default 0.1 ms, the check of Incerti, 2014), > 0; a new
-        value does not recompile. The step is checked against RK4's stability region using the
-        eigenvalues of the Jacobian at the first and last state: an unstable step fails the solve.
-    max_steps: step budget of the ODE and RK4 methods (static: a new value recompiles).
-    throw: what a failure does (see "Errors and guarantees" in the docs):
-        `True` — raise `SolveError` when called eagerly; under `jit`/`vmap`/`grad` the states and
-        outputs carry an `eqx.error_if`, so the program raises at run time whichever of them the
-        caller keeps. Invalid traced parameters (e.g. a negative stiffness inside `jit`) raise the
-        same way, naming the parameter and its range.
-        `False` — never raise for values: failed elements get `success=False` and NaN states and
-        outputs (never finite garbage); shape and type errors still raise.
-    progress: show a tqdm progress bar for the ODE method.
-    adjoint: how the ODE method is differentiated: `None` (reverse mode with recursive
-        checkpointing, diffrax's default), `"forward"` (`diffrax.ForwardMode()`: use with
-        `jax.jacfwd`/`jax.jvp`; cheaper when there are few parameters) or any diffrax adjoint.
+    - `scene`: what to compute (model, input, times, observed outputs).
+    - `method`: `"auto"`, `"closed"`, `"expm"`, `"modal"`, `"ode"` or `"rk4"` (see "Method
+      choice" under `jaxbelt.solve` below).
+    - `solver`: diffrax solver for `method="ode"` (default: `scene.model.default_solver()`).
+    - `rtol`, `atol`: tolerances of the adaptive step-size controller (ODE method), > 0. Arrays: a
+      new value does not recompile.
+    - `dt0`: initial step [s] for the ODE method (default: chosen automatically; required for
+      fixed-step diffrax solvers).
+    - `dt`: step [s] of `method="rk4"` (default 0.1 ms, the check of Incerti, 2014), > 0; a new
+      value does not recompile. The step is checked against RK4's stability region using the
+      eigenvalues of the Jacobian at the first and last state: an unstable step fails the solve.
+    - `max_steps`: step budget of the ODE and RK4 methods (static: a new value recompiles).
+    - `throw`: what a failure does (see "Errors and guarantees" in the docs).
+      `True`: raise `SolveError` when called eagerly; under `jit`/`vmap`/`grad` the states and
+      outputs carry an `eqx.error_if`, so the program raises at run time whichever of them the
+      caller keeps. Invalid traced parameters (e.g. a negative stiffness inside `jit`) raise the
+      same way, naming the parameter and its range.
+      `False`: never raise for values: failed elements get `success=False` and NaN states and
+      outputs (never finite garbage); shape and type errors still raise.
+    - `progress`: show a tqdm progress bar for the ODE method.
+    - `adjoint`: how the ODE method is differentiated: `None` (reverse mode with recursive
+      checkpointing, diffrax's default), `"forward"` (`diffrax.ForwardMode()`: use with
+      `jax.jacfwd`/`jax.jvp`; cheaper when there are few parameters) or any diffrax adjoint.
 
     Works under `jax.jit`, `jax.vmap` and `jax.grad` (the modal method differentiates with
     respect to the input's parameters only: JAX does not differentiate eigenvectors).

@@ -4,6 +4,8 @@ import json
 import sys
 from pathlib import Path
 
+import pytest
+
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
@@ -35,9 +37,14 @@ def test_readme_table_replaces_only_the_marked_block(tmp_path):
         assert "old table" not in text
     # the docs page holds every headline row; the README links to it
     text = page.read_text()
-    assert "| startup | per trajectory | 7.25 us | <= 20 us | cpu, 2 cores | quick |" in text
-    assert "| startup | error | 3.1e-13 rel | – |" in text
-    assert "docs/benchmarks.md" in readme.read_text()
+    assert "| startup | per trajectory | 7.25 us | <= 20 us | yes | cpu, 2 cores | quick |" in text
+    assert "| startup | error | 3.1e-13 rel | – | – |" in text
+    assert "docs/benchmarks.md" in readme.read_text() and "Every target is met." in readme.read_text()
+    # a missed target is named in the README, under the matched-error table
+    results = _result(tmp_path, "startup", [{"what": "per trajectory", "value": 25.0, "unit": "us", "target": "<= 20 us"}])
+    assert readme_table.update_readme(readme, results, docs_page=page)
+    assert "| 25 us | <= 20 us | **no** |" in page.read_text()
+    assert "Missed: per trajectory." in readme.read_text()
 
 
 def test_readme_without_markers_is_left_alone(tmp_path, capsys):
@@ -94,3 +101,24 @@ def test_nonlinear_benchmarks_numpy_reference_is_the_models_vector_field():
     f = bench_nonlinear.numpy_rhs(sys_)
     for tau in (0.0, 0.37, 2.9):
         np.testing.assert_allclose(f(tau, z), np.asarray(sys_.rhs(tau, z, 0.0)), rtol=1e-12, atol=1e-15)
+
+
+@pytest.mark.parametrize("target, value, met", [
+    ("<= 0.2", 0.2, True), ("<= 0.5", 0.576, False), ("< 1e-3", 9.5e-5, True), ("< 1", 1.0, False),
+    (">= 50", 105.0, True), (">= 1000x", 999.0, False), ("<= 20 us", 11.2, True),
+    ("16.0 +/- 0.1", 15.998, True), ("9.0 +/- 0.05", 8.94, False), ("reported", 1.0, None), (None, 1.0, None),
+])
+def test_target_met_reads_each_form_of_target(target, value, met):
+    assert readme_table.target_met(target, value) is met
+
+
+def test_every_committed_numeric_target_is_judged():
+    """A target the table cannot read would show "–" and hide a miss: every committed target but
+    "reported" must parse."""
+    unread = []
+    for path in sorted(readme_table.RESULTS.glob("*.json")):
+        for h in json.loads(path.read_text()).get("headline", []):
+            t = h.get("target")
+            if t and t != "reported" and readme_table.target_met(t, h.get("value")) is None:
+                unread.append((path.name, t))
+    assert not unread

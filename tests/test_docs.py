@@ -65,3 +65,28 @@ def test_user_visible_text_names_no_internal_files():
     bad = re.compile(r"NOTES\.md|seeds?[ /_]*0\d\d|\bissue \d+", re.I)
     hits = [f"{f.relative_to(ROOT)}: {m.group(0)}" for f in files for m in bad.finditer(f.read_text())]
     assert not hits, hits
+
+
+def test_prose_timings_match_the_committed_benchmark():
+    """Numbers quoted in sentences (not in the generated tables) come from benchmarks/results/coldstart.json:
+    a rerun that changes them fails here until the sentences are updated."""
+    import json
+
+    data = json.loads((ROOT / "benchmarks" / "results" / "coldstart.json").read_text())
+    sweep, cli = data["fourbar_sweep"], data["cli"]["fourbar"]
+    two, one = sweep["diffrax Tsit5 rtol 1e-6"]["time_s"], sweep["diffrax Tsit5 rtol 1e-6, one device"]["time_s"]
+    lsoda = sweep["scipy LSODA rtol 1e-6"]["time_s"]
+
+    def text(path):
+        return re.sub(r"\s+", " ", (ROOT / path).read_text())
+
+    claims = {
+        "README.md": [f"1000 four-bar PID gain sets in {two:.2f} s on 2 cores, against {lsoda:.0f} s"],
+        "docs/sweeps.md": [f"{one:.2f} s on one device, {two:.2f} s on two",
+                           f"LSODA loop at the same χ error takes {lsoda:.0f} s",
+                           f"({cli['warm_s']:.1f} s against {cli['cold_s']:.1f} s on 2 CPU cores"],
+        "jaxbelt/batch.py": [f"(measured: {one / two:.1f}x on 2 cores"],
+    }
+    for path, sentences in claims.items():
+        for s in sentences:
+            assert s in text(path), f"{path}: expected {s!r}"

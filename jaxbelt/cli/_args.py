@@ -17,7 +17,8 @@ def _number(text: str, kind=float):
     try:
         v = kind(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        what = "an integer" if kind is int else "a number"
+        raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
     if kind is float and not math.isfinite(v):
         raise argparse.ArgumentTypeError(f"expected a finite number, got {text!r}")
     return v
@@ -30,10 +31,20 @@ def finite_float(text: str) -> float:
 
 def positive_float(text: str) -> float:
     """A finite number > 0."""
-    v = _number(text)
-    if not v > 0:
-        raise argparse.ArgumentTypeError(f"must be > 0, got {text}")
-    return v
+    return float_above(0.0)(text)
+
+
+def float_above(lo: float, why: str = ""):
+    """A finite number > lo (`why`: the reason, added to the message in parentheses)."""
+
+    def parse(text: str) -> float:
+        v = _number(text)
+        if not v > lo:
+            raise argparse.ArgumentTypeError(f"must be > {lo:g}{f' ({why})' if why else ''}, got {text}")
+        return v
+
+    parse.__name__ = "number"
+    return parse
 
 
 def nonnegative_float(text: str) -> float:

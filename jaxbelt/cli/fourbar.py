@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ._args import finite_float, image_path, nonnegative_float, positive_float
+from ._args import finite_float, float_above, image_path, nonnegative_float, positive_float
 
 
 def register(subparsers) -> None:
@@ -27,7 +27,8 @@ def register(subparsers) -> None:
     p.add_argument("--kd", type=nonnegative_float, default=0.015, help="Kd [V/(rad/s^2)] (paper: 0.015)")
     p.add_argument("--omega-ref", type=positive_float, default=30.0, help="motor speed set point [rad/s] (paper: 30)")
     p.add_argument("--v-limit", type=positive_float, default=None, help="voltage limiter [V] (default: none)")
-    p.add_argument("--t1", type=positive_float, default=1.0, help="simulated time [s], > 0.5")
+    p.add_argument("--t1", type=float_above(0.5, "the closed-loop index is taken over 0.375-0.5 s"), default=1.0,
+                   help="simulated time [s], > 0.5 (default 1)")
     p.set_defaults(func=run)
 
 
@@ -41,8 +42,6 @@ def run(args) -> int:
 
     drive = jb.FourBarDrive()
     pid = jb.PID(kp=args.kp, ki=args.ki, kd=args.kd, omega_ref=args.omega_ref, v_limit=args.v_limit)
-    if not args.t1 > 0.5:
-        raise ValueError(f"--t1 must be > 0.5 s (the closed-loop index is taken over 0.375-0.5 s); got {args.t1}")
     open_, closed = simulate_fig4(drive, pid, voltage=args.voltage, t1=args.t1, n=int(round(2000 * args.t1)) + 1)
     chi_open = float(jb.fluctuation_index(open_, 0.5 * args.t1, args.t1))
     chi_closed = float(jb.fluctuation_index(closed, 0.375, 0.5))

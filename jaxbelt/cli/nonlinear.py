@@ -20,7 +20,15 @@ def register(subparsers):
     p.add_argument("--harmonics", type=int_at_least(1), default=3, help="harmonics of the harmonic balance (default 3)")
     p.add_argument("--quick", action="store_true", help="shorter, coarser ramp records (faster)")
     p.add_argument("--no-mode2", action="store_true", help="skip the second-mode panel (two-mode model, 14-19 m/s)")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, check=check)
+
+
+def check(args) -> str | None:
+    """The models of this command have at most two modes: a third damping ratio would go unused."""
+    if args.damping is not None and len(args.damping) > 2:
+        return (f"argument --damping: give 1 ratio (all modes) or 2 (modes 1 and 2; the command's models have at "
+                f"most 2 modes), got {len(args.damping)}")
+    return None
 
 
 def run(args) -> int:

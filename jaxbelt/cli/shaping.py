@@ -12,7 +12,14 @@ from ._args import float_in, image_path, positive_float
 
 
 def register(subparsers):
-    p = subparsers.add_parser("shaping", help="pseudo-polynomial command shaping of a belt-driven platform (Incerti, pseudo-polynomial commands)")
+    p = subparsers.add_parser(
+        "shaping",
+        help="pseudo-polynomial command shaping of a belt-driven platform (Incerti, pseudo-polynomial commands)",
+        description="Optimise the exponents of a pseudo-polynomial motion command of the belt-driven platform "
+        "(Incerti, Table III) to cancel the residual vibration energy H, optionally a robust command over a "
+        "frequency band; compare with ZV/ZVD shapers and write the figure (the paper's Fig. 3 and a "
+        "sensitivity plot), or the paper's Fig. 2 with --figure profiles.",
+    )
     p.add_argument("--out", type=image_path, default="shaping.png", help="figure file (default shaping.png)")
     p.add_argument("--figure", choices=["overview", "profiles"], default="overview",
                    help="overview: optimisation, Fig. 3 and sensitivity (default); profiles: the paper's Fig. 2, "
@@ -28,7 +35,23 @@ def register(subparsers):
                    help="robust band as fractions of omega_n (default 0.8 1.2)")
     p.add_argument("--spread", type=float_in(0.0, 1.0, lo_open=True, hi_open=True), default=0.3, help="sensitivity sweep +-spread around omega_n (default 0.3)")
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, check=check)
+
+
+def check(args) -> str | None:
+    """The relations between arguments that argparse does not check (run before anything is computed)."""
+    from ..commands import MIN_EXPONENT_GAP
+
+    low, high = args.band
+    if not low < high:
+        return f"argument --band: LOW must be < HIGH, got {low:g} {high:g}"
+    g = sorted(args.gammas)
+    if len(g) < 2:
+        return f"argument --gammas: give at least 2 exponents, got {len(g)}"
+    if min(b - a for a, b in zip(g, g[1:])) < MIN_EXPONENT_GAP:
+        return (f"argument --gammas: the exponents must differ pairwise by at least {MIN_EXPONENT_GAP:g}, "
+                f"got {' '.join(f'{x:g}' for x in args.gammas)}")
+    return None
 
 
 def run(args) -> int:

@@ -390,7 +390,7 @@ def crossing_speeds(rig: RunoutRig, n_modes: int = 2, harmonics=1):
 
     Returns an array of shape `(n_modes, n_pulleys, n_harmonics)`; `[n-1, j, i]` is the crossing of
     mode n with harmonic `harmonics[i]` of pulley j. Moon & Wickert's stand (`RunoutRig()`:
-    L = 0.86 m, r = 0.063 m, v_t = 41.0 m/s): 8.98 m/s (mode 1), 16.02 m/s (mode 2).
+    L = 0.86 m, r = 0.063 m, v_t = 41.0 m/s): 8.98 m/s (mode 1), 16.00 m/s (mode 2).
     """
     o = "crossing_speeds"
     if not isinstance(rig, RunoutRig):

@@ -127,7 +127,7 @@ def tune_pid(
         if loss < best[0]:
             best = (loss, p, k)
         if progress:
-            it.set_postfix(chi=f"{float(m['chi_smooth']):.4f}")
+            it.set_postfix(chi_smooth=f"{float(m['chi_smooth']):.4f}")
         p = p_new
     _, p_best, k_best = best
     m0, mb = jax.device_get((_tune_report(drive, pid, g0, cfg, jnp.zeros(3)), _tune_report(drive, pid, g0, cfg, p_best)))

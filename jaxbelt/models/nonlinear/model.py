@@ -243,7 +243,7 @@ class NonlinearBelt(AbstractModel):
     paper's 50: $v_t$ = 37.94 m/s, $\\xi_1$ = 0.01219, $\\xi_2$ = 0.02713. The folds are then
     8.61 / 8.90 m/s for the first mode (measured 8.5 / 8.9) and 15.59 / 16.11 m/s for the second
     (measured band 15.7-16.1), each within its reading tolerance. Why two damping ratios: the
-    linear crossings (8.20 and 14.61 m/s here) have a ratio fixed by $L/r$ (1.78), and hardening
+    linear crossings (8.31 and 14.80 m/s here) have a ratio fixed by $L/r$ (1.78), and hardening
     bends the second resonance much further (the backbone shift grows as $n^3$), so with the
     first mode's ratio the second-mode upper fold lies beyond 18 m/s; the second mode's own
     damping sets where its resonance ends (a damping that grows with the mode, as a
@@ -253,7 +253,7 @@ class NonlinearBelt(AbstractModel):
     The sensor at the belt-driven idle pulley is chosen because the modelled up-sweep then rises
     and drops as measured (at the drive pulley it falls before the jump). The jump amplitudes
     (1.98 -> 0.57 mm up, 0.52 -> 1.51 mm down, 1 cm from the pulley) are not reached: the
-    model gives about 0.72 -> 0.47 and 0.57 -> 0.54 mm. 1 cm from a pulley the mode shape is
+    model gives about 0.72 -> 0.46 and 0.56 -> 0.53 mm. 1 cm from a pulley the mode shape is
     $\\approx 0.05$ of its peak, so the sensor sees mostly the pulley's own run-out, and the modal
     amplitude at a fold is tied to how far the fold lies above the crossing, i.e. to the fold
     speeds the fit already matches.
