@@ -310,3 +310,24 @@ def test_no_tracer_leaks_between_programs():
     out = jax.jit(batch)(x)
     ref = np.stack([np.asarray(jax.jit(scalar)(g)) for g in x])
     np.testing.assert_allclose(out, ref, rtol=1e-9, atol=1e-9 * float(np.max(np.abs(ref))))
+
+
+def test_fourbar_geometry_is_checked_when_the_lengths_are_traced():
+    """A crank too long to turn (a = 0.3 m: D^2 < 0 for alpha in 176-203 deg) is refused eagerly, and under
+    jit it raised nothing: the crank stopped at the first unreachable angle with success=True. Now: a
+    run-time error naming the condition, NaN with success=False for throw=False, per element under vmap;
+    a valid traced length gives the eager result."""
+    ts = jnp.linspace(0.0, 1.0, 11)
+
+    def run(a, throw):
+        sol = jb.simulate(jb.Scene(jb.FourBarDrive(a=a), jb.ConstantVoltage(25.0), ts=ts), throw=throw)
+        return sol.ys[:, 0], sol.success
+
+    with pytest.raises(ValueError, match="cannot be assembled"):
+        jb.FourBarDrive(a=0.3)
+    with pytest.raises(RUNTIME, match="cannot be assembled"):
+        jax.block_until_ready(jax.jit(lambda a: run(a, True))(0.3))
+    alpha, ok = jax.jit(lambda a: run(a, False))(0.3)
+    assert not bool(ok) and np.all(np.isnan(np.asarray(alpha)))
+    np.testing.assert_array_equal(jax.vmap(lambda a: run(a, False)[1])(jnp.array([0.0884, 0.3])), [True, False])
+    np.testing.assert_allclose(jax.jit(lambda a: run(a, True))(0.0884)[0], run(0.0884, True)[0], rtol=1e-10)

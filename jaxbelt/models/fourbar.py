@@ -29,7 +29,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_fields, check_positive
+from .._checks import check_fields, check_positive, record
 from .._checks import as_float_array as _arr
 from .base import AbstractModel, integrand, observable
 from ..commands import AbstractVoltageSource, MotorState
@@ -51,6 +51,21 @@ IDENTIFIED_STDERR = {"a": 0.0002, "R": 0.005}
 _N_CHECK = 4096
 # Smallest |sin(transmission angle)| accepted: below this the velocity ratios Q, R blow up.
 _DEAD_TOL = 1e-3
+_GRASHOF = "the crank must be the shortest link of a Grashof crank-rocker: a + longest <= sum of the other two"
+
+
+def _geometry(xp, a, b, c, hx, hy):
+    """`(D^2, |sin(gamma - beta)|)` of Appendix A on `_N_CHECK` crank angles over a turn (leading axis), for
+    lengths of any (broadcast) batch shape; `xp` is numpy (host check) or jax.numpy (traced check).
+    |sin(gamma - beta)| = D / sqrt(A^2 + B^2) is zero where coupler and rocker align (0 where D^2 < 0)."""
+    shape = xp.broadcast_shapes(*(xp.shape(x) for x in (a, b, c, hx, hy)))
+    al = xp.linspace(0.0, 2 * xp.pi, _N_CHECK, endpoint=False).reshape((-1,) + (1,) * len(shape))
+    sa, ca = xp.sin(al), xp.cos(al)
+    A = 2 * c * (hy - a * sa)
+    B = 2 * c * (hx - a * ca)
+    C = a**2 - b**2 + c**2 + hx**2 + hy**2 - 2 * a * (hx * ca + hy * sa)
+    D2 = A**2 + B**2 - C**2
+    return D2, xp.sqrt(xp.where(D2 >= 0, D2, 0.0) / (A**2 + B**2))
 
 
 class FourBarDrive(AbstractModel):
@@ -168,28 +183,27 @@ class FourBarDrive(AbstractModel):
         if vals is not None:
             host = dict(zip([n for n, _, _ in spec], vals))
             self._check_geometry(*(host[n] for n in ("a", "b", "c", "hx", "hy")))
+        else:  # traced lengths (jit/vmap/grad): the same two conditions, recorded as run-time checks
+            D2, s = _geometry(jnp, self.a, self.b, self.c, self.hx, self.hy)
+            record(jnp.all(D2 >= 0), f"{o}: the linkage cannot be assembled over a full crank turn "
+                   f"(D^2 = A^2 + B^2 - C^2 < 0 at some crank angle; {_GRASHOF})")
+            record(jnp.all(s >= _DEAD_TOL) | jnp.any(D2 < 0),  # an unassemblable one is reported as such alone
+                   f"{o}: the linkage passes a dead point (coupler and rocker aligned, |sin(gamma - beta)| < "
+                   f"{_DEAD_TOL:g} at some crank angle); the crank cannot drive it through")
 
     def _check_geometry(self, a, b, c, hx, hy):
         # numpy on the host values: a construction check, not part of any traced program
         al = np.linspace(0.0, 2 * np.pi, _N_CHECK, endpoint=False)
         shape = np.broadcast_shapes(*(np.shape(x) for x in (a, b, c, hx, hy)))
-        al_b = al.reshape((-1,) + (1,) * len(shape))  # a model with batched fields: every member
-        sa, ca = np.sin(al_b), np.cos(al_b)
-        A = 2 * c * (hy - a * sa)
-        B = 2 * c * (hx - a * ca)
-        C = a**2 - b**2 + c**2 + hx**2 + hy**2 - 2 * a * (hx * ca + hy * sa)
-        D2 = A**2 + B**2 - C**2
+        D2, s = _geometry(np, a, b, c, hx, hy)
         geo = ", ".join(f"{n}={float(np.ravel(x)[0]):g}" if np.size(x) == 1 else f"{n}={np.ravel(x).tolist()}"
                         for n, x in zip(("a", "b", "c", "hx", "hy"), (a, b, c, hx, hy))) + " m"
         if np.any(D2 < 0):
             i = int(np.argmin(D2)) // max(int(np.prod(shape)), 1)
             raise ValueError(
                 f"FourBarDrive: the linkage ({geo}) cannot be assembled over a full crank turn: "
-                f"D^2 = A^2 + B^2 - C^2 < 0 at alpha = {np.degrees(al[i]):.1f} deg (the crank must be the "
-                "shortest link of a Grashof crank-rocker: a + longest <= sum of the other two)"
+                f"D^2 = A^2 + B^2 - C^2 < 0 at alpha = {np.degrees(al[i]):.1f} deg ({_GRASHOF})"
             )
-        # |sin(gamma - beta)| = D / sqrt(A^2 + B^2): zero where coupler and rocker align.
-        s = np.sqrt(D2 / (A**2 + B**2))
         if np.min(s) < _DEAD_TOL:
             i = int(np.argmin(s)) // max(int(np.prod(shape)), 1)
             raise ValueError(
