@@ -331,3 +331,33 @@ def test_fourbar_geometry_is_checked_when_the_lengths_are_traced():
     assert not bool(ok) and np.all(np.isnan(np.asarray(alpha)))
     np.testing.assert_array_equal(jax.vmap(lambda a: run(a, False)[1])(jnp.array([0.0884, 0.3])), [True, False])
     np.testing.assert_allclose(jax.jit(lambda a: run(a, True))(0.0884)[0], run(0.0884, True)[0], rtol=1e-10)
+
+
+def test_nonlinear_belt_checks_survive_jit():
+    """harmonic_balance and the KBM backbone under jit: each invalid value was refused eagerly but gave a
+    finite amplitude under jit (damping -0.5 -> pp 4.1e-4, speed above the wave speed -> 4.4e-4). Now a
+    run-time error naming the parameter, or NaN with success=False; valid values give the eager result."""
+    B = jb.NonlinearBelt
+    with pytest.raises(RUNTIME, match="parameter `damping`"):
+        jax.block_until_ready(jax.jit(lambda x: jb.harmonic_balance(B(damping=x), 9.0).pp)(-0.5))
+    with pytest.raises(RUNTIME, match="parameter `speed`"):
+        jax.block_until_ready(jax.jit(lambda s: jb.harmonic_balance(B(), s).pp)(50.0))
+    hb = jax.jit(lambda r: jb.harmonic_balance(B(runout=B().runout.at[0].set(r)), 9.0, throw=False))
+    bad, good = hb(-1e-4), hb(jnp.asarray(float(B().runout[0])))
+    assert not bool(bad.success) and np.isnan(float(bad.pp))
+    assert bool(good.success) and float(good.pp) == pytest.approx(float(jb.harmonic_balance(B(), 9.0).pp), rel=1e-10)
+    # backbone: sub-critical speed, mode number, an amplitude the backbone reaches
+    b = B()
+    with pytest.raises(ValueError, match="parameter `speed`"):
+        jb.backbone_amplitude(b, float(b.wave_speed))
+    with pytest.raises(RUNTIME, match="parameter `speed`"):
+        jax.block_until_ready(jax.jit(lambda s: jb.backbone_amplitude(b, s))(2 * float(b.wave_speed)))
+    with pytest.raises(ValueError, match="parameter `n`"):
+        jb.backbone_amplitude(b, 9.0, n=0)
+    for a in (0.1, -0.1, float("nan")):  # the bisection returned the wave speed for all three
+        with pytest.raises(ValueError, match="`a`"):
+            jb.backbone_speed(b, a)
+    with pytest.raises(RUNTIME, match="`a` too large"):
+        jax.block_until_ready(jax.jit(lambda a: jb.backbone_speed(b, a))(0.1))
+    a9 = jb.backbone_amplitude(b, 9.0)  # round trip: the speed of the backbone amplitude at 9 m/s
+    assert float(jax.jit(lambda a: jb.backbone_speed(b, a))(a9)) == pytest.approx(9.0, abs=1e-9)

@@ -43,8 +43,8 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 
-from ..._checks import is_concrete
-from ..._guard import validated_inputs
+from ..._checks import collecting, is_concrete
+from ..._guard import all_ok, guard, traced_checks, validated_inputs
 from .model import ModalSystem, NonlinearBelt, mode_shapes
 
 __all__ = ["HarmonicSolution", "ResponseCurve", "Jumps", "harmonic_balance", "response_curve", "fold_speeds",
@@ -156,22 +156,31 @@ def harmonic_balance(belt: NonlinearBelt, speed, n_harmonics: int = 3, guess=Non
     `guess`: initial (2N, 2H+1) coefficients (default: rest, which reaches the branch that is
     unique away from the hysteresis band; inside it pick the branch by the guess, or use
     `response_curve`). Raises `RuntimeError` when Newton fails (`throw=False`: `success=False`
-    and NaN values; under jit an `eqx.error_if` on the returned values fires instead).
+    and NaN values; under jit an `eqx.error_if` on the returned values fires instead). Invalid
+    parameters raise `ValueError`; traced ones (a belt or speed inside jit/vmap/grad) raise at run
+    time, naming the parameter (`throw=False`: `success=False` and NaN values).
     """
     H = _check_h(n_harmonics)
     _check_equal_radii(belt)
-    belt.check_speed(speed)
+    with collecting() as checks:  # concrete: raises now; traced: recorded, attached to the results below
+        belt.check_speed(speed)
+    checks = checks + traced_checks(belt)
     n = belt.n_modes
     Y0 = jnp.zeros(2 * n * (2 * H + 1)) if guess is None else jnp.ravel(jnp.asarray(guess, float)) / _scale(belt)
     speed = jnp.asarray(speed, dtype=float)
     Y, pp, amp, ok = _hb_point(belt, speed, Y0, H, max_steps)
+    params_ok = all_ok(checks)
+    if checks and throw:  # the parameter checks first (on every returned value), then Newton's
+        Y, pp, amp = guard((Y, pp, amp), checks, throw=True)[0]
     if throw:
         if is_concrete(ok):
             if not bool(ok):
                 raise RuntimeError(f"harmonic_balance: Newton did not converge at {float(speed):g} m/s "
                                    f"(n_harmonics={H}); give a guess near the wanted branch")
         else:
-            pp = eqx.error_if(pp, ~ok, "harmonic_balance: Newton did not converge")
+            pp = eqx.error_if(pp, ~ok & params_ok, "harmonic_balance: Newton did not converge")
+    else:
+        ok = ok & params_ok
     nanif = lambda a: jnp.where(ok, a, jnp.nan)  # noqa: E731
     return HarmonicSolution(speed=speed, coefficients=nanif(_scale(belt) * Y.reshape(2 * n, 2 * H + 1)),
                             pp=nanif(pp), amplitude=nanif(amp), success=ok)

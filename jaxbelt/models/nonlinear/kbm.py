@@ -47,7 +47,22 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..._checks import check_nonnegative, collecting, is_concrete
+from ..._guard import guard, traced_checks
 from .model import NonlinearBelt, _gauss, mode_shapes
+
+
+def _checks(owner: str, belt, n, speed=None) -> list:
+    """Refuse a bad mode number (static) or belt; a concrete bad speed raises, traced checks are returned
+    (to attach to the result with `guard`)."""
+    if not isinstance(belt, NonlinearBelt):
+        raise TypeError(f"{owner}: `belt` must be a NonlinearBelt; got {type(belt).__name__}")
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise ValueError(f"{owner}: parameter `n` (mode number) must be an integer >= 1; got {n!r}")
+    with collecting() as found:
+        if speed is not None:
+            belt.check_speed(speed)
+    return found + traced_checks(belt)
 
 
 def kappa(v, v_l, n: int = 1):
@@ -66,16 +81,22 @@ def backbone_frequency(v, a, v_l, n: int = 1):
 def backbone_amplitude(belt: NonlinearBelt, speed, n: int = 1):
     """Modal amplitude $a$ on the backbone at running speed `speed` [m/s], driven by pulley 0:
     $a = \\sqrt{(\\Omega_0 - \\omega_n)/\\kappa_n}$ above the linear crossing, 0 below it (where the
-    backbone does not exist)."""
+    backbone does not exist). `speed` must be sub-critical, $0 \\le V < v_t$."""
+    checks = _checks("backbone_amplitude", belt, n, speed)
     v = jnp.asarray(speed, dtype=float) / belt.wave_speed
     Om = v * belt.span / belt.pulley_radii[0]
     sig = Om - n * jnp.pi * (1 - v**2)
-    return jnp.sqrt(jnp.maximum(sig, 0.0) / kappa(v, belt.v_l, n))
+    return guard(jnp.sqrt(jnp.maximum(sig, 0.0) / kappa(v, belt.v_l, n)), checks, throw=True)[0]
 
 
 def backbone_speed(belt: NonlinearBelt, a, n: int = 1):
     """Running speed [m/s] at which the drive-pulley rate meets the backbone at amplitude `a`
-    (bisection in $v \\in (0, 1)$; `a` may be an array)."""
+    (bisection in $v \\in (0, 1)$; `a` >= 0 may be an array). Raises `ValueError` for an amplitude
+    whose backbone meets no sub-critical speed (under jit: a run-time error)."""
+    checks = _checks("backbone_speed", belt, n)
+    with collecting() as found:
+        check_nonnegative("a", a, owner="backbone_speed")
+    checks = found + checks
     a = jnp.asarray(a, dtype=float)
     c = belt.span / belt.pulley_radii[0]
 
@@ -88,8 +109,18 @@ def backbone_speed(belt: NonlinearBelt, a, n: int = 1):
         pos = resid(mid) > 0
         return jnp.where(pos, lo, mid), jnp.where(pos, mid, hi)
 
-    lo, hi = jax.lax.fori_loop(0, 80, body, (jnp.zeros_like(a), jnp.ones_like(a) * (1 - 1e-12)))
-    return 0.5 * (lo + hi) * belt.wave_speed
+    v_top = 1 - 1e-12
+    bracketed = (resid(jnp.zeros_like(a)) <= 0) & (resid(jnp.full_like(a, v_top)) > 0)
+    msg = ("backbone_speed: no sub-critical speed meets the backbone at this amplitude `a` (the drive-pulley "
+           "rate stays below the backbone frequency up to the wave speed: `a` too large)")
+    if is_concrete((bracketed, checks)):
+        bad = np.atleast_1d(np.asarray(a))[~np.atleast_1d(np.asarray(bracketed))]
+        if bad.size:
+            raise ValueError(f"{msg}; got a = {np.ravel(bad).tolist()}")
+    else:
+        checks = checks + [(jnp.all(bracketed), msg)]
+    lo, hi = jax.lax.fori_loop(0, 80, body, (jnp.zeros_like(a), jnp.ones_like(a) * v_top))
+    return guard(0.5 * (lo + hi) * belt.wave_speed, checks, throw=True)[0]
 
 
 def forcing_coefficient(belt: NonlinearBelt, speed, n: int = 1):
@@ -114,6 +145,7 @@ def forcing_coefficient(belt: NonlinearBelt, speed, n: int = 1):
 
 def kbm_coefficients(belt: NonlinearBelt, speed, n: int = 1):
     """$(C_3, C_2, C_1, C_0)$ of eq. (31), $\\sum_i C_i (a^2)^i = 0$, with modal damping kept."""
+    checks = _checks("kbm_coefficients", belt, n, speed)
     v = jnp.asarray(speed, dtype=float) / belt.wave_speed
     g = forcing_coefficient(belt, speed, n)
     om = n * jnp.pi * (1 - v**2)
@@ -121,7 +153,8 @@ def kbm_coefficients(belt: NonlinearBelt, speed, n: int = 1):
     Om = jnp.where(jnp.abs(W0 - om) <= jnp.abs(W1 - om), W0, W1)
     sig = Om - om
     kap = kappa(v, belt.v_l, n)
-    return jnp.stack([kap**2, -2 * sig * kap, sig**2 + (belt.mode_damping(n)[n - 1] * om) ** 2, -jnp.abs(g) ** 2])
+    C = jnp.stack([kap**2, -2 * sig * kap, sig**2 + (belt.mode_damping(n)[n - 1] * om) ** 2, -jnp.abs(g) ** 2])
+    return guard(C, checks, throw=True)[0]
 
 
 def kbm_amplitudes(belt: NonlinearBelt, speed, n: int = 1):

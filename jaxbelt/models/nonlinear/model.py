@@ -314,8 +314,14 @@ class NonlinearBelt(AbstractModel):
 
     # --- speeds -------------------------------------------------------------------------
     def check_speed(self, speed):
-        """Raise `ValueError` unless $0 \\le V < v_t$ (sub-critical); arrays are checked elementwise."""
-        if is_concrete(speed) and is_concrete(self.wave_speed):
+        """Raise `ValueError` unless $0 \\le V < v_t$ (sub-critical); arrays are checked elementwise.
+        Traced values (jit/vmap/grad) are recorded as a run-time check (see `jaxbelt._guard`)."""
+        if not (is_concrete(speed) and is_concrete(self.wave_speed)):
+            s = jnp.asarray(speed, dtype=float)
+            record(jnp.all(jnp.isfinite(s) & (s >= 0) & (s < self.wave_speed)),
+                   "NonlinearBelt: parameter `speed` (running speed) must lie in [0, wave_speed) m/s "
+                   "(sub-critical travelling string)")
+        else:
             s = np.atleast_1d(np.asarray(speed, dtype=float))
             vt = float(np.max(np.asarray(self.wave_speed)))
             bad = s[~np.isfinite(s) | (s < 0) | (s >= np.min(np.asarray(self.wave_speed)))]
