@@ -4,6 +4,7 @@ Each test is one of the ways a hostile but realistic user broke an earlier versi
 outcome is stated in the test (an exception naming the parameter, or `success=False` with NaN).
 """
 
+import re
 import subprocess
 import sys
 
@@ -361,3 +362,24 @@ def test_nonlinear_belt_checks_survive_jit():
         jax.block_until_ready(jax.jit(lambda a: jb.backbone_speed(b, a))(0.1))
     a9 = jb.backbone_amplitude(b, 9.0)  # round trip: the speed of the backbone amplitude at 9 m/s
     assert float(jax.jit(lambda a: jb.backbone_speed(b, a))(a9)) == pytest.approx(9.0, abs=1e-9)
+
+
+@pytest.mark.parametrize("call, needle", [
+    # a bound <= 0 switched its penalty off (max(0, peak/bound - 1) is 0): the tuned current reached 31.6 A
+    (lambda d, p, pl, c: jb.tune_pid(d, p, steps=1, i_max=-20.0, progress=False), "parameter `i_max` must be finite and > 0 A"),
+    (lambda d, p, pl, c: jb.tune_pid(d, p, steps=1, i_max=0.0, progress=False), "parameter `i_max`"),
+    # a negative weight rewarded breaking the bound (loss -4.96 with 34 A against i_max = 20 A)
+    (lambda d, p, pl, c: jb.tune_pid(d, p, steps=1, i_max=20.0, penalty=-10.0, progress=False), "parameter `penalty`"),
+    (lambda d, p, pl, c: jb.tune_pid(d, p, steps=1, learning_rate=float("nan"), progress=False), "parameter `learning_rate`"),
+    (lambda d, p, pl, c: jb.optimise_command(pl, c, max_speed=-1.0, progress=False), "parameter `max_speed` must be finite and > 0 rad/s"),
+    (lambda d, p, pl, c: jb.optimise_command(pl, c, max_speed=float("nan"), progress=False), "parameter `max_speed`"),
+    (lambda d, p, pl, c: jb.optimise_command(pl, c, margin=-1.0, progress=False), "parameter `margin`"),
+    (lambda d, p, pl, c: jb.optimise_command(pl, c, gap=-1.0, progress=False), "parameter `gap` must be >= 0.001"),
+    (lambda d, p, pl, c: jb.optimise_robust(pl, c, max_accel=-5.0, progress=False), "parameter `max_accel`"),
+    (lambda d, p, pl, c: jb.optimise_robust(pl, c, n_freq=1, progress=False), "parameter `n_freq`"),
+])
+def test_optimiser_options_that_would_silently_change_the_problem_are_refused(call, needle):
+    drive, pid = jb.FourBarDrive(), jb.PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0)
+    plat, cmd = jb.BeltPlatform(), jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]))
+    with pytest.raises(ValueError, match=re.escape(needle)):
+        call(drive, pid, plat, cmd)

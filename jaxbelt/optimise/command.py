@@ -31,7 +31,8 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from ..commands import PseudoPolynomial, ShapedCommand
+from .._checks import check_nonnegative, check_positive
+from ..commands import MIN_EXPONENT_GAP, PseudoPolynomial, ShapedCommand
 from .._guard import host_checked
 from ..objectives.residual import residual_energy, residual_energy_joules
 
@@ -282,6 +283,22 @@ def _band_reference(plat, reference, omegas, n_nodes):
     return jax.vmap(lambda w: residual_energy_joules(plat.with_natural_frequency(w), reference, n_nodes=n_nodes))(omegas)
 
 
+def _check_options(owner, margin, gap, max_speed, max_accel, penalty, learning_rate):
+    """The optimisers' scalar options: a limit <= 0 would switch its penalty off, a negative penalty would
+    reward breaking it, and a margin or gap below the exponents' own minimum would let an iterate leave
+    the commands `PseudoPolynomial` accepts."""
+    for name, value, unit in (("max_speed", max_speed, "rad/s"), ("max_accel", max_accel, "rad/s^2")):
+        if value is not None:
+            check_positive(name, value, unit, owner=owner)
+    check_nonnegative("penalty", penalty, owner=owner)
+    check_positive("margin", margin, owner=owner)
+    if not float(gap) >= MIN_EXPONENT_GAP:
+        raise ValueError(f"{owner}: parameter `gap` must be >= {MIN_EXPONENT_GAP:g} (the least distance between "
+                         f"exponents that PseudoPolynomial accepts); got {gap}")
+    if learning_rate is not None:
+        check_positive("learning_rate", learning_rate, owner=owner)
+
+
 def _bounds(cmd: PseudoPolynomial, margin, gap, max_step):
     g = np.sort(np.asarray(cmd.gammas, dtype=float))
     lower = float(max(cmd.order, 2))
@@ -321,6 +338,7 @@ def optimise_command(plat, cmd: PseudoPolynomial, *, optimizer="lbfgs", learning
     """
     if not isinstance(cmd, PseudoPolynomial):
         raise ValueError(f"optimise_command: `cmd` must be a PseudoPolynomial; got {type(cmd).__name__}")
+    _check_options("optimise_command", margin, gap, max_speed, max_accel, penalty, learning_rate)
     lower, margin, gap = _bounds(cmd, margin, gap, max_step)
     theta0 = _params_jit(cmd.gammas, lower, margin, gap, max_step)
     h0 = _residual_jit(plat, cmd, n_nodes)
@@ -363,6 +381,9 @@ def optimise_robust(plat, cmd: PseudoPolynomial, *, band=(0.8, 1.2), n_freq: int
     lo_b, hi_b = float(band[0]), float(band[1])
     if not (0 < lo_b < hi_b):
         raise ValueError(f"optimise_robust: `band` must satisfy 0 < low < high (fractions of omega_n); got {band}")
+    _check_options("optimise_robust", margin, gap, max_speed, max_accel, penalty, learning_rate)
+    if isinstance(n_freq, bool) or not isinstance(n_freq, (int, np.integer)) or n_freq < 2:
+        raise ValueError(f"optimise_robust: parameter `n_freq` must be an integer >= 2; got {n_freq!r}")
     if reference is None:
         reference = PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]), cmd.displacement, cmd.duration)
     omegas = jnp.linspace(lo_b, hi_b, int(n_freq)) * plat.omega_n
