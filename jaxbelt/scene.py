@@ -28,6 +28,15 @@ class TracedGridWarning(UserWarning):
     """A scene's output times are traced, so `simulate` cannot see that they are evenly spaced."""
 
 
+_START_MESSAGE = ("Scene: the start time (`t0`, or `ts[0]` without it) must be >= 0 s: times count from the start "
+                  "of the input command (t = 0), which is not defined before it")
+
+
+def _check_start(start: float, name: str) -> None:
+    if start < 0:
+        raise ValueError(f"{_START_MESSAGE}; got {name} = {start}")
+
+
 class Scene(eqx.Module):
     """A simulation request.
 
@@ -36,7 +45,8 @@ class Scene(eqx.Module):
       `ExponentialVoltage(24.0, 0.02)` or `PID(...)`; any other kind raises `TypeError`.
     - `ts`: strictly increasing output times [s], shape (N,).
     - `t0`: start time [s], where the initial state holds (default `ts[0]`; must be <= `ts[0]`);
-      `scene.start_time` is the start in either case.
+      `scene.start_time` is the start in either case. Times count from the start of the input
+      command (t = 0, where a voltage step or a motion begins), so the start must be >= 0.
     - `t1`: final time [s] when `ts` is not given: only the state at `t1` is returned
       (no dense buffer); `t0` then defaults to 0.
     - `observe`: names of outputs to compute besides the state (e.g. `("current",
@@ -146,6 +156,8 @@ class Scene(eqx.Module):
                         f"Scene: `t0` (start time, s) must be finite and <= ts[0] = {float(np.asarray(raw)[0])}; "
                         f"got {float(start)}"
                     )
+            if is_concrete(raw) and (start is None or is_concrete(start)):
+                _check_start(float(np.asarray(raw)[0]) if start is None else float(start), "ts[0]" if start is None else "t0")
             self.t1 = None
         else:
             self.ts = None
@@ -155,6 +167,8 @@ class Scene(eqx.Module):
             for name, v in (("t0", self.t0), ("t1", self.t1)):
                 if jnp.ndim(v) != 0:
                     raise ValueError(f"Scene: `{name}` must be a scalar time [s]; got shape {jnp.shape(v)}")
+            if is_concrete(self.t0):
+                _check_start(float(self.t0), "t0")
             if is_concrete(self.t1) and is_concrete(self.t0):
                 if not (np.isfinite(float(self.t0)) and np.isfinite(float(self.t1)) and float(self.t1) > float(self.t0)):
                     raise ValueError(
@@ -179,7 +193,8 @@ class Scene(eqx.Module):
         """`[(ok, message)]` for the time checks that values decide (evaluated under `jit` too)."""
         t_first = self.times[0]
         t0 = self.start_time
-        checks = [(jnp.isfinite(t0) & (t0 <= t_first), "Scene: `t0` must be finite and <= the first output time")]
+        checks = [(jnp.isfinite(t0) & (t0 <= t_first), "Scene: `t0` must be finite and <= the first output time"),
+                  (t0 >= 0, _START_MESSAGE)]
         if self.ts is not None and self.ts.shape[0] > 1:
             checks.append((jnp.all(jnp.diff(self.ts) > 0) & jnp.all(jnp.isfinite(self.ts)),
                            "Scene: `ts` must be finite and strictly increasing"))

@@ -333,7 +333,7 @@ def test_scene_ts_of_wrong_shape(shape):
         jb.Scene(STARTUP, EXP, ts=np.zeros(shape))
 
 
-@given(t0=st.floats(-1.0, 1.0), dt=st.one_of(st.floats(-1.0, 0.0), NONFINITE))
+@given(t0=st.floats(0.0, 1.0), dt=st.one_of(st.floats(-1.0, 0.0), NONFINITE))  # t0 < 0: its own error
 @fuzz(10)
 def test_scene_t1_not_after_t0(t0, dt):
     with pytest.raises(ValueError, match=named("t1")):

@@ -383,3 +383,24 @@ def test_optimiser_options_that_would_silently_change_the_problem_are_refused(ca
     plat, cmd = jb.BeltPlatform(), jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]))
     with pytest.raises(ValueError, match=re.escape(needle)):
         call(drive, pid, plat, cmd)
+
+
+def test_a_scene_cannot_start_before_the_command(model):
+    """ExponentialVoltage extrapolated to t < 0 grows like exp(-t/gamma): a scene from t = -1 s returned
+    speeds of -1.7e21 rad/s without a word. Times count from the command's start: refused eagerly (ts[0],
+    t0, final-time scenes) and under jit; a start at 0 is the eager result."""
+    cmd = jb.ExponentialVoltage(24.0, 0.02)
+    for kw in (dict(ts=jnp.array([-1.0, 0.1])), dict(ts=jnp.array([0.0, 0.1]), t0=-0.5), dict(t1=0.1, t0=-0.5)):
+        with pytest.raises(ValueError, match="must be >= 0 s"):
+            jb.Scene(model, cmd, **kw)
+
+    def run(ts, throw=True):
+        sol = jb.simulate(jb.Scene(model, cmd, ts=ts, uniform=False), throw=throw)
+        return sol.ys, sol.success
+
+    with pytest.raises(RUNTIME, match="must be >= 0 s"):
+        jax.block_until_ready(jax.jit(run)(jnp.array([-1.0, 0.1])))
+    ys, ok = jax.jit(lambda ts: run(ts, False))(jnp.array([-1.0, 0.1]))
+    assert not bool(ok) and np.all(np.isnan(np.asarray(ys)))
+    ts = jnp.array([0.0, 0.1])
+    np.testing.assert_allclose(jax.jit(run)(ts)[0], run(ts)[0], rtol=1e-10, atol=1e-12)
