@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import numbers
 import threading
 
 import jax
@@ -198,6 +199,13 @@ def check_range(name: str, value, lo=None, hi=None, *, lo_open=False, hi_open=Fa
         return good
 
     _enforce(name, value, f"must lie in {_interval(lo, hi, lo_open, hi_open)}", unit, owner, ok)
+
+
+def check_int(owner: str, name: str, value, lo: int = 1) -> int:
+    """Refuse anything but an integer >= lo (a float or a bool is refused, not truncated); return it."""
+    if isinstance(value, bool) or not isinstance(value, (numbers.Integral, np.integer)) or int(value) < lo:
+        raise ValueError(f"{owner}: parameter `{name}` must be an integer >= {lo}; got {value!r}")
+    return int(value)
 
 
 def positive_checks(owner: str, **values) -> list:

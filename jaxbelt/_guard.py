@@ -300,6 +300,15 @@ def guard(value, checks, throw: bool = True):
     return nan_where(value, ok), ok
 
 
+def checked(value, *modules, checks=()):
+    """`value` with the parameter checks of the traced `modules` and the recorded `checks` attached
+    (`guard(..., throw=True)`): under jit/vmap/grad an invalid parameter raises at run time, naming it.
+    With concrete modules and no checks, `value` itself. The modules' checks come first (a bad parameter
+    is reported as such, not through an argument check it makes fail)."""
+    found = traced_checks(*modules) + list(checks)
+    return guard(value, found, throw=True)[0] if found else value
+
+
 def nan_where(value, ok):
     """`value` with every inexact leaf set to NaN where `ok` is False (ok broadcasts from the left)."""
 

@@ -404,3 +404,49 @@ def test_a_scene_cannot_start_before_the_command(model):
     assert not bool(ok) and np.all(np.isnan(np.asarray(ys)))
     ts = jnp.array([0.0, 0.1])
     np.testing.assert_allclose(jax.jit(run)(ts)[0], run(ts)[0], rtol=1e-10, atol=1e-12)
+
+
+_TRACED_SPAN_CASES = [
+    # (what, function of one traced value, bad value, good value, message); each returned a finite or
+    # NaN value under jit before (e.g. natural frequencies of -166 rad/s for a negative span length)
+    ("span length", lambda L: jb.MovingString(length=L).natural_frequencies(1.0), -1.0, 0.2621, "parameter `length`"),
+    ("span tension (was blamed on the speed)", lambda T: jb.MovingString(tension=T).natural_frequencies(1.0), -1.0, 140.0,
+     "parameter `tension`"),
+    ("rotor radius", lambda r: jb.MovingString().critical_rotor_speed(r), -1.0, 0.1166, "parameter `pulley_radius`"),
+    ("pulley radius", lambda R: jb.BeltPulleyContact(R).slip_margin(10.0), -1.0, 0.05, "parameter `radius`"),
+    ("belt density", lambda d: jb.BeltPulleyContact(0.05, density=d).separation_speed(), -1.0, 0.05, "parameter `density`"),
+    ("wrap angle", lambda w: jb.BeltPulleyContact(0.05, wrap_angle=w).pressure(0.1, 10.0), -1.0, 2.094, "parameter `wrap_angle`"),
+    ("contact angle", lambda a: jb.BeltPulleyContact(0.05).pressure(a, 10.0), 5.0, 1.0, "`alpha` must lie in [0, wrap_angle]"),
+    ("pulley speed", lambda w: jb.BeltPulleyContact(0.05).slip_margin(w), float("nan"), 10.0, "parameter `omega`"),
+    ("rig damping", lambda z: jb.linear_runout_response(jb.RunoutRig(damping_ratio=z), 5.0), -0.5, 0.01, "parameter `damping_ratio`"),
+    ("sensor position", lambda p: jb.linear_runout_response(jb.RunoutRig(position=p), 5.0), 5.0, 0.01, "parameter `position`"),
+    ("rig run-out", lambda e: jb.linear_runout_response(jb.RunoutRig(runouts=jnp.stack([e, 0.21e-3])), 5.0), -1e-4,
+     0.355e-3, "parameter `runouts`"),
+]
+
+
+@pytest.mark.parametrize("what, fn, bad, good, message", _TRACED_SPAN_CASES, ids=[c[0] for c in _TRACED_SPAN_CASES])
+def test_span_and_contact_parameters_are_checked_under_jit(what, fn, bad, good, message):
+    """Belt spans, pulley contact and the run-out rig: a traced invalid parameter raises at run time naming
+    it; a valid one gives the eager value."""
+    with pytest.raises(RUNTIME, match=re.escape(message)):
+        jax.block_until_ready(jax.jit(fn)(bad))
+    np.testing.assert_allclose(jax.jit(fn)(good), fn(good), rtol=1e-12)
+
+
+def test_span_counts_and_reference_run_options_are_refused_not_truncated():
+    rig = jb.RunoutRig()
+    # n_modes = 0 returned the boundary-shift term alone (6.99e-4 against 7.06e-4); 1.7 was truncated to 1
+    for bad in (0, 1.7, True):
+        with pytest.raises(ValueError, match="parameter `n_modes` must be an integer >= 1"):
+            jb.linear_runout_response(rig, 5.0, n_modes=bad)
+    with pytest.raises(ValueError, match="parameter `n_modes`"):
+        jb.MovingString().natural_frequencies(1.0, n_modes=1.5)
+    damped = jb.RunoutRig(damping_ratio=0.05)
+    for kw, name in ((dict(speed=-5.0, n_periods_settle=5), "speed"), (dict(speed=5.0, n_periods_measure=0), "n_periods_measure"),
+                     (dict(speed=5.0, rtol=-1.0), "rtol"), (dict(speed=5.0, n_periods_settle=-1), "n_periods_settle")):
+        with pytest.raises(ValueError, match=f"parameter `{name}`"):  # -5 m/s returned 1.6e50
+            jb.simulate_runout_response(damped, **kw)
+    contact = jb.BeltPulleyContact(0.05)
+    with pytest.raises(ValueError, match="parameter `omega` must be finite"):
+        contact.slip_report(float("nan"))  # was SlipError "slips by nan N"

@@ -19,7 +19,8 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_positive, check_range, is_concrete
+from .._checks import check_finite, check_positive, check_range, collecting, is_concrete, record
+from .._guard import checked
 from .._checks import as_float_array as _arr
 
 __all__ = ["BeltPulleyContact", "SlipError", "SlipReport"]
@@ -102,13 +103,22 @@ class BeltPulleyContact(eqx.Module):
         check_positive("friction", self.friction, "", o)
         check_range("wrap_angle", self.wrap_angle, 0.0, 2.0 * np.pi, lo_open=True, hi_open=True, unit="rad", owner=o)
 
-    def centrifugal_tension(self, omega):
-        """$T_c = \\rho R^2\\omega^2$ [N] (eq. 5-6)."""
+    def _omega_checks(self, owner, omega) -> list:
+        with collecting() as found:  # concrete: raises now; traced: returned, attached to the result
+            check_finite("omega", omega, owner=owner)
+        return found
+
+    def _tc(self, omega):
         return self.density * self.radius**2 * _arr(omega) ** 2
+
+    def centrifugal_tension(self, omega):
+        """$T_c = \\rho R^2\\omega^2$ [N] (eq. 5-6), pulley speed `omega` [rad/s]."""
+        found = self._omega_checks("BeltPulleyContact.centrifugal_tension", omega)
+        return checked(self._tc(omega), self, checks=found)
 
     def slip_limit(self):
         """$e^{\\mu\\vartheta}$, the largest tension ratio friction can hold (eq. 8)."""
-        return jnp.exp(self.friction * self.wrap_angle)
+        return checked(jnp.exp(self.friction * self.wrap_angle), self)
 
     def slip_margin(self, omega):
         """$(T_1 - T_c)e^{\\mu\\vartheta} - (T_2 - T_c)$ [N]: eq. (8) as a margin (>= 0: no slip).
@@ -116,11 +126,17 @@ class BeltPulleyContact(eqx.Module):
         Smooth in every parameter (usable as a constraint under `grad`); negative values are the
         tight-side tension in excess of what the pulley can transmit.
         """
-        tc = self.centrifugal_tension(omega)
-        return (self.slack_tension - tc) * self.slip_limit() - (self.tight_tension - tc)
+        found = self._omega_checks("BeltPulleyContact.slip_margin", omega)
+        tc = self._tc(omega)
+        margin = (self.slack_tension - tc) * jnp.exp(self.friction * self.wrap_angle) - (self.tight_tension - tc)
+        return checked(margin, self, checks=found)
 
     def slip_report(self, omega) -> SlipReport:
-        """The slip check at one concrete speed as a `SlipReport` (ratio, limit, margin, needed μ)."""
+        """The slip check at one concrete speed `omega` [rad/s] as a `SlipReport` (ratio, limit, margin, needed μ)."""
+        if not is_concrete(omega) or np.ndim(omega) != 0:
+            raise ValueError(f"BeltPulleyContact.slip_report: `omega` must be one concrete speed [rad/s] (a scalar "
+                             f"outside jit; use slip_margin under jit or for arrays); got shape {np.shape(omega)}")
+        check_finite("omega", omega, owner="BeltPulleyContact.slip_report")
         omega = float(np.asarray(omega))
         tc = float(self.centrifugal_tension(omega))
         t1, t2 = float(self.slack_tension), float(self.tight_tension)
@@ -144,19 +160,25 @@ class BeltPulleyContact(eqx.Module):
         $0 \\le \\alpha \\le \\vartheta$ (measured from where the slack side arrives). Negative values
         are returned as they are: there the belt has separated (eq. 11).
         """
+        o = "BeltPulleyContact.pressure"
         alpha = _arr(alpha)
+        found = self._omega_checks(o, omega)
         if is_concrete(alpha) and is_concrete(self.wrap_angle):
-            check_range("alpha", alpha, 0.0, float(self.wrap_angle), unit="rad", owner="BeltPulleyContact.pressure")
+            check_range("alpha", alpha, 0.0, float(np.max(np.asarray(self.wrap_angle))), unit="rad", owner=o)
+        else:
+            with collecting() as more:
+                record(jnp.all((alpha >= 0) & (alpha <= self.wrap_angle)), f"{o}: `alpha` must lie in [0, wrap_angle] rad")
+            found += more
         t = (self.tight_tension - self.slack_tension) / self.wrap_angle * alpha + self.slack_tension
-        return (t - self.centrifugal_tension(omega)) / self.radius
+        return checked((t - self._tc(omega)) / self.radius, self, checks=found)
 
     def separation_speed(self):
         """Pulley speed [rad/s] at which $p$ first reaches 0: $\\omega_s = \\sqrt{\\min(T_1, T_2)/\\rho}/R$.
 
         p is linear in $\\alpha$, so its minimum is at the end with the lower tension.
         """
-        return jnp.sqrt(jnp.minimum(self.slack_tension, self.tight_tension) / self.density) / self.radius
+        return checked(jnp.sqrt(jnp.minimum(self.slack_tension, self.tight_tension) / self.density) / self.radius, self)
 
     def separation_angle(self):
         """Wrap position $\\alpha$ [rad] where separation starts (0 if $T_1 \\le T_2$, else $\\vartheta$)."""
-        return jnp.where(self.slack_tension <= self.tight_tension, 0.0, self.wrap_angle)
+        return checked(jnp.where(self.slack_tension <= self.tight_tension, 0.0, self.wrap_angle), self)

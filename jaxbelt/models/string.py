@@ -38,9 +38,10 @@ import optimistix as optx
 
 import numbers
 
-from .._checks import check_nonnegative, check_positive, check_range, collecting, is_concrete, record
+from .._checks import (check_finite, check_int, check_nonnegative, check_positive, check_range, collecting,
+                       is_concrete, record)
 from .._checks import as_float_array as _arr
-from .._guard import all_ok, error_if, guard, host_checked, stored_jit, traced_checks
+from .._guard import all_ok, checked, error_if, guard, host_checked, stored_jit, traced_checks
 
 __all__ = [
     "MovingString",
@@ -97,9 +98,10 @@ def _check_subcritical(speed, critical, owner: str, name: str = "speed"):
                 f"(at and above it the span has no stiffness, eq. 39); got |{name}| up to {worst:.6g} m/s"
             )
         return speed
+    # a critical speed that is not finite comes from invalid parameters: their own check reports it
     return error_if(
         speed,
-        jnp.any(~(jnp.abs(speed) < critical)),
+        jnp.any(~(jnp.abs(speed) < critical) & jnp.isfinite(critical)),
         f"{owner}: `{name}` must be below the critical speed sqrt(T/rho)",
     )
 
@@ -139,8 +141,9 @@ class MovingString(eqx.Module):
         """$\\omega_{CR} = \\sqrt{T/\\rho}/R_U$ [rad/s] (belt-vibration report, eq. 53): the rotor speed at
         which the belt speed $\\omega_U R_U$ (eq. 50) reaches $V_{cr}$ and every $\\omega_n$ of eq. (51)
         vanishes. `pulley_radius` $R_U$ [m] > 0."""
-        check_positive("pulley_radius", pulley_radius, "m", "MovingString.critical_rotor_speed")
-        return self.critical_speed / jnp.asarray(pulley_radius, dtype=float)
+        with collecting() as found:
+            check_positive("pulley_radius", pulley_radius, "m", "MovingString.critical_rotor_speed")
+        return checked(self.critical_speed / jnp.asarray(pulley_radius, dtype=float), self, checks=found)
 
     def natural_frequencies(self, speed=0.0, n_modes: int = 3):
         """$\\omega_n(V) = (n\\pi/L) V_{cr} (1 - V^2/V_{cr}^2)$ [rad/s] (eq. 39), $n = 1..n\\_modes$.
@@ -148,13 +151,12 @@ class MovingString(eqx.Module):
         `speed` [m/s] of any shape; returns shape `speed.shape + (n_modes,)`. Raises `ValueError`
         if any $|V| \\ge V_{cr}$ (under `jit`: `eqx.error_if`).
         """
-        if int(n_modes) < 1:
-            raise ValueError(f"MovingString.natural_frequencies: `n_modes` must be >= 1; got {n_modes}")
+        n_modes = check_int("MovingString.natural_frequencies", "n_modes", n_modes)
         vc = self.critical_speed
         speed = _check_subcritical(speed, vc, "MovingString.natural_frequencies")
-        n = jnp.arange(1, int(n_modes) + 1, dtype=float)
+        n = jnp.arange(1, n_modes + 1, dtype=float)
         base = (jnp.pi / self.length) * vc * (1.0 - (speed / vc) ** 2)
-        return base[..., None] * n
+        return checked(base[..., None] * n, self)
 
     def mode_shape(self, x, t, speed, n: int = 1, b1=1.0, b2=0.0):
         """Free vibration of mode `n` at belt speed `speed`, eq. (49) with the sign of eq. (28)-(31) fixed.
@@ -170,6 +172,7 @@ class MovingString(eqx.Module):
         $\\psi_n = \\sin(n\\pi x)e^{i n\\pi v x}$). `x` [m], `t` [s] broadcast; returns metres if
         $B_1, B_2$ are.
         """
+        n = check_int("MovingString.mode_shape", "n", n)
         vc = self.critical_speed
         speed = _check_subcritical(speed, vc, "MovingString.mode_shape")
         w = (n * jnp.pi / self.length) * vc * (1.0 - (speed / vc) ** 2)
@@ -179,7 +182,7 @@ class MovingString(eqx.Module):
         t = jnp.asarray(t, dtype=float)
         pa = w * t - a * x
         pb = w * t - b * x
-        return b1 * (jnp.cos(pa) - jnp.cos(pb)) + b2 * (jnp.sin(pa) - jnp.sin(pb))
+        return checked(b1 * (jnp.cos(pa) - jnp.cos(pb)) + b2 * (jnp.sin(pa) - jnp.sin(pb)), self)
 
     # --- Galerkin discretisation -------------------------------------------------------------
     def galerkin_matrices(self, speed, n_basis: int):
@@ -190,11 +193,9 @@ class MovingString(eqx.Module):
         $G_{jk} = 2V\\int_0^L \\sin(j\\pi x/L)\\,(k\\pi/L)\\cos(k\\pi x/L)\\,dx$ (skew),
         $K = (T/\\rho - V^2)(k\\pi/L)^2 (L/2)\\,\\delta_{jk}$ (per unit $\\rho$).
         """
-        nb = int(n_basis)
-        if nb < 1:
-            raise ValueError(f"MovingString.galerkin_matrices: `n_basis` must be >= 1; got {n_basis}")
+        nb = check_int("MovingString.galerkin_matrices", "n_basis", n_basis)
         speed = _check_subcritical(speed, self.critical_speed, "MovingString.galerkin_matrices")
-        return self._galerkin_matrices(speed, nb)
+        return checked(self._galerkin_matrices(speed, nb), self)
 
     def _galerkin_matrices(self, speed, nb: int):
         """`galerkin_matrices` for a speed already checked against the critical speed."""
@@ -218,12 +219,12 @@ class MovingString(eqx.Module):
         first-order problem of $A = [[0, I], [-M^{-1}K, -M^{-1}G]]$; its eigenvalues are $\\pm i\\omega$.
         `speed` a scalar [m/s] (use `jax.vmap` over speeds). Converges to eq. (39) as $N$ grows.
         """
-        if int(n_modes) > int(n_basis):
-            raise ValueError(
-                f"MovingString.galerkin_frequencies: `n_modes` ({n_modes}) must not exceed `n_basis` ({n_basis})"
-            )
-        speed = _check_subcritical(speed, self.critical_speed, "MovingString.galerkin_frequencies")
-        return _galerkin_frequencies(self, speed, int(n_basis), int(n_modes))
+        o = "MovingString.galerkin_frequencies"
+        n_basis, n_modes = check_int(o, "n_basis", n_basis), check_int(o, "n_modes", n_modes)
+        if n_modes > n_basis:
+            raise ValueError(f"{o}: `n_modes` ({n_modes}) must not exceed `n_basis` ({n_basis})")
+        speed = _check_subcritical(speed, self.critical_speed, o)
+        return checked(_galerkin_frequencies(self, speed, n_basis, n_modes), self)
 
 
 @stored_jit
@@ -493,9 +494,11 @@ def runout_phasors(rig: RunoutRig, speed, n_modes: int = 64):
     $\\mathrm{Re}(W_0 e^{i\\Omega_0 t} + W_1 e^{i\\Omega_1 t})$, $\\Omega_j = V/r_j$.
     Arguments as in `linear_runout_response`.
     """
+    n_modes = check_int("runout_phasors", "n_modes", n_modes)
     speed = _check_response_inputs("runout_phasors", rig, speed)
-    return _phasors(speed, rig.length, rig.wave_speed, rig.pulley_radii, rig.runouts, rig.phase,
-                    rig.damping_ratio, rig.position, int(n_modes))
+    out = _phasors(speed, rig.length, rig.wave_speed, rig.pulley_radii, rig.runouts, rig.phase,
+                   rig.damping_ratio, rig.position, n_modes)
+    return checked(out, rig)  # a traced rig: its parameter checks, at run time
 
 
 @stored_jit
@@ -554,6 +557,7 @@ def linear_runout_response(rig: RunoutRig, speed, n_modes: int = 64):
     long-time peak-to-peak of a two-frequency signal with incommensurate frequencies
     (see `runout_phasors` for the complex amplitudes).
     """
+    check_int("linear_runout_response", "n_modes", n_modes)
     W0, W1 = runout_phasors(rig, speed, n_modes)
     r = rig.pulley_radii
     same = r[0] == r[1]
@@ -586,6 +590,7 @@ def galerkin_runout_system(rig: RunoutRig, speed, n_basis: int = 24):
     $\\pm i\\omega - \\zeta\\omega$ (the convention of `linear_runout_response`).
     """
     o = "galerkin_runout_system"
+    check_int(o, "n_basis", n_basis)
     speed = _check_response_inputs(o, rig, speed)
     L = rig.length
     vt = rig.wave_speed
@@ -595,7 +600,7 @@ def galerkin_runout_system(rig: RunoutRig, speed, n_basis: int = 24):
     A = _first_order(M, G, K)
     lam, vec = jnp.linalg.eig(A)
     lam_d = lam - rig.damping_ratio * jnp.abs(jnp.imag(lam))
-    A = jnp.real(vec @ jnp.diag(lam_d) @ jnp.linalg.inv(vec))
+    A = checked(jnp.real(vec @ jnp.diag(lam_d) @ jnp.linalg.inv(vec)), rig)  # a traced rig: checked at run time
     r0, r1 = rig.pulley_radii[0], rig.pulley_radii[1]
     e0, e1 = rig.runouts[0], rig.runouts[1]
     W0, W1 = V / r0, V / r1
@@ -639,6 +644,16 @@ def simulate_runout_response(
 
     o = "simulate_runout_response"
     check_range("damping_ratio", rig.damping_ratio, 0.0, 1.0, lo_open=True, hi_open=True, owner=o)
+    if not is_concrete(speed) or np.ndim(speed) != 0:
+        raise ValueError(f"{o}: `speed` must be one concrete speed [m/s] (a reference run, not traceable); "
+                         f"got shape {np.shape(speed)}")
+    check_positive("speed", speed, "m/s", owner=o)  # the sampling window counts periods of V / r0
+    check_int(o, "n_basis", n_basis)
+    check_int(o, "n_periods_measure", n_periods_measure)
+    if n_periods_settle is not None:
+        check_nonnegative("n_periods_settle", n_periods_settle, owner=o)
+    check_positive("rtol", rtol, owner=o)
+    check_positive("atol", atol, owner=o)
     A, forcing, shift = galerkin_runout_system(rig, speed, n_basis)
     L = rig.length
     V = _arr(speed)

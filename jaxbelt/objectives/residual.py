@@ -34,15 +34,13 @@ being $T + t_{last}$.
 
 from __future__ import annotations
 
-import numbers
-
 import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import is_concrete, positive_checks
+from .._checks import check_int, is_concrete, positive_checks
 from .._guard import all_ok, error_if, guard, host_checked, traced_checks
 from ..commands import AbstractMotionCommand, MIN_EXPONENT_GAP, PseudoPolynomial, ShapedCommand, falling_factorial
 from ..models.platform import BeltPlatform
@@ -239,9 +237,7 @@ _MIN_NODES = 8
 
 
 def _check_int(owner, name, value, lo):
-    """Refuse anything but an integer >= lo (a float or a bool is refused, not truncated)."""
-    if isinstance(value, bool) or not isinstance(value, (numbers.Integral, np.integer)) or int(value) < lo:
-        raise ValueError(f"{owner}: parameter `{name}` must be an integer >= {lo}; got {value!r}")
+    check_int(owner, name, value, lo)
 
 
 def _end(cmd):
