@@ -450,3 +450,27 @@ def test_span_counts_and_reference_run_options_are_refused_not_truncated():
     contact = jb.BeltPulleyContact(0.05)
     with pytest.raises(ValueError, match="parameter `omega` must be finite"):
         contact.slip_report(float("nan"))  # was SlipError "slips by nan N"
+
+
+def test_fluctuation_index_of_a_reversed_drive_and_its_window():
+    """χ divides by the magnitude of the average speed: running backwards gave χ = -0.64. A window bound
+    beyond the samples was cut silently to the samples; the grid options must be positive."""
+    drive = jb.FourBarDrive()
+    ts = jnp.linspace(0.0, 0.5, 101)
+
+    def speed(v):
+        return jb.simulate(jb.Scene(drive, jb.ConstantVoltage(v), ts=ts, observe=("motor_speed",)))
+
+    back = speed(-25.0)
+    w = np.asarray(back.outputs["motor_speed"])[60:]  # t in [0.3, 0.5]: samples 60..100
+    t = np.asarray(ts)[60:]
+    avg = np.sum(0.5 * np.diff(t) * (w[1:] + w[:-1])) / (t[-1] - t[0])  # trapezoid time mean, < 0
+    assert avg < 0
+    assert float(jb.fluctuation_index(back, 0.3, 0.5)) == pytest.approx((w.max() - w.min()) / abs(avg), rel=1e-12)
+    for t0, t1, name in ((0.4, 5.0, "t1"), (-5.0, 0.5, "t0")):
+        with pytest.raises(ValueError, match=f"parameter `{name}`.*within the sampled times"):
+            jb.fluctuation_index(back, t0, t1)
+    pid = jb.PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0)
+    for kw, name in ((dict(t1=float("nan")), "t1"), (dict(dt_save=0.0), "dt_save"), (dict(method="rk4", dt=-1e-3), "dt")):
+        with pytest.raises(ValueError, match=f"parameter `{name}` must be finite and > 0 s"):
+            jb.fluctuation_objective(drive, pid, **kw)

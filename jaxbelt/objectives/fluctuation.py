@@ -75,6 +75,21 @@ def _check_bound(name, value):
         record(jnp.all(jnp.isfinite(jnp.asarray(value, dtype=float))), msg)
 
 
+def _check_inside(name, value, ts):
+    """A window bound must lie within the sampled times (beyond them the window would be cut silently)."""
+    msg = f"{_O}: parameter `{name}` (a bound of the window [t0, t1]) must lie within the sampled times"
+    if is_concrete((value, ts)):
+        t = np.asarray(ts, dtype=float)
+        tol = _WINDOW_RTOL * max(abs(float(t[-1])), 1.0)
+        v = float(np.asarray(value, dtype=float))
+        if not (t[0] - tol <= v <= t[-1] + tol):
+            raise ValueError(f"{msg} [{t[0]:g}, {t[-1]:g}] s; got {v:g}")
+    else:
+        t = jnp.asarray(ts, dtype=float)
+        tol = _WINDOW_RTOL * jnp.maximum(jnp.abs(t[-1]), 1.0)
+        record((value >= t[0] - tol) & (value <= t[-1] + tol), msg)
+
+
 _AVERAGES = ("mean", "midrange")
 
 
@@ -88,8 +103,9 @@ def chi_from_samples(ts, speed, t0=None, t1=None, *, smooth: bool = False, tempe
 
     `average`: `"mean"` (time mean, default) or `"midrange"` ((max + min)/2) for $\\dot\\varphi_{av}$.
 
-    `smooth=False`: exact $(\\max - \\min)/\\text{average}$ over the samples in the window (time
-    average by the trapezoid rule). `smooth=True`: log-mean-exp max and min at temperature
+    `smooth=False`: exact $(\\max - \\min)/|\\text{average}|$ over the samples in the window (time
+    average by the trapezoid rule; its magnitude, so that a drive running backwards has the χ of the
+    same motion forwards). `t0`, `t1` must lie within the sampled times. `smooth=True`: log-mean-exp max and min at temperature
     `temperature` × average speed (dimensionless, default 3e-4).
     """
     _check_average(average)
@@ -99,6 +115,7 @@ def chi_from_samples(ts, speed, t0=None, t1=None, *, smooth: bool = False, tempe
         for name, bound in (("t0", t0), ("t1", t1)):
             if bound is not None:
                 _check_bound(name, bound)
+                _check_inside(name, bound, ts)
         if smooth:
             check_positive("temperature", temperature, owner=_O)
         inside, w = _node_weights(ts, t0, t1)
@@ -114,7 +131,7 @@ def _chi(speed, inside, w, smooth, temperature, average):
         vmin = jnp.min(jnp.where(inside, speed, jnp.inf), axis=-1)
         if average == "midrange":
             avg = 0.5 * (vmax + vmin)
-        return (vmax - vmin) / avg
+        return (vmax - vmin) / jnp.abs(avg)
     tau = temperature * jnp.abs(avg)
     x = speed / tau[..., None] if jnp.ndim(tau) else speed / tau
     logw = jnp.log(jnp.where(w > 0, w / wsum, 1.0))
@@ -124,7 +141,7 @@ def _chi(speed, inside, w, smooth, temperature, average):
     smin = -jax.nn.logsumexp(xn_in + logw, axis=-1)
     if average == "midrange":
         avg = 0.5 * tau * (smax + smin)
-    return tau * (smax - smin) / avg
+    return tau * (smax - smin) / jnp.abs(avg)
 
 
 def _speed(sol):
@@ -149,9 +166,17 @@ def fluctuation_index(sol, t0=None, t1=None, *, smooth: bool = False, temperatur
     return chi_from_samples(sol.ts, _speed(sol), t0, t1, smooth=smooth, temperature=temperature, average=average)
 
 
-def _grid(t1, dt_save):
-    t1 = float(t1)
-    n = int(round(t1 / float(dt_save))) + 1
+def _grid(t1, step, step_name):
+    """The output grid 0..t1 [s] with spacing `step` [s] (its size fixes the program: concrete values)."""
+    for name, value in (("t1", t1), (step_name, step)):
+        if not is_concrete(value):
+            raise ValueError(f"{_O}: `{name}` fixes the number of output times, so it must be a concrete number "
+                             "(not traced)")
+        check_positive(name, value, "s", owner=_O)
+    t1, step = float(t1), float(step)
+    if t1 / step > 1e7:
+        raise ValueError(f"{_O}: `t1` / `{step_name}` = {t1 / step:.3g} output times; at most 1e7")
+    n = int(round(t1 / step)) + 1
     return np.linspace(0.0, t1, n)
 
 
@@ -173,7 +198,7 @@ def closed_loop_metrics(
     Returns a dict of scalars.
     """
     _check_average(average)
-    ts = _grid(t1, dt if method == "rk4" else dt_save)
+    ts = _grid(t1, *((dt, "dt") if method == "rk4" else (dt_save, "dt_save")))
     sol = _run_from_rest(drive, pid, ts, ("motor_speed", "voltage"), True, method, rtol, atol, dt, max_steps, adjoint)
     speed, v, ys = sol.outputs["motor_speed"], sol.outputs["voltage"], sol.ys
     i = ys[:, 2]
@@ -211,7 +236,7 @@ def fluctuation_objective(
                                 adjoint=adjoint, average=average)
         return m["chi_smooth"] if smooth else m["chi"]
     _check_average(average)
-    ts = _grid(t1, dt if method == "rk4" else dt_save)
+    ts = _grid(t1, *((dt, "dt") if method == "rk4" else (dt_save, "dt_save")))
     _check_bound("t0", t0)
     keep = ts >= float(t0) - _WINDOW_RTOL * max(abs(float(ts[-1])), 1.0)  # as `_node_weights` decides
     window = ts[keep] if keep.sum() >= 2 else ts  # fewer than two: chi_from_samples names the error
