@@ -474,3 +474,32 @@ def test_fluctuation_index_of_a_reversed_drive_and_its_window():
     for kw, name in ((dict(t1=float("nan")), "t1"), (dict(dt_save=0.0), "dt_save"), (dict(method="rk4", dt=-1e-3), "dt")):
         with pytest.raises(ValueError, match=f"parameter `{name}` must be finite and > 0 s"):
             jb.fluctuation_objective(drive, pid, **kw)
+
+
+@pytest.mark.parametrize("call, message", [
+    # each returned a plausible number (or hung) before
+    (lambda: jb.BeltPlatform().with_natural_frequency(-31.2), "parameter `omega_n` must be finite and > 0"),  # = +31.2
+    (lambda: jb.BeltPlatform().with_natural_frequency(0.3), "must be underdamped"),  # tree_at skipped the check
+    (lambda: jb.sensitivity_curve(jb.BeltPlatform(), {"p": jb.PseudoPolynomial([3.0, 4.0, 5.0])}, rel=1.2), "parameter `rel`"),
+    (lambda: jb.sensitivity_curve(jb.BeltPlatform(), {"p": jb.PseudoPolynomial([3.0, 4.0, 5.0])}, n=1), "parameter `n`"),
+    (lambda: jb.tolerance_band(np.linspace(0.7, 1.3, 7), np.full(7, 0.01), 1.0, 5.0), "parameter `omega0` must lie within"),
+    (lambda: jb.tolerance_band(np.linspace(1.3, 0.7, 7), np.full(7, 0.01), 1.0, 1.0), "strictly increasing"),
+    (lambda: jb.tolerance_band(np.linspace(0.7, 1.3, 7), np.full(7, 0.01), 1.0, 1.0, level=-1.0), "parameter `level`"),
+    (lambda: jb.response_curve(jb.NonlinearBelt(), max_step=float("nan")), "parameter `max_step`"),  # hung > 13 min
+    (lambda: jb.response_curve(jb.NonlinearBelt(), step=-0.05), "parameter `step`"),
+    (lambda: jb.fold_speeds(jb.NonlinearBelt(), n_folds=0), "parameter `n_folds`"),  # returned []
+    (lambda: jb.harmonic_balance(jb.NonlinearBelt(), 9.0, max_steps=0), "parameter `max_steps`"),
+    (lambda: jb.harmonic_balance(jb.NonlinearBelt(), 9.0, guess=np.zeros(2)), "`guess` must have shape"),
+])
+def test_options_of_the_sweeps_and_continuations_are_checked(call, message):
+    with pytest.raises(ValueError, match=re.escape(message)):
+        call()
+
+
+def test_a_traced_negative_natural_frequency_is_not_its_positive_twin():
+    plat, cmd = jb.BeltPlatform(), jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]))
+    f = jax.jit(lambda w: jb.residual_energy(plat.with_natural_frequency(w), cmd))
+    with pytest.raises(RUNTIME, match="parameter `k`"):
+        jax.block_until_ready(f(-float(plat.omega_n)))
+    w = 1.1 * float(plat.omega_n)
+    assert float(f(w)) == pytest.approx(float(jb.residual_energy(plat.with_natural_frequency(w), cmd)), rel=1e-12)

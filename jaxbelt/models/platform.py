@@ -121,8 +121,19 @@ class BeltPlatform(AbstractModel):
 
     def with_natural_frequency(self, omega_n):
         """The same platform with the belt stiffness scaled so that $\\omega_n$ takes the given value
-        (inertia, damping constant and geometry unchanged, so $\\xi$ scales as $1/\\omega_n$)."""
-        return eqx.tree_at(lambda p: p.k, self, self.k * (jnp.asarray(omega_n, dtype=float) / self.omega_n) ** 2)
+        (inertia, damping constant and geometry unchanged, so $\\xi$ scales as $1/\\omega_n$).
+
+        `omega_n` [rad/s] must be finite and > 0, and the result underdamped (`ValueError`); a traced
+        invalid value makes the stiffness NaN, which the platform's own check reports at run time."""
+        w = jnp.asarray(omega_n, dtype=float)
+        if is_concrete(w):
+            check_positive("omega_n", w, "rad/s", "BeltPlatform.with_natural_frequency")
+        else:  # the square would make a negative frequency look valid: NaN stiffness instead
+            w = jnp.where(jnp.isfinite(w) & (w > 0), w, jnp.nan)
+        new = eqx.tree_at(lambda p: p.k, self, self.k * (w / self.omega_n) ** 2)
+        if is_concrete(new):  # tree_at skips the construction checks (e.g. an overdamped result)
+            new.__check_init__()
+        return new
 
     # --- dynamics -----------------------------------------------------------------------------
     def vector_field(self, t, y, inp):

@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from .._checks import check_nonnegative, check_positive
+from .._checks import check_int, check_nonnegative, check_positive
 from ..commands import MIN_EXPONENT_GAP, PseudoPolynomial, ShapedCommand
 from .._guard import host_checked
 from ..objectives.residual import residual_energy, residual_energy_joules
@@ -418,9 +418,15 @@ def sensitivity_curve(plat, commands: dict, *, rel: float = 0.3, n: int = 121, n
     """Residual energy $E(T)$ [J] of each command against the actual natural frequency.
 
     The belt stiffness is scaled so that $\\omega$ sweeps $[1-rel, 1+rel]\\,\\omega_n$ (`n`
-    points; the design value sits at the centre when `n` is odd). Returns `(omegas, {name: E})`.
+    points; the design value sits at the centre when `n` is odd). `rel` in (0, 1), `n` >= 2.
+    Returns `(omegas, {name: E})`.
     """
-    omegas = jnp.linspace(1.0 - rel, 1.0 + rel, int(n)) * plat.omega_n
+    o = "sensitivity_curve"
+    check_positive("rel", rel, owner=o)
+    if not float(rel) < 1.0:
+        raise ValueError(f"{o}: parameter `rel` must lie in (0, 1) (the sweep must keep omega > 0); got {rel}")
+    n = check_int(o, "n", n, 2)
+    omegas = jnp.linspace(1.0 - rel, 1.0 + rel, n) * plat.omega_n
     out = {}
     for name, cmd in commands.items():
         out[name] = _band_reference(plat, cmd, omegas, n_nodes)
@@ -432,10 +438,22 @@ def tolerance_band(omegas, energy, reference, omega0, level: float = 0.05):
 
     Returns the width as a fraction of `omega0` (0 when the ratio at `omega0` is not below the
     level), with the band edges found by linear interpolation of the ratio on the grid; a band
-    that reaches the end of the grid is cut there.
+    that reaches the end of the grid is cut there. `omegas` [rad/s]: a strictly increasing grid;
+    `energy` of its shape, `reference` of its shape or a scalar; `omega0` within the grid; `level` > 0.
     """
+    o = "tolerance_band"
     w = np.asarray(omegas, dtype=float)
-    r = np.asarray(energy, dtype=float) / np.asarray(reference, dtype=float)
+    e, ref = np.asarray(energy, dtype=float), np.asarray(reference, dtype=float)
+    if w.ndim != 1 or w.size < 2 or not np.all(np.isfinite(w)) or not np.all(np.diff(w) > 0):
+        raise ValueError(f"{o}: `omegas` must be a finite, strictly increasing 1-D grid of >= 2 frequencies [rad/s]")
+    if e.shape != w.shape or ref.shape not in ((), w.shape):
+        raise ValueError(f"{o}: `energy` must have the shape of `omegas` {w.shape} and `reference` that shape or "
+                         f"none (a scalar); got {e.shape} and {ref.shape}")
+    check_positive("level", level, owner=o)
+    check_positive("omega0", omega0, "rad/s", owner=o)
+    if not w[0] <= float(omega0) <= w[-1]:
+        raise ValueError(f"{o}: parameter `omega0` must lie within the grid [{w[0]:g}, {w[-1]:g}] rad/s; got {omega0}")
+    r = e / ref
     i0 = int(np.argmin(np.abs(w - float(omega0))))
     if not r[i0] < level:
         return 0.0

@@ -43,7 +43,7 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 
-from ..._checks import collecting, is_concrete
+from ..._checks import check_int, check_positive, collecting, is_concrete
 from ..._guard import all_ok, guard, traced_checks, validated_inputs
 from .model import ModalSystem, NonlinearBelt, mode_shapes
 
@@ -166,6 +166,10 @@ def harmonic_balance(belt: NonlinearBelt, speed, n_harmonics: int = 3, guess=Non
         belt.check_speed(speed)
     checks = checks + traced_checks(belt)
     n = belt.n_modes
+    check_int("harmonic_balance", "max_steps", max_steps)
+    if guess is not None and jnp.shape(guess) != (2 * n, 2 * H + 1):
+        raise ValueError(f"harmonic_balance: `guess` must have shape (2 n_modes, 2 n_harmonics + 1) = "
+                         f"{(2 * n, 2 * H + 1)}; got {jnp.shape(guess)}")
     Y0 = jnp.zeros(2 * n * (2 * H + 1)) if guess is None else jnp.ravel(jnp.asarray(guess, float)) / _scale(belt)
     speed = jnp.asarray(speed, dtype=float)
     Y, pp, amp, ok = _hb_point(belt, speed, Y0, H, max_steps)
@@ -405,8 +409,10 @@ def fold_speeds(belt: NonlinearBelt, speed_range=(7.5, 10.5), n_harmonics: int =
     """
     H = _check_h(n_harmonics)
     _check_equal_radii(belt)
+    n_folds = check_int("fold_speeds", "n_folds", n_folds)
+    max_points = check_int("fold_speeds", "max_points", max_points, 2)
     v0, v1 = _check_range_speeds(belt, speed_range)
-    _, Vs, ok = _fold_jit(belt, v0, v1, H, int(n_folds), int(max_points), jnp.asarray(_DS0), jnp.asarray(_DS_MAX))
+    _, Vs, ok = _fold_jit(belt, v0, v1, H, n_folds, max_points, jnp.asarray(_DS0), jnp.asarray(_DS_MAX))
     Vs = belt.wave_speed * 0.0 + Vs  # keep the belt's dtype
     if throw:
         if is_concrete(ok):
@@ -553,8 +559,14 @@ def response_curve(belt: NonlinearBelt, speed_range=(7.5, 10.5), n_harmonics: in
     """
     H = _check_h(n_harmonics)
     _check_equal_radii(belt)
+    o = "response_curve"
+    max_points = check_int(o, "max_points", max_points, 2)
+    check_positive("step", step, owner=o)  # a NaN step never ends the continuation; a negative one walks back
+    check_positive("max_step", max_step, owner=o)
+    if not float(step) <= float(max_step):
+        raise ValueError(f"{o}: parameter `step` must be <= `max_step`; got step = {step}, max_step = {max_step}")
     v0, v1 = _check_range_speeds(belt, speed_range)
-    us, ts, acc = _trace(belt, v0, v1, H, int(max_points), step, max_step)
+    us, ts, acc = _trace(belt, v0, v1, H, max_points, step, max_step)
     acc_n = np.asarray(acc)
     us_n = np.asarray(us)
     if not acc_n[0] or not np.any(us_n[acc_n, -1] >= float(v1)):
