@@ -34,6 +34,8 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from ._checks import check_int, check_nonnegative, check_positive
+
 __all__ = ["identify", "IdentifyResult"]
 
 _SOLVERS = ("lm", "gn")
@@ -96,6 +98,9 @@ def _fit(predict, names, p0, data, w, is_log, scale, solver_kind, jac_mode, rtol
 
     def resid(u, _):
         pred = jnp.asarray(predict_once(unpack(u)), dtype=float)
+        if pred.shape != data.shape:  # broadcasting would fit a scalar to every point without a word
+            raise ValueError(f"identify: `predict(params)` must return an array of the shape of `data` "
+                             f"{tuple(data.shape)}; got shape {tuple(pred.shape)}")
         return jnp.ravel((pred - data) * w)
 
     if solver_kind == "lm":
@@ -148,6 +153,9 @@ def identify(
         raise ValueError(f"identify: `solver` must be one of {_SOLVERS}; got {solver!r}")
     if jac not in ("fwd", "bwd"):
         raise ValueError(f"identify: `jac` must be 'fwd' or 'bwd'; got {jac!r}")
+    check_positive("rtol", rtol, owner="identify")
+    check_nonnegative("atol", atol, owner="identify")
+    check_int("identify", "max_steps", max_steps)
     names = tuple(params0)
     p0 = np.array([float(params0[n]) for n in names])
     if not np.all(np.isfinite(p0)):

@@ -503,3 +503,24 @@ def test_a_traced_negative_natural_frequency_is_not_its_positive_twin():
         jax.block_until_ready(f(-float(plat.omega_n)))
     w = 1.1 * float(plat.omega_n)
     assert float(f(w)) == pytest.approx(float(jb.residual_energy(plat.with_natural_frequency(w), cmd)), rel=1e-12)
+
+
+def test_identify_refuses_a_prediction_of_another_shape_and_fractional_orders_are_refused():
+    x = np.linspace(0.0, 1.0, 20)
+    y = 3.0 * x + 1.0
+    # a scalar prediction was broadcast against the 20 points and fitted (a = 3.48) without a word
+    for predict in (lambda p: p["a"] * jnp.mean(x), lambda p: p["a"] * x[:, None]):
+        with pytest.raises(ValueError, match=r"must return an array of the shape of `data` \(20,\)"):
+            jb.identify(predict, {"a": 1.0}, y)
+    with pytest.raises(ValueError, match="parameter `rtol`"):
+        jb.identify(lambda p: p["a"] * x + p["b"], {"a": 1.0, "b": 0.5}, y, rtol=-1.0)
+    fit = jb.identify(lambda p: p["a"] * x + p["b"], {"a": 1.0, "b": 0.5}, y)
+    assert fit.params["a"] == pytest.approx(3.0, rel=1e-9) and fit.params["b"] == pytest.approx(1.0, rel=1e-9)
+    span = jb.MovingString()
+    for kw in (dict(n=1.5, m=8), dict(n=1, m=7.5)):
+        with pytest.raises(ValueError, match="whole numbers"):
+            jb.exciting_speeds(span, 0.1166, **kw)
+    with pytest.raises(RUNTIME, match="whole numbers"):
+        jax.block_until_ready(jax.jit(lambda m: jb.exciting_speeds(span, 0.1166, n=1, m=m))(7.5))
+    assert float(jax.jit(lambda m: jb.exciting_speeds(span, 0.1166, n=1, m=m))(8.0)) == pytest.approx(
+        float(jb.exciting_speeds(span, 0.1166, n=1, m=8)), rel=1e-12)

@@ -263,6 +263,13 @@ def exciting_speeds(span: MovingString, pulley_radius, n=1, m=1):
         check_positive("pulley_radius", pulley_radius, "m", "exciting_speeds")
         check_range("n", n, 1, None, owner="exciting_speeds")
         check_range("m", m, 1, None, owner="exciting_speeds")
+        for name, v in (("n", n), ("m", m)):  # mode and harmonic orders are whole numbers
+            msg = f"exciting_speeds: parameter `{name}` must hold whole numbers (a mode or harmonic order)"
+            if is_concrete(v):
+                if not np.all(np.asarray(v, dtype=float) == np.round(np.asarray(v, dtype=float))):
+                    raise ValueError(f"{msg}; got {np.asarray(v).tolist()}")
+            else:
+                record(jnp.all(v == jnp.round(v)), msg)
     checks = checks + traced_checks(span)
     R = jnp.asarray(pulley_radius, dtype=float)
     n = jnp.asarray(n, dtype=float)
