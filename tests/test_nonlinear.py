@@ -216,3 +216,38 @@ def test_simulate_scene_matches_sweep_integrator():
     sol = jb.simulate(jb.Scene(b, jb.RunningSpeed(9.0), t2[idx]), method="ode", rtol=1e-10, atol=1e-14)
     scale = float(jnp.max(jnp.abs(zs)))
     np.testing.assert_allclose(np.asarray(sol.ys), np.asarray(zs[idx]), atol=1e-5 * scale)
+
+
+def _fd5(f, x, h):
+    """Fourth-order central difference (the reference of the two tests below)."""
+    return (-f(x + 2 * h) + 8 * f(x + h) - 8 * f(x - h) + f(x - 2 * h)) / (12 * h)
+
+
+def test_backbone_speed_gradients_match_finite_differences():
+    """The bisection carries no derivative: jax.grad was exactly 0 w.r.t. a, v_l, span and the pulley radii
+    (finite differences: 764.8, 0.153, -12.7). Now the implicit-function derivative, eagerly and under jit."""
+    import equinox as eqx
+
+    belt = jb.NonlinearBelt()
+    cases = [
+        (lambda a: jb.backbone_speed(belt, a), 0.01, 1e-5),
+        (lambda vl: jb.backbone_speed(eqx.tree_at(lambda b: b.v_l, belt, vl), 0.01), 50.0, 1e-3),
+        (lambda L: jb.backbone_speed(eqx.tree_at(lambda b: b.span, belt, L), 0.01), 0.86, 1e-5),
+        (lambda r: jb.backbone_speed(eqx.tree_at(lambda b: b.pulley_radii, belt, jnp.stack([r, r])), 0.01), 0.063, 1e-6),
+    ]
+    for f, x, h in cases:
+        ref = float(_fd5(f, x, h))
+        assert abs(ref) > 1e-3
+        assert float(jax.grad(f)(x)) == pytest.approx(ref, rel=1e-7)
+        assert float(jax.jit(jax.grad(f))(x)) == pytest.approx(ref, rel=1e-7)
+
+
+def test_backbone_amplitude_gradient_is_zero_below_the_crossing():
+    """Below the linear crossing the amplitude is 0 on an open interval: its derivative is 0 (it was NaN)."""
+    belt = jb.NonlinearBelt()
+    f = lambda v: jb.backbone_amplitude(belt, v)  # noqa: E731
+    speeds = jnp.array([7.0, 8.0, 9.5, 10.0])
+    grads = np.asarray(jax.vmap(jax.grad(f))(speeds))
+    ref = np.array([float(_fd5(f, float(v), 1e-4)) for v in speeds])
+    np.testing.assert_array_equal(grads[:2], [0.0, 0.0])
+    np.testing.assert_allclose(grads[2:], ref[2:], rtol=1e-7)

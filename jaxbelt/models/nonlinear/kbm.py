@@ -86,7 +86,11 @@ def backbone_amplitude(belt: NonlinearBelt, speed, n: int = 1):
     v = jnp.asarray(speed, dtype=float) / belt.wave_speed
     Om = v * belt.span / belt.pulley_radii[0]
     sig = Om - n * jnp.pi * (1 - v**2)
-    return guard(jnp.sqrt(jnp.maximum(sig, 0.0) / kappa(v, belt.v_l, n)), checks, throw=True)[0]
+    above = sig > 0
+    # double where: below the crossing the value is 0 on an open interval, and so is its derivative
+    # (sqrt(max(sig, 0)) would give inf * 0 = NaN there)
+    a = jnp.where(above, jnp.sqrt(jnp.where(above, sig, 1.0) / kappa(v, belt.v_l, n)), 0.0)
+    return guard(a, checks, throw=True)[0]
 
 
 def backbone_speed(belt: NonlinearBelt, a, n: int = 1):
@@ -113,14 +117,20 @@ def backbone_speed(belt: NonlinearBelt, a, n: int = 1):
     bracketed = (resid(jnp.zeros_like(a)) <= 0) & (resid(jnp.full_like(a, v_top)) > 0)
     msg = ("backbone_speed: no sub-critical speed meets the backbone at this amplitude `a` (the drive-pulley "
            "rate stays below the backbone frequency up to the wave speed: `a` too large)")
-    if is_concrete((bracketed, checks)):
-        bad = np.atleast_1d(np.asarray(a))[~np.atleast_1d(np.asarray(bracketed))]
-        if bad.size:
-            raise ValueError(f"{msg}; got a = {np.ravel(bad).tolist()}")
+    if is_concrete((bracketed, checks)):  # (under an eager grad the flags are concrete, `a` is not)
+        ok = np.atleast_1d(np.asarray(bracketed))
+        if not ok.all():
+            got = f"; got a = {np.ravel(np.atleast_1d(np.asarray(a))[~ok]).tolist()}" if is_concrete(a) else ""
+            raise ValueError(msg + got)
     else:
         checks = checks + [(jnp.all(bracketed), msg)]
     lo, hi = jax.lax.fori_loop(0, 80, body, (jnp.zeros_like(a), jnp.ones_like(a) * v_top))
-    return guard(0.5 * (lo + hi) * belt.wave_speed, checks, throw=True)[0]
+    # the bisection carries no derivative: one Newton step from its (constant) root does. Its value is
+    # the root (resid = 0 there) and its derivative the implicit-function one, -resid_theta / resid_v
+    v_root = jax.lax.stop_gradient(0.5 * (lo + hi))
+    r, r_v = jax.jvp(resid, (v_root,), (jnp.ones_like(v_root),))
+    v_star = v_root - r / jax.lax.stop_gradient(r_v) + jax.lax.stop_gradient(r / r_v)
+    return guard(v_star * belt.wave_speed, checks, throw=True)[0]
 
 
 def forcing_coefficient(belt: NonlinearBelt, speed, n: int = 1):
