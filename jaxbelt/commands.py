@@ -181,6 +181,12 @@ def falling_factorial(gammas, k: int):
 MIN_EXPONENT_GAP = 1e-3
 
 
+def exponents_apart(gammas) -> bool:
+    """Whether the (host) exponents `gammas` differ pairwise by at least `MIN_EXPONENT_GAP` (to rounding)."""
+    g = _np.sort(_np.asarray(gammas, dtype=float))
+    return bool(_np.min(_np.diff(g)) >= MIN_EXPONENT_GAP * (1 - 1e-9))
+
+
 def _record_check(ok, message):
     record(ok, message)
 
@@ -229,9 +235,7 @@ class PseudoPolynomial(AbstractMotionCommand):
             "their accuracy)"
         )
         if is_concrete(self.gammas):
-            g = _np.sort(_np.asarray(self.gammas, dtype=float))
-            gap = _np.min(_np.diff(g))
-            if not gap >= MIN_EXPONENT_GAP * (1 - 1e-9):
+            if not exponents_apart(self.gammas):
                 raise ValueError(f"{msg}; got {self.gammas.tolist()}")
         else:
             g = self.gammas

@@ -50,6 +50,11 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    check = getattr(args, "check", None)  # what argparse cannot see: relations between arguments
+    problem = check(args) if check is not None else None
+    if problem:
+        print(f"jaxbelt {args.command}: error: {problem} (see --help)", file=sys.stderr)
+        return 2
     if not args.no_cache and args.command != "bench":
         from ..cache import enable_compilation_cache
 
@@ -57,11 +62,6 @@ def main(argv=None) -> int:
             enable_compilation_cache()
         except OSError as e:  # an unwritable cache folder costs time, not the result
             print(f"jaxbelt: compilation cache disabled ({e})", file=sys.stderr)
-    check = getattr(args, "check", None)  # what argparse cannot see: relations between arguments
-    problem = check(args) if check is not None else None
-    if problem:
-        print(f"jaxbelt {args.command}: error: {problem} (see --help)", file=sys.stderr)
-        return 2
     try:
         return int(args.func(args) or 0)
     except ValueError as e:  # bad parameters: say which, no traceback

@@ -40,15 +40,14 @@ def register(subparsers):
 
 def check(args) -> str | None:
     """The relations between arguments that argparse does not check (run before anything is computed)."""
-    from ..commands import MIN_EXPONENT_GAP
+    from ..commands import MIN_EXPONENT_GAP, exponents_apart
 
     low, high = args.band
     if not low < high:
         return f"argument --band: LOW must be < HIGH, got {low:g} {high:g}"
-    g = sorted(args.gammas)
-    if len(g) < 2:
-        return f"argument --gammas: give at least 2 exponents, got {len(g)}"
-    if min(b - a for a, b in zip(g, g[1:])) < MIN_EXPONENT_GAP:
+    if len(args.gammas) < 2:
+        return f"argument --gammas: give at least 2 exponents, got {len(args.gammas)}"
+    if not exponents_apart(args.gammas):
         return (f"argument --gammas: the exponents must differ pairwise by at least {MIN_EXPONENT_GAP:g}, "
                 f"got {' '.join(f'{x:g}' for x in args.gammas)}")
     return None

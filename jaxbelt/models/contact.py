@@ -116,9 +116,12 @@ class BeltPulleyContact(eqx.Module):
         found = self._omega_checks("BeltPulleyContact.centrifugal_tension", omega)
         return checked(self._tc(omega), self, checks=found)
 
+    def _limit(self):
+        return jnp.exp(self.friction * self.wrap_angle)
+
     def slip_limit(self):
         """$e^{\\mu\\vartheta}$, the largest tension ratio friction can hold (eq. 8)."""
-        return checked(jnp.exp(self.friction * self.wrap_angle), self)
+        return checked(self._limit(), self)
 
     def slip_margin(self, omega):
         """$(T_1 - T_c)e^{\\mu\\vartheta} - (T_2 - T_c)$ [N]: eq. (8) as a margin (>= 0: no slip).
@@ -128,8 +131,10 @@ class BeltPulleyContact(eqx.Module):
         """
         found = self._omega_checks("BeltPulleyContact.slip_margin", omega)
         tc = self._tc(omega)
-        margin = (self.slack_tension - tc) * jnp.exp(self.friction * self.wrap_angle) - (self.tight_tension - tc)
-        return checked(margin, self, checks=found)
+        return checked(self._margin(tc), self, checks=found)
+
+    def _margin(self, tc):
+        return (self.slack_tension - tc) * self._limit() - (self.tight_tension - tc)
 
     def slip_report(self, omega) -> SlipReport:
         """The slip check at one concrete speed `omega` [rad/s] as a `SlipReport` (ratio, limit, margin, needed μ)."""
@@ -138,10 +143,11 @@ class BeltPulleyContact(eqx.Module):
                              f"outside jit; use slip_margin under jit or for arrays); got shape {np.shape(omega)}")
         check_finite("omega", omega, owner="BeltPulleyContact.slip_report")
         omega = float(np.asarray(omega))
-        tc = float(self.centrifugal_tension(omega))
+        tc_array = self._tc(omega)  # omega checked above, the contact at its construction
+        tc = float(tc_array)
         t1, t2 = float(self.slack_tension), float(self.tight_tension)
-        lim = float(self.slip_limit())
-        margin = float(self.slip_margin(omega))
+        lim = float(self._limit())
+        margin = float(self._margin(tc_array))
         ratio = (t2 - tc) / (t1 - tc) if t1 > tc else float("inf")
         req = float(np.log(ratio) / float(self.wrap_angle)) if np.isfinite(ratio) and ratio > 0 else float("inf")
         return SlipReport(omega, tc, ratio, lim, margin, max(req, 0.0), margin >= 0.0)

@@ -36,8 +36,6 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-import numbers
-
 from .._checks import (check_finite, check_int, check_nonnegative, check_positive, check_range, collecting,
                        is_concrete, record)
 from .._checks import as_float_array as _arr

@@ -147,7 +147,7 @@ def quadrature_error(plat, cmd, n_nodes: int = 128):
     acceleration's terms, $|\\Phi/T|\\sum_i |a_i|/(\\gamma_i - 1)$, so that an $\\mathcal H$ near zero
     (a well shaped command) is judged by the accuracy of its cancelling parts.
     """
-    _check_int("quadrature_error", "n_nodes", n_nodes, _MIN_NODES)
+    check_int("quadrature_error", "n_nodes", n_nodes, _MIN_NODES)
     base = cmd.base if isinstance(cmd, ShapedCommand) else cmd
     if not isinstance(base, PseudoPolynomial):
         return jnp.zeros(())
@@ -200,12 +200,12 @@ def residual_energy(plat, cmd, *, method: str = "quadrature", n_nodes: int = 128
         )
     if method not in ("quadrature", "ode"):
         raise ValueError(f"residual_energy: `method` must be 'quadrature' or 'ode'; got {method!r}")
-    _check_int(o, "n_nodes", n_nodes, _MIN_NODES)
+    check_int(o, "n_nodes", n_nodes, _MIN_NODES)
     if method == "quadrature":  # the tolerances play no part: fixed values keep one compiled program
         rtol, atol, max_steps = 0.0, 0.0, 0
         checks = traced_checks(plat, cmd)  # empty when the values are concrete (checked at construction)
     else:
-        _check_int(o, "max_steps", max_steps, 1)
+        check_int(o, "max_steps", max_steps, 1)
         tol_checks = positive_checks(o, rtol=rtol, atol=atol)
         if tol_checks:  # traced: the solver gets safe tolerances, the result is refused by the checks
             tol_ok = all_ok(tol_checks)
@@ -234,10 +234,6 @@ def residual_energy(plat, cmd, *, method: str = "quadrature", n_nodes: int = 128
 
 #: Fewest Gauss-Legendre nodes of the quadrature (its error estimate compares with a rule of 3/4 as many).
 _MIN_NODES = 8
-
-
-def _check_int(owner, name, value, lo):
-    check_int(owner, name, value, lo)
 
 
 def _end(cmd):

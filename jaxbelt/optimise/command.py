@@ -382,11 +382,10 @@ def optimise_robust(plat, cmd: PseudoPolynomial, *, band=(0.8, 1.2), n_freq: int
     if not (0 < lo_b < hi_b):
         raise ValueError(f"optimise_robust: `band` must satisfy 0 < low < high (fractions of omega_n); got {band}")
     _check_options("optimise_robust", margin, gap, max_speed, max_accel, penalty, learning_rate)
-    if isinstance(n_freq, bool) or not isinstance(n_freq, (int, np.integer)) or n_freq < 2:
-        raise ValueError(f"optimise_robust: parameter `n_freq` must be an integer >= 2; got {n_freq!r}")
+    n_freq = check_int("optimise_robust", "n_freq", n_freq, 2)
     if reference is None:
         reference = PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]), cmd.displacement, cmd.duration)
-    omegas = jnp.linspace(lo_b, hi_b, int(n_freq)) * plat.omega_n
+    omegas = jnp.linspace(lo_b, hi_b, n_freq) * plat.omega_n
     e_ref = _band_reference(plat, reference, omegas, n_nodes)
     lower, margin, gap = _bounds(cmd, margin, gap, max_step)
     theta0 = _params_jit(cmd.gammas, lower, margin, gap, max_step)

@@ -160,7 +160,7 @@ def harmonic_balance(belt: NonlinearBelt, speed, n_harmonics: int = 3, guess=Non
     parameters raise `ValueError`; traced ones (a belt or speed inside jit/vmap/grad) raise at run
     time, naming the parameter (`throw=False`: `success=False` and NaN values).
     """
-    H = _check_h(n_harmonics)
+    H = check_int("harmonic_balance", "n_harmonics", n_harmonics)
     _check_equal_radii(belt)
     with collecting() as checks:  # concrete: raises now; traced: recorded, attached to the results below
         belt.check_speed(speed)
@@ -188,12 +188,6 @@ def harmonic_balance(belt: NonlinearBelt, speed, n_harmonics: int = 3, guess=Non
     nanif = lambda a: jnp.where(ok, a, jnp.nan)  # noqa: E731
     return HarmonicSolution(speed=speed, coefficients=nanif(_scale(belt) * Y.reshape(2 * n, 2 * H + 1)),
                             pp=nanif(pp), amplitude=nanif(amp), success=ok)
-
-
-def _check_h(n_harmonics):
-    if not isinstance(n_harmonics, (int, np.integer)) or isinstance(n_harmonics, bool) or n_harmonics < 1:
-        raise ValueError(f"parameter `n_harmonics` must be an integer >= 1; got {n_harmonics!r}")
-    return int(n_harmonics)
 
 
 # --- continuation --------------------------------------------------------------------------------------
@@ -407,7 +401,7 @@ def fold_speeds(belt: NonlinearBelt, speed_range=(7.5, 10.5), n_harmonics: int =
     Fewer than `n_folds` folds in the range: `ValueError` (concrete) / `eqx.error_if` (traced);
     `throw=False` returns NaN for the missing ones.
     """
-    H = _check_h(n_harmonics)
+    H = check_int("fold_speeds", "n_harmonics", n_harmonics)
     _check_equal_radii(belt)
     n_folds = check_int("fold_speeds", "n_folds", n_folds)
     max_points = check_int("fold_speeds", "max_points", max_points, 2)
@@ -478,7 +472,7 @@ def _jumps_jit(belt, v0, v1, H, n_folds, max_points, ds0, ds_max):
 def jumps(belt: NonlinearBelt, speed_range=(7.5, 10.5), n_harmonics: int = 3, n_folds: int = 2, *,
           max_points: int = 200, throw: bool = True) -> Jumps:
     """Fold speeds and the peak-to-peak before and after each jump (see `Jumps`); differentiable."""
-    H = _check_h(n_harmonics)
+    H = check_int("jumps", "n_harmonics", n_harmonics)
     _check_equal_radii(belt)
     v0, v1 = _check_range_speeds(belt, speed_range)
     Vs, ppb, ppa, ok = _jumps_jit(belt, v0, v1, H, int(n_folds), int(max_points), jnp.asarray(_DS0),
@@ -557,7 +551,7 @@ def response_curve(belt: NonlinearBelt, speed_range=(7.5, 10.5), n_harmonics: in
     scaled (coefficients / run-out, speed [m/s]) space. Raises `RuntimeError` if the curve does
     not reach the end of the range within `max_points` points.
     """
-    H = _check_h(n_harmonics)
+    H = check_int("response_curve", "n_harmonics", n_harmonics)
     _check_equal_radii(belt)
     o = "response_curve"
     max_points = check_int(o, "max_points", max_points, 2)

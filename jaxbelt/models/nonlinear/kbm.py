@@ -47,7 +47,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..._checks import check_nonnegative, collecting, is_concrete
+from ..._checks import check_int, check_nonnegative, collecting, is_concrete
 from ..._guard import guard, traced_checks
 from .model import NonlinearBelt, _gauss, mode_shapes
 
@@ -57,8 +57,7 @@ def _checks(owner: str, belt, n, speed=None) -> list:
     (to attach to the result with `guard`)."""
     if not isinstance(belt, NonlinearBelt):
         raise TypeError(f"{owner}: `belt` must be a NonlinearBelt; got {type(belt).__name__}")
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
-        raise ValueError(f"{owner}: parameter `n` (mode number) must be an integer >= 1; got {n!r}")
+    check_int(owner, "n", n)  # the mode number
     with collecting() as found:
         if speed is not None:
             belt.check_speed(speed)
