@@ -296,6 +296,50 @@ def test_cli_entry_ends_the_process_with_the_commands_status_and_output():
     assert r.stdout.splitlines() == ["command output", "exit handler ran"]
 
 
+def test_cli_process_binds_lapack_without_scipy_linalg_and_runs_without_cyclic_gc():
+    # the command's process: LAPACK kernels bound to scipy's tables loaded on their own (not the 0.2 s
+    # scipy.linalg package), results as from numpy's LAPACK; the cyclic collector off while it runs
+    code = (
+        "import sys, gc, numpy as np, jax, jax.numpy as jnp, jaxbelt.cli as c\n"
+        "def probe():\n"
+        "    a = np.array([[0.0, 1.0, 0.3], [-4.0, -0.5, 0.0], [0.2, 0.0, -2.0]])\n"
+        "    w = np.sort_complex(np.asarray(jnp.linalg.eigvals(jnp.asarray(a))))\n"
+        "    ref = np.sort_complex(np.linalg.eigvals(a))\n"
+        "    x = np.asarray(jnp.linalg.solve(jnp.asarray(a), jnp.ones(3)))\n"
+        "    print(float(np.max(np.abs(w - ref))), float(np.max(np.abs(a @ x - 1.0))),\n"
+        "          'scipy.linalg' in sys.modules, 'scipy.linalg.cython_lapack' in sys.modules, gc.isenabled())\n"
+        "    return 0\n"
+        "c.main = probe; c.entry()\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    eig_err, solve_err, linalg_pkg, tables, gc_on = r.stdout.split()
+    assert float(eig_err) < 1e-12 and float(solve_err) < 1e-12
+    assert (linalg_pkg, tables, gc_on) == ("False", "True", "False")
+
+
+def test_cli_lapack_tables_fall_back_to_the_usual_import(monkeypatch):
+    # another scipy layout (here: the second table cannot be loaded) leaves nothing behind in sys.modules
+    import importlib.util
+
+    import jaxbelt.cli as cli
+
+    real = importlib.util.spec_from_file_location
+
+    def refuse_lapack(name, *args, **kwargs):
+        if name.endswith("cython_lapack"):
+            raise ImportError("not this layout")
+        return real(name, *args, **kwargs)
+
+    before = {k for k in sys.modules if k.startswith("scipy.linalg.cython_")}
+    monkeypatch.delitem(sys.modules, "scipy.linalg", raising=False)
+    for k in before:
+        monkeypatch.delitem(sys.modules, k)
+    monkeypatch.setattr(importlib.util, "spec_from_file_location", refuse_lapack)
+    cli._bind_lapack_tables()
+    assert not {k for k in sys.modules if k.startswith("scipy.linalg.cython_")}
+
+
 def test_no_tracer_leaks_between_programs():
     """Models built inside one jitted program must not leak values into another (a cached constant made
     inside a trace once broke every later program with 'Execution supplied 1 arguments ...')."""

@@ -27,10 +27,10 @@ def draw_startup(ts, curves, gammas, v_max=24.0, fig=None):
     output of `jaxbelt.startup_curves`), `gammas` the voltage time constants [s], `v_max` [V]
     (for the title). Returns the matplotlib figure.
     """
-    import matplotlib.pyplot as plt
-
     ts = np.asarray(ts)
     if fig is None:
+        import matplotlib.pyplot as plt  # only to make the figure: the CLI passes its own Agg figure
+
         fig = plt.figure(figsize=(11, 12), constrained_layout=True)
     axes = fig.subplots(4, 2)
     for ax, (name, title) in zip(axes.ravel(), STARTUP_PANELS):
