@@ -70,6 +70,15 @@ def test_cli_bench_without_checkout_says_so(monkeypatch, capsys):
     assert "benchmarks/ folder was not found" in capsys.readouterr().err
 
 
+def test_cli_bench_refuses_unknown_scenes_in_one_line(capsys):
+    from jaxbelt.cli import main
+
+    assert main(["bench", "--quick", "--only", "startup", "foo"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("jaxbelt bench: error: argument --only: unknown scene(s) foo (choose from ")
+    assert "startup" in err and err.count("\n") == 1
+
+
 def test_matched_error_ratio_pairs_the_most_accurate_matched_reference():
     """Hand-made rows: the most accurate scipy run (1e-10) is matched by no jaxbelt run, the next
     (1e-8, 2 s) by two; the cheaper of those (0.01 s) is taken: ratio 200. Batches are left out."""

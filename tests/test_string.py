@@ -357,3 +357,20 @@ def test_critical_rotor_speed_eq53(span):
     assert all(float(jb.exciting_speeds(span, 0.1166, n, m)) < w_cr for n in (1, 2, 3) for m in (1, 5, 9))
     with pytest.raises(ValueError, match="pulley_radius"):
         span.critical_rotor_speed(0.0)
+
+
+def test_mode_shape_refuses_positions_off_the_span(span):
+    # the ends are part of the span (y = 0 there); a point beyond either end, or NaN, is refused by name
+    # eagerly, and under jit where the position is traced
+    import equinox as eqx
+
+    L = float(span.length)
+    ends = np.asarray(span.mode_shape(jnp.array([0.0, L]), 0.01, 20.0))
+    assert np.all(np.abs(ends) < 1e-12)
+    for bad in (-1e-3, L + 1e-3, float("nan")):
+        with pytest.raises(ValueError, match=r"mode_shape: parameter `x` must lie on the span \[0, 0.2621\] m"):
+            span.mode_shape(bad, 0.0, 20.0)
+    shape = jax.jit(lambda x: span.mode_shape(x, 0.0, 20.0))
+    assert float(shape(0.1)) == pytest.approx(float(span.mode_shape(0.1, 0.0, 20.0)), rel=1e-14)
+    with pytest.raises((eqx.EquinoxRuntimeError, jax.errors.JaxRuntimeError, ValueError), match="must lie on the span"):
+        jax.block_until_ready(shape(L + 1e-3))

@@ -27,7 +27,24 @@ def register(subparsers):
                               description=__doc__)
     p.add_argument("--quick", action="store_true", help="CI-sized runs (< 2 minutes on 2 cores)")
     p.add_argument("--only", nargs="+", metavar="SCENE", help="run only these scenes (e.g. startup)")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, check=_check_scenes)
+
+
+def _check_scenes(args):
+    """`--only` names scenes of the checkout's benchmarks (the list is the checkout's own: `run_all.discover`)."""
+    where = benchmarks_dir()
+    if not args.only or where is None:  # no checkout: `run` says so
+        return None
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("_jaxbelt_bench_run_all", where / "run_all.py")
+    run_all = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(run_all)
+    scenes = run_all.discover()
+    unknown = sorted(set(args.only) - set(scenes))
+    if unknown:
+        return f"argument --only: unknown scene(s) {', '.join(unknown)} (choose from {', '.join(scenes)})"
+    return None
 
 
 def run(args) -> int:

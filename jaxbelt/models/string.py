@@ -104,6 +104,18 @@ def _check_subcritical(speed, critical, owner: str, name: str = "speed"):
     )
 
 
+def _check_on_span(x, length, owner: str) -> None:
+    """Refuse positions `x` [m] outside the span [0, length] (ValueError; recorded when traced)."""
+    if is_concrete(x) and is_concrete(length):
+        v, L = np.asarray(x, dtype=float), float(np.max(np.asarray(length)))
+        bad = ~(np.isfinite(v) & (v >= 0.0) & (v <= L))
+        if np.any(bad):
+            worst = v[np.broadcast_to(bad, v.shape)].tolist() if v.ndim else float(v)
+            raise ValueError(f"{owner}: parameter `x` must lie on the span [0, {L:g}] m; got {worst}")
+        return
+    record(jnp.all(jnp.isfinite(x) & (x >= 0.0) & (x <= length)), f"{owner}: parameter `x` must lie on the span [0, length] m")
+
+
 class MovingString(eqx.Module):
     """A belt span as an axially moving string (belt-vibration report, eq. 24-55).
 
@@ -168,7 +180,8 @@ class MovingString(eqx.Module):
         $y = -2\\sin(n\\pi x/L)\\,[B_1\\sin + \\dots](\\omega_n t + n\\pi V x/(V_{cr} L))$: a standing
         envelope with a phase that drifts along the span (the complex mode of Moon & Wickert,
         $\\psi_n = \\sin(n\\pi x)e^{i n\\pi v x}$). `x` [m], `t` [s] broadcast; returns metres if
-        $B_1, B_2$ are.
+        $B_1, B_2$ are. `x` must lie on the span, $0 \\le x \\le L$ (outside it the expression is no
+        longer a displacement of the belt).
         """
         n = check_int("MovingString.mode_shape", "n", n)
         vc = self.critical_speed
@@ -178,9 +191,12 @@ class MovingString(eqx.Module):
         b = w / (speed + vc)
         x = jnp.asarray(x, dtype=float)
         t = jnp.asarray(t, dtype=float)
+        with collecting() as found:  # concrete: raises now; traced: attached to the result below
+            _check_on_span(x, self.length, "MovingString.mode_shape")
+            check_finite("t", t, owner="MovingString.mode_shape")
         pa = w * t - a * x
         pb = w * t - b * x
-        return checked(b1 * (jnp.cos(pa) - jnp.cos(pb)) + b2 * (jnp.sin(pa) - jnp.sin(pb)), self)
+        return checked(b1 * (jnp.cos(pa) - jnp.cos(pb)) + b2 * (jnp.sin(pa) - jnp.sin(pb)), self, checks=found)
 
     # --- Galerkin discretisation -------------------------------------------------------------
     def galerkin_matrices(self, speed, n_basis: int):
