@@ -349,7 +349,8 @@ def main(argv=None) -> int:
         head.append({"what": "import jaxbelt / import jax+diffrax+equinox+optax", "unit": "x",
                      "value": data["imports"]["ratio"], "target": "<= 1.1"})
     for k, v in data.get("cli", {}).items():
-        head.append({"what": f"CLI {k}: warm cache / cold", "unit": "x", "value": v["warm_over_cold"], "target": "<= 0.5"})
+        head.append({"what": f"CLI {k}: warm cache / cold (medians {v['warm_s']:.2f} s / {v['cold_s']:.2f} s)", "unit": "x",
+                     "value": v["warm_over_cold"], "target": "<= 0.5"})
     if "closed_form" in data:
         cf = data["closed_form"]
         head.append({"what": "start-up batch of 100 000: peak / output (XLA)", "unit": "x",
