@@ -208,6 +208,16 @@ def check_int(owner: str, name: str, value, lo: int = 1) -> int:
     return int(value)
 
 
+def check_penalised_limits(owner: str, penalty, limits) -> None:
+    """An optimiser's bounds and the weight of their quadratic penalty: each given `(name, value, unit)`
+    of `limits` finite and > 0 (a bound <= 0 would switch its penalty off, max(0, peak/bound - 1) = 0;
+    None: no bound), `penalty` finite and >= 0 (a negative weight would reward breaking the bounds)."""
+    for name, value, unit in limits:
+        if value is not None:
+            check_positive(name, value, unit, owner=owner)
+    check_nonnegative("penalty", penalty, owner=owner)
+
+
 def positive_checks(owner: str, **values) -> list:
     """`check_positive` on each named value: raises when concrete; returns the checks recorded for
     the traced ones (to attach with `jaxbelt._guard.guard`)."""

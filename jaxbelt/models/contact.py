@@ -141,7 +141,7 @@ class BeltPulleyContact(eqx.Module):
         if not is_concrete(omega) or np.ndim(omega) != 0:
             raise ValueError(f"BeltPulleyContact.slip_report: `omega` must be one concrete speed [rad/s] (a scalar "
                              f"outside jit; use slip_margin under jit or for arrays); got shape {np.shape(omega)}")
-        check_finite("omega", omega, owner="BeltPulleyContact.slip_report")
+        self._omega_checks("BeltPulleyContact.slip_report", omega)  # concrete: raises here
         omega = float(np.asarray(omega))
         tc_array = self._tc(omega)  # omega checked above, the contact at its construction
         tc = float(tc_array)

@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from .._checks import check_int, check_nonnegative, check_positive
+from .._checks import check_int, check_penalised_limits, check_positive, check_range
 from ..commands import MIN_EXPONENT_GAP, PseudoPolynomial, ShapedCommand
 from .._guard import host_checked
 from ..objectives.residual import residual_energy, residual_energy_joules
@@ -287,10 +287,7 @@ def _check_options(owner, margin, gap, max_speed, max_accel, penalty, learning_r
     """The optimisers' scalar options: a limit <= 0 would switch its penalty off, a negative penalty would
     reward breaking it, and a margin or gap below the exponents' own minimum would let an iterate leave
     the commands `PseudoPolynomial` accepts."""
-    for name, value, unit in (("max_speed", max_speed, "rad/s"), ("max_accel", max_accel, "rad/s^2")):
-        if value is not None:
-            check_positive(name, value, unit, owner=owner)
-    check_nonnegative("penalty", penalty, owner=owner)
+    check_penalised_limits(owner, penalty, (("max_speed", max_speed, "rad/s"), ("max_accel", max_accel, "rad/s^2")))
     check_positive("margin", margin, owner=owner)
     if not float(gap) >= MIN_EXPONENT_GAP:
         raise ValueError(f"{owner}: parameter `gap` must be >= {MIN_EXPONENT_GAP:g} (the least distance between "
@@ -421,9 +418,7 @@ def sensitivity_curve(plat, commands: dict, *, rel: float = 0.3, n: int = 121, n
     Returns `(omegas, {name: E})`.
     """
     o = "sensitivity_curve"
-    check_positive("rel", rel, owner=o)
-    if not float(rel) < 1.0:
-        raise ValueError(f"{o}: parameter `rel` must lie in (0, 1) (the sweep must keep omega > 0); got {rel}")
+    check_range("rel", rel, 0.0, 1.0, lo_open=True, hi_open=True, owner=o)  # 1 - rel > 0: omega stays > 0
     n = check_int(o, "n", n, 2)
     omegas = jnp.linspace(1.0 - rel, 1.0 + rel, n) * plat.omega_n
     out = {}

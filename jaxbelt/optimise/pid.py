@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from .._checks import check_nonnegative, check_positive
+from .._checks import check_penalised_limits, check_positive
 from ..models.motor import PID, check_pid_nonnegative
 from ..objectives.fluctuation import closed_loop_metrics
 
@@ -83,10 +83,7 @@ def tune_pid(
     """
     check_pid_nonnegative(pid)
     o = "tune_pid"
-    for name, value, unit in (("v_max", v_max, "V"), ("i_max", i_max, "A")):
-        if value is not None:  # a bound <= 0 would switch its penalty off (max(0, peak/bound - 1) = 0)
-            check_positive(name, value, unit, owner=o)
-    check_nonnegative("penalty", penalty, owner=o)  # a negative weight would reward breaking the bounds
+    check_penalised_limits(o, penalty, (("v_max", v_max, "V"), ("i_max", i_max, "A")))
     check_positive("learning_rate", learning_rate, owner=o)
     check_positive("temperature", temperature, owner=o)
     for name in ("kp", "ki", "kd"):
