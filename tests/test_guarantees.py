@@ -532,6 +532,8 @@ def test_fluctuation_index_of_a_reversed_drive_and_its_window():
     (lambda: jb.response_curve(jb.NonlinearBelt(), max_step=float("nan")), "parameter `max_step`"),  # hung > 13 min
     (lambda: jb.response_curve(jb.NonlinearBelt(), step=-0.05), "parameter `step`"),
     (lambda: jb.fold_speeds(jb.NonlinearBelt(), n_folds=0), "parameter `n_folds`"),  # returned []
+    (lambda: jb.jumps(jb.NonlinearBelt(), n_folds=2.5), "jumps: parameter `n_folds`"),  # was truncated to 2
+    (lambda: jb.jumps(jb.NonlinearBelt(), max_points=1), "jumps: parameter `max_points`"),
     (lambda: jb.harmonic_balance(jb.NonlinearBelt(), 9.0, max_steps=0), "parameter `max_steps`"),
     (lambda: jb.harmonic_balance(jb.NonlinearBelt(), 9.0, guess=np.zeros(2)), "`guess` must have shape"),
 ])

@@ -391,6 +391,16 @@ def _check_range_speeds(belt, speed_range):
     return jnp.asarray(v0, float), jnp.asarray(v1, float)
 
 
+def _fold_options(owner, belt, speed_range, n_harmonics, n_folds, max_points):
+    """The checked options of the fold searches (`fold_speeds`, `jumps`): `(H, n_folds, max_points, v0, v1)`."""
+    H = check_int(owner, "n_harmonics", n_harmonics)
+    _check_equal_radii(belt)
+    n_folds = check_int(owner, "n_folds", n_folds)
+    max_points = check_int(owner, "max_points", max_points, 2)
+    v0, v1 = _check_range_speeds(belt, speed_range)
+    return H, n_folds, max_points, v0, v1
+
+
 def fold_speeds(belt: NonlinearBelt, speed_range=(7.5, 10.5), n_harmonics: int = 3, n_folds: int = 2, *,
                 max_points: int = 200, throw: bool = True):
     """Fold (saddle-node) speeds [m/s] of the response curve in `speed_range`, ascending, shape (n_folds,).
@@ -401,11 +411,7 @@ def fold_speeds(belt: NonlinearBelt, speed_range=(7.5, 10.5), n_harmonics: int =
     Fewer than `n_folds` folds in the range: `ValueError` (concrete) / `eqx.error_if` (traced);
     `throw=False` returns NaN for the missing ones.
     """
-    H = check_int("fold_speeds", "n_harmonics", n_harmonics)
-    _check_equal_radii(belt)
-    n_folds = check_int("fold_speeds", "n_folds", n_folds)
-    max_points = check_int("fold_speeds", "max_points", max_points, 2)
-    v0, v1 = _check_range_speeds(belt, speed_range)
+    H, n_folds, max_points, v0, v1 = _fold_options("fold_speeds", belt, speed_range, n_harmonics, n_folds, max_points)
     _, Vs, ok = _fold_jit(belt, v0, v1, H, n_folds, max_points, jnp.asarray(_DS0), jnp.asarray(_DS_MAX))
     Vs = belt.wave_speed * 0.0 + Vs  # keep the belt's dtype
     if throw:
@@ -472,10 +478,8 @@ def _jumps_jit(belt, v0, v1, H, n_folds, max_points, ds0, ds_max):
 def jumps(belt: NonlinearBelt, speed_range=(7.5, 10.5), n_harmonics: int = 3, n_folds: int = 2, *,
           max_points: int = 200, throw: bool = True) -> Jumps:
     """Fold speeds and the peak-to-peak before and after each jump (see `Jumps`); differentiable."""
-    H = check_int("jumps", "n_harmonics", n_harmonics)
-    _check_equal_radii(belt)
-    v0, v1 = _check_range_speeds(belt, speed_range)
-    Vs, ppb, ppa, ok = _jumps_jit(belt, v0, v1, H, int(n_folds), int(max_points), jnp.asarray(_DS0),
+    H, n_folds, max_points, v0, v1 = _fold_options("jumps", belt, speed_range, n_harmonics, n_folds, max_points)
+    Vs, ppb, ppa, ok = _jumps_jit(belt, v0, v1, H, n_folds, max_points, jnp.asarray(_DS0),
                                   jnp.asarray(_DS_MAX))
     if throw:
         if is_concrete(ok):
@@ -551,9 +555,9 @@ def response_curve(belt: NonlinearBelt, speed_range=(7.5, 10.5), n_harmonics: in
     scaled (coefficients / run-out, speed [m/s]) space. Raises `RuntimeError` if the curve does
     not reach the end of the range within `max_points` points.
     """
-    H = check_int("response_curve", "n_harmonics", n_harmonics)
-    _check_equal_radii(belt)
     o = "response_curve"
+    H = check_int(o, "n_harmonics", n_harmonics)
+    _check_equal_radii(belt)
     max_points = check_int(o, "max_points", max_points, 2)
     check_positive("step", step, owner=o)  # a NaN step never ends the continuation; a negative one walks back
     check_positive("max_step", max_step, owner=o)
