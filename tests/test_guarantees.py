@@ -318,6 +318,40 @@ def test_cli_process_binds_lapack_without_scipy_linalg_and_runs_without_cyclic_g
     assert (linalg_pkg, tables, gc_on) == ("False", "True", "False")
 
 
+def test_cli_process_defines_matplotlibs_artists_without_their_property_lists():
+    # the command's own process: `set` keeps its signature and works, its docstring has no property list
+    # (0.1-0.15 s of the matplotlib import); the command runs through the real parser and entry
+    code = (
+        "import sys, inspect, jaxbelt.cli as c, jaxbelt.cli.startup as s\n"
+        "def probe(args):\n"
+        "    import matplotlib.lines as ml\n"
+        "    from matplotlib.figure import Figure\n"
+        "    line = ml.Line2D([0, 1], [0, 1]); line.set(linewidth=3.0, color='r')\n"
+        "    print('antialiased' in ml.Line2D.set.__doc__, 'linewidth' in inspect.signature(ml.Line2D.set).parameters,\n"
+        "          line.get_linewidth(), line.get_color())\n"
+        "    return 0\n"
+        "s.run = probe; sys.argv = ['jaxbelt', 'startup']; c.entry()\n"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split() == ["False", "True", "3.0", "r"]
+
+
+def test_matplotlib_keeps_its_property_lists_outside_the_cli_process():
+    # in a user's process (here: pytest's) nothing changes, and once a figure module is loaded the
+    # preparation is a no-op
+    import matplotlib.artist
+    import matplotlib.lines
+    from matplotlib.figure import Figure  # noqa: F401
+
+    import jaxbelt.cli as cli
+
+    before = matplotlib.artist.kwdoc
+    cli._prepare_figures()
+    assert matplotlib.artist.kwdoc is before
+    assert "antialiased" in matplotlib.lines.Line2D.set.__doc__
+
+
 def test_cli_lapack_tables_fall_back_to_the_usual_import(monkeypatch):
     # another scipy layout (here: the second table cannot be loaded) leaves nothing behind in sys.modules
     import importlib.util

@@ -19,6 +19,9 @@ import sys
 
 SUBCOMMANDS = ("startup", "shaping", "fourbar", "string", "nonlinear", "bench")
 
+#: set by `entry`: the command runs in a process of its own (no user code), see `_prepare_figures`
+_OWN_PROCESS = False
+
 
 class _Parser(argparse.ArgumentParser):
     """Bad arguments: one line on stderr (`jaxbelt startup: error: argument --gamma: must be > 0`), exit 2."""
@@ -56,6 +59,8 @@ def main(argv=None) -> int:
     if problem:
         print(f"jaxbelt {args.command}: error: {problem} (see --help)", file=sys.stderr)
         return 2
+    if _OWN_PROCESS and args.command != "bench":
+        _prepare_figures()
     if not args.no_cache and args.command != "bench":
         from ..cache import enable_compilation_cache
 
@@ -104,6 +109,32 @@ def _bind_lapack_tables() -> None:
             sys.modules.pop(full, None)
 
 
+def _no_property_list(artist) -> str:
+    return "Properties: see matplotlib's documentation (this list is not built in the jaxbelt command's process)."
+
+
+def _prepare_figures() -> None:
+    """Import matplotlib without building the property lists of its artists' docstrings.
+
+    As each `Artist` subclass is defined, matplotlib writes the docstring of its `set` method: the
+    list of every settable property with its accepted values, parsed from the setters' docstrings
+    (`matplotlib.artist.kwdoc`). For the ~100 classes a figure imports that is 0.1-0.15 s of the
+    0.3-0.4 s matplotlib import, in every command that draws a figure, and nothing in the command's
+    process reads a docstring. Here `kwdoc` is replaced by a one-line note before the artists are
+    defined; signatures, setters and drawing are matplotlib's own. Only for the command's own process
+    (`entry`), and only while no figure module is loaded (afterwards it would change nothing); on any
+    failure matplotlib is imported the usual way.
+    """
+    if "matplotlib.figure" in sys.modules:
+        return
+    try:
+        import matplotlib.artist as artist
+    except Exception:  # noqa: BLE001 - the command reports a missing matplotlib itself
+        return
+    if callable(getattr(artist, "kwdoc", None)):
+        artist.kwdoc = _no_property_list
+
+
 def entry() -> None:
     """The `jaxbelt` command (and `python -m jaxbelt`): `main()`, then the end of the process.
 
@@ -113,10 +144,13 @@ def entry() -> None:
       `jaxbelt startup` (each one walks JAX's and matplotlib's module objects); with it off the peak
       memory of the longest commands grows by 2-6 % (measured: `nonlinear` 877 -> 897 MB).
     - scipy's LAPACK tables are loaded without `scipy.linalg` (`_bind_lapack_tables`).
+    - matplotlib's artists are defined without their docstrings' property lists (`_prepare_figures`).
     - Once the command has written its outputs and the exit handlers have run, the process ends
       without the interpreter's teardown (freeing every module and XLA's client: ~0.3 s). JAX's
       compilation cache and jaxbelt's stored programs are written when they are made, not at exit.
     """
+    global _OWN_PROCESS
+    _OWN_PROCESS = True
     gc.disable()
     _bind_lapack_tables()
     code = main()
