@@ -55,14 +55,17 @@ def imports(repeats: int) -> dict:
     return {"deps_s": b, "jaxbelt_s": o, "ratio": o / b, "repeats": repeats}
 
 
-def cli(commands, repeats: int) -> dict:
+def cli(commands, repeats: int, budget_s: float = 0.0) -> dict:
     """Each repeat: a cold run (empty cache folder), a warm run (the same folder) and a --no-cache run, back
     to back, so that the two runs of a ratio see about the same load; `warm_over_cold` is the median of the
-    per-repeat ratios."""
+    per-repeat ratios. A command is repeated `repeats` times, and more (up to 25) until its repeats have
+    taken `budget_s`: the short commands, whose ratios scatter most with the machine's load (+-0.1 for a
+    5 s repeat), get more of them."""
     out = {}
     for name in commands:
         cold, warm, nocache = [], [], []
-        for _ in range(repeats):
+        start = time.perf_counter()
+        while len(cold) < repeats or (time.perf_counter() - start < budget_s and len(cold) < 25):
             with tempfile.TemporaryDirectory() as d:
                 env = dict(ENV, JAXBELT_CACHE_DIR=d)
                 png = str(Path(d) / "out.png")
@@ -73,9 +76,10 @@ def cli(commands, repeats: int) -> dict:
                                      "--out", png], env))
         c, w, n = (float(np.median(x)) for x in (cold, warm, nocache))
         r = float(np.median(np.array(warm) / np.array(cold)))
-        out[name] = {"cold_s": c, "warm_s": w, "no_cache_s": n, "warm_over_cold": r, "repeats": repeats,
+        out[name] = {"cold_s": c, "warm_s": w, "no_cache_s": n, "warm_over_cold": r, "repeats": len(cold),
                      "ratios": (np.array(warm) / np.array(cold)).tolist()}
-        print(f"cli {name}: cold {c:.1f} s, warm {w:.1f} s ({r:.2f}x), --no-cache {n:.1f} s", flush=True)
+        print(f"cli {name}: cold {c:.1f} s, warm {w:.1f} s ({r:.2f}x, {len(cold)} repeats), --no-cache {n:.1f} s",
+              flush=True)
     return out
 
 
@@ -304,6 +308,9 @@ def main(argv=None) -> int:
     p.add_argument("--cli", nargs="*", default=None, help="CLI commands to time cold/warm (default: all; quick: startup)")
     p.add_argument("--skip", nargs="*", default=(), help="parts to skip: imports cli compile_once construction closed_form fourbar_sweep")
     p.add_argument("--cli-repeats", type=int, default=None, help="cold/warm pairs per CLI command (default 3; quick: 1)")
+    p.add_argument("--cli-budget", type=float, default=None,
+                   help="seconds per CLI command: short commands are repeated until it is spent, up to 25 times "
+                        "(default 90; quick: 0)")
     args = p.parse_args(argv)
     import jax
 
@@ -318,7 +325,8 @@ def main(argv=None) -> int:
                               "noisy; compare the ratios, each measured in the same run (medians of repeats)"}
     parts = {
         "imports": lambda: imports(3 if args.quick else 5),
-        "cli": lambda: cli(commands, args.cli_repeats or (1 if args.quick else 3)),
+        "cli": lambda: cli(commands, args.cli_repeats or (1 if args.quick else 3),
+                           args.cli_budget if args.cli_budget is not None else (0.0 if args.quick else 90.0)),
         "compile_once": lambda: compile_once(args.quick),
         "construction": construction,
         "closed_form": lambda: closed_form(args.quick),
@@ -349,7 +357,7 @@ def main(argv=None) -> int:
         head.append({"what": "import jaxbelt / import jax+diffrax+equinox+optax", "unit": "x",
                      "value": data["imports"]["ratio"], "target": "<= 1.1"})
     for k, v in data.get("cli", {}).items():
-        head.append({"what": f"CLI {k}: warm cache / cold (medians {v['warm_s']:.2f} s / {v['cold_s']:.2f} s)", "unit": "x",
+        head.append({"what": f"CLI {k}: warm cache / cold (medians {v['warm_s']:.2f} s / {v['cold_s']:.2f} s, {v['repeats']} repeats)", "unit": "x",
                      "value": v["warm_over_cold"], "target": "<= 0.5"})
     if "closed_form" in data:
         cf = data["closed_form"]
