@@ -296,6 +296,13 @@ def test_cli_entry_ends_the_process_with_the_commands_status_and_output():
     assert r.stdout.splitlines() == ["command output", "exit handler ran"]
 
 
+def _printed_by(code):
+    """The words printed by `code`, run in a fresh Python process that must exit with status 0."""
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    return r.stdout.split()
+
+
 def test_cli_process_binds_lapack_without_scipy_linalg_and_runs_without_cyclic_gc():
     # the command's process: LAPACK kernels bound to scipy's tables loaded on their own (not the 0.2 s
     # scipy.linalg package), results as from numpy's LAPACK; the cyclic collector off while it runs
@@ -311,9 +318,7 @@ def test_cli_process_binds_lapack_without_scipy_linalg_and_runs_without_cyclic_g
         "    return 0\n"
         "c.main = probe; c.entry()\n"
     )
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
-    assert r.returncode == 0, r.stderr
-    eig_err, solve_err, linalg_pkg, tables, gc_on = r.stdout.split()
+    eig_err, solve_err, linalg_pkg, tables, gc_on = _printed_by(code)
     assert float(eig_err) < 1e-12 and float(solve_err) < 1e-12
     assert (linalg_pkg, tables, gc_on) == ("False", "True", "False")
 
@@ -332,9 +337,7 @@ def test_cli_process_defines_matplotlibs_artists_without_their_property_lists():
         "    return 0\n"
         "s.run = probe; sys.argv = ['jaxbelt', 'startup']; c.entry()\n"
     )
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
-    assert r.returncode == 0, r.stderr
-    assert r.stdout.split() == ["False", "True", "3.0", "r"]
+    assert _printed_by(code) == ["False", "True", "3.0", "r"]
 
 
 def test_matplotlib_keeps_its_property_lists_outside_the_cli_process():
