@@ -1,39 +1,21 @@
 """Compile once, import fast: repeated calls reuse their compiled programs, `import jaxbelt` loads no
 plotting library, and the persistent compilation cache stores programs where it is told to."""
 
-import contextlib
 import os
 import subprocess
 import sys
 from pathlib import Path
 
 import jax
-import jax.monitoring
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import jaxbelt as jb
+from compiles import count_compiles
 from jaxbelt.optimise import pid as pid_mod
 
 ROOT = Path(__file__).resolve().parents[1]
-_COMPILE = "/jax/core/compile/backend_compile_duration"
-
-
-@contextlib.contextmanager
-def count_compiles():
-    """Number of XLA compilations inside the block (every jit, eager op or lowering counts)."""
-    box = {"n": 0}
-
-    def listener(name, duration, **kw):
-        if name == _COMPILE:
-            box["n"] += 1
-
-    jax.monitoring.register_event_duration_secs_listener(listener)
-    try:
-        yield box
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listener)
 
 
 def _subprocess(code, **env):

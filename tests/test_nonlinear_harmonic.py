@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 import jaxbelt as jb
+from compiles import count_compiles
 from jaxbelt.models.nonlinear.calibration import MODE2_RANGE, model_fold_speeds
 from jaxbelt.models.nonlinear.kbm import kbm_amplitudes
 from jaxbelt.models.nonlinear.model import distance_travelled
@@ -120,6 +121,13 @@ def test_second_mode_bistability_matches_time_domain(belt2, curve2):
     assert abs(pps[0] / pps[1] - 1) > 0.2, pps
 
 
+def test_calibrate_refuses_options_it_would_truncate():
+    # checked before any work: a fractional count is refused by name, not rounded by int()
+    for kw, name in ((dict(n_harmonics=2.5), "n_harmonics"), (dict(max_steps=0), "max_steps")):
+        with pytest.raises(ValueError, match=f"calibrate: parameter `{name}` must be an integer"):
+            jb.calibrate(**kw)
+
+
 @pytest.mark.slow
 def test_calibrate_recovers_the_identified_defaults():
     """`calibrate` (Levenberg-Marquardt through the implicit fold derivatives) from the former
@@ -133,6 +141,12 @@ def test_calibrate_recovers_the_identified_defaults():
     np.testing.assert_allclose(np.asarray(fit.belt.damping), np.asarray(d.damping), rtol=5e-4)
     assert np.all(np.abs(np.asarray(fit.residuals)) < 1.0)  # each speed within its reading tolerance
     assert float(fit.cost) < 0.5
+    # a second fit of the same problem (from the defaults) reuses the compiled solve: no compilation
+    with count_compiles() as compiles:
+        again = jb.calibrate(d)
+    assert compiles["n"] == 0
+    np.testing.assert_allclose(float(again.belt.wave_speed), float(fit.belt.wave_speed), rtol=5e-4)
+    assert bool(again.success)
 
 
 def test_curve_folds_and_stability_match_time_domain_sweeps(belt, curve, sweeps):
