@@ -160,7 +160,7 @@ def main(argv=None):
     sweep_row = next(r for r in rows if r["name"] == "sweep_up_down_N1")
     ratio = sweep_row["median_s"] / med_c
     rows.append({"name": "response_curve_N1_H3", "method": "jaxbelt harmonic balance + arclength continuation "
-                 "(optimistix Newton) + Floquet", "error": max(errs), "median_s": med_c, "compile_s": comp_c,
+                 "(optimistix chord corrector) + Floquet", "error": max(errs), "median_s": med_c, "compile_s": comp_c,
                  "repeats": max(repeats, 3), "points": int(curve.speed.shape[0]),
                  "folds": np.asarray(curve.folds).tolist()})
     headline.append({"what": f"response curve 7.5-10.5 m/s (both folds) vs up+down sweep over {n_speeds} speeds",
