@@ -305,7 +305,8 @@ def plot(data, path):
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="fewer repeats, two CLI commands, a 200-gain sweep")
-    p.add_argument("--cli", nargs="*", default=None, help="CLI commands to time cold/warm (default: all; quick: startup)")
+    p.add_argument("--cli", nargs="*", default=None,
+                   help="CLI commands to time cold/warm (default: all; quick: startup); the others keep their last rows")
     p.add_argument("--skip", nargs="*", default=(), help="parts to skip: imports cli compile_once construction closed_form fourbar_sweep")
     p.add_argument("--cli-repeats", type=int, default=None, help="cold/warm pairs per CLI command (default 3; quick: 1)")
     p.add_argument("--cli-budget", type=float, default=None,
@@ -343,6 +344,9 @@ def main(argv=None) -> int:
             continue
         t = time.perf_counter()
         data[name] = fn()
+        if name == "cli" and args.cli is not None and "cli" in previous:  # the other commands keep their rows
+            data[name] = {k: data[name].get(k, previous["cli"].get(k)) for k in CLI_ARGS
+                          if k in data[name] or k in previous["cli"]}
         print(f"{name}: {time.perf_counter() - t:.1f} s", flush=True)
     data["rows"] = []
     head = []
