@@ -601,6 +601,38 @@ def _exact_phasor(v, Om, s0, s1, xm):
 
 
 # --- Galerkin model of the forced problem (independent check by time stepping) --------------------
+class _RunoutForcing(eqx.Module):
+    """`forcing(t)` of `galerkin_runout_system`: the modal load of the run-outs' shift, a pytree (not a
+    closure) so that the time-domain solve of `simulate_runout_response` compiles once per `n_basis`."""
+
+    e0: jnp.ndarray
+    e1: jnp.ndarray
+    W0: jnp.ndarray
+    W1: jnp.ndarray
+    phase: jnp.ndarray
+    speed: jnp.ndarray
+    length: jnp.ndarray
+    c1: jnp.ndarray  # sine projections over [0, L] of 1 and of x/L, (N,)
+    cx: jnp.ndarray
+    Minv: jnp.ndarray
+
+    def __call__(self, t):
+        # f = -(s_tt + 2 V s_xt), s = e0 sin(W0 t)(1 - x/L) + e1 sin(W1 t + ph) x/L
+        b0 = self.e0 * jnp.sin(self.W0 * t)
+        b1 = self.e1 * jnp.sin(self.W1 * t + self.phase)
+        b0_tt = -(self.W0**2) * b0
+        b1_tt = -(self.W1**2) * b1
+        b0_t = self.e0 * self.W0 * jnp.cos(self.W0 * t)
+        b1_t = self.e1 * self.W1 * jnp.cos(self.W1 * t + self.phase)
+        F = -(b0_tt * (self.c1 - self.cx) + b1_tt * self.cx + 2.0 * self.speed * (b1_t - b0_t) / self.length * self.c1)
+        return jnp.concatenate([jnp.zeros_like(F), self.Minv * F])
+
+
+def _runout_field(t, z, args):
+    A, forcing = args
+    return A @ z + forcing(t)
+
+
 def galerkin_runout_system(rig: RunoutRig, speed, n_basis: int = 24):
     """First-order Galerkin model of the run-out problem in $N$ sine modes of $u = w - s$ (SI time, metres).
 
@@ -630,20 +662,8 @@ def galerkin_runout_system(rig: RunoutRig, speed, n_basis: int = 24):
     # sine projections over [0, L] of 1, x/L and 1 - x/L
     c1 = L * (1.0 - (-1.0) ** k) / (k * jnp.pi)
     cx = L * (-((-1.0) ** k)) / (k * jnp.pi)
-    c1mx = c1 - cx
     Minv = 1.0 / (0.5 * L)
-    nb = int(n_basis)
-
-    def forcing(t):
-        # f = -(s_tt + 2 V s_xt), s = e0 sin(W0 t)(1 - x/L) + e1 sin(W1 t + ph) x/L
-        b0 = e0 * jnp.sin(W0 * t)
-        b1 = e1 * jnp.sin(W1 * t + ph)
-        b0_tt = -(W0**2) * b0
-        b1_tt = -(W1**2) * b1
-        b0_t = e0 * W0 * jnp.cos(W0 * t)
-        b1_t = e1 * W1 * jnp.cos(W1 * t + ph)
-        F = -(b0_tt * c1mx + b1_tt * cx + 2.0 * V * (b1_t - b0_t) / L * c1)
-        return jnp.concatenate([jnp.zeros(nb), Minv * F])
+    forcing = _RunoutForcing(e0=e0, e1=e1, W0=W0, W1=W1, phase=ph, speed=V, length=L, c1=c1, cx=cx, Minv=Minv)
 
     def shift(t, x):
         return e0 * jnp.sin(W0 * t) * (1.0 - x / L) + e1 * jnp.sin(W1 * t + ph) * x / L
@@ -688,12 +708,11 @@ def simulate_runout_response(
     ts = jnp.linspace(t_settle, t_end, 200 * n_periods_measure + 1)
     nb = int(n_basis)
 
-    def vf(t, z, args):
-        return A @ z + forcing(t)
-
+    # a module-level field and array arguments: one compiled solve per n_basis, for every rig and speed
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(vf), diffrax.Tsit5(), 0.0, t_end, None, jnp.zeros(2 * nb),
-        saveat=diffrax.SaveAt(ts=ts), stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
+        diffrax.ODETerm(_runout_field), diffrax.Tsit5(), jnp.asarray(0.0), jnp.asarray(t_end, float), None,
+        jnp.zeros(2 * nb), args=(A, forcing), saveat=diffrax.SaveAt(ts=ts),
+        stepsize_controller=diffrax.PIDController(rtol=jnp.asarray(rtol, float), atol=jnp.asarray(atol, float)),
         max_steps=2_000_000,
     )
     k = jnp.arange(1, nb + 1, dtype=float)
