@@ -17,8 +17,9 @@ never used; delete the folder to reclaim the space.
 
 JAX must still trace and lower a program to find it in that cache (about 0.7 s for a four-bar
 simulation). So, beside it (`<folder>/jaxbelt-programs`), jaxbelt keeps the lowered form of the
-programs it runs eagerly (`simulate`'s, the belt-span functions') as `jax.export` modules and a later
-process calls them untraced (0.25 s for that simulation; `programs=False` to switch this off).
+programs it runs eagerly (`simulate`'s, the belt-span functions', the non-linear belt's harmonic
+balance and continuation) as `jax.export` modules and a later process calls them untraced
+(0.25 s for that simulation; `programs=False` to switch this off).
 Only scenes built from jaxbelt's own classes are kept (a user's subclass is always traced, since
 jaxbelt cannot tell when its code changes); the key holds a hash of jaxbelt's source, the versions
 of JAX and the other dependencies and JAX's numerical settings. Treat the folder as trusted: whoever can write

@@ -156,6 +156,26 @@ def test_belt_span_functions_through_the_store(tmp_path):
     _same(stored, reference)
 
 
+def test_nonlinear_harmonic_balance_through_the_store(tmp_path):
+    # the harmonic-balance programs (one point, the continuation, the fold refinement) are stored like
+    # simulate's: a later process runs them untraced (a warm `jaxbelt nonlinear` 7 s instead of 13 s)
+    belt = jb.NonlinearBelt(n_modes=1)
+
+    def run():
+        return jb.harmonic_balance(belt, 7.0, 1).pp, jb.fold_speeds(belt, (7.5, 10.5), 1)
+
+    reference = run()
+    with store_in(tmp_path / "xla") as folder:
+        run()
+        written = len(_programs(folder))
+        assert written == 3
+        _store.forget()
+        stored = run()
+        assert len(_programs(folder)) == written  # loaded, not exported again
+    _same(stored, reference)
+    assert np.all(np.isfinite(np.asarray(stored[1])))
+
+
 def test_the_key_holds_module_names_and_error_mode(monkeypatch):
     tree = jax.tree_util.tree_structure(_startup_scene())
     names = [n for n, _ in _store._describe_tree(tree)]

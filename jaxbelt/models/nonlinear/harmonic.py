@@ -45,7 +45,7 @@ import numpy as np
 import optimistix as optx
 
 from ..._checks import check_int, check_positive, collecting, is_concrete
-from ..._guard import all_ok, guard, traced_checks, validated_inputs
+from ..._guard import all_ok, guard, stored_jit, traced_checks, validated_inputs
 from .model import ModalSystem, NonlinearBelt, mode_shapes
 
 __all__ = ["HarmonicSolution", "ResponseCurve", "Jumps", "harmonic_balance", "response_curve", "fold_speeds",
@@ -141,7 +141,7 @@ def _observe(belt: NonlinearBelt, speed, Y, H: int, at=0.01):
     return jnp.max(w) - jnp.min(w), amp
 
 
-@functools.partial(eqx.filter_jit)
+@stored_jit
 def _hb_point(belt, speed, Y0, H: int, max_steps: int):
     sol = optx.root_find(lambda Y, a: _residual(Y, a[0], a[1], H), _hb_solver(), Y0, args=(speed, belt),
                          max_steps=max_steps, throw=False)
@@ -346,7 +346,7 @@ def _locate_folds(us, ts, acc, n_folds: int):
     return pick, count
 
 
-@functools.partial(eqx.filter_jit)
+@stored_jit
 def _continue_jit(belt, v0, v1, H, max_points, ds0, ds_max):
     """The continuation, compiled once per (belt structure, H, max_points) and shared by
     `response_curve`, `fold_speeds` and `jumps` (not differentiated: the folds are refined apart)."""
@@ -362,7 +362,7 @@ def _trace(belt, v0, v1, H, max_points, ds0, ds_max):
 _MAX_FOLDS = 6  # folds located and refined per curve (one compiled refinement for every caller)
 
 
-@functools.partial(eqx.filter_jit)
+@stored_jit
 def _folds_jit(belt, us, ts, acc, H):
     """Up to `_MAX_FOLDS` folds (in arclength order) refined on the extended system; `ok` marks real ones."""
     pick, count = _locate_folds(us, ts, acc, _MAX_FOLDS)
@@ -447,7 +447,7 @@ class Jumps(eqx.Module):
     pp_after: jnp.ndarray
 
 
-@functools.partial(eqx.filter_jit)
+@stored_jit
 def _landing_jit(belt, us, acc, Vs, Ys, H):
     """pp [m] (and success) of the branch a sweep lands on at each fold speed `Vs` (differentiable)."""
     Vc = us[:, -1]
@@ -531,7 +531,7 @@ class ResponseCurve(eqx.Module):
         return s[keep], p[keep]
 
 
-@functools.partial(eqx.filter_jit)
+@stored_jit
 def _curve_post_jit(belt, us, acc, H):
     """pp, modal amplitudes and Floquet multipliers of the accepted points (a sequential map:
     the rows past the last accepted point cost nothing)."""
@@ -591,7 +591,7 @@ def response_curve(belt: NonlinearBelt, speed_range=(7.5, 10.5), n_harmonics: in
     )
 
 
-@functools.partial(eqx.filter_jit)
+@stored_jit
 def _refine_fold_jit(belt, u, t, H):
     return _refine_fold(belt, u, t, H)
 
