@@ -290,6 +290,23 @@ def test_ramp_distance_closed_form_and_quadrature():
     assert abs(float(r.distance_at(3.0)) - (8.8 * 2.0 + 9.2 * 1.0)) < 1e-12
 
 
+def test_a_speed_profile_of_ones_own_is_checked_at_each_output_time():
+    """`input_checks` covers a constant speed and a ramp whole (its ends); another profile is checked at
+    t = 0 there and at each output time by the `w_sensor` observable: this one passes the wave speed
+    (37.94 m/s) at t = 0.36 s and is refused by name."""
+
+    class Surge(jb.AbstractRunningSpeed):
+        def speed_at(self, t):
+            return 9.0 + 80.0 * jnp.asarray(t, dtype=float)
+
+    belt = jb.NonlinearBelt()
+    scene = jb.Scene(belt, Surge(), ts=jnp.linspace(0.0, 0.5, 6), observe=("w_sensor",))
+    with pytest.raises(Exception, match="sub-critical"):
+        jb.simulate(scene, method="ode")
+    ok = jb.simulate(jb.Scene(belt, Surge(), ts=jnp.linspace(0.0, 0.3, 4), observe=("w_sensor",)), method="ode")
+    assert np.all(np.isfinite(np.asarray(ok["w_sensor"])))
+
+
 def test_bad_inputs():
     with pytest.raises(ValueError, match="pulley_radii"):
         jb.response_curve(old_belt(pulley_radii=(0.063, 0.05)), (8.0, 9.0))

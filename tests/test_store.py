@@ -157,18 +157,19 @@ def test_belt_span_functions_through_the_store(tmp_path):
 
 
 def test_nonlinear_harmonic_balance_through_the_store(tmp_path):
-    # the harmonic-balance programs (one point, the continuation, the fold refinement) are stored like
-    # simulate's: a later process runs them untraced (a warm `jaxbelt nonlinear` 7 s instead of 13 s)
+    # the harmonic-balance programs (one point, the continuation, the fold refinement) and a speed ramp
+    # are stored like the other simulations: a later process runs them untraced
     belt = jb.NonlinearBelt(n_modes=1)
 
-    def run():
-        return jb.harmonic_balance(belt, 7.0, 1).pp, jb.fold_speeds(belt, (7.5, 10.5), 1)
+    def run():  # a ramp's simulate holds no host callback either (the speed is checked by input_checks)
+        return (jb.harmonic_balance(belt, 7.0, 1).pp, jb.fold_speeds(belt, (7.5, 10.5), 1),
+                jb.speed_ramp(belt, 8.0, 8.2, 0.1, z0=jnp.zeros(2)).w)
 
     reference = run()
     with store_in(tmp_path / "xla") as folder:
         run()
         written = len(_programs(folder))
-        assert written == 3
+        assert written == 4
         _store.forget()
         stored = run()
         assert len(_programs(folder)) == written  # loaded, not exported again
