@@ -59,15 +59,16 @@ def main(argv=None) -> int:
     if problem:
         print(f"jaxbelt {args.command}: error: {problem} (see --help)", file=sys.stderr)
         return 2
-    if _OWN_PROCESS and args.command != "bench":
-        _prepare_figures()
-    if not args.no_cache and args.command != "bench":
-        from ..cache import enable_compilation_cache
+    if args.command != "bench":  # the figure commands (bench runs the benchmarks in processes of their own)
+        if _OWN_PROCESS:
+            _prepare_figures()
+        if not args.no_cache:
+            from ..cache import enable_compilation_cache
 
-        try:
-            enable_compilation_cache()
-        except OSError as e:  # an unwritable cache folder costs time, not the result
-            print(f"jaxbelt: compilation cache disabled ({e})", file=sys.stderr)
+            try:
+                enable_compilation_cache()
+            except OSError as e:  # an unwritable cache folder costs time, not the result
+                print(f"jaxbelt: compilation cache disabled ({e})", file=sys.stderr)
     try:
         return int(args.func(args) or 0)
     except ValueError as e:  # bad parameters: say which, no traceback
