@@ -38,8 +38,35 @@ KP, KI, KD, W0 = 80.0, 32.0, 0.015, 30.0
 
 # --- independent numpy vector field (textbook velocity/acceleration analysis) ---------------
 def np_rhs_factory(d):
-    p = {k: float(getattr(d, k)) for k in ("a", "b", "c", "hx", "hy", "f1", "f2", "f3", "m1", "m2", "m3", "jg1",
-                                           "jg2", "jg3", "g", "R", "L", "km", "jm", "ja", "jb", "z", "T0", "lam")}
+    p = {
+        k: float(getattr(d, k))
+        for k in (
+            "a",
+            "b",
+            "c",
+            "hx",
+            "hy",
+            "f1",
+            "f2",
+            "f3",
+            "m1",
+            "m2",
+            "m3",
+            "jg1",
+            "jg2",
+            "jg3",
+            "g",
+            "R",
+            "L",
+            "km",
+            "jm",
+            "ja",
+            "jb",
+            "z",
+            "T0",
+            "lam",
+        )
+    }
     k_asm = d.assembly
     jeq = p["jb"] + (p["jm"] + p["ja"]) * p["z"] ** 2
 
@@ -63,10 +90,26 @@ def np_rhs_factory(d):
         # (mass, r'x, r'y, r''x, r''y, J_G, θ', θ'')
         links = (
             (p["m1"], -f1 * sa, f1 * ca, -f1 * ca, -f1 * sa, p["jg1"], 1.0, 0.0),
-            (p["m2"], -a * sa - f2 * Q * sb, a * ca + f2 * Q * cb,
-             -a * ca - f2 * (Q2 * sb + Q * Q * cb), -a * sa + f2 * (Q2 * cb - Q * Q * sb), p["jg2"], Q, Q2),
-            (p["m3"], -f3 * R * sg, f3 * R * cg, -f3 * (R2 * sg + R * R * cg), f3 * (R2 * cg - R * R * sg),
-             p["jg3"], R, R2),
+            (
+                p["m2"],
+                -a * sa - f2 * Q * sb,
+                a * ca + f2 * Q * cb,
+                -a * ca - f2 * (Q2 * sb + Q * Q * cb),
+                -a * sa + f2 * (Q2 * cb - Q * Q * sb),
+                p["jg2"],
+                Q,
+                Q2,
+            ),
+            (
+                p["m3"],
+                -f3 * R * sg,
+                f3 * R * cg,
+                -f3 * (R2 * sg + R * R * cg),
+                f3 * (R2 * cg - R * R * sg),
+                p["jg3"],
+                R,
+                R2,
+            ),
         )
         J = sum(m * (vx * vx + vy * vy) + jg * w * w for m, vx, vy, _, _, jg, w, _ in links)
         dJ = sum(2 * m * (vx * ax + vy * ay) + 2 * jg * w * dw for m, vx, vy, ax, ay, jg, w, dw in links)
@@ -85,8 +128,9 @@ def np_rhs_factory(d):
 
 
 def scipy_solve(rhs, ts, method, rtol, gains=(KP, KI, KD, W0)):
-    sol = solve_ivp(rhs, (ts[0], ts[-1]), [0.0, 0.0, 0.0], method=method, t_eval=ts, rtol=rtol,
-                    atol=rtol * 1e-2, args=gains)
+    sol = solve_ivp(
+        rhs, (ts[0], ts[-1]), [0.0, 0.0, 0.0], method=method, t_eval=ts, rtol=rtol, atol=rtol * 1e-2, args=gains
+    )
     return sol.y.T
 
 
@@ -112,30 +156,59 @@ def main(quick: bool) -> None:
     for name, solver in solvers.items():
         if quick and name == "Kvaerno5":
             continue
-        run = eqx.filter_jit(lambda sc, r, s=solver: jb.simulate(sc, solver=s, rtol=r, atol=r * 1e-2,
-                                                                   max_steps=10**6).ys)
+        run = eqx.filter_jit(
+            lambda sc, r, s=solver: jb.simulate(sc, solver=s, rtol=r, atol=r * 1e-2, max_steps=10**6).ys
+        )
         for tol in tols:
             med, comp, ys = time_jax(run, scene, jnp.asarray(tol), repeats=repeats)
-            rows.append({"name": f"diffrax {name}", "method": "ode", "rtol": tol, "error": rel_error(ys, ref),
-                         "median_s": med, "compile_s": comp, "repeats": repeats})
+            rows.append(
+                {
+                    "name": f"diffrax {name}",
+                    "method": "ode",
+                    "rtol": tol,
+                    "error": rel_error(ys, ref),
+                    "median_s": med,
+                    "compile_s": comp,
+                    "repeats": repeats,
+                }
+            )
             print(rows[-1])
-    for dt in ((1e-3,) if quick else (1e-3, 5e-4, 2.5e-4, 1.25e-4)):  # outputs every 1 ms: dt <= 1 ms
+    for dt in (1e-3,) if quick else (1e-3, 5e-4, 2.5e-4, 1.25e-4):  # outputs every 1 ms: dt <= 1 ms
+
         def run(d, p, dt=dt):  # simulate jits the stepping itself (rk4 needs concrete ts)
             return jb.simulate(jb.Scene(d, p, ts=ts), method="rk4", dt=dt).ys
 
         med, comp, ys = time_jax(run, drive, pid, repeats=repeats)
-        rows.append({"name": f"RK4 dt={dt * 1e3:g} ms" + (" (paper)" if dt == 1e-3 else ""), "method": "rk4",
-                     "dt": dt, "error": rel_error(ys, ref), "median_s": med, "compile_s": comp, "repeats": repeats})
+        rows.append(
+            {
+                "name": f"RK4 dt={dt * 1e3:g} ms" + (" (paper)" if dt == 1e-3 else ""),
+                "method": "rk4",
+                "dt": dt,
+                "error": rel_error(ys, ref),
+                "median_s": med,
+                "compile_s": comp,
+                "repeats": repeats,
+            }
+        )
         print(rows[-1])
     rhs = np_rhs_factory(drive)
     sp_tols = (1e-6,) if quick else (1e-4, 1e-6, 1e-8, 1e-10)
-    for method in (("LSODA",) if quick else ("LSODA", "Radau", "DOP853")):
+    for method in ("LSODA",) if quick else ("LSODA", "Radau", "DOP853"):
         for tol in sp_tols:
             if method == "Radau" and tol < 1e-9:
                 continue  # minutes per solve: out of the time budget
             med, ys = time_py(scipy_solve, rhs, ts, method, tol, repeats=1 if quick else 2)
-            rows.append({"name": f"scipy {method}", "method": "scipy", "rtol": tol, "error": rel_error(ys, ref),
-                         "median_s": med, "compile_s": None, "repeats": 1 if quick else 2})
+            rows.append(
+                {
+                    "name": f"scipy {method}",
+                    "method": "scipy",
+                    "rtol": tol,
+                    "error": rel_error(ys, ref),
+                    "median_s": med,
+                    "compile_s": None,
+                    "repeats": 1 if quick else 2,
+                }
+            )
             print(rows[-1])
 
     # --- 2. gradient / forward cost -----------------------------------------------------------
@@ -175,25 +248,65 @@ def main(quick: bool) -> None:
 
     rk4_row = next(r for r in rows if r["method"] == "rk4" and r.get("dt") == 1e-3)
     headline = [
-        {"what": "closed-loop run 0.5 s, Tsit5 rtol 1e-8: error", "unit": "rel",
-         "value": next(r["error"] for r in rows if r["name"] == "diffrax Tsit5" and r["rtol"] == 1e-8), "target": None},
-        {"what": "closed-loop run 0.5 s, Tsit5 rtol 1e-8: time", "unit": "s",
-         "value": next(r["median_s"] for r in rows if r["name"] == "diffrax Tsit5" and r["rtol"] == 1e-8), "target": None},
+        {
+            "what": "closed-loop run 0.5 s, Tsit5 rtol 1e-8: error",
+            "unit": "rel",
+            "value": next(r["error"] for r in rows if r["name"] == "diffrax Tsit5" and r["rtol"] == 1e-8),
+            "target": None,
+        },
+        {
+            "what": "closed-loop run 0.5 s, Tsit5 rtol 1e-8: time",
+            "unit": "s",
+            "value": next(r["median_s"] for r in rows if r["name"] == "diffrax Tsit5" and r["rtol"] == 1e-8),
+            "target": None,
+        },
         {"what": "paper's RK4 at 1 ms: error", "unit": "rel", "value": rk4_row["error"], "target": None},
         {"what": "paper's RK4 at 1 ms: time", "unit": "s", "value": rk4_row["median_s"], "target": None},
-        {"what": "scipy LSODA rtol 1e-6: time", "unit": "s",
-         "value": next(r["median_s"] for r in rows if r["name"] == "scipy LSODA" and r["rtol"] == 1e-6), "target": None},
-        {"what": "gradient / forward time (smooth chi, 3 gains, forward mode)", "unit": "x", "value": t_grd / t_fwd, "target": "<= 5"},
-        {"what": "gradient / forward time (smooth chi, reverse mode)", "unit": "x", "value": t_rev / t_fwd, "target": None},
+        {
+            "what": "scipy LSODA rtol 1e-6: time",
+            "unit": "s",
+            "value": next(r["median_s"] for r in rows if r["name"] == "scipy LSODA" and r["rtol"] == 1e-6),
+            "target": None,
+        },
+        {
+            "what": "gradient / forward time (smooth chi, 3 gains, forward mode)",
+            "unit": "x",
+            "value": t_grd / t_fwd,
+            "target": "<= 5",
+        },
+        {
+            "what": "gradient / forward time (smooth chi, reverse mode)",
+            "unit": "x",
+            "value": t_rev / t_fwd,
+            "target": None,
+        },
         {"what": f"vmap sweep of {n_sweep} gain sets (chi)", "unit": "s", "value": t_sweep, "target": None},
-        {"what": f"scipy LSODA loop, {n_sweep} gain sets (timed on {n_sp}, scaled)", "unit": "s", "value": t_sp,
-         "target": None},
+        {
+            "what": f"scipy LSODA loop, {n_sweep} gain sets (timed on {n_sp}, scaled)",
+            "unit": "s",
+            "value": t_sp,
+            "target": None,
+        },
         {"what": "sweep speed-up over scipy loop", "unit": "x", "value": t_sp / t_sweep, "target": None},
     ]
-    extra = {"gradient": {"forward_s": t_fwd, "grad_s": t_grd, "forward_compile_s": c_fwd, "grad_compile_s": c_grd,
-                         "grad_reverse_s": t_rev, "grad_reverse_compile_s": c_rev},
-             "sweep": {"n": n_sweep, "vmap_s": t_sweep, "vmap_compile_s": c_sweep, "scipy_scaled_s": t_sp,
-                       "scipy_timed_runs": n_sp, "max_chi_difference_vs_scipy": chi_diff}}
+    extra = {
+        "gradient": {
+            "forward_s": t_fwd,
+            "grad_s": t_grd,
+            "forward_compile_s": c_fwd,
+            "grad_compile_s": c_grd,
+            "grad_reverse_s": t_rev,
+            "grad_reverse_compile_s": c_rev,
+        },
+        "sweep": {
+            "n": n_sweep,
+            "vmap_s": t_sweep,
+            "vmap_compile_s": c_sweep,
+            "scipy_scaled_s": t_sp,
+            "scipy_timed_runs": n_sp,
+            "max_chi_difference_vs_scipy": chi_diff,
+        },
+    }
     path = write_results("fourbar", rows, headline, quick, extra)
     print("wrote", path)
     plot(rows)
@@ -212,8 +325,13 @@ def plot(rows):
         groups.setdefault(key, []).append(r)
     for name, sel in groups.items():
         sel = sorted(sel, key=lambda r: r["median_s"])
-        ax.loglog([r["median_s"] for r in sel], [max(r["error"], 1e-16) for r in sel], marker="o",
-                  ls="--" if sel[0]["method"] == "scipy" else "-", label=name)
+        ax.loglog(
+            [r["median_s"] for r in sel],
+            [max(r["error"], 1e-16) for r in sel],
+            marker="o",
+            ls="--" if sel[0]["method"] == "scipy" else "-",
+            label=name,
+        )
     ax.set_xlabel("median run time [s]")
     ax.set_ylabel("max error / peak (vs Dopri8 rtol 1e-12)")
     ax.set_title("four-bar drive, closed loop (PID) 0.5 s: work-precision")

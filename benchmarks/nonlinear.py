@@ -67,8 +67,9 @@ def scipy_pp(belt, speed, rtol, atol, method="DOP853"):
     decay = float(np.min(np.asarray(sys_.damping * sys_.omega)))  # the slowest mode sets the settling time
     periods = int(np.ceil(40.0 / decay / T)) + 1
     t_end = periods * T
-    sol = solve_ivp(numpy_rhs(sys_), (0.0, t_end), np.zeros(2 * n), method=method, rtol=rtol, atol=atol,
-                    dense_output=True)
+    sol = solve_ivp(
+        numpy_rhs(sys_), (0.0, t_end), np.zeros(2 * n), method=method, rtol=rtol, atol=atol, dense_output=True
+    )
     tt = np.linspace(t_end - T, t_end, 4001)
     z = sol.sol(tt)
     xm = 0.01 / float(belt.span)
@@ -93,26 +94,48 @@ def main(argv=None):
     rows, headline, sweeps = [], [], {}
 
     # 1. sweeps (quick: one mode only)
-    for n in ((1,) if quick else (1, 4)):
+    for n in (1,) if quick else (1, 4):
         belt = jb.NonlinearBelt(damping=XI, n_modes=n, sensor_pulley="drive")
 
         def updown(b=belt):
             up = jb.nonlinear_sweep(b, speeds)
             dn = jb.nonlinear_sweep(b, speeds[::-1], up.steady.z[-1], up.steady.theta[-1])
-            return up.pp, dn.pp, up.converged.all() & dn.converged.all(), up.steady.periods.sum() + dn.steady.periods.sum()
+            return (
+                up.pp,
+                dn.pp,
+                up.converged.all() & dn.converged.all(),
+                up.steady.periods.sum() + dn.steady.periods.sum(),
+            )
 
         med, comp, out = time_jax(updown, repeats=repeats, min_time=0.0)
         sweeps[n] = (np.asarray(out[0]), np.asarray(out[1])[::-1])
-        rows.append({"name": f"sweep_up_down_N{n}", "method": "jaxbelt diffrax Tsit5 + steady-state criterion, lax.scan over speeds",
-                     "error": None, "median_s": med, "compile_s": comp, "repeats": repeats,
-                     "speeds": 2 * n_speeds, "converged": bool(out[2]), "periods_total": int(out[3])})
-        headline.append({"what": f"{n_speeds}-speed up+down sweep, N={n}, after compile", "value": med, "unit": "s",
-                         "target": None})
+        rows.append(
+            {
+                "name": f"sweep_up_down_N{n}",
+                "method": "jaxbelt diffrax Tsit5 + steady-state criterion, lax.scan over speeds",
+                "error": None,
+                "median_s": med,
+                "compile_s": comp,
+                "repeats": repeats,
+                "speeds": 2 * n_speeds,
+                "converged": bool(out[2]),
+                "periods_total": int(out[3]),
+            }
+        )
+        headline.append(
+            {"what": f"{n_speeds}-speed up+down sweep, N={n}, after compile", "value": med, "unit": "s", "target": None}
+        )
         print(f"N={n}: up+down {2 * n_speeds} speeds: {med:.3f} s (compile {comp:.1f} s), converged {bool(out[2])}")
     if 4 in sweeps:
         peak1, peak4 = sweeps[1][0].max(), sweeps[4][0].max()
-        headline.append({"what": "N=1 peak-to-peak error vs N=4 (increasing sweep)", "value": float(peak1 / peak4 - 1),
-                         "unit": "-", "target": "reported"})
+        headline.append(
+            {
+                "what": "N=1 peak-to-peak error vs N=4 (increasing sweep)",
+                "value": float(peak1 / peak4 - 1),
+                "unit": "-",
+                "target": "reported",
+            }
+        )
 
     # 2. accuracy against scipy
     check = [9.0] if quick else [8.0, 9.0, 9.6, 10.5]
@@ -121,10 +144,13 @@ def main(argv=None):
     for s in check:
         t0 = time.perf_counter()
         refs[s], nfev = scipy_pp(belt, s, 1e-11, 1e-14)
-        print(f"scipy reference at {s} m/s: pp {refs[s] * 1e3:.6f} mm ({nfev} evaluations, {time.perf_counter() - t0:.1f} s)")
+        print(
+            f"scipy reference at {s} m/s: pp {refs[s] * 1e3:.6f} mm ({nfev} evaluations, {time.perf_counter() - t0:.1f} s)"
+        )
     worst = 0.0
     settings = [(1e-3, 32), (1e-4, 64), (1e-6, 128)] + ([] if quick else [(1e-8, 256)])
     for rtol, steps in settings:
+
         def run(rtol=rtol, steps=steps):
             return jnp.stack([jb.nonlinear_steady_state(belt, s, rtol=rtol, steps_per_period=steps).pp for s in check])
 
@@ -132,17 +158,41 @@ def main(argv=None):
         err = max(abs(float(out[i]) / refs[s] - 1) for i, s in enumerate(check))
         if (rtol, steps) == (1e-4, 64):
             worst = err
-        rows.append({"name": f"steady_rtol{rtol:g}_steps{steps}", "method": "jaxbelt steady_state (diffrax Tsit5)", "error": err,
-                     "median_s": med, "compile_s": comp, "repeats": repeats, "speeds": len(check)})
+        rows.append(
+            {
+                "name": f"steady_rtol{rtol:g}_steps{steps}",
+                "method": "jaxbelt steady_state (diffrax Tsit5)",
+                "error": err,
+                "median_s": med,
+                "compile_s": comp,
+                "repeats": repeats,
+                "speeds": len(check),
+            }
+        )
         print(f"jaxbelt rtol={rtol:g} steps/period={steps}: error {err:.2e}, {med:.3f} s for {len(check)} speeds")
     for rtol in (1e-5, 1e-7):
         med, out = time_py(lambda r=rtol: [scipy_pp(belt, s, r, r * 1e-3)[0] for s in check], repeats=1)
         err = max(abs(out[i] / refs[s] - 1) for i, s in enumerate(check))
-        rows.append({"name": f"scipy_DOP853_rtol{rtol:g}", "method": "scipy solve_ivp DOP853, fixed long time",
-                     "error": err, "median_s": med, "compile_s": None, "repeats": 1, "speeds": len(check)})
+        rows.append(
+            {
+                "name": f"scipy_DOP853_rtol{rtol:g}",
+                "method": "scipy solve_ivp DOP853, fixed long time",
+                "error": err,
+                "median_s": med,
+                "compile_s": None,
+                "repeats": 1,
+                "speeds": len(check),
+            }
+        )
         print(f"scipy rtol={rtol:g}: error {err:.2e}, {med:.3f} s")
-    headline.append({"what": "steady pp error vs scipy rtol 1e-11 (defaults rtol 1e-4, 64 steps/period)",
-                     "value": worst, "unit": "-", "target": "< 1e-3"})
+    headline.append(
+        {
+            "what": "steady pp error vs scipy rtol 1e-11 (defaults rtol 1e-4, 64 steps/period)",
+            "value": worst,
+            "unit": "-",
+            "target": "< 1e-3",
+        }
+    )
     # 3. response curve by harmonic balance + continuation (both folds, stability) vs up+down sweeps
     belt = jb.NonlinearBelt(damping=XI, n_modes=1, sensor_pulley="drive")
     curve_fn = lambda: jb.response_curve(belt, (7.5, 10.5), 3).pp  # noqa: E731
@@ -159,14 +209,34 @@ def main(argv=None):
         errs.append(abs(float(curve.pp[i]) / float(ref.pp) - 1))
     sweep_row = next(r for r in rows if r["name"] == "sweep_up_down_N1")
     ratio = sweep_row["median_s"] / med_c
-    rows.append({"name": "response_curve_N1_H3", "method": "jaxbelt harmonic balance + arclength continuation "
-                 "(optimistix chord corrector) + Floquet", "error": max(errs), "median_s": med_c, "compile_s": comp_c,
-                 "repeats": max(repeats, 3), "points": int(curve.speed.shape[0]),
-                 "folds": np.asarray(curve.folds).tolist()})
-    headline.append({"what": f"response curve 7.5-10.5 m/s (both folds) vs up+down sweep over {n_speeds} speeds",
-                     "value": ratio, "unit": "x faster", "target": ">= 20"})
-    headline.append({"what": "response curve pp error on the stable branch vs time domain",
-                     "value": max(errs), "unit": "-", "target": "<= 1e-3"})
+    rows.append(
+        {
+            "name": "response_curve_N1_H3",
+            "method": "jaxbelt harmonic balance + arclength continuation (optimistix chord corrector) + Floquet",
+            "error": max(errs),
+            "median_s": med_c,
+            "compile_s": comp_c,
+            "repeats": max(repeats, 3),
+            "points": int(curve.speed.shape[0]),
+            "folds": np.asarray(curve.folds).tolist(),
+        }
+    )
+    headline.append(
+        {
+            "what": f"response curve 7.5-10.5 m/s (both folds) vs up+down sweep over {n_speeds} speeds",
+            "value": ratio,
+            "unit": "x faster",
+            "target": ">= 20",
+        }
+    )
+    headline.append(
+        {
+            "what": "response curve pp error on the stable branch vs time domain",
+            "value": max(errs),
+            "unit": "-",
+            "target": "<= 1e-3",
+        }
+    )
     print(f"response curve: {med_c * 1e3:.1f} ms, {ratio:.1f}x faster than the sweeps, pp error {max(errs):.1e}")
     path = write_results("nonlinear", rows, headline, quick)
     print(f"wrote {path}")

@@ -49,7 +49,7 @@ def target_met(target, value):
             return abs(float(value) - centre) <= tol
         for op in ("<=", ">=", "<", ">"):
             if text.startswith(op):
-                bound = float(text[len(op):].split()[0].rstrip("x"))
+                bound = float(text[len(op) :].split()[0].rstrip("x"))
                 v = float(value)
                 return {"<=": v <= bound, ">=": v >= bound, "<": v < bound, ">": v > bound}[op]
     except ValueError:
@@ -72,8 +72,11 @@ def matched_error_ratios(data) -> list:
     compared with the cheapest such jaxbelt run.
     Returns dicts with `task`, `jax`, `ref`, their errors and times, and `ratio` = t_ref / t_jax.
     """
-    rows = [r for r in data.get("rows", []) if r.get("error") is not None and r.get("median_s")
-            and (r.get("batch") or 1) == 1]
+    rows = [
+        r
+        for r in data.get("rows", [])
+        if r.get("error") is not None and r.get("median_s") and (r.get("batch") or 1) == 1
+    ]
     ref_names = {r.get("name") for r in rows if _is_reference(r)}
     jax_names = {r.get("name") for r in rows if not _is_reference(r)}
     shared = ref_names & jax_names
@@ -92,11 +95,26 @@ def matched_error_ratios(data) -> list:
             ok = [j for j in jaxs if j["error"] <= max(ref["error"] * (1 + 1e-6), 1e-13)]
             if ok:
                 j = min(ok, key=lambda r: r["median_s"])
-                label = lambda r: r.get("method") if r.get("method") not in (None, "ode", "scipy") or task != "all" else r.get("name")  # noqa: E731
-                out.append({"task": task, "jax": f"{label(j)}" + (f" rtol={j['rtol']:g}" if j.get("rtol") else ""),
-                            "ref": f"{label(ref)}" + (f" rtol={ref['rtol']:g}" if ref.get("rtol") else ""),
-                            "jax_error": j["error"], "ref_error": ref["error"], "jax_s": j["median_s"],
-                            "ref_s": ref["median_s"], "ratio": ref["median_s"] / j["median_s"]})
+
+                def label(r, task=task):
+                    return (
+                        r.get("method")
+                        if r.get("method") not in (None, "ode", "scipy") or task != "all"
+                        else r.get("name")
+                    )
+
+                out.append(
+                    {
+                        "task": task,
+                        "jax": f"{label(j)}" + (f" rtol={j['rtol']:g}" if j.get("rtol") else ""),
+                        "ref": f"{label(ref)}" + (f" rtol={ref['rtol']:g}" if ref.get("rtol") else ""),
+                        "jax_error": j["error"],
+                        "ref_error": ref["error"],
+                        "jax_s": j["median_s"],
+                        "ref_s": ref["median_s"],
+                        "ratio": ref["median_s"] / j["median_s"],
+                    }
+                )
                 break
     return out
 
@@ -120,28 +138,37 @@ def headline_table(results_dir: Path = RESULTS) -> list:
         for h in data.get("headline", []):
             value = f"{_fmt(h.get('value'))} {h.get('unit', '')}".strip()
             met = {True: "yes", False: "**no**", None: "–"}[target_met(h.get("target"), h.get("value"))]
-            lines.append(f"| {data.get('scene', path.stem)} | {h.get('what', '')} | {value} | "
-                         f"{h.get('target') or '–'} | {met} | {machine} | {mode} |")
+            lines.append(
+                f"| {data.get('scene', path.stem)} | {h.get('what', '')} | {value} | "
+                f"{h.get('target') or '–'} | {met} | {machine} | {mode} |"
+            )
     return lines
 
 
 def matched_table(results_dir: Path = RESULTS) -> list:
     """jaxbelt against scipy/numpy at matched error, one Markdown table with its caption (list of lines)."""
-    lines = ["**jaxbelt against scipy/numpy at matched error** (single runs; the reference run is the most "
-             "accurate one that a jaxbelt run matches; time ratio = reference / jaxbelt):", "",
-             "| scene | task | jaxbelt run (error, time) | reference run (error, time) | speed-up |",
-             "|---|---|---|---|---|"]
+    lines = [
+        "**jaxbelt against scipy/numpy at matched error** (single runs; the reference run is the most "
+        "accurate one that a jaxbelt run matches; time ratio = reference / jaxbelt):",
+        "",
+        "| scene | task | jaxbelt run (error, time) | reference run (error, time) | speed-up |",
+        "|---|---|---|---|---|",
+    ]
     for path, data in _load(results_dir):
         for m in matched_error_ratios(data):
             task = "" if m["task"] == "all" else m["task"]
-            lines.append(f"| {data.get('scene', path.stem)} | {task} | {m['jax']} ({_fmt(m['jax_error'])}, "
-                         f"{_fmt(m['jax_s'])} s) | {m['ref']} ({_fmt(m['ref_error'])}, {_fmt(m['ref_s'])} s) | "
-                         f"{_fmt(m['ratio'])}x |")
+            lines.append(
+                f"| {data.get('scene', path.stem)} | {task} | {m['jax']} ({_fmt(m['jax_error'])}, "
+                f"{_fmt(m['jax_s'])} s) | {m['ref']} ({_fmt(m['ref_error'])}, {_fmt(m['ref_s'])} s) | "
+                f"{_fmt(m['ratio'])}x |"
+            )
     return lines
 
 
-_FOOTER = ("_Generated by `python benchmarks/run_all.py` from `benchmarks/results/*.json`; "
-           "work-precision plots in `benchmarks/results/*.png`._")
+_FOOTER = (
+    "_Generated by `python benchmarks/run_all.py` from `benchmarks/results/*.json`; "
+    "work-precision plots in `benchmarks/results/*.png`._"
+)
 
 
 def build_table(results_dir: Path = RESULTS, fold: bool = False) -> str:
@@ -156,7 +183,10 @@ def build_table(results_dir: Path = RESULTS, fold: bool = False) -> str:
         n = len(head) - 2
         missed = [r.split(" | ")[1] for r in head[2:] if "| **no** |" in r]
         note = f" Missed: {'; '.join(missed)}." if missed else " Every target is met."
-        lines = matched + ["", f"All {n} headline numbers, with their targets: [docs/benchmarks.md](docs/benchmarks.md).{note}"]
+        lines = matched + [
+            "",
+            f"All {n} headline numbers, with their targets: [docs/benchmarks.md](docs/benchmarks.md).{note}",
+        ]
     else:
         lines = head + [""] + matched
     return "\n".join(lines + ["", _FOOTER])
@@ -180,8 +210,9 @@ def update_docs_page(page: Path = DOCS_PAGE, results_dir: Path = RESULTS) -> boo
     return False
 
 
-def update_readme(readme: Path | None = None, results_dir: Path = RESULTS, print_only: bool = False,
-                  docs_page: Path | None = None) -> bool:
+def update_readme(
+    readme: Path | None = None, results_dir: Path = RESULTS, print_only: bool = False, docs_page: Path | None = None
+) -> bool:
     """Write the table into README.md between the markers; return True if written.
 
     Called without `readme`, it updates the repository's README.md and docs/benchmarks.md; with an

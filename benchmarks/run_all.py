@@ -37,10 +37,16 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true", help="CI-sized runs (< 2 minutes in all on 2 cores)")
     p.add_argument("--only", nargs="+", metavar="SCENE", help="run only these scenes")
     p.add_argument("--timeout", type=float, default=None, help="per-scene time limit [s]")
-    p.add_argument("--xla-defaults", action="store_true",
-                   help="with --quick: compile with XLA's default settings (default: its quicker CPU compilation)")
-    p.add_argument("--update", action="store_true",
-                   help="with --quick: overwrite the committed results and README table (default: scratch folder)")
+    p.add_argument(
+        "--xla-defaults",
+        action="store_true",
+        help="with --quick: compile with XLA's default settings (default: its quicker CPU compilation)",
+    )
+    p.add_argument(
+        "--update",
+        action="store_true",
+        help="with --quick: overwrite the committed results and README table (default: scratch folder)",
+    )
     args = p.parse_args(argv)
     scenes = discover()
     if args.only:
@@ -77,14 +83,18 @@ def main(argv=None) -> int:
         if rc != 0:
             failed.append(scene)
     if scratch:
-        print(f"run_all: quick results in {env['JAXBELT_BENCH_OUT']} (committed results untouched; --update to overwrite)")
+        print(
+            f"run_all: quick results in {env['JAXBELT_BENCH_OUT']} (committed results untouched; --update to overwrite)"
+        )
     else:
         sys.path.insert(0, str(HERE))
         import readme_table
 
         readme_table.update_readme()
-    print(f"run_all: {len(scenes) - len(failed)}/{len(scenes)} benchmarks ran in {time.perf_counter() - t0:.1f} s"
-          + (f"; failed: {failed}" if failed else ""))
+    print(
+        f"run_all: {len(scenes) - len(failed)}/{len(scenes)} benchmarks ran in {time.perf_counter() - t0:.1f} s"
+        + (f"; failed: {failed}" if failed else "")
+    )
     return 1 if failed else 0
 
 

@@ -74,21 +74,47 @@ def main(argv=None):
     t_fwd, c_fwd, h = time_jax(fwd, g0, repeats=reps, min_time=0.1)
     t_grad, c_grad, _ = time_jax(grad, g0, repeats=reps, min_time=0.1)
     t_vg, c_vg, _ = time_jax(vg, g0, repeats=reps, min_time=0.1)
-    rows.append(dict(name="H forward", method="quadrature n=128", error=rel_error(h, h_ref), median_s=t_fwd,
-                     compile_s=c_fwd, repeats=reps))
-    rows.append(dict(name="dH/dgamma", method="reverse-mode grad", error=None, median_s=t_grad, compile_s=c_grad,
-                     repeats=reps))
-    rows.append(dict(name="H and dH/dgamma", method="value_and_grad", error=None, median_s=t_vg, compile_s=c_vg,
-                     repeats=reps))
+    rows.append(
+        dict(
+            name="H forward",
+            method="quadrature n=128",
+            error=rel_error(h, h_ref),
+            median_s=t_fwd,
+            compile_s=c_fwd,
+            repeats=reps,
+        )
+    )
+    rows.append(
+        dict(name="dH/dgamma", method="reverse-mode grad", error=None, median_s=t_grad, compile_s=c_grad, repeats=reps)
+    )
+    rows.append(
+        dict(name="H and dH/dgamma", method="value_and_grad", error=None, median_s=t_vg, compile_s=c_vg, repeats=reps)
+    )
     # one call of a ~15 us function is dominated by dispatch; a batch of 1024 exponent sets
     # measures the arithmetic cost of the gradient relative to the forward pass
     gs = g0[None, :] + 0.001 * jnp.arange(1024.0)[:, None]
     t_bf, c_bf, _ = time_jax(jax.jit(jax.vmap(H)), gs, repeats=reps, min_time=0.1)
     t_bg, c_bg, _ = time_jax(jax.jit(jax.vmap(jax.grad(H))), gs, repeats=reps, min_time=0.1)
-    rows.append(dict(name="H forward, vmap 1024", method="quadrature n=128", error=None, median_s=t_bf, compile_s=c_bf,
-                     repeats=reps))
-    rows.append(dict(name="dH/dgamma, vmap 1024", method="reverse-mode grad", error=None, median_s=t_bg,
-                     compile_s=c_bg, repeats=reps))
+    rows.append(
+        dict(
+            name="H forward, vmap 1024",
+            method="quadrature n=128",
+            error=None,
+            median_s=t_bf,
+            compile_s=c_bf,
+            repeats=reps,
+        )
+    )
+    rows.append(
+        dict(
+            name="dH/dgamma, vmap 1024",
+            method="reverse-mode grad",
+            error=None,
+            median_s=t_bg,
+            compile_s=c_bg,
+            repeats=reps,
+        )
+    )
 
     # --- work-precision of H -------------------------------------------------------------
     wp = {"quadrature": [], "ode": [], "scipy": []}
@@ -98,30 +124,34 @@ def main(argv=None):
 
     candidates = [16, 32, 48, 64, 128] if quick else [12, 16, 24, 32, 40, 48, 64, 96, 128]
     nodes = [n for n in candidates if float(quadrature_error(plat, jb.PseudoPolynomial(g0), n)) <= QUADRATURE_TOL]
-    print(f"quadrature: node counts {sorted(set(candidates) - set(nodes))} refused (not resolved), "
-          f"{nodes} timed")
+    print(f"quadrature: node counts {sorted(set(candidates) - set(nodes))} refused (not resolved), {nodes} timed")
     for n in nodes:
         f = jax.jit(lambda g, n=n: jb.residual_energy(plat, jb.PseudoPolynomial(g), n_nodes=n))
         t, c, v = time_jax(f, g0, repeats=reps)
         e = rel_error(v, h_ref)
         wp["quadrature"].append((t, e))
         rows.append(dict(name="H", method=f"quadrature n={n}", error=e, median_s=t, compile_s=c, repeats=reps))
-    for rtol in ([1e-6, 1e-9, 1e-12] if quick else [1e-5, 1e-6, 1e-8, 1e-10, 1e-12]):
-        f = jax.jit(lambda g, rtol=rtol: jb.residual_energy(plat, jb.PseudoPolynomial(g), method="ode", rtol=rtol,
-                                                           atol=rtol * 1e-3))
+    for rtol in [1e-6, 1e-9, 1e-12] if quick else [1e-5, 1e-6, 1e-8, 1e-10, 1e-12]:
+        f = jax.jit(
+            lambda g, rtol=rtol: jb.residual_energy(
+                plat, jb.PseudoPolynomial(g), method="ode", rtol=rtol, atol=rtol * 1e-3
+            )
+        )
         t, c, v = time_jax(f, g0, repeats=reps)
         e = rel_error(v, h_ref)
         wp["ode"].append((t, e))
-        rows.append(dict(name="H", method=f"diffrax Dopri8 rtol={rtol:g}", error=e, median_s=t, compile_s=c,
-                         repeats=reps))
+        rows.append(
+            dict(name="H", method=f"diffrax Dopri8 rtol={rtol:g}", error=e, median_s=t, compile_s=c, repeats=reps)
+        )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        for eps in ([1e-6, 1e-9, 1e-12] if quick else [1e-4, 1e-6, 1e-8, 1e-10, 1e-12]):
+        for eps in [1e-6, 1e-9, 1e-12] if quick else [1e-4, 1e-6, 1e-8, 1e-10, 1e-12]:
             t, v = time_py(h_scipy, consts, np.asarray(g0), eps, repeats=reps)
             e = rel_error(v, h_ref)
             wp["scipy"].append((t, e))
-            rows.append(dict(name="H", method=f"scipy quad epsrel={eps:g}", error=e, median_s=t, compile_s=None,
-                             repeats=reps))
+            rows.append(
+                dict(name="H", method=f"scipy quad epsrel={eps:g}", error=e, median_s=t, compile_s=None, repeats=reps)
+            )
 
     # --- optimisation: optax L-BFGS vs scipy BFGS ----------------------------------------
     cmd0 = jb.PseudoPolynomial(g0)
@@ -135,8 +165,18 @@ def main(argv=None):
         opt_samples.append(time.perf_counter() - t)
     t_opt = float(np.median(opt_samples))
     rel_jax = float(res.value) / float(h)
-    rows.append(dict(name="optimise (3,4,5)", method="optax lbfgs", error=rel_jax, median_s=t_opt,
-                     compile_s=first - t_opt, repeats=reps, steps=res.n_steps, gammas=res.gammas.tolist()))
+    rows.append(
+        dict(
+            name="optimise (3,4,5)",
+            method="optax lbfgs",
+            error=rel_jax,
+            median_s=t_opt,
+            compile_s=first - t_opt,
+            repeats=reps,
+            steps=res.n_steps,
+            gammas=res.gammas.tolist(),
+        )
+    )
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -145,9 +185,19 @@ def main(argv=None):
         sres = minimize(fun, np.asarray(g0), method="BFGS", options=dict(gtol=1e-12, maxiter=200))
         t_scipy = time.perf_counter() - t
     rel_scipy = float(sres.fun)
-    rows.append(dict(name="optimise (3,4,5)", method="scipy BFGS (FD gradient) on scipy.quad H", error=rel_scipy,
-                     median_s=t_scipy, compile_s=None, repeats=1, steps=int(sres.nit), nfev=int(sres.nfev),
-                     gammas=np.asarray(sres.x).tolist()))
+    rows.append(
+        dict(
+            name="optimise (3,4,5)",
+            method="scipy BFGS (FD gradient) on scipy.quad H",
+            error=rel_scipy,
+            median_s=t_scipy,
+            compile_s=None,
+            repeats=1,
+            steps=int(sres.nit),
+            nfev=int(sres.nfev),
+            gammas=np.asarray(sres.x).tolist(),
+        )
+    )
 
     headline = [
         dict(what="one H (quadrature, jit)", value=t_fwd * 1e6, unit="us", target=None),
@@ -163,7 +213,9 @@ def main(argv=None):
     ]
     path = write_results("shaping", rows, headline, quick)
     for hl in headline:
-        print(f"{hl['what']:45s} {hl['value']:.4g} {hl['unit']}" + (f"  (target {hl['target']})" if hl["target"] else ""))
+        print(
+            f"{hl['what']:45s} {hl['value']:.4g} {hl['unit']}" + (f"  (target {hl['target']})" if hl["target"] else "")
+        )
     print(f"wrote {path}")
 
     import matplotlib
@@ -174,9 +226,16 @@ def main(argv=None):
     fig, ax = plt.subplots(figsize=(6.5, 4.5))
     for (name, pts), mk in zip(wp.items(), ("o-", "s-", "^-")):
         ts_, es = zip(*pts)
-        ax.loglog(ts_, np.maximum(es, 1e-17), mk, label={"quadrature": "jaxbelt Gauss-Legendre (nodes)",
-                                                          "ode": "jaxbelt diffrax Dopri8 (rtol)",
-                                                          "scipy": "scipy.integrate.quad (epsrel)"}[name])
+        ax.loglog(
+            ts_,
+            np.maximum(es, 1e-17),
+            mk,
+            label={
+                "quadrature": "jaxbelt Gauss-Legendre (nodes)",
+                "ode": "jaxbelt diffrax Dopri8 (rtol)",
+                "scipy": "scipy.integrate.quad (epsrel)",
+            }[name],
+        )
     ax.set_xlabel("median time per H [s]")
     ax.set_ylabel("relative error of H(3,4,5)")
     ax.set_title("shaping: residual energy H, work-precision")

@@ -47,6 +47,7 @@ def np_crossing_loop(speeds):
     for a in range(N_MODES):
         for j in range(len(RADII)):
             for k in range(HARM):
+
                 def f(V, n=a + 1, h=k + 1, r=RADII[j]):
                     return n * np.pi / L * VT * (1 - (V / VT) ** 2) - h * V / r
 
@@ -126,13 +127,35 @@ def main(quick: bool):
 
     t_jax, c_jax, (nat, load, cross) = time_jax(jax_diagram, jnp.asarray(speeds), repeats=reps)
     t_np, (nat0, load0, cross0) = time_py(np_crossing_loop, speeds, repeats=max(1, reps // 3))
-    err_loci = max(float(np.max(np.abs(np.asarray(nat) - nat0) / np.abs(nat0).max())),
-                   float(np.max(np.abs(np.asarray(load) - load0) / np.abs(load0).max())))
+    err_loci = max(
+        float(np.max(np.abs(np.asarray(nat) - nat0) / np.abs(nat0).max())),
+        float(np.max(np.abs(np.asarray(load) - load0) / np.abs(load0).max())),
+    )
     err_cross = float(np.max(np.abs(np.asarray(cross) - cross0) / cross0))
-    rows.append(dict(name="crossing diagram", method="jaxbelt (jit, Newton crossings)", error=max(err_loci, err_cross),
-                     median_s=t_jax, compile_s=c_jax, repeats=reps, n_speeds=n_speeds, n_modes=N_MODES))
-    rows.append(dict(name="crossing diagram", method="numpy loop + scipy brentq", error=0.0, median_s=t_np,
-                     compile_s=None, repeats=max(1, reps // 3), n_speeds=n_speeds, n_modes=N_MODES))
+    rows.append(
+        dict(
+            name="crossing diagram",
+            method="jaxbelt (jit, Newton crossings)",
+            error=max(err_loci, err_cross),
+            median_s=t_jax,
+            compile_s=c_jax,
+            repeats=reps,
+            n_speeds=n_speeds,
+            n_modes=N_MODES,
+        )
+    )
+    rows.append(
+        dict(
+            name="crossing diagram",
+            method="numpy loop + scipy brentq",
+            error=0.0,
+            median_s=t_np,
+            compile_s=None,
+            repeats=max(1, reps // 3),
+            n_speeds=n_speeds,
+            n_modes=N_MODES,
+        )
+    )
     mw = np.asarray(jb.crossing_speeds(jb.RunoutRig(), 2))
     headline += [
         dict(what=f"crossing diagram {n_speeds} speeds x {N_MODES} modes, jaxbelt", value=t_jax, unit="s", target=None),
@@ -140,8 +163,10 @@ def main(quick: bool):
         dict(what="Moon & Wickert crossing, mode 1", value=float(mw[0, 0, 0]), unit="m/s", target="9.0 +/- 0.05"),
         dict(what="Moon & Wickert crossing, mode 2", value=float(mw[1, 0, 0]), unit="m/s", target="16.0 +/- 0.1"),
     ]
-    print(f"crossing diagram: jax {t_jax * 1e3:.2f} ms (compile {c_jax:.2f} s), numpy/scipy loop {t_np * 1e3:.1f} ms, "
-          f"max rel. difference {max(err_loci, err_cross):.2e}")
+    print(
+        f"crossing diagram: jax {t_jax * 1e3:.2f} ms (compile {c_jax:.2f} s), numpy/scipy loop {t_np * 1e3:.1f} ms, "
+        f"max rel. difference {max(err_loci, err_cross):.2e}"
+    )
 
     # 2. linear response sweep -----------------------------------------------------------------------
     # the sweep avoids exact resonance (undamped reference): 1000 speeds on a grid offset from crossings
@@ -154,24 +179,61 @@ def main(quick: bool):
         f = jax.jit(lambda V, nm=nm, rig=rig: jb.linear_runout_response(rig, V, nm))
         t, c, out = time_jax(f, jnp.asarray(sw), repeats=reps)
         err = float(np.max(np.abs(np.asarray(out) - ref) / ref))
-        rows.append(dict(name="linear response sweep", method=f"jaxbelt modal, {nm} modes", error=err, median_s=t,
-                         compile_s=c, repeats=reps, n_speeds=n_sweep, n_modes=nm))
+        rows.append(
+            dict(
+                name="linear response sweep",
+                method=f"jaxbelt modal, {nm} modes",
+                error=err,
+                median_s=t,
+                compile_s=c,
+                repeats=reps,
+                n_speeds=n_sweep,
+                n_modes=nm,
+            )
+        )
         wp.append((nm, t, err))
         print(f"linear response {n_sweep} speeds, {nm:3d} modes: jax {t * 1e3:.2f} ms, max rel. error {err:.2e}")
     t_np_modal, out_np = time_py(np_modal_loop, sw, repeats=max(1, reps // 3))
     err_np = float(np.max(np.abs(out_np - ref) / ref))
-    rows.append(dict(name="linear response sweep", method="numpy loop, modal 64 modes", error=err_np,
-                     median_s=t_np_modal, compile_s=None, repeats=max(1, reps // 3), n_speeds=n_sweep, n_modes=64))
-    rows.append(dict(name="linear response sweep", method="numpy loop, exact travelling waves (reference)", error=0.0,
-                     median_s=t_exact, compile_s=None, repeats=max(1, reps // 3), n_speeds=n_sweep))
+    rows.append(
+        dict(
+            name="linear response sweep",
+            method="numpy loop, modal 64 modes",
+            error=err_np,
+            median_s=t_np_modal,
+            compile_s=None,
+            repeats=max(1, reps // 3),
+            n_speeds=n_sweep,
+            n_modes=64,
+        )
+    )
+    rows.append(
+        dict(
+            name="linear response sweep",
+            method="numpy loop, exact travelling waves (reference)",
+            error=0.0,
+            median_s=t_exact,
+            compile_s=None,
+            repeats=max(1, reps // 3),
+            n_speeds=n_sweep,
+        )
+    )
     t64 = [t for nm, t, _ in wp if nm == 64][0]
     e64 = [e for nm, _, e in wp if nm == 64][0]
     headline += [
         dict(what=f"linear response {n_sweep} speeds, 64 modes, jaxbelt", value=t64, unit="s", target=None),
-        dict(what="linear response speed-up over numpy loop (same formula, 64 modes)", value=t_np_modal / t64,
-             unit="x", target=None),
-        dict(what="linear response, 64 modes: max rel. error vs exact travelling-wave solution", value=e64,
-             unit="", target="< 1e-4"),
+        dict(
+            what="linear response speed-up over numpy loop (same formula, 64 modes)",
+            value=t_np_modal / t64,
+            unit="x",
+            target=None,
+        ),
+        dict(
+            what="linear response, 64 modes: max rel. error vs exact travelling-wave solution",
+            value=e64,
+            unit="",
+            target="< 1e-4",
+        ),
     ]
     print(f"numpy modal loop {t_np_modal * 1e3:.1f} ms (err {err_np:.2e}); numpy exact loop {t_exact * 1e3:.1f} ms")
 
@@ -191,7 +253,7 @@ def _plot(wp, t_np_modal, err_np, t_exact, t_jax, t_np, n_speeds, n_sweep):
     ts = [t for _, t, _ in wp]
     es = [max(e, 1e-16) for _, _, e in wp]
     ax.loglog(ts, es, "o-", label="jaxbelt modal (jit + vmap)")
-    for (nm, t, e) in wp:
+    for nm, t, e in wp:
         ax.annotate(f"{nm}", (t, max(e, 1e-16)), textcoords="offset points", xytext=(4, 4), fontsize=7)
     ax.loglog([t_np_modal], [err_np], "s", color="C1", label="numpy loop, 64 modes")
     ax.axvline(t_exact, color="C2", ls="--", label="numpy loop, exact waves (reference)")

@@ -37,11 +37,10 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import scipy.integrate as si  # noqa: E402
 import scipy.linalg as sl  # noqa: E402
+from _common import RESULTS, rel_error, time_jax, time_py, write_results  # noqa: E402
 
 import jaxbelt as jb  # noqa: E402
 from jaxbelt.fast import startup_gamma_batch  # noqa: E402
-
-from _common import RESULTS, rel_error, time_jax, time_py, write_results  # noqa: E402
 
 V_MAX = 24.0
 GAMMA = 0.02
@@ -72,8 +71,16 @@ def scipy_solve(model, gamma, ts, method, rtol):
 
     jac = (lambda t, y: A) if method in ("LSODA", "Radau") else None
     kw = {"jac": jac} if jac is not None else {}
-    sol = si.solve_ivp(f, (0.0, float(ts[-1])), np.zeros(A.shape[0]), method=method, t_eval=np.asarray(ts),
-                       rtol=rtol, atol=rtol * 1e-2, **kw)
+    sol = si.solve_ivp(
+        f,
+        (0.0, float(ts[-1])),
+        np.zeros(A.shape[0]),
+        method=method,
+        t_eval=np.asarray(ts),
+        rtol=rtol,
+        atol=rtol * 1e-2,
+        **kw,
+    )
     return sol.y.T
 
 
@@ -87,15 +94,26 @@ def main(quick: bool = False) -> Path:
     rows = []
 
     def add(name, method, err, med, comp, **extra):
-        rows.append({"name": name, "method": method, "error": err, "median_s": med, "compile_s": comp,
-                     "repeats": reps["repeats"], **extra})
+        rows.append(
+            {
+                "name": name,
+                "method": method,
+                "error": err,
+                "median_s": med,
+                "compile_s": comp,
+                "repeats": reps["repeats"],
+                **extra,
+            }
+        )
         c = "" if comp is None else f"  compile {comp:7.2f} s"
         print(f"  {name:34s} err {err:9.2e}  median {med * 1e3:10.4f} ms{c}", flush=True)
 
     print("single trajectory (gamma = 20 ms, 501 points)")
     # --- closed forms ---------------------------------------------------------------------
     for method in ("expm", "modal"):
-        fn = jax.jit(lambda g, m=method: jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V_MAX, g), ts=ts), method=m).ys)
+        fn = jax.jit(
+            lambda g, m=method: jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V_MAX, g), ts=ts), method=m).ys
+        )
         med, comp, ys = time_jax(fn, jnp.asarray(GAMMA), **reps)
         add(f"closed form ({method})", method, rel_error(ys, ref), med, comp, batch=1)
 
@@ -105,10 +123,13 @@ def main(quick: bool = False) -> Path:
     for sname, solver in solvers.items():
         if quick and sname == "Dopri8":
             continue
+
         @jax.jit
         def run(g, rtol, atol, solver=solver):
             scene = jb.Scene(model, jb.ExponentialVoltage(V_MAX, g), ts=ts)
-            return jb.simulate(scene, method="ode", solver=solver, rtol=rtol, atol=atol, max_steps=200_000, throw=False).ys
+            return jb.simulate(
+                scene, method="ode", solver=solver, rtol=rtol, atol=atol, max_steps=200_000, throw=False
+            ).ys
 
         for rtol in rtols:
             if sname == "Kvaerno5" and rtol < 1e-10:
@@ -118,22 +139,36 @@ def main(quick: bool = False) -> Path:
             med, comp, ys = time_jax(run, jnp.asarray(GAMMA), jnp.asarray(rtol), jnp.asarray(rtol * 1e-2), **reps)
             add(f"diffrax {sname} rtol={rtol:g}", f"diffrax-{sname}", rel_error(ys, ref), med, comp, rtol=rtol, batch=1)
 
-    fn = jax.jit(lambda g: jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V_MAX, g), ts=ts), method="rk4", dt=1e-4).ys)
+    fn = jax.jit(
+        lambda g: jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V_MAX, g), ts=ts), method="rk4", dt=1e-4).ys
+    )
     med, comp, ys = time_jax(fn, jnp.asarray(GAMMA), **reps)
     add("RK4 dt=0.1 ms", "rk4", rel_error(ys, ref), med, comp, batch=1)
 
     # --- scipy solve_ivp ------------------------------------------------------------------
-    scipy_rtols = {"RK45": [1e-6] if quick else [1e-4, 1e-6, 1e-8, 1e-10],
-                   "DOP853": [1e-10] if quick else [1e-4, 1e-6, 1e-8, 1e-10, 1e-12],
-                   "LSODA": [1e-6] if quick else [1e-4, 1e-6, 1e-8, 1e-10],
-                   "Radau": [1e-6] if quick else [1e-4, 1e-6, 1e-8, 1e-10]}
+    scipy_rtols = {
+        "RK45": [1e-6] if quick else [1e-4, 1e-6, 1e-8, 1e-10],
+        "DOP853": [1e-10] if quick else [1e-4, 1e-6, 1e-8, 1e-10, 1e-12],
+        "LSODA": [1e-6] if quick else [1e-4, 1e-6, 1e-8, 1e-10],
+        "Radau": [1e-6] if quick else [1e-4, 1e-6, 1e-8, 1e-10],
+    }
     scipy_reps = 1 if quick else 3
     dop853_1e10 = None
     for meth, rts in scipy_rtols.items():
         for rtol in rts:
             med, ys = time_py(scipy_solve, model, GAMMA, ts_np, meth, rtol, repeats=scipy_reps)
-            rows.append({"name": f"scipy {meth} rtol={rtol:g}", "method": f"scipy-{meth}", "error": rel_error(ys, ref),
-                         "median_s": med, "compile_s": None, "repeats": scipy_reps, "rtol": rtol, "batch": 1})
+            rows.append(
+                {
+                    "name": f"scipy {meth} rtol={rtol:g}",
+                    "method": f"scipy-{meth}",
+                    "error": rel_error(ys, ref),
+                    "median_s": med,
+                    "compile_s": None,
+                    "repeats": scipy_reps,
+                    "rtol": rtol,
+                    "batch": 1,
+                }
+            )
             print(f"  {rows[-1]['name']:34s} err {rows[-1]['error']:9.2e}  median {med * 1e3:10.4f} ms", flush=True)
             if meth == "DOP853" and rtol == 1e-10:
                 dop853_1e10 = rows[-1]
@@ -161,38 +196,79 @@ def main(quick: bool = False) -> Path:
     fast = jax.jit(lambda g: startup_gamma_batch(model, g, ts, v_max=V_MAX))
     med, comp, ys = time_jax(fast, gs, repeats=5, min_time=0.0)
     fast_err = batch_error(np.asarray(gs), ys)
-    add(f"batched closed form (fast) x{n_fast}", "fast-batch", fast_err, med / n_fast, comp, batch=n_fast,
-        batch_s=med)
+    add(f"batched closed form (fast) x{n_fast}", "fast-batch", fast_err, med / n_fast, comp, batch=n_fast, batch_s=med)
     fast_row = rows[-1]
     del ys
 
     gs = jnp.linspace(0.01, 0.1, n_vmap)
     # throw=False: with the eqx.error_if check inside a large vmap we saw (intermittently) the
     # process stall; success is not needed here (the error against the reference is measured)
-    fn = jax.jit(jax.vmap(lambda g: jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V_MAX, g), ts=ts), method="expm",
-                                                throw=False).ys))
+    fn = jax.jit(
+        jax.vmap(
+            lambda g: (
+                jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V_MAX, g), ts=ts), method="expm", throw=False).ys
+            )
+        )
+    )
     med, comp, ys = time_jax(fn, gs, repeats=reps["repeats"], min_time=0.0)
-    add(f"vmap simulate(expm) x{n_vmap}", "expm-vmap", batch_error(np.asarray(gs), ys), med / n_vmap, comp,
-        batch=n_vmap, batch_s=med)
+    add(
+        f"vmap simulate(expm) x{n_vmap}",
+        "expm-vmap",
+        batch_error(np.asarray(gs), ys),
+        med / n_vmap,
+        comp,
+        batch=n_vmap,
+        batch_s=med,
+    )
     vmap_expm_row = rows[-1]
 
     gs = jnp.linspace(0.01, 0.1, n_ode)
-    fn = jax.jit(jax.vmap(lambda g: jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V_MAX, g), ts=ts), method="ode",
-                                                solver=diffrax.Tsit5(), rtol=1e-10, atol=1e-12, throw=False).ys))
+    fn = jax.jit(
+        jax.vmap(
+            lambda g: (
+                jb.simulate(
+                    jb.Scene(model, jb.ExponentialVoltage(V_MAX, g), ts=ts),
+                    method="ode",
+                    solver=diffrax.Tsit5(),
+                    rtol=1e-10,
+                    atol=1e-12,
+                    throw=False,
+                ).ys
+            )
+        )
+    )
     med, comp, ys = time_jax(fn, gs, repeats=reps["repeats"], min_time=0.0)
-    add(f"vmap diffrax Tsit5 rtol=1e-10 x{n_ode}", "diffrax-Tsit5-vmap", batch_error(np.asarray(gs), ys), med / n_ode,
-        comp, batch=n_ode, batch_s=med)
+    add(
+        f"vmap diffrax Tsit5 rtol=1e-10 x{n_ode}",
+        "diffrax-Tsit5-vmap",
+        batch_error(np.asarray(gs), ys),
+        med / n_ode,
+        comp,
+        batch=n_ode,
+        batch_s=med,
+    )
 
     # throughput of the batched closed form over batch sizes (fast has been compiled for n_fast
     # only; each size compiles once, compile time apart)
     throughput = []
-    for nb in ([100, 1_000] if quick else [100, 1_000, 10_000, 30_000]):
+    for nb in [100, 1_000] if quick else [100, 1_000, 10_000, 30_000]:
         g = jnp.linspace(0.01, 0.1, nb)
         med_b, comp_b, _ = time_jax(fast, g, repeats=3 if quick else 5, min_time=0.0)
-        throughput.append({"batch": nb, "median_s": med_b, "compile_s": comp_b, "traj_per_s": nb / med_b,
-                           "us_per_traj": med_b / nb * 1e6, "output_MB": nb * N_T * 5 * 8 / 1e6})
-        print(f"  throughput batch {nb:6d}: {nb / med_b:12.0f} traj/s ({med_b / nb * 1e6:6.2f} us each), "
-              f"output {nb * N_T * 5 * 8 / 1e6:.0f} MB", flush=True)
+        throughput.append(
+            {
+                "batch": nb,
+                "median_s": med_b,
+                "compile_s": comp_b,
+                "traj_per_s": nb / med_b,
+                "us_per_traj": med_b / nb * 1e6,
+                "output_MB": nb * N_T * 5 * 8 / 1e6,
+            }
+        )
+        print(
+            f"  throughput batch {nb:6d}: {nb / med_b:12.0f} traj/s ({med_b / nb * 1e6:6.2f} us each), "
+            f"output {nb * N_T * 5 * 8 / 1e6:.0f} MB",
+            flush=True,
+        )
 
     shortcuts = measure_shortcuts(model, ts, ref, reps)
 
@@ -200,32 +276,74 @@ def main(quick: bool = False) -> Path:
     ratio = dop853_1e10["median_s"] / per_traj
     single_expm = rows[0]
     headline = [
-        {"what": "start-up: batched closed form, per trajectory (10k gammas, 501 pts)" if not quick
-         else f"start-up: batched closed form, per trajectory ({n_fast} gammas, 501 pts)",
-         "value": per_traj * 1e6, "unit": "us", "target": "<= 20 us"},
-        {"what": "start-up: batched closed form, error vs expm reference", "value": fast_err, "unit": "rel",
-         "target": "<= 1e-11"},
-        {"what": "start-up: speed-up of batched closed form over scipy DOP853 rtol 1e-10", "value": ratio,
-         "unit": "x", "target": ">= 1000x"},
-        {"what": "start-up: single trajectory closed form (expm)", "value": single_expm["median_s"] * 1e3, "unit": "ms",
-         "target": None},
-        {"what": "start-up: scipy DOP853 rtol 1e-10 (error %.1e)" % dop853_1e10["error"],
-         "value": dop853_1e10["median_s"] * 1e3, "unit": "ms", "target": None},
-        {"what": "start-up: vmap simulate(expm), per trajectory", "value": vmap_expm_row["median_s"] * 1e6, "unit": "us",
-         "target": None},
-        {"what": "start-up shortcut: final state only vs dense (diffrax)", "value": shortcuts["final_only"]["speedup"],
-         "unit": "x", "target": None},
+        {
+            "what": "start-up: batched closed form, per trajectory (10k gammas, 501 pts)"
+            if not quick
+            else f"start-up: batched closed form, per trajectory ({n_fast} gammas, 501 pts)",
+            "value": per_traj * 1e6,
+            "unit": "us",
+            "target": "<= 20 us",
+        },
+        {
+            "what": "start-up: batched closed form, error vs expm reference",
+            "value": fast_err,
+            "unit": "rel",
+            "target": "<= 1e-11",
+        },
+        {
+            "what": "start-up: speed-up of batched closed form over scipy DOP853 rtol 1e-10",
+            "value": ratio,
+            "unit": "x",
+            "target": ">= 1000x",
+        },
+        {
+            "what": "start-up: single trajectory closed form (expm)",
+            "value": single_expm["median_s"] * 1e3,
+            "unit": "ms",
+            "target": None,
+        },
+        {
+            "what": f"start-up: scipy DOP853 rtol 1e-10 (error {dop853_1e10['error']:.1e})",
+            "value": dop853_1e10["median_s"] * 1e3,
+            "unit": "ms",
+            "target": None,
+        },
+        {
+            "what": "start-up: vmap simulate(expm), per trajectory",
+            "value": vmap_expm_row["median_s"] * 1e6,
+            "unit": "us",
+            "target": None,
+        },
+        {
+            "what": "start-up shortcut: final state only vs dense (diffrax)",
+            "value": shortcuts["final_only"]["speedup"],
+            "unit": "x",
+            "target": None,
+        },
     ]
-    path = write_results("startup", rows, headline, quick, extra={
-        "reference": "scipy.linalg.expm of the augmented system at each output time",
-        "gamma": GAMMA, "n_points": N_T, "shortcuts": shortcuts, "throughput": throughput,
-        "ratios": {"fast_batch_vs_scipy_DOP853_1e-10": ratio,
-                   "single_expm_vs_scipy_DOP853_1e-10": dop853_1e10["median_s"] / single_expm["median_s"]},
-        "wall_s": time.perf_counter() - t_start,
-    })
+    path = write_results(
+        "startup",
+        rows,
+        headline,
+        quick,
+        extra={
+            "reference": "scipy.linalg.expm of the augmented system at each output time",
+            "gamma": GAMMA,
+            "n_points": N_T,
+            "shortcuts": shortcuts,
+            "throughput": throughput,
+            "ratios": {
+                "fast_batch_vs_scipy_DOP853_1e-10": ratio,
+                "single_expm_vs_scipy_DOP853_1e-10": dop853_1e10["median_s"] / single_expm["median_s"],
+            },
+            "wall_s": time.perf_counter() - t_start,
+        },
+    )
     plot(rows, RESULTS / "startup.png")
-    print(f"per-trajectory cost in the batch: {per_traj * 1e6:.2f} us (error {fast_err:.1e}); "
-          f"{ratio:.0f}x faster than scipy DOP853 at rtol 1e-10 ({dop853_1e10['median_s'] * 1e3:.2f} ms)")
+    print(
+        f"per-trajectory cost in the batch: {per_traj * 1e6:.2f} us (error {fast_err:.1e}); "
+        f"{ratio:.0f}x faster than scipy DOP853 at rtol 1e-10 ({dop853_1e10['median_s'] * 1e3:.2f} ms)"
+    )
     print(f"wrote {path} in {time.perf_counter() - t_start:.1f} s")
     return path
 
@@ -236,7 +354,7 @@ def _count_eqns(jaxpr) -> int:
     for e in jaxpr.eqns:
         n += 1
         for v in e.params.values():
-            for sub in (v if isinstance(v, (tuple, list)) else (v,)):
+            for sub in v if isinstance(v, (tuple, list)) else (v,):
                 inner = getattr(sub, "jaxpr", sub)
                 if hasattr(inner, "eqns"):
                     n += _count_eqns(inner)
@@ -250,36 +368,75 @@ def measure_shortcuts(model, ts, ref, reps) -> dict:
     tsit = diffrax.Tsit5()
 
     # final state only (SaveAt(t1=True)) vs a dense 501-point save, same solver and tolerances
-    dense = jax.jit(lambda g: jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V_MAX, g), ts=ts), method="ode",
-                                          solver=tsit, rtol=1e-10, atol=1e-12).ys[-1])
-    final = jax.jit(lambda g: jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V_MAX, g), t1=T1), method="ode",
-                                          solver=tsit, rtol=1e-10, atol=1e-12).ys[-1])
+    dense = jax.jit(
+        lambda g: jb.simulate(
+            jb.Scene(model, jb.ExponentialVoltage(V_MAX, g), ts=ts), method="ode", solver=tsit, rtol=1e-10, atol=1e-12
+        ).ys[-1]
+    )
+    final = jax.jit(
+        lambda g: jb.simulate(
+            jb.Scene(model, jb.ExponentialVoltage(V_MAX, g), t1=T1), method="ode", solver=tsit, rtol=1e-10, atol=1e-12
+        ).ys[-1]
+    )
     md, _, yd = time_jax(dense, jnp.asarray(GAMMA), **reps)
     mf, _, yf = time_jax(final, jnp.asarray(GAMMA), **reps)
-    out["final_only"] = {"dense_s": md, "final_s": mf, "speedup": md / mf,
-                         "max_rel_diff": float(np.max(np.abs(yd - yf)) / np.max(np.abs(yd)))}
+    out["final_only"] = {
+        "dense_s": md,
+        "final_s": mf,
+        "speedup": md / mf,
+        "max_rel_diff": float(np.max(np.abs(yd - yf)) / np.max(np.abs(yd))),
+    }
 
     # closed form vs stepping at matched accuracy
     closed = jax.jit(lambda g: jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V_MAX, g), ts=ts)).ys)
-    stepped = jax.jit(lambda g: jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V_MAX, g), ts=ts), method="ode",
-                                            solver=tsit, rtol=1e-12, atol=1e-14, max_steps=200_000).ys)
+    stepped = jax.jit(
+        lambda g: (
+            jb.simulate(
+                jb.Scene(model, jb.ExponentialVoltage(V_MAX, g), ts=ts),
+                method="ode",
+                solver=tsit,
+                rtol=1e-12,
+                atol=1e-14,
+                max_steps=200_000,
+            ).ys
+        )
+    )
     mc, _, yc = time_jax(closed, jnp.asarray(GAMMA), **reps)
     ms, _, ys = time_jax(stepped, jnp.asarray(GAMMA), **reps)
-    out["closed_vs_stepping"] = {"closed_s": mc, "stepping_s": ms, "speedup": ms / mc,
-                                 "closed_error": rel_error(yc, ref), "stepping_error": rel_error(ys, ref)}
+    out["closed_vs_stepping"] = {
+        "closed_s": mc,
+        "stepping_s": ms,
+        "speedup": ms / mc,
+        "closed_error": rel_error(yc, ref),
+        "stepping_error": rel_error(ys, ref),
+    }
 
     # unobserved outputs are not computed: all derived outputs vs none, closed form
-    names = ("electric_power", "mechanical_power", "alpha1", "alpha2", "motor_speed", "kinetic_energy",
-             "elastic_energy", "magnetic_energy", "voltage")
+    names = (
+        "electric_power",
+        "mechanical_power",
+        "alpha1",
+        "alpha2",
+        "motor_speed",
+        "kinetic_energy",
+        "elastic_energy",
+        "magnetic_energy",
+        "voltage",
+    )
     every = jax.jit(lambda g: jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V_MAX, g), ts=ts, observe=names)))
     none = jax.jit(lambda g: jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V_MAX, g), ts=ts)))
     me, _, se = time_jax(every, jnp.asarray(GAMMA), **reps)
     mn, _, sn = time_jax(none, jnp.asarray(GAMMA), **reps)
     n_every = _count_eqns(jax.make_jaxpr(every)(jnp.asarray(GAMMA)).jaxpr)
     n_none = _count_eqns(jax.make_jaxpr(none)(jnp.asarray(GAMMA)).jaxpr)
-    out["unobserved_outputs"] = {"all_outputs_s": me, "state_only_s": mn, "speedup": me / mn,
-                                 "jaxpr_eqns_all": n_every, "jaxpr_eqns_state_only": n_none,
-                                 "max_abs_state_diff": float(np.max(np.abs(se.ys - sn.ys)))}
+    out["unobserved_outputs"] = {
+        "all_outputs_s": me,
+        "state_only_s": mn,
+        "speedup": me / mn,
+        "jaxpr_eqns_all": n_every,
+        "jaxpr_eqns_state_only": n_none,
+        "max_abs_state_diff": float(np.max(np.abs(se.ys - sn.ys))),
+    }
 
     # tolerances as arrays: a new rtol reuses the compiled solve
     traces = {"n": 0}
@@ -295,8 +452,12 @@ def measure_shortcuts(model, ts, ref, reps) -> dict:
     t = time.perf_counter()
     jax.block_until_ready(solve(jnp.asarray(1e-9)))
     second = time.perf_counter() - t
-    out["tolerance_arrays"] = {"first_call_s": first, "new_rtol_call_s": second, "traces": traces["n"],
-                               "speedup": first / second}
+    out["tolerance_arrays"] = {
+        "first_call_s": first,
+        "new_rtol_call_s": second,
+        "traces": traces["n"],
+        "speedup": first / second,
+    }
     for k, v in out.items():
         print(f"  shortcut {k:20s} speed-up {v['speedup']:8.1f}x")
     return out
@@ -320,8 +481,15 @@ def plot(rows, path):
         batch = rs[0].get("batch", 1) > 1
         label = meth + (" (per trajectory in batch)" if batch else "")
         ls = "--" if meth.startswith("scipy") else "-"
-        ax.loglog(x, y, ls, marker=markers.get(meth, "o"), ms=9 if meth in markers else 5, label=label,
-                  mfc="none" if batch else None)
+        ax.loglog(
+            x,
+            y,
+            ls,
+            marker=markers.get(meth, "o"),
+            ms=9 if meth in markers else 5,
+            label=label,
+            mfc="none" if batch else None,
+        )
     ax.set_xlabel("median run time per trajectory [s] (compile time excluded)")
     ax.set_ylabel("relative error vs expm reference")
     ax.set_title("jaxbelt start-up scene (Incerti, 2014): work-precision, gamma = 20 ms, 501 points")

@@ -53,8 +53,15 @@ from jaxbelt.objectives.fluctuation import closed_loop_metrics  # noqa: E402
 TS = jnp.linspace(0.0, 0.5, 501)
 V_MAX = 24.0
 KP, KI, KD, W0 = 80.0, 32.0, 0.015, 30.0
-RUNOUT = dict(length=0.86, wave_speed=41.0, pulley_radii=(0.063, 0.063), runouts=(0.355e-3, 0.21e-3),
-              phase=float(np.radians(240.0)), damping_ratio=0.01, position=0.01)
+RUNOUT = dict(
+    length=0.86,
+    wave_speed=41.0,
+    pulley_radii=(0.063, 0.063),
+    runouts=(0.355e-3, 0.21e-3),
+    phase=float(np.radians(240.0)),
+    damping_ratio=0.01,
+    position=0.01,
+)
 SPAN = dict(tension=140.0, density=0.05, length=0.2621)
 MAX_RUN_S = 20.0
 
@@ -123,8 +130,13 @@ def random_inputs(scene: str, n: int, seed: int = 0):
 
 def batch_and_reference(scene: str, x):
     """(batched result, independent reference) for inputs `x`, both numpy."""
-    batch = {"startup": startup_batch, "shaping": shaping_batch, "pid": pid_batch, "runout": runout_batch,
-             "span_freqs": span_freqs_batch}[scene]
+    batch = {
+        "startup": startup_batch,
+        "shaping": shaping_batch,
+        "pid": pid_batch,
+        "runout": runout_batch,
+        "span_freqs": span_freqs_batch,
+    }[scene]
     out = np.asarray(jax.jit(batch)(x))
     if scene == "startup":
         f = jax.jit(startup_scalar)
@@ -150,8 +162,13 @@ REFERENCE = {
     "runout": "loop of scalar linear_runout_response calls",
     "span_freqs": "numpy closed form (eq. 39)",
 }
-FUNCS = {"startup": startup_batch, "shaping": shaping_batch, "pid": pid_batch, "runout": runout_batch,
-         "span_freqs": span_freqs_batch}
+FUNCS = {
+    "startup": startup_batch,
+    "shaping": shaping_batch,
+    "pid": pid_batch,
+    "runout": runout_batch,
+    "span_freqs": span_freqs_batch,
+}
 
 
 def max_rel_diff(x, ref) -> float:
@@ -230,29 +247,47 @@ def measure_scene(scene: str, sizes, quick: bool, t_budget_end: float) -> list[d
         peak1 = _maxrss_kib()
         growth = peak1 - (rss0 if rss0 is not None else peak0)
         row = {
-            "name": scene, "method": {"startup": "batched closed form", "shaping": "vmap quadrature",
-                                      "pid": "vmap diffrax", "runout": "vectorised modal formula",
-                                      "span_freqs": "vectorised closed form"}[scene],
+            "name": scene,
+            "method": {
+                "startup": "batched closed form",
+                "shaping": "vmap quadrature",
+                "pid": "vmap diffrax",
+                "runout": "vectorised modal formula",
+                "span_freqs": "vectorised closed form",
+            }[scene],
             "error": check if n == sizes[0] else None,
             "reference": REFERENCE[scene] if n == sizes[0] else None,
             "reference_n": 3 if n == sizes[0] else None,
-            "batch": n, "median_s": median, "compile_s": max(first - median, 0.0), "first_call_s": first,
-            "repeats": reps, "per_element_us": median / n * 1e6, "elements_per_s": n / median,
-            "output_bytes": _nbytes(out), "peak_rss_growth_kib": int(growth),
-            "peak_rss_reset_per_size": reset, "device_peak_bytes": _device_peak(),
+            "batch": n,
+            "median_s": median,
+            "compile_s": max(first - median, 0.0),
+            "first_call_s": first,
+            "repeats": reps,
+            "per_element_us": median / n * 1e6,
+            "elements_per_s": n / median,
+            "output_bytes": _nbytes(out),
+            "peak_rss_growth_kib": int(growth),
+            "peak_rss_reset_per_size": reset,
+            "device_peak_bytes": _device_peak(),
             "measure_wall_s": wall,
         }
         rows.append(row)
-        print(f"  {scene} n={n:>6d}: {median * 1e3:9.3f} ms ({row['per_element_us']:.3g} us/elem, "
-              f"{row['elements_per_s']:.3g}/s), first call {first:.2f} s, out {row['output_bytes'] / 1e6:.2f} MB, "
-              f"peak RSS growth {max(growth, 0) / 1024:.0f} MiB", flush=True)
+        print(
+            f"  {scene} n={n:>6d}: {median * 1e3:9.3f} ms ({row['per_element_us']:.3g} us/elem, "
+            f"{row['elements_per_s']:.3g}/s), first call {first:.2f} s, out {row['output_bytes'] / 1e6:.2f} MB, "
+            f"peak RSS growth {max(growth, 0) / 1024:.0f} MiB",
+            flush=True,
+        )
         del out
         if n == sizes[-1]:
             break
         if median > MAX_RUN_S or 10 * median > MAX_RUN_S:
             print(f"  {scene}: stopping at n={n} (the next size would take ~{10 * median:.0f} s > {MAX_RUN_S:.0f} s)")
             break
-        if not quick and time.perf_counter() + 10 * median * (2 + reps_for(scene, 10 * n, quick)) + first > t_budget_end:
+        if (
+            not quick
+            and time.perf_counter() + 10 * median * (2 + reps_for(scene, 10 * n, quick)) + first > t_budget_end
+        ):
             print(f"  {scene}: stopping at n={n}: the script's time budget would be passed")
             break
     return rows
@@ -274,9 +309,11 @@ def gradient_costs(quick: bool) -> list[dict]:
     def freqs(v):
         return jb.MovingString(**SPAN).natural_frequencies(v, n_modes=3)[..., 0]
 
-    cases = [("startup", "mean omega2 over 0.5 s, d/dgamma", mean_speed, random_inputs("startup", n)),
-             ("runout", "peak-to-peak response, d/dspeed", runout, random_inputs("runout", n)),
-             ("span_freqs", "first natural frequency, d/dspeed", freqs, random_inputs("span_freqs", n))]
+    cases = [
+        ("startup", "mean omega2 over 0.5 s, d/dgamma", mean_speed, random_inputs("startup", n)),
+        ("runout", "peak-to-peak response, d/dspeed", runout, random_inputs("runout", n)),
+        ("span_freqs", "first natural frequency, d/dspeed", freqs, random_inputs("span_freqs", n)),
+    ]
     for scene, what, f, x in cases:
         # elements are independent, so one forward-mode product with a tangent of ones is the batch of
         # element derivatives (reverse mode through the batched start-up closed form asked for 36 GB
@@ -285,20 +322,35 @@ def gradient_costs(quick: bool) -> list[dict]:
         jvp = jax.jit(lambda x, f=f: jax.jvp(f, (x,), (jnp.ones_like(x),)))
         t_f, c_f, _ = time_jax(fwd, x, repeats=reps)
         t_g, c_g, (_, g) = time_jax(jvp, x, repeats=reps)
-        row = {"scene": scene, "what": what, "batch": n, "forward_s": t_f, "grad_s": t_g, "mode": "forward (jvp)",
-               "ratio": t_g / t_f, "forward_compile_s": c_f, "grad_compile_s": c_g, "source": "measured here"}
+        row = {
+            "scene": scene,
+            "what": what,
+            "batch": n,
+            "forward_s": t_f,
+            "grad_s": t_g,
+            "mode": "forward (jvp)",
+            "ratio": t_g / t_f,
+            "forward_compile_s": c_f,
+            "grad_compile_s": c_g,
+            "source": "measured here",
+        }
         if quick:  # --quick keeps to forward mode (time)
             row.update(reverse_s=None, reverse_ratio=None, reverse_note="not measured in --quick")
         elif scene != "startup":  # reverse mode: the gradient of the sum is the batch of derivatives
             rev = jax.jit(jax.grad(lambda x, f=f: jnp.sum(f(x))))
             t_r, c_r, g_r = time_jax(rev, x, repeats=reps)
-            row.update(reverse_s=t_r, reverse_ratio=t_r / t_f, reverse_compile_s=c_r,
-                       reverse_vs_forward_mode_rel=max_rel_diff(g_r, g))
+            row.update(
+                reverse_s=t_r,
+                reverse_ratio=t_r / t_f,
+                reverse_compile_s=c_r,
+                reverse_vs_forward_mode_rel=max_rel_diff(g_r, g),
+            )
         else:
             # not measured: vmap of the scalar expm solve at n = 1000 hung (idle, no CPU) in the second
             # call on this machine; reverse mode through the batched closed form needs ~36 GB
-            row.update(reverse_s=None, reverse_ratio=None,
-                       reverse_note="not measured (see the comment in gradient_costs)")
+            row.update(
+                reverse_s=None, reverse_ratio=None, reverse_note="not measured (see the comment in gradient_costs)"
+            )
         # central differences on three elements: the derivative is right, not just fast
         h = 1e-6 * np.maximum(np.abs(np.asarray(x[:3])), 1.0)
         xp, xm = np.asarray(x).copy(), np.asarray(x).copy()
@@ -307,8 +359,11 @@ def gradient_costs(quick: bool) -> list[dict]:
         fd = (np.asarray(fwd(jnp.asarray(xp)))[:3] - np.asarray(fwd(jnp.asarray(xm)))[:3]) / (2 * h)
         row["grad_vs_central_fd_rel"] = max_rel_diff(np.asarray(g)[:3], fd)
         out.append(row)
-        print(f"gradient {scene}: forward {t_f * 1e3:.3f} ms, jvp {t_g * 1e3:.3f} ms (ratio {row['ratio']:.2f}), "
-              f"reverse ratio {row['reverse_ratio']}, vs FD {row['grad_vs_central_fd_rel']:.1e}", flush=True)
+        print(
+            f"gradient {scene}: forward {t_f * 1e3:.3f} ms, jvp {t_g * 1e3:.3f} ms (ratio {row['ratio']:.2f}), "
+            f"reverse ratio {row['reverse_ratio']}, vs FD {row['grad_vs_central_fd_rel']:.1e}",
+            flush=True,
+        )
     for scene, file, keys in (("shaping", "shaping.json", None), ("pid", "fourbar.json", "gradient")):
         path = RESULTS / file
         try:
@@ -319,17 +374,32 @@ def gradient_costs(quick: bool) -> list[dict]:
         if keys is None:
             for h in data.get("headline", []):
                 if h["what"].startswith("gradient / forward"):
-                    out.append({"scene": scene, "what": f"H: {h['what']}", "ratio": h["value"],
-                                "target": h.get("target"), "source": f"benchmarks/results/{file}",
-                                "quick_run": data.get("quick")})
+                    out.append(
+                        {
+                            "scene": scene,
+                            "what": f"H: {h['what']}",
+                            "ratio": h["value"],
+                            "target": h.get("target"),
+                            "source": f"benchmarks/results/{file}",
+                            "quick_run": data.get("quick"),
+                        }
+                    )
         else:
             gr = data.get(keys, {})
             for h in data.get("headline", []):
                 if h["what"].startswith("gradient / forward"):
-                    out.append({"scene": scene, "what": f"chi: {h['what']}", "ratio": h["value"],
-                                "target": h.get("target"), "source": f"benchmarks/results/{file}",
-                                "quick_run": data.get("quick"), "forward_s": gr.get("forward_s"),
-                                "grad_s": gr.get("grad_s")})
+                    out.append(
+                        {
+                            "scene": scene,
+                            "what": f"chi: {h['what']}",
+                            "ratio": h["value"],
+                            "target": h.get("target"),
+                            "source": f"benchmarks/results/{file}",
+                            "quick_run": data.get("quick"),
+                            "forward_s": gr.get("forward_s"),
+                            "grad_s": gr.get("grad_s"),
+                        }
+                    )
     return out
 
 
@@ -355,19 +425,38 @@ def main(quick: bool) -> None:
         sel = [r for r in rows if r["name"] == scene]
         big = sel[-1]
         mib = (big["output_bytes"] + 1024 * max(big["peak_rss_growth_kib"], 0)) / 2**20
-        headline.append({"what": f"throughput {scene}, batch {big['batch']} "
-                                 f"({_fmt_us(big['per_element_us'])} per element, {mib:.0f} MiB)",
-                         "value": big["elements_per_s"], "unit": "1/s", "target": None})
+        headline.append(
+            {
+                "what": f"throughput {scene}, batch {big['batch']} "
+                f"({_fmt_us(big['per_element_us'])} per element, {mib:.0f} MiB)",
+                "value": big["elements_per_s"],
+                "unit": "1/s",
+                "target": None,
+            }
+        )
     for g in grads:
         if g.get("ratio") is not None and g["source"] == "measured here":
-            headline.append({"what": f"{g['scene']}: derivative / forward time, batch {g['batch']}, forward mode",
-                             "value": g["ratio"], "unit": "x", "target": None})
+            headline.append(
+                {
+                    "what": f"{g['scene']}: derivative / forward time, batch {g['batch']}, forward mode",
+                    "value": g["ratio"],
+                    "unit": "x",
+                    "target": None,
+                }
+            )
     wall = time.perf_counter() - t_start
-    extra = {"gradient_over_forward": grads, "sizes": list(sizes), "max_run_s": MAX_RUN_S, "wall_s": wall,
-             "notes": ("compile_s = first call (compile + one run) minus the median run; peak_rss_growth_kib = "
-                       "peak RSS during the measurement minus the RSS before it (peak reset per size via "
-                       "/proc/self/clear_refs when allowed); device_peak_bytes is null where the backend "
-                       "reports no memory stats (CPU).")}
+    extra = {
+        "gradient_over_forward": grads,
+        "sizes": list(sizes),
+        "max_run_s": MAX_RUN_S,
+        "wall_s": wall,
+        "notes": (
+            "compile_s = first call (compile + one run) minus the median run; peak_rss_growth_kib = "
+            "peak RSS during the measurement minus the RSS before it (peak reset per size via "
+            "/proc/self/clear_refs when allowed); device_peak_bytes is null where the backend "
+            "reports no memory stats (CPU)."
+        ),
+    }
     path = write_results("throughput", rows, headline, quick, extra)
     print(f"wrote {path} ({wall:.1f} s)")
     plot(rows, scenes)
@@ -379,9 +468,13 @@ def plot(rows, scenes):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    labels = {"startup": "start-up gamma sweep (501 pts, closed form)", "shaping": "shaping H(exponents)",
-              "pid": "PID gains -> chi (diffrax)", "runout": "run-out response (64 modes)",
-              "span_freqs": "span natural frequencies (3 modes)"}
+    labels = {
+        "startup": "start-up gamma sweep (501 pts, closed form)",
+        "shaping": "shaping H(exponents)",
+        "pid": "PID gains -> chi (diffrax)",
+        "runout": "run-out response (64 modes)",
+        "span_freqs": "span natural frequencies (3 modes)",
+    }
     fig, ax = plt.subplots(figsize=(7.5, 6), constrained_layout=True)
     for scene in scenes:
         sel = [r for r in rows if r["name"] == scene]

@@ -28,46 +28,42 @@ if _os.environ.get("JAXBELT_X64", "1") != "0" and not _jax.config.jax_enable_x64
 # read it as imports, `jaxbelt._lazy.attach` as the table of where each name lives.
 if _typing.TYPE_CHECKING:
     # --- core: scenes, simulation, commands --------------------------------------------------------
-    from .commands import AbstractInput as AbstractInput
-    from .commands import AbstractVoltageSource as AbstractVoltageSource
-    from .commands import AbstractVoltageCommand as AbstractVoltageCommand
-    from .commands import AbstractExponentialVoltage as AbstractExponentialVoltage
-    from .commands import AbstractController as AbstractController
-    from .commands import AbstractRunningSpeed as AbstractRunningSpeed
-    from .commands import MotorState as MotorState
-    from .commands import AbstractMotionCommand as AbstractMotionCommand
-    from .commands import ConstantVoltage as ConstantVoltage
-    from .commands import ExponentialVoltage as ExponentialVoltage
-    from .commands import PseudoPolynomial as PseudoPolynomial
-    from .commands import ShapedCommand as ShapedCommand
-    from .models import AbstractModel as AbstractModel
-    from .models import AbstractLinearModel as AbstractLinearModel
-    from .models import integrand as integrand
-    from .models import observable as observable
-    from .scene import Scene as Scene
-    from .scene import TracedGridWarning as TracedGridWarning
-    from .solution import Solution as Solution
-    from .solution import SolveError as SolveError
-    from .solve import simulate as simulate
+    # --- sub-modules -------------------------------------------------------------------------------
+    from . import modal as modal
+    from . import plots as plots
     from .batch import cpu_devices as cpu_devices
     from .batch import sweep as sweep
 
+    # --- persistent compilation cache (opt-in; the CLI switches it on) --------------------------------
+    from .cache import enable_compilation_cache as enable_compilation_cache
+    from .commands import AbstractController as AbstractController
+    from .commands import AbstractExponentialVoltage as AbstractExponentialVoltage
+    from .commands import AbstractInput as AbstractInput
+    from .commands import AbstractMotionCommand as AbstractMotionCommand
+    from .commands import AbstractRunningSpeed as AbstractRunningSpeed
+    from .commands import AbstractVoltageCommand as AbstractVoltageCommand
+    from .commands import AbstractVoltageSource as AbstractVoltageSource
+    from .commands import ConstantVoltage as ConstantVoltage
+    from .commands import ExponentialVoltage as ExponentialVoltage
+    from .commands import MotorState as MotorState
+    from .commands import PseudoPolynomial as PseudoPolynomial
+    from .commands import ShapedCommand as ShapedCommand
+
+    # --- parameter identification (weighted least squares, optimistix) -------------------------------
+    from .identification import IdentifyResult as IdentifyResult
+    from .identification import identify as identify
+    from .models import AbstractLinearModel as AbstractLinearModel
+    from .models import AbstractModel as AbstractModel
+
     # --- start-up of a belt drive (Incerti, 2014) ---------------------------------------------------------
     from .models import BeltChain as BeltChain
-    from .models import BeltStartup as BeltStartup
-    from .models.startup import startup_curves as startup_curves
 
-    # --- four-bar linkage + PID-controlled DC motor (Incerti, 2012) -------------------------------------
-    from .models.fourbar import FourBarDrive as FourBarDrive
-    from .models.fourbar import simulate_fig4 as simulate_fig4
-    from .models.motor import PID as PID
-    from .objectives.fluctuation import fluctuation_index as fluctuation_index
-    from .objectives.fluctuation import fluctuation_objective as fluctuation_objective
-    from .optimise.pid import PIDTuneResult as PIDTuneResult
-    from .optimise.pid import tune_pid as tune_pid
+    # --- command shaping of a belt-driven platform (Incerti, pseudo-polynomial commands) --------------------------------------
+    from .models import BeltPlatform as BeltPlatform
 
     # --- belt spans: contact, moving string, crossing diagrams (belt-vibration report; Moon & Wickert, 1997) --------------------
     from .models import BeltPulleyContact as BeltPulleyContact
+    from .models import BeltStartup as BeltStartup
     from .models import MovingString as MovingString
     from .models import RunoutRig as RunoutRig
     from .models import SlipError as SlipError
@@ -75,13 +71,44 @@ if _typing.TYPE_CHECKING:
     from .models import crossing_diagram as crossing_diagram
     from .models import crossing_speeds as crossing_speeds
     from .models import exciting_speeds as exciting_speeds
+    from .models import integrand as integrand
     from .models import linear_runout_response as linear_runout_response
+    from .models import observable as observable
     from .models import runout_phasors as runout_phasors
     from .models import simulate_runout_response as simulate_runout_response
 
-    # --- command shaping of a belt-driven platform (Incerti, pseudo-polynomial commands) --------------------------------------
-    from .models import BeltPlatform as BeltPlatform
+    # --- four-bar linkage + PID-controlled DC motor (Incerti, 2012) -------------------------------------
+    from .models.fourbar import FourBarDrive as FourBarDrive
+    from .models.fourbar import simulate_fig4 as simulate_fig4
+    from .models.motor import PID as PID
+    from .models.nonlinear import MEASUREMENTS as MEASUREMENTS
+
+    # --- non-linear belt vibration (Moon & Wickert, 1997) ------------------------------------------------------
+    from .models.nonlinear import NonlinearBelt as NonlinearBelt
+    from .models.nonlinear import ResponseCurve as ResponseCurve
+    from .models.nonlinear import RunningSpeed as RunningSpeed
+    from .models.nonlinear import SpeedRamp as SpeedRamp
+    from .models.nonlinear import SteadyStateError as SteadyStateError
+    from .models.nonlinear import backbone_amplitude as backbone_amplitude
+    from .models.nonlinear import backbone_frequency as backbone_frequency
+    from .models.nonlinear import backbone_speed as backbone_speed
+    from .models.nonlinear import calibrate as calibrate
+    from .models.nonlinear import fold_speeds as fold_speeds
+    from .models.nonlinear import harmonic_balance as harmonic_balance
+    from .models.nonlinear import jumps as jumps
+    from .models.nonlinear import kbm_amplitudes as kbm_amplitudes
+    from .models.nonlinear import kbm_coefficients as kbm_coefficients
+    from .models.nonlinear import nonlinear_basins as nonlinear_basins
+    from .models.nonlinear import nonlinear_steady_state as nonlinear_steady_state
+    from .models.nonlinear import nonlinear_sweep as nonlinear_sweep
+    from .models.nonlinear import nonlinear_trajectory as nonlinear_trajectory
+    from .models.nonlinear import response_curve as response_curve
+    from .models.nonlinear import speed_ramp as speed_ramp
+    from .models.nonlinear import speed_sweep as speed_sweep
     from .models.platform import platform_response as platform_response
+    from .models.startup import startup_curves as startup_curves
+    from .objectives.fluctuation import fluctuation_index as fluctuation_index
+    from .objectives.fluctuation import fluctuation_objective as fluctuation_objective
     from .objectives.residual import residual_energy as residual_energy
     from .objectives.residual import residual_energy_joules as residual_energy_joules
     from .optimise.command import CommandOptimResult as CommandOptimResult
@@ -90,41 +117,13 @@ if _typing.TYPE_CHECKING:
     from .optimise.command import sensitivity_curve as sensitivity_curve
     from .optimise.command import shaped_commands as shaped_commands
     from .optimise.command import tolerance_band as tolerance_band
-
-    # --- non-linear belt vibration (Moon & Wickert, 1997) ------------------------------------------------------
-    from .models.nonlinear import NonlinearBelt as NonlinearBelt
-    from .models.nonlinear import RunningSpeed as RunningSpeed
-    from .models.nonlinear import SpeedRamp as SpeedRamp
-    from .models.nonlinear import kbm_coefficients as kbm_coefficients
-    from .models.nonlinear import backbone_amplitude as backbone_amplitude
-    from .models.nonlinear import backbone_frequency as backbone_frequency
-    from .models.nonlinear import backbone_speed as backbone_speed
-    from .models.nonlinear import kbm_amplitudes as kbm_amplitudes
-    from .models.nonlinear import SteadyStateError as SteadyStateError
-    from .models.nonlinear import nonlinear_basins as nonlinear_basins
-    from .models.nonlinear import speed_sweep as speed_sweep
-    from .models.nonlinear import nonlinear_steady_state as nonlinear_steady_state
-    from .models.nonlinear import nonlinear_sweep as nonlinear_sweep
-    from .models.nonlinear import nonlinear_trajectory as nonlinear_trajectory
-    from .models.nonlinear import ResponseCurve as ResponseCurve
-    from .models.nonlinear import response_curve as response_curve
-    from .models.nonlinear import fold_speeds as fold_speeds
-    from .models.nonlinear import harmonic_balance as harmonic_balance
-    from .models.nonlinear import speed_ramp as speed_ramp
-    from .models.nonlinear import MEASUREMENTS as MEASUREMENTS
-    from .models.nonlinear import calibrate as calibrate
-    from .models.nonlinear import jumps as jumps
-
-    # --- parameter identification (weighted least squares, optimistix) -------------------------------
-    from .identification import IdentifyResult as IdentifyResult
-    from .identification import identify as identify
-
-    # --- persistent compilation cache (opt-in; the CLI switches it on) --------------------------------
-    from .cache import enable_compilation_cache as enable_compilation_cache
-
-    # --- sub-modules -------------------------------------------------------------------------------
-    from . import modal as modal
-    from . import plots as plots
+    from .optimise.pid import PIDTuneResult as PIDTuneResult
+    from .optimise.pid import tune_pid as tune_pid
+    from .scene import Scene as Scene
+    from .scene import TracedGridWarning as TracedGridWarning
+    from .solution import Solution as Solution
+    from .solution import SolveError as SolveError
+    from .solve import simulate as simulate
 
 from ._lazy import attach as _attach  # noqa: E402
 

@@ -19,7 +19,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-
 _SCALARS: dict = {}
 _SCALARS_MAX = 4096
 #: id -> (array, its value) of the arrays in `_SCALARS`: checks read a cached default without a transfer
@@ -101,7 +100,6 @@ def collecting():
         _collector.found = prev
 
 
-
 def _interval(lo, hi, lo_open, hi_open) -> str:
     lb = "-inf" if lo is None else f"{lo:g}"
     ub = "inf" if hi is None else f"{hi:g}"
@@ -168,8 +166,11 @@ def _finite(v, xp):
 
 
 #: kind -> (what the message says, test) for `check_fields`
-_RULES = {"positive": ("must be finite and > 0", _positive), "nonnegative": ("must be finite and >= 0", _nonnegative),
-          "finite": ("must be finite", _finite)}
+_RULES = {
+    "positive": ("must be finite and > 0", _positive),
+    "nonnegative": ("must be finite and >= 0", _nonnegative),
+    "finite": ("must be finite", _finite),
+}
 
 
 def check_positive(name: str, value, unit: str = "", owner: str = "") -> None:

@@ -35,6 +35,7 @@ from jax.experimental import checkify
 from . import _store
 from ._checks import collecting, is_concrete
 
+
 def _modules(tree):
     out = []
 
@@ -103,10 +104,12 @@ _store.CONTEXTS.append(lambda: (bool(_host_checks.value), bool(_validated.value)
 
 #: diffrax's own checks of `SaveAt(ts=...)`, which `Scene` and `simulate` make too (strictly increasing
 #: finite output times, start time <= the first of them; traced values: recorded checks on the results)
-_VALIDATED_BY_JAXBELT = frozenset({
-    "saveat.ts must be increasing or decreasing.",
-    "saveat.ts must lie between t0 and t1.",
-})
+_VALIDATED_BY_JAXBELT = frozenset(
+    {
+        "saveat.ts must be increasing or decreasing.",
+        "saveat.ts must lie between t0 and t1.",
+    }
+)
 #: and the start of diffrax's check of the sign of `dt0` (its message goes on with the values), which
 #: `simulate` makes too (`dt`, `dt0` finite and > 0, t0 < t1) and jaxbelt's own fixed-step solves satisfy
 _VALIDATED_PREFIX = "Must have (t1 - t0) * dt0 >= 0"

@@ -124,19 +124,31 @@ def settings() -> tuple:
 
         # its plain values and enums; an object without a value repr (the axis environment, empty
         # outside a trace, where the store is used) by its type
-        trace = tuple(v if _plain(v) or isinstance(v, enum.Enum) else type(v).__qualname__
-                      for v in _config.trace_context())
+        trace = tuple(
+            v if _plain(v) or isinstance(v, enum.Enum) else type(v).__qualname__ for v in _config.trace_context()
+        )
     except Exception:  # noqa: BLE001 - another JAX layout: the settings jaxbelt knows of
-        trace = (bool(c.jax_enable_x64), str(c.jax_default_matmul_precision), str(c.jax_numpy_dtype_promotion),
-                 str(c.jax_numpy_rank_promotion))
-    return (trace, os.environ.get("XLA_FLAGS", ""), os.environ.get("EQX_ON_ERROR", "raise"),
-            tuple(f() for f in CONTEXTS))
+        trace = (
+            bool(c.jax_enable_x64),
+            str(c.jax_default_matmul_precision),
+            str(c.jax_numpy_dtype_promotion),
+            str(c.jax_numpy_rank_promotion),
+        )
+    return (
+        trace,
+        os.environ.get("XLA_FLAGS", ""),
+        os.environ.get("EQX_ON_ERROR", "raise"),
+        tuple(f() for f in CONTEXTS),
+    )
 
 
 def _trusted_type(t) -> bool:
     module = getattr(t, "__module__", None) or ""
-    return t in (tuple, list, dict, type(None)) or module.startswith(_TRUSTED_PREFIXES) or (
-        module in ("jaxbelt", "equinox", "diffrax"))
+    return (
+        t in (tuple, list, dict, type(None))
+        or module.startswith(_TRUSTED_PREFIXES)
+        or (module in ("jaxbelt", "equinox", "diffrax"))
+    )
 
 
 def _plain(v) -> bool:
@@ -170,8 +182,13 @@ def storable_function(fun) -> bool:
     """A module-level function of jaxbelt (its code is in the fingerprint; a closure or a function defined
     elsewhere could change without changing the key)."""
     module, qualname = getattr(fun, "__module__", None) or "", getattr(fun, "__qualname__", None) or ""
-    return (module == "jaxbelt" or module.startswith("jaxbelt.")) and "<locals>" not in qualname and (
-        getattr(fun, "__closure__", None) is None) and callable(fun) and hasattr(fun, "__code__")
+    return (
+        (module == "jaxbelt" or module.startswith("jaxbelt."))
+        and "<locals>" not in qualname
+        and (getattr(fun, "__closure__", None) is None)
+        and callable(fun)
+        and hasattr(fun, "__code__")
+    )
 
 
 def _is_array(x) -> bool:

@@ -26,6 +26,10 @@ def fast_compile_xla_flags(caller: str = "") -> str | None:
     given = caller.split()
     names = {f.split("=", 1)[0] for f in given}
     flags = " ".join(given + [f for f in FAST_COMPILE_FLAGS if f.split("=", 1)[0] not in names])
-    probe = subprocess.run([sys.executable, "-c", "import jax; jax.devices('cpu')"], capture_output=True,
-                           env=dict(os.environ, XLA_FLAGS=flags), timeout=300)
+    probe = subprocess.run(
+        [sys.executable, "-c", "import jax; jax.devices('cpu')"],
+        capture_output=True,
+        env=dict(os.environ, XLA_FLAGS=flags),
+        timeout=300,
+    )
     return flags if probe.returncode == 0 else None

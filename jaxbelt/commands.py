@@ -17,18 +17,16 @@ scene is solved in closed form (no time stepping). The question is answered by t
 
 from __future__ import annotations
 
-from typing import ClassVar
-
 import abc
-from typing import NamedTuple
+from typing import ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as _np
 
-from ._checks import check_finite, check_nonnegative, check_positive, check_range, is_concrete, record
 from ._checks import as_float_array as _arr
+from ._checks import check_finite, check_nonnegative, check_positive, check_range, is_concrete, record
 
 
 class AbstractInput(eqx.Module):
@@ -330,7 +328,9 @@ class ShapedCommand(AbstractMotionCommand):
             )
         check_nonnegative("times", self.times, "s", owner=o)
         check_finite("amplitudes", self.amplitudes, owner=o)
-        order_msg = f"{o}: parameter `times` must be non-decreasing (impulse times in order, the last one ends the move)"
+        order_msg = (
+            f"{o}: parameter `times` must be non-decreasing (impulse times in order, the last one ends the move)"
+        )
         sum_msg = f"{o}: parameter `amplitudes` must sum to 1"
         if is_concrete((self.times, self.amplitudes)):
             t = _np.asarray(self.times, dtype=float)

@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-
 import numpy as np
 
 from ._checks import is_concrete
@@ -153,7 +152,9 @@ def exp_input_batch(A, F, s, x0, t0, ts, f_var, s_var, *, uniform: bool = False,
     def expm_path():
         def one(a):
             f, sv = a
-            return expm_solve(A, jnp.concatenate([F, f[:, None]], axis=1), jnp.concatenate([s, sv[None]]), x0, t0, ts, uniform)
+            return expm_solve(
+                A, jnp.concatenate([F, f[:, None]], axis=1), jnp.concatenate([s, sv[None]]), x0, t0, ts, uniform
+            )
 
         return jax.lax.map(one, (f_var, s_var))
 
@@ -211,11 +212,19 @@ def batched_exponential_scene(scene):
     ys = startup_gamma_batch(model, inp.gamma, scene.ts, v_max=inp.v_max, y0=scene.y0, t0=scene.start_time)
     outputs = {}
     for name in scene.observe:
+
         def one(g, yb, name=name):
             cmd = ExponentialVoltage(inp.v_max, g)
             return jax.vmap(lambda t, y: model.output(name, t, y, cmd))(scene.ts, yb)
 
         outputs[name] = jax.vmap(one)(inp.gamma, ys)
     success = jnp.all(jnp.isfinite(ys), axis=(1, 2))
-    return Solution(ts=scene.ts, ys=ys if scene.state else None, outputs=outputs, success=success, stats={},
-                    state_names=tuple(model.state_names), method="fast")
+    return Solution(
+        ts=scene.ts,
+        ys=ys if scene.state else None,
+        outputs=outputs,
+        success=success,
+        stats={},
+        state_names=tuple(model.state_names),
+        method="fast",
+    )

@@ -99,16 +99,19 @@ def _fit(predict, names, p0, data, w, is_log, scale, solver_kind, jac_mode, rtol
     def resid(u, _):
         pred = jnp.asarray(predict_once(unpack(u)), dtype=float)
         if pred.shape != data.shape:  # broadcasting would fit a scalar to every point without a word
-            raise ValueError(f"identify: `predict(params)` must return an array of the shape of `data` "
-                             f"{tuple(data.shape)}; got shape {tuple(pred.shape)}")
+            raise ValueError(
+                f"identify: `predict(params)` must return an array of the shape of `data` "
+                f"{tuple(data.shape)}; got shape {tuple(pred.shape)}"
+            )
         return jnp.ravel((pred - data) * w)
 
     if solver_kind == "lm":
         solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
     else:
         solver = optx.GaussNewton(rtol=rtol, atol=atol)
-    sol = optx.least_squares(resid, solver, jnp.zeros_like(p0), options={"jac": jac_mode},
-                             max_steps=max_steps, throw=False)
+    sol = optx.least_squares(
+        resid, solver, jnp.zeros_like(p0), options={"jac": jac_mode}, max_steps=max_steps, throw=False
+    )
     u = sol.value
     # the residual at the solution comes with its Jacobian (one evaluation of the prediction)
     jac, r = (jax.jacfwd if jac_mode == "fwd" else jax.jacrev)(lambda v: (resid(v, None),) * 2, has_aux=True)(u)
@@ -178,8 +181,16 @@ def identify(
             raise ValueError("identify: `sigma` (noise standard deviation, data units) must be finite and > 0")
         w = 1.0 / sig
     is_log, scale = _transform(p0)
-    args = (predict, names, jnp.asarray(p0), jnp.asarray(data), jnp.asarray(w), jnp.asarray(is_log),
-            jnp.asarray(scale), solver)
+    args = (
+        predict,
+        names,
+        jnp.asarray(p0),
+        jnp.asarray(data),
+        jnp.asarray(w),
+        jnp.asarray(is_log),
+        jnp.asarray(scale),
+        solver,
+    )
     try:
         u, r, jac, ok, steps = _fit(*args, jac, rtol, atol, int(max_steps))
     except TypeError as e:

@@ -28,8 +28,10 @@ class TracedGridWarning(UserWarning):
     """A scene's output times are traced, so `simulate` cannot see that they are evenly spaced."""
 
 
-_START_MESSAGE = ("Scene: the start time (`t0`, or `ts[0]` without it) must be >= 0 s: times count from the start "
-                  "of the input command (t = 0), which is not defined before it")
+_START_MESSAGE = (
+    "Scene: the start time (`t0`, or `ts[0]` without it) must be >= 0 s: times count from the start "
+    "of the input command (t = 0), which is not defined before it"
+)
 
 
 def _check_start(start: float, name: str) -> None:
@@ -157,7 +159,9 @@ class Scene(eqx.Module):
                         f"got {float(start)}"
                     )
             if is_concrete(raw) and (start is None or is_concrete(start)):
-                _check_start(float(np.asarray(raw)[0]) if start is None else float(start), "ts[0]" if start is None else "t0")
+                _check_start(
+                    float(np.asarray(raw)[0]) if start is None else float(start), "ts[0]" if start is None else "t0"
+                )
             self.t1 = None
         else:
             self.ts = None
@@ -170,7 +174,9 @@ class Scene(eqx.Module):
             if is_concrete(self.t0):
                 _check_start(float(self.t0), "t0")
             if is_concrete(self.t1) and is_concrete(self.t0):
-                if not (np.isfinite(float(self.t0)) and np.isfinite(float(self.t1)) and float(self.t1) > float(self.t0)):
+                if not (
+                    np.isfinite(float(self.t0)) and np.isfinite(float(self.t1)) and float(self.t1) > float(self.t0)
+                ):
                     raise ValueError(
                         f"Scene: `t1` (final time, s) must be finite and > t0 = {float(self.t0)}; got {float(self.t1)}"
                     )
@@ -193,11 +199,17 @@ class Scene(eqx.Module):
         """`[(ok, message)]` for the time checks that values decide (evaluated under `jit` too)."""
         t_first = self.times[0]
         t0 = self.start_time
-        checks = [(jnp.isfinite(t0) & (t0 <= t_first), "Scene: `t0` must be finite and <= the first output time"),
-                  (t0 >= 0, _START_MESSAGE)]
+        checks = [
+            (jnp.isfinite(t0) & (t0 <= t_first), "Scene: `t0` must be finite and <= the first output time"),
+            (t0 >= 0, _START_MESSAGE),
+        ]
         if self.ts is not None and self.ts.shape[0] > 1:
-            checks.append((jnp.all(jnp.diff(self.ts) > 0) & jnp.all(jnp.isfinite(self.ts)),
-                           "Scene: `ts` must be finite and strictly increasing"))
+            checks.append(
+                (
+                    jnp.all(jnp.diff(self.ts) > 0) & jnp.all(jnp.isfinite(self.ts)),
+                    "Scene: `ts` must be finite and strictly increasing",
+                )
+            )
         elif self.ts is None:
             checks.append((jnp.isfinite(self.t1) & (self.t1 > self.t0), "Scene: `t1` must be finite and > t0"))
         if self.y0 is not None:

@@ -31,8 +31,17 @@ import numpy as np
 
 from . import _store
 from ._checks import as_float_array, concrete_array_type, is_concrete, positive_checks
-from ._guard import (_modules, eager, error_if, guard, has_host_callbacks, host_checked, nan_where, traced_checks,
-                     validated_inputs)
+from ._guard import (
+    _modules,
+    eager,
+    error_if,
+    guard,
+    has_host_callbacks,
+    host_checked,
+    nan_where,
+    traced_checks,
+    validated_inputs,
+)
 from .commands import AbstractExponentialVoltage
 from .fast import batched_exponential_scene
 from .modal import expm_solve, modal_solve
@@ -87,6 +96,7 @@ def _run_impl(scene: Scene, method: str, solver, rtol, atol, dt0, max_steps: int
         ys = _closed(model, inp, y0, t0, times, method, scene.uniform)
     else:
         if integrals:
+
             def vf(t, y, args):
                 x, _ = y
                 return model.vector_field(t, x, args), jnp.stack([model.rate(n, t, x, args) for n in integrals])
@@ -107,8 +117,18 @@ def _run_impl(scene: Scene, method: str, solver, rtol, atol, dt0, max_steps: int
         meter = diffrax.TqdmProgressMeter() if progress else diffrax.NoProgressMeter()
         with validated_inputs():  # the output times were checked by Scene (or are checked on the results)
             sol = diffrax.diffeqsolve(
-                diffrax.ODETerm(vf), solver, t0, times[-1], dt0, y_init, args=inp, saveat=saveat,
-                stepsize_controller=controller, max_steps=max_steps, throw=False, progress_meter=meter,
+                diffrax.ODETerm(vf),
+                solver,
+                t0,
+                times[-1],
+                dt0,
+                y_init,
+                args=inp,
+                saveat=saveat,
+                stepsize_controller=controller,
+                max_steps=max_steps,
+                throw=False,
+                progress_meter=meter,
                 adjoint=adjoint,
             )
         if integrals:
@@ -128,12 +148,17 @@ def _run_impl(scene: Scene, method: str, solver, rtol, atol, dt0, max_steps: int
     success = success & jnp.all(jnp.isfinite(ys))
     outputs = dict(integral_vals)
     for name in pointwise:
-        outputs[name] = jax.vmap(lambda t, y: model.output(name, t, y, inp))(times, ys)
+        outputs[name] = jax.vmap(lambda t, y, name=name: model.output(name, t, y, inp))(times, ys)
     for v in outputs.values():
         success = success & jnp.all(jnp.isfinite(v))
     return Solution(
-        ts=times, ys=ys if scene.state else None, outputs=outputs, success=success, stats=stats,
-        state_names=tuple(model.state_names), method=method,
+        ts=times,
+        ys=ys if scene.state else None,
+        outputs=outputs,
+        success=success,
+        stats=stats,
+        state_names=tuple(model.state_names),
+        method=method,
     )
 
 
@@ -176,12 +201,16 @@ def _describe(scene: Scene, method: str) -> str:
 
 def _failure_hint(method: str) -> str:
     if method == "rk4":
-        return ("The fixed RK4 step is too large for the fastest mode of this scene (dt * spectral radius beyond "
-                "RK4's stability region), or the solution is not finite. Use a smaller `dt` or method='ode'.")
+        return (
+            "The fixed RK4 step is too large for the fastest mode of this scene (dt * spectral radius beyond "
+            "RK4's stability region), or the solution is not finite. Use a smaller `dt` or method='ode'."
+        )
     if method == "ode":
-        return ("The solver did not reach the final time (step budget `max_steps` exhausted or step size collapsed) "
-                "or produced non-finite values. Try an implicit solver (diffrax.Kvaerno5()), looser tolerances or a "
-                "larger max_steps.")
+        return (
+            "The solver did not reach the final time (step budget `max_steps` exhausted or step size collapsed) "
+            "or produced non-finite values. Try an implicit solver (diffrax.Kvaerno5()), looser tolerances or a "
+            "larger max_steps."
+        )
     return "The closed form produced non-finite values (check the parameters)."
 
 
@@ -270,8 +299,15 @@ def simulate(
         dt0 = jnp.asarray(dt0, dtype=float)
         dt0 = jnp.where(jnp.isfinite(dt0) & (dt0 > 0), dt0, 1.0)
     sol = _run(
-        scene, method, solver, jnp.asarray(rtol, dtype=float), jnp.asarray(atol, dtype=float),
-        None if dt0 is None else jnp.asarray(dt0, dtype=float), int(max_steps), bool(progress), adjoint,
+        scene,
+        method,
+        solver,
+        jnp.asarray(rtol, dtype=float),
+        jnp.asarray(atol, dtype=float),
+        None if dt0 is None else jnp.asarray(dt0, dtype=float),
+        int(max_steps),
+        bool(progress),
+        adjoint,
     )
     return _finish(sol, checks, throw, _describe(scene, method), _failure_hint(method))
 
@@ -392,7 +428,9 @@ def _make_plan(scene, treedef, method, solver, dt0, adjoint, max_steps, progress
         # nothing on this path is differentiated (every input is a concrete value): the plain forward
         # loop, which traces and compiles faster than a checkpointed one and takes the same steps
         adjoint = _forward()
-    return _Plan(False, method, solver, default_solver, _program(treedef, method, int(max_steps), bool(progress), adjoint))
+    return _Plan(
+        False, method, solver, default_solver, _program(treedef, method, int(max_steps), bool(progress), adjoint)
+    )
 
 
 class _Program:
@@ -465,8 +503,7 @@ def _simulate_concrete(scene, method, solver, rtol, atol, dt0, dt, max_steps, pr
     leaves, treedef = jax.tree_util.tree_flatten(scene)
     if not _concrete_leaves(leaves):
         return None
-    key = (treedef, tuple([leaf.shape for leaf in leaves]), method, solver, dt0 is None, adjoint, max_steps,
-           progress)
+    key = (treedef, tuple([leaf.shape for leaf in leaves]), method, solver, dt0 is None, adjoint, max_steps, progress)
     try:
         plan = _PLANS.get(key)
     except TypeError:  # an unhashable solver or adjoint (e.g. holding arrays)
@@ -553,7 +590,8 @@ def _batched_input(inp) -> bool:
     allowed = getattr(type(inp), "array_fields", ())
     return any(
         hasattr(v, "shape") and jnp.ndim(v) >= 1
-        for f in dataclasses.fields(inp) if f.name not in allowed
+        for f in dataclasses.fields(inp)
+        if f.name not in allowed
         for v in (getattr(inp, f.name, None),)
     )
 

@@ -6,7 +6,6 @@ from pathlib import Path
 
 import pytest
 
-
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
@@ -17,14 +16,29 @@ import run_all  # noqa: E402
 def _result(tmp_path, scene, headline):
     d = tmp_path / "results"
     d.mkdir(exist_ok=True)
-    (d / f"{scene}.json").write_text(json.dumps({
-        "scene": scene, "machine": {"backend": "cpu", "cpu_count": 2}, "quick": True, "rows": [], "headline": headline}))
+    (d / f"{scene}.json").write_text(
+        json.dumps(
+            {
+                "scene": scene,
+                "machine": {"backend": "cpu", "cpu_count": 2},
+                "quick": True,
+                "rows": [],
+                "headline": headline,
+            }
+        )
+    )
     return d
 
 
 def test_readme_table_replaces_only_the_marked_block(tmp_path):
-    results = _result(tmp_path, "startup", [{"what": "per trajectory", "value": 7.25, "unit": "us", "target": "<= 20 us"},
-                                            {"what": "error", "value": 3.1e-13, "unit": "rel", "target": None}])
+    results = _result(
+        tmp_path,
+        "startup",
+        [
+            {"what": "per trajectory", "value": 7.25, "unit": "us", "target": "<= 20 us"},
+            {"what": "error", "value": 3.1e-13, "unit": "rel", "target": None},
+        ],
+    )
     readme = tmp_path / "README.md"
     page = tmp_path / "benchmarks.md"
     for f in (readme, page):
@@ -41,7 +55,9 @@ def test_readme_table_replaces_only_the_marked_block(tmp_path):
     assert "| startup | error | 3.1e-13 rel | – | – |" in text
     assert "docs/benchmarks.md" in readme.read_text() and "Every target is met." in readme.read_text()
     # a missed target is named in the README, under the matched-error table
-    results = _result(tmp_path, "startup", [{"what": "per trajectory", "value": 25.0, "unit": "us", "target": "<= 20 us"}])
+    results = _result(
+        tmp_path, "startup", [{"what": "per trajectory", "value": 25.0, "unit": "us", "target": "<= 20 us"}]
+    )
     assert readme_table.update_readme(readme, results, docs_page=page)
     assert "| 25 us | <= 20 us | **no** |" in page.read_text()
     assert "Missed: per trajectory." in readme.read_text()
@@ -99,10 +115,10 @@ def test_matched_error_ratio_pairs_the_most_accurate_matched_reference():
 def test_nonlinear_benchmarks_numpy_reference_is_the_models_vector_field():
     # benchmarks/nonlinear.py times scipy on a numpy copy of ModalSystem.rhs; the copy must follow the model
     # (it once read the modal damping as one scalar after it became per mode, and the benchmark failed)
+    import nonlinear as bench_nonlinear
     import numpy as np
 
     import jaxbelt as jb
-    import nonlinear as bench_nonlinear
 
     belt = jb.NonlinearBelt(n_modes=3, damping=(0.011, 0.02, 0.03), sensor_pulley="drive")
     sys_ = belt.modal(9.0)
@@ -112,11 +128,22 @@ def test_nonlinear_benchmarks_numpy_reference_is_the_models_vector_field():
         np.testing.assert_allclose(f(tau, z), np.asarray(sys_.rhs(tau, z, 0.0)), rtol=1e-12, atol=1e-15)
 
 
-@pytest.mark.parametrize("target, value, met", [
-    ("<= 0.2", 0.2, True), ("<= 0.5", 0.576, False), ("< 1e-3", 9.5e-5, True), ("< 1", 1.0, False),
-    (">= 50", 105.0, True), (">= 1000x", 999.0, False), ("<= 20 us", 11.2, True),
-    ("16.0 +/- 0.1", 15.998, True), ("9.0 +/- 0.05", 8.94, False), ("reported", 1.0, None), (None, 1.0, None),
-])
+@pytest.mark.parametrize(
+    "target, value, met",
+    [
+        ("<= 0.2", 0.2, True),
+        ("<= 0.5", 0.576, False),
+        ("< 1e-3", 9.5e-5, True),
+        ("< 1", 1.0, False),
+        (">= 50", 105.0, True),
+        (">= 1000x", 999.0, False),
+        ("<= 20 us", 11.2, True),
+        ("16.0 +/- 0.1", 15.998, True),
+        ("9.0 +/- 0.05", 8.94, False),
+        ("reported", 1.0, None),
+        (None, 1.0, None),
+    ],
+)
 def test_target_met_reads_each_form_of_target(target, value, met):
     assert readme_table.target_met(target, value) is met
 

@@ -10,7 +10,12 @@ def test_cli_writes_figure_whose_curves_match_the_reference(tmp_path, capsys):
     from test_startup import reference  # scipy expm reference
 
     out = tmp_path / "startup.png"
-    assert main(["--no-cache", "startup", "--gamma", "0.02", "0.05", "--t-end", "0.3", "--points", "301", "--out", str(out)]) == 0
+    assert (
+        main(
+            ["--no-cache", "startup", "--gamma", "0.02", "0.05", "--t-end", "0.3", "--points", "301", "--out", str(out)]
+        )
+        == 0
+    )
     assert out.stat().st_size > 20_000
     printed = capsys.readouterr().out
     # the reported final speed equals the independent reference

@@ -10,9 +10,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from compiles import count_compiles
 
 import jaxbelt as jb
-from compiles import count_compiles
 from jaxbelt.optimise import pid as pid_mod
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,8 +39,18 @@ def test_tune_pid_compiles_its_step_once():
     traces = dict(pid_mod.TRACE_COUNT)
     # new values of the same shapes: learning rate, window start, bounds, tolerances, gains
     with count_compiles() as c:
-        second = jb.tune_pid(drive, jb.PID(kp=60.0, v_limit=45.0), t0=0.4, t1=0.5, steps=3, progress=False,
-                             learning_rate=0.05, v_max=44.0, i_max=20.0, rtol=1e-8)
+        second = jb.tune_pid(
+            drive,
+            jb.PID(kp=60.0, v_limit=45.0),
+            t0=0.4,
+            t1=0.5,
+            steps=3,
+            progress=False,
+            learning_rate=0.05,
+            v_max=44.0,
+            i_max=20.0,
+            rtol=1e-8,
+        )
         third = jb.tune_pid(drive, pid, **kw)
     assert pid_mod.TRACE_COUNT == traces
     assert c["n"] == 0
@@ -87,8 +97,7 @@ def test_optimise_command_reuses_its_step():
     plat = jb.BeltPlatform()
     jb.optimise_command(plat, jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0])), max_steps=3, progress=False)
     with count_compiles() as c:
-        res = jb.optimise_command(plat, jb.PseudoPolynomial(jnp.array([3.2, 4.1, 5.3])), max_steps=3,
-                                  progress=False)
+        res = jb.optimise_command(plat, jb.PseudoPolynomial(jnp.array([3.2, 4.1, 5.3])), max_steps=3, progress=False)
     assert c["n"] == 0
     assert float(res.relative) < 1.0
 
@@ -185,10 +194,19 @@ def _reference_energy(d, alpha):
         s = jnp.sin(gam - bet)
         Q = d.a * jnp.sin(al - gam) / (d.b * s)
         R = d.a * jnp.sin(al - bet) / (d.c * s)
-        J = (d.jg1 + d.m1 * d.f1**2 + (d.jg3 + d.m3 * d.f3**2) * R**2 + d.m2 * d.a**2
-             + (d.jg2 + d.m2 * d.f2**2) * Q**2 + 2 * d.a * d.f2 * d.m2 * Q * jnp.cos(al - bet - d.theta2))
-        Ep = d.g * (d.m1 * d.f1 * jnp.sin(al + d.theta1) + d.m2 * (d.a * sa + d.f2 * jnp.sin(bet + d.theta2))
-                    + d.m3 * (d.hy + d.f3 * jnp.sin(gam + d.theta3)))
+        J = (
+            d.jg1
+            + d.m1 * d.f1**2
+            + (d.jg3 + d.m3 * d.f3**2) * R**2
+            + d.m2 * d.a**2
+            + (d.jg2 + d.m2 * d.f2**2) * Q**2
+            + 2 * d.a * d.f2 * d.m2 * Q * jnp.cos(al - bet - d.theta2)
+        )
+        Ep = d.g * (
+            d.m1 * d.f1 * jnp.sin(al + d.theta1)
+            + d.m2 * (d.a * sa + d.f2 * jnp.sin(bet + d.theta2))
+            + d.m3 * (d.hy + d.f3 * jnp.sin(gam + d.theta3))
+        )
         return J, Ep
 
     J, Ep = jax.vmap(coeffs)(alpha)

@@ -19,14 +19,30 @@ def _missing(*modules):
 def test_docs_build_strict(tmp_path):
     missing = _missing("mkdocs", "material", "mkdocstrings", "mkdocstrings_handlers.python", "mkdocs_jupyter")
     if missing:
-        pytest.skip(f"documentation packages not installed ({', '.join(missing)}); "
-                    "install them with: python -m pip install -e '.[dev]'")
+        pytest.skip(
+            f"documentation packages not installed ({', '.join(missing)}); "
+            "install them with: python -m pip install -e '.[dev]'"
+        )
     site = tmp_path / "site"
     # no network: MathJax is loaded by the reader's browser, not at build time; notebooks are not executed
-    proc = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "--config-file",
-                           str(ROOT / "mkdocs.yml"), "--site-dir", str(site)],
-                          cwd=ROOT, capture_output=True, text=True, timeout=300,
-                          env={**__import__("os").environ, "NO_MKDOCS_2_WARNING": "1"})
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "mkdocs",
+            "build",
+            "--strict",
+            "--config-file",
+            str(ROOT / "mkdocs.yml"),
+            "--site-dir",
+            str(site),
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={**__import__("os").environ, "NO_MKDOCS_2_WARNING": "1"},
+    )
     assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-8000:]
     assert (site / "index.html").exists()
     api = (site / "api" / "core" / "index.html").read_text()
@@ -82,9 +98,11 @@ def test_prose_timings_match_the_committed_benchmark():
 
     claims = {
         "README.md": [f"1000 four-bar PID gain sets in {two:.2f} s on 2 cores, against {lsoda:.0f} s"],
-        "docs/sweeps.md": [f"{one:.2f} s on one device, {two:.2f} s on two",
-                           f"LSODA loop at the same χ error takes {lsoda:.0f} s",
-                           f"({cli['warm_s']:.1f} s against {cli['cold_s']:.1f} s on 2 CPU cores"],
+        "docs/sweeps.md": [
+            f"{one:.2f} s on one device, {two:.2f} s on two",
+            f"LSODA loop at the same χ error takes {lsoda:.0f} s",
+            f"({cli['warm_s']:.1f} s against {cli['cold_s']:.1f} s on 2 CPU cores",
+        ],
         "jaxbelt/batch.py": [f"(measured: {one / two:.1f}x on 2 cores"],
     }
     for path, sentences in claims.items():

@@ -4,10 +4,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from references import expm_reference, startup_reference
 
 import jaxbelt as jb
 from jaxbelt.fast import exp_input_batch, startup_gamma_batch
-from references import expm_reference, startup_reference
 
 # one compilation per shape, shared by the tests (the model is a pytree argument)
 gamma_batch = jax.jit(startup_gamma_batch, static_argnames=("n_fix", "chunk"))
@@ -17,7 +17,6 @@ TS = jnp.linspace(0.0, 0.3, 61)
 def rel(x, ref):
     scale = np.maximum(np.max(np.abs(ref), axis=0), 1e-300)
     return float(np.max(np.max(np.abs(np.asarray(x) - ref), axis=0) / scale))
-
 
 
 @pytest.mark.parametrize("params", [{}, {"L": 1e-7}, {"tau_r0": 2.0, "k": 1e8}], ids=["tableI", "L=1e-7H", "k=1e8"])
@@ -35,7 +34,9 @@ def test_gamma_batch_matches_expm_reference_including_resonance(params):
 def test_gamma_batch_equals_vmapped_simulate():
     model = jb.BeltStartup(tau_r0=2.0)
     gammas = jnp.linspace(0.01, 0.08, 8)
-    ref = jax.vmap(lambda g: jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, g), ts=TS), method="expm").ys)(gammas)
+    ref = jax.vmap(lambda g: jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, g), ts=TS), method="expm").ys)(
+        gammas
+    )
     fast = gamma_batch(model, gammas, TS)
     assert rel(fast.reshape(-1, 5), np.asarray(ref).reshape(-1, 5)) < 1e-10
 
@@ -68,7 +69,18 @@ def test_fallbacks_match_reference(A, s_var):
     f = np.array([0.3, -1.0])
     x0 = np.array([0.2, 0.1])
     ts = np.linspace(0.0, 1.0, 21)
-    xs = np.asarray(exp_input_batch(jnp.asarray(A), jnp.asarray(F), jnp.asarray(s), jnp.asarray(x0), 0.0, jnp.asarray(ts), jnp.asarray(f), jnp.asarray(s_var)))
+    xs = np.asarray(
+        exp_input_batch(
+            jnp.asarray(A),
+            jnp.asarray(F),
+            jnp.asarray(s),
+            jnp.asarray(x0),
+            0.0,
+            jnp.asarray(ts),
+            jnp.asarray(f),
+            jnp.asarray(s_var),
+        )
+    )
     for i, sv in enumerate(s_var):
         ref = expm_reference(A, np.concatenate([F, f[:, None]], axis=1), np.array([0.0, sv]), x0, ts)
         assert rel(xs[i], ref) < 1e-10
@@ -95,10 +107,14 @@ def test_batched_command_scene_equals_vmapped_simulate():
 
     model = jb.BeltStartup()
     gammas = jnp.array([0.02, 0.04, 0.06])
-    sol = batched_exponential_scene(jb.Scene(model, jb.ExponentialVoltage(24.0, gammas), ts=TS,
-                                             observe=("electric_power", "alpha2")))
-    ref = jax.vmap(lambda g: jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, g), ts=TS,
-                                                  observe=("electric_power", "alpha2")), method="expm"))(gammas)
+    sol = batched_exponential_scene(
+        jb.Scene(model, jb.ExponentialVoltage(24.0, gammas), ts=TS, observe=("electric_power", "alpha2"))
+    )
+    ref = jax.vmap(
+        lambda g: jb.simulate(
+            jb.Scene(model, jb.ExponentialVoltage(24.0, g), ts=TS, observe=("electric_power", "alpha2")), method="expm"
+        )
+    )(gammas)
     assert sol.ys.shape == (3, 61, 5) and sol.method == "fast"
     assert rel(sol.ys.reshape(-1, 5), np.asarray(ref.ys).reshape(-1, 5)) < 1e-10
     for name in ("electric_power", "alpha2"):
@@ -116,9 +132,12 @@ def test_simulate_routes_a_batch_of_gammas_to_the_fast_path():
     sol = jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, gammas), ts=TS, observe=("electric_power",)))
     assert sol.method == "fast" and sol.ys.shape == (4, TS.shape[0], 5)
     for i, g in enumerate(np.asarray(gammas)):
-        one = jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, g), ts=TS, observe=("electric_power",)), method="expm")
+        one = jb.simulate(
+            jb.Scene(model, jb.ExponentialVoltage(24.0, g), ts=TS, observe=("electric_power",)), method="expm"
+        )
         np.testing.assert_allclose(sol.ys[i], one.ys, rtol=0, atol=1e-10 * float(jnp.max(jnp.abs(one.ys))))
-        np.testing.assert_allclose(sol.electric_power[i], one.electric_power, rtol=0,
-                                   atol=1e-10 * float(jnp.max(jnp.abs(one.electric_power))))
+        np.testing.assert_allclose(
+            sol.electric_power[i], one.electric_power, rtol=0, atol=1e-10 * float(jnp.max(jnp.abs(one.electric_power)))
+        )
     with pytest.raises(ValueError, match="jax.vmap over scalar commands"):
         jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, gammas), ts=TS), method="ode")

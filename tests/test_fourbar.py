@@ -30,8 +30,23 @@ def drive():
 @pytest.fixture(scope="module")
 def skew():
     """A second geometry with off-line centres of mass and the other assembly mode."""
-    return jb.FourBarDrive(a=0.08, b=0.32, c=0.25, hx=0.28, hy=-0.04, f1=0.03, f2=0.12, f3=0.1,
-                           theta1=0.3, theta2=-0.4, theta3=0.7, m1=0.3, m2=0.5, m3=0.2, assembly=-1)
+    return jb.FourBarDrive(
+        a=0.08,
+        b=0.32,
+        c=0.25,
+        hx=0.28,
+        hy=-0.04,
+        f1=0.03,
+        f2=0.12,
+        f3=0.1,
+        theta1=0.3,
+        theta2=-0.4,
+        theta3=0.7,
+        m1=0.3,
+        m2=0.5,
+        m3=0.2,
+        assembly=-1,
+    )
 
 
 # --- kinematics -----------------------------------------------------------------------------
@@ -81,8 +96,9 @@ def test_inertia_equals_direct_lagrangian(which, request):
         vel = jax.jacfwd(lambda x: d.points(x))(a)
         dbeta, dgamma = jax.grad(lambda x: d.angles(x)[0])(a), jax.grad(lambda x: d.angles(x)[1])(a)
         sq = {k: jnp.sum(v**2) for k, v in vel.items()}
-        return 0.5 * (d.m1 * sq["G1"] + d.jg1 + d.m2 * sq["G2"] + d.jg2 * dbeta**2
-                      + d.m3 * sq["G3"] + d.jg3 * dgamma**2)
+        return 0.5 * (
+            d.m1 * sq["G1"] + d.jg1 + d.m2 * sq["G2"] + d.jg2 * dbeta**2 + d.m3 * sq["G3"] + d.jg3 * dgamma**2
+        )
 
     J_direct = 2 * jax.vmap(ek_unit)(ALPHA)
     np.testing.assert_allclose(d.inertia(ALPHA), J_direct, rtol=1e-12)
@@ -144,8 +160,23 @@ def test_smooth_limiter_bounds():
 
 
 # --- dynamics against an independent numpy/scipy implementation ------------------------------
-P = {**ASSUMED_PARAMETERS, **IDENTIFIED_PARAMETERS, "hy": 0.05, "jg1": 3.5e-4, "jg2": 1.7e-2, "jg3": 1.7e-2, "L": 9e-3, "km": 0.48,
-     "jm": 13e-4, "ja": 9.8e-5, "jb": 9.8e-5, "z": 1.0, "T0": 0.0, "lam": 0.08, "g": 9.81}
+P = {
+    **ASSUMED_PARAMETERS,
+    **IDENTIFIED_PARAMETERS,
+    "hy": 0.05,
+    "jg1": 3.5e-4,
+    "jg2": 1.7e-2,
+    "jg3": 1.7e-2,
+    "L": 9e-3,
+    "km": 0.48,
+    "jm": 13e-4,
+    "ja": 9.8e-5,
+    "jb": 9.8e-5,
+    "z": 1.0,
+    "T0": 0.0,
+    "lam": 0.08,
+    "g": 9.81,
+}
 
 
 def _np_kin(al, p=P):
@@ -184,8 +215,14 @@ def _np_energy_coeffs(al, p=P):
     # (mass, r', r'', inertia, θ', θ'')
     links = [
         (p["m1"], p["f1"] * ep(al), -p["f1"] * e(al), p["jg1"], 1.0, 0.0),
-        (p["m2"], a * ep(al) + p["f2"] * Q * ep(be), -a * e(al) + p["f2"] * (Q2 * ep(be) - Q**2 * e(be)),
-         p["jg2"], Q, Q2),
+        (
+            p["m2"],
+            a * ep(al) + p["f2"] * Q * ep(be),
+            -a * e(al) + p["f2"] * (Q2 * ep(be) - Q**2 * e(be)),
+            p["jg2"],
+            Q,
+            Q2,
+        ),
         (p["m3"], p["f3"] * R * ep(ga), p["f3"] * (R2 * ep(ga) - R**2 * e(ga)), p["jg3"], R, R2),
     ]
     J = sum(m * v @ v + jg * w**2 for m, v, _, jg, w, _ in links)
@@ -219,8 +256,12 @@ def test_numpy_reference_coefficients_agree(drive):
 
 @pytest.mark.parametrize(
     "ctrl, alpha0",
-    [(("const", 25.0), 0.0), (("pid", 80.0, 32.0, 0.015, 30.0), 0.0), (("pid", 80.0, 32.0, 0.015, 30.0), 1.0),
-     (("pid_constant", 20.0, 32.0, 0.015, 30.0), 0.7)],
+    [
+        (("const", 25.0), 0.0),
+        (("pid", 80.0, 32.0, 0.015, 30.0), 0.0),
+        (("pid", 80.0, 32.0, 0.015, 30.0), 1.0),
+        (("pid_constant", 20.0, 32.0, 0.015, 30.0), 0.7),
+    ],
     ids=["open", "pid", "pid-alpha0", "pid-constant-gain"],
 )
 def test_simulation_matches_scipy(drive, ctrl, alpha0):
@@ -233,8 +274,16 @@ def test_simulation_matches_scipy(drive, ctrl, alpha0):
         inp = jb.PID(*ctrl[1:], gain="ramped" if ctrl[0] == "pid" else "constant")
     d = eqx.tree_at(lambda m: m.alpha0, drive, jnp.asarray(alpha0))
     sol = jb.simulate(jb.Scene(d, inp, ts=ts), solver=diffrax.Dopri8(), rtol=1e-11, atol=1e-11)
-    ref = solve_ivp(_np_rhs, (0, 0.5), [alpha0, 0.0, 0.0], method="LSODA", t_eval=ts, rtol=1e-10, atol=1e-10,
-                    args=(ctrl, P, P["z"] * alpha0))
+    ref = solve_ivp(
+        _np_rhs,
+        (0, 0.5),
+        [alpha0, 0.0, 0.0],
+        method="LSODA",
+        t_eval=ts,
+        rtol=1e-10,
+        atol=1e-10,
+        args=(ctrl, P, P["z"] * alpha0),
+    )
     assert ref.success
     ys = np.asarray(sol.ys)
     for j in range(3):
@@ -257,8 +306,7 @@ def test_contract_shapes_and_rk4_order(drive):
 
 
 def test_energy_balance_closed_loop(drive):
-    names = ("electric_energy", "copper_loss", "friction_loss", "kinetic_energy", "potential_energy",
-             "magnetic_energy")
+    names = ("electric_energy", "copper_loss", "friction_loss", "kinetic_energy", "potential_energy", "magnetic_energy")
     ts = jnp.linspace(0.0, 1.0, 11)
     sol = jb.simulate(jb.Scene(drive, jb.PID(v_limit=40.0), ts=ts, observe=names), rtol=1e-10, atol=1e-10)
     stored = sol.kinetic_energy + sol.potential_energy + sol.magnetic_energy
@@ -346,8 +394,11 @@ def test_alpha0_shifts_the_scene_and_the_integral_reference():
     pid = jb.PID()
     ts = jnp.linspace(0.0, 0.5, 101)
     s0 = jb.simulate(jb.Scene(free, pid, ts=ts, observe=("voltage",)), rtol=1e-11, atol=1e-11)
-    s1 = jb.simulate(jb.Scene(eqx.tree_at(lambda m: m.alpha0, free, jnp.asarray(1.0)), pid, ts=ts,
-                              observe=("voltage",)), rtol=1e-11, atol=1e-11)
+    s1 = jb.simulate(
+        jb.Scene(eqx.tree_at(lambda m: m.alpha0, free, jnp.asarray(1.0)), pid, ts=ts, observe=("voltage",)),
+        rtol=1e-11,
+        atol=1e-11,
+    )
     np.testing.assert_allclose(s1.alpha_dot, s0.alpha_dot, atol=1e-6)
     np.testing.assert_allclose(s1.alpha - 1.0, s0.alpha, atol=1e-7)
     # integral term zero at t = 0 for any start angle: V(0) = -Kd z F(alpha0, 0, 0) with the real linkage

@@ -19,7 +19,6 @@ Known bugs are pinned as `xfail(strict=True)` tests at the end of the file (see 
 
 import math
 import re
-import warnings
 
 import equinox as eqx
 import jax
@@ -33,7 +32,11 @@ import jaxbelt as jb
 
 # A database-less, derandomized profile: the same examples on every run (CI is reproducible).
 settings.register_profile(
-    "jaxbelt-fuzz", derandomize=True, database=None, deadline=None, print_blob=True,
+    "jaxbelt-fuzz",
+    derandomize=True,
+    database=None,
+    deadline=None,
+    print_blob=True,
     phases=[Phase.explicit, Phase.reuse, Phase.generate, Phase.shrink],  # no explain phase: writes no patch files
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
 )
@@ -83,8 +86,10 @@ _CHAIN = dict(inertias=[1e-3, 2e-3], k=[1e5], c=[1.0], r_drive=[0.05], r_driven=
 CONSTRUCTORS = (
     [(jb.BeltStartup, n, "pos") for n in ("jm", "j1", "j2", "k", "r1", "r2", "z", "R", "L", "km")]
     + [(jb.BeltStartup, n, "nonneg") for n in ("c", "mu")]
-    + [(lambda **kw: jb.BeltChain(**{**_CHAIN, **{k: [v] for k, v in kw.items()}}), n, "pos")
-       for n in ("k", "r_drive", "r_driven")]
+    + [
+        (lambda **kw: jb.BeltChain(**{**_CHAIN, **{k: [v] for k, v in kw.items()}}), n, "pos")
+        for n in ("k", "r_drive", "r_driven")
+    ]
     + [(lambda **kw: jb.BeltChain(**{**_CHAIN, **kw}), n, "pos") for n in ("jm", "z", "R", "L", "km")]
     + [(jb.FourBarDrive, n, "pos") for n in ("a", "b", "c", "jg1", "jm", "ja", "jb", "R", "L", "km", "z")]
     + [(jb.FourBarDrive, n, "nonneg") for n in ("f1", "m2", "g", "T0", "lam")]
@@ -92,20 +97,29 @@ CONSTRUCTORS = (
     + [(jb.BeltPlatform, n, "pos") for n in ("J", "k", "r", "R", "z")]
     + [(jb.BeltPlatform, "c", "nonneg")]
     + [(jb.MovingString, n, "pos") for n in ("tension", "density", "length")]
-    + [(lambda **kw: jb.BeltPulleyContact(**{"radius": 0.05, **kw}), n, "pos")
-       for n in ("radius", "slack_tension", "tight_tension", "density", "friction")]
+    + [
+        (lambda **kw: jb.BeltPulleyContact(**{"radius": 0.05, **kw}), n, "pos")
+        for n in ("radius", "slack_tension", "tight_tension", "density", "friction")
+    ]
     + [(lambda **kw: jb.BeltPulleyContact(0.05, **kw), "wrap_angle", "angle")]
     + [(jb.NonlinearBelt, n, "pos") for n in ("span", "wave_speed", "pulley_radii")]
     + [(jb.NonlinearBelt, n, "nonneg") for n in ("v_l", "runout")]
     + [(jb.NonlinearBelt, "phase", "finite"), (jb.NonlinearBelt, "damping", "unit")]
     + [(jb.PID, n, "finite") for n in ("kp", "ki", "kd", "omega_ref")]
     + [(jb.PID, n, "pos") for n in ("v_limit", "v_smooth")]
-    + [(jb.ConstantVoltage, "voltage", "finite"), (jb.ExponentialVoltage, "v_max", "finite"),
-       (jb.ExponentialVoltage, "gamma", "pos")]
-    + [(lambda **kw: jb.PseudoPolynomial([3.0, 4.0, 5.0], **kw), "duration", "pos"),
-       (lambda **kw: jb.PseudoPolynomial([3.0, 4.0, 5.0], **kw), "displacement", "finite")]
-    + [(lambda **kw: jb.SpeedRamp(**{"v_start": 1.0, "v_end": 2.0, "duration": 1.0, **kw}), n, "nonneg")
-       for n in ("v_start", "v_end")]
+    + [
+        (jb.ConstantVoltage, "voltage", "finite"),
+        (jb.ExponentialVoltage, "v_max", "finite"),
+        (jb.ExponentialVoltage, "gamma", "pos"),
+    ]
+    + [
+        (lambda **kw: jb.PseudoPolynomial([3.0, 4.0, 5.0], **kw), "duration", "pos"),
+        (lambda **kw: jb.PseudoPolynomial([3.0, 4.0, 5.0], **kw), "displacement", "finite"),
+    ]
+    + [
+        (lambda **kw: jb.SpeedRamp(**{"v_start": 1.0, "v_end": 2.0, "duration": 1.0, **kw}), n, "nonneg")
+        for n in ("v_start", "v_end")
+    ]
     + [(lambda **kw: jb.SpeedRamp(**{"v_start": 1.0, "v_end": 2.0, "duration": 1.0, **kw}), "duration", "pos")]
 )
 BAD = {
@@ -113,8 +127,9 @@ BAD = {
     "nonneg": BAD_NONNEG,
     "finite": NONFINITE,
     "unit": st.one_of(NONFINITE, NEGATIVE, st.floats(min_value=1.0, max_value=1e6)),  # [0, 1)
-    "angle": st.one_of(NONFINITE, st.floats(max_value=0.0, min_value=-1e3),
-                       st.floats(min_value=2 * math.pi, max_value=1e3)),  # (0, 2 pi)
+    "angle": st.one_of(
+        NONFINITE, st.floats(max_value=0.0, min_value=-1e3), st.floats(min_value=2 * math.pi, max_value=1e3)
+    ),  # (0, 2 pi)
 }
 _IDS = [f"{getattr(c, '__name__', 'kw')}-{n}" for c, n, _ in CONSTRUCTORS]
 
@@ -157,8 +172,13 @@ def test_belt_chain_stage_arrays_of_wrong_length_are_refused(n, m):
     if m == n:
         m = n + 1
     with pytest.raises(ValueError, match=r"`k` must have shape"):
-        jb.BeltChain(inertias=np.full(n + 1, 1e-3), k=np.full(m, 1e5), c=np.ones(n), r_drive=np.full(n, 0.05),
-                     r_driven=np.full(n, 0.1))
+        jb.BeltChain(
+            inertias=np.full(n + 1, 1e-3),
+            k=np.full(m, 1e5),
+            c=np.ones(n),
+            r_drive=np.full(n, 0.05),
+            r_driven=np.full(n, 0.1),
+        )
 
 
 @given(t=st.lists(st.floats(min_value=0.0, max_value=1.0), min_size=1, max_size=4), bad=st.one_of(NONFINITE, NEGATIVE))
@@ -195,8 +215,11 @@ def test_pid_switches_outside_their_choices_are_refused(limiter, gain):
             jb.PID(gain=gain)
 
 
-@given(n=st.one_of(st.integers(max_value=0), st.floats(allow_nan=True), st.booleans(), st.text(max_size=2)),
-       sensor=st.text(max_size=6), travel=st.text(max_size=6))
+@given(
+    n=st.one_of(st.integers(max_value=0), st.floats(allow_nan=True), st.booleans(), st.text(max_size=2)),
+    sensor=st.text(max_size=6),
+    travel=st.text(max_size=6),
+)
 @fuzz(12)
 def test_nonlinear_belt_static_options_are_refused(n, sensor, travel):
     with pytest.raises(ValueError, match=named("n_modes")):
@@ -210,6 +233,7 @@ def test_nonlinear_belt_static_options_are_refused(n, sensor, travel):
 
 
 # --- free functions of the belt spans --------------------------------------------------
+
 
 @given(R=BAD_POSITIVE, n=st.one_of(NONFINITE, st.floats(min_value=-5.0, max_value=0.999)))
 @fuzz(12)
@@ -237,8 +261,11 @@ def test_exciting_speeds_valid_solve_eq_54_and_match_jit(R, n, m):
 _exciting_jit = jax.jit(lambda R, n, m: jb.exciting_speeds(jb.MovingString(), R, n, m))
 
 
-@given(which=st.sampled_from(["length", "pulley_radii", "wave_speed"]), bad=BAD_POSITIVE,
-       h=st.one_of(NONFINITE, st.floats(min_value=-3.0, max_value=0.99)))
+@given(
+    which=st.sampled_from(["length", "pulley_radii", "wave_speed"]),
+    bad=BAD_POSITIVE,
+    h=st.one_of(NONFINITE, st.floats(min_value=-3.0, max_value=0.99)),
+)
 @fuzz(12)
 def test_crossing_speeds_concrete_bad_arguments(which, bad, h):
     arg = (0.063, bad) if which == "pulley_radii" else bad
@@ -311,8 +338,7 @@ def test_scene_y0_of_wrong_shape_or_not_finite(n, bad):
         jb.Scene(STARTUP, EXP, ts=TS, y0=np.where(np.arange(5) == n % 5, bad, 0.0))
 
 
-@given(ts=st.lists(st.floats(min_value=0.0, max_value=1.0), min_size=2, max_size=8), i=st.integers(0, 6),
-       bad=NONFINITE)
+@given(ts=st.lists(st.floats(min_value=0.0, max_value=1.0), min_size=2, max_size=8), i=st.integers(0, 6), bad=NONFINITE)
 @fuzz(15)
 def test_scene_ts_not_increasing_or_not_finite(ts, i, bad):
     ts = sorted(ts)
@@ -372,8 +398,11 @@ def test_simulate_concrete_bad_rk4_step(dt):
         jb.simulate(SCENE, "rk4", dt=dt)
 
 
-@given(max_steps=st.one_of(st.integers(max_value=0), st.floats(allow_nan=True), st.booleans(), st.none(),
-                           st.text(max_size=3)))
+@given(
+    max_steps=st.one_of(
+        st.integers(max_value=0), st.floats(allow_nan=True), st.booleans(), st.none(), st.text(max_size=3)
+    )
+)
 @fuzz(12)
 def test_simulate_bad_max_steps(max_steps):
     with pytest.raises(ValueError, match=named("max_steps")):
@@ -443,8 +472,12 @@ def test_startup_valid_parameters_jit_equals_eager(scales):
     rel_close(run(_startup_ys, p), _startup(p).ys)
 
 
-@given(i=st.integers(0, len(SU_NAMES) - 1), j=st.integers(0, 2), data=st.data(),
-       scales=st.lists(SCALE, min_size=3, max_size=3))
+@given(
+    i=st.integers(0, len(SU_NAMES) - 1),
+    j=st.integers(0, 2),
+    data=st.data(),
+    scales=st.lists(SCALE, min_size=3, max_size=3),
+)
 @fuzz(15)
 def test_startup_vmap_one_bad_element_is_flagged_and_the_others_untouched(i, j, data, scales):
     P = np.stack([SU_DEFAULT * s for s in scales])
@@ -464,8 +497,9 @@ def test_startup_vmap_one_bad_element_is_flagged_and_the_others_untouched(i, j, 
 
 # --- traced times and initial state ------------------------------------------------------
 
-_startup_times_flag = jax.jit(lambda ts, t0, y0: jb.simulate(jb.Scene(STARTUP, EXP, ts=ts, t0=t0, y0=y0, uniform=False),
-                                                             throw=False))
+_startup_times_flag = jax.jit(
+    lambda ts, t0, y0: jb.simulate(jb.Scene(STARTUP, EXP, ts=ts, t0=t0, y0=y0, uniform=False), throw=False)
+)
 
 
 @given(i=st.integers(0, 19), kind=st.sampled_from(["repeat", "nan", "t0", "y0"]), bad=NONFINITE)
@@ -549,8 +583,12 @@ _platform_vmap_flag = jax.jit(jax.vmap(lambda p: _platform(p, throw=False)))
 _platform_ys = jax.jit(lambda p: _platform(p).ys)
 
 
-@given(i=st.integers(0, len(PL_NAMES) - 1), j=st.integers(0, 2), data=st.data(),
-       scales=st.lists(SCALE, min_size=3, max_size=3))
+@given(
+    i=st.integers(0, len(PL_NAMES) - 1),
+    j=st.integers(0, 2),
+    data=st.data(),
+    scales=st.lists(SCALE, min_size=3, max_size=3),
+)
 @fuzz(8)
 def test_platform_vmap_one_bad_element_is_flagged_and_the_others_untouched(i, j, data, scales):
     P = np.stack([PL_DEFAULT * s for s in scales])
@@ -652,8 +690,12 @@ _fourbar_vmap_flag = jax.jit(jax.vmap(lambda p: _fourbar(p, throw=False)))
 _fourbar_vmap_throw = jax.jit(jax.vmap(lambda p: _fourbar(p).outputs["motor_speed"]))
 
 
-@given(i=st.integers(0, len(PID_NAMES) - 1), j=st.integers(0, 1), data=st.data(),
-       scales=st.lists(SCALE, min_size=2, max_size=2))
+@given(
+    i=st.integers(0, len(PID_NAMES) - 1),
+    j=st.integers(0, 1),
+    data=st.data(),
+    scales=st.lists(SCALE, min_size=2, max_size=2),
+)
 @fuzz(4)
 def test_fourbar_pid_vmap_one_bad_element(i, j, data, scales):
     P = np.stack([PID_DEFAULT * s for s in scales])
@@ -668,8 +710,11 @@ def test_fourbar_pid_vmap_one_bad_element(i, j, data, scales):
         run(_fourbar_vmap_throw, P)
 
 
-_chi = jax.jit(lambda kp: jb.fluctuation_objective(DRIVE, _pid(jnp.array(PID_DEFAULT).at[0].set(kp)), 0.02, 0.05,
-                                                   dt_save=5e-3, max_steps=MAX_STEPS))
+_chi = jax.jit(
+    lambda kp: jb.fluctuation_objective(
+        DRIVE, _pid(jnp.array(PID_DEFAULT).at[0].set(kp)), 0.02, 0.05, dt_save=5e-3, max_steps=MAX_STEPS
+    )
+)
 
 
 @given(kp=st.one_of(NONFINITE, st.floats(20.0, 200.0)))
@@ -680,8 +725,11 @@ def test_fluctuation_objective_traced_gain(kp):
             run(_chi, kp)
         return
     chi = float(run(_chi, kp))
-    ref = float(jb.fluctuation_objective(DRIVE, _pid(np.where(np.arange(6) == 0, kp, PID_DEFAULT)), 0.02, 0.05,
-                                         dt_save=5e-3, max_steps=MAX_STEPS))
+    ref = float(
+        jb.fluctuation_objective(
+            DRIVE, _pid(np.where(np.arange(6) == 0, kp, PID_DEFAULT)), 0.02, 0.05, dt_save=5e-3, max_steps=MAX_STEPS
+        )
+    )
     assert math.isfinite(chi) and chi == pytest.approx(ref, rel=1e-10)
 
 
@@ -701,8 +749,11 @@ def test_fluctuation_index_valid_window_jit_equals_eager(fb_solution, t0, width)
     assert math.isfinite(chi) and chi >= 0 and chi == pytest.approx(ref, rel=1e-12, abs=1e-15)
 
 
-@given(t0=st.one_of(st.floats(0.051, 10.0), st.floats(-10.0, -0.01)), width=st.floats(0.0, 1e-3),
-       bad=st.sampled_from([nan, inf]))
+@given(
+    t0=st.one_of(st.floats(0.051, 10.0), st.floats(-10.0, -0.01)),
+    width=st.floats(0.0, 1e-3),
+    bad=st.sampled_from([nan, inf]),
+)
 @fuzz(10)
 def test_fluctuation_index_empty_window_is_refused(fb_solution, t0, width, bad):
     with pytest.raises(ValueError, match="window"):
@@ -737,9 +788,16 @@ _belt_ys = jax.jit(lambda p: _belt(p).ys)
 
 
 def _nl_bad(name):
-    return {"span": BAD_POSITIVE, "wave_speed": BAD_POSITIVE, "pulley_radii": BAD_POSITIVE, "v_l": BAD_NONNEG,
-            "runout": BAD_NONNEG, "phase": NONFINITE, "damping": BAD["unit"],
-            "speed": st.one_of(NONFINITE, NEGATIVE, st.floats(37.44, 1e4))}[name]
+    return {
+        "span": BAD_POSITIVE,
+        "wave_speed": BAD_POSITIVE,
+        "pulley_radii": BAD_POSITIVE,
+        "v_l": BAD_NONNEG,
+        "runout": BAD_NONNEG,
+        "phase": NONFINITE,
+        "damping": BAD["unit"],
+        "speed": st.one_of(NONFINITE, NEGATIVE, st.floats(37.44, 1e4)),
+    }[name]
 
 
 @given(i=st.integers(0, len(NL_NAMES) - 1), data=st.data())
@@ -764,6 +822,7 @@ def test_nonlinear_valid_parameters_jit_equals_eager(scales):
 # =====================================================================================
 # 7. identify: argument checks (before any solve).
 # =====================================================================================
+
 
 def _predict(p):
     return p["a"] * jnp.arange(1.0, 4.0)
@@ -815,14 +874,27 @@ def test_identify_sigma_none_with_too_few_points():
 #    a message that does not name the parameter, or the wrong kind of error.
 # =====================================================================================
 
+
 def _xfail(reason):
     return pytest.mark.xfail(strict=True, reason=reason)
 
 
 # fixed: ShapedCommand.zv/zvd did not check `omega_n`/`zeta` (omega_n=inf gave a silent identity shaper;
 # a negative omega_n or zeta >= 1 was refused with a message about `times`)
-@pytest.mark.parametrize("omega, zeta", [(inf, 0.0), (-inf, 0.0), (-10.0, 0.0), (0.0, 0.0), (nan, 0.0),
-                                         (10.0, 1.5), (10.0, 1.0), (10.0, -0.1), (10.0, nan)])
+@pytest.mark.parametrize(
+    "omega, zeta",
+    [
+        (inf, 0.0),
+        (-inf, 0.0),
+        (-10.0, 0.0),
+        (0.0, 0.0),
+        (nan, 0.0),
+        (10.0, 1.5),
+        (10.0, 1.0),
+        (10.0, -0.1),
+        (10.0, nan),
+    ],
+)
 def test_bug_shaper_mode_arguments_not_checked(omega, zeta):
     for make in (jb.ShapedCommand.zv, jb.ShapedCommand.zvd):
         with pytest.raises(ValueError, match=named("omega_n") if zeta == 0.0 else named("zeta")):
@@ -838,8 +910,10 @@ def test_shaper_traced_invalid_times_or_mode_refused():
         run(_shaped_times, jnp.array([0.02, 0.01]))
     with pytest.raises(RUNTIME, match=named("times")):  # omega_n = inf: no silent identity shaper under jit
         run(_zv_omega, inf)
-    rel_close(run(_shaped_times, jnp.array([0.0, 0.01])),
-              jb.residual_energy(PLAT, jb.ShapedCommand(PP, [0.0, 0.01], [0.5, 0.5])))
+    rel_close(
+        run(_shaped_times, jnp.array([0.0, 0.01])),
+        jb.residual_energy(PLAT, jb.ShapedCommand(PP, [0.0, 0.01], [0.5, 0.5])),
+    )
 
 
 # fixed: BeltStartup/BeltChain did not check `tau_r0` (NaN/inf accepted, simulate failed with an unnamed SolveError)
@@ -937,7 +1011,9 @@ def test_bug_shaped_command_decreasing_times(times):
         jb.ShapedCommand(jb.PseudoPolynomial([3.0, 4.0, 5.0]), times, [1.0 / len(times)] * len(times))
 
 
-_H_ode_tol = jax.jit(lambda rtol, atol: jb.residual_energy(PLAT, PP, method="ode", rtol=rtol, atol=atol, max_steps=4096))
+_H_ode_tol = jax.jit(
+    lambda rtol, atol: jb.residual_energy(PLAT, PP, method="ode", rtol=rtol, atol=atol, max_steps=4096)
+)
 
 
 # fixed: residual_energy(method='ode') did not check rtol/atol (rtol=-1 returned finite garbage, 0.5 % off)
@@ -1039,8 +1115,10 @@ def test_bug_fluctuation_temperature_not_checked(fb_solution, bad):
 
 
 def test_fluctuation_traced_temperature_valid_equals_eager(fb_solution):
-    rel_close(run(_chi_temperature, fb_solution, 3e-4),
-              jb.fluctuation_index(fb_solution, 0.02, 0.05, smooth=True, temperature=3e-4))
+    rel_close(
+        run(_chi_temperature, fb_solution, 3e-4),
+        jb.fluctuation_index(fb_solution, 0.02, 0.05, smooth=True, temperature=3e-4),
+    )
 
 
 # fixed: fluctuation_index under jit with a window holding < 2 samples returned a silent NaN

@@ -187,8 +187,12 @@ def test_quadrature_h_refuses_a_move_it_cannot_resolve():
     with pytest.raises(ValueError, match="n_nodes"):
         jb.residual_energy(plat, long_move)
     # under jit the same refusal is a run-time error
-    f = jax.jit(lambda T: jb.residual_energy(plat, jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]), duration=T), n_nodes=48))
-    assert float(f(0.5)) == pytest.approx(float(jb.residual_energy(plat, jb.PseudoPolynomial([3.0, 4.0, 5.0], duration=0.5), method="ode")), rel=1e-8)
+    f = jax.jit(
+        lambda T: jb.residual_energy(plat, jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]), duration=T), n_nodes=48)
+    )
+    assert float(f(0.5)) == pytest.approx(
+        float(jb.residual_energy(plat, jb.PseudoPolynomial([3.0, 4.0, 5.0], duration=0.5), method="ode")), rel=1e-8
+    )
     with pytest.raises(RUNTIME, match="n_nodes"):
         jax.block_until_ready(f(2.0))
 
@@ -253,10 +257,19 @@ def test_nearly_equal_exponents_are_refused_and_gradients_are_right_at_the_limit
         (["startup", "--t-end", "-1"], "argument --t-end: must be > 0, got -1"),
         (["startup", "--method", "euler"], "argument --method: invalid choice: 'euler'"),
         (["startup", "--points", "2.5"], "argument --points: expected an integer, got '2.5'"),
-        (["fourbar", "--t1", "0.3"], "argument --t1: must be > 0.5 (the closed-loop index is taken over 0.375-0.5 s), got 0.3"),
+        (
+            ["fourbar", "--t1", "0.3"],
+            "argument --t1: must be > 0.5 (the closed-loop index is taken over 0.375-0.5 s), got 0.3",
+        ),
         # relations between arguments: checked after parsing, still before anything is computed
-        (["shaping", "--band", "1.2", "0.8"], "jaxbelt shaping: error: argument --band: LOW must be < HIGH, got 1.2 0.8"),
-        (["shaping", "--gammas", "3", "3", "4"], "argument --gammas: the exponents must differ pairwise by at least 0.001"),
+        (
+            ["shaping", "--band", "1.2", "0.8"],
+            "jaxbelt shaping: error: argument --band: LOW must be < HIGH, got 1.2 0.8",
+        ),
+        (
+            ["shaping", "--gammas", "3", "3", "4"],
+            "argument --gammas: the exponents must differ pairwise by at least 0.001",
+        ),
         (["nonlinear", "--damping", "0.1", "0.2", "0.3"], "argument --damping: give 1 ratio (all modes) or 2"),
     ],
 )
@@ -278,8 +291,21 @@ def test_cli_refuses_bad_arguments_before_computing(argv, needle, capsys):
 
 def test_cli_output_without_suffix_prints_the_written_name(tmp_path):
     r = subprocess.run(
-        [sys.executable, "-m", "jaxbelt", "startup", "--gamma", "0.02", "--points", "51", "--out", str(tmp_path / "fig")],
-        capture_output=True, text=True, timeout=300,
+        [
+            sys.executable,
+            "-m",
+            "jaxbelt",
+            "startup",
+            "--gamma",
+            "0.02",
+            "--points",
+            "51",
+            "--out",
+            str(tmp_path / "fig"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
     )
     assert r.returncode == 0, r.stderr
     written = tmp_path / "fig.png"
@@ -289,8 +315,10 @@ def test_cli_output_without_suffix_prints_the_written_name(tmp_path):
 def test_cli_entry_ends_the_process_with_the_commands_status_and_output():
     # `entry` ends the process without the interpreter's teardown: the exit handlers still run, the
     # buffered output (a pipe here) still arrives, and the command's status is the process's
-    code = ("import atexit, jaxbelt.cli as c; atexit.register(lambda: print('exit handler ran')); "
-            "c.main = lambda: (print('command output'), 3)[1]; c.entry()")
+    code = (
+        "import atexit, jaxbelt.cli as c; atexit.register(lambda: print('exit handler ran')); "
+        "c.main = lambda: (print('command output'), 3)[1]; c.entry()"
+    )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert r.returncode == 3, r.stderr
     assert r.stdout.splitlines() == ["command output", "exit handler ran"]
@@ -445,20 +473,38 @@ def test_nonlinear_belt_checks_survive_jit():
     assert float(jax.jit(lambda a: jb.backbone_speed(b, a))(a9)) == pytest.approx(9.0, abs=1e-9)
 
 
-@pytest.mark.parametrize("call, needle", [
-    # a bound <= 0 switched its penalty off (max(0, peak/bound - 1) is 0): the tuned current reached 31.6 A
-    (lambda d, p, pl, c: jb.tune_pid(d, p, steps=1, i_max=-20.0, progress=False), "parameter `i_max` must be finite and > 0 A"),
-    (lambda d, p, pl, c: jb.tune_pid(d, p, steps=1, i_max=0.0, progress=False), "parameter `i_max`"),
-    # a negative weight rewarded breaking the bound (loss -4.96 with 34 A against i_max = 20 A)
-    (lambda d, p, pl, c: jb.tune_pid(d, p, steps=1, i_max=20.0, penalty=-10.0, progress=False), "parameter `penalty`"),
-    (lambda d, p, pl, c: jb.tune_pid(d, p, steps=1, learning_rate=float("nan"), progress=False), "parameter `learning_rate`"),
-    (lambda d, p, pl, c: jb.optimise_command(pl, c, max_speed=-1.0, progress=False), "parameter `max_speed` must be finite and > 0 rad/s"),
-    (lambda d, p, pl, c: jb.optimise_command(pl, c, max_speed=float("nan"), progress=False), "parameter `max_speed`"),
-    (lambda d, p, pl, c: jb.optimise_command(pl, c, margin=-1.0, progress=False), "parameter `margin`"),
-    (lambda d, p, pl, c: jb.optimise_command(pl, c, gap=-1.0, progress=False), "parameter `gap` must be >= 0.001"),
-    (lambda d, p, pl, c: jb.optimise_robust(pl, c, max_accel=-5.0, progress=False), "parameter `max_accel`"),
-    (lambda d, p, pl, c: jb.optimise_robust(pl, c, n_freq=1, progress=False), "parameter `n_freq`"),
-])
+@pytest.mark.parametrize(
+    "call, needle",
+    [
+        # a bound <= 0 switched its penalty off (max(0, peak/bound - 1) is 0): the tuned current reached 31.6 A
+        (
+            lambda d, p, pl, c: jb.tune_pid(d, p, steps=1, i_max=-20.0, progress=False),
+            "parameter `i_max` must be finite and > 0 A",
+        ),
+        (lambda d, p, pl, c: jb.tune_pid(d, p, steps=1, i_max=0.0, progress=False), "parameter `i_max`"),
+        # a negative weight rewarded breaking the bound (loss -4.96 with 34 A against i_max = 20 A)
+        (
+            lambda d, p, pl, c: jb.tune_pid(d, p, steps=1, i_max=20.0, penalty=-10.0, progress=False),
+            "parameter `penalty`",
+        ),
+        (
+            lambda d, p, pl, c: jb.tune_pid(d, p, steps=1, learning_rate=float("nan"), progress=False),
+            "parameter `learning_rate`",
+        ),
+        (
+            lambda d, p, pl, c: jb.optimise_command(pl, c, max_speed=-1.0, progress=False),
+            "parameter `max_speed` must be finite and > 0 rad/s",
+        ),
+        (
+            lambda d, p, pl, c: jb.optimise_command(pl, c, max_speed=float("nan"), progress=False),
+            "parameter `max_speed`",
+        ),
+        (lambda d, p, pl, c: jb.optimise_command(pl, c, margin=-1.0, progress=False), "parameter `margin`"),
+        (lambda d, p, pl, c: jb.optimise_command(pl, c, gap=-1.0, progress=False), "parameter `gap` must be >= 0.001"),
+        (lambda d, p, pl, c: jb.optimise_robust(pl, c, max_accel=-5.0, progress=False), "parameter `max_accel`"),
+        (lambda d, p, pl, c: jb.optimise_robust(pl, c, n_freq=1, progress=False), "parameter `n_freq`"),
+    ],
+)
 def test_optimiser_options_that_would_silently_change_the_problem_are_refused(call, needle):
     drive, pid = jb.FourBarDrive(), jb.PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0)
     plat, cmd = jb.BeltPlatform(), jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]))
@@ -491,18 +537,58 @@ _TRACED_SPAN_CASES = [
     # (what, function of one traced value, bad value, good value, message); each returned a finite or
     # NaN value under jit before (e.g. natural frequencies of -166 rad/s for a negative span length)
     ("span length", lambda L: jb.MovingString(length=L).natural_frequencies(1.0), -1.0, 0.2621, "parameter `length`"),
-    ("span tension (was blamed on the speed)", lambda T: jb.MovingString(tension=T).natural_frequencies(1.0), -1.0, 140.0,
-     "parameter `tension`"),
+    (
+        "span tension (was blamed on the speed)",
+        lambda T: jb.MovingString(tension=T).natural_frequencies(1.0),
+        -1.0,
+        140.0,
+        "parameter `tension`",
+    ),
     ("rotor radius", lambda r: jb.MovingString().critical_rotor_speed(r), -1.0, 0.1166, "parameter `pulley_radius`"),
     ("pulley radius", lambda R: jb.BeltPulleyContact(R).slip_margin(10.0), -1.0, 0.05, "parameter `radius`"),
-    ("belt density", lambda d: jb.BeltPulleyContact(0.05, density=d).separation_speed(), -1.0, 0.05, "parameter `density`"),
-    ("wrap angle", lambda w: jb.BeltPulleyContact(0.05, wrap_angle=w).pressure(0.1, 10.0), -1.0, 2.094, "parameter `wrap_angle`"),
-    ("contact angle", lambda a: jb.BeltPulleyContact(0.05).pressure(a, 10.0), 5.0, 1.0, "`alpha` must lie in [0, wrap_angle]"),
+    (
+        "belt density",
+        lambda d: jb.BeltPulleyContact(0.05, density=d).separation_speed(),
+        -1.0,
+        0.05,
+        "parameter `density`",
+    ),
+    (
+        "wrap angle",
+        lambda w: jb.BeltPulleyContact(0.05, wrap_angle=w).pressure(0.1, 10.0),
+        -1.0,
+        2.094,
+        "parameter `wrap_angle`",
+    ),
+    (
+        "contact angle",
+        lambda a: jb.BeltPulleyContact(0.05).pressure(a, 10.0),
+        5.0,
+        1.0,
+        "`alpha` must lie in [0, wrap_angle]",
+    ),
     ("pulley speed", lambda w: jb.BeltPulleyContact(0.05).slip_margin(w), float("nan"), 10.0, "parameter `omega`"),
-    ("rig damping", lambda z: jb.linear_runout_response(jb.RunoutRig(damping_ratio=z), 5.0), -0.5, 0.01, "parameter `damping_ratio`"),
-    ("sensor position", lambda p: jb.linear_runout_response(jb.RunoutRig(position=p), 5.0), 5.0, 0.01, "parameter `position`"),
-    ("rig run-out", lambda e: jb.linear_runout_response(jb.RunoutRig(runouts=jnp.stack([e, 0.21e-3])), 5.0), -1e-4,
-     0.355e-3, "parameter `runouts`"),
+    (
+        "rig damping",
+        lambda z: jb.linear_runout_response(jb.RunoutRig(damping_ratio=z), 5.0),
+        -0.5,
+        0.01,
+        "parameter `damping_ratio`",
+    ),
+    (
+        "sensor position",
+        lambda p: jb.linear_runout_response(jb.RunoutRig(position=p), 5.0),
+        5.0,
+        0.01,
+        "parameter `position`",
+    ),
+    (
+        "rig run-out",
+        lambda e: jb.linear_runout_response(jb.RunoutRig(runouts=jnp.stack([e, 0.21e-3])), 5.0),
+        -1e-4,
+        0.355e-3,
+        "parameter `runouts`",
+    ),
 ]
 
 
@@ -524,8 +610,12 @@ def test_span_counts_and_reference_run_options_are_refused_not_truncated():
     with pytest.raises(ValueError, match="parameter `n_modes`"):
         jb.MovingString().natural_frequencies(1.0, n_modes=1.5)
     damped = jb.RunoutRig(damping_ratio=0.05)
-    for kw, name in ((dict(speed=-5.0, n_periods_settle=5), "speed"), (dict(speed=5.0, n_periods_measure=0), "n_periods_measure"),
-                     (dict(speed=5.0, rtol=-1.0), "rtol"), (dict(speed=5.0, n_periods_settle=-1), "n_periods_settle")):
+    for kw, name in (
+        (dict(speed=-5.0, n_periods_settle=5), "speed"),
+        (dict(speed=5.0, n_periods_measure=0), "n_periods_measure"),
+        (dict(speed=5.0, rtol=-1.0), "rtol"),
+        (dict(speed=5.0, n_periods_settle=-1), "n_periods_settle"),
+    ):
         with pytest.raises(ValueError, match=f"parameter `{name}`"):  # -5 m/s returned 1.6e50
             jb.simulate_runout_response(damped, **kw)
     contact = jb.BeltPulleyContact(0.05)
@@ -552,28 +642,50 @@ def test_fluctuation_index_of_a_reversed_drive_and_its_window():
         with pytest.raises(ValueError, match=f"parameter `{name}`.*within the sampled times"):
             jb.fluctuation_index(back, t0, t1)
     pid = jb.PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0)
-    for kw, name in ((dict(t1=float("nan")), "t1"), (dict(dt_save=0.0), "dt_save"), (dict(method="rk4", dt=-1e-3), "dt")):
+    for kw, name in (
+        (dict(t1=float("nan")), "t1"),
+        (dict(dt_save=0.0), "dt_save"),
+        (dict(method="rk4", dt=-1e-3), "dt"),
+    ):
         with pytest.raises(ValueError, match=f"parameter `{name}` must be finite and > 0 s"):
             jb.fluctuation_objective(drive, pid, **kw)
 
 
-@pytest.mark.parametrize("call, message", [
-    # each returned a plausible number (or hung) before
-    (lambda: jb.BeltPlatform().with_natural_frequency(-31.2), "parameter `omega_n` must be finite and > 0"),  # = +31.2
-    (lambda: jb.BeltPlatform().with_natural_frequency(0.3), "must be underdamped"),  # tree_at skipped the check
-    (lambda: jb.sensitivity_curve(jb.BeltPlatform(), {"p": jb.PseudoPolynomial([3.0, 4.0, 5.0])}, rel=1.2), "parameter `rel`"),
-    (lambda: jb.sensitivity_curve(jb.BeltPlatform(), {"p": jb.PseudoPolynomial([3.0, 4.0, 5.0])}, n=1), "parameter `n`"),
-    (lambda: jb.tolerance_band(np.linspace(0.7, 1.3, 7), np.full(7, 0.01), 1.0, 5.0), "parameter `omega0` must lie within"),
-    (lambda: jb.tolerance_band(np.linspace(1.3, 0.7, 7), np.full(7, 0.01), 1.0, 1.0), "strictly increasing"),
-    (lambda: jb.tolerance_band(np.linspace(0.7, 1.3, 7), np.full(7, 0.01), 1.0, 1.0, level=-1.0), "parameter `level`"),
-    (lambda: jb.response_curve(jb.NonlinearBelt(), max_step=float("nan")), "parameter `max_step`"),  # hung > 13 min
-    (lambda: jb.response_curve(jb.NonlinearBelt(), step=-0.05), "parameter `step`"),
-    (lambda: jb.fold_speeds(jb.NonlinearBelt(), n_folds=0), "parameter `n_folds`"),  # returned []
-    (lambda: jb.jumps(jb.NonlinearBelt(), n_folds=2.5), "jumps: parameter `n_folds`"),  # was truncated to 2
-    (lambda: jb.jumps(jb.NonlinearBelt(), max_points=1), "jumps: parameter `max_points`"),
-    (lambda: jb.harmonic_balance(jb.NonlinearBelt(), 9.0, max_steps=0), "parameter `max_steps`"),
-    (lambda: jb.harmonic_balance(jb.NonlinearBelt(), 9.0, guess=np.zeros(2)), "`guess` must have shape"),
-])
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        # each returned a plausible number (or hung) before
+        (
+            lambda: jb.BeltPlatform().with_natural_frequency(-31.2),
+            "parameter `omega_n` must be finite and > 0",
+        ),  # = +31.2
+        (lambda: jb.BeltPlatform().with_natural_frequency(0.3), "must be underdamped"),  # tree_at skipped the check
+        (
+            lambda: jb.sensitivity_curve(jb.BeltPlatform(), {"p": jb.PseudoPolynomial([3.0, 4.0, 5.0])}, rel=1.2),
+            "parameter `rel`",
+        ),
+        (
+            lambda: jb.sensitivity_curve(jb.BeltPlatform(), {"p": jb.PseudoPolynomial([3.0, 4.0, 5.0])}, n=1),
+            "parameter `n`",
+        ),
+        (
+            lambda: jb.tolerance_band(np.linspace(0.7, 1.3, 7), np.full(7, 0.01), 1.0, 5.0),
+            "parameter `omega0` must lie within",
+        ),
+        (lambda: jb.tolerance_band(np.linspace(1.3, 0.7, 7), np.full(7, 0.01), 1.0, 1.0), "strictly increasing"),
+        (
+            lambda: jb.tolerance_band(np.linspace(0.7, 1.3, 7), np.full(7, 0.01), 1.0, 1.0, level=-1.0),
+            "parameter `level`",
+        ),
+        (lambda: jb.response_curve(jb.NonlinearBelt(), max_step=float("nan")), "parameter `max_step`"),  # hung > 13 min
+        (lambda: jb.response_curve(jb.NonlinearBelt(), step=-0.05), "parameter `step`"),
+        (lambda: jb.fold_speeds(jb.NonlinearBelt(), n_folds=0), "parameter `n_folds`"),  # returned []
+        (lambda: jb.jumps(jb.NonlinearBelt(), n_folds=2.5), "jumps: parameter `n_folds`"),  # was truncated to 2
+        (lambda: jb.jumps(jb.NonlinearBelt(), max_points=1), "jumps: parameter `max_points`"),
+        (lambda: jb.harmonic_balance(jb.NonlinearBelt(), 9.0, max_steps=0), "parameter `max_steps`"),
+        (lambda: jb.harmonic_balance(jb.NonlinearBelt(), 9.0, guess=np.zeros(2)), "`guess` must have shape"),
+    ],
+)
 def test_options_of_the_sweeps_and_continuations_are_checked(call, message):
     with pytest.raises(ValueError, match=re.escape(message)):
         call()
@@ -606,4 +718,5 @@ def test_identify_refuses_a_prediction_of_another_shape_and_fractional_orders_ar
     with pytest.raises(RUNTIME, match="whole numbers"):
         jax.block_until_ready(jax.jit(lambda m: jb.exciting_speeds(span, 0.1166, n=1, m=m))(7.5))
     assert float(jax.jit(lambda m: jb.exciting_speeds(span, 0.1166, n=1, m=m))(8.0)) == pytest.approx(
-        float(jb.exciting_speeds(span, 0.1166, n=1, m=8)), rel=1e-12)
+        float(jb.exciting_speeds(span, 0.1166, n=1, m=8)), rel=1e-12
+    )

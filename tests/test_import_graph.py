@@ -61,7 +61,7 @@ def _cycle(graph):
         stack.append(n)
         for d in sorted(graph[n]):
             if state.get(d) == 1:
-                return stack[stack.index(d):] + [d]
+                return stack[stack.index(d) :] + [d]
             if d not in state:
                 c = visit(d, stack)
                 if c:
@@ -80,10 +80,14 @@ def _cycle(graph):
 
 def test_import_graph_has_no_cycle():
     # package __init__ files re-export their children; edges out of them are re-exports, not dependencies
-    graph = {n: (set() if (PKG.parent / n.replace(".", "/") / "__init__.py").exists() else deps)
-             for n, deps in _graph().items()}
-    graph = {n: {d for d in deps if not (PKG.parent / d.replace(".", "/") / "__init__.py").exists()}
-             for n, deps in graph.items()}
+    graph = {
+        n: (set() if (PKG.parent / n.replace(".", "/") / "__init__.py").exists() else deps)
+        for n, deps in _graph().items()
+    }
+    graph = {
+        n: {d for d in deps if not (PKG.parent / d.replace(".", "/") / "__init__.py").exists()}
+        for n, deps in graph.items()
+    }
     assert len(graph) > 30
     assert _cycle(graph) is None, f"import cycle: {' -> '.join(_cycle(graph))}"
 
@@ -103,8 +107,9 @@ def test_import_loads_no_plotting_library_and_announces_float64():
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == ["False", "True", "True"]
     # the opt-out leaves JAX's default (float32) alone
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                         env={**env, "JAXBELT_X64": "0"}, timeout=120)
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, env={**env, "JAXBELT_X64": "0"}, timeout=120
+    )
     assert out.stdout.split() == ["False", "False", "False"], out.stderr
 
 
@@ -112,8 +117,13 @@ def _loaded_after(code: str) -> set:
     """The heavy libraries loaded by `code` in a fresh process."""
     heavy = ("diffrax", "optax", "optimistix", "lineax", "matplotlib", "matplotlib.pyplot")
     probe = f"import sys; {code}; print(' '.join(m for m in {heavy!r} if m in sys.modules))"
-    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120,
-                         env={k: v for k, v in os.environ.items() if k != "JAXBELT_X64"})
+    out = subprocess.run(
+        [sys.executable, "-c", probe],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={k: v for k, v in os.environ.items() if k != "JAXBELT_X64"},
+    )
     assert out.returncode == 0, out.stderr
     return set(out.stdout.split())
 
@@ -122,17 +132,23 @@ def test_import_and_the_startup_closed_form_load_only_what_they_use():
     # `import jaxbelt` imports JAX alone; the start-up closed form adds equinox, never an ODE solver,
     # an optimiser or a plotting library; the first name of another scene loads that scene's libraries
     assert _loaded_after("import jaxbelt") == set()
-    assert _loaded_after(
-        "import jaxbelt as jb, numpy as np; ts, c = jb.startup_curves(gammas=[0.02], n_points=11); "
-        "assert np.all(np.isfinite(c['current']))") == set()
+    assert (
+        _loaded_after(
+            "import jaxbelt as jb, numpy as np; ts, c = jb.startup_curves(gammas=[0.02], n_points=11); "
+            "assert np.all(np.isfinite(c['current']))"
+        )
+        == set()
+    )
     assert {"diffrax", "optax"} <= _loaded_after("import jaxbelt as jb; jb.tune_pid")
 
 
 def _lazy_packages():
     from jaxbelt import _lazy
 
-    return [(name, _lazy.exports(PKG.parent / name.replace(".", "/") / "__init__.py"))
-            for name in ("jaxbelt", "jaxbelt.models", "jaxbelt.plots")]
+    return [
+        (name, _lazy.exports(PKG.parent / name.replace(".", "/") / "__init__.py"))
+        for name in ("jaxbelt", "jaxbelt.models", "jaxbelt.plots")
+    ]
 
 
 def test_every_lazy_name_is_the_object_its_module_defines():
@@ -149,7 +165,7 @@ def test_every_lazy_name_is_the_object_its_module_defines():
                 assert not (PKG.parent / package.replace(".", "/") / f"{name}.py").exists(), f"{package}.{name}"
                 assert not (PKG.parent / package.replace(".", "/") / name).is_dir(), f"{package}.{name}"
         with pytest.raises(AttributeError, match=f"module '{package}' has no attribute 'no_such_name'"):
-            getattr(pkg, "no_such_name")
+            _ = pkg.no_such_name
     # sub-modules are reached as attributes, as an eager import made them
     assert jaxbelt.models.fourbar.FourBarDrive is jaxbelt.FourBarDrive
 
@@ -161,8 +177,9 @@ def test_lazy_table_refuses_other_statements(tmp_path):
     init.write_text("import typing\nif typing.TYPE_CHECKING:\n    import numpy\n")
     with pytest.raises(ImportError, match="TYPE_CHECKING block may hold only"):
         _lazy.exports(init)
-    init.write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from .a import b as b\n"
-                    "    from . import c as c\n")
+    init.write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from .a import b as b\n    from . import c as c\n"
+    )
     assert _lazy.exports(init) == {"b": ("a", "b"), "c": ("c", None)}
 
 
@@ -186,6 +203,11 @@ np.testing.assert_allclose(h_jit, h, rtol=1e-12)
 assert float(h) > 0 and np.all(np.isfinite(y))
 print("ok")
 """
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
-                         env={k: v for k, v in os.environ.items() if k != "JAXBELT_X64"})
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        env={k: v for k, v in os.environ.items() if k != "JAXBELT_X64"},
+    )
     assert out.returncode == 0 and out.stdout.split() == ["ok"], out.stderr[-3000:]

@@ -9,17 +9,26 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from nonlinear_reference import modal_harmonic_pp, string_exact_pp
 
 import jaxbelt as jb
 from jaxbelt.models.nonlinear.kbm import kappa, kbm_amplitudes
-from nonlinear_reference import modal_harmonic_pp, string_exact_pp
 
 XI = 0.015  # modal damping ratio used for the 004 acceptance checks
 
 
 def belt(**kw):
-    base = dict(span=0.86, wave_speed=41.0, v_l=50.0, pulley_radii=(0.063, 0.063),
-                runout=(0.355e-3, 0.21e-3), phase=jnp.deg2rad(240.0), damping=XI, n_modes=1, sensor_pulley="drive")
+    base = dict(
+        span=0.86,
+        wave_speed=41.0,
+        v_l=50.0,
+        pulley_radii=(0.063, 0.063),
+        runout=(0.355e-3, 0.21e-3),
+        phase=jnp.deg2rad(240.0),
+        damping=XI,
+        n_modes=1,
+        sensor_pulley="drive",
+    )
     base.update(kw)
     return jb.NonlinearBelt(**base)
 
@@ -206,7 +215,6 @@ def test_nonconvergence_names_speed():
         jb.speed_sweep(b, jnp.array([9.0]))
 
 
-
 def test_simulate_scene_matches_sweep_integrator():
     """`simulate` (diffrax Tsit5, rtol 1e-10, physical time) of the model's vector field agrees
     with the fixed-step RK4 of the sweeps (128 steps per forcing period) to 1e-5 of the amplitude."""
@@ -233,7 +241,11 @@ def test_backbone_speed_gradients_match_finite_differences():
         (lambda a: jb.backbone_speed(belt, a), 0.01, 1e-5),
         (lambda vl: jb.backbone_speed(eqx.tree_at(lambda b: b.v_l, belt, vl), 0.01), 50.0, 1e-3),
         (lambda L: jb.backbone_speed(eqx.tree_at(lambda b: b.span, belt, L), 0.01), 0.86, 1e-5),
-        (lambda r: jb.backbone_speed(eqx.tree_at(lambda b: b.pulley_radii, belt, jnp.stack([r, r])), 0.01), 0.063, 1e-6),
+        (
+            lambda r: jb.backbone_speed(eqx.tree_at(lambda b: b.pulley_radii, belt, jnp.stack([r, r])), 0.01),
+            0.063,
+            1e-6,
+        ),
     ]
     for f, x, h in cases:
         ref = float(_fd5(f, x, h))

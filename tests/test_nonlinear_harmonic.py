@@ -6,9 +6,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from compiles import count_compiles
 
 import jaxbelt as jb
-from compiles import count_compiles
 from jaxbelt.models.nonlinear.calibration import MODE2_RANGE, model_fold_speeds
 from jaxbelt.models.nonlinear.kbm import kbm_amplitudes
 from jaxbelt.models.nonlinear.model import distance_travelled
@@ -16,8 +16,16 @@ from jaxbelt.models.nonlinear.model import distance_travelled
 
 def old_belt(**kw):
     """The former default (v_t = 41 m/s, xi = 0.015, sensor at the drive pulley)."""
-    base = dict(wave_speed=41.0, v_l=50.0, runout=(0.355e-3, 0.21e-3), phase=jnp.deg2rad(240.0), damping=0.015,
-                n_modes=1, sensor_pulley="drive", travel="drive_to_idle")
+    base = dict(
+        wave_speed=41.0,
+        v_l=50.0,
+        runout=(0.355e-3, 0.21e-3),
+        phase=jnp.deg2rad(240.0),
+        damping=0.015,
+        n_modes=1,
+        sensor_pulley="drive",
+        travel="drive_to_idle",
+    )
     base.update(kw)
     return jb.NonlinearBelt(**base)
 
@@ -169,7 +177,9 @@ def test_curve_folds_and_stability_match_time_domain_sweeps(belt, curve, sweeps)
     for res, speeds, direction in ((ru, up_s, "up"), (rd, dn_s, "down")):
         for i in range(0, speeds.size, 3):
             hb = _branch_state(belt, curve, float(speeds[i]), direction, throw=False)
-            if bool(hb.success) and abs(float(hb.amplitude[0]) / float(res.steady.amplitude[i, 0]) - 1) < 0.05:  # same branch
+            if (
+                bool(hb.success) and abs(float(hb.amplitude[0]) / float(res.steady.amplitude[i, 0]) - 1) < 0.05
+            ):  # same branch
                 assert abs(float(hb.pp) / float(res.pp[i]) - 1) < 1e-3, (direction, speeds[i])
                 compared += 1
     assert compared >= 6
@@ -232,7 +242,7 @@ def test_fold_speed_gradient_matches_finite_differences(belt):
         x = float(x0.ravel()[0])
         h = 1e-4 * x
 
-        def at(xx):  # the parameter with its first entry replaced
+        def at(xx, x0=x0):  # the parameter with its first entry replaced
             return np.r_[xx, x0.ravel()[1:]].reshape(x0.shape)
 
         fp = float(f(belt.__class__(**{**_fields(belt), name: at(x + h)})))
@@ -243,8 +253,18 @@ def test_fold_speed_gradient_matches_finite_differences(belt):
 
 
 def _fields(b):
-    return dict(span=b.span, wave_speed=b.wave_speed, v_l=b.v_l, pulley_radii=b.pulley_radii, runout=b.runout,
-                phase=b.phase, damping=b.damping, n_modes=b.n_modes, sensor_pulley=b.sensor_pulley, travel=b.travel)
+    return dict(
+        span=b.span,
+        wave_speed=b.wave_speed,
+        v_l=b.v_l,
+        pulley_radii=b.pulley_radii,
+        runout=b.runout,
+        phase=b.phase,
+        damping=b.damping,
+        n_modes=b.n_modes,
+        sensor_pulley=b.sensor_pulley,
+        travel=b.travel,
+    )
 
 
 @pytest.mark.slow
@@ -272,8 +292,12 @@ def test_speed_ramp_record_and_scene(belt, curve):
     k = int(np.argmin(np.diff(pp_rev)))
     assert float(curve.folds[0]) <= v_rev[k] <= hi + 0.01, (v_rev[k], hi)
     ts = jnp.asarray(t[: t.size // 2 : 50])
-    sol = jb.simulate(jb.Scene(belt, jb.SpeedRamp(8.7, 9.1, 3.0), ts, y0=rec.z[0], observe=("w_sensor",)),
-                      method="ode", rtol=1e-10, atol=1e-14)
+    sol = jb.simulate(
+        jb.Scene(belt, jb.SpeedRamp(8.7, 9.1, 3.0), ts, y0=rec.z[0], observe=("w_sensor",)),
+        method="ode",
+        rtol=1e-10,
+        atol=1e-14,
+    )
     np.testing.assert_allclose(np.asarray(sol["w_sensor"]), w[: t.size // 2 : 50], atol=1e-6 * 0.565e-3 * 2)
 
 

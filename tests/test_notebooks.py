@@ -79,5 +79,7 @@ def test_notebook_executes(path, tmp_path):
                 warnings.filterwarnings("ignore", message=".*non-interactive, and thus cannot be shown")
                 result = shell.run_cell(cell.source, store_history=False)
             if not result.success:
-                pytest.fail(f"{path.name}: code cell {k + 1} raised:\n{cell.source}\n\n{result.error_in_exec or result.error_before_exec!r}")
+                pytest.fail(
+                    f"{path.name}: code cell {k + 1} raised:\n{cell.source}\n\n{result.error_in_exec or result.error_before_exec!r}"
+                )
             _render_open_figures()

@@ -8,9 +8,9 @@ finite differences.
 
 import warnings
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
-import equinox as eqx
 import numpy as np
 import pytest
 from scipy.integrate import quad
@@ -202,7 +202,9 @@ def test_platform_simulation_energy_at_T_matches_h_times_h():
         cmd = _cmd(g)
         sol = jb.simulate(
             jb.Scene(p, cmd, ts=jnp.array([0.0, 0.5, 1.0]), observe=("kinetic_energy", "elastic_energy")),
-            method="ode", rtol=1e-12, atol=1e-13,
+            method="ode",
+            rtol=1e-12,
+            atol=1e-13,
         )
         e_sim = sol.kinetic_energy[-1] + sol.elastic_energy[-1]
         e_ref = jb.residual_energy_joules(p, cmd)
@@ -325,8 +327,12 @@ def test_platform_free_vibration_after_the_move_matches_closed_form():
     s = ts - 1.0
     sig = xi * wn
     alpha = jnp.exp(-sig * s) * (a0 * jnp.cos(wd * s) + (ad0 + sig * a0) / wd * jnp.sin(wd * s))
-    sol = jb.simulate(jb.Scene(p, cmd, ts=jnp.concatenate([jnp.zeros(1), ts]), observe=("alpha",)),
-                      method="ode", rtol=1e-12, atol=1e-14)
+    sol = jb.simulate(
+        jb.Scene(p, cmd, ts=jnp.concatenate([jnp.zeros(1), ts]), observe=("alpha",)),
+        method="ode",
+        rtol=1e-12,
+        atol=1e-14,
+    )
     np.testing.assert_allclose(sol.alpha[1:], alpha, rtol=0, atol=1e-7 * float(jnp.max(jnp.abs(alpha))))
     np.testing.assert_allclose(sol.theta[1:], PHI * lam + alpha, rtol=1e-9)
 
@@ -347,7 +353,10 @@ def test_fig2_profiles_drawn_from_the_commands(tmp_path):
     assert float(jnp.max(c.velocity(t))) == pytest.approx(15 / 8, rel=1e-12)
     assert float(jnp.max(c.acceleration(t))) == pytest.approx(10 / np.sqrt(3), rel=1e-6)
     p = jb.PseudoPolynomial(jnp.array([4.5, 6.2, 8.4]), 1.0, 1.0)
-    profiles = {"3-4-5": (c(t), c.velocity(t), c.acceleration(t)), "4.5-6.2-8.4": (p(t), p.velocity(t), p.acceleration(t))}
+    profiles = {
+        "3-4-5": (c(t), c.velocity(t), c.acceleration(t)),
+        "4.5-6.2-8.4": (p(t), p.velocity(t), p.acceleration(t)),
+    }
     axes = plot_profiles(t, profiles)
     np.testing.assert_array_equal(axes[2].lines[1].get_ydata(), np.asarray(p.acceleration(t)))
     plt.close("all")

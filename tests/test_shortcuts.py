@@ -96,8 +96,10 @@ def test_unobserved_outputs_shrink_the_program():
     def size(observe):
         f = lambda g: jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V, g), ts=TS, observe=observe))  # noqa: E731
         jaxpr = jax.make_jaxpr(f)(jnp.asarray(GAMMA))
-        return sum(len(e.params["jaxpr"].eqns) if "jaxpr" in e.params and hasattr(e.params["jaxpr"], "eqns") else 1
-                   for e in jaxpr.eqns)
+        return sum(
+            len(e.params["jaxpr"].eqns) if "jaxpr" in e.params and hasattr(e.params["jaxpr"], "eqns") else 1
+            for e in jaxpr.eqns
+        )
 
     n0 = size(())
     n_all = size(("electric_power", "mechanical_power", "alpha1", "alpha2", "kinetic_energy", "elastic_energy"))

@@ -8,11 +8,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from references import expm_reference, startup_reference
 from scipy.integrate import solve_ivp
 
 import jaxbelt as jb
 from jaxbelt.modal import modal_decomposition, modal_solve, modal_solve_raw
-from references import expm_reference, startup_reference
 
 TS = jnp.linspace(0.0, 0.5, 501)
 
@@ -97,8 +97,12 @@ def test_modal_vectors_are_left_and_right_eigenvectors():
     lam, X, Yt, cond = modal_decomposition(A)
     A = np.asarray(A, dtype=complex)
     np.testing.assert_allclose(np.asarray(Yt) @ np.asarray(X), np.eye(5), atol=1e-10)  # eq. (20)
-    np.testing.assert_allclose(np.asarray(Yt) @ A @ np.asarray(X), np.diag(np.asarray(lam)), atol=1e-7 * np.abs(lam).max())
-    np.testing.assert_allclose(np.asarray(Yt) @ A, np.asarray(lam)[:, None] * np.asarray(Yt), atol=1e-9 * np.abs(lam).max())
+    np.testing.assert_allclose(
+        np.asarray(Yt) @ A @ np.asarray(X), np.diag(np.asarray(lam)), atol=1e-7 * np.abs(lam).max()
+    )
+    np.testing.assert_allclose(
+        np.asarray(Yt) @ A, np.asarray(lam)[:, None] * np.asarray(Yt), atol=1e-9 * np.abs(lam).max()
+    )
     assert np.min(np.abs(np.asarray(lam))) < 1e-9 * np.max(np.abs(np.asarray(lam)))  # rigid-body mode
 
 
@@ -116,7 +120,9 @@ def test_rigid_body_mode_limit_is_exact():
     taylor = t + (lam + s) * t**2 / 2 + (lam**2 + lam * s + s**2) * t**3 / 6
     np.testing.assert_allclose(complex(exp_convolution(lam, s, t)), taylor, rtol=1e-15)
     # resonance lambda = s: tau e^{s tau}
-    np.testing.assert_allclose(np.real(exp_convolution(-5.0, -5.0, tau)), np.asarray(tau) * np.exp(-5 * np.asarray(tau)), rtol=1e-14)
+    np.testing.assert_allclose(
+        np.real(exp_convolution(-5.0, -5.0, tau)), np.asarray(tau) * np.exp(-5 * np.asarray(tau)), rtol=1e-14
+    )
     # stiff pole: no overflow
     assert np.all(np.isfinite(np.asarray(exp_convolution(-1e9, 0.0, tau))))
 
@@ -176,7 +182,15 @@ def test_energy_balance():
     """V I = R I^2 + belt damping + load power + d/dt (kinetic + elastic + magnetic), integrated."""
     model = jb.BeltStartup(tau_r0=1.5)
     cmd = jb.ExponentialVoltage(24.0, 0.04)
-    names = ("electric_energy", "copper_loss", "damping_loss", "load_work", "kinetic_energy", "elastic_energy", "magnetic_energy")
+    names = (
+        "electric_energy",
+        "copper_loss",
+        "damping_loss",
+        "load_work",
+        "kinetic_energy",
+        "elastic_energy",
+        "magnetic_energy",
+    )
     sol = jb.simulate(jb.Scene(model, cmd, ts=TS, observe=names), method="ode", rtol=1e-11, atol=1e-12)
     stored = sol.kinetic_energy + sol.elastic_energy + sol.magnetic_energy
     rhs = sol.copper_loss + sol.damping_loss + sol.load_work + stored
@@ -196,7 +210,9 @@ def test_derived_outputs():
     V = 24.0 * (1 - np.exp(-t / 0.02))
     np.testing.assert_allclose(sol.voltage, V, rtol=1e-13, atol=1e-13)
     np.testing.assert_allclose(sol.electric_power, V * np.asarray(sol.current), rtol=1e-12, atol=1e-9)
-    np.testing.assert_allclose(sol.mechanical_power, 0.09 * 15 * np.asarray(sol.current) * np.asarray(sol.omega1), rtol=1e-12, atol=1e-9)
+    np.testing.assert_allclose(
+        sol.mechanical_power, 0.09 * 15 * np.asarray(sol.current) * np.asarray(sol.omega1), rtol=1e-12, atol=1e-9
+    )
     # accelerations: derivative of the speeds (central differences on a fine grid)
     tf = jnp.linspace(0.1, 0.2, 2001)
     fine = jb.simulate(jb.Scene(model, cmd, ts=tf, observe=("alpha1", "alpha2")))
@@ -230,12 +246,16 @@ def test_vmap_over_gamma_matches_loop(method):
     gammas = jnp.array([0.02, 0.04, 0.06])
 
     def run(g):
-        return jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, g), ts=ts), method=method, rtol=1e-10, atol=1e-12).ys
+        return jb.simulate(
+            jb.Scene(model, jb.ExponentialVoltage(24.0, g), ts=ts), method=method, rtol=1e-10, atol=1e-12
+        ).ys
 
     batched = jax.vmap(run)(gammas)
     assert batched.shape == (3, 101, 5)
     for i, g in enumerate(gammas):
-        np.testing.assert_allclose(batched[i], reference(model, jb.ExponentialVoltage(24.0, g), ts), rtol=0, atol=2e-7 * 200)
+        np.testing.assert_allclose(
+            batched[i], reference(model, jb.ExponentialVoltage(24.0, g), ts), rtol=0, atol=2e-7 * 200
+        )
 
 
 def test_vmap_over_model_parameter():
@@ -262,7 +282,11 @@ def test_gradients_against_finite_differences():
     np.testing.assert_allclose(dg, fd_g, rtol=1e-6)
     np.testing.assert_allclose(dk, fd_k, rtol=1e-5)
     # modal path: gradient w.r.t. the command (the eigen-decomposition does not depend on gamma)
-    dgm = jax.grad(lambda g: jb.simulate(jb.Scene(jb.BeltStartup(), jb.ExponentialVoltage(24.0, g), ts=ts), method="modal").omega2[-1])(g0)
+    dgm = jax.grad(
+        lambda g: jb.simulate(jb.Scene(jb.BeltStartup(), jb.ExponentialVoltage(24.0, g), ts=ts), method="modal").omega2[
+            -1
+        ]
+    )(g0)
     np.testing.assert_allclose(dgm, fd_g, rtol=1e-6)
     # and under vmap
     gs = jnp.array([0.02, 0.03, 0.05])
@@ -285,8 +309,11 @@ def test_belt_chain_n1_equals_startup_and_n3_against_scipy():
     np.testing.assert_array_equal(np.asarray(B1), np.asarray(B2))
     # three stages in series: 4 shafts, 9 states; compare with scipy Radau on hand-written equations
     ch = jb.BeltChain(
-        inertias=[0.018, 0.05, 0.08, 0.25], k=[120e3, 90e3, 60e3], c=[20.0, 15.0, 10.0],
-        r_drive=[0.08, 0.06, 0.05], r_driven=[0.16, 0.12, 0.1],
+        inertias=[0.018, 0.05, 0.08, 0.25],
+        k=[120e3, 90e3, 60e3],
+        c=[20.0, 15.0, 10.0],
+        r_drive=[0.08, 0.06, 0.05],
+        r_driven=[0.16, 0.12, 0.1],
     )
     assert ch.state_names == ("theta1", "theta2", "theta3", "theta4", "omega1", "omega2", "omega3", "omega4", "current")
     cmd = jb.ExponentialVoltage(24.0, 0.02)
@@ -314,7 +341,14 @@ def test_belt_chain_n1_equals_startup_and_n3_against_scipy():
 
 @pytest.mark.parametrize(
     "kwargs, name",
-    [({"j1": 0.0}, "j1"), ({"k": -1.0}, "k"), ({"R": 0.0}, "R"), ({"L": -1e-3}, "L"), ({"jm": float("nan")}, "jm"), ({"c": -1.0}, "c")],
+    [
+        ({"j1": 0.0}, "j1"),
+        ({"k": -1.0}, "k"),
+        ({"R": 0.0}, "R"),
+        ({"L": -1e-3}, "L"),
+        ({"jm": float("nan")}, "jm"),
+        ({"c": -1.0}, "c"),
+    ],
 )
 def test_bad_model_parameters(kwargs, name):
     with pytest.raises(ValueError, match=rf"`{name}`.*(> 0|>= 0)"):

@@ -43,8 +43,9 @@ def _same(sol, ref):
 
 
 def _fourbar_scene(n=41, **kw):
-    return jb.Scene(jb.FourBarDrive(), jb.PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0),
-                    ts=jnp.linspace(0.0, 0.2, n), **kw)
+    return jb.Scene(
+        jb.FourBarDrive(), jb.PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0), ts=jnp.linspace(0.0, 0.2, n), **kw
+    )
 
 
 def test_stored_simulation_is_the_traced_one_and_loads_untraced(tmp_path):
@@ -71,8 +72,12 @@ def test_new_values_reuse_the_stored_program_and_new_structure_gets_its_own(tmp_
     # new parameter values and times of the same shapes: the same program
     same = jb.Scene(jb.BeltStartup(k=2.0e5), jb.ExponentialVoltage(20.0, 0.02), ts=jnp.linspace(0.0, 0.5, 21))
     # another grid length, another observed set, another method: new programs
-    calls = [(same, {}), (_startup_scene(n=11), {}), (_startup_scene(observe=("current",)), {}),
-             (_startup_scene(), {"method": "modal"})]
+    calls = [
+        (same, {}),
+        (_startup_scene(n=11), {}),
+        (_startup_scene(observe=("current",)), {}),
+        (_startup_scene(), {"method": "modal"}),
+    ]
     with store_in(tmp_path / "xla") as folder:
         jb.simulate(_startup_scene())
         stored = [jb.simulate(scene, **kw) for scene, kw in calls[:1]]
@@ -144,8 +149,11 @@ def test_belt_span_functions_through_the_store(tmp_path):
     speeds = jnp.linspace(1.0, 20.0, 7)
 
     def run():
-        return (span.galerkin_frequencies(20.0, 8, 3), jb.linear_runout_response(rig, speeds, n_modes=8),
-                jb.crossing_speeds(rig, n_modes=2))
+        return (
+            span.galerkin_frequencies(20.0, 8, 3),
+            jb.linear_runout_response(rig, speeds, n_modes=8),
+            jb.crossing_speeds(rig, n_modes=2),
+        )
 
     reference = run()
     with store_in(tmp_path / "xla") as folder:
@@ -162,8 +170,11 @@ def test_nonlinear_harmonic_balance_through_the_store(tmp_path):
     belt = jb.NonlinearBelt(n_modes=1)
 
     def run():  # a ramp's simulate holds no host callback either (the speed is checked by input_checks)
-        return (jb.harmonic_balance(belt, 7.0, 1).pp, jb.fold_speeds(belt, (7.5, 10.5), 1),
-                jb.speed_ramp(belt, 8.0, 8.2, 0.1, z0=jnp.zeros(2)).w)
+        return (
+            jb.harmonic_balance(belt, 7.0, 1).pp,
+            jb.fold_speeds(belt, (7.5, 10.5), 1),
+            jb.speed_ramp(belt, 8.0, 8.2, 0.1, z0=jnp.zeros(2)).w,
+        )
 
     reference = run()
     with store_in(tmp_path / "xla") as folder:
@@ -181,8 +192,14 @@ def test_the_key_holds_module_names_and_error_mode(monkeypatch):
     tree = jax.tree_util.tree_structure(_startup_scene())
     names = [n for n, _ in _store._describe_tree(tree)]
     assert "jaxbelt.scene.Scene" in names and "jaxbelt.models.startup.BeltStartup" in names
-    assert _store._describe_tree(jax.tree_util.tree_structure(jb.Scene(_OwnStartup(), jb.ExponentialVoltage(24.0, 0.04),
-                                                                       ts=jnp.linspace(0.0, 0.3, 3)))) is None
+    assert (
+        _store._describe_tree(
+            jax.tree_util.tree_structure(
+                jb.Scene(_OwnStartup(), jb.ExponentialVoltage(24.0, 0.04), ts=jnp.linspace(0.0, 0.3, 3))
+            )
+        )
+        is None
+    )
     before = _store.settings()
     monkeypatch.setenv("EQX_ON_ERROR", "nan")  # equinox's checks become NaNs: another program
     assert _store.settings() != before
@@ -207,7 +224,10 @@ def test_off_unless_the_cache_is_on(tmp_path):
     jb.enable_compilation_cache(tmp_path / "xla", programs=False)
     try:
         jb.simulate(_startup_scene(n=11))
-        assert not (tmp_path / "xla" / "jaxbelt-programs").exists() or _programs(tmp_path / "xla" / "jaxbelt-programs") == []
+        assert (
+            not (tmp_path / "xla" / "jaxbelt-programs").exists()
+            or _programs(tmp_path / "xla" / "jaxbelt-programs") == []
+        )
     finally:
         disable_compilation_cache()
     assert _store.folder() is None
@@ -231,8 +251,10 @@ def test_a_new_process_runs_the_stored_closed_form(tmp_path):
         assert out.returncode == 0, out.stderr
         outs.append(out.stdout.split())
     assert outs[0][0] == "1" and outs[1][0] == "0"  # traced once, then loaded
-    ref = jb.simulate(jb.Scene(jb.BeltStartup(), jb.ExponentialVoltage(24.0, 0.04), ts=jnp.linspace(0, 0.5, 51),
-                               observe=("current",)))
+    ref = jb.simulate(
+        jb.Scene(jb.BeltStartup(), jb.ExponentialVoltage(24.0, 0.04), ts=jnp.linspace(0, 0.5, 51), observe=("current",))
+    )
     for o in outs:
-        np.testing.assert_allclose([float(o[1]), float(o[2])], [float(ref.current[-1]), float(ref.ys[-1, 3])],
-                                   rtol=1e-12)
+        np.testing.assert_allclose(
+            [float(o[1]), float(o[2])], [float(ref.current[-1]), float(ref.ys[-1, 3])], rtol=1e-12
+        )

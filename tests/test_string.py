@@ -4,10 +4,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from compiles import count_compiles
 from scipy.optimize import brentq
 
 import jaxbelt as jb
-from compiles import count_compiles
 from jaxbelt.models.string import TABLE2_COMPUTED_RPM, _exact_phasor
 
 RPM = 30.0 / np.pi
@@ -64,8 +64,9 @@ def test_galerkin_converges_to_eq39(span):
     order = np.log2(errs[:-1] / errs[1:])
     assert np.all(order > 2.5)  # observed ~3 (sine coefficients of the gyroscopic coupling fall as 1/k)
     # at rest G = 0 and the sine basis is exact
-    np.testing.assert_allclose(np.asarray(span.galerkin_frequencies(0.0, 6, 3)),
-                               np.asarray(span.natural_frequencies(0.0, 3)), rtol=1e-12)
+    np.testing.assert_allclose(
+        np.asarray(span.galerkin_frequencies(0.0, 6, 3)), np.asarray(span.natural_frequencies(0.0, 3)), rtol=1e-12
+    )
 
 
 def test_galerkin_vs_scipy_quadratic_eigenproblem(span):
@@ -111,17 +112,25 @@ def test_crossing_speeds_moon_wickert():
 
 def test_crossing_speeds_vs_brentq():
     Lm, r, vt = 0.86, (0.063, 0.045), 41.0
-    vc = np.asarray(jb.crossing_speeds(jb.RunoutRig(length=Lm, pulley_radii=r, wave_speed=vt), n_modes=4, harmonics=(1, 2, 3)))
+    vc = np.asarray(
+        jb.crossing_speeds(jb.RunoutRig(length=Lm, pulley_radii=r, wave_speed=vt), n_modes=4, harmonics=(1, 2, 3))
+    )
     for i, n in enumerate(range(1, 5)):
         for j, rj in enumerate(r):
             for k, h in enumerate((1, 2, 3)):
-                ref = brentq(lambda V: n * np.pi / Lm * vt * (1 - V**2 / vt**2) - h * V / rj, 0, vt, xtol=1e-14)
+                ref = brentq(
+                    lambda V, n=n, h=h, rj=rj: n * np.pi / Lm * vt * (1 - V**2 / vt**2) - h * V / rj, 0, vt, xtol=1e-14
+                )
                 assert vc[i, j, k] == pytest.approx(ref, rel=1e-12)
 
 
 def test_crossing_is_exciting_speed(span):
     # harmonic m of a pulley of radius R_U meets mode n at V = omega_U R_U (eq. 50 + 55)
-    vc = np.asarray(jb.crossing_speeds(jb.RunoutRig(length=L, pulley_radii=(RU,), wave_speed=span.critical_speed), n_modes=3, harmonics=9))
+    vc = np.asarray(
+        jb.crossing_speeds(
+            jb.RunoutRig(length=L, pulley_radii=(RU,), wave_speed=span.critical_speed), n_modes=3, harmonics=9
+        )
+    )
     wu = np.asarray(jb.exciting_speeds(span, RU, np.arange(1, 4)[:, None], np.arange(1, 10)[None, :]))
     np.testing.assert_allclose(vc[:, 0, :], wu * RU, rtol=1e-12)
 
@@ -311,10 +320,16 @@ def test_errors_speed_at_or_above_critical(span):
         jax.jit(lambda v: span.natural_frequencies(v, 2))(60.0).block_until_ready()
 
 
-@pytest.mark.parametrize("kw,name", [
-    (dict(tension=0.0), "tension"), (dict(tension=-5.0), "tension"),
-    (dict(density=0.0), "density"), (dict(density=-0.05), "density"), (dict(length=0.0), "length"),
-])
+@pytest.mark.parametrize(
+    "kw,name",
+    [
+        (dict(tension=0.0), "tension"),
+        (dict(tension=-5.0), "tension"),
+        (dict(density=0.0), "density"),
+        (dict(density=-0.05), "density"),
+        (dict(length=0.0), "length"),
+    ],
+)
 def test_errors_string_parameters(kw, name):
     with pytest.raises(ValueError, match=name):
         jb.MovingString(**kw)
@@ -326,10 +341,15 @@ def test_errors_wrap_angle(theta):
         jb.BeltPulleyContact(radius=0.03, wrap_angle=theta)
 
 
-@pytest.mark.parametrize("kw,name", [
-    (dict(slack_tension=0.0), "slack_tension"), (dict(tight_tension=-1.0), "tight_tension"),
-    (dict(density=0.0), "density"), (dict(radius=0.0), "radius"),
-])
+@pytest.mark.parametrize(
+    "kw,name",
+    [
+        (dict(slack_tension=0.0), "slack_tension"),
+        (dict(tight_tension=-1.0), "tight_tension"),
+        (dict(density=0.0), "density"),
+        (dict(radius=0.0), "radius"),
+    ],
+)
 def test_errors_contact_parameters(kw, name):
     args = dict(radius=0.03)
     args.update(kw)

@@ -15,10 +15,27 @@ DRAW_ONLY = ("startup", "shaping", "fourbar", "string")
 
 #: Library entry points that simulate, solve or optimise: a plot module must take their results instead.
 COMPUTING = {
-    "simulate", "diffeqsolve", "residual_energy", "residual_energy_joules", "crossing_speeds", "crossing_diagram",
-    "linear_runout_response", "runout_phasors", "simulate_runout_response", "galerkin_runout_system",
-    "galerkin_frequencies", "startup_curves", "platform_response", "simulate_fig4", "sensitivity_curve",
-    "optimise_command", "optimise_robust", "tune_pid", "root_find", "identify", "sweep",
+    "simulate",
+    "diffeqsolve",
+    "residual_energy",
+    "residual_energy_joules",
+    "crossing_speeds",
+    "crossing_diagram",
+    "linear_runout_response",
+    "runout_phasors",
+    "simulate_runout_response",
+    "galerkin_runout_system",
+    "galerkin_frequencies",
+    "startup_curves",
+    "platform_response",
+    "simulate_fig4",
+    "sensitivity_curve",
+    "optimise_command",
+    "optimise_robust",
+    "tune_pid",
+    "root_find",
+    "identify",
+    "sweep",
 }
 
 
@@ -66,8 +83,13 @@ def test_plot_modules_import_matplotlib_lazily(path):
 
 def test_import_jaxbelt_loads_no_matplotlib():
     code = "import sys, jaxbelt, jaxbelt.plots; print('matplotlib' in sys.modules)"
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
-                         env={**__import__("os").environ, "PYTHONPATH": str(ROOT)})
+    out = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={**__import__("os").environ, "PYTHONPATH": str(ROOT)},
+    )
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.strip() == "False"
 

@@ -48,8 +48,7 @@ SCRIPT = textwrap.dedent(
 
 
 def test_sharded_sweep_over_4_cpu_devices_equals_unsharded():
-    env = dict(os.environ, JAX_PLATFORMS="cpu",
-               PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    env = dict(os.environ, JAX_PLATFORMS="cpu", PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     res = subprocess.run([sys.executable, "-c", SCRIPT], capture_output=True, text=True, env=env, timeout=300, cwd=ROOT)
     assert res.returncode == 0, res.stderr[-3000:]
     out = json.loads(res.stdout.strip().splitlines()[-1])
@@ -74,8 +73,13 @@ def test_sweep_reports_failing_elements():
         gamma, L = p
         # an explicit solver on a 1e-8 H armature (pole -R/L = -1.5e7 1/s) exhausts its step
         # budget: those elements must fail and be named, the others succeed
-        return jb.simulate(jb.Scene(jb.BeltStartup(L=L), jb.ExponentialVoltage(24.0, gamma), ts=ts),
-                           method="ode", solver=diffrax.Tsit5(), max_steps=2000, throw=False)
+        return jb.simulate(
+            jb.Scene(jb.BeltStartup(L=L), jb.ExponentialVoltage(24.0, gamma), ts=ts),
+            method="ode",
+            solver=diffrax.Tsit5(),
+            max_steps=2000,
+            throw=False,
+        )
 
     gammas = jnp.array([0.02, 0.03, 0.04, 0.05])
     inductances = jnp.array([2e-4, 1e-8, 2e-4, 1e-8])

@@ -38,8 +38,9 @@ def test_span_frequencies_match_eq39(tp):
     out, ref = tp.batch_and_reference("span_freqs", x)
     np.testing.assert_allclose(out, ref, rtol=1e-12)
     vc = np.sqrt(140.0 / 0.05)
-    np.testing.assert_allclose(tp.span_freqs_closed_form(np.array([0.0]))[0], np.pi / 0.2621 * vc * np.arange(1, 4),
-                               rtol=1e-14)
+    np.testing.assert_allclose(
+        tp.span_freqs_closed_form(np.array([0.0]))[0], np.pi / 0.2621 * vc * np.arange(1, 4), rtol=1e-14
+    )
 
 
 def test_max_rel_diff_is_per_column(tp):

@@ -34,7 +34,7 @@ def _run_with_xla_flags(flags: str) -> dict:
 
     stdout = _subprocess(PROBE + '\nimport json\nprint("RESULT " + json.dumps(out))\n', XLA_FLAGS=flags)
     line = next(ln for ln in stdout.splitlines() if ln.startswith("RESULT "))
-    return json.loads(line[len("RESULT "):])
+    return json.loads(line[len("RESULT ") :])
 
 
 def test_fast_compile_flags_change_results_only_by_rounding():
@@ -43,7 +43,9 @@ def test_fast_compile_flags_change_results_only_by_rounding():
     from jaxbelt._xla import FAST_COMPILE_FLAGS
 
     if not set(FAST_COMPILE_FLAGS) <= set(os.environ.get("XLA_FLAGS", "").split()):
-        pytest.skip("the suite runs with XLA's default settings (JAXBELT_TEST_XLA_DEFAULTS=1, or an XLA without these flags)")
+        pytest.skip(
+            "the suite runs with XLA's default settings (JAXBELT_TEST_XLA_DEFAULTS=1, or an XLA without these flags)"
+        )
     ns = {}
     exec(PROBE, ns)  # noqa: S102 - the probe above, in this process
     quick = ns["out"]

@@ -36,7 +36,8 @@ def build_parser() -> argparse.ArgumentParser:
         description="Differentiable simulation of belt drives and DC-motor mechanisms (figures from the papers).",
     )
     parser.add_argument(
-        "--no-cache", action="store_true",
+        "--no-cache",
+        action="store_true",
         help="do not use the persistent compilation cache (default: compiled programs are kept in "
         "~/.cache/jaxbelt/xla, or $XDG_CACHE_HOME/jaxbelt/xla, and reused by later runs)",
     )

@@ -23,8 +23,9 @@ def benchmarks_dir() -> Path | None:
 
 
 def register(subparsers):
-    p = subparsers.add_parser("bench", help="run the work-precision benchmarks (needs the repository checkout)",
-                              description=__doc__)
+    p = subparsers.add_parser(
+        "bench", help="run the work-precision benchmarks (needs the repository checkout)", description=__doc__
+    )
     p.add_argument("--quick", action="store_true", help="CI-sized runs (< 2 minutes on 2 cores)")
     p.add_argument("--only", nargs="+", metavar="SCENE", help="run only these scenes (e.g. startup)")
     p.set_defaults(func=run, check=_check_scenes)

@@ -17,18 +17,30 @@ def register(subparsers) -> None:
     )
     p.add_argument("--out", type=image_path, default="fourbar.png", help="Fig. 4 image (default fourbar.png)")
     p.add_argument("--strip", type=image_path, default=None, help="also write a linkage snapshot strip to this image")
-    p.add_argument("--regulators", type=image_path, default=None,
-                   help="also write the comparison of the ramped-gain PID (eq. 16) with a constant-gain PID (eq. 14)")
-    p.add_argument("--kp-constant", type=nonnegative_float, default=35.0,
-                   help="Kp [V s/rad] of the constant-gain PID in --regulators (default 35: Kp t at t = 0.44 s)")
+    p.add_argument(
+        "--regulators",
+        type=image_path,
+        default=None,
+        help="also write the comparison of the ramped-gain PID (eq. 16) with a constant-gain PID (eq. 14)",
+    )
+    p.add_argument(
+        "--kp-constant",
+        type=nonnegative_float,
+        default=35.0,
+        help="Kp [V s/rad] of the constant-gain PID in --regulators (default 35: Kp t at t = 0.44 s)",
+    )
     p.add_argument("--voltage", type=finite_float, default=25.0, help="open-loop voltage [V] (paper: 25)")
     p.add_argument("--kp", type=nonnegative_float, default=80.0, help="Kp [V/rad], multiplies t (paper: 80)")
     p.add_argument("--ki", type=nonnegative_float, default=32.0, help="Ki [V/rad] (paper: 32)")
     p.add_argument("--kd", type=nonnegative_float, default=0.015, help="Kd [V/(rad/s^2)] (paper: 0.015)")
     p.add_argument("--omega-ref", type=positive_float, default=30.0, help="motor speed set point [rad/s] (paper: 30)")
     p.add_argument("--v-limit", type=positive_float, default=None, help="voltage limiter [V] (default: none)")
-    p.add_argument("--t1", type=float_above(0.5, "the closed-loop index is taken over 0.375-0.5 s"), default=1.0,
-                   help="simulated time [s], > 0.5 (default 1)")
+    p.add_argument(
+        "--t1",
+        type=float_above(0.5, "the closed-loop index is taken over 0.375-0.5 s"),
+        default=1.0,
+        help="simulated time [s], > 0.5 (default 1)",
+    )
     p.set_defaults(func=run)
 
 
@@ -45,7 +57,9 @@ def run(args) -> int:
     open_, closed = simulate_fig4(drive, pid, voltage=args.voltage, t1=args.t1, n=int(round(2000 * args.t1)) + 1)
     chi_open = float(jb.fluctuation_index(open_, 0.5 * args.t1, args.t1))
     chi_closed = float(jb.fluctuation_index(closed, 0.375, 0.5))
-    print(f"open loop {args.voltage:g} V: chi = {100 * chi_open:.1f} % over {0.5 * args.t1:g}-{args.t1:g} s (paper: 54.3 %)")
+    print(
+        f"open loop {args.voltage:g} V: chi = {100 * chi_open:.1f} % over {0.5 * args.t1:g}-{args.t1:g} s (paper: 54.3 %)"
+    )
     print(f"closed loop PID: chi = {100 * chi_closed:.2f} % over 0.375-0.5 s (paper: 2.6 %)")
     fig = fourbar_figure(open_, closed, omega_ref=args.omega_ref, voltage=args.voltage)
     fig.savefig(Path(args.out), dpi=120)
@@ -55,14 +69,20 @@ def run(args) -> int:
 
         from jaxbelt.plots.fourbar import plot_regulators
 
-        const = jb.PID(kp=args.kp_constant, ki=args.ki, kd=args.kd, omega_ref=args.omega_ref,
-                       v_limit=args.v_limit, gain="constant")
+        const = jb.PID(
+            kp=args.kp_constant, ki=args.ki, kd=args.kd, omega_ref=args.omega_ref, v_limit=args.v_limit, gain="constant"
+        )
         sol_c = jb.simulate(jb.Scene(drive, const, ts=closed.ts, observe=FIG4_OUTPUTS))
         chi_c = float(jb.fluctuation_index(sol_c, 0.375, 0.5))
-        print(f"closed loop PID, constant Kp = {args.kp_constant:g} V s/rad: chi = {100 * chi_c:.2f} % over 0.375-0.5 s")
+        print(
+            f"closed loop PID, constant Kp = {args.kp_constant:g} V s/rad: chi = {100 * chi_c:.2f} % over 0.375-0.5 s"
+        )
         fig, ax = plt.subplots(figsize=(8, 4), constrained_layout=True)
-        plot_regulators({f"ramped, Kp t = {args.kp:g} t": closed, f"constant, Kp = {args.kp_constant:g}": sol_c},
-                        omega_ref=args.omega_ref, ax=ax)
+        plot_regulators(
+            {f"ramped, Kp t = {args.kp:g} t": closed, f"constant, Kp = {args.kp_constant:g}": sol_c},
+            omega_ref=args.omega_ref,
+            ax=ax,
+        )
         fig.savefig(Path(args.regulators), dpi=120)
         print(f"wrote {args.regulators}")
     if args.strip:

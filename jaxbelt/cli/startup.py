@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 
-from ._args import image_path, int_at_least, positive_float, finite_float
+from ._args import finite_float, image_path, int_at_least, positive_float
 
 
 def register(sub):
@@ -14,11 +14,22 @@ def register(sub):
         description="Simulate the start-up of the belt drive of Incerti (2014) (Table I) for each time constant "
         "of the voltage command V(t) = Vmax (1 - exp(-t/gamma)) and write the 8-panel figure.",
     )
-    p.add_argument("--gamma", type=positive_float, nargs="+", default=[0.02, 0.04, 0.06], help="time constants [s] (default 0.02 0.04 0.06)")
+    p.add_argument(
+        "--gamma",
+        type=positive_float,
+        nargs="+",
+        default=[0.02, 0.04, 0.06],
+        help="time constants [s] (default 0.02 0.04 0.06)",
+    )
     p.add_argument("--v-max", type=finite_float, default=24.0, help="final voltage Vmax [V] (default 24)")
     p.add_argument("--t-end", type=positive_float, default=0.5, help="simulated time [s] (default 0.5)")
     p.add_argument("--points", type=int_at_least(2), default=501, help="output points (default 501)")
-    p.add_argument("--method", default="auto", choices=["auto", "expm", "modal", "ode", "rk4"], help="solution method (default: closed form)")
+    p.add_argument(
+        "--method",
+        default="auto",
+        choices=["auto", "expm", "modal", "ode", "rk4"],
+        help="solution method (default: closed form)",
+    )
     p.add_argument("--out", type=image_path, default="startup.png", help="output image (default startup.png)")
     p.set_defaults(func=run)
 
@@ -33,7 +44,9 @@ def run(args) -> int:
     model = BeltStartup()
     t = time.perf_counter()
     ts, c = startup_curves(model, args.gamma, args.v_max, args.t_end, args.points, args.method)
-    print(f"simulated {len(args.gamma)} start-ups ({args.method}) in {time.perf_counter() - t:.2f} s (incl. compilation)")
+    print(
+        f"simulated {len(args.gamma)} start-ups ({args.method}) in {time.perf_counter() - t:.2f} s (incl. compilation)"
+    )
     for i, g in enumerate(args.gamma):
         print(
             f"  gamma = {1e3 * g:5.1f} ms: peak current {c['current'][i].max():7.2f} A, "

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-
 from ._args import float_in, image_path, positive_float
 
 
@@ -13,15 +12,31 @@ def register(subparsers):
         description="Belt spans as axially moving strings (the belt-vibration report and Moon & Wickert): writes one figure.",
     )
     p.add_argument("--out", type=image_path, default="string.png", help="output image (default: string.png)")
-    p.add_argument("--figure", choices=["overview", "modes"], default="overview",
-                   help="overview: pressure, exciting speeds, crossings, run-out (default); modes: the first three "
-                        "mode shapes of the moving span (report figs. 37-39) and omega_n(omega_U) with omega_CR (eq. 51, 53)")
-    p.add_argument("--contact-radius", type=positive_float, default=0.025,
-                   help="motor pulley radius [m] for the pressure plot (not in the belt-vibration report; default 0.025)")
-    p.add_argument("--belt-speed", type=float_in(0.0, 52.9), default=20.0,
-                   help="belt speed V [m/s] of the mode-shape snapshots, below sqrt(T/rho) = 52.9 m/s (default 20)")
-    p.add_argument("--pulley-radius", type=positive_float, default=0.1166,
-                   help="driven pulley radius R_U [m] for omega_CR (fitted to Table 2; default 0.1166)")
+    p.add_argument(
+        "--figure",
+        choices=["overview", "modes"],
+        default="overview",
+        help="overview: pressure, exciting speeds, crossings, run-out (default); modes: the first three "
+        "mode shapes of the moving span (report figs. 37-39) and omega_n(omega_U) with omega_CR (eq. 51, 53)",
+    )
+    p.add_argument(
+        "--contact-radius",
+        type=positive_float,
+        default=0.025,
+        help="motor pulley radius [m] for the pressure plot (not in the belt-vibration report; default 0.025)",
+    )
+    p.add_argument(
+        "--belt-speed",
+        type=float_in(0.0, 52.9),
+        default=20.0,
+        help="belt speed V [m/s] of the mode-shape snapshots, below sqrt(T/rho) = 52.9 m/s (default 20)",
+    )
+    p.add_argument(
+        "--pulley-radius",
+        type=positive_float,
+        default=0.1166,
+        help="driven pulley radius R_U [m] for omega_CR (fitted to Table 2; default 0.1166)",
+    )
     p.set_defaults(func=run)
 
 
@@ -49,13 +64,15 @@ def run(args) -> int:
     responses = {
         f"ζ = {float(rig.damping_ratio):g}, x = {1e3 * float(rig.position):.0f} mm": jb.linear_runout_response(rig, Vr),
         f"ζ = {float(rig.damping_ratio):g}, x = L/4": jb.linear_runout_response(
-            jb.RunoutRig(damping_ratio=rig.damping_ratio, position=rig.length / 4), Vr),
+            jb.RunoutRig(damping_ratio=rig.damping_ratio, position=rig.length / 4), Vr
+        ),
     }
     # Galerkin frequencies (belt-vibration report, eq. 24) against eq. (39) at 20 m/s
     n_basis = np.array([4, 8, 16, 32, 64])
     exact = np.asarray(jb.MovingString().natural_frequencies(20.0, 3))
-    errors = np.array([np.abs(np.asarray(jb.MovingString().galerkin_frequencies(20.0, n, 3)) - exact) / exact
-                       for n in n_basis])
+    errors = np.array(
+        [np.abs(np.asarray(jb.MovingString().galerkin_frequencies(20.0, n, 3)) - exact) / exact for n in n_basis]
+    )
     fig = string_figure(
         diagram=dict(speeds=V, natural=natural, load=load, crossings=crossings, pulley_radii=rig.pulley_radii),
         response=dict(speeds=Vr, responses=responses, crossings=crossings),
@@ -64,7 +81,9 @@ def run(args) -> int:
     )
     fig.savefig(args.out, dpi=110)
     print(f"critical speed (belt-vibration report span): {float(span.critical_speed):.3f} m/s")
-    print(f"Moon & Wickert crossings: mode 1 {float(crossings[0, 0, 0]):.3f} m/s, mode 2 {float(crossings[1, 0, 0]):.3f} m/s")
+    print(
+        f"Moon & Wickert crossings: mode 1 {float(crossings[0, 0, 0]):.3f} m/s, mode 2 {float(crossings[1, 0, 0]):.3f} m/s"
+    )
     print(f"wrote {args.out}")
     return 0
 
@@ -86,9 +105,12 @@ def _modes(args, span) -> int:
     rotor = np.linspace(0.0, w_cr, 300)
     freqs = np.asarray(span.natural_frequencies(jnp.asarray(rotor[:-1] * args.pulley_radius), 3))
     freqs = np.vstack([freqs, np.zeros((1, 3))])  # eq. (51) is exactly zero at omega_CR
-    fig = modes_figure(x, times[0], np.stack(shapes), rotor * RPM, freqs, w_cr * RPM,
-                       title=f"moving span, V = {args.belt_speed:g} m/s")
+    fig = modes_figure(
+        x, times[0], np.stack(shapes), rotor * RPM, freqs, w_cr * RPM, title=f"moving span, V = {args.belt_speed:g} m/s"
+    )
     fig.savefig(args.out, dpi=110)
-    print(f"critical rotor speed omega_CR = {w_cr:.1f} rad/s = {w_cr * RPM:.0f} rpm (eq. 53, R_U = {args.pulley_radius:g} m)")
+    print(
+        f"critical rotor speed omega_CR = {w_cr:.1f} rad/s = {w_cr * RPM:.0f} rpm (eq. 53, R_U = {args.pulley_radius:g} m)"
+    )
     print(f"wrote {args.out}")
     return 0

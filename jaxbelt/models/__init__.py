@@ -7,12 +7,17 @@ if _typing.TYPE_CHECKING:  # the public names, imported on first use (`jaxbelt._
     from .base import AbstractModel as AbstractModel
     from .base import integrand as integrand
     from .base import observable as observable
-    from .startup import BeltChain as BeltChain
-    from .startup import BeltStartup as BeltStartup
-    from .startup import chain_matrices as chain_matrices
     from .contact import BeltPulleyContact as BeltPulleyContact
     from .contact import SlipError as SlipError
     from .contact import SlipReport as SlipReport
+    from .fourbar import FourBarDrive as FourBarDrive
+    from .motor import PID as PID
+    from .nonlinear import NonlinearBelt as NonlinearBelt
+    from .nonlinear import RunningSpeed as RunningSpeed
+    from .platform import BeltPlatform as BeltPlatform
+    from .startup import BeltChain as BeltChain
+    from .startup import BeltStartup as BeltStartup
+    from .startup import chain_matrices as chain_matrices
     from .string import MovingString as MovingString
     from .string import RunoutRig as RunoutRig
     from .string import crossing_diagram as crossing_diagram
@@ -22,11 +27,6 @@ if _typing.TYPE_CHECKING:  # the public names, imported on first use (`jaxbelt._
     from .string import linear_runout_response as linear_runout_response
     from .string import runout_phasors as runout_phasors
     from .string import simulate_runout_response as simulate_runout_response
-    from .nonlinear import NonlinearBelt as NonlinearBelt
-    from .nonlinear import RunningSpeed as RunningSpeed
-    from .platform import BeltPlatform as BeltPlatform
-    from .fourbar import FourBarDrive as FourBarDrive
-    from .motor import PID as PID
 
 from .._lazy import attach as _attach  # noqa: E402
 

@@ -19,12 +19,11 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._checks import as_float_array as _arr
 from .._checks import check_finite, check_positive, check_range, collecting, is_concrete, record
 from .._guard import checked
-from .._checks import as_float_array as _arr
 
 __all__ = ["BeltPulleyContact", "SlipError", "SlipReport"]
-
 
 
 class SlipError(ValueError):
@@ -139,8 +138,10 @@ class BeltPulleyContact(eqx.Module):
     def slip_report(self, omega) -> SlipReport:
         """The slip check at one concrete speed `omega` [rad/s] as a `SlipReport` (ratio, limit, margin, needed μ)."""
         if not is_concrete(omega) or np.ndim(omega) != 0:
-            raise ValueError(f"BeltPulleyContact.slip_report: `omega` must be one concrete speed [rad/s] (a scalar "
-                             f"outside jit; use slip_margin under jit or for arrays); got shape {np.shape(omega)}")
+            raise ValueError(
+                f"BeltPulleyContact.slip_report: `omega` must be one concrete speed [rad/s] (a scalar "
+                f"outside jit; use slip_margin under jit or for arrays); got shape {np.shape(omega)}"
+            )
         self._omega_checks("BeltPulleyContact.slip_report", omega)  # concrete: raises here
         omega = float(np.asarray(omega))
         tc_array = self._tc(omega)  # omega checked above, the contact at its construction
@@ -173,7 +174,9 @@ class BeltPulleyContact(eqx.Module):
             check_range("alpha", alpha, 0.0, float(np.max(np.asarray(self.wrap_angle))), unit="rad", owner=o)
         else:
             with collecting() as more:
-                record(jnp.all((alpha >= 0) & (alpha <= self.wrap_angle)), f"{o}: `alpha` must lie in [0, wrap_angle] rad")
+                record(
+                    jnp.all((alpha >= 0) & (alpha <= self.wrap_angle)), f"{o}: `alpha` must lie in [0, wrap_angle] rad"
+                )
             found += more
         t = (self.tight_tension - self.slack_tension) / self.wrap_angle * alpha + self.slack_tension
         return checked((t - self._tc(omega)) / self.radius, self, checks=found)

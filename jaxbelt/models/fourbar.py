@@ -29,17 +29,25 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_fields, check_positive, record
 from .._checks import as_float_array as _arr
-from .base import AbstractModel, integrand, observable
+from .._checks import check_fields, check_positive, record
 from ..commands import AbstractVoltageSource, MotorState
-
-
+from .base import AbstractModel, integrand, observable
 
 #: The first, assumed set of the values lost with Table I (not from the paper); see the module docstring.
 ASSUMED_PARAMETERS = {
-    "a": 0.10, "b": 0.30, "c": 0.30, "hx": 0.30, "f1": 0.05, "f2": 0.15, "f3": 0.15,
-    "m1": 0.40, "m2": 0.38, "m3": 0.38, "R": 1.5, "assembly": 1,
+    "a": 0.10,
+    "b": 0.30,
+    "c": 0.30,
+    "hx": 0.30,
+    "f1": 0.05,
+    "f2": 0.15,
+    "f3": 0.15,
+    "m1": 0.40,
+    "m2": 0.38,
+    "m3": 0.38,
+    "R": 1.5,
+    "assembly": 1,
 }
 
 #: Crank length [m] and armature resistance [ohm] identified from the paper's two indices
@@ -157,7 +165,7 @@ class FourBarDrive(AbstractModel):
     input_types: ClassVar[tuple[type, ...]] = (AbstractVoltageSource,)
 
     @classmethod
-    def assumed_table(cls, **kw) -> "FourBarDrive":
+    def assumed_table(cls, **kw) -> FourBarDrive:
         """The drive with the first, assumed set of the lost Table I values (`ASSUMED_PARAMETERS`:
         a = 100 mm, R = 1.5 Ω; χ = 55.1 % open loop, 5.6 % closed loop); `kw` override fields."""
         p = {k: v for k, v in ASSUMED_PARAMETERS.items()}
@@ -173,10 +181,18 @@ class FourBarDrive(AbstractModel):
             + [(n, "nonnegative", "m") for n in ("f1", "f2", "f3")]
             + [(n, "nonnegative", "kg") for n in ("m1", "m2", "m3")]
             + [(n, "positive", "kg m^2") for n in ("jg1", "jg2", "jg3", "jm", "ja", "jb")]
-            + [("g", "nonnegative", "m/s^2"), ("R", "positive", "ohm"), ("L", "positive", "H"),
-               ("km", "positive", "N m/A"), ("z", "positive", ""), ("T0", "nonnegative", "N m"),
-               ("lam", "nonnegative", "N m s/rad"), ("hx", "finite", "m"), ("hy", "finite", "m"),
-               ("alpha0", "finite", "rad")]
+            + [
+                ("g", "nonnegative", "m/s^2"),
+                ("R", "positive", "ohm"),
+                ("L", "positive", "H"),
+                ("km", "positive", "N m/A"),
+                ("z", "positive", ""),
+                ("T0", "nonnegative", "N m"),
+                ("lam", "nonnegative", "N m s/rad"),
+                ("hx", "finite", "m"),
+                ("hy", "finite", "m"),
+                ("alpha0", "finite", "rad"),
+            ]
         )
         # one transfer for every field; the geometry check reuses the host values
         vals = check_fields(o, [(n, getattr(self, n), kind, unit) for n, kind, unit in spec])
@@ -185,19 +201,29 @@ class FourBarDrive(AbstractModel):
             self._check_geometry(*(host[n] for n in ("a", "b", "c", "hx", "hy")))
         else:  # traced lengths (jit/vmap/grad): the same two conditions, recorded as run-time checks
             D2, s = _geometry(jnp, self.a, self.b, self.c, self.hx, self.hy)
-            record(jnp.all(D2 >= 0), f"{o}: the linkage cannot be assembled over a full crank turn "
-                   f"(D^2 = A^2 + B^2 - C^2 < 0 at some crank angle; {_GRASHOF})")
-            record(jnp.all(s >= _DEAD_TOL) | jnp.any(D2 < 0),  # an unassemblable one is reported as such alone
-                   f"{o}: the linkage passes a dead point (coupler and rocker aligned, |sin(gamma - beta)| < "
-                   f"{_DEAD_TOL:g} at some crank angle); the crank cannot drive it through")
+            record(
+                jnp.all(D2 >= 0),
+                f"{o}: the linkage cannot be assembled over a full crank turn "
+                f"(D^2 = A^2 + B^2 - C^2 < 0 at some crank angle; {_GRASHOF})",
+            )
+            record(
+                jnp.all(s >= _DEAD_TOL) | jnp.any(D2 < 0),  # an unassemblable one is reported as such alone
+                f"{o}: the linkage passes a dead point (coupler and rocker aligned, |sin(gamma - beta)| < "
+                f"{_DEAD_TOL:g} at some crank angle); the crank cannot drive it through",
+            )
 
     def _check_geometry(self, a, b, c, hx, hy):
         # numpy on the host values: a construction check, not part of any traced program
         al = np.linspace(0.0, 2 * np.pi, _N_CHECK, endpoint=False)
         shape = np.broadcast_shapes(*(np.shape(x) for x in (a, b, c, hx, hy)))
         D2, s = _geometry(np, a, b, c, hx, hy)
-        geo = ", ".join(f"{n}={float(np.ravel(x)[0]):g}" if np.size(x) == 1 else f"{n}={np.ravel(x).tolist()}"
-                        for n, x in zip(("a", "b", "c", "hx", "hy"), (a, b, c, hx, hy))) + " m"
+        geo = (
+            ", ".join(
+                f"{n}={float(np.ravel(x)[0]):g}" if np.size(x) == 1 else f"{n}={np.ravel(x).tolist()}"
+                for n, x in zip(("a", "b", "c", "hx", "hy"), (a, b, c, hx, hy))
+            )
+            + " m"
+        )
         if np.any(D2 < 0):
             i = int(np.argmin(D2)) // max(int(np.prod(shape)), 1)
             raise ValueError(
@@ -293,7 +319,10 @@ class FourBarDrive(AbstractModel):
         JB = self.jg2 + self.m2 * self.f2**2
         JD = self.jg3 + self.m3 * self.f3**2
         J = (
-            JA + JD * Rr**2 + self.m2 * self.a**2 + JB * Q**2
+            JA
+            + JD * Rr**2
+            + self.m2 * self.a**2
+            + JB * Q**2
             + 2 * self.a * self.f2 * self.m2 * Q * (cab * c2 + sab * s2)  # cos(alpha - beta - theta2)
         )
         y1 = self.f1 * (sa * c1 + ca * s1)  # f1 sin(alpha + theta1)

@@ -13,10 +13,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._checks import check_fields, check_nonnegative
 from .._checks import as_float_array as _arr
+from .._checks import check_fields, check_nonnegative
 from ..commands import AbstractController, MotorState
-
 
 
 def _opt_arr(x):
@@ -96,8 +95,7 @@ class PID(AbstractController):
         """Regulator output before the limiter [V] (eq. 14 or 16 with the constant set point);
         `phi0` is the motor angle at $t = 0$ [rad]."""
         w0 = self.omega_ref
-        return (self.proportional_gain(t) * (w0 - phi_dot) + self.ki * (w0 * t - (phi - phi0))
-                - self.kd * phi_ddot)
+        return self.proportional_gain(t) * (w0 - phi_dot) + self.ki * (w0 * t - (phi - phi0)) - self.kd * phi_ddot
 
     def limit(self, v):
         """Apply the voltage limiter (identity when `v_limit is None`)."""
@@ -113,7 +111,7 @@ class PID(AbstractController):
         """Armature voltage $V_a$ [V] at time `t` for the motor state `motor`."""
         return self.limit(self.raw_voltage(t, motor.angle, motor.speed, motor.acceleration, motor.angle0))
 
-    def with_limiter(self, limiter: str) -> "PID":
+    def with_limiter(self, limiter: str) -> PID:
         """The same regulator with the `"hard"` or `"smooth"` limiter."""
         return PID(self.kp, self.ki, self.kd, self.omega_ref, self.v_limit, limiter, self.v_smooth, self.gain)
 
@@ -122,7 +120,7 @@ class PID(AbstractController):
         """`(kp, ki, kd)` stacked as one array."""
         return jnp.stack([self.kp, self.ki, self.kd])
 
-    def with_gains(self, gains) -> "PID":
+    def with_gains(self, gains) -> PID:
         """The same regulator with gains `(kp, ki, kd)`."""
         gains = jnp.asarray(gains, dtype=float)
         return eqx.tree_at(lambda p: (p.kp, p.ki, p.kd), self, (gains[0], gains[1], gains[2]))

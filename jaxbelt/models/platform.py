@@ -17,11 +17,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_nonnegative, check_positive, is_concrete, record
 from .._checks import as_float_array as _arr
+from .._checks import check_nonnegative, check_positive, is_concrete, record
 from ..commands import AbstractMotionCommand
-from .base import AbstractModel, integrand, observable
-
+from .base import AbstractModel, observable
 
 
 class BeltPlatform(AbstractModel):
@@ -73,8 +72,10 @@ class BeltPlatform(AbstractModel):
         check_positive("r", self.r, "m", o)
         check_positive("R", self.R, "m", o)
         check_positive("z", self.z, "", o)
-        msg = (f"{o}: the platform must be underdamped (damping ratio xi = c_t / (2 J omega_n) < 1); "
-               "lower `c` or raise `k`")
+        msg = (
+            f"{o}: the platform must be underdamped (damping ratio xi = c_t / (2 J omega_n) < 1); "
+            "lower `c` or raise `k`"
+        )
         if is_concrete(self):
             with jax.ensure_compile_time_eval():  # host values even when built inside a trace
                 xi = np.asarray(self.damping_ratio)

@@ -17,11 +17,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_finite, check_nonnegative, check_positive, is_concrete
 from .._checks import as_float_array as _arr
+from .._checks import check_finite, check_nonnegative, check_positive, is_concrete
 from ..commands import AbstractVoltageCommand
 from .base import AbstractLinearModel, integrand, observable
-
 
 
 def chain_matrices(jm, inertias, k, c, r_drive, r_driven, z, mu, R, L, km):
@@ -225,7 +224,6 @@ class _BeltDriveBase(AbstractLinearModel):
         return (self.tau_r0 + self.mu * w) * w
 
 
-
 class BeltStartup(_BeltDriveBase):
     """2-DOF synchronous belt drive + gear reducer + permanent-magnet DC motor (Incerti, 2014).
 
@@ -319,31 +317,41 @@ class BeltChain(_BeltDriveBase):
     def __check_init__(self):
         o = "BeltChain"
         if self.inertias.ndim != 1 or self.inertias.shape[0] < 2:
-            raise ValueError(f"{o}: `inertias` must be a 1-D array of n + 1 >= 2 shaft inertias; got shape {self.inertias.shape}")
+            raise ValueError(
+                f"{o}: `inertias` must be a 1-D array of n + 1 >= 2 shaft inertias; got shape {self.inertias.shape}"
+            )
         n = self.inertias.shape[0] - 1
         for name in ("k", "c", "r_drive", "r_driven"):
             if getattr(self, name).shape != (n,):
-                raise ValueError(f"{o}: `{name}` must have shape ({n},) for {n} stages; got {getattr(self, name).shape}")
+                raise ValueError(
+                    f"{o}: `{name}` must have shape ({n},) for {n} stages; got {getattr(self, name).shape}"
+                )
         check_positive("inertias", self.inertias, "kg m^2", o)
         check_positive("r_drive", self.r_drive, "m", o)
         check_positive("r_driven", self.r_driven, "m", o)
         self._check_common(o)
 
     @classmethod
-    def from_startup(cls, m: BeltStartup) -> "BeltChain":
+    def from_startup(cls, m: BeltStartup) -> BeltChain:
         return cls(
-            inertias=jnp.stack([m.j1, m.j2]), k=m.k[None], c=m.c[None], r_drive=m.r1[None],
-            r_driven=m.r2[None], jm=m.jm, tau_r0=m.tau_r0, mu=m.mu, z=m.z, R=m.R, L=m.L, km=m.km,
+            inertias=jnp.stack([m.j1, m.j2]),
+            k=m.k[None],
+            c=m.c[None],
+            r_drive=m.r1[None],
+            r_driven=m.r2[None],
+            jm=m.jm,
+            tau_r0=m.tau_r0,
+            mu=m.mu,
+            z=m.z,
+            R=m.R,
+            L=m.L,
+            km=m.km,
         )
 
     @property
     def state_names(self) -> tuple[str, ...]:  # type: ignore[override]
         m = self.inertias.shape[0]
-        return (
-            tuple(f"theta{i + 1}" for i in range(m))
-            + tuple(f"omega{i + 1}" for i in range(m))
-            + ("current",)
-        )
+        return tuple(f"theta{i + 1}" for i in range(m)) + tuple(f"omega{i + 1}" for i in range(m)) + ("current",)
 
     def _inertias(self):
         return self.inertias
@@ -354,7 +362,14 @@ class BeltChain(_BeltDriveBase):
 
 #: The eight time histories of Incerti (2014), Fig. 3, in the paper's panel order (a-h).
 STARTUP_OUTPUTS = (
-    "voltage", "current", "electric_power", "mechanical_power", "omega1", "omega2", "alpha1", "alpha2",
+    "voltage",
+    "current",
+    "electric_power",
+    "mechanical_power",
+    "omega1",
+    "omega2",
+    "alpha1",
+    "alpha2",
 )
 
 

@@ -36,9 +36,17 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from .._checks import (check_finite, check_int, check_nonnegative, check_positive, check_range, collecting,
-                       is_concrete, record)
 from .._checks import as_float_array as _arr
+from .._checks import (
+    check_finite,
+    check_int,
+    check_nonnegative,
+    check_positive,
+    check_range,
+    collecting,
+    is_concrete,
+    record,
+)
 from .._guard import all_ok, checked, error_if, guard, host_checked, stored_jit, traced_checks
 
 __all__ = [
@@ -72,14 +80,28 @@ TABLE1_OBSERVATIONS = (
 
 #: Belt-vibration report, Table 2, computed column: (mode n, harmonic m) -> exciting rotor speed [rpm].
 TABLE2_COMPUTED_RPM = {
-    (1, 8): 735, (1, 7): 833, (1, 6): 960, (1, 5): 1130, (1, 4): 1364, (1, 3): 1706,
-    (2, 9): 1236, (2, 8): 1364, (2, 7): 1518, (2, 6): 1706, (3, 9): 1706,
+    (1, 8): 735,
+    (1, 7): 833,
+    (1, 6): 960,
+    (1, 5): 1130,
+    (1, 4): 1364,
+    (1, 3): 1706,
+    (2, 9): 1236,
+    (2, 8): 1364,
+    (2, 7): 1518,
+    (2, 6): 1706,
+    (3, 9): 1706,
 }
 #: Belt-vibration report, Table 2, measured speeds [rpm] with the (n, m) the paper pairs them with (None: unpaired).
 TABLE2_MEASURED_RPM = (
-    (730, (1, 8)), (810, (1, 7)), (910, (1, 6)), (1020, None), (1180, (1, 5)), (1400, (1, 4)), (1720, (1, 3)),
+    (730, (1, 8)),
+    (810, (1, 7)),
+    (910, (1, 6)),
+    (1020, None),
+    (1180, (1, 5)),
+    (1400, (1, 4)),
+    (1720, (1, 3)),
 )
-
 
 
 def _check_subcritical(speed, critical, owner: str, name: str = "speed"):
@@ -113,7 +135,10 @@ def _check_on_span(x, length, owner: str) -> None:
             worst = v[np.broadcast_to(bad, v.shape)].tolist() if v.ndim else float(v)
             raise ValueError(f"{owner}: parameter `x` must lie on the span [0, {L:g}] m; got {worst}")
         return
-    record(jnp.all(jnp.isfinite(x) & (x >= 0.0) & (x <= length)), f"{owner}: parameter `x` must lie on the span [0, length] m")
+    record(
+        jnp.all(jnp.isfinite(x) & (x >= 0.0) & (x <= length)),
+        f"{owner}: parameter `x` must lie on the span [0, length] m",
+    )
 
 
 class MovingString(eqx.Module):
@@ -338,8 +363,10 @@ class RunoutRig(eqx.Module):
         if is_concrete(self.position) and is_concrete(self.length):
             check_range("position", self.position, 0.0, float(np.min(np.asarray(self.length))), unit="m", owner=o)
         else:
-            record(jnp.all(jnp.isfinite(self.position) & (self.position >= 0) & (self.position <= jnp.min(self.length))),
-                   f"{o}: parameter `position` must lie in [0, length] m")
+            record(
+                jnp.all(jnp.isfinite(self.position) & (self.position >= 0) & (self.position <= jnp.min(self.length))),
+                f"{o}: parameter `position` must lie in [0, length] m",
+            )
 
 
 def _crossing_root(n_pi_over_L, vt, slope):
@@ -368,8 +395,11 @@ def _roots(k, c, s):
     def one(k, c, s):
         # throw=False: a failure is reported by jaxbelt's guard (no optimistix host callback in the program)
         sol = optx.root_find(f, solver, c, args=(k, c, s), max_steps=64, throw=False)
-        return error_if(sol.value, sol.result != optx.RESULTS.successful,
-                        "crossing_speeds: Newton's method did not converge to the crossing speed")
+        return error_if(
+            sol.value,
+            sol.result != optx.RESULTS.successful,
+            "crossing_speeds: Newton's method did not converge to the crossing speed",
+        )
 
     return jax.vmap(one)(k, c, s)
 
@@ -393,7 +423,9 @@ def _harmonics(harmonics, owner):
         return jnp.arange(1, _positive_int(harmonics, "harmonics", owner) + 1, dtype=float)
     ks = _arr(harmonics)
     if ks.ndim != 1 or ks.shape[0] < 1:
-        raise ValueError(f"{owner}: `harmonics` must be a positive integer or a 1-D sequence of orders; got shape {ks.shape}")
+        raise ValueError(
+            f"{owner}: `harmonics` must be a positive integer or a 1-D sequence of orders; got shape {ks.shape}"
+        )
     check_range("harmonics", ks, 1, None, owner=owner)
     return ks
 
@@ -517,8 +549,17 @@ def runout_phasors(rig: RunoutRig, speed, n_modes: int = 64):
     """
     n_modes = check_int("runout_phasors", "n_modes", n_modes)
     speed = _check_response_inputs("runout_phasors", rig, speed)
-    out = _phasors(speed, rig.length, rig.wave_speed, rig.pulley_radii, rig.runouts, rig.phase,
-                   rig.damping_ratio, rig.position, n_modes)
+    out = _phasors(
+        speed,
+        rig.length,
+        rig.wave_speed,
+        rig.pulley_radii,
+        rig.runouts,
+        rig.phase,
+        rig.damping_ratio,
+        rig.position,
+        n_modes,
+    )
     return checked(out, rig)  # a traced rig: its parameter checks, at run time
 
 
@@ -672,7 +713,13 @@ def galerkin_runout_system(rig: RunoutRig, speed, n_basis: int = 24):
 
 
 def simulate_runout_response(
-    rig: RunoutRig, speed, n_basis: int = 24, n_periods_settle=None, n_periods_measure: int = 4, rtol=1e-8, atol=1e-12,
+    rig: RunoutRig,
+    speed,
+    n_basis: int = 24,
+    n_periods_settle=None,
+    n_periods_measure: int = 4,
+    rtol=1e-8,
+    atol=1e-12,
 ):
     """Peak-to-peak displacement [m] at `position` from a diffrax run of the Galerkin model, from rest.
 
@@ -686,8 +733,10 @@ def simulate_runout_response(
     o = "simulate_runout_response"
     check_range("damping_ratio", rig.damping_ratio, 0.0, 1.0, lo_open=True, hi_open=True, owner=o)
     if not is_concrete(speed) or np.ndim(speed) != 0:
-        raise ValueError(f"{o}: `speed` must be one concrete speed [m/s] (a reference run, not traceable); "
-                         f"got shape {np.shape(speed)}")
+        raise ValueError(
+            f"{o}: `speed` must be one concrete speed [m/s] (a reference run, not traceable); "
+            f"got shape {np.shape(speed)}"
+        )
     check_positive("speed", speed, "m/s", owner=o)  # the sampling window counts periods of V / r0
     check_int(o, "n_basis", n_basis)
     check_int(o, "n_periods_measure", n_periods_measure)
@@ -710,8 +759,14 @@ def simulate_runout_response(
 
     # a module-level field and array arguments: one compiled solve per n_basis, for every rig and speed
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(_runout_field), diffrax.Tsit5(), jnp.asarray(0.0), jnp.asarray(t_end, float), None,
-        jnp.zeros(2 * nb), args=(A, forcing), saveat=diffrax.SaveAt(ts=ts),
+        diffrax.ODETerm(_runout_field),
+        diffrax.Tsit5(),
+        jnp.asarray(0.0),
+        jnp.asarray(t_end, float),
+        None,
+        jnp.zeros(2 * nb),
+        args=(A, forcing),
+        saveat=diffrax.SaveAt(ts=ts),
         stepsize_controller=diffrax.PIDController(rtol=jnp.asarray(rtol, float), atol=jnp.asarray(atol, float)),
         max_steps=2_000_000,
     )

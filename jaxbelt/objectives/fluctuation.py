@@ -170,8 +170,9 @@ def _grid(t1, step, step_name):
     """The output grid 0..t1 [s] with spacing `step` [s] (its size fixes the program: concrete values)."""
     for name, value in (("t1", t1), (step_name, step)):
         if not is_concrete(value):
-            raise ValueError(f"{_O}: `{name}` fixes the number of output times, so it must be a concrete number "
-                             "(not traced)")
+            raise ValueError(
+                f"{_O}: `{name}` fixes the number of output times, so it must be a concrete number (not traced)"
+            )
         check_positive(name, value, "s", owner=_O)
     t1, step = float(t1), float(step)
     if t1 / step > 1e7:
@@ -187,8 +188,21 @@ def _run_from_rest(drive, pid, ts, observe, state, method, rtol, atol, dt, max_s
 
 
 def closed_loop_metrics(
-    drive, pid, t0=0.375, t1=0.5, *, temperature=3e-4, peak_temperature=0.5, dt_save=5e-4,
-    method="ode", rtol=1e-8, atol=1e-8, dt=1e-3, max_steps=100_000, adjoint=None, average="mean",
+    drive,
+    pid,
+    t0=0.375,
+    t1=0.5,
+    *,
+    temperature=3e-4,
+    peak_temperature=0.5,
+    dt_save=5e-4,
+    method="ode",
+    rtol=1e-8,
+    atol=1e-8,
+    dt=1e-3,
+    max_steps=100_000,
+    adjoint=None,
+    average="mean",
 ):
     """χ (exact and smooth) over [t0, t1] and peak |voltage| and |current| over [0, t1].
 
@@ -217,8 +231,22 @@ def closed_loop_metrics(
 
 
 def fluctuation_objective(
-    drive, pid, t0=0.375, t1=0.5, *, smooth=True, temperature=3e-4, peak_temperature=0.5, dt_save=5e-4,
-    method="ode", rtol=1e-8, atol=1e-8, dt=1e-3, max_steps=100_000, adjoint=None, average="mean",
+    drive,
+    pid,
+    t0=0.375,
+    t1=0.5,
+    *,
+    smooth=True,
+    temperature=3e-4,
+    peak_temperature=0.5,
+    dt_save=5e-4,
+    method="ode",
+    rtol=1e-8,
+    atol=1e-8,
+    dt=1e-3,
+    max_steps=100_000,
+    adjoint=None,
+    average="mean",
 ):
     """Pure scalar objective $\\chi(\\text{drive}, \\text{pid})$ over [t0, t1] for optimisers.
 
@@ -231,9 +259,22 @@ def fluctuation_objective(
     batched sweep about 25 % faster.
     """
     if not (is_concrete(t0) and is_concrete(t1)):  # a traced window: the whole grid, as closed_loop_metrics
-        m = closed_loop_metrics(drive, pid, t0, t1, temperature=temperature, peak_temperature=peak_temperature,
-                                dt_save=dt_save, method=method, rtol=rtol, atol=atol, dt=dt, max_steps=max_steps,
-                                adjoint=adjoint, average=average)
+        m = closed_loop_metrics(
+            drive,
+            pid,
+            t0,
+            t1,
+            temperature=temperature,
+            peak_temperature=peak_temperature,
+            dt_save=dt_save,
+            method=method,
+            rtol=rtol,
+            atol=atol,
+            dt=dt,
+            max_steps=max_steps,
+            adjoint=adjoint,
+            average=average,
+        )
         return m["chi_smooth"] if smooth else m["chi"]
     _check_average(average)
     ts = _grid(t1, *((dt, "dt") if method == "rk4" else (dt_save, "dt_save")))
@@ -241,5 +282,6 @@ def fluctuation_objective(
     keep = ts >= float(t0) - _WINDOW_RTOL * max(abs(float(ts[-1])), 1.0)  # as `_node_weights` decides
     window = ts[keep] if keep.sum() >= 2 else ts  # fewer than two: chi_from_samples names the error
     sol = _run_from_rest(drive, pid, window, ("motor_speed",), False, method, rtol, atol, dt, max_steps, adjoint)
-    return chi_from_samples(window, sol.outputs["motor_speed"], t0, t1, smooth=smooth, temperature=temperature,
-                            average=average)
+    return chi_from_samples(
+        window, sol.outputs["motor_speed"], t0, t1, smooth=smooth, temperature=temperature, average=average
+    )

@@ -42,7 +42,7 @@ import numpy as np
 
 from .._checks import check_int, is_concrete, positive_checks
 from .._guard import all_ok, error_if, guard, host_checked, traced_checks
-from ..commands import AbstractMotionCommand, MIN_EXPONENT_GAP, PseudoPolynomial, ShapedCommand, falling_factorial
+from ..commands import MIN_EXPONENT_GAP, AbstractMotionCommand, PseudoPolynomial, ShapedCommand, falling_factorial
 from ..models.platform import BeltPlatform
 
 _P = 4  # substitution power u = v**p
@@ -62,8 +62,10 @@ def _guard_exponents(cmd: PseudoPolynomial) -> PseudoPolynomial:
     diff = jnp.abs(g[:, None] - g[None, :]) + jnp.eye(g.shape[0])
     bad = ~(jnp.all(g > lo) & jnp.all(diff >= MIN_EXPONENT_GAP * (1 - 1e-9)))  # NaN counts as bad
     g = error_if(
-        g, bad, f"PseudoPolynomial: exponents must be at least {MIN_EXPONENT_GAP:g} apart and each > {lo} "
-        "(eq. 23 singular or ill-conditioned, or acceleration infinite at T)"
+        g,
+        bad,
+        f"PseudoPolynomial: exponents must be at least {MIN_EXPONENT_GAP:g} apart and each > {lo} "
+        "(eq. 23 singular or ill-conditioned, or acceleration infinite at T)",
     )
     return eqx.tree_at(lambda c: c.gammas, cmd, g)
 
@@ -171,7 +173,13 @@ def convolution_integrals(plat, cmd, n_nodes: int = 128):
 def _end_state_ode(plat, cmd, rtol, atol, max_steps):
     term = diffrax.ODETerm(lambda t, y, args: plat.deflection_vector_field(t, y, args))
     sol = diffrax.diffeqsolve(
-        term, diffrax.Dopri8(), 0.0, cmd.end_time, None, jnp.zeros((2,)), args=cmd,
+        term,
+        diffrax.Dopri8(),
+        0.0,
+        cmd.end_time,
+        None,
+        jnp.zeros((2,)),
+        args=cmd,
         saveat=diffrax.SaveAt(t1=True),
         stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
         max_steps=max_steps,
@@ -179,8 +187,9 @@ def _end_state_ode(plat, cmd, rtol, atol, max_steps):
     return sol.ys[-1]
 
 
-def residual_energy(plat, cmd, *, method: str = "quadrature", n_nodes: int = 128,
-                    rtol=1e-12, atol=1e-15, max_steps: int = 100_000):
+def residual_energy(
+    plat, cmd, *, method: str = "quadrature", n_nodes: int = 128, rtol=1e-12, atol=1e-15, max_steps: int = 100_000
+):
     """Target $\\mathcal H = G^2 + \\omega_n^2F^2$ of eq. (30)-(32) [rad²/s⁴] for platform `plat`
     driven by motion command `cmd`; $E_{tot}(T) = h\\mathcal H$ (see `residual_energy_joules`).
 
@@ -225,7 +234,8 @@ def residual_energy(plat, cmd, *, method: str = "quadrature", n_nodes: int = 128
             )
     else:
         H = error_if(
-            H, ~(err <= QUADRATURE_TOL) & params_ok,
+            H,
+            ~(err <= QUADRATURE_TOL) & params_ok,
             f"residual_energy: the {n_nodes}-node quadrature does not resolve the vibration during the move "
             "(estimated relative error above 1e-8): pass a larger n_nodes (about 2.5*omega_d*T + 32) or method='ode'",
         )
@@ -259,4 +269,6 @@ def _residual_energy_impl(plat, cmd, rtol, atol, *, method: str, n_nodes: int, m
 # instead of dispatching its few hundred operations one by one (its guards come back as values, see
 # `host_checked`); inside a caller's jit/vmap/grad it is inlined. The tolerances are traced, so a new
 # value does not recompile.
-_residual_energy_jit = host_checked(_residual_energy_impl, jit=jax.jit, static_argnames=("method", "n_nodes", "max_steps"))
+_residual_energy_jit = host_checked(
+    _residual_energy_impl, jit=jax.jit, static_argnames=("method", "n_nodes", "max_steps")
+)

@@ -1,4 +1,5 @@
 """Optimisers: optax loops (one jitted step), constraints, progress bars and result objects."""
+
 from .command import CommandOptimResult as CommandOptimResult
 from .command import optimise_command as optimise_command
 from .command import optimise_robust as optimise_robust

@@ -32,8 +32,8 @@ import numpy as np
 import optax
 
 from .._checks import check_int, check_penalised_limits, check_positive, check_range
-from ..commands import MIN_EXPONENT_GAP, PseudoPolynomial, ShapedCommand
 from .._guard import host_checked
+from ..commands import MIN_EXPONENT_GAP, PseudoPolynomial, ShapedCommand
 from ..objectives.residual import residual_energy, residual_energy_joules
 
 
@@ -154,7 +154,7 @@ class CommandOptimResult(eqx.Module):
         return self.value / self.initial_value
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _named_optimizer(name: str, learning_rate):
     # cached so that repeated runs reuse the same transformation object (and the compiled step)
     if name == "lbfgs":
@@ -169,9 +169,7 @@ def _init(opt, problem, theta):
     # strong-typed leaves: optax initialises some line-search statistics as weak-typed Python
     # scalars, which would make the first update's state differ in type and compile the step twice
     state = opt.init(theta)
-    return jax.tree_util.tree_map(
-        lambda x: jax.lax.convert_element_type(x, x.dtype) if eqx.is_array(x) else x, state
-    )
+    return jax.tree_util.tree_map(lambda x: jax.lax.convert_element_type(x, x.dtype) if eqx.is_array(x) else x, state)
 
 
 @host_checked
@@ -244,8 +242,13 @@ def _run(problem: ShapingProblem, theta0, optimizer, learning_rate, max_steps, t
 def _final(problem, theta, theta0):
     cmd = problem.command(theta)
     ts = jnp.linspace(0.0, 1.0, 2001) * cmd.duration
-    return (cmd, problem.raw(theta), problem.raw(theta0), jnp.max(jnp.abs(cmd.velocity(ts))),
-            jnp.max(jnp.abs(cmd.acceleration(ts))))
+    return (
+        cmd,
+        problem.raw(theta),
+        problem.raw(theta0),
+        jnp.max(jnp.abs(cmd.velocity(ts))),
+        jnp.max(jnp.abs(cmd.acceleration(ts))),
+    )
 
 
 def _finish(problem, theta, theta0, hist, ghist, n, converged):
@@ -280,7 +283,9 @@ def _residual_jit(plat, cmd, n_nodes):
 
 @host_checked
 def _band_reference(plat, reference, omegas, n_nodes):
-    return jax.vmap(lambda w: residual_energy_joules(plat.with_natural_frequency(w), reference, n_nodes=n_nodes))(omegas)
+    return jax.vmap(lambda w: residual_energy_joules(plat.with_natural_frequency(w), reference, n_nodes=n_nodes))(
+        omegas
+    )
 
 
 def _check_options(owner, margin, gap, max_speed, max_accel, penalty, learning_rate):
@@ -290,8 +295,10 @@ def _check_options(owner, margin, gap, max_speed, max_accel, penalty, learning_r
     check_penalised_limits(owner, penalty, (("max_speed", max_speed, "rad/s"), ("max_accel", max_accel, "rad/s^2")))
     check_positive("margin", margin, owner=owner)
     if not float(gap) >= MIN_EXPONENT_GAP:
-        raise ValueError(f"{owner}: parameter `gap` must be >= {MIN_EXPONENT_GAP:g} (the least distance between "
-                         f"exponents that PseudoPolynomial accepts); got {gap}")
+        raise ValueError(
+            f"{owner}: parameter `gap` must be >= {MIN_EXPONENT_GAP:g} (the least distance between "
+            f"exponents that PseudoPolynomial accepts); got {gap}"
+        )
     if learning_rate is not None:
         check_positive("learning_rate", learning_rate, owner=owner)
 
@@ -312,11 +319,24 @@ def _bounds(cmd: PseudoPolynomial, margin, gap, max_step):
     return lower, margin, gap
 
 
-def optimise_command(plat, cmd: PseudoPolynomial, *, optimizer="lbfgs", learning_rate=None, max_steps: int = 200,
-                     tol: float = 1e-14, gtol: float = 1e-15, margin: float = 1e-3, gap: float = 1e-3,
-                     max_step: float = 10.0,
-                     max_speed=None, max_accel=None, penalty: float = 10.0, n_nodes: int = 128,
-                     progress: bool = True) -> CommandOptimResult:
+def optimise_command(
+    plat,
+    cmd: PseudoPolynomial,
+    *,
+    optimizer="lbfgs",
+    learning_rate=None,
+    max_steps: int = 200,
+    tol: float = 1e-14,
+    gtol: float = 1e-15,
+    margin: float = 1e-3,
+    gap: float = 1e-3,
+    max_step: float = 10.0,
+    max_speed=None,
+    max_accel=None,
+    penalty: float = 10.0,
+    n_nodes: int = 128,
+    progress: bool = True,
+) -> CommandOptimResult:
     """Minimise the residual energy $\\mathcal H(\\gamma)$ (eq. 32) over the exponents of `cmd`.
 
     Starts from `cmd.gammas` (the paper: (3, 4, 5)); keeps Φ and T. The objective is
@@ -340,22 +360,48 @@ def optimise_command(plat, cmd: PseudoPolynomial, *, optimizer="lbfgs", learning
     theta0 = _params_jit(cmd.gammas, lower, margin, gap, max_step)
     h0 = _residual_jit(plat, cmd, n_nodes)
     problem = ShapingProblem(
-        plat=plat, displacement=cmd.displacement, duration=cmd.duration, lower=lower,
-        margin=jnp.asarray(margin), gap=jnp.asarray(gap), max_step=jnp.asarray(max_step, dtype=float), scale=h0,
+        plat=plat,
+        displacement=cmd.displacement,
+        duration=cmd.duration,
+        lower=lower,
+        margin=jnp.asarray(margin),
+        gap=jnp.asarray(gap),
+        max_step=jnp.asarray(max_step, dtype=float),
+        scale=h0,
         max_speed=None if max_speed is None else jnp.asarray(max_speed, dtype=float),
         max_accel=None if max_accel is None else jnp.asarray(max_accel, dtype=float),
-        penalty=jnp.asarray(penalty, dtype=float), kind="nominal", n_nodes=n_nodes,
+        penalty=jnp.asarray(penalty, dtype=float),
+        kind="nominal",
+        n_nodes=n_nodes,
     )
-    theta, hist, ghist, n, conv = _run(problem, theta0, optimizer, learning_rate, max_steps, tol, gtol, progress,
-                                       "optimise_command")
+    theta, hist, ghist, n, conv = _run(
+        problem, theta0, optimizer, learning_rate, max_steps, tol, gtol, progress, "optimise_command"
+    )
     return _finish(problem, theta, theta0, hist, ghist, n, conv)
 
 
-def optimise_robust(plat, cmd: PseudoPolynomial, *, band=(0.8, 1.2), n_freq: int = 25, mode: str = "mean",
-                    reference: PseudoPolynomial | None = None, optimizer="lbfgs", learning_rate=None,
-                    max_steps: int = 150, tol: float = 0.0, gtol: float = 1e-12, margin: float = 1e-3,
-                    gap: float = 0.25, max_step: float = 10.0, max_speed=None, max_accel=None,
-                    penalty: float = 10.0, n_nodes: int = 128, progress: bool = True) -> CommandOptimResult:
+def optimise_robust(
+    plat,
+    cmd: PseudoPolynomial,
+    *,
+    band=(0.8, 1.2),
+    n_freq: int = 25,
+    mode: str = "mean",
+    reference: PseudoPolynomial | None = None,
+    optimizer="lbfgs",
+    learning_rate=None,
+    max_steps: int = 150,
+    tol: float = 0.0,
+    gtol: float = 1e-12,
+    margin: float = 1e-3,
+    gap: float = 0.25,
+    max_step: float = 10.0,
+    max_speed=None,
+    max_accel=None,
+    penalty: float = 10.0,
+    n_nodes: int = 128,
+    progress: bool = True,
+) -> CommandOptimResult:
     """Minimise the residual energy over a band of natural frequencies (robust shaping).
 
     $E(\\omega)$ is the residual energy [J] on the platform with its belt stiffness scaled to
@@ -387,15 +433,27 @@ def optimise_robust(plat, cmd: PseudoPolynomial, *, band=(0.8, 1.2), n_freq: int
     lower, margin, gap = _bounds(cmd, margin, gap, max_step)
     theta0 = _params_jit(cmd.gammas, lower, margin, gap, max_step)
     problem = ShapingProblem(
-        plat=plat, displacement=cmd.displacement, duration=cmd.duration, lower=lower,
-        margin=jnp.asarray(margin), gap=jnp.asarray(gap), max_step=jnp.asarray(max_step, dtype=float), scale=jnp.asarray(1.0), omegas=omegas, ref_energy=e_ref,
+        plat=plat,
+        displacement=cmd.displacement,
+        duration=cmd.duration,
+        lower=lower,
+        margin=jnp.asarray(margin),
+        gap=jnp.asarray(gap),
+        max_step=jnp.asarray(max_step, dtype=float),
+        scale=jnp.asarray(1.0),
+        omegas=omegas,
+        ref_energy=e_ref,
         max_speed=None if max_speed is None else jnp.asarray(max_speed, dtype=float),
         max_accel=None if max_accel is None else jnp.asarray(max_accel, dtype=float),
-        penalty=jnp.asarray(penalty, dtype=float), kind="band", mode=mode, n_nodes=n_nodes,
+        penalty=jnp.asarray(penalty, dtype=float),
+        kind="band",
+        mode=mode,
+        n_nodes=n_nodes,
     )
     problem = eqx.tree_at(lambda p: p.scale, problem, _raw(problem, theta0))
-    theta, hist, ghist, n, conv = _run(problem, theta0, optimizer, learning_rate, max_steps, tol, gtol, progress,
-                                       "optimise_robust")
+    theta, hist, ghist, n, conv = _run(
+        problem, theta0, optimizer, learning_rate, max_steps, tol, gtol, progress, "optimise_robust"
+    )
     return _finish(problem, theta, theta0, hist, ghist, n, conv)
 
 
@@ -441,8 +499,10 @@ def tolerance_band(omegas, energy, reference, omega0, level: float = 0.05):
     if w.ndim != 1 or w.size < 2 or not np.all(np.isfinite(w)) or not np.all(np.diff(w) > 0):
         raise ValueError(f"{o}: `omegas` must be a finite, strictly increasing 1-D grid of >= 2 frequencies [rad/s]")
     if e.shape != w.shape or ref.shape not in ((), w.shape):
-        raise ValueError(f"{o}: `energy` must have the shape of `omegas` {w.shape} and `reference` that shape or "
-                         f"none (a scalar); got {e.shape} and {ref.shape}")
+        raise ValueError(
+            f"{o}: `energy` must have the shape of `omegas` {w.shape} and `reference` that shape or "
+            f"none (a scalar); got {e.shape} and {ref.shape}"
+        )
     check_positive("level", level, owner=o)
     check_positive("omega0", omega0, "rad/s", owner=o)
     if not w[0] <= float(omega0) <= w[-1]:

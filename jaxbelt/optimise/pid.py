@@ -108,9 +108,16 @@ def tune_pid(
     # shapes or the program is static: t1 (the output grid), the method, and the RK4 step.
     f = functools.partial(jnp.asarray, dtype=float)
     cfg = _Config(
-        t0=f(t0), v_max=f(np.inf if v_max is None else v_max), i_max=f(np.inf if i_max is None else i_max),
-        penalty=f(penalty), temperature=f(temperature), rtol=f(rtol), atol=f(atol),
-        t1=float(t1), method=str(method), dt=float(dt) if method == "rk4" else 1e-3,
+        t0=f(t0),
+        v_max=f(np.inf if v_max is None else v_max),
+        i_max=f(np.inf if i_max is None else i_max),
+        penalty=f(penalty),
+        temperature=f(temperature),
+        rtol=f(rtol),
+        atol=f(atol),
+        t1=float(t1),
+        method=str(method),
+        dt=float(dt) if method == "rk4" else 1e-3,
     )
     p = jnp.zeros(3)
     hist = {k: [] for k in ("loss", "chi_smooth", "v_peak", "i_peak", "kp", "ki", "kd")}
@@ -126,8 +133,15 @@ def tune_pid(
         loss = float(loss)
         if not np.isfinite(loss):
             raise FloatingPointError(f"tune_pid: non-finite loss at step {k} with gains {gains.tolist()}")
-        for name, val in (("loss", loss), ("chi_smooth", m["chi_smooth"]), ("v_peak", m["v_peak"]),
-                          ("i_peak", m["i_peak"]), ("kp", gains[0]), ("ki", gains[1]), ("kd", gains[2])):
+        for name, val in (
+            ("loss", loss),
+            ("chi_smooth", m["chi_smooth"]),
+            ("v_peak", m["v_peak"]),
+            ("i_peak", m["i_peak"]),
+            ("kp", gains[0]),
+            ("ki", gains[1]),
+            ("kd", gains[2]),
+        ):
             hist[name].append(float(val))
         if loss < best[0]:
             best = (loss, p, k)
@@ -135,7 +149,9 @@ def tune_pid(
             it.set_postfix(chi_smooth=f"{float(m['chi_smooth']):.4f}")
         p = p_new
     _, p_best, k_best = best
-    m0, mb = jax.device_get((_tune_report(drive, pid, g0, cfg, jnp.zeros(3)), _tune_report(drive, pid, g0, cfg, p_best)))
+    m0, mb = jax.device_get(
+        (_tune_report(drive, pid, g0, cfg, jnp.zeros(3)), _tune_report(drive, pid, g0, cfg, p_best))
+    )
     return PIDTuneResult(
         pid=pid.with_gains(g0 * jnp.exp(p_best)),
         chi=float(mb["chi"]),
@@ -160,7 +176,7 @@ class _Config(eqx.Module):
     dt: float = eqx.field(static=True)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _default_adam():
     return optax.inject_hyperparams(optax.adam)(learning_rate=0.1)
 
@@ -169,8 +185,16 @@ def _metrics(drive, which, g0, cfg: _Config, p):
     # Three parameters: forward-mode derivatives (one JVP per gain, diffrax.ForwardMode) cost about
     # 5 forward solves, a third of reverse mode through the checkpointed solve, and compile faster.
     return closed_loop_metrics(
-        drive, which.with_gains(g0 * jnp.exp(p)), cfg.t0, cfg.t1, temperature=cfg.temperature,
-        method=cfg.method, rtol=cfg.rtol, atol=cfg.atol, dt=cfg.dt, adjoint="forward",
+        drive,
+        which.with_gains(g0 * jnp.exp(p)),
+        cfg.t0,
+        cfg.t1,
+        temperature=cfg.temperature,
+        method=cfg.method,
+        rtol=cfg.rtol,
+        atol=cfg.atol,
+        dt=cfg.dt,
+        adjoint="forward",
     )
 
 
@@ -185,9 +209,11 @@ def _tune_step(opt, drive, train_pid, g0, cfg: _Config, p, state):
     def loss_aux(q):
         m = _metrics(drive, train_pid, g0, cfg, q)
         # v_max, i_max = inf when unbounded: the penalty terms are then exactly zero
-        loss = (m["chi_smooth"]
-                + cfg.penalty * jnp.maximum(0.0, m["v_peak"] / cfg.v_max - 1.0) ** 2
-                + cfg.penalty * jnp.maximum(0.0, m["i_peak"] / cfg.i_max - 1.0) ** 2)
+        loss = (
+            m["chi_smooth"]
+            + cfg.penalty * jnp.maximum(0.0, m["v_peak"] / cfg.v_max - 1.0) ** 2
+            + cfg.penalty * jnp.maximum(0.0, m["i_peak"] / cfg.i_max - 1.0) ** 2
+        )
         return loss, (loss, m)
 
     grad, (loss, m) = jax.jacfwd(loss_aux, has_aux=True)(p)

@@ -8,6 +8,13 @@ only when a figure is drawn.
 import typing as _typing
 
 if _typing.TYPE_CHECKING:  # the public names, imported on first use (`jaxbelt._lazy`)
+    from .fourbar import fourbar_figure as fourbar_figure
+    from .fourbar import linkage_strip as linkage_strip
+    from .fourbar import plot_regulators as plot_regulators
+    from .nonlinear import response_figure as response_figure
+    from .shaping import plot_fig3 as plot_fig3
+    from .shaping import plot_sensitivity as plot_sensitivity
+    from .shaping import shaping_figure as shaping_figure
     from .startup import draw_startup as draw_startup
     from .string import plot_contact_pressure as plot_contact_pressure
     from .string import plot_crossing_diagram as plot_crossing_diagram
@@ -16,13 +23,6 @@ if _typing.TYPE_CHECKING:  # the public names, imported on first use (`jaxbelt._
     from .string import plot_galerkin_convergence as plot_galerkin_convergence
     from .string import plot_runout_response as plot_runout_response
     from .string import string_figure as string_figure
-    from .nonlinear import response_figure as response_figure
-    from .shaping import plot_fig3 as plot_fig3
-    from .shaping import plot_sensitivity as plot_sensitivity
-    from .shaping import shaping_figure as shaping_figure
-    from .fourbar import fourbar_figure as fourbar_figure
-    from .fourbar import linkage_strip as linkage_strip
-    from .fourbar import plot_regulators as plot_regulators
 
 from .._lazy import attach as _attach  # noqa: E402
 

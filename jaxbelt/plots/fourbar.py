@@ -9,8 +9,15 @@ import jax.numpy as jnp
 import numpy as np
 
 
-def fourbar_figure(open_sol, closed_sol, *, omega_ref: float = 30.0, voltage: float = 25.0,
-                   chi_window=(0.375, 0.5), title: str | None = None):
+def fourbar_figure(
+    open_sol,
+    closed_sol,
+    *,
+    omega_ref: float = 30.0,
+    voltage: float = 25.0,
+    chi_window=(0.375, 0.5),
+    title: str | None = None,
+):
     """Paper Fig. 4: open loop (left) and closed loop (right), rows a-b motor speed with the set
     point, c-d voltage, e-f current, g-h mechanical and electric power.
 
@@ -84,8 +91,14 @@ def linkage_strip(drive=None, alphas=None, *, n: int = 8, ax=None):
             ax.plot(*P[k], marker="o", color="k", ms=3)
         for k in ("G1", "G2", "G3"):
             ax.plot(*P[k], marker="x", color="0.3", ms=4)
-        ax.text(dx + 0.5 * (allx.min() + allx.max()), ally.min() - 0.06 * width, f"α = {np.degrees(al):.0f}°",
-                ha="center", va="top", fontsize=8)
+        ax.text(
+            dx + 0.5 * (allx.min() + allx.max()),
+            ally.min() - 0.06 * width,
+            f"α = {np.degrees(al):.0f}°",
+            ha="center",
+            va="top",
+            fontsize=8,
+        )
     ax.set_aspect("equal")
     ax.axis("off")
     ax.set_title("four-bar linkage over one crank turn (A, D fixed pivots; x: centres of mass)", fontsize=9)

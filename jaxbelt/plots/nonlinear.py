@@ -74,19 +74,39 @@ def plot_response_curve(ax, curve, measurements=None, *, title="response curve (
         ax.axvline(f, color="0.5", lw=0.8, ls=":", label="folds" if k == 0 else None)
     if measurements is not None and mode == 2:
         m = {x.quantity: x.value for x in measurements}
-        ax.axvspan(m["mode2_band_low"], m["mode2_band_high"], color="C2", alpha=0.15,
-                   label="measured hysteresis band (Sec. 2)")
+        ax.axvspan(
+            m["mode2_band_low"], m["mode2_band_high"], color="C2", alpha=0.15, label="measured hysteresis band (Sec. 2)"
+        )
     elif measurements is not None:
         m = {x.quantity: x.value for x in measurements}
-        ax.annotate("", xy=(m["up_jump_speed"], 1e3 * m["up_jump_pp_after"]),
-                    xytext=(m["up_jump_speed"], 1e3 * m["up_jump_pp_before"]), arrowprops=dict(arrowstyle="->", color="k"))
-        ax.annotate("", xy=(m["down_jump_speed"], 1e3 * m["down_jump_pp_after"]),
-                    xytext=(m["down_jump_speed"], 1e3 * m["down_jump_pp_before"]),
-                    arrowprops=dict(arrowstyle="->", color="C2"))
-        ax.plot([m["up_jump_speed"]] * 2, [1e3 * m["up_jump_pp_before"], 1e3 * m["up_jump_pp_after"]], "ko", ms=5,
-                label="measured, increasing (Sec. 2)")
-        ax.plot([m["down_jump_speed"]] * 2, [1e3 * m["down_jump_pp_before"], 1e3 * m["down_jump_pp_after"]], "o",
-                color="C2", mfc="none", ms=6, label="measured, decreasing (Sec. 2)")
+        ax.annotate(
+            "",
+            xy=(m["up_jump_speed"], 1e3 * m["up_jump_pp_after"]),
+            xytext=(m["up_jump_speed"], 1e3 * m["up_jump_pp_before"]),
+            arrowprops=dict(arrowstyle="->", color="k"),
+        )
+        ax.annotate(
+            "",
+            xy=(m["down_jump_speed"], 1e3 * m["down_jump_pp_after"]),
+            xytext=(m["down_jump_speed"], 1e3 * m["down_jump_pp_before"]),
+            arrowprops=dict(arrowstyle="->", color="C2"),
+        )
+        ax.plot(
+            [m["up_jump_speed"]] * 2,
+            [1e3 * m["up_jump_pp_before"], 1e3 * m["up_jump_pp_after"]],
+            "ko",
+            ms=5,
+            label="measured, increasing (Sec. 2)",
+        )
+        ax.plot(
+            [m["down_jump_speed"]] * 2,
+            [1e3 * m["down_jump_pp_before"], 1e3 * m["down_jump_pp_after"]],
+            "o",
+            color="C2",
+            mfc="none",
+            ms=6,
+            label="measured, decreasing (Sec. 2)",
+        )
     ax.set_xlabel("running speed V [m/s]")
     ax.set_ylabel("peak-to-peak at 1 cm [mm]")
     ax.set_title(title)
@@ -118,13 +138,15 @@ def response_figure(curve, ramp_up, ramp_down, measurements, summary: str = "", 
     else:
         fig, grid = plt.subplots(2, 2, figsize=(14, 9))
         axes = [grid[0, 0], grid[1, 0], grid[1, 1]]
-        plot_response_curve(grid[0, 1], curve2, measurements, mode=2,
-                            title="second mode (2-mode model) vs the measured band")
+        plot_response_curve(
+            grid[0, 1], curve2, measurements, mode=2, title="second mode (2-mode model) vs the measured band"
+        )
     plot_response_curve(axes[0], curve, measurements, title="predicted vs measured (Fig. 8 analogue)")
     if jumps is not None:
-        for k, (V, b, a) in enumerate(zip(*(np.asarray(x) for x in (jumps.speed, jumps.pp_before, jumps.pp_after)))):
-            axes[0].annotate("", xy=(V, 1e3 * a), xytext=(V, 1e3 * b),
-                             arrowprops=dict(arrowstyle="->", color="C1", lw=1.5))
+        for V, b, a in zip(*(np.asarray(x) for x in (jumps.speed, jumps.pp_before, jumps.pp_after))):
+            axes[0].annotate(
+                "", xy=(V, 1e3 * a), xytext=(V, 1e3 * b), arrowprops=dict(arrowstyle="->", color="C1", lw=1.5)
+            )
         axes[0].plot([], [], color="C1", lw=1.5, label="predicted jumps")
         axes[0].legend(fontsize=7)
     plot_ramp(axes[1], ramp_up)
@@ -133,5 +155,3 @@ def response_figure(curve, ramp_up, ramp_down, measurements, summary: str = "", 
         axes[0].text(0.02, 0.98, summary, transform=axes[0].transAxes, fontsize=7, va="top", family="monospace")
     fig.tight_layout()
     return fig
-
-

@@ -73,8 +73,9 @@ def plot_sensitivity(omegas, curves: dict, omega0, *, ax=None, reference: str | 
     return ax
 
 
-def shaping_figure(before: dict, after: dict, omegas, curves: dict, omega_n, *, move_times=None,
-                   reference: str | None = None):
+def shaping_figure(
+    before: dict, after: dict, omegas, curves: dict, omega_n, *, move_times=None, reference: str | None = None
+):
     """One figure: Fig. 3 (rows 1-4, from the `jaxbelt.platform_response` dicts `before`, `after`) and the
     sensitivity plot (row 5: `omegas` [rad/s], `curves` {label: E(T) [J]}, design `omega_n` [rad/s]).
     Returns the Figure."""
@@ -107,8 +108,9 @@ def plot_profiles(t, profiles: dict, *, axes=None, styles=("-", "--", ":", "-.")
     names = ("a) displacement [rad]", "b) velocity [rad/s]", "c) acceleration [rad/s²]")
     for j, (label, curves) in enumerate(profiles.items()):
         for k in range(3):
-            axes[k].plot(t, np.asarray(curves[k]), styles[j % len(styles)], color="k" if j == 0 else f"C{j}",
-                         label=label)
+            axes[k].plot(
+                t, np.asarray(curves[k]), styles[j % len(styles)], color="k" if j == 0 else f"C{j}", label=label
+            )
     for k in range(3):
         axes[k].set_xlabel("t [s]")
         axes[k].set_ylabel(names[k])

@@ -58,8 +58,14 @@ def plot_contact_pressure(contact: BeltPulleyContact | None = None, rpm: float =
     return ax
 
 
-def plot_frequency_harmonics(span: MovingString | None = None, pulley_radius: float = 0.1166, n_modes: int = 3,
-                             harmonics=range(3, 10), max_rpm: float = 2000.0, ax=None):
+def plot_frequency_harmonics(
+    span: MovingString | None = None,
+    pulley_radius: float = 0.1166,
+    n_modes: int = 3,
+    harmonics=range(3, 10),
+    max_rpm: float = 2000.0,
+    ax=None,
+):
     """Belt-vibration report, Fig. 41: sub-multiples $\\omega_n/m$ of the span frequencies against rotor speed (eq. 51).
 
     The rotor harmonic m meets mode n where the line $\\omega_U$ crosses $\\omega_n(\\omega_U R_U)/m$;
@@ -74,8 +80,14 @@ def plot_frequency_harmonics(span: MovingString | None = None, pulley_radius: fl
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for i in range(n_modes):
         for m in harmonics:
-            ax.plot(rpm, wn[:, i] / m * RPM, "--", lw=0.7, color=colors[i % len(colors)],
-                    label=f"n = {i + 1}" if m == list(harmonics)[0] else None)
+            ax.plot(
+                rpm,
+                wn[:, i] / m * RPM,
+                "--",
+                lw=0.7,
+                color=colors[i % len(colors)],
+                label=f"n = {i + 1}" if m == list(harmonics)[0] else None,
+            )
             w = float(exciting_speeds(span, pulley_radius, i + 1, m)) * RPM
             if w <= max_rpm:
                 ax.plot(w, w, "o", ms=3, color=colors[i % len(colors)])
@@ -132,8 +144,14 @@ def plot_crossing_diagram(speeds, natural, load, crossings, pulley_radii, *, har
     ls = ["-", "--", ":", "-."]
     for j in range(load.shape[1]):
         for k in range(load.shape[2]):
-            ax.plot(V, load[:, j, k], ls[j % 4], color=f"C{k}", lw=0.9,
-                    label=f"pulley {j} (r = {1e3 * radii[j]:.0f} mm), harmonic {ks[k]:g}" if k < 3 else None)
+            ax.plot(
+                V,
+                load[:, j, k],
+                ls[j % 4],
+                color=f"C{k}",
+                lw=0.9,
+                label=f"pulley {j} (r = {1e3 * radii[j]:.0f} mm), harmonic {ks[k]:g}" if k < 3 else None,
+            )
     for i in range(vc.shape[0]):
         for j in range(vc.shape[1]):
             for k in range(vc.shape[2]):
@@ -141,8 +159,13 @@ def plot_crossing_diagram(speeds, natural, load, crossings, pulley_radii, *, har
                     f = ks[k] * vc[i, j, k] / radii[j] / (2 * np.pi)
                     ax.plot(vc[i, j, k], f, "o", color="C3", ms=4)
                     if j == 0 and k == 0:
-                        ax.annotate(f"{vc[i, j, k]:.2f} m/s", (vc[i, j, k], f), textcoords="offset points",
-                                    xytext=(4, -10), fontsize=7)
+                        ax.annotate(
+                            f"{vc[i, j, k]:.2f} m/s",
+                            (vc[i, j, k], f),
+                            textcoords="offset points",
+                            xytext=(4, -10),
+                            fontsize=7,
+                        )
     ax.set_xlim(0, vmax)
     ax.set_ylim(0, 1.05 * nat[0, -1])
     ax.set_xlabel("running speed V [m/s]")
@@ -197,8 +220,15 @@ def plot_galerkin_convergence(n_basis, errors, speed, *, ax=None):
     return ax
 
 
-def string_figure(diagram: dict, response: dict, galerkin: dict, *, contact: BeltPulleyContact | None = None,
-                  span: MovingString | None = None, pulley_radius: float = 0.1166):
+def string_figure(
+    diagram: dict,
+    response: dict,
+    galerkin: dict,
+    *,
+    contact: BeltPulleyContact | None = None,
+    span: MovingString | None = None,
+    pulley_radius: float = 0.1166,
+):
     """All figures of the scene on one page (the `jaxbelt string` CLI figure), from computed results.
 
     `diagram`: keyword arguments of `plot_crossing_diagram`; `response`: of `plot_runout_response`;
@@ -255,8 +285,14 @@ def plot_span_frequencies(rotor_rpm, frequencies, critical_rpm, *, ax=None):
     for i in range(frequencies.shape[1]):
         ax.plot(rotor_rpm, frequencies[:, i] * RPM, label=f"n = {i + 1}")
     ax.axvline(float(critical_rpm), color="k", ls="--", lw=0.8)
-    ax.annotate(f"ω_CR = {float(critical_rpm):.0f} rpm", (float(critical_rpm), 0.0), textcoords="offset points",
-                xytext=(-4, 8), ha="right", fontsize=8)
+    ax.annotate(
+        f"ω_CR = {float(critical_rpm):.0f} rpm",
+        (float(critical_rpm), 0.0),
+        textcoords="offset points",
+        xytext=(-4, 8),
+        ha="right",
+        fontsize=8,
+    )
     ax.set_xlabel("rotor speed ω_U [rpm]")
     ax.set_ylabel("span frequency ω_n [rpm]")
     ax.set_title("Eq. (51): ω_n(ω_U R_U); eq. (53): ω_CR")

@@ -12,9 +12,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from references import startup_reference
 
 import jaxbelt as jb
-from references import startup_reference
 
 pytestmark = pytest.mark.stress
 
@@ -90,8 +90,13 @@ def test_100_second_horizon_closed_form_and_ode():
     closed = jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V, 0.02), ts=ts))
     # the angles grow linearly to ~1e4 rad: a uniform-grid expm scan of 2000 steps keeps 1e-9
     assert rel(closed.ys, ref) < 1e-9
-    ode = jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V, 0.02), ts=ts), method="ode", solver=diffrax.Tsit5(),
-                      rtol=1e-10, atol=1e-10)
+    ode = jb.simulate(
+        jb.Scene(model, jb.ExponentialVoltage(V, 0.02), ts=ts),
+        method="ode",
+        solver=diffrax.Tsit5(),
+        rtol=1e-10,
+        atol=1e-10,
+    )
     assert rel(ode.ys, ref) < 1e-6
     assert np.all(np.isfinite(np.asarray(ode.ys)))
 
@@ -104,8 +109,13 @@ def test_float32_against_float64():
         model = jb.BeltStartup()
         ts = jnp.linspace(0.0, 0.5, 501)
         closed = jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V, 0.02), ts=ts))
-        ode = jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V, 0.02), ts=ts), method="ode",
-                          solver=diffrax.Tsit5(), rtol=1e-5, atol=1e-6)
+        ode = jb.simulate(
+            jb.Scene(model, jb.ExponentialVoltage(V, 0.02), ts=ts),
+            method="ode",
+            solver=diffrax.Tsit5(),
+            rtol=1e-5,
+            atol=1e-6,
+        )
         assert closed.ys.dtype == jnp.float32 and ode.ys.dtype == jnp.float32
     # float32 carries ~7 digits; measured: the closed form (a 500-step product of float32
     # exponentials) keeps ~1e-3, Tsit5 at rtol 1e-5 ~1e-4. Both far from float64's 1e-12.
@@ -150,8 +160,13 @@ def test_sweep_with_step_budget_failures_names_the_elements():
     model = jb.BeltStartup()
 
     def run(t1):
-        return jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V, 0.02), t1=t1), method="ode",
-                           solver=diffrax.Tsit5(), max_steps=40, throw=False)
+        return jb.simulate(
+            jb.Scene(model, jb.ExponentialVoltage(V, 0.02), t1=t1),
+            method="ode",
+            solver=diffrax.Tsit5(),
+            max_steps=40,
+            throw=False,
+        )
 
     horizons = jnp.array([1e-3, 0.5, 2e-3, 1.0])  # 40 steps reach 1-2 ms, not 0.5-1 s
     with pytest.raises(jb.SolveError) as e:
@@ -192,8 +207,13 @@ def test_changing_tolerances_does_not_recompile():
 
     @eqx.debug.assert_max_traces(max_traces=1)
     def solve(rtol, atol):
-        return jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V, 0.02), ts=ts), method="ode",
-                           solver=diffrax.Tsit5(), rtol=rtol, atol=atol).ys
+        return jb.simulate(
+            jb.Scene(model, jb.ExponentialVoltage(V, 0.02), ts=ts),
+            method="ode",
+            solver=diffrax.Tsit5(),
+            rtol=rtol,
+            atol=atol,
+        ).ys
 
     solve = eqx.filter_jit(solve)
     ref = reference(model, 0.02, ts)
@@ -203,7 +223,9 @@ def test_changing_tolerances_does_not_recompile():
     jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V, 0.02), ts=ts), method="ode", solver=diffrax.Tsit5(), rtol=1e-4)
     before = eqx.debug.get_num_traces(jb.solve._run_traced)
     for r in (1e-5, 1e-6, 1e-9):
-        jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V, 0.02), ts=ts), method="ode", solver=diffrax.Tsit5(), rtol=r)
+        jb.simulate(
+            jb.Scene(model, jb.ExponentialVoltage(V, 0.02), ts=ts), method="ode", solver=diffrax.Tsit5(), rtol=r
+        )
     assert eqx.debug.get_num_traces(jb.solve._run_traced) == before
 
 

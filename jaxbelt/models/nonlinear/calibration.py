@@ -14,7 +14,6 @@ import dataclasses
 import functools
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
@@ -23,8 +22,17 @@ from ..._checks import check_int
 from .harmonic import fold_speeds, jumps
 from .model import NonlinearBelt
 
-__all__ = ["Measurement", "MEASUREMENTS", "calibrate", "Calibration", "jump_residuals", "model_fold_speeds", "two_mode",
-           "MODE1_RANGE", "MODE2_RANGE"]
+__all__ = [
+    "Measurement",
+    "MEASUREMENTS",
+    "calibrate",
+    "Calibration",
+    "jump_residuals",
+    "model_fold_speeds",
+    "two_mode",
+    "MODE1_RANGE",
+    "MODE2_RANGE",
+]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -86,9 +94,18 @@ def two_mode(belt: NonlinearBelt) -> NonlinearBelt:
     """`belt` with `n_modes=2` (the smallest model that has the second-mode resonance)."""
     if belt.n_modes == 2:
         return belt
-    return NonlinearBelt(span=belt.span, wave_speed=belt.wave_speed, v_l=belt.v_l, pulley_radii=belt.pulley_radii,
-                         runout=belt.runout, phase=belt.phase, damping=belt.damping, n_modes=2,
-                         sensor_pulley=belt.sensor_pulley, travel=belt.travel)
+    return NonlinearBelt(
+        span=belt.span,
+        wave_speed=belt.wave_speed,
+        v_l=belt.v_l,
+        pulley_radii=belt.pulley_radii,
+        runout=belt.runout,
+        phase=belt.phase,
+        damping=belt.damping,
+        n_modes=2,
+        sensor_pulley=belt.sensor_pulley,
+        travel=belt.travel,
+    )
 
 
 def model_fold_speeds(belt: NonlinearBelt, n_harmonics: int = 3):
@@ -141,8 +158,9 @@ def _log_problem(free: tuple, shapes: tuple, n_harmonics: int, amplitudes: bool)
 
     def build(p, b):  # one flat vector of logs -> the belt
         parts = jnp.split(p, np.cumsum(sizes)[:-1])
-        return eqx.tree_at(lambda bb: [getattr(bb, f) for f in free], b,
-                           [jnp.exp(x).reshape(sh) for x, sh in zip(parts, shapes)])
+        return eqx.tree_at(
+            lambda bb: [getattr(bb, f) for f in free], b, [jnp.exp(x).reshape(sh) for x, sh in zip(parts, shapes)]
+        )
 
     def residuals(p, b):
         return jump_residuals(build(p, b), n_harmonics, amplitudes=amplitudes)
@@ -150,8 +168,14 @@ def _log_problem(free: tuple, shapes: tuple, n_harmonics: int, amplitudes: bool)
     return build, residuals
 
 
-def calibrate(belt: NonlinearBelt | None = None, *, free=("wave_speed", "damping"), amplitudes: bool = False,
-              n_harmonics: int = 3, max_steps: int = 40) -> Calibration:
+def calibrate(
+    belt: NonlinearBelt | None = None,
+    *,
+    free=("wave_speed", "damping"),
+    amplitudes: bool = False,
+    n_harmonics: int = 3,
+    max_steps: int = 40,
+) -> Calibration:
     """Identify the parameters named in `free` (any of `wave_speed`, `damping`, `v_l`) from the
     measured jumps of Moon & Wickert (1997), Sec. 2, by Levenberg-Marquardt
     (`optimistix.LevenbergMarquardt`) in log coordinates (positive by construction).
@@ -189,12 +213,24 @@ def calibrate(belt: NonlinearBelt | None = None, *, free=("wave_speed", "damping
 
     p0 = jnp.concatenate([jnp.log(jnp.ravel(jnp.asarray(getattr(belt, f), float))) for f in free])
     # reverse-mode Jacobian: four residuals, one backward pass each
-    sol = optx.least_squares(fn, optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8), p0, args=belt,
-                             max_steps=max_steps, throw=False, options=dict(jac="bwd"))
+    sol = optx.least_squares(
+        fn,
+        optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8),
+        p0,
+        args=belt,
+        max_steps=max_steps,
+        throw=False,
+        options=dict(jac="bwd"),
+    )
     out = build(sol.value, belt)
     r = fn(sol.value, belt)
-    return Calibration(belt=out, residuals=r, cost=0.5 * jnp.sum(r**2), fold_speeds=model_fold_speeds(out, n_harmonics),
-                       success=sol.result == optx.RESULTS.successful)
+    return Calibration(
+        belt=out,
+        residuals=r,
+        cost=0.5 * jnp.sum(r**2),
+        fold_speeds=model_fold_speeds(out, n_harmonics),
+        success=sol.result == optx.RESULTS.successful,
+    )
 
 
 def layout_choices():
@@ -204,8 +240,15 @@ def layout_choices():
 
 def with_layout(belt: NonlinearBelt, sensor_pulley, travel, sign):
     """`belt` with the given sensor pulley, travel direction and sign of the measured 240° phase."""
-    return NonlinearBelt(span=belt.span, wave_speed=belt.wave_speed, v_l=belt.v_l, pulley_radii=belt.pulley_radii,
-                         runout=belt.runout, phase=sign * float(np.deg2rad(240.0)), damping=belt.damping,
-                         n_modes=belt.n_modes, sensor_pulley=sensor_pulley, travel=travel)
-
-
+    return NonlinearBelt(
+        span=belt.span,
+        wave_speed=belt.wave_speed,
+        v_l=belt.v_l,
+        pulley_radii=belt.pulley_radii,
+        runout=belt.runout,
+        phase=sign * float(np.deg2rad(240.0)),
+        damping=belt.damping,
+        n_modes=belt.n_modes,
+        sensor_pulley=sensor_pulley,
+        travel=travel,
+    )

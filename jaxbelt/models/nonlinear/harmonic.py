@@ -48,8 +48,7 @@ from ..._checks import check_int, check_positive, collecting, is_concrete
 from ..._guard import all_ok, guard, stored_jit, traced_checks, validated_inputs
 from .model import ModalSystem, NonlinearBelt, mode_shapes
 
-__all__ = ["HarmonicSolution", "ResponseCurve", "Jumps", "harmonic_balance", "response_curve", "fold_speeds",
-           "jumps"]
+__all__ = ["HarmonicSolution", "ResponseCurve", "Jumps", "harmonic_balance", "response_curve", "fold_speeds", "jumps"]
 
 
 # --- Fourier machinery ---------------------------------------------------------------------------------
@@ -62,7 +61,7 @@ def _basis(H: int, phis):
     return jnp.concatenate([jnp.ones((1, phis.shape[0])), jnp.cos(k * phis), jnp.sin(k * phis)])  # (2H+1, nt)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _fourier(H: int):
     nt = _n_time(H)
     phis = 2 * np.pi * np.arange(nt) / nt
@@ -143,15 +142,17 @@ def _observe(belt: NonlinearBelt, speed, Y, H: int, at=0.01):
 
 @stored_jit
 def _hb_point(belt, speed, Y0, H: int, max_steps: int):
-    sol = optx.root_find(lambda Y, a: _residual(Y, a[0], a[1], H), _hb_solver(), Y0, args=(speed, belt),
-                         max_steps=max_steps, throw=False)
+    sol = optx.root_find(
+        lambda Y, a: _residual(Y, a[0], a[1], H), _hb_solver(), Y0, args=(speed, belt), max_steps=max_steps, throw=False
+    )
     ok = sol.result == optx.RESULTS.successful
     pp, amp = _observe(belt, speed, sol.value, H)
     return sol.value, pp, amp, ok
 
 
-def harmonic_balance(belt: NonlinearBelt, speed, n_harmonics: int = 3, guess=None, *, max_steps: int = 50,
-                     throw: bool = True) -> HarmonicSolution:
+def harmonic_balance(
+    belt: NonlinearBelt, speed, n_harmonics: int = 3, guess=None, *, max_steps: int = 50, throw: bool = True
+) -> HarmonicSolution:
     """Steady periodic response at `speed` [m/s] by harmonic balance with `n_harmonics` harmonics.
 
     `guess`: initial (2N, 2H+1) coefficients (default: rest, which reaches the branch that is
@@ -169,8 +170,10 @@ def harmonic_balance(belt: NonlinearBelt, speed, n_harmonics: int = 3, guess=Non
     n = belt.n_modes
     check_int("harmonic_balance", "max_steps", max_steps)
     if guess is not None and jnp.shape(guess) != (2 * n, 2 * H + 1):
-        raise ValueError(f"harmonic_balance: `guess` must have shape (2 n_modes, 2 n_harmonics + 1) = "
-                         f"{(2 * n, 2 * H + 1)}; got {jnp.shape(guess)}")
+        raise ValueError(
+            f"harmonic_balance: `guess` must have shape (2 n_modes, 2 n_harmonics + 1) = "
+            f"{(2 * n, 2 * H + 1)}; got {jnp.shape(guess)}"
+        )
     Y0 = jnp.zeros(2 * n * (2 * H + 1)) if guess is None else jnp.ravel(jnp.asarray(guess, float)) / _scale(belt)
     speed = jnp.asarray(speed, dtype=float)
     Y, pp, amp, ok = _hb_point(belt, speed, Y0, H, max_steps)
@@ -180,22 +183,31 @@ def harmonic_balance(belt: NonlinearBelt, speed, n_harmonics: int = 3, guess=Non
     if throw:
         if is_concrete(ok):
             if not bool(ok):
-                raise RuntimeError(f"harmonic_balance: Newton did not converge at {float(speed):g} m/s "
-                                   f"(n_harmonics={H}); give a guess near the wanted branch")
+                raise RuntimeError(
+                    f"harmonic_balance: Newton did not converge at {float(speed):g} m/s "
+                    f"(n_harmonics={H}); give a guess near the wanted branch"
+                )
         else:
             pp = eqx.error_if(pp, ~ok & params_ok, "harmonic_balance: Newton did not converge")
     else:
         ok = ok & params_ok
     nanif = lambda a: jnp.where(ok, a, jnp.nan)  # noqa: E731
-    return HarmonicSolution(speed=speed, coefficients=nanif(_scale(belt) * Y.reshape(2 * n, 2 * H + 1)),
-                            pp=nanif(pp), amplitude=nanif(amp), success=ok)
+    return HarmonicSolution(
+        speed=speed,
+        coefficients=nanif(_scale(belt) * Y.reshape(2 * n, 2 * H + 1)),
+        pp=nanif(pp),
+        amplitude=nanif(amp),
+        success=ok,
+    )
 
 
 # --- continuation --------------------------------------------------------------------------------------
 def _jac(belt, H):
     """Jacobian of the residual w.r.t. (Y, V), shape (n, n+1)."""
+
     def full(u):
         return _residual(u[:-1], u[-1], belt, H)
+
     return jax.jacfwd(full)
 
 
@@ -223,6 +235,7 @@ def _continue(belt, v0, v1, H: int, max_points: int, ds0, ds_max):
     def corrector(u_pred, t):
         def fn(u, _):
             return jnp.concatenate([_residual(u[:-1], u[-1], belt, H), (t @ (u - u_pred))[None]])
+
         return optx.root_find(fn, chord, u_pred, max_steps=12, throw=False)
 
     def step(carry, _):
@@ -233,11 +246,18 @@ def _continue(belt, v0, v1, H: int, max_points: int, ds0, ds_max):
         nsteps = sol.stats["num_steps"]
         t_new = _tangent(_jac(belt, H)(u_new), t)
         # reject too large corrections and turns (two close folds must not be stepped over)
-        ok = (sol.result == optx.RESULTS.successful) & jnp.all(jnp.isfinite(u_new)) \
-            & (jnp.linalg.norm(u_new - u_pred) < 0.5 * ds + 1e-12) & (t_new @ t > 0.97) \
-            & (u_new[-1] > 0) & (u_new[-1] < belt.wave_speed)
+        ok = (
+            (sol.result == optx.RESULTS.successful)
+            & jnp.all(jnp.isfinite(u_new))
+            & (jnp.linalg.norm(u_new - u_pred) < 0.5 * ds + 1e-12)
+            & (t_new @ t > 0.97)
+            & (u_new[-1] > 0)
+            & (u_new[-1] < belt.wave_speed)
+        )
         accept = ok & ~done
-        ds_new = jnp.where(ok, jnp.where(nsteps <= 6, jnp.minimum(1.6 * ds, ds_max), ds), 0.5 * ds)  # 6: quick for chord
+        ds_new = jnp.where(
+            ok, jnp.where(nsteps <= 6, jnp.minimum(1.6 * ds, ds_max), ds), 0.5 * ds
+        )  # 6: quick for chord
         u_out = jnp.where(accept, u_new, u)
         t_out = jnp.where(accept, t_new, t)
         V = u_out[-1]
@@ -291,8 +311,17 @@ def _floquet(belt, speed, Y, H: int):
     # throw=False: no host callback, so the programs holding this solve can be kept in JAX's persistent
     # cache; the fixed-step solve only fails on non-finite values, which give NaN multipliers (not stable)
     with validated_inputs():  # dt0 = T / steps has the sign of T - 0
-        sol = diffrax.diffeqsolve(diffrax.ODETerm(rhs), diffrax.Tsit5(), 0.0, T, T / steps, jnp.eye(2 * n),
-                                  stepsize_controller=diffrax.ConstantStepSize(), max_steps=steps + 1, throw=False)
+        sol = diffrax.diffeqsolve(
+            diffrax.ODETerm(rhs),
+            diffrax.Tsit5(),
+            0.0,
+            T,
+            T / steps,
+            jnp.eye(2 * n),
+            stepsize_controller=diffrax.ConstantStepSize(),
+            max_steps=steps + 1,
+            throw=False,
+        )
     M = sol.ys[-1]
     ok = (sol.result == diffrax.RESULTS.successful) & jnp.all(jnp.isfinite(M))
     return jnp.where(ok, jnp.linalg.eigvals(jnp.where(ok, M, jnp.eye(2 * n))), jnp.nan)
@@ -301,10 +330,11 @@ def _floquet(belt, speed, Y, H: int):
 def _fold_system(belt, H: int, c):
     def fn(w, b):
         n = c.shape[0]
-        Y, V, phi = w[:n], w[n], w[n + 1:]
+        Y, V, phi = w[:n], w[n], w[n + 1 :]
         R = _residual(Y, V, b, H)
         JY = jax.jvp(lambda yy: _residual(yy, V, b, H), (Y,), (phi,))[1]
         return jnp.concatenate([R, JY, (c @ phi - 1.0)[None]])
+
     return fn
 
 
@@ -406,8 +436,15 @@ def _fold_options(owner, belt, speed_range, n_harmonics, n_folds, max_points):
     return H, n_folds, max_points, v0, v1
 
 
-def fold_speeds(belt: NonlinearBelt, speed_range=(7.5, 10.5), n_harmonics: int = 3, n_folds: int = 2, *,
-                max_points: int = 200, throw: bool = True):
+def fold_speeds(
+    belt: NonlinearBelt,
+    speed_range=(7.5, 10.5),
+    n_harmonics: int = 3,
+    n_folds: int = 2,
+    *,
+    max_points: int = 200,
+    throw: bool = True,
+):
     """Fold (saddle-node) speeds [m/s] of the response curve in `speed_range`, ascending, shape (n_folds,).
 
     For a hardening resonance the lower fold is where a decreasing sweep jumps up and the upper
@@ -422,9 +459,11 @@ def fold_speeds(belt: NonlinearBelt, speed_range=(7.5, 10.5), n_harmonics: int =
     if throw:
         if is_concrete(ok):
             if not bool(np.all(np.asarray(ok))):
-                raise ValueError(f"fold_speeds: found {int(np.sum(np.asarray(ok)))} of n_folds={n_folds} folds in "
-                                 f"speed_range {tuple(float(x) for x in (v0, v1))} m/s (no hysteresis there, or "
-                                 "refinement failed); widen the range or lower `damping`")
+                raise ValueError(
+                    f"fold_speeds: found {int(np.sum(np.asarray(ok)))} of n_folds={n_folds} folds in "
+                    f"speed_range {tuple(float(x) for x in (v0, v1))} m/s (no hysteresis there, or "
+                    "refinement failed); widen the range or lower `damping`"
+                )
         else:
             Vs = eqx.error_if(Vs, ~jnp.all(ok), "fold_speeds: fewer folds than n_folds in speed_range")
     Vs = jnp.where(ok, Vs, jnp.nan)
@@ -461,8 +500,9 @@ def _landing_jit(belt, us, acc, Vs, Ys, H):
         k = jnp.argmax(jnp.where(seg, dist, -1.0))
         lam = jnp.clip((Vf_ - Vc[k]) / (Vc[k + 1] - Vc[k]), 0.0, 1.0)
         Yg = us[k, :-1] + lam * (us[k + 1, :-1] - us[k, :-1])
-        sol = optx.root_find(lambda Y, a: _residual(Y, a[0], a[1], H), _hb_solver(), Yg, args=(Vf, belt),
-                             max_steps=30, throw=False)
+        sol = optx.root_find(
+            lambda Y, a: _residual(Y, a[0], a[1], H), _hb_solver(), Yg, args=(Vf, belt), max_steps=30, throw=False
+        )
         ok = (sol.result == optx.RESULTS.successful) & jnp.any(seg)
         # the landing branch must differ from the fold's own state
         ok = ok & (jnp.linalg.norm(sol.value - Yf) > 1e-3 * (jnp.linalg.norm(Yf) + 1e-30))
@@ -480,17 +520,25 @@ def _jumps_jit(belt, v0, v1, H, n_folds, max_points, ds0, ds_max):
     return Vs, pp_b, pp_a, ok & ok_a
 
 
-def jumps(belt: NonlinearBelt, speed_range=(7.5, 10.5), n_harmonics: int = 3, n_folds: int = 2, *,
-          max_points: int = 200, throw: bool = True) -> Jumps:
+def jumps(
+    belt: NonlinearBelt,
+    speed_range=(7.5, 10.5),
+    n_harmonics: int = 3,
+    n_folds: int = 2,
+    *,
+    max_points: int = 200,
+    throw: bool = True,
+) -> Jumps:
     """Fold speeds and the peak-to-peak before and after each jump (see `Jumps`); differentiable."""
     H, n_folds, max_points, v0, v1 = _fold_options("jumps", belt, speed_range, n_harmonics, n_folds, max_points)
-    Vs, ppb, ppa, ok = _jumps_jit(belt, v0, v1, H, n_folds, max_points, jnp.asarray(_DS0),
-                                  jnp.asarray(_DS_MAX))
+    Vs, ppb, ppa, ok = _jumps_jit(belt, v0, v1, H, n_folds, max_points, jnp.asarray(_DS0), jnp.asarray(_DS_MAX))
     if throw:
         if is_concrete(ok):
             if not bool(np.all(np.asarray(ok))):
-                raise ValueError(f"jumps: found {int(np.sum(np.asarray(ok)))} of n_folds={n_folds} jumps in "
-                                 f"speed_range {tuple(float(x) for x in (v0, v1))} m/s")
+                raise ValueError(
+                    f"jumps: found {int(np.sum(np.asarray(ok)))} of n_folds={n_folds} jumps in "
+                    f"speed_range {tuple(float(x) for x in (v0, v1))} m/s"
+                )
         else:
             Vs = eqx.error_if(Vs, ~jnp.all(ok), "jumps: fewer folds than n_folds in speed_range")
     nanif = lambda a: jnp.where(ok, a, jnp.nan)  # noqa: E731
@@ -545,15 +593,22 @@ def _curve_post_jit(belt, us, acc, H):
             return pp, amp, _floquet(belt, u[-1], u[:-1], H)
 
         def no(u):
-            return (jnp.nan * u[0], jnp.full((belt.n_modes,), jnp.nan),
-                    jnp.full((n2,), jnp.nan, dtype=complex))
+            return (jnp.nan * u[0], jnp.full((belt.n_modes,), jnp.nan), jnp.full((n2,), jnp.nan, dtype=complex))
+
         return jax.lax.cond(a, yes, no, u)
 
     return jax.lax.map(one, (us, acc))
 
 
-def response_curve(belt: NonlinearBelt, speed_range=(7.5, 10.5), n_harmonics: int = 3, *,
-                   max_points: int = 200, step: float = 0.05, max_step: float = 0.25) -> ResponseCurve:
+def response_curve(
+    belt: NonlinearBelt,
+    speed_range=(7.5, 10.5),
+    n_harmonics: int = 3,
+    *,
+    max_points: int = 200,
+    step: float = 0.05,
+    max_step: float = 0.25,
+) -> ResponseCurve:
     """Response curve over `speed_range` [m/s] by harmonic balance (`n_harmonics`) and
     pseudo-arclength continuation in speed, through the folds, with the Floquet stability of
     every point and the fold speeds. `step`/`max_step`: initial/largest arclength step in the
@@ -573,9 +628,11 @@ def response_curve(belt: NonlinearBelt, speed_range=(7.5, 10.5), n_harmonics: in
     acc_n = np.asarray(acc)
     us_n = np.asarray(us)
     if not acc_n[0] or not np.any(us_n[acc_n, -1] >= float(v1)):
-        raise RuntimeError(f"response_curve: continuation stopped before {float(v1):g} m/s (reached "
-                           f"{float(us_n[acc_n, -1].max()) if acc_n.any() else float(v0):g} m/s in {max_points} "
-                           "points); raise max_points or max_step")
+        raise RuntimeError(
+            f"response_curve: continuation stopped before {float(v1):g} m/s (reached "
+            f"{float(us_n[acc_n, -1].max()) if acc_n.any() else float(v0):g} m/s in {max_points} "
+            "points); raise max_points or max_step"
+        )
     keep = acc_n & (us_n[:, -1] <= float(v1) + 1e-9)
     pp, amp, mult = _curve_post_jit(belt, us, jnp.asarray(keep), H)
     _, Vf, okf = _folds_jit(belt, us, ts, jnp.asarray(keep), H)
@@ -583,8 +640,10 @@ def response_curve(belt: NonlinearBelt, speed_range=(7.5, 10.5), n_harmonics: in
     n = belt.n_modes
     mult = np.asarray(mult)[keep]
     return ResponseCurve(
-        speed=jnp.asarray(us_n[keep, -1]), pp=jnp.asarray(np.asarray(pp)[keep]),
-        amplitude=jnp.asarray(np.asarray(amp)[keep]), stable=jnp.asarray(np.max(np.abs(mult), axis=1) < 1.0),
+        speed=jnp.asarray(us_n[keep, -1]),
+        pp=jnp.asarray(np.asarray(pp)[keep]),
+        amplitude=jnp.asarray(np.asarray(amp)[keep]),
+        stable=jnp.asarray(np.max(np.abs(mult), axis=1) < 1.0),
         multipliers=jnp.asarray(mult),
         coefficients=jnp.asarray(_scale(belt) * us_n[keep, :-1].reshape(-1, 2 * n, 2 * H + 1)),
         folds=jnp.asarray(np.sort(Vf[okf])),

@@ -114,8 +114,10 @@ def backbone_speed(belt: NonlinearBelt, a, n: int = 1):
 
     v_top = 1 - 1e-12
     bracketed = (resid(jnp.zeros_like(a)) <= 0) & (resid(jnp.full_like(a, v_top)) > 0)
-    msg = ("backbone_speed: no sub-critical speed meets the backbone at this amplitude `a` (the drive-pulley "
-           "rate stays below the backbone frequency up to the wave speed: `a` too large)")
+    msg = (
+        "backbone_speed: no sub-critical speed meets the backbone at this amplitude `a` (the drive-pulley "
+        "rate stays below the backbone frequency up to the wave speed: `a` too large)"
+    )
     if is_concrete((bracketed, checks)):  # (under an eager grad the flags are concrete, `a` is not)
         ok = np.atleast_1d(np.asarray(bracketed))
         if not ok.all():
@@ -162,7 +164,7 @@ def kbm_coefficients(belt: NonlinearBelt, speed, n: int = 1):
     Om = jnp.where(jnp.abs(W0 - om) <= jnp.abs(W1 - om), W0, W1)
     sig = Om - om
     kap = kappa(v, belt.v_l, n)
-    C = jnp.stack([kap**2, -2 * sig * kap, sig**2 + (belt.mode_damping(n)[n - 1] * om) ** 2, -jnp.abs(g) ** 2])
+    C = jnp.stack([kap**2, -2 * sig * kap, sig**2 + (belt.mode_damping(n)[n - 1] * om) ** 2, -(jnp.abs(g) ** 2)])
     return guard(C, checks, throw=True)[0]
 
 

@@ -70,11 +70,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..._checks import check_nonnegative, check_positive, check_range, is_concrete, record
 from ..._checks import as_float_array as _arr
+from ..._checks import check_nonnegative, check_positive, check_range, is_concrete, record
 from ...commands import AbstractRunningSpeed
-from ..base import AbstractModel, integrand, observable
-
+from ..base import AbstractModel, observable
 
 
 def _pair(x):
@@ -186,11 +185,13 @@ class ModalSystem(eqx.Module):
         e0, e1 = self.e
         W0, W1 = self.Omega
         d = e1 * s1 - e0 * s0
-        q = jnp.stack([
-            e0 * W0**2 * s0,
-            e1 * W1**2 * s1,
-            -2.0 * self.v * (e1 * W1 * jnp.cos(th1) - e0 * W0 * jnp.cos(th0)),
-        ])
+        q = jnp.stack(
+            [
+                e0 * W0**2 * s0,
+                e1 * W1**2 * s1,
+                -2.0 * self.v * (e1 * W1 * jnp.cos(th1) - e0 * W0 * jnp.cos(th0)),
+            ]
+        )
         Sz = self.S @ z
         gen = self.P @ q - 0.5 * self.v_l**2 * (z @ Sz + d**2) * Sz  # <Phi_j, f + N>
         zr, zi = z[:n], z[n:]
@@ -277,7 +278,6 @@ class NonlinearBelt(AbstractModel):
     sensor_pulley: str = eqx.field(static=True, default="idle")
     travel: str = eqx.field(static=True, default="drive_to_idle")
 
-
     def __check_init__(self):
         o = "NonlinearBelt"
         if not isinstance(self.n_modes, (int, np.integer)) or isinstance(self.n_modes, bool) or self.n_modes < 1:
@@ -293,8 +293,10 @@ class NonlinearBelt(AbstractModel):
         check_nonnegative("runout", self.runout, "m", o)
         check_range("phase", self.phase, owner=o, unit="rad")
         if jnp.ndim(self.damping) > 1:
-            raise ValueError(f"{o}: parameter `damping` must be a scalar or a 1-D array of per-mode ratios; "
-                             f"got shape {jnp.shape(self.damping)}")
+            raise ValueError(
+                f"{o}: parameter `damping` must be a scalar or a 1-D array of per-mode ratios; "
+                f"got shape {jnp.shape(self.damping)}"
+            )
         check_range("damping", self.damping, 0.0, 1.0, hi_open=True, owner=o)
         if is_concrete(self.runout) and is_concrete(self.span):
             if np.any(np.asarray(self.runout) >= 0.1 * np.asarray(self.span)):
@@ -303,7 +305,10 @@ class NonlinearBelt(AbstractModel):
                     f"{0.1 * float(self.span):g} m); got {np.asarray(self.runout).tolist()}"
                 )
         else:  # traced: recorded, attached to the results by `simulate` (see `jaxbelt._guard`)
-            record(jnp.all(self.runout < 0.1 * self.span), f"{o}: parameter `runout` must be small against the span (< 0.1 span)")
+            record(
+                jnp.all(self.runout < 0.1 * self.span),
+                f"{o}: parameter `runout` must be small against the span (< 0.1 span)",
+            )
 
     input_types: ClassVar[tuple[type, ...]] = (AbstractRunningSpeed,)
 
@@ -318,9 +323,11 @@ class NonlinearBelt(AbstractModel):
         Traced values (jit/vmap/grad) are recorded as a run-time check (see `jaxbelt._guard`)."""
         if not (is_concrete(speed) and is_concrete(self.wave_speed)):
             s = jnp.asarray(speed, dtype=float)
-            record(jnp.all(jnp.isfinite(s) & (s >= 0) & (s < self.wave_speed)),
-                   "NonlinearBelt: parameter `speed` (running speed) must lie in [0, wave_speed) m/s "
-                   "(sub-critical travelling string)")
+            record(
+                jnp.all(jnp.isfinite(s) & (s >= 0) & (s < self.wave_speed)),
+                "NonlinearBelt: parameter `speed` (running speed) must lie in [0, wave_speed) m/s "
+                "(sub-critical travelling string)",
+            )
         else:
             s = np.atleast_1d(np.asarray(speed, dtype=float))
             vt = float(np.max(np.asarray(self.wave_speed)))
@@ -384,7 +391,9 @@ class NonlinearBelt(AbstractModel):
         """The dimensionless Galerkin system at running speed `speed` [m/s]."""
         self.check_speed(speed)
         v = self.dimensionless_speed(speed)
-        v = eqx.error_if(v, (v < 0) | (v >= 1), "NonlinearBelt: running speed must be sub-critical, 0 <= V < wave_speed")
+        v = eqx.error_if(
+            v, (v < 0) | (v >= 1), "NonlinearBelt: running speed must be sub-critical, 0 <= V < wave_speed"
+        )
         return self._modal_v(v)
 
     def _modal_v(self, v) -> ModalSystem:
@@ -402,8 +411,16 @@ class NonlinearBelt(AbstractModel):
         radii, runout, phase = self.layout()
         Omega = v * self.span / radii
         return ModalSystem(
-            v=v, omega=omega, mu=mu, S=S, P=P, Omega=Omega, e=runout / self.span,
-            phase=phase, damping=self.mode_damping(), v_l=self.v_l,
+            v=v,
+            omega=omega,
+            mu=mu,
+            S=S,
+            P=P,
+            Omega=Omega,
+            e=runout / self.span,
+            phase=phase,
+            damping=self.mode_damping(),
+            v_l=self.v_l,
         )
 
     # --- model protocol (physical time) ---------------------------------------------------
@@ -420,9 +437,16 @@ class NonlinearBelt(AbstractModel):
         """The running speed must be sub-critical, $0 \\le V < v_t$: a constant speed, both ends of a
         `SpeedRamp` (so every speed between), another profile at t = 0 (and the `w_sensor` observable
         checks it at each output time)."""
-        speeds = jnp.stack([inp.v_start, inp.v_end]) if isinstance(inp, SpeedRamp) else jnp.atleast_1d(inp.speed_at(0.0))
-        return [(jnp.all(self._subcritical(speeds)), "NonlinearBelt: parameter `speed` (running speed) must lie in [0, wave_speed) m/s "
-                     "(sub-critical travelling string)")]
+        speeds = (
+            jnp.stack([inp.v_start, inp.v_end]) if isinstance(inp, SpeedRamp) else jnp.atleast_1d(inp.speed_at(0.0))
+        )
+        return [
+            (
+                jnp.all(self._subcritical(speeds)),
+                "NonlinearBelt: parameter `speed` (running speed) must lie in [0, wave_speed) m/s "
+                "(sub-critical travelling string)",
+            )
+        ]
 
     def vector_field(self, t, y, inp):
         """$dz/dt$ [1/s]. The speed may vary (`SpeedRamp`): the modes follow the current speed

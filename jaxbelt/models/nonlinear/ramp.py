@@ -41,8 +41,17 @@ def ramp_initial_state(belt: NonlinearBelt, speed, n_harmonics: int = 5):
     return hb.coefficients @ _basis(n_harmonics, jnp.zeros(1))[:, 0]
 
 
-def speed_ramp(belt: NonlinearBelt, v_start, v_end, duration, *, hold: float = 0.0, samples_per_period: int = 24,
-               rtol: float = 1e-8, z0=None) -> RampRecord:
+def speed_ramp(
+    belt: NonlinearBelt,
+    v_start,
+    v_end,
+    duration,
+    *,
+    hold: float = 0.0,
+    samples_per_period: int = 24,
+    rtol: float = 1e-8,
+    z0=None,
+) -> RampRecord:
     """Displacement at the sensor while the belt speed ramps linearly from `v_start` to `v_end`
     [m/s] in `duration` [s] (Moon & Wickert (1997), Fig. 3), then held at `v_end` for `hold` [s].
     Starts on the steady response at `v_start` (or at modal state `z0`); sampled
@@ -63,8 +72,9 @@ def speed_ramp(belt: NonlinearBelt, v_start, v_end, duration, *, hold: float = 0
     atol = 1e-9 * float((belt.runout[0] + belt.runout[1]) / belt.span)
     # the ramp is a scene like any other: one protocol, the same guards and failure policy
     scene = Scene(belt, ramp, ts=ts, y0=jnp.asarray(z0, float), observe=("w_sensor",))
-    sol = simulate(scene, "ode", solver=diffrax.Tsit5(), rtol=jnp.asarray(rtol), atol=jnp.asarray(atol),
-                   max_steps=_RAMP_MAX_STEPS)
+    sol = simulate(
+        scene, "ode", solver=diffrax.Tsit5(), rtol=jnp.asarray(rtol), atol=jnp.asarray(atol), max_steps=_RAMP_MAX_STEPS
+    )
     return RampRecord(t=ts, speed=ramp.speed_at(ts), w=sol.outputs["w_sensor"], z=sol.ys)
 
 

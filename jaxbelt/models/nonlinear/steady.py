@@ -92,9 +92,16 @@ def _solve_period(sys: ModalSystem, z, tau0, T, theta00, n_save: int, rtol, atol
     ts = jnp.minimum(ts, tau0 + T).at[-1].set(tau0 + T)  # rounding must not put a save time past t1
     term = diffrax.ODETerm(lambda tau, zz, args: sys.rhs(tau, zz, theta00))
     sol = diffrax.diffeqsolve(
-        term, _SOLVER, t0=tau0, t1=tau0 + T, dt0=T / n_save, y0=z,
-        saveat=diffrax.SaveAt(ts=ts), stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
-        max_steps=16 * n_save, throw=False,
+        term,
+        _SOLVER,
+        t0=tau0,
+        t1=tau0 + T,
+        dt0=T / n_save,
+        y0=z,
+        saveat=diffrax.SaveAt(ts=ts),
+        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
+        max_steps=16 * n_save,
+        throw=False,
     )
     ok = sol.result == diffrax.RESULTS.successful
     return ts, jnp.where(ok, sol.ys, jnp.nan)
@@ -137,8 +144,19 @@ def _chunk(sys: ModalSystem, xm, phi_m, z, tau0, theta00, window, T, n_steps):
     return zs[-1], tau0 + T, (ws[-2], ws[-1]), mx - mn, amp
 
 
-def _steady_core(belt: NonlinearBelt, sys: ModalSystem, z0, theta00, xm, rtol, atol_rel,
-                 min_periods, max_periods, min_steps, periods_per_chunk):
+def _steady_core(
+    belt: NonlinearBelt,
+    sys: ModalSystem,
+    z0,
+    theta00,
+    xm,
+    rtol,
+    atol_rel,
+    min_periods,
+    max_periods,
+    min_steps,
+    periods_per_chunk,
+):
     n = belt.n_modes
     phi_m = _point_shape(sys, xm, n)
     T, n_steps = _steps_per_period(sys, min_steps, periods_per_chunk)
@@ -159,14 +177,24 @@ def _steady_core(belt: NonlinearBelt, sys: ModalSystem, z0, theta00, xm, rtol, a
         bad = ~jnp.all(jnp.isfinite(z))
         return z, tau, window, k + 1, pp, d, d1, amp, ok | bad
 
-    init = (z0, jnp.asarray(0.0), (w0, w0), jnp.asarray(0), jnp.asarray(jnp.inf), jnp.asarray(jnp.inf),
-            jnp.asarray(jnp.inf), jnp.zeros((n,)), jnp.asarray(False))
+    init = (
+        z0,
+        jnp.asarray(0.0),
+        (w0, w0),
+        jnp.asarray(0),
+        jnp.asarray(jnp.inf),
+        jnp.asarray(jnp.inf),
+        jnp.asarray(jnp.inf),
+        jnp.zeros((n,)),
+        jnp.asarray(False),
+    )
     z, tau, window, k, pp, d1, d2, amp, done = jax.lax.while_loop(cond, body, init)
     finite = jnp.all(jnp.isfinite(z)) & jnp.isfinite(pp)
     converged = done & finite & (jnp.maximum(d1, d2) <= (rtol * pp + atol) * (1.0 - rho))
     theta = theta00 + sys.Omega[0] * tau
-    return SteadyState(pp=pp * belt.span, amplitude=amp, z=z, theta=theta, periods=k * periods_per_chunk,
-                       converged=converged)
+    return SteadyState(
+        pp=pp * belt.span, amplitude=amp, z=z, theta=theta, periods=k * periods_per_chunk, converged=converged
+    )
 
 
 def _project(belt: NonlinearBelt, v_old, v_new, z):
@@ -211,7 +239,9 @@ def _z0(belt, z0):
         return jnp.zeros((2 * belt.n_modes,))
     z0 = jnp.asarray(z0, dtype=float)
     if z0.shape[-1] != 2 * belt.n_modes:
-        raise ValueError(f"initial modal state must have {2 * belt.n_modes} entries (zeta_r, zeta_i); got shape {z0.shape}")
+        raise ValueError(
+            f"initial modal state must have {2 * belt.n_modes} entries (zeta_r, zeta_i); got shape {z0.shape}"
+        )
     return z0
 
 
@@ -221,9 +251,20 @@ def _steady_jit(belt, speed, z0, theta0, xm, rtol, atol, *, min_periods, max_per
     return _steady_core(belt, sys, z0, theta0, xm, rtol, atol, min_periods, max_periods, min_steps, periods_per_chunk)
 
 
-def nonlinear_steady_state(belt: NonlinearBelt, speed, z0=None, theta0=0.0, *, at=0.01, rtol=1e-4, atol=1e-7,
-                 min_periods: int = 4, max_periods: int = 3000, steps_per_period: int = 64,
-                 periods_per_chunk: int = 1) -> SteadyState:
+def nonlinear_steady_state(
+    belt: NonlinearBelt,
+    speed,
+    z0=None,
+    theta0=0.0,
+    *,
+    at=0.01,
+    rtol=1e-4,
+    atol=1e-7,
+    min_periods: int = 4,
+    max_periods: int = 3000,
+    steps_per_period: int = 64,
+    periods_per_chunk: int = 1,
+) -> SteadyState:
     """Steady state at running speed `speed` [m/s] from modal state `z0` (default: rest).
 
     `at`: measurement point [m] from the driven pulley (x = 0). `rtol`/`atol`: convergence
@@ -231,10 +272,19 @@ def nonlinear_steady_state(belt: NonlinearBelt, speed, z0=None, theta0=0.0, *, a
     Does not raise when not converged: check `.converged` (see `speed_sweep` for raising).
     """
     _check_common(belt, speed, at)
-    return _steady_jit(belt, jnp.asarray(speed, dtype=float), _z0(belt, z0), jnp.asarray(theta0, dtype=float),
-                       belt.sensor_x(at), jnp.asarray(rtol, dtype=float),
-                       jnp.asarray(atol, dtype=float), min_periods=min_periods, max_periods=max_periods,
-                       min_steps=steps_per_period, periods_per_chunk=periods_per_chunk)
+    return _steady_jit(
+        belt,
+        jnp.asarray(speed, dtype=float),
+        _z0(belt, z0),
+        jnp.asarray(theta0, dtype=float),
+        belt.sensor_x(at),
+        jnp.asarray(rtol, dtype=float),
+        jnp.asarray(atol, dtype=float),
+        min_periods=min_periods,
+        max_periods=max_periods,
+        min_steps=steps_per_period,
+        periods_per_chunk=periods_per_chunk,
+    )
 
 
 def _sweep_core(belt, speeds, z0, theta0, xm, rtol, atol, min_periods, max_periods, min_steps, periods_per_chunk):
@@ -256,9 +306,20 @@ def _sweep_jit(belt, speeds, z0, theta0, xm, rtol, atol, *, min_periods, max_per
     return _sweep_core(belt, speeds, z0, theta0, xm, rtol, atol, min_periods, max_periods, min_steps, periods_per_chunk)
 
 
-def nonlinear_sweep(belt: NonlinearBelt, speeds, z0=None, theta0=0.0, *, at=0.01, rtol=1e-4, atol=1e-7,
-          min_periods: int = 4, max_periods: int = 3000, steps_per_period: int = 64,
-          periods_per_chunk: int = 1) -> SweepResult:
+def nonlinear_sweep(
+    belt: NonlinearBelt,
+    speeds,
+    z0=None,
+    theta0=0.0,
+    *,
+    at=0.01,
+    rtol=1e-4,
+    atol=1e-7,
+    min_periods: int = 4,
+    max_periods: int = 3000,
+    steps_per_period: int = 64,
+    periods_per_chunk: int = 1,
+) -> SweepResult:
     """Quasi-static sweep over `speeds` [m/s] (in the given order), each speed started from the
     previous speed's final state (the first from `z0`, default rest). Jit-compiled; `vmap` it
     over belts (damping, v_l, ...) or initial states for many sweeps at once. Does not raise on
@@ -267,10 +328,19 @@ def nonlinear_sweep(belt: NonlinearBelt, speeds, z0=None, theta0=0.0, *, at=0.01
     if speeds.ndim != 1 or speeds.shape[0] < 1:
         raise ValueError(f"`speeds` must be a 1-D array of running speeds [m/s]; got shape {speeds.shape}")
     _check_common(belt, speeds, at)
-    return _sweep_jit(belt, speeds, _z0(belt, z0), jnp.asarray(theta0, dtype=float),
-                      belt.sensor_x(at), jnp.asarray(rtol, dtype=float),
-                      jnp.asarray(atol, dtype=float), min_periods=min_periods, max_periods=max_periods,
-                      min_steps=steps_per_period, periods_per_chunk=periods_per_chunk)
+    return _sweep_jit(
+        belt,
+        speeds,
+        _z0(belt, z0),
+        jnp.asarray(theta0, dtype=float),
+        belt.sensor_x(at),
+        jnp.asarray(rtol, dtype=float),
+        jnp.asarray(atol, dtype=float),
+        min_periods=min_periods,
+        max_periods=max_periods,
+        min_steps=steps_per_period,
+        periods_per_chunk=periods_per_chunk,
+    )
 
 
 def check_converged(result: SweepResult | SteadyState, speeds=None, max_periods=None):
@@ -290,38 +360,84 @@ def check_converged(result: SweepResult | SteadyState, speeds=None, max_periods=
     )
 
 
-def speed_sweep(belt: NonlinearBelt, speeds, z0=None, *, at=0.01, rtol=1e-4, atol=1e-7,
-                min_periods: int = 4, max_periods: int = 3000, steps_per_period: int = 64,
-                periods_per_chunk: int = 1, throw: bool = True):
+def speed_sweep(
+    belt: NonlinearBelt,
+    speeds,
+    z0=None,
+    *,
+    at=0.01,
+    rtol=1e-4,
+    atol=1e-7,
+    min_periods: int = 4,
+    max_periods: int = 3000,
+    steps_per_period: int = 64,
+    periods_per_chunk: int = 1,
+    throw: bool = True,
+):
     """Peak-to-peak displacement [m] at `at` (default 1 cm from the driven pulley) per speed of a
     quasi-static sweep over `speeds` [m/s] in the given order (`speeds[::-1]` sweeps down).
 
     Raises `SteadyStateError` naming the speeds where the steady state was not reached
     (`throw=False` returns the amplitudes anyway; under `jit`/`vmap` an `eqx.error_if` fires).
     """
-    res = nonlinear_sweep(belt, speeds, z0, at=at, rtol=rtol, atol=atol, min_periods=min_periods,
-                max_periods=max_periods, steps_per_period=steps_per_period, periods_per_chunk=periods_per_chunk)
+    res = nonlinear_sweep(
+        belt,
+        speeds,
+        z0,
+        at=at,
+        rtol=rtol,
+        atol=atol,
+        min_periods=min_periods,
+        max_periods=max_periods,
+        steps_per_period=steps_per_period,
+        periods_per_chunk=periods_per_chunk,
+    )
     pp = res.pp
     if throw:
         if is_concrete(res.converged):
             check_converged(res, max_periods=max_periods)
         else:
-            pp = eqx.error_if(pp, ~jnp.all(res.converged),
-                              "speed_sweep: no steady state reached at some speed; call jaxbelt.nonlinear_sweep to see which")
+            pp = eqx.error_if(
+                pp,
+                ~jnp.all(res.converged),
+                "speed_sweep: no steady state reached at some speed; call jaxbelt.nonlinear_sweep to see which",
+            )
     return pp
 
 
-def nonlinear_basins(belt: NonlinearBelt, speed, z0s, *, at=0.01, rtol=1e-4, atol=1e-7, min_periods: int = 4,
-           max_periods: int = 3000, steps_per_period: int = 64) -> SteadyState:
+def nonlinear_basins(
+    belt: NonlinearBelt,
+    speed,
+    z0s,
+    *,
+    at=0.01,
+    rtol=1e-4,
+    atol=1e-7,
+    min_periods: int = 4,
+    max_periods: int = 3000,
+    steps_per_period: int = 64,
+) -> SteadyState:
     """Steady states at one speed reached from each initial modal state in `z0s` (shape (K, 2N)),
     computed with `vmap` (Fig. 6: in the hysteresis band, two stable branches)."""
     z0s = jnp.atleast_2d(jnp.asarray(z0s, dtype=float))
     _z0(belt, z0s)
     _check_common(belt, speed, at)
-    f = lambda z: _steady_jit(belt, jnp.asarray(speed, dtype=float), z, jnp.asarray(0.0),  # noqa: E731
-                              belt.sensor_x(at), jnp.asarray(rtol, dtype=float),
-                              jnp.asarray(atol, dtype=float), min_periods=min_periods, max_periods=max_periods,
-                              min_steps=steps_per_period, periods_per_chunk=1)
+
+    def f(z):
+        return _steady_jit(
+            belt,
+            jnp.asarray(speed, dtype=float),
+            z,
+            jnp.asarray(0.0),
+            belt.sensor_x(at),
+            jnp.asarray(rtol, dtype=float),
+            jnp.asarray(atol, dtype=float),
+            min_periods=min_periods,
+            max_periods=max_periods,
+            min_steps=steps_per_period,
+            periods_per_chunk=1,
+        )
+
     return jax.vmap(f)(z0s)
 
 
@@ -340,6 +456,7 @@ def nonlinear_trajectory(belt: NonlinearBelt, speed, z0=None, periods: int = 200
     for phase-plane plots ($\\zeta^R_1$ against $\\zeta^I_1$, Fig. 6). diffrax (Tsit5, tight
     tolerances), saved `steps_per_period` times per forcing period."""
     _check_common(belt, speed, None)
-    ts, zs, _ = _trajectory_jit(belt, jnp.asarray(speed, dtype=float), _z0(belt, z0), periods=periods,
-                                steps_per_period=steps_per_period)
+    ts, zs, _ = _trajectory_jit(
+        belt, jnp.asarray(speed, dtype=float), _z0(belt, z0), periods=periods, steps_per_period=steps_per_period
+    )
     return jnp.concatenate([jnp.zeros((1,)), ts]), zs
