@@ -31,6 +31,11 @@ if _typing.TYPE_CHECKING:
     # --- sub-modules -------------------------------------------------------------------------------
     from . import modal as modal
     from . import plots as plots
+    from ._model import AbstractLinearModel as AbstractLinearModel
+    from ._model import AbstractModel as AbstractModel
+    from ._model import integrand as integrand
+    from ._model import observable as observable
+    from ._model import observable_family as observable_family
     from .batch import cpu_devices as cpu_devices
     from .batch import sweep as sweep
 
@@ -52,14 +57,13 @@ if _typing.TYPE_CHECKING:
     # --- parameter identification (weighted least squares, optimistix) -------------------------------
     from .identification import IdentifyResult as IdentifyResult
     from .identification import identify as identify
-    from .models import AbstractLinearModel as AbstractLinearModel
-    from .models import AbstractModel as AbstractModel
 
     # --- start-up of a belt drive (Incerti, 2014) ---------------------------------------------------------
     from .models import BeltChain as BeltChain
 
     # --- command shaping of a belt-driven platform (Incerti, pseudo-polynomial commands) --------------------------------------
     from .models import BeltPlatform as BeltPlatform
+    from .models import ModalAxis as ModalAxis
 
     # --- belt spans: contact, moving string, crossing diagrams (belt-vibration report; Moon & Wickert, 1997) --------------------
     from .models import BeltPulleyContact as BeltPulleyContact
@@ -71,15 +75,12 @@ if _typing.TYPE_CHECKING:
     from .models import crossing_diagram as crossing_diagram
     from .models import crossing_speeds as crossing_speeds
     from .models import exciting_speeds as exciting_speeds
-    from .models import integrand as integrand
     from .models import linear_runout_response as linear_runout_response
-    from .models import observable as observable
     from .models import runout_phasors as runout_phasors
     from .models import simulate_runout_response as simulate_runout_response
 
     # --- four-bar linkage + PID-controlled DC motor (Incerti, 2012) -------------------------------------
     from .models.fourbar import FourBarDrive as FourBarDrive
-    from .models.fourbar import simulate_fig4 as simulate_fig4
     from .models.motor import PID as PID
     from .models.nonlinear import MEASUREMENTS as MEASUREMENTS
 
@@ -105,8 +106,6 @@ if _typing.TYPE_CHECKING:
     from .models.nonlinear import response_curve as response_curve
     from .models.nonlinear import speed_ramp as speed_ramp
     from .models.nonlinear import speed_sweep as speed_sweep
-    from .models.platform import platform_response as platform_response
-    from .models.startup import startup_curves as startup_curves
     from .objectives.fluctuation import fluctuation_index as fluctuation_index
     from .objectives.fluctuation import fluctuation_objective as fluctuation_objective
     from .objectives.residual import residual_energy as residual_energy
@@ -119,6 +118,9 @@ if _typing.TYPE_CHECKING:
     from .optimise.command import tolerance_band as tolerance_band
     from .optimise.pid import PIDTuneResult as PIDTuneResult
     from .optimise.pid import tune_pid as tune_pid
+    from .runs import platform_response as platform_response
+    from .runs import simulate_fig4 as simulate_fig4
+    from .runs import startup_curves as startup_curves
     from .scene import Scene as Scene
     from .scene import TracedGridWarning as TracedGridWarning
     from .solution import Solution as Solution

@@ -196,8 +196,8 @@ def batched_exponential_scene(scene):
     (B, N); `success` (B,) is False where a trajectory is not finite. Anything else returns None
     (the caller solves the scene as usual).
     """
+    from ._model import AbstractLinearModel
     from .commands import ExponentialVoltage
-    from .models.base import AbstractLinearModel
     from .solution import Solution
 
     model, inp = scene.model, scene.input

@@ -53,7 +53,7 @@ class Scene(eqx.Module):
       (no dense buffer); `t0` then defaults to 0.
     - `observe`: names of outputs to compute besides the state (e.g. `("current",
       "electric_power", "alpha2")`, or integral outputs such as `"electric_energy"`; see
-      `type(model).output_names()` and `integral_names()`). Nothing that is not named is computed.
+      `model.available_outputs()`). Nothing that is not named is computed.
     - `y0`: initial state (default: the model's rest state), shape `(model.n_states,)`.
     - `state`: whether the full state history `ys` is returned (set `False` to get only
       the observed outputs).
@@ -97,8 +97,8 @@ class Scene(eqx.Module):
             if not isinstance(name, str):
                 raise TypeError(f"Scene: `observe` holds output names (str); got {name!r}")
         if observe:
-            known = tuple(model.state_names) + type(model).output_names() + type(model).integral_names()
-            unknown = [n for n in observe if n not in known and not _dynamic_output(model, n)]
+            known = model.available_outputs()
+            unknown = [n for n in observe if n not in known]
             if unknown:
                 raise ValueError(f"Scene: {type(model).__name__} has no output {unknown[0]!r}; available: {known}")
         self.state = bool(state)
@@ -215,9 +215,3 @@ class Scene(eqx.Module):
         if self.y0 is not None:
             checks.append((jnp.all(jnp.isfinite(self.y0)), "Scene: `y0` must be finite"))
         return checks
-
-
-def _dynamic_output(model, name: str) -> bool:
-    """Outputs a model resolves by pattern (e.g. `alpha3` of a longer belt chain)."""
-    accepts = getattr(model, "accepts_output", None)
-    return bool(accepts and accepts(name))

@@ -42,10 +42,11 @@ from ._guard import (
     traced_checks,
     validated_inputs,
 )
+from ._model import AbstractLinearModel
+from ._params import declared
 from .commands import AbstractExponentialVoltage
 from .fast import batched_exponential_scene
 from .modal import expm_solve, modal_solve
-from .models.base import AbstractLinearModel
 from .scene import Scene
 from .solution import Solution, SolveError
 
@@ -540,12 +541,15 @@ def _simulate_concrete(scene, method, solver, rtol, atol, dt0, dt, max_steps, pr
 def _check_scalar_fields(obj) -> None:
     """Parameters are scalars inside `simulate` (a batch is a `jax.vmap`/`jb.sweep` over them).
 
-    Fields a class declares in `array_fields` (e.g. the exponents of a `PseudoPolynomial`) are
-    exempt; nested modules are checked too."""
+    Fields a class declares in `array_fields` (e.g. the exponents of a `PseudoPolynomial`), and
+    parameters declared with a shape other than a scalar (`param(shape=None)`, e.g. the frequencies
+    of a `ModalAxis`), are exempt; nested modules are checked too."""
     if all(jnp.ndim(leaf) == 0 for leaf in jax.tree_util.tree_leaves(obj)):
         return
     for m in _modules(obj):
-        allowed = getattr(type(m), "array_fields", ())
+        allowed = set(getattr(type(m), "array_fields", ())) | {
+            name for name, (p, _) in declared(type(m)).items() if p.shape != ()
+        }
         for f in dataclasses.fields(m):
             v = getattr(m, f.name, None)
             if f.name in allowed or not hasattr(v, "shape") or isinstance(v, eqx.Module):

@@ -128,7 +128,7 @@ def test_eager_programs_hold_no_host_callback(tmp_path):
         "import jax, jax.numpy as jnp, jaxbelt as jb; "
         f"jb.enable_compilation_cache({str(tmp_path / 'xla')!r}); "
         "jax.config.update('jax_explain_cache_misses', True); "
-        "jb.models.fourbar.simulate_fig4(jb.FourBarDrive(), n=201); "
+        "jb.simulate_fig4(jb.FourBarDrive(), n=201); "
         "plat, cmd = jb.BeltPlatform(), jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0])); "
         "jb.residual_energy(plat, cmd); jb.optimise_command(plat, cmd, max_steps=2, progress=False); "
         "jb.crossing_speeds(jb.RunoutRig(), n_modes=2); jb.MovingString().galerkin_frequencies(20.0, 8, 3)"

@@ -99,12 +99,12 @@ def test_plot_modules_import(scene):
     importlib.import_module(f"jaxbelt.plots.{scene}")
 
 
-def test_computations_live_next_to_their_models():
+def test_the_papers_runs_live_above_simulate_not_in_the_models():
     import jaxbelt as jb
-    from jaxbelt.models import fourbar, platform, startup
+    from jaxbelt import runs
 
-    assert jb.startup_curves is startup.startup_curves
-    assert jb.platform_response is platform.platform_response
-    assert jb.simulate_fig4 is fourbar.simulate_fig4
+    assert jb.startup_curves is runs.startup_curves
+    assert jb.platform_response is runs.platform_response
+    assert jb.simulate_fig4 is runs.simulate_fig4
     for name in ("startup_curves", "platform_response", "simulate_fig4", "plot_startup"):
         assert not hasattr(jb.plots, name), f"jaxbelt.plots.{name} should not exist (it computed)"

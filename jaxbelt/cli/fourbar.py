@@ -49,8 +49,8 @@ def run(args) -> int:
 
     matplotlib.use("Agg")
     import jaxbelt as jb
-    from jaxbelt.models.fourbar import FIG4_OUTPUTS, simulate_fig4
     from jaxbelt.plots.fourbar import fourbar_figure, linkage_strip
+    from jaxbelt.runs import FIG4_OUTPUTS, simulate_fig4
 
     drive = jb.FourBarDrive()
     pid = jb.PID(kp=args.kp, ki=args.ki, kd=args.kd, omega_ref=args.omega_ref, v_limit=args.v_limit)

@@ -92,10 +92,11 @@ def run(args) -> int:
     import matplotlib.pyplot as plt
 
     from ..commands import PseudoPolynomial
-    from ..models.platform import BeltPlatform, platform_response
+    from ..models.platform import BeltPlatform
     from ..objectives.residual import residual_energy
     from ..optimise.command import optimise_command, optimise_robust, sensitivity_curve, shaped_commands, tolerance_band
     from ..plots.shaping import shaping_figure
+    from ..runs import platform_response
 
     if args.figure == "profiles":
         return _profiles(args)

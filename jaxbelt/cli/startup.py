@@ -38,8 +38,9 @@ def run(args) -> int:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from ..models.startup import BeltStartup, startup_curves
+    from ..models.startup import BeltStartup
     from ..plots.startup import draw_startup
+    from ..runs import startup_curves
 
     model = BeltStartup()
     t = time.perf_counter()

@@ -30,9 +30,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import as_float_array as _arr
-from .._checks import check_fields, check_positive, record
+from .._checks import check_fields, record
+from .._model import AbstractModel, integrand, observable
 from ..commands import AbstractVoltageSource, MotorState
-from .base import AbstractModel, integrand, observable
 
 #: The first, assumed set of the values lost with Table I (not from the paper); see the module docstring.
 ASSUMED_PARAMETERS = {
@@ -161,8 +161,19 @@ class FourBarDrive(AbstractModel):
     alpha0: jnp.ndarray = eqx.field(converter=_arr, default=0.0)
     assembly: int = eqx.field(static=True, default=1)
 
-    state_names: ClassVar[tuple[str, ...]] = ("alpha", "alpha_dot", "current")
     input_types: ClassVar[tuple[type, ...]] = (AbstractVoltageSource,)
+
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return ("alpha", "alpha_dot", "current")
+
+    def input_checks(self, inp) -> list:
+        return []
+
+    def default_solver(self):
+        import diffrax
+
+        return diffrax.Tsit5()
 
     @classmethod
     def assumed_table(cls, **kw) -> FourBarDrive:
@@ -457,30 +468,3 @@ class FourBarDrive(AbstractModel):
         """Bearing friction $(T_0 + \\lambda\\dot\\varphi)\\dot\\varphi$ [W] (eq. 6)."""
         w = self.z * y[1]
         return (self.T0 + self.lam * w) * w
-
-
-#: The outputs of Incerti (2012), Fig. 4 (besides the state): motor speed, voltage, mechanical and electric power.
-FIG4_OUTPUTS = ("motor_speed", "voltage", "mechanical_power", "electric_power")
-
-
-def simulate_fig4(drive=None, pid=None, *, voltage: float = 25.0, t1: float = 1.0, n: int = 2001, **kw):
-    """The two runs of Incerti (2012), Fig. 4: open loop at constant `voltage` [V] and closed loop with `pid`.
-
-    Both start at rest and are saved on `n` equally spaced times over $[0, t_1]$ [s] with the
-    outputs `FIG4_OUTPUTS` observed; `kw` go to `simulate`. Defaults: `FourBarDrive()` (crank
-    length and resistance identified, the other lost Table I values assumed) and the paper's PID
-    with ramped proportional gain (eq. 16: $K_p$ = 80, $K_i$ = 32, $K_d$ = 0.015, $\\omega_0$ = 30 rad/s).
-    Returns `(open_loop, closed_loop)` `Solution`s.
-    """
-    from ..commands import ConstantVoltage
-    from ..scene import Scene
-    from ..solve import simulate
-    from .motor import PID
-
-    check_positive("t1", t1, "s", "simulate_fig4")
-    drive = FourBarDrive() if drive is None else drive
-    pid = PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0) if pid is None else pid
-    ts = jnp.linspace(0.0, float(t1), int(n))
-    open_loop = simulate(Scene(drive, ConstantVoltage(voltage), ts=ts, observe=FIG4_OUTPUTS), **kw)
-    closed_loop = simulate(Scene(drive, pid, ts=ts, observe=FIG4_OUTPUTS), **kw)
-    return open_loop, closed_loop

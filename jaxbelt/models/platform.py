@@ -8,8 +8,6 @@ $J\\ddot\\vartheta + 2cR^2(\\dot\\vartheta - \\lambda\\dot\\varphi_m) + 2kR^2(\\
 $\\lambda = z r / R$.
 """
 
-from __future__ import annotations
-
 from typing import ClassVar
 
 import equinox as eqx
@@ -17,12 +15,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import as_float_array as _arr
-from .._checks import check_nonnegative, check_positive, is_concrete, record
+from .._checks import check_positive, is_concrete, record
+from .._model import AbstractModel, observable
+from .._params import document, param, recheck
 from ..commands import AbstractMotionCommand
-from .base import AbstractModel, observable
 
 
+@document
 class BeltPlatform(AbstractModel):
     """Rotary platform driven by a position-controlled servomotor through a belt (Incerti, pseudo-polynomial commands).
 
@@ -36,14 +35,7 @@ class BeltPlatform(AbstractModel):
 
     Parameters (SI; defaults are Table III of Incerti (pseudo-polynomial commands)):
 
-    | field | symbol | unit | default |
-    |---|---|---|---|
-    | `J` | platform moment of inertia | kg m² | 6 |
-    | `k` | stiffness of each belt branch | N/m | 9e4 |
-    | `c` | damping constant of each branch | N s/m | 150 |
-    | `r` | radius of the driving pulley (1) | m | 0.060 |
-    | `R` | radius of the platform pulley (2) | m | 0.180 |
-    | `z` | gear ratio of the reducer, $\\varphi = z\\varphi_m$ | – | 0.1 (1:10) |
+    {parameters}
 
     State: `theta` [rad], `omega` [rad/s] (platform). The input is a motion command of the motor
     shaft with `cmd(t)`, `cmd.velocity(t)`, `cmd.acceleration(t)` (e.g. `PseudoPolynomial`).
@@ -52,26 +44,35 @@ class BeltPlatform(AbstractModel):
     and the rigid-body commands `command_angle` $\\lambda\\varphi_m$, `command_velocity`
     $\\lambda\\dot\\varphi_m$, `command_acceleration` $\\lambda\\ddot\\varphi_m$ (Fig. 3, dashed).
     The model must be underdamped ($\\xi < 1$) for the residual energy of eq. (31).
+    `to_axis()` gives the same dynamics as a one-mode `ModalAxis` (command: the motor angle).
     """
 
-    J: jnp.ndarray = eqx.field(converter=_arr, default=6.0)
-    k: jnp.ndarray = eqx.field(converter=_arr, default=9e4)
-    c: jnp.ndarray = eqx.field(converter=_arr, default=150.0)
-    r: jnp.ndarray = eqx.field(converter=_arr, default=0.060)
-    R: jnp.ndarray = eqx.field(converter=_arr, default=0.180)
-    z: jnp.ndarray = eqx.field(converter=_arr, default=0.1)
+    J: jnp.ndarray = param(6.0, unit="kg m²", symbol="$J$", doc="platform moment of inertia", default_note="Table III")
+    k: jnp.ndarray = param(9e4, unit="N/m", symbol="$k$", doc="stiffness of each belt branch")
+    c: jnp.ndarray = param(
+        150.0, unit="N s/m", symbol="$c$", check="nonnegative", doc="damping constant of each branch"
+    )
+    r: jnp.ndarray = param(0.060, unit="m", symbol="$r$", doc="radius of the driving pulley (1)")
+    R: jnp.ndarray = param(0.180, unit="m", symbol="$R$", doc="radius of the platform pulley (2)")
+    z: jnp.ndarray = param(
+        0.1, unit="–", symbol="$z$", doc="gear ratio of the reducer, $\\varphi = z\\varphi_m$ (1:10)"
+    )
 
-    state_names: ClassVar[tuple[str, ...]] = ("theta", "omega")
     input_types: ClassVar[tuple[type, ...]] = (AbstractMotionCommand,)
 
-    def __check_init__(self):
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return ("theta", "omega")
+
+    def initial_state(self, inp):
+        """At rest at the command's start angle (zero)."""
+        return jnp.zeros((2,))
+
+    def input_checks(self, inp) -> list:
+        return []
+
+    def _check_relations(self):
         o = "BeltPlatform"
-        check_positive("J", self.J, "kg m^2", o)
-        check_positive("k", self.k, "N/m", o)
-        check_nonnegative("c", self.c, "N s/m", o)
-        check_positive("r", self.r, "m", o)
-        check_positive("R", self.R, "m", o)
-        check_positive("z", self.z, "", o)
         msg = (
             f"{o}: the platform must be underdamped (damping ratio xi = c_t / (2 J omega_n) < 1); "
             "lower `c` or raise `k`"
@@ -133,7 +134,7 @@ class BeltPlatform(AbstractModel):
             w = jnp.where(jnp.isfinite(w) & (w > 0), w, jnp.nan)
         new = eqx.tree_at(lambda p: p.k, self, self.k * (w / self.omega_n) ** 2)
         if is_concrete(new):  # tree_at skips the construction checks (e.g. an overdamped result)
-            new.__check_init__()
+            recheck(new)
         return new
 
     # --- dynamics -----------------------------------------------------------------------------
@@ -154,6 +155,19 @@ class BeltPlatform(AbstractModel):
         import diffrax
 
         return diffrax.Tsit5()
+
+    def to_axis(self):
+        """The platform as a one-mode `ModalAxis` whose command is the motor angle $\\varphi_m$ [rad]: the deflection
+        $\\alpha$ obeys eq. (4), $\\ddot\\alpha + 2\\xi\\omega_n\\dot\\alpha + \\omega_n^2\\alpha = -\\lambda\\ddot\\varphi_m$,
+        i.e. frequency $\\omega_n/2\\pi$ [Hz], damping ratio $\\xi$ and gain $\\lambda$. Differentiable in the platform's
+        parameters (the axis is built from them, not from host numbers)."""
+        from .axis import ModalAxis
+
+        return ModalAxis(
+            frequencies=(self.omega_n / (2 * jnp.pi))[None],
+            damping_ratios=self.damping_ratio[None],
+            gains=self.lam[None],
+        )
 
     # --- outputs (one time) -------------------------------------------------------------------
     @observable("acceleration")
@@ -187,31 +201,3 @@ class BeltPlatform(AbstractModel):
     @observable("command_acceleration")
     def _out_command_acceleration(self, t, y, inp):
         return self.lam * inp.acceleration(t)
-
-
-#: The time histories returned by `platform_response` besides `t` and `velocity`.
-PLATFORM_OUTPUTS = ("acceleration", "kinetic_energy", "elastic_energy", "command_velocity", "command_acceleration")
-
-
-def platform_response(platform, command, t_end: float | None = None, n: int = 901, *, rtol=1e-10, atol=1e-12):
-    """The platform's motion under `command` over $[0, t_{end}]$ (Incerti, pseudo-polynomial commands, Fig. 3).
-
-    `t_end` [s] defaults to 1.5 × the move time (so the residual vibration shows); `n` equally
-    spaced output times; solved as an ODE at `rtol`, `atol`. Returns a dict of numpy arrays of
-    shape `(n,)`: `t` [s], platform `velocity` [rad/s] and `acceleration` [rad/s²], the rigid-body
-    commands $\\lambda\\dot\\varphi_m$ (`command_velocity` [rad/s]) and $\\lambda\\ddot\\varphi_m$
-    (`command_acceleration` [rad/s²]), `kinetic_energy` and `elastic_energy` [J].
-    """
-    import numpy as np
-
-    from ..scene import Scene
-    from ..solve import simulate
-
-    if t_end is None:
-        t_end = 1.5 * float(command.end_time)
-    check_positive("t_end", t_end, "s", "platform_response")
-    ts = jnp.linspace(0.0, float(t_end), int(n))
-    sol = simulate(Scene(platform, command, ts=ts, observe=PLATFORM_OUTPUTS), method="ode", rtol=rtol, atol=atol)
-    out = {"t": np.asarray(ts), "velocity": np.asarray(sol.omega)}
-    out.update({k: np.asarray(sol[k]) for k in PLATFORM_OUTPUTS})
-    return out

@@ -8,19 +8,18 @@ as the paper's conclusion suggests); `BeltStartup` is the paper's 2-DOF case (n 
 Table I values as defaults.
 """
 
-from __future__ import annotations
-
+import abc
 from typing import ClassVar
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from equinox import AbstractVar
 
-from .._checks import as_float_array as _arr
-from .._checks import check_finite, check_nonnegative, check_positive, is_concrete
+from .._checks import is_concrete
+from .._model import AbstractLinearModel, integrand, observable, observable_family
+from .._params import document, param
 from ..commands import AbstractVoltageCommand
-from .base import AbstractLinearModel, integrand, observable
 
 
 def chain_matrices(jm, inertias, k, c, r_drive, r_driven, z, mu, R, L, km):
@@ -68,33 +67,39 @@ def chain_matrices(jm, inertias, k, c, r_drive, r_driven, z, mu, R, L, km):
     return A, B
 
 
-class _BeltDriveBase(AbstractLinearModel):
+class AbstractBeltDrive(AbstractLinearModel):
     """Shared behaviour of the belt-drive start-up models (linear, voltage driven).
 
-    Subclasses provide the shaft inertias `_inertias()` (n + 1) and the stage radii
-    `_stage_radii()` (driving, driven; n each); the motor, load and belt fields (`jm`, `k`, `c`,
-    `tau_r0`, `mu`, `z`, `R`, `L`, `km`) have the same names in every subclass.
+    Subclasses give the shaft inertias `_inertias()` (n + 1) and the stage radii `_stage_radii()`
+    (driving, driven; n each), and the motor, load and belt parameters declared here.
     """
+
+    jm: AbstractVar[jnp.ndarray]
+    k: AbstractVar[jnp.ndarray]
+    c: AbstractVar[jnp.ndarray]
+    tau_r0: AbstractVar[jnp.ndarray]
+    mu: AbstractVar[jnp.ndarray]
+    z: AbstractVar[jnp.ndarray]
+    R: AbstractVar[jnp.ndarray]
+    L: AbstractVar[jnp.ndarray]
+    km: AbstractVar[jnp.ndarray]
 
     input_types: ClassVar[tuple[type, ...]] = (AbstractVoltageCommand,)
 
-    def _inertias(self):
-        raise NotImplementedError
+    @abc.abstractmethod
+    def _inertias(self) -> jnp.ndarray:
+        """The n + 1 shaft inertias [kg m²] (shaft 0 without the motor)."""
 
-    def _stage_radii(self):
-        raise NotImplementedError
+    @abc.abstractmethod
+    def _stage_radii(self) -> tuple[jnp.ndarray, jnp.ndarray]:
+        """Driving and driven pulley radii [m] of the n stages."""
 
-    def _check_common(self, owner: str):
-        check_positive("jm", self.jm, "kg m^2", owner)
-        check_positive("k", self.k, "N/m", owner)
-        check_nonnegative("c", self.c, "N s/m", owner)
-        check_nonnegative("mu", self.mu, "N m s/rad", owner)
-        # constant part of the load torque tau_r = tau_r0 + mu * omega (Incerti, 2014): any finite value
-        check_finite("tau_r0", self.tau_r0, owner=owner)
-        check_positive("z", self.z, "", owner)
-        check_positive("R", self.R, "ohm", owner)
-        check_positive("L", self.L, "H", owner)
-        check_positive("km", self.km, "N m/A", owner)
+    def initial_state(self, inp):
+        """At rest, no current."""
+        return jnp.zeros((self.n_states,))
+
+    def input_checks(self, inp) -> list:
+        return []
 
     def matrices(self):
         """`(A, B)` of eq. (10)-(11) (generalised to n stages)."""
@@ -123,10 +128,6 @@ class _BeltDriveBase(AbstractLinearModel):
         A, B = self.matrices()
         return A, B[:, 1], B[:, 0] * self.tau_r0
 
-    def vector_field(self, t, y, inp):
-        A, B = self.matrices()
-        return A @ y + B[:, 1] * inp(t) + B[:, 0] * self.tau_r0
-
     def default_solver(self):
         import diffrax
 
@@ -146,24 +147,10 @@ class _BeltDriveBase(AbstractLinearModel):
         nz = mag[mag > 1e-9 * mag.max()]
         return float(nz.max() / nz.min())
 
-    def accepts_output(self, name: str) -> bool:
-        """Accelerations `alpha3`, `alpha4`, ... of longer chains (`alpha1`, `alpha2` are declared)."""
-        return name.startswith("alpha") and name[5:].isdigit() and 1 <= int(name[5:]) <= self.n_shafts
-
-    def output(self, name, t, y, inp):
-        if name not in self.output_names() and self.accepts_output(name):
-            return self._accel(t, y, inp)[int(name[5:]) - 1]
-        return super().output(name, t, y, inp)
-
-    @observable("alpha1")
-    def _out_alpha1(self, t, y, inp):
-        """Angular acceleration of pulley 1 $\\ddot\\vartheta_1$ [rad/s²] (Fig. 3g)."""
-        return self._accel(t, y, inp)[0]
-
-    @observable("alpha2")
-    def _out_alpha2(self, t, y, inp):
-        """Angular acceleration of pulley 2 $\\ddot\\vartheta_2$ [rad/s²] (Fig. 3h)."""
-        return self._accel(t, y, inp)[1]
+    @observable_family("alpha", size="n_shafts")
+    def _out_alpha(self, t, y, inp):
+        """Angular accelerations of the shafts $\\ddot\\vartheta_i$ [rad/s²]: `alpha1`, `alpha2` (Fig. 3g, 3h), ..."""
+        return self._accel(t, y, inp)
 
     # --- derived outputs (one time) ---------------------------------------------------------
     def _accel(self, t, y, inp):
@@ -224,7 +211,37 @@ class _BeltDriveBase(AbstractLinearModel):
         return (self.tau_r0 + self.mu * w) * w
 
 
-class BeltStartup(_BeltDriveBase):
+# The motor, load and belt parameters that both drives declare (written once, here).
+def _jm():
+    return param(4e-4, unit="kg m²", symbol="$J_m$", doc="motor inertia", default_note="Table I")
+
+
+def _tau_r0():
+    return param(0.0, unit="N m", symbol="$\\tau_{r0}$", check="finite", doc="constant load torque")
+
+
+def _mu():
+    return param(5.0, unit="N m s/rad", symbol="$\\mu$", check="nonnegative", doc="viscous load coefficient")
+
+
+def _z():
+    return param(15.0, unit="–", symbol="$z$", doc="gear ratio $\\vartheta_m = z\\vartheta_1$")
+
+
+def _R():
+    return param(0.15, unit="Ω", symbol="$R$", doc="armature resistance")
+
+
+def _L():
+    return param(0.2e-3, unit="H", symbol="$L$", doc="armature inductance")
+
+
+def _km():
+    return param(0.09, unit="N m/A", symbol="$k_m$", doc="torque / back-emf constant")
+
+
+@document
+class BeltStartup(AbstractBeltDrive):
     """2-DOF synchronous belt drive + gear reducer + permanent-magnet DC motor (Incerti, 2014).
 
     Equations of motion (eq. 6-8), with $J_1^* = J_1 + z^2 J_m$:
@@ -239,47 +256,28 @@ class BeltStartup(_BeltDriveBase):
 
     Parameters (SI; defaults are Table I of Incerti (2014)):
 
-    | field | symbol | unit | default |
-    |---|---|---|---|
-    | `jm` | $J_m$ motor inertia | kg m² | 4e-4 |
-    | `j1` | $J_1$ driving pulley inertia | kg m² | 0.018 |
-    | `j2` | $J_2$ driven pulley + load inertia | kg m² | 0.25 |
-    | `k` | belt branch stiffness | N/m | 120e3 |
-    | `c` | belt branch damping | N s/m | 20 |
-    | `r1`, `r2` | pulley radii | m | 0.08, 0.16 |
-    | `tau_r0` | constant load torque | N m | 0 |
-    | `mu` | viscous load coefficient | N m s/rad | 5 |
-    | `z` | gear ratio $\\vartheta_m = z\\vartheta_1$ | – | 15 |
-    | `R` | armature resistance | Ω | 0.15 |
-    | `L` | armature inductance | H | 0.2e-3 |
-    | `km` | torque / back-emf constant | N m/A | 0.09 |
+    {parameters}
 
     State: `theta1, theta2` [rad], `omega1, omega2` [rad/s], `current` [A].
     """
 
-    jm: jnp.ndarray = eqx.field(converter=_arr, default=4e-4)
-    j1: jnp.ndarray = eqx.field(converter=_arr, default=0.018)
-    j2: jnp.ndarray = eqx.field(converter=_arr, default=0.25)
-    k: jnp.ndarray = eqx.field(converter=_arr, default=120e3)
-    c: jnp.ndarray = eqx.field(converter=_arr, default=20.0)
-    r1: jnp.ndarray = eqx.field(converter=_arr, default=0.08)
-    r2: jnp.ndarray = eqx.field(converter=_arr, default=0.16)
-    tau_r0: jnp.ndarray = eqx.field(converter=_arr, default=0.0)
-    mu: jnp.ndarray = eqx.field(converter=_arr, default=5.0)
-    z: jnp.ndarray = eqx.field(converter=_arr, default=15.0)
-    R: jnp.ndarray = eqx.field(converter=_arr, default=0.15)
-    L: jnp.ndarray = eqx.field(converter=_arr, default=0.2e-3)
-    km: jnp.ndarray = eqx.field(converter=_arr, default=0.09)
+    jm: jnp.ndarray = _jm()
+    j1: jnp.ndarray = param(0.018, unit="kg m²", symbol="$J_1$", doc="driving pulley inertia")
+    j2: jnp.ndarray = param(0.25, unit="kg m²", symbol="$J_2$", doc="driven pulley + load inertia")
+    k: jnp.ndarray = param(120e3, unit="N/m", symbol="$k$", doc="stiffness of each belt branch")
+    c: jnp.ndarray = param(20.0, unit="N s/m", symbol="$c$", check="nonnegative", doc="damping of each belt branch")
+    r1: jnp.ndarray = param(0.08, unit="m", symbol="$r_1$", doc="driving pulley radius")
+    r2: jnp.ndarray = param(0.16, unit="m", symbol="$r_2$", doc="driven pulley radius")
+    tau_r0: jnp.ndarray = _tau_r0()
+    mu: jnp.ndarray = _mu()
+    z: jnp.ndarray = _z()
+    R: jnp.ndarray = _R()
+    L: jnp.ndarray = _L()
+    km: jnp.ndarray = _km()
 
-    state_names: ClassVar[tuple[str, ...]] = ("theta1", "theta2", "omega1", "omega2", "current")
-
-    def __check_init__(self):
-        o = "BeltStartup"
-        check_positive("j1", self.j1, "kg m^2", o)
-        check_positive("j2", self.j2, "kg m^2", o)
-        check_positive("r1", self.r1, "m", o)
-        check_positive("r2", self.r2, "m", o)
-        self._check_common(o)
+    @property
+    def state_names(self) -> tuple[str, ...]:
+        return ("theta1", "theta2", "omega1", "omega2", "current")
 
     def _inertias(self):
         return jnp.stack([self.j1, self.j2])
@@ -288,33 +286,37 @@ class BeltStartup(_BeltDriveBase):
         return self.r1[None], self.r2[None]
 
 
-class BeltChain(_BeltDriveBase):
+@document
+class BeltChain(AbstractBeltDrive):
     """n belt stages in series driven by a DC motor (generalisation of Incerti (2014)).
 
     Shafts 0..n; shaft 0 carries the motor through gear ratio `z`. Stage i (i = 0..n-1) joins
     shaft i (driving pulley radius `r_drive[i]`) and shaft i+1 (driven radius `r_driven[i]`) with
-    two branches of stiffness `k[i]` [N/m] and damping `c[i]` [N s/m]. `inertias` [kg m²] has
-    n + 1 entries (pulleys on each shaft); the load $\\tau_{r0} + \\mu\\dot\\vartheta_n$ acts on
-    the last shaft. State: angles (n+1), speeds (n+1), current: 2n + 3 states.
-    `BeltChain.from_startup(BeltStartup())` is the paper's 2-DOF drive.
+    two branches of stiffness `k[i]` and damping `c[i]`. The load
+    $\\tau_{r0} + \\mu\\dot\\vartheta_n$ acts on the last shaft. State: angles (n+1), speeds (n+1),
+    current: 2n + 3 states. `BeltChain.from_startup(BeltStartup())` is the paper's 2-DOF drive.
+
+    {parameters}
     """
 
     array_fields: ClassVar[tuple[str, ...]] = ("inertias", "k", "c", "r_drive", "r_driven")
 
-    inertias: jnp.ndarray = eqx.field(converter=_arr)
-    k: jnp.ndarray = eqx.field(converter=_arr)
-    c: jnp.ndarray = eqx.field(converter=_arr)
-    r_drive: jnp.ndarray = eqx.field(converter=_arr)
-    r_driven: jnp.ndarray = eqx.field(converter=_arr)
-    jm: jnp.ndarray = eqx.field(converter=_arr, default=4e-4)
-    tau_r0: jnp.ndarray = eqx.field(converter=_arr, default=0.0)
-    mu: jnp.ndarray = eqx.field(converter=_arr, default=5.0)
-    z: jnp.ndarray = eqx.field(converter=_arr, default=15.0)
-    R: jnp.ndarray = eqx.field(converter=_arr, default=0.15)
-    L: jnp.ndarray = eqx.field(converter=_arr, default=0.2e-3)
-    km: jnp.ndarray = eqx.field(converter=_arr, default=0.09)
+    inertias: jnp.ndarray = param(unit="kg m²", shape=None, doc="the n + 1 shaft inertias (pulleys on each shaft)")
+    k: jnp.ndarray = param(unit="N/m", shape=None, doc="branch stiffness of each stage, shape (n,)")
+    c: jnp.ndarray = param(
+        unit="N s/m", check="nonnegative", shape=None, doc="branch damping of each stage, shape (n,)"
+    )
+    r_drive: jnp.ndarray = param(unit="m", shape=None, doc="driving pulley radius of each stage, shape (n,)")
+    r_driven: jnp.ndarray = param(unit="m", shape=None, doc="driven pulley radius of each stage, shape (n,)")
+    jm: jnp.ndarray = _jm()
+    tau_r0: jnp.ndarray = _tau_r0()
+    mu: jnp.ndarray = _mu()
+    z: jnp.ndarray = _z()
+    R: jnp.ndarray = _R()
+    L: jnp.ndarray = _L()
+    km: jnp.ndarray = _km()
 
-    def __check_init__(self):
+    def _check_relations(self):
         o = "BeltChain"
         if self.inertias.ndim != 1 or self.inertias.shape[0] < 2:
             raise ValueError(
@@ -326,13 +328,9 @@ class BeltChain(_BeltDriveBase):
                 raise ValueError(
                     f"{o}: `{name}` must have shape ({n},) for {n} stages; got {getattr(self, name).shape}"
                 )
-        check_positive("inertias", self.inertias, "kg m^2", o)
-        check_positive("r_drive", self.r_drive, "m", o)
-        check_positive("r_driven", self.r_driven, "m", o)
-        self._check_common(o)
 
     @classmethod
-    def from_startup(cls, m: BeltStartup) -> BeltChain:
+    def from_startup(cls, m: BeltStartup) -> "BeltChain":
         return cls(
             inertias=jnp.stack([m.j1, m.j2]),
             k=m.k[None],
@@ -349,7 +347,7 @@ class BeltChain(_BeltDriveBase):
         )
 
     @property
-    def state_names(self) -> tuple[str, ...]:  # type: ignore[override]
+    def state_names(self) -> tuple[str, ...]:
         m = self.inertias.shape[0]
         return tuple(f"theta{i + 1}" for i in range(m)) + tuple(f"omega{i + 1}" for i in range(m)) + ("current",)
 
@@ -358,44 +356,3 @@ class BeltChain(_BeltDriveBase):
 
     def _stage_radii(self):
         return self.r_drive, self.r_driven
-
-
-#: The eight time histories of Incerti (2014), Fig. 3, in the paper's panel order (a-h).
-STARTUP_OUTPUTS = (
-    "voltage",
-    "current",
-    "electric_power",
-    "mechanical_power",
-    "omega1",
-    "omega2",
-    "alpha1",
-    "alpha2",
-)
-
-
-def startup_curves(model=None, gammas=(0.02, 0.04, 0.06), v_max=24.0, t_end=0.5, n_points=501, method="auto"):
-    """The eight time histories of Incerti (2014), Fig. 3, for each voltage time constant, as numpy arrays.
-
-    The motor voltage is $V(t) = V_{max}(1 - e^{-t/\\gamma})$ (Incerti, 2014, eq. 30) with
-    `v_max` $V_{max}$ [V] and each $\\gamma$ of `gammas` [s]; the drive starts at rest and is
-    simulated over $[0, t_{end}]$ [s] on `n_points` equally spaced times (one compiled program, run for
-    each $\\gamma$; closed form by default, `method` as in `simulate`).
-
-    Returns `(ts, curves)`: `ts` [s] of shape `(n_points,)` and `curves[name]` of shape
-    `(len(gammas), n_points)` for each name of `STARTUP_OUTPUTS`: voltage [V], current [A],
-    electric and mechanical power [W], pulley speeds [rad/s] and accelerations [rad/s²].
-    Default model: `BeltStartup()` (Incerti, 2014, Table I).
-    """
-    from ..commands import ExponentialVoltage
-    from ..scene import Scene
-    from ..solve import simulate
-
-    model = BeltStartup() if model is None else model
-    ts = np.linspace(0.0, float(t_end), int(n_points))
-    observe = tuple(n for n in STARTUP_OUTPUTS if n not in model.state_names)
-    rows = []
-    for g in np.atleast_1d(np.asarray(gammas, dtype=float)).tolist():
-        sol = simulate(Scene(model, ExponentialVoltage(v_max, g), ts=ts, observe=observe), method=method)
-        sol = jax.device_get(sol)  # the columns are read on the host (no program per column)
-        rows.append([sol[n] for n in STARTUP_OUTPUTS])
-    return ts, {n: np.stack([r[i] for r in rows]) for i, n in enumerate(STARTUP_OUTPUTS)}

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-#: Panel titles of Fig. 3, keyed by the names of `jaxbelt.models.startup.STARTUP_OUTPUTS` (paper order a-h).
+#: Panel titles of Fig. 3, keyed by the names of `jaxbelt.runs.STARTUP_OUTPUTS` (paper order a-h).
 STARTUP_PANELS = (
     ("voltage", "a) motor voltage V [V]"),
     ("current", "b) armature current I [A]"),

@@ -72,8 +72,8 @@ import numpy as np
 
 from ..._checks import as_float_array as _arr
 from ..._checks import check_nonnegative, check_positive, check_range, is_concrete, record
+from ..._model import AbstractModel, observable
 from ...commands import AbstractRunningSpeed
-from ..base import AbstractModel, observable
 
 
 def _pair(x):
@@ -313,7 +313,7 @@ class NonlinearBelt(AbstractModel):
     input_types: ClassVar[tuple[type, ...]] = (AbstractRunningSpeed,)
 
     @property
-    def state_names(self) -> tuple[str, ...]:  # type: ignore[override]
+    def state_names(self) -> tuple[str, ...]:
         n = self.n_modes
         return tuple(f"zeta_r{i + 1}" for i in range(n)) + tuple(f"zeta_i{i + 1}" for i in range(n))
 
@@ -498,6 +498,10 @@ class NonlinearBelt(AbstractModel):
         import diffrax
 
         return diffrax.Tsit5()
+
+    def initial_state(self, inp):
+        """The flat belt at rest (every modal coordinate zero)."""
+        return jnp.zeros((self.n_states,))
 
 
 __all__ = ["NonlinearBelt", "ModalSystem", "RunningSpeed", "SpeedRamp", "mode_shapes", "distance_travelled"]
