@@ -53,6 +53,24 @@ def as_float_array(x):
             _SCALARS[key] = hit
             _HOST[id(hit)] = (hit, float(x))
         return hit
+    if t is tuple and x and all(type(e) is float or type(e) is int for e in x):
+        # a tuple of numbers (a default such as two pulley radii): cached like a number
+        key = (x, tuple(math.copysign(1.0, e) for e in x), dtype)
+        hit = _SCALARS.get(key)
+        if hit is None:
+            host = np.asarray(x, dtype=dtype)
+            with jax.ensure_compile_time_eval():
+                hit = jax.device_put(host)
+            if isinstance(hit, jax.core.Tracer):
+                return hit
+            if len(_SCALARS) >= _SCALARS_MAX:
+                _SCALARS.clear()
+                _HOST.clear()
+            host = host.astype(float)
+            host.flags.writeable = False  # shared by every check that reads it
+            _SCALARS[key] = hit
+            _HOST[id(hit)] = (hit, host)
+        return hit
     if t is np.ndarray and x.dtype.kind in "fiub":
         # converted on the host and transferred: `jnp.asarray` would run a small program per shape
         return jax.device_put(np.asarray(x, dtype=dtype))
@@ -144,7 +162,9 @@ def _enforce(name: str, value, what: str, unit: str, owner: str, ok) -> None:
     else:
         v = None
     if v is not None:
-        if not ok(v, _Scalar):
+        if type(v) is not float:  # the host copy of a cached tuple (`as_float_array`)
+            _check_host(name, v, what, unit, owner, ok)
+        elif not ok(v, _Scalar):
             raise ValueError(f"{_message(name, what, unit, owner)}; got {v}")
         return
     if not is_concrete(value):

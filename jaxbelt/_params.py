@@ -18,6 +18,12 @@ and from that single declaration follow
 
 `shape=()` declares a scalar: a concrete array of another shape is refused by name at construction
 (an array inertia would otherwise broadcast through the equations and fail later, far from its cause).
+`shape=(2,)` declares a fixed shape, `shape=None` any shape (the class checks the relations between
+its arrays' shapes), and `batch=True` a parameter that may also carry one leading batch axis (the time
+constants of `ExponentialVoltage`, solved together by the batched closed form).
+
+A switch (an integer size or a choice among names, a static field) is declared with `option(...)`:
+checked at construction and listed in the same table.
 """
 
 from __future__ import annotations
@@ -27,12 +33,14 @@ import math
 from typing import Any, NamedTuple
 
 import equinox as eqx
+import jax
 import numpy as np
 
-from ._checks import as_float_array, check_fields, host_values, is_concrete
+from ._checks import _HOST, _RULES, _enforce, _message, _Scalar, as_float_array
 
-#: metadata key of a declared parameter
+#: metadata keys of a declared parameter and of a declared option
 _KEY = "jaxbelt_param"
+_OPT = "jaxbelt_option"
 
 #: the marker a class docstring writes where its parameter table goes
 MARKER = "{parameters}"
@@ -51,6 +59,18 @@ class Param(NamedTuple):
     shape: tuple | None  # None: any shape; () a scalar
     symbol: str
     default_note: str
+    batch: bool = False  # one leading batch axis allowed on top of `shape`
+    optional: bool = False  # None allowed (and not checked)
+    valid: str = ""  # the valid values in words, where the class checks them (check="none")
+
+
+class Option(NamedTuple):
+    """What an option declaration says: a static switch (`choices`) or a static integer (`minimum`)."""
+
+    doc: str
+    choices: tuple | None
+    minimum: int | None
+    symbol: str
 
 
 def param(
@@ -64,33 +84,101 @@ def param(
     lo_open: bool = False,
     hi_open: bool = False,
     shape: tuple | None = (),
+    batch: bool = False,
+    optional: bool = False,
+    converter=None,
+    valid: str = "",
     symbol: str = "",
     default_note: str = "",
-):
+) -> Any:
     """A float parameter field: `default` in SI units `unit`, valid values by `check`.
 
     - `check`: `"positive"` (finite, > 0), `"nonnegative"` (finite, >= 0), `"finite"`, `"range"`
-      (finite and within `lo`/`hi`, open or closed ends), or `"none"` (checked by the class itself).
-    - `shape`: `()` for a scalar (default), a tuple for a fixed shape, `None` for any shape.
+      (finite and within `lo`/`hi`, open or closed ends), or `"none"` (checked by the class itself, in its
+      `_check_relations`; `valid` then says the valid values in words for the table).
+    - `shape`: `()` for a scalar (default), a tuple for a fixed shape, `None` for any shape;
+      `batch=True`: one more leading axis is allowed (a batch of values).
+    - `optional`: the value may be None (e.g. "no limiter"); None is not checked.
+    - `converter`: the field's converter (default: the float converter of every model).
     - `symbol`: the paper's symbol, in Markdown math (`"$J$"`); `default_note`: said after the default
       in the table (e.g. "Table III").
     """
     if check not in ("positive", "nonnegative", "finite", "range", "none"):
         raise ValueError(f"param: unknown check {check!r}")
-    meta = {_KEY: Param(unit, doc, check, lo, hi, lo_open, hi_open, shape, symbol, default_note)}
+    meta = {
+        _KEY: Param(unit, doc, check, lo, hi, lo_open, hi_open, shape, symbol, default_note, batch, optional, valid)
+    }
+    convert = as_float_array if converter is None else converter
+    if optional:
+        base = convert
+
+        def convert(x):
+            return None if x is None else base(x)
+
     if default is dataclasses.MISSING:
-        return eqx.field(converter=as_float_array, metadata=meta)
-    return eqx.field(converter=as_float_array, default=default, metadata=meta)
+        return eqx.field(converter=convert, metadata=meta)
+    return eqx.field(converter=convert, default=default, metadata=meta)
+
+
+def option(
+    default: Any = dataclasses.MISSING,
+    *,
+    doc: str,
+    choices: tuple | None = None,
+    minimum: int | None = None,
+    symbol: str = "",
+) -> Any:
+    """A static field: one of `choices` (e.g. `("hard", "smooth")`), or an integer >= `minimum` (a size).
+
+    Checked at construction (`ValueError` naming it), listed in the parameter table; static, so a new
+    value compiles a new program (sizes and switches only, never values)."""
+    if (choices is None) == (minimum is None):
+        raise ValueError("option: give exactly one of `choices` and `minimum`")
+    meta = {_OPT: Option(doc, None if choices is None else tuple(choices), minimum, symbol)}
+    if default is dataclasses.MISSING:
+        return eqx.field(static=True, metadata=meta)
+    return eqx.field(static=True, default=default, metadata=meta)
+
+
+class _Spec(NamedTuple):
+    params: tuple  # ((name, Param), ...) in field order
+    options: tuple  # ((name, Option), ...)
+    defaults: dict  # name -> default
+    relations: Any  # the class's `_check_relations`, or None
+    relations_take_host: bool
+
+
+_SPECS: dict = {}
+
+
+def _spec(cls) -> _Spec:
+    spec = _SPECS.get(cls)
+    if spec is None:
+        params, options, defaults = [], [], {}
+        for f in dataclasses.fields(cls):
+            if _KEY in f.metadata:
+                params.append((f.name, f.metadata[_KEY]))
+            elif _OPT in f.metadata:
+                options.append((f.name, f.metadata[_OPT]))
+            else:
+                continue
+            defaults[f.name] = f.default
+        relations = getattr(cls, "_check_relations", None)
+        takes_host = relations is not None and relations.__code__.co_argcount >= 2
+        spec = _SPECS[cls] = _Spec(tuple(params), tuple(options), defaults, relations, takes_host)
+    return spec
 
 
 def declared(cls) -> dict[str, tuple[Param, Any]]:
     """`{field name: (Param, default)}` of the parameters a class declares with `param`, in field order."""
-    out = {}
-    for f in dataclasses.fields(cls):
-        p = f.metadata.get(_KEY)
-        if p is not None:
-            out[f.name] = (p, f.default)
-    return out
+    spec = _spec(cls)
+    return {name: (p, spec.defaults[name]) for name, p in spec.params}
+
+
+def declared_options(cls) -> dict[str, tuple[Option, Any]]:
+    """`{field name: (Option, default)}` of the options a class declares with `option`, in field order."""
+    spec = _spec(cls)
+    return {name: (o, spec.defaults[name]) for name, o in spec.options}
 
 
 def _interval(p: Param) -> str:
@@ -106,8 +194,16 @@ def valid_range(p: Param) -> str:
         "nonnegative": ">= 0",
         "finite": "finite",
         "range": _interval(p),
-        "none": "see the class",
+        "none": p.valid or "see below",
     }[p.check]
+
+
+def _shape_words(p: Param) -> str:
+    """What a parameter's shape must be, after "must": "be a scalar", "have shape (2,)", ..."""
+    if p.shape is None:
+        return "be an array"
+    one = "be a scalar" if p.shape == () else f"have shape {tuple(p.shape)}"
+    return f"{one} or a 1-D batch of them" if p.batch else one
 
 
 def _range_ok(p: Param):
@@ -122,69 +218,151 @@ def _range_ok(p: Param):
     return ok
 
 
-def check_declared(module, owner: str | None = None) -> list | None:
-    """Check every declared parameter of `module` (one device transfer for all of them).
+_OK: dict = {}
 
-    Raises `ValueError` naming the first parameter out of its range or shape (concrete values);
-    traced values are recorded (`jaxbelt._checks.record`). Returns the host values in declaration
-    order, or None under a trace.
+
+def _rule(p: Param):
+    """`(what the message says, ok(v, xp))` of a declared check."""
+    rule = _OK.get(p)
+    if rule is None:
+        rule = _RULES[p.check] if p.check in _RULES else (f"must lie in {_interval(p)}", _range_ok(p))
+        _OK[p] = rule
+    return rule
+
+
+def _check_option(owner: str, name: str, o: Option, value) -> None:
+    if o.choices is not None:
+        if value not in o.choices:
+            raise ValueError(f"{owner}: parameter `{name}` must be one of {o.choices}; got {value!r}")
+    elif isinstance(value, bool) or not isinstance(value, int | np.integer) or value < o.minimum:
+        raise ValueError(f"{owner}: parameter `{name}` must be an integer >= {o.minimum}; got {value!r}")
+
+
+def _shape_ok(p: Param, shape: tuple) -> bool:
+    if p.shape is None or shape == p.shape:
+        return True
+    return p.batch and len(shape) == len(p.shape) + 1 and shape[1:] == p.shape
+
+
+def check_declared(module, owner: str | None = None) -> dict:
+    """Check every declared option and parameter of `module`, in declaration order.
+
+    Concrete values out of their range or shape raise `ValueError` naming the parameter, its range, its
+    unit and the value; traced values are recorded (`jaxbelt._checks.record`). Cheap: a value made from
+    a Python number is known on the host already (`jaxbelt._checks.as_float_array` keeps it), the others
+    come over in one device transfer for all of them. Returns `{name: host value}` of the concrete
+    parameters (a float, or a numpy array), for the class's relation checks.
     """
     owner = owner or type(module).__name__
-    table = declared(type(module))
-    simple, ranged = [], []
-    for name, (p, _) in table.items():
+    spec = _spec(type(module))
+    for name, o in spec.options:
+        _check_option(owner, name, o, getattr(module, name))
+    host: dict = {}
+    fetch, traced = [], []
+    for name, p in spec.params:
         value = getattr(module, name)
-        if p.shape is not None and tuple(np.shape(value)) != tuple(p.shape):
-            want = "a scalar" if p.shape == () else f"shape {tuple(p.shape)}"
+        if value is None and p.optional:
+            continue
+        shape = tuple(value.shape)
+        if not _shape_ok(p, shape):
             raise ValueError(
-                f"{owner}: parameter `{name}` must be {want} [{p.unit or '-'}]; got an array of shape {np.shape(value)}"
+                f"{owner}: parameter `{name}` must {_shape_words(p)} [{p.unit or '-'}]; got an array of shape {shape}"
             )
-        if p.check in ("positive", "nonnegative", "finite"):
-            simple.append((name, value, p.check, p.unit))
-        elif p.check == "range":
-            ranged.append((name, value, p))
-    vals = check_fields(owner, simple)
-    if ranged:
-        from ._checks import _enforce
-
-        host = host_values([v for _, v, _ in ranged]) if is_concrete([v for _, v, _ in ranged]) else None
-        for k, (name, value, p) in enumerate(ranged):
-            _enforce(
-                name, value if host is None else host[k], f"must lie in {_interval(p)}", p.unit, owner, _range_ok(p)
-            )
-    return vals
+        known = _HOST.get(id(value))
+        if known is not None and known[0] is value:
+            host[name] = known[1]
+        elif isinstance(value, jax.core.Tracer):
+            traced.append((name, value, p))
+        else:
+            fetch.append((name, value))
+    if fetch:  # one transfer for every value not known on the host
+        for (name, _), v in zip(fetch, jax.device_get([v for _, v in fetch])):
+            v = np.asarray(v, dtype=float)
+            host[name] = float(v) if v.ndim == 0 else v
+    for name, p in spec.params:
+        if p.check == "none" or name not in host:
+            continue
+        v = host[name]
+        what, ok = _rule(p)
+        if not bool(ok(v, _Scalar if type(v) is float else np)):
+            got = v if type(v) is float else v.tolist()
+            raise ValueError(f"{_message(name, what, p.unit, owner)}; got {got}")
+    for name, value, p in traced:
+        if p.check != "none":
+            what, ok = _rule(p)
+            _enforce(name, value, what, p.unit, owner, ok)  # traced: recorded
+    return host
 
 
 class Parametrised(eqx.Module):
-    """Base of every module whose fields are declared with `param`.
+    """Base of every module whose fields are declared with `param` (and `option`).
 
     Construction checks the declarations (concrete values raise, traced ones are recorded), then the
     relations between parameters that a class states in a method `_check_relations(self)` of its own
-    (e.g. a platform that must be underdamped): first each parameter alone, so that a bad value is
-    named as such and not through a relation it breaks. Subclasses do not define `__check_init__`.
+    (e.g. a platform that must be underdamped), or `_check_relations(self, host)` to receive the host
+    values `check_declared` already fetched (`{name: value}`, concrete parameters only): first each
+    parameter alone, so that a bad value is named as such and not through a relation it breaks.
+    Subclasses do not define `__check_init__`.
     """
 
     def __check_init__(self):
-        check_declared(self)
-        relations = getattr(type(self), "_check_relations", None)
-        if relations is not None:
-            relations(self)
+        spec = _spec(type(self))
+        host = check_declared(self)
+        if spec.relations is not None:
+            if spec.relations_take_host:
+                spec.relations(self, host)
+            else:
+                spec.relations(self)
 
 
 def _fmt_default(d) -> str:
     if d is dataclasses.MISSING:
         return "required"
+    if d is None:
+        return "None"
+    if isinstance(d, bool):
+        return str(d)
     if isinstance(d, float | int):
         return f"{d:g}" if not (isinstance(d, float) and math.isnan(d)) else "nan"
+    if isinstance(d, str):
+        return f'`"{d}"`'
+    if isinstance(d, tuple | list):
+        return "(" + ", ".join(_fmt_default(x) for x in d) + ")"
     return str(d)
 
 
+def _valid_cell(p: Param) -> str:
+    words = valid_range(p)
+    if p.shape is None:
+        words += "; an array"
+    elif p.shape != ():
+        words += f"; shape {tuple(p.shape)}"
+    if p.batch:
+        words += "; or a 1-D batch"
+    if p.optional:
+        words += "; or None"
+    return words
+
+
 def parameter_table(cls) -> str:
-    """The Markdown table of the parameters `cls` declares: field, symbol, unit, default, valid range, meaning."""
+    """The Markdown table of what `cls` declares (`param` and `option` fields): field, symbol, unit,
+    default, valid values, meaning."""
     rows = ["| field | symbol | unit | default | valid | meaning |", "|---|---|---|---|---|---|"]
-    for name, (p, d) in declared(cls).items():
-        default = _fmt_default(d) + (f" ({p.default_note})" if p.default_note else "")
-        rows.append(f"| `{name}` | {p.symbol or '–'} | {p.unit or '–'} | {default} | {valid_range(p)} | {p.doc} |")
+    spec = _spec(cls)
+    params, options = dict(spec.params), dict(spec.options)
+    for name, d in spec.defaults.items():  # field order
+        if name in params:
+            p = params[name]
+            default = _fmt_default(d) + (f" ({p.default_note})" if p.default_note else "")
+            rows.append(f"| `{name}` | {p.symbol or '–'} | {p.unit or '–'} | {default} | {_valid_cell(p)} | {p.doc} |")
+        else:
+            o = options[name]
+            valid = (
+                "one of " + ", ".join(_fmt_default(c) for c in o.choices)
+                if o.choices is not None
+                else f"integer >= {o.minimum}"
+            )
+            rows.append(f"| `{name}` | {o.symbol or '–'} | – | {_fmt_default(d)} | {valid} (static) | {o.doc} |")
     return "\n".join(rows)
 
 

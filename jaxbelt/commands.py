@@ -18,19 +18,19 @@ scene is solved in closed form (no time stepping). The question is answered by t
 from __future__ import annotations
 
 import abc
-from typing import ClassVar, NamedTuple
+from typing import NamedTuple
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
-import numpy as _np
+import numpy as np
 
-from ._checks import as_float_array as _arr
-from ._checks import check_finite, check_nonnegative, check_positive, check_range, is_concrete, record
+from ._checks import check_positive, check_range, record
+from ._params import Parametrised, document, param
 
 
-class AbstractInput(eqx.Module):
-    """Base class of every model input (command, controller or running speed)."""
+class AbstractInput(Parametrised):
+    """Base class of every model input (command, controller or running speed); its parameters are
+    declared with `jaxbelt._params.param` (checked at construction, listed in the docs)."""
 
 
 class MotorState(NamedTuple):
@@ -107,13 +107,14 @@ class AbstractRunningSpeed(AbstractInput):
         """Belt speed [m/s] at time `t` [s]."""
 
 
+@document
 class ConstantVoltage(AbstractExponentialVoltage):
-    """Constant armature voltage $V(t) = V_0$ [V] (a step applied at t = 0)."""
+    """Constant armature voltage $V(t) = V_0$ [V] (a step applied at t = 0).
 
-    voltage: jnp.ndarray = eqx.field(converter=_arr)
+    {parameters}
+    """
 
-    def __check_init__(self):
-        check_finite("voltage", self.voltage, owner="ConstantVoltage")
+    voltage: jnp.ndarray = param(unit="V", check="finite", symbol="$V_0$", doc="the constant voltage")
 
     def __call__(self, t):
         return self.voltage * jnp.ones_like(jnp.asarray(t, dtype=float))
@@ -122,22 +123,22 @@ class ConstantVoltage(AbstractExponentialVoltage):
         return jnp.stack([self.voltage]), jnp.zeros((1,))
 
 
+@document
 class ExponentialVoltage(AbstractExponentialVoltage):
     """Exponential voltage ramp of Incerti (2014), eq. (30).
 
     $V(t) = V_{max}\\,(1 - e^{-t/\\gamma})$
 
-    - `v_max`: final voltage $V_{max}$ [V] (Table I: 24 V).
-    - `gamma`: time constant $\\gamma$ [s], > 0 (the paper uses 0.02, 0.04, 0.06 s). A 1-D array
-      of time constants makes a batch: `simulate` solves all of them at once (batched closed form).
+    {parameters}
+
+    A 1-D array of time constants makes a batch (the paper uses 0.02, 0.04, 0.06 s): `simulate`
+    solves all of them at once (batched closed form).
     """
 
-    v_max: jnp.ndarray = eqx.field(converter=_arr, default=24.0)
-    gamma: jnp.ndarray = eqx.field(converter=_arr, default=0.02)
-
-    def __check_init__(self):
-        check_finite("v_max", self.v_max, owner="ExponentialVoltage")
-        check_positive("gamma", self.gamma, "s", owner="ExponentialVoltage")
+    v_max: jnp.ndarray = param(
+        24.0, unit="V", check="finite", symbol="$V_{max}$", default_note="Table I", doc="final voltage"
+    )
+    gamma: jnp.ndarray = param(0.02, unit="s", batch=True, symbol="$\\gamma$", doc="time constant")
 
     def __call__(self, t):
         t = jnp.asarray(t, dtype=float)
@@ -181,14 +182,15 @@ MIN_EXPONENT_GAP = 1e-3
 
 def exponents_apart(gammas) -> bool:
     """Whether the (host) exponents `gammas` differ pairwise by at least `MIN_EXPONENT_GAP` (to rounding)."""
-    g = _np.sort(_np.asarray(gammas, dtype=float))
-    return bool(_np.min(_np.diff(g)) >= MIN_EXPONENT_GAP * (1 - 1e-9))
+    g = np.sort(np.asarray(gammas, dtype=float))
+    return bool(np.min(np.diff(g)) >= MIN_EXPONENT_GAP * (1 - 1e-9))
 
 
 def _record_check(ok, message):
     record(ok, message)
 
 
+@document
 class PseudoPolynomial(AbstractMotionCommand):
     """Pseudo-polynomial rest-to-rest motion command of order n (Incerti, pseudo-polynomial commands, eq. 17-23).
 
@@ -202,41 +204,46 @@ class PseudoPolynomial(AbstractMotionCommand):
     vanish at t = 0 and $\\varphi_m(T) = \\Phi$ with n derivatives zero at T. Integer exponents
     give the classical polynomials: (3, 4, 5) → C = (10, −15, 6).
 
-    - `gammas`: the n + 1 exponents $\\gamma_i$ (shape parameters), at least `MIN_EXPONENT_GAP` = 1e-3 apart and each
-      > max(n, 2): > 2 keeps the acceleration finite at t = T, > n keeps the n-th derivative so.
-    - `displacement`: total motor displacement $\\Phi$ [rad] (default 15 rev, Incerti (pseudo-polynomial commands)).
-    - `duration`: motion time T [s], > 0 (default 1 s).
+    {parameters}
+
+    The n + 1 exponents `gammas` are at least `MIN_EXPONENT_GAP` = 1e-3 apart and each > max(n, 2):
+    > 2 keeps the acceleration finite at t = T, > n keeps the n-th derivative so.
 
     `cmd(t)` is the position [rad]; before t = 0 the axis is at 0, after T it holds at $\\Phi$.
     Everything is differentiable with respect to `gammas` (and Φ, T).
     """
 
-    array_fields: ClassVar[tuple[str, ...]] = ("gammas",)
+    gammas: jnp.ndarray = param(
+        unit="–", check="none", shape=None, symbol="$\\gamma_i$", doc="the n + 1 >= 2 exponents (shape parameters), 1-D"
+    )
+    displacement: jnp.ndarray = param(
+        15 * 2 * 3.141592653589793,
+        unit="rad",
+        check="finite",
+        symbol="$\\Phi$",
+        default_note="15 rev",
+        doc="total motor displacement",
+    )
+    duration: jnp.ndarray = param(1.0, unit="s", symbol="$T$", doc="motion time")
 
-    gammas: jnp.ndarray = eqx.field(converter=_arr)
-    displacement: jnp.ndarray = eqx.field(converter=_arr, default=15 * 2 * 3.141592653589793)
-    duration: jnp.ndarray = eqx.field(converter=_arr, default=1.0)
-
-    def __check_init__(self):
+    def _check_relations(self, host):
         o = "PseudoPolynomial"
         if self.gammas.ndim != 1 or self.gammas.shape[0] < 2:
             raise ValueError(
                 f"{o}: `gammas` must be a 1-D array of n + 1 >= 2 exponents; got shape {self.gammas.shape}"
             )
-        check_finite("displacement", self.displacement, owner=o)
-        check_positive("duration", self.duration, "s", owner=o)
+        g = host.get("gammas", self.gammas)  # host values, or the tracer
         lo = float(max(self.order, 2))
-        check_range("gammas", self.gammas, lo=lo, lo_open=True, owner=o)
+        check_range("gammas", g, lo=lo, lo_open=True, owner=o)
         msg = (
             f"{o}: parameter `gammas` must differ pairwise by at least {MIN_EXPONENT_GAP:g} (eq. 23 is singular "
             "for equal exponents; closer ones make the coefficients grow as 1/gap, and H and its gradient lose "
             "their accuracy)"
         )
-        if is_concrete(self.gammas):
-            if not exponents_apart(self.gammas):
-                raise ValueError(f"{msg}; got {self.gammas.tolist()}")
+        if "gammas" in host:
+            if not exponents_apart(g):
+                raise ValueError(f"{msg}; got {np.asarray(g).tolist()}")
         else:
-            g = self.gammas
             diff = jnp.abs(g[:, None] - g[None, :]) + MIN_EXPONENT_GAP * jnp.eye(g.shape[0])
             _record_check(jnp.all(diff >= MIN_EXPONENT_GAP * (1 - 1e-9)), msg)
 
@@ -300,6 +307,7 @@ def _damped_half_period_and_ratio(omega_n, zeta):
     return half, jnp.exp(-zeta * jnp.pi / jnp.sqrt(1.0 - zeta**2))
 
 
+@document
 class ShapedCommand(AbstractMotionCommand):
     """A motion command passed through an input shaper (impulse sequence).
 
@@ -311,33 +319,36 @@ class ShapedCommand(AbstractMotionCommand):
     $(0, t_2)$; ZVD: $A = (1, 2K, K^2)/(1+K)^2$ at $(0, t_2, 2t_2)$.
 
     - `base`: a command with `derivative(t, k)` and `end_time` (e.g. `PseudoPolynomial`).
-    - `times` [s] (>= 0, increasing) and `amplitudes` (summing to 1).
+
+    {parameters}
+
+    `times` and `amplitudes` are 1-D of equal length; the times are non-decreasing and the
+    amplitudes sum to 1.
     """
 
-    array_fields: ClassVar[tuple[str, ...]] = ("times", "amplitudes")
-
     base: AbstractMotionCommand
-    times: jnp.ndarray = eqx.field(converter=_arr)
-    amplitudes: jnp.ndarray = eqx.field(converter=_arr)
+    times: jnp.ndarray = param(unit="s", check="nonnegative", shape=None, symbol="$t_j$", doc="impulse times")
+    amplitudes: jnp.ndarray = param(
+        unit="–", check="finite", shape=None, symbol="$A_j$", doc="impulse amplitudes (summing to 1)"
+    )
 
-    def __check_init__(self):
+    def _check_relations(self, host):
         o = "ShapedCommand"
         if self.times.ndim != 1 or self.times.shape != self.amplitudes.shape:
             raise ValueError(
                 f"{o}: `times` and `amplitudes` must be 1-D of equal length; got {self.times.shape}, {self.amplitudes.shape}"
             )
-        check_nonnegative("times", self.times, "s", owner=o)
-        check_finite("amplitudes", self.amplitudes, owner=o)
         order_msg = (
             f"{o}: parameter `times` must be non-decreasing (impulse times in order, the last one ends the move)"
         )
         sum_msg = f"{o}: parameter `amplitudes` must sum to 1"
-        if is_concrete((self.times, self.amplitudes)):
-            t = _np.asarray(self.times, dtype=float)
-            if t.size > 1 and not _np.all(_np.diff(t) >= 0):
+        if "times" in host and "amplitudes" in host:
+            t = np.atleast_1d(host["times"])
+            if t.size > 1 and not np.all(np.diff(t) >= 0):
                 raise ValueError(f"{order_msg}; got {t.tolist()}")
-            if abs(float(_np.sum(_np.asarray(self.amplitudes))) - 1.0) > 1e-9:
-                raise ValueError(f"{sum_msg}; got {self.amplitudes.tolist()}")
+            a = np.atleast_1d(host["amplitudes"])
+            if abs(float(np.sum(a)) - 1.0) > 1e-9:
+                raise ValueError(f"{sum_msg}; got {a.tolist()}")
         else:
             if self.times.shape[0] > 1:
                 _record_check(jnp.all(jnp.diff(self.times) >= 0), order_msg)

@@ -541,9 +541,10 @@ def _simulate_concrete(scene, method, solver, rtol, atol, dt0, dt, max_steps, pr
 def _check_scalar_fields(obj) -> None:
     """Parameters are scalars inside `simulate` (a batch is a `jax.vmap`/`jb.sweep` over them).
 
-    Fields a class declares in `array_fields` (e.g. the exponents of a `PseudoPolynomial`), and
-    parameters declared with a shape other than a scalar (`param(shape=None)`, e.g. the frequencies
-    of a `ModalAxis`), are exempt; nested modules are checked too."""
+    Parameters declared with a shape other than a scalar (`param(shape=None)`, e.g. the frequencies
+    of a `ModalAxis` or the exponents of a `PseudoPolynomial`) are exempt, and so are the fields a class
+    lists in a class variable `array_fields` (arrays that are not declared parameters); nested modules
+    are checked too."""
     if all(jnp.ndim(leaf) == 0 for leaf in jax.tree_util.tree_leaves(obj)):
         return
     for m in _modules(obj):
@@ -590,13 +591,12 @@ def _finish(sol: Solution, checks, throw: bool, what: str, hint: str) -> Solutio
 
 
 def _batched_input(inp) -> bool:
-    """A command whose parameters carry a leading batch axis (decided from shapes, nothing computed)."""
-    allowed = getattr(type(inp), "array_fields", ())
+    """A command whose parameters carry a leading batch axis (decided from shapes, nothing computed): a
+    parameter declared with `batch=True` that holds one (e.g. the time constants of an `ExponentialVoltage`)."""
     return any(
-        hasattr(v, "shape") and jnp.ndim(v) >= 1
-        for f in dataclasses.fields(inp)
-        if f.name not in allowed
-        for v in (getattr(inp, f.name, None),)
+        p.batch and v is not None and jnp.ndim(v) > len(p.shape or ())
+        for name, (p, _) in declared(type(inp)).items()
+        for v in (getattr(inp, name),)
     )
 
 

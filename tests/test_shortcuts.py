@@ -61,18 +61,18 @@ def test_closed_form_equals_stepping():
 
 def test_unobserved_outputs_are_not_computed(monkeypatch):
     calls = {"electric_power": 0, "alpha2": 0}
-    orig_p, orig_a = jb.BeltStartup._out_electric_power, jb.BeltStartup._out_alpha2
+    orig_p, orig_a = jb.BeltStartup._out_electric_power, jb.BeltStartup._out_alpha
 
     def spy_p(self, t, y, inp):
         calls["electric_power"] += 1
         return orig_p(self, t, y, inp)
 
-    def spy_a(self, t, y, inp):
+    def spy_a(self, t, y, inp):  # the family alpha1, alpha2 (one method for the vector)
         calls["alpha2"] += 1
         return orig_a(self, t, y, inp)
 
     monkeypatch.setattr(jb.BeltStartup, "_out_electric_power", spy_p)
-    monkeypatch.setattr(jb.BeltStartup, "_out_alpha2", spy_a)
+    monkeypatch.setattr(jb.BeltStartup, "_out_alpha", spy_a)
     model = jb.BeltStartup()
     cmd = jb.ExponentialVoltage(V, GAMMA + 1e-3)  # a gamma no other test compiled for
     only = jb.simulate(jb.Scene(model, cmd, ts=TS, observe=("current",)))

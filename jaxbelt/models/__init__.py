@@ -3,6 +3,7 @@
 import typing as _typing
 
 if _typing.TYPE_CHECKING:  # the public names, imported on first use (`jaxbelt._lazy`)
+    from .axis import ModalAxis as ModalAxis
     from .contact import BeltPulleyContact as BeltPulleyContact
     from .contact import SlipError as SlipError
     from .contact import SlipReport as SlipReport
@@ -11,7 +12,6 @@ if _typing.TYPE_CHECKING:  # the public names, imported on first use (`jaxbelt._
     from .nonlinear import NonlinearBelt as NonlinearBelt
     from .nonlinear import RunningSpeed as RunningSpeed
     from .platform import BeltPlatform as BeltPlatform
-    from .axis import ModalAxis as ModalAxis
     from .startup import BeltChain as BeltChain
     from .startup import BeltStartup as BeltStartup
     from .startup import chain_matrices as chain_matrices

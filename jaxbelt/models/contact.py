@@ -15,13 +15,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
 from .._checks import as_float_array as _arr
-from .._checks import check_finite, check_positive, check_range, collecting, is_concrete, record
+from .._checks import check_finite, check_range, collecting, is_concrete, record
 from .._guard import checked
+from .._params import Parametrised, document, param
 
 __all__ = ["BeltPulleyContact", "SlipError", "SlipReport"]
 
@@ -71,36 +71,37 @@ class SlipReport:
         )
 
 
-class BeltPulleyContact(eqx.Module):
+@document
+class BeltPulleyContact(Parametrised):
     """A belt wrapped on one pulley with slack-side tension $T_1$ and tight-side tension $T_2$ (belt-vibration report).
 
-    | field | symbol | unit | default |
-    |---|---|---|---|
-    | `radius` | $R$ pulley radius | m | required (the motor pulley's is not in the belt-vibration report) |
-    | `slack_tension` | $T_1$ | N | 120 |
-    | `tight_tension` | $T_2$ | N | 140 |
-    | `density` | $\\rho$ belt mass per length | kg/m | 0.05 |
-    | `friction` | $\\mu$ | – | 0.2 |
-    | `wrap_angle` | $\\vartheta$, in $(0, 2\\pi)$ | rad | 2.094 (120°) |
+    {parameters}
 
     Pulley speeds `omega` are angular [rad/s].
     """
 
-    radius: jnp.ndarray = eqx.field(converter=_arr)
-    slack_tension: jnp.ndarray = eqx.field(converter=_arr, default=120.0)
-    tight_tension: jnp.ndarray = eqx.field(converter=_arr, default=140.0)
-    density: jnp.ndarray = eqx.field(converter=_arr, default=0.05)
-    friction: jnp.ndarray = eqx.field(converter=_arr, default=0.2)
-    wrap_angle: jnp.ndarray = eqx.field(converter=_arr, default=2.094)
-
-    def __check_init__(self):
-        o = "BeltPulleyContact"
-        check_positive("radius", self.radius, "m", o)
-        check_positive("slack_tension", self.slack_tension, "N", o)
-        check_positive("tight_tension", self.tight_tension, "N", o)
-        check_positive("density", self.density, "kg/m", o)
-        check_positive("friction", self.friction, "", o)
-        check_range("wrap_angle", self.wrap_angle, 0.0, 2.0 * np.pi, lo_open=True, hi_open=True, unit="rad", owner=o)
+    radius: jnp.ndarray = param(
+        unit="m",
+        symbol="$R$",
+        default_note="the motor pulley's is not in the belt-vibration report",
+        doc="pulley radius",
+    )
+    slack_tension: jnp.ndarray = param(120.0, unit="N", symbol="$T_1$", doc="slack-side tension")
+    tight_tension: jnp.ndarray = param(140.0, unit="N", symbol="$T_2$", doc="tight-side tension")
+    density: jnp.ndarray = param(0.05, unit="kg/m", symbol="$\\rho$", doc="belt mass per length")
+    friction: jnp.ndarray = param(0.2, unit="–", symbol="$\\mu$", doc="friction coefficient")
+    wrap_angle: jnp.ndarray = param(
+        2.094,
+        unit="rad",
+        check="range",
+        lo=0.0,
+        hi=2.0 * np.pi,
+        lo_open=True,
+        hi_open=True,
+        symbol="$\\vartheta$",
+        default_note="120°",
+        doc="wrap angle",
+    )
 
     def _omega_checks(self, owner, omega) -> list:
         with collecting() as found:  # concrete: raises now; traced: returned, attached to the result

@@ -24,14 +24,13 @@ from __future__ import annotations
 
 from typing import ClassVar
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import as_float_array as _arr
-from .._checks import check_fields, record
+from .._checks import record
 from .._model import AbstractModel, integrand, observable
+from .._params import document, option, param
 from ..commands import AbstractVoltageSource, MotorState
 
 #: The first, assumed set of the values lost with Table I (not from the paper); see the module docstring.
@@ -76,6 +75,7 @@ def _geometry(xp, a, b, c, hx, hy):
     return D2, xp.sqrt(xp.where(D2 >= 0, D2, 0.0) / (A**2 + B**2))
 
 
+@document
 class FourBarDrive(AbstractModel):
     """Four-bar linkage (crank a, coupler b, rocker c) driven by a DC motor through a gearbox.
 
@@ -101,25 +101,7 @@ class FourBarDrive(AbstractModel):
     Parameters (SI). Defaults marked *identified* or *assumed* replace the lost Table I (see the
     module docstring; `FourBarDrive.assumed_table()` is the first, assumed set):
 
-    | field | symbol | unit | default |
-    |---|---|---|---|
-    | `a` | crank length | m | 0.0884 (*identified*; assumed 0.10) |
-    | `b`, `c` | coupler, rocker lengths | m | 0.30, 0.30 (*assumed*) |
-    | `hx`, `hy` | rocker pivot D | m | 0.30 (*assumed*), 0.05 |
-    | `f1`, `f2`, `f3` | distances of $G_i$ from A, B, D | m | 0.05, 0.15, 0.15 (*assumed*) |
-    | `theta1..3` | angles $\\vartheta_i$ of $G_i$ off the link lines | rad | 0 |
-    | `m1`, `m2`, `m3` | link masses | kg | 0.40, 0.38, 0.38 (*assumed*) |
-    | `jg1`, `jg2`, `jg3` | link inertias about $G_i$ | kg m² | 3.5e-4, 1.7e-2, 1.7e-2 |
-    | `g` | gravity | m/s² | 9.81 |
-    | `R` | armature resistance | Ω | 0.886 (*identified*; assumed 1.5) |
-    | `L` | armature inductance | H | 9e-3 |
-    | `km` | torque / back-emf constant | N m/A | 0.48 |
-    | `jm`, `ja`, `jb` | motor, gear a, gear b inertias | kg m² | 13e-4, 9.8e-5, 9.8e-5 |
-    | `z` | gear ratio $\\dot\\varphi/\\dot\\alpha$ | – | 1 |
-    | `T0` | constant friction torque on the motor shaft | N m | 0 |
-    | `lam` | viscous friction $\\lambda$ on the motor shaft | N m s/rad | 0.08 |
-    | `alpha0` | crank angle at the scene start (rest state) | rad | 0 |
-    | `assembly` | $k = \\pm 1$, the assembly mode (static) | – | +1 (*assumed*) |
+    {parameters}
 
     **Initial angle.** The scene starts at rest at `alpha0` (`initial_state`), and the drive hands
     the motor angle $z\\alpha_0$ to its controller as the start of the angle reference
@@ -131,35 +113,65 @@ class FourBarDrive(AbstractModel):
     when a length, inductance, resistance or inertia is not positive.
     """
 
-    a: jnp.ndarray = eqx.field(converter=_arr, default=0.0884)
-    b: jnp.ndarray = eqx.field(converter=_arr, default=0.30)
-    c: jnp.ndarray = eqx.field(converter=_arr, default=0.30)
-    hx: jnp.ndarray = eqx.field(converter=_arr, default=0.30)
-    hy: jnp.ndarray = eqx.field(converter=_arr, default=0.05)
-    f1: jnp.ndarray = eqx.field(converter=_arr, default=0.05)
-    f2: jnp.ndarray = eqx.field(converter=_arr, default=0.15)
-    f3: jnp.ndarray = eqx.field(converter=_arr, default=0.15)
-    theta1: jnp.ndarray = eqx.field(converter=_arr, default=0.0)
-    theta2: jnp.ndarray = eqx.field(converter=_arr, default=0.0)
-    theta3: jnp.ndarray = eqx.field(converter=_arr, default=0.0)
-    m1: jnp.ndarray = eqx.field(converter=_arr, default=0.40)
-    m2: jnp.ndarray = eqx.field(converter=_arr, default=0.38)
-    m3: jnp.ndarray = eqx.field(converter=_arr, default=0.38)
-    jg1: jnp.ndarray = eqx.field(converter=_arr, default=3.5e-4)
-    jg2: jnp.ndarray = eqx.field(converter=_arr, default=1.7e-2)
-    jg3: jnp.ndarray = eqx.field(converter=_arr, default=1.7e-2)
-    g: jnp.ndarray = eqx.field(converter=_arr, default=9.81)
-    R: jnp.ndarray = eqx.field(converter=_arr, default=0.886)
-    L: jnp.ndarray = eqx.field(converter=_arr, default=9e-3)
-    km: jnp.ndarray = eqx.field(converter=_arr, default=0.48)
-    jm: jnp.ndarray = eqx.field(converter=_arr, default=13e-4)
-    ja: jnp.ndarray = eqx.field(converter=_arr, default=9.8e-5)
-    jb: jnp.ndarray = eqx.field(converter=_arr, default=9.8e-5)
-    z: jnp.ndarray = eqx.field(converter=_arr, default=1.0)
-    T0: jnp.ndarray = eqx.field(converter=_arr, default=0.0)
-    lam: jnp.ndarray = eqx.field(converter=_arr, default=0.08)
-    alpha0: jnp.ndarray = eqx.field(converter=_arr, default=0.0)
-    assembly: int = eqx.field(static=True, default=1)
+    a: jnp.ndarray = param(
+        0.0884, unit="m", symbol="$a$", default_note="*identified*; assumed 0.10", doc="crank length"
+    )
+    b: jnp.ndarray = param(0.30, unit="m", symbol="$b$", default_note="*assumed*", doc="coupler length")
+    c: jnp.ndarray = param(0.30, unit="m", symbol="$c$", default_note="*assumed*", doc="rocker length")
+    hx: jnp.ndarray = param(
+        0.30, unit="m", check="finite", symbol="$h_x$", default_note="*assumed*", doc="abscissa of the rocker pivot D"
+    )
+    hy: jnp.ndarray = param(0.05, unit="m", check="finite", symbol="$h_y$", doc="ordinate of the rocker pivot D")
+    f1: jnp.ndarray = param(
+        0.05, unit="m", check="nonnegative", symbol="$f_1$", default_note="*assumed*", doc="distance of $G_1$ from A"
+    )
+    f2: jnp.ndarray = param(
+        0.15, unit="m", check="nonnegative", symbol="$f_2$", default_note="*assumed*", doc="distance of $G_2$ from B"
+    )
+    f3: jnp.ndarray = param(
+        0.15, unit="m", check="nonnegative", symbol="$f_3$", default_note="*assumed*", doc="distance of $G_3$ from D"
+    )
+    theta1: jnp.ndarray = param(
+        0.0, unit="rad", check="finite", symbol="$\\vartheta_1$", doc="angle of $G_1$ off the crank line"
+    )
+    theta2: jnp.ndarray = param(
+        0.0, unit="rad", check="finite", symbol="$\\vartheta_2$", doc="angle of $G_2$ off the coupler line"
+    )
+    theta3: jnp.ndarray = param(
+        0.0, unit="rad", check="finite", symbol="$\\vartheta_3$", doc="angle of $G_3$ off the rocker line"
+    )
+    m1: jnp.ndarray = param(
+        0.40, unit="kg", check="nonnegative", symbol="$m_1$", default_note="*assumed*", doc="crank mass"
+    )
+    m2: jnp.ndarray = param(
+        0.38, unit="kg", check="nonnegative", symbol="$m_2$", default_note="*assumed*", doc="coupler mass"
+    )
+    m3: jnp.ndarray = param(
+        0.38, unit="kg", check="nonnegative", symbol="$m_3$", default_note="*assumed*", doc="rocker mass"
+    )
+    jg1: jnp.ndarray = param(3.5e-4, unit="kg m²", symbol="$J_{G1}$", doc="crank inertia about $G_1$")
+    jg2: jnp.ndarray = param(1.7e-2, unit="kg m²", symbol="$J_{G2}$", doc="coupler inertia about $G_2$")
+    jg3: jnp.ndarray = param(1.7e-2, unit="kg m²", symbol="$J_{G3}$", doc="rocker inertia about $G_3$")
+    g: jnp.ndarray = param(9.81, unit="m/s²", check="nonnegative", symbol="$g$", doc="gravity")
+    R: jnp.ndarray = param(
+        0.886, unit="Ω", symbol="$R$", default_note="*identified*; assumed 1.5", doc="armature resistance"
+    )
+    L: jnp.ndarray = param(9e-3, unit="H", symbol="$L$", doc="armature inductance")
+    km: jnp.ndarray = param(0.48, unit="N m/A", symbol="$k_m$", doc="torque / back-emf constant")
+    jm: jnp.ndarray = param(13e-4, unit="kg m²", symbol="$J_m$", doc="motor inertia")
+    ja: jnp.ndarray = param(9.8e-5, unit="kg m²", symbol="$J_a$", doc="inertia of gear a (motor side)")
+    jb: jnp.ndarray = param(9.8e-5, unit="kg m²", symbol="$J_b$", doc="inertia of gear b (crank side)")
+    z: jnp.ndarray = param(1.0, unit="–", symbol="$z$", doc="gear ratio $\\dot\\varphi/\\dot\\alpha$")
+    T0: jnp.ndarray = param(
+        0.0, unit="N m", check="nonnegative", symbol="$T_0$", doc="constant friction torque on the motor shaft"
+    )
+    lam: jnp.ndarray = param(
+        0.08, unit="N m s/rad", check="nonnegative", symbol="$\\lambda$", doc="viscous friction on the motor shaft"
+    )
+    alpha0: jnp.ndarray = param(
+        0.0, unit="rad", check="finite", symbol="$\\alpha_0$", doc="crank angle at the scene start (rest state)"
+    )
+    assembly: int = option(1, choices=(1, -1), symbol="$k$", doc="the assembly mode of Appendix A (*assumed*)")
 
     input_types: ClassVar[tuple[type, ...]] = (AbstractVoltageSource,)
 
@@ -183,33 +195,11 @@ class FourBarDrive(AbstractModel):
         p.update(kw)
         return cls(**p)
 
-    def __check_init__(self):
+    def _check_relations(self, host):
         o = "FourBarDrive"
-        if self.assembly not in (1, -1):
-            raise ValueError(f"{o}: `assembly` (k of Appendix A) must be +1 or -1; got {self.assembly!r}")
-        spec = (
-            [(n, "positive", "m") for n in ("a", "b", "c")]
-            + [(n, "nonnegative", "m") for n in ("f1", "f2", "f3")]
-            + [(n, "nonnegative", "kg") for n in ("m1", "m2", "m3")]
-            + [(n, "positive", "kg m^2") for n in ("jg1", "jg2", "jg3", "jm", "ja", "jb")]
-            + [
-                ("g", "nonnegative", "m/s^2"),
-                ("R", "positive", "ohm"),
-                ("L", "positive", "H"),
-                ("km", "positive", "N m/A"),
-                ("z", "positive", ""),
-                ("T0", "nonnegative", "N m"),
-                ("lam", "nonnegative", "N m s/rad"),
-                ("hx", "finite", "m"),
-                ("hy", "finite", "m"),
-                ("alpha0", "finite", "rad"),
-            ]
-        )
-        # one transfer for every field; the geometry check reuses the host values
-        vals = check_fields(o, [(n, getattr(self, n), kind, unit) for n, kind, unit in spec])
-        if vals is not None:
-            host = dict(zip([n for n, _, _ in spec], vals))
-            self._check_geometry(*(host[n] for n in ("a", "b", "c", "hx", "hy")))
+        lengths = ("a", "b", "c", "hx", "hy")
+        if all(n in host for n in lengths):  # the host values of the construction check: no transfer
+            self._check_geometry(*(host[n] for n in lengths))
         else:  # traced lengths (jit/vmap/grad): the same two conditions, recorded as run-time checks
             D2, s = _geometry(jnp, self.a, self.b, self.c, self.hx, self.hy)
             record(

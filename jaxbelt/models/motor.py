@@ -13,19 +13,15 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._checks import as_float_array as _arr
-from .._checks import check_fields, check_nonnegative
+from .._checks import check_nonnegative
+from .._params import document, option, param
 from ..commands import AbstractController, MotorState
-
-
-def _opt_arr(x):
-    return None if x is None else jnp.asarray(x, dtype=float)
-
 
 _LIMITERS = ("hard", "smooth")
 _GAINS = ("ramped", "constant")
 
 
+@document
 class PID(AbstractController):
     """PID speed regulator with a ramped or constant proportional gain (Incerti, 2012, eq. 14-16).
 
@@ -54,38 +50,27 @@ class PID(AbstractController):
       inside $(-V_{lim}, V_{lim})$, tends to the hard clip as $s \\to 0$, and has a non-zero
       gradient everywhere (use it for gradient-based tuning).
 
-    | field | symbol | unit | paper value |
-    |---|---|---|---|
-    | `kp` | $K_p$ (ramped: multiplies $t$) | V/rad (ramped), V s/rad (constant) | 80 |
-    | `ki` | $K_i$ | V/rad | 32 |
-    | `kd` | $K_d$ | V/(rad s⁻²) | 0.015 |
-    | `omega_ref` | $\\omega_0$ motor speed set point | rad/s | 30 |
-    | `v_limit` | $V_{lim}$ (None: no limiter) | V | – |
-    | `limiter` | `"hard"` or `"smooth"` (static) | – | – |
-    | `v_smooth` | width $s$ of the smooth limiter | V | 0.5 |
-    | `gain` | `"ramped"` ($K_p t$, eq. 16) or `"constant"` ($K_p$, eq. 14) (static) | – | ramped |
+    Parameters (the paper's regulator as defaults, Incerti (2012), Sec. II-D):
+
+    {parameters}
+
+    `kp` is in V/rad for the ramped gain (it multiplies $t$) and in V s/rad for the constant one.
     """
 
-    kp: jnp.ndarray = eqx.field(converter=_arr, default=80.0)
-    ki: jnp.ndarray = eqx.field(converter=_arr, default=32.0)
-    kd: jnp.ndarray = eqx.field(converter=_arr, default=0.015)
-    omega_ref: jnp.ndarray = eqx.field(converter=_arr, default=30.0)
-    v_limit: jnp.ndarray | None = eqx.field(converter=_opt_arr, default=None)
-    limiter: str = eqx.field(static=True, default="hard")
-    v_smooth: jnp.ndarray = eqx.field(converter=_arr, default=0.5)
-    gain: str = eqx.field(static=True, default="ramped")
-
-    def __check_init__(self):
-        o = "PID"
-        if self.limiter not in _LIMITERS:
-            raise ValueError(f"{o}: `limiter` must be one of {_LIMITERS}; got {self.limiter!r}")
-        checks = [(n, getattr(self, n), "finite", "") for n in ("kp", "ki", "kd", "omega_ref")]
-        if self.v_limit is not None:
-            checks.append(("v_limit", self.v_limit, "positive", "V"))
-        checks.append(("v_smooth", self.v_smooth, "positive", "V"))
-        check_fields(o, checks)  # one transfer for all the fields
-        if self.gain not in _GAINS:
-            raise ValueError(f"{o}: `gain` must be one of {_GAINS} (eq. 16 or eq. 14); got {self.gain!r}")
+    kp: jnp.ndarray = param(
+        80.0, unit="V/rad", check="finite", symbol="$K_p$", doc="proportional gain (ramped: multiplies $t$)"
+    )
+    ki: jnp.ndarray = param(32.0, unit="V/rad", check="finite", symbol="$K_i$", doc="integral gain")
+    kd: jnp.ndarray = param(0.015, unit="V s²/rad", check="finite", symbol="$K_d$", doc="derivative gain")
+    omega_ref: jnp.ndarray = param(
+        30.0, unit="rad/s", check="finite", symbol="$\\omega_0$", doc="motor speed set point"
+    )
+    v_limit: jnp.ndarray | None = param(
+        None, unit="V", optional=True, symbol="$V_{lim}$", doc="voltage limit (None: no limiter; Fig. 3)"
+    )
+    limiter: str = option("hard", choices=_LIMITERS, doc="the limiter's shape: clip or smooth")
+    v_smooth: jnp.ndarray = param(0.5, unit="V", symbol="$s$", doc="width of the smooth limiter")
+    gain: str = option("ramped", choices=_GAINS, doc="proportional gain $K_p t$ (eq. 16) or $K_p$ (eq. 14)")
 
     def proportional_gain(self, t):
         """Proportional gain at time `t`: $K_p t$ (ramped, eq. 16) or $K_p$ (constant, eq. 14) [V s/rad]."""

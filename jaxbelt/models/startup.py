@@ -299,8 +299,6 @@ class BeltChain(AbstractBeltDrive):
     {parameters}
     """
 
-    array_fields: ClassVar[tuple[str, ...]] = ("inertias", "k", "c", "r_drive", "r_driven")
-
     inertias: jnp.ndarray = param(unit="kg m²", shape=None, doc="the n + 1 shaft inertias (pulleys on each shaft)")
     k: jnp.ndarray = param(unit="N/m", shape=None, doc="branch stiffness of each stage, shape (n,)")
     c: jnp.ndarray = param(

@@ -48,6 +48,7 @@ from .._checks import (
     record,
 )
 from .._guard import all_ok, checked, error_if, guard, host_checked, stored_jit, traced_checks
+from .._params import Parametrised, document, param
 
 __all__ = [
     "MovingString",
@@ -141,29 +142,30 @@ def _check_on_span(x, length, owner: str) -> None:
     )
 
 
-class MovingString(eqx.Module):
+@document
+class MovingString(Parametrised):
     """A belt span as an axially moving string (belt-vibration report, eq. 24-55).
 
     $y_{,tt} + 2V y_{,xt} + (V^2 - T/\\rho) y_{,xx} = 0$ on $0 < x < L$, $y = 0$ at both ends.
 
-    | field | symbol | unit | default |
-    |---|---|---|---|
-    | `tension` | $T$ span tension | N | 140 (belt-vibration report, tight side) |
-    | `density` | $\\rho$ mass per unit length | kg/m | 0.05 (belt-vibration report) |
-    | `length` | $L$ free span length | m | 0.2621 (fitted to the belt-vibration report, Table 2; not in the text) |
+    {parameters}
 
     Speeds are belt speeds $V$ [m/s]; frequencies are angular [rad/s].
     """
 
-    tension: jnp.ndarray = eqx.field(converter=_arr, default=140.0)
-    density: jnp.ndarray = eqx.field(converter=_arr, default=0.05)
-    length: jnp.ndarray = eqx.field(converter=_arr, default=0.2621)
-
-    def __check_init__(self):
-        o = "MovingString"
-        check_positive("tension", self.tension, "N", o)
-        check_positive("density", self.density, "kg/m", o)
-        check_positive("length", self.length, "m", o)
+    tension: jnp.ndarray = param(
+        140.0, unit="N", symbol="$T$", default_note="belt-vibration report, tight side", doc="span tension"
+    )
+    density: jnp.ndarray = param(
+        0.05, unit="kg/m", symbol="$\\rho$", default_note="belt-vibration report", doc="mass per unit length"
+    )
+    length: jnp.ndarray = param(
+        0.2621,
+        unit="m",
+        symbol="$L$",
+        default_note="fitted to the belt-vibration report, Table 2; not in the text",
+        doc="free span length",
+    )
 
     @property
     def critical_speed(self):
@@ -321,22 +323,15 @@ def exciting_speeds(span: MovingString, pulley_radius, n=1, m=1):
     return guard(out, checks, throw=True)[0]
 
 
-class RunoutRig(eqx.Module):
+@document
+class RunoutRig(Parametrised):
     """A belt span between two eccentric pulleys: the run-out test stand of Moon & Wickert (1997, sec. 2).
 
     The belt runs from pulley 0 ($x = 0$) to pulley 1 ($x = L$); pulley $j$ of radius $r_j$ turns at
     $\\Omega_j = V/r_j$ and moves the span end by $e_j\\sin(\\Omega_j t + \\phi_j)$, $\\phi_0 = 0$,
     $\\phi_1 = \\phi$ (Moon & Wickert, 1997, eq. 3).
 
-    | field | symbol | unit | default |
-    |---|---|---|---|
-    | `length` | $L$ free span length | m | 0.86 (Moon & Wickert, 1997, test stand) |
-    | `pulley_radii` | $(r_0, r_1)$ pulley pitch radii | m | (0.063, 0.063) (test stand) |
-    | `wave_speed` | $v_t = \\sqrt{P/\\rho A}$ transverse wave speed | m/s | 41.0 (ASSUMED: not in the text; puts the first crossing at 9.0 m/s) |
-    | `runouts` | $(e_0, e_1)$ run-out amplitudes, half the peak-to-peak | m | (0.355e-3, 0.21e-3) (test stand: 0.71 and 0.42 mm peak-to-peak) |
-    | `phase` | $\\phi$ of pulley 1's run-out | rad | 4.18879 = 240° (test stand; its sign is ASSUMED) |
-    | `damping_ratio` | $\\zeta$ modal damping ratio, in $[0, 1)$ | – | 0.0 (ASSUMED: the paper's linear analysis is undamped) |
-    | `position` | $x_m$ sensor distance from pulley 0, in $[0, L]$ | m | 0.01 ("1 cm from the driven pulley"; which pulley is ASSUMED) |
+    {parameters}
 
     The crossing functions (`crossing_speeds`, `crossing_diagram`) use `length`, `pulley_radii`
     (one or more pulleys) and `wave_speed`; the response functions (`runout_phasors`,
@@ -345,26 +340,74 @@ class RunoutRig(eqx.Module):
     wave speed is identified from the measured jump speeds (37.94 m/s).
     """
 
-    length: jnp.ndarray = eqx.field(converter=_arr, default=0.86)
-    pulley_radii: jnp.ndarray = eqx.field(converter=_arr, default=(0.063, 0.063))
-    wave_speed: jnp.ndarray = eqx.field(converter=_arr, default=41.0)
-    runouts: jnp.ndarray = eqx.field(converter=_arr, default=(0.355e-3, 0.21e-3))
-    phase: jnp.ndarray = eqx.field(converter=_arr, default=4.18879)
-    damping_ratio: jnp.ndarray = eqx.field(converter=_arr, default=0.0)
-    position: jnp.ndarray = eqx.field(converter=_arr, default=0.01)
+    length: jnp.ndarray = param(
+        0.86, unit="m", symbol="$L$", default_note="Moon & Wickert, 1997, test stand", doc="free span length"
+    )
+    pulley_radii: jnp.ndarray = param(
+        (0.063, 0.063),
+        unit="m",
+        shape=None,
+        symbol="$(r_0, r_1)$",
+        default_note="test stand",
+        doc="pulley pitch radii (one value per pulley, 1-D)",
+    )
+    wave_speed: jnp.ndarray = param(
+        41.0,
+        unit="m/s",
+        symbol="$v_t$",
+        default_note="ASSUMED: not in the text; puts the first crossing at 9.0 m/s",
+        doc="transverse wave speed $v_t = \\sqrt{P/\\rho A}$",
+    )
+    runouts: jnp.ndarray = param(
+        (0.355e-3, 0.21e-3),
+        unit="m",
+        check="nonnegative",
+        shape=(2,),
+        symbol="$(e_0, e_1)$",
+        default_note="test stand: 0.71 and 0.42 mm peak-to-peak",
+        doc="run-out amplitudes, half the peak-to-peak",
+    )
+    phase: jnp.ndarray = param(
+        4.18879,
+        unit="rad",
+        check="finite",
+        symbol="$\\phi$",
+        default_note="240°, test stand; its sign is ASSUMED",
+        doc="phase of pulley 1's run-out",
+    )
+    damping_ratio: jnp.ndarray = param(
+        0.0,
+        unit="–",
+        check="range",
+        lo=0.0,
+        hi=1.0,
+        hi_open=True,
+        symbol="$\\zeta$",
+        default_note="ASSUMED: the paper's linear analysis is undamped",
+        doc="modal damping ratio",
+    )
+    position: jnp.ndarray = param(
+        0.01,
+        unit="m",
+        check="none",
+        valid="[0, `length`]",
+        symbol="$x_m$",
+        default_note='"1 cm from the driven pulley"; which pulley is ASSUMED',
+        doc="sensor distance from pulley 0",
+    )
 
-    def __check_init__(self):
+    def _check_relations(self, host):
         o = "RunoutRig"
-        check_positive("length", self.length, "m", o)
-        check_positive("pulley_radii", self.pulley_radii, "m", o)
-        check_positive("wave_speed", self.wave_speed, "m/s", o)
-        check_nonnegative("runouts", self.runouts, "m", o)
-        check_range("damping_ratio", self.damping_ratio, 0.0, 1.0, hi_open=True, owner=o)
-        if is_concrete(self.position) and is_concrete(self.length):
-            check_range("position", self.position, 0.0, float(np.min(np.asarray(self.length))), unit="m", owner=o)
+        if self.pulley_radii.ndim > 1:
+            raise ValueError(
+                f"{o}: parameter `pulley_radii` must be one radius or a 1-D array of radii [m]; "
+                f"got an array of shape {self.pulley_radii.shape}"
+            )
+        if "position" in host and "length" in host:
+            check_range("position", host["position"], 0.0, float(host["length"]), unit="m", owner=o)
         else:
             record(
-                jnp.all(jnp.isfinite(self.position) & (self.position >= 0) & (self.position <= jnp.min(self.length))),
+                jnp.all(jnp.isfinite(self.position) & (self.position >= 0) & (self.position <= self.length)),
                 f"{o}: parameter `position` must lie in [0, length] m",
             )
 

@@ -71,23 +71,27 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._checks import as_float_array as _arr
-from ..._checks import check_nonnegative, check_positive, check_range, is_concrete, record
+from ..._checks import is_concrete, record
 from ..._model import AbstractModel, observable
+from ..._params import document, option, param
 from ...commands import AbstractRunningSpeed
 
 
 def _pair(x):
-    return jnp.broadcast_to(jnp.asarray(x, dtype=float), (2,))
+    """One value for both pulleys, or the two values (another shape is refused by name at construction)."""
+    x = _arr(x)
+    return jnp.broadcast_to(x, (2,)) if x.ndim == 0 else x
 
 
+@document
 class RunningSpeed(AbstractRunningSpeed):
-    """Input of a `NonlinearBelt` scene: the constant belt running speed $V$ [m/s]."""
+    """Input of a `NonlinearBelt` scene: the constant belt running speed $V$ [m/s].
 
-    speed: jnp.ndarray = eqx.field(converter=_arr)
+    {parameters}
+    """
 
-    def __check_init__(self):
-        # the sub-critical bound (speed < the belt's wave speed) is the belt's: `NonlinearBelt.check_speed`
-        check_nonnegative("speed", self.speed, "m/s", "RunningSpeed")
+    # the sub-critical bound (speed < the belt's wave speed) is the belt's: `NonlinearBelt.check_speed`
+    speed: jnp.ndarray = param(unit="m/s", check="nonnegative", symbol="$V$", doc="belt running speed")
 
     def speed_at(self, t):
         return self.speed + 0.0 * jnp.asarray(t, dtype=float)
@@ -100,23 +104,21 @@ class RunningSpeed(AbstractRunningSpeed):
         return self.speed
 
 
+@document
 class SpeedRamp(AbstractRunningSpeed):
     """Input of a `NonlinearBelt` scene: the belt speed ramped linearly through resonance, as in
     the time records of Moon & Wickert (1997), Fig. 3.
 
     $V(t) = V_0 + (V_1 - V_0)\\,t/T$ for $0 \\le t \\le T$, held at $V_0$ before and at $V_1$ after
-    (`v_start` $V_0$, `v_end` $V_1$ [m/s], `duration` $T$ [s]). The pulley angles are the integral of
-    the pulley speeds, $\\theta_i(t) = \\int_0^t V\\,dt / r_i$ (`distance_at`), not $\\Omega t$.
+    (parameters below). The pulley angles are the integral of the pulley speeds,
+    $\\theta_i(t) = \\int_0^t V\\,dt / r_i$ (`distance_at`), not $\\Omega t$.
+
+    {parameters}
     """
 
-    v_start: jnp.ndarray = eqx.field(converter=_arr)
-    v_end: jnp.ndarray = eqx.field(converter=_arr)
-    duration: jnp.ndarray = eqx.field(converter=_arr)
-
-    def __check_init__(self):
-        check_nonnegative("v_start", self.v_start, "m/s", "SpeedRamp")
-        check_nonnegative("v_end", self.v_end, "m/s", "SpeedRamp")
-        check_positive("duration", self.duration, "s", "SpeedRamp")
+    v_start: jnp.ndarray = param(unit="m/s", check="nonnegative", symbol="$V_0$", doc="speed at the start")
+    v_end: jnp.ndarray = param(unit="m/s", check="nonnegative", symbol="$V_1$", doc="speed at the end")
+    duration: jnp.ndarray = param(unit="s", symbol="$T$", doc="ramp time")
 
     def speed_at(self, t):
         s = jnp.clip(jnp.asarray(t, dtype=float) / self.duration, 0.0, 1.0)  # hold outside [0, T] (by definition)
@@ -218,25 +220,16 @@ def _gauss(n_modes: int):
     return jnp.asarray(0.5 * (xg + 1.0)), jnp.asarray(0.5 * wg)
 
 
+@document
 class NonlinearBelt(AbstractModel):
     """Travelling belt span with stretching non-linearity, driven by eccentric pulleys (Moon & Wickert, 1997).
 
     See the module docstring for the equations (eq. 1-7, 34-36 of Moon & Wickert) and the
     derivation of the forcing. Parameters (SI; defaults: the test stand of Moon & Wickert (1997)):
 
-    | field | meaning | unit | default |
-    |---|---|---|---|
-    | `span` | free span length $L$ | m | 0.86 |
-    | `wave_speed` | transverse wave speed $v_t = \\sqrt{P/\\rho A}$ (identified) | m/s | 37.94 |
-    | `v_l` | longitudinal / transverse wave speed ratio | – | 50 |
-    | `pulley_radii` | $(r_d, r_i)$ drive and idle pulley | m | (0.063, 0.063) |
-    | `runout` | eccentricities $(\\varepsilon_d, \\varepsilon_i)$ = half the peak-to-peak run-out (0.71, 0.42 mm p-p) | m | (0.355e-3, 0.21e-3) |
-    | `phase` | phase $\\phi$ of the idle pulley's run-out, $\\theta_i = \\theta_d + \\phi$ | rad | +240° |
-    | `damping` | modal damping ratio $\\xi$: one for all modes, or per mode (the last entry serves the higher modes; identified) | – | (0.01219, 0.02713) |
-    | `n_modes` | number of complex modes N (static) | – | 1 |
-    | `sensor_pulley` | pulley the sensor sits 1 cm from: `"drive"` or `"idle"` (static) | – | `"idle"` |
-    | `travel` | belt travel in the span: `"drive_to_idle"` or `"idle_to_drive"` (static) | – | `"drive_to_idle"` |
+    {parameters}
 
+    `damping` is one ratio for all modes, or one per mode (the last entry serves the higher modes).
     The paper does not give the belt tension nor the damping, and leaves open which pulley is
     "the driven pulley" the sensor sits at, the travel direction and the sign of the 240° phase.
     The defaults are identified from the four measured jump speeds (Moon & Wickert (1997), Sec. 2,
@@ -265,44 +258,67 @@ class NonlinearBelt(AbstractModel):
     1 cm from the sensor pulley; `"speed"` [m/s].
     """
 
-    array_fields: ClassVar[tuple[str, ...]] = ("pulley_radii", "runout", "damping")
+    span: jnp.ndarray = param(0.86, unit="m", symbol="$L$", doc="free span length")
+    wave_speed: jnp.ndarray = param(
+        37.94, unit="m/s", symbol="$v_t$", default_note="identified", doc="transverse wave speed $\\sqrt{P/\\rho A}$"
+    )
+    v_l: jnp.ndarray = param(
+        50.0, unit="–", check="nonnegative", symbol="$v_l$", doc="longitudinal / transverse wave speed ratio"
+    )
+    pulley_radii: jnp.ndarray = param(
+        (0.063, 0.063),
+        unit="m",
+        shape=(2,),
+        converter=_pair,
+        symbol="$(r_d, r_i)$",
+        doc="drive and idle pulley radii (one value: both)",
+    )
+    runout: jnp.ndarray = param(
+        (0.355e-3, 0.21e-3),
+        unit="m",
+        check="nonnegative",
+        shape=(2,),
+        converter=_pair,
+        symbol="$(\\varepsilon_d, \\varepsilon_i)$",
+        default_note="0.71, 0.42 mm p-p",
+        doc="eccentricities, half the peak-to-peak run-out; < 0.1 `span`",
+    )
+    phase: jnp.ndarray = param(
+        float(np.deg2rad(240.0)),
+        unit="rad",
+        check="range",
+        symbol="$\\phi$",
+        default_note="+240°",
+        doc="phase of the idle pulley's run-out, $\\theta_i = \\theta_d + \\phi$",
+    )
+    damping: jnp.ndarray = param(
+        (0.01219, 0.02713),
+        unit="–",
+        check="range",
+        lo=0.0,
+        hi=1.0,
+        hi_open=True,
+        shape=None,
+        symbol="$\\xi$",
+        default_note="identified",
+        doc="modal damping ratio: one for all modes, or a 1-D array of per-mode ratios",
+    )
+    n_modes: int = option(1, minimum=1, symbol="$N$", doc="number of complex modes")
+    sensor_pulley: str = option("idle", choices=("drive", "idle"), doc="the pulley the sensor sits 1 cm from")
+    travel: str = option("drive_to_idle", choices=("drive_to_idle", "idle_to_drive"), doc="belt travel in the span")
 
-    span: jnp.ndarray = eqx.field(converter=_arr, default=0.86)
-    wave_speed: jnp.ndarray = eqx.field(converter=_arr, default=37.94)
-    v_l: jnp.ndarray = eqx.field(converter=_arr, default=50.0)
-    pulley_radii: jnp.ndarray = eqx.field(converter=_pair, default=(0.063, 0.063))
-    runout: jnp.ndarray = eqx.field(converter=_pair, default=(0.355e-3, 0.21e-3))
-    phase: jnp.ndarray = eqx.field(converter=_arr, default=float(np.deg2rad(240.0)))
-    damping: jnp.ndarray = eqx.field(converter=_arr, default=(0.01219, 0.02713))
-    n_modes: int = eqx.field(static=True, default=1)
-    sensor_pulley: str = eqx.field(static=True, default="idle")
-    travel: str = eqx.field(static=True, default="drive_to_idle")
-
-    def __check_init__(self):
+    def _check_relations(self, host):
         o = "NonlinearBelt"
-        if not isinstance(self.n_modes, (int, np.integer)) or isinstance(self.n_modes, bool) or self.n_modes < 1:
-            raise ValueError(f"{o}: parameter `n_modes` must be an integer >= 1; got {self.n_modes!r}")
-        if self.sensor_pulley not in ("drive", "idle"):
-            raise ValueError(f"{o}: parameter `sensor_pulley` must be 'drive' or 'idle'; got {self.sensor_pulley!r}")
-        if self.travel not in ("drive_to_idle", "idle_to_drive"):
-            raise ValueError(f"{o}: parameter `travel` must be 'drive_to_idle' or 'idle_to_drive'; got {self.travel!r}")
-        check_positive("span", self.span, "m", o)
-        check_positive("wave_speed", self.wave_speed, "m/s", o)
-        check_nonnegative("v_l", self.v_l, "", o)
-        check_positive("pulley_radii", self.pulley_radii, "m", o)
-        check_nonnegative("runout", self.runout, "m", o)
-        check_range("phase", self.phase, owner=o, unit="rad")
-        if jnp.ndim(self.damping) > 1:
+        if self.damping.ndim > 1:
             raise ValueError(
                 f"{o}: parameter `damping` must be a scalar or a 1-D array of per-mode ratios; "
-                f"got shape {jnp.shape(self.damping)}"
+                f"got shape {self.damping.shape}"
             )
-        check_range("damping", self.damping, 0.0, 1.0, hi_open=True, owner=o)
-        if is_concrete(self.runout) and is_concrete(self.span):
-            if np.any(np.asarray(self.runout) >= 0.1 * np.asarray(self.span)):
+        if "runout" in host and "span" in host:
+            if np.any(host["runout"] >= 0.1 * host["span"]):
                 raise ValueError(
                     f"{o}: parameter `runout` must be small against the span (< 0.1 span = "
-                    f"{0.1 * float(self.span):g} m); got {np.asarray(self.runout).tolist()}"
+                    f"{0.1 * float(host['span']):g} m); got {np.asarray(host['runout']).tolist()}"
                 )
         else:  # traced: recorded, attached to the results by `simulate` (see `jaxbelt._guard`)
             record(
