@@ -51,6 +51,26 @@ def test_docs_build_strict(tmp_path):
     assert 'class="arithmatex"' in (site / "api" / "shaping" / "index.html").read_text()
     assert (site / "notebooks" / "01_startup" / "index.html").exists()
     assert (site / "references" / "index.html").exists()
+    # the parameter tables that the declarations fill in (docs/_ext/griffe_params.py): no marker left, and
+    # on the class's API page a row for each declared field with its unit and valid range
+    import html
+
+    import jaxbelt as jb
+    from jaxbelt._params import declared, valid_range
+
+    pages = {p: (site / "api" / p / "index.html").read_text() for p in ("core", "startup", "fourbar", "spans")}
+    assert not [p for p, t in pages.items() if "{parameters}" in t]
+    for page, cls in (("fourbar", jb.FourBarDrive), ("spans", jb.RunoutRig), ("core", jb.ExponentialVoltage)):
+        rows = {}
+        for row in re.findall(r"<tr>\s*<td><code>(\w+)</code></td>(.*?)</tr>", pages[page], re.S):
+            rows.setdefault(
+                row[0],
+                [html.unescape(re.sub(r"<[^>]+>", "", c)).strip() for c in re.findall(r"<td>(.*?)</td>", row[1], re.S)],
+            )
+        for name, (p, _) in declared(cls).items():
+            assert name in rows, (cls.__name__, name)
+            symbol, unit, default, valid, meaning = rows[name]
+            assert unit == (p.unit or "–") and valid.startswith(valid_range(p).replace("`", "")), (cls.__name__, name, rows[name])
 
 
 def test_api_pages_cover_the_public_names():
