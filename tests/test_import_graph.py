@@ -97,6 +97,58 @@ def test_cycle_detector_finds_a_cycle():
     assert _cycle({"a": {"b"}, "b": set()}) is None
 
 
+def _folder_loop(graph, packages):
+    """A loop through a package seen as one room: a module of `package` imports a module outside it that
+    (directly or further on) imports back into `package` (e.g. models/* -> solve -> models/base), which
+    the file-level test does not see because no file imports itself. `graph`: {module: imported modules};
+    `packages`: the package names to look at. Returns the loop as a list of names (the package standing
+    for its modules), or None."""
+    for package in sorted(packages):
+
+        def room(n, package=package):
+            return package if n == package or n.startswith(package + ".") else n
+
+        folded = {}
+        for n, deps in graph.items():
+            folded.setdefault(room(n), set()).update(room(d) for d in deps if room(d) != room(n))
+        for n in set().union(*folded.values()) - set(folded):
+            folded[n] = set()
+        loop = _cycle(folded)
+        if loop is not None:
+            return loop
+    return None
+
+
+def _folder_graph():
+    """The module graph for the folder-level test: a package's `__init__` that hands on its own children's
+    names (re-exports, imported on first use) does not depend on them."""
+    packages = {n for n in _graph() if (PKG.parent / n.replace(".", "/") / "__init__.py").exists()}
+    graph = {n: {d for d in deps if not (n in packages and d.startswith(n + "."))} for n, deps in _graph().items()}
+    return graph, packages
+
+
+def test_no_folder_imports_itself_through_another_module():
+    graph, packages = _folder_graph()
+    assert {"jaxbelt.models", "jaxbelt.models.nonlinear", "jaxbelt.cli", "jaxbelt.plots"} <= packages
+    loop = _folder_loop(graph, packages - {"jaxbelt"})
+    assert loop is None, f"folder-level import loop: {' -> '.join(loop)}"
+
+
+def test_folder_loop_detector_finds_a_loop_through_a_package():
+    # models/startup -> solve -> models/base: no file-level cycle, a loop through the folder `models`
+    graph = {"models": set(), "models.startup": {"solve"}, "models.base": set(), "solve": {"models.base"}}
+    assert _cycle(graph) is None
+    assert _folder_loop(graph, {"models"}) == ["models", "solve", "models"]
+    # the same arrow from solve into a module of its own floor: no loop
+    graph["solve"] = {"protocol"}
+    graph["protocol"] = set()
+    assert _folder_loop(graph, {"models"}) is None
+    # a loop through a nested package is the loop of the package that holds it too
+    graph = {"m.n.a": {"x"}, "x": {"m.n.b"}, "m.n.b": set()}
+    assert _folder_loop(graph, {"m"}) == ["m", "x", "m"]
+    assert _folder_loop(graph, {"m.n"}) == ["m.n", "x", "m.n"]
+
+
 def test_import_loads_no_plotting_library_and_announces_float64():
     code = (
         "import sys, jax; import jaxbelt as jb; "
