@@ -123,6 +123,10 @@ if _typing.TYPE_CHECKING:
     from .runs import startup_curves as startup_curves
     from .scene import Scene as Scene
     from .scene import TracedGridWarning as TracedGridWarning
+
+    # --- command shaping on the user's axis ---------------------------------------------------------
+    from .shaping.identify import identify_axis as identify_axis
+    from .shaping.identify import load_record as load_record
     from .solution import Solution as Solution
     from .solution import SolveError as SolveError
     from .solve import simulate as simulate

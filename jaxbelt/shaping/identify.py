@@ -1,0 +1,547 @@
+"""The modes of the user's axis from a measured record: `identify_axis` and `load_record`.
+
+A free decay (tap the payload, let it ring) or the end of a step response (a short move, then the payload
+rings about its final position), recorded with an accelerometer or an encoder at a uniform rate, is a sum
+of damped oscillations
+
+$y(t) = c_0 + \\sum_{i=1}^{n} e^{-\\sigma_i \\tau}\\,\\big(a_i\\cos\\omega_{d,i}\\tau + b_i\\sin\\omega_{d,i}\\tau\\big)$,
+$\\tau = t - t_0$,
+
+with $\\omega_i = 2\\pi f_i$, $\\sigma_i = \\zeta_i\\omega_i$, $\\omega_{d,i} = \\omega_i\\sqrt{1-\\zeta_i^2}$ and $t_0$ the
+first sample (the constant $c_0$ only with `offset=True`). `identify_axis` fits it in two steps:
+
+1. **Matrix pencil** (Hua and Sarkar, 1990, IEEE Trans. Acoust. Speech Signal Process. 38(5), 814-824):
+   the Hankel matrix $Y_{kj} = y_{k+j}$ of the samples (mean-removed with `offset=True`), $j = 0..L$ with
+   the pencil parameter $L = N/3$ (at most 500), has rank $2n$ (+1 for the offset) without noise. Its $M$
+   dominant right singular vectors $V$ (by subspace iteration) span the sampled exponentials $z^j$, so the
+   eigenvalues of $V_1^{+}V_2$ ($V$ without its last, resp. first, row) are the poles $z_k = e^{s_k\\Delta t}$.
+   Amplitudes by linear least squares on the poles; the $n$ stable complex-conjugate pairs with the largest
+   RMS over the record are kept (real poles, i.e. the offset or drifts, and unstable ones are dropped; a
+   pole's angle in $(0, \\pi)$ keeps its frequency below Nyquist). This is the start point.
+2. **Nonlinear least squares** on all $4n$ (+1) parameters with Levenberg-Marquardt
+   (`optimistix.least_squares`), in coordinates that keep every mode physical: $\\ln f_i$ (so $f_i > 0$),
+   $\\operatorname{logit}\\zeta_i$ (so $0 < \\zeta_i < 1$), the amplitudes and the offset in units of the
+   record's spread. One compiled program per record length, `n_modes` and `offset`: a second record of
+   the same length runs without compiling.
+
+**Standard errors** from the Jacobian $J$ of the residuals at the optimum: $C = s^2 (J^TJ)^{-1}$ with
+$s^2 = \\mathrm{SSR}/(N - p)$, mapped to $f_i$ and $\\zeta_i$ by the delta method
+($\\mathrm{d}f = f\\,\\mathrm{d}\\ln f$, $\\mathrm{d}\\zeta = \\zeta(1-\\zeta)\\,\\mathrm{d}\\operatorname{logit}\\zeta$), as in
+`jaxbelt.identify`. They are linearised (Cramér-Rao-type) errors for white noise.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import os
+
+import jax
+import jax.numpy as jnp
+import lineax as lx
+import numpy as np
+import optimistix as optx
+
+from .._checks import check_int
+
+__all__ = ["identify_axis", "load_record"]
+
+_OWNER = "identify_axis"
+#: largest deviation of a time stamp from the uniform grid, in units of the step (see `identify_axis`)
+UNIFORM_RTOL = 1e-3
+#: samples needed per fitted parameter
+SAMPLES_PER_PARAMETER = 10
+#: periods of the lowest mode the record must hold
+MIN_PERIODS = 2.0
+#: a mode's amplitude must exceed this many of its standard errors (a fit to noise does not)
+MIN_SIGNIFICANCE = 8.0
+#: largest pencil parameter L and number of Hankel rows (the cost of the singular vectors is rows x L^2)
+_PENCIL_MAX_L = 500
+_PENCIL_MAX_ROWS = 2500
+#: extra model orders the pencil tries when the first one holds fewer than n stable pairs
+_PENCIL_EXTRA_ORDERS = 4
+#: subspace iteration of the pencil's singular vectors: extra vectors in the block, and iterations
+_PENCIL_OVERSAMPLE = 6
+_PENCIL_ITERATIONS = 12
+_RESULT_NAMES = (
+    "successful",
+    "max_steps_reached",
+    "nonlinear_max_steps_reached",
+    "nonlinear_divergence",
+    "nonfinite",
+    "singular",
+)
+
+
+# --------------------------------------------------------------------------------------------
+# checks of the record
+# --------------------------------------------------------------------------------------------
+def _require_x64() -> None:
+    """`RuntimeError` unless JAX's 64-bit mode is on: the fit needs float64 (the noise-free records of the
+    tests are fitted to 1e-13). `jaxbelt._checks.require_x64` says so where the package has it."""
+    from .. import _checks
+
+    require = getattr(_checks, "require_x64", None)
+    if require is not None:
+        require(_OWNER)
+    elif jax.dtypes.canonicalize_dtype(float) != np.dtype(np.float64):
+        raise RuntimeError(
+            f"{_OWNER}: the fit computes in float64, and JAX's 64-bit mode is off: add "
+            '`jax.config.update("jax_enable_x64", True)` right after `import jax`'
+        )
+
+
+def _first_bad(name: str, x: np.ndarray) -> None:
+    bad = np.flatnonzero(~np.isfinite(x))
+    if bad.size:
+        k = int(bad[0])
+        raise ValueError(
+            f"{_OWNER}: parameter `{name}` must be finite (no NaN or inf); got {x[k]} at index {k} "
+            f"({bad.size} non-finite value{'s' if bad.size > 1 else ''} in all)"
+        )
+
+
+def _check_record(t, y, n_modes, offset):
+    """Validated host arrays `(t, y)`, the step `dt` [s] and the number of parameters `p`."""
+    n = check_int(_OWNER, "n_modes", n_modes, lo=1)
+    if not isinstance(offset, (bool, np.bool_)):
+        raise ValueError(f"{_OWNER}: parameter `offset` must be True or False; got {offset!r}")
+    try:
+        t = np.asarray(t, dtype=float)
+    except (TypeError, ValueError) as e:
+        raise ValueError(
+            f"{_OWNER}: parameter `t` must be a 1-D array of times [s]; got {type(t).__name__} ({e})"
+        ) from None
+    try:
+        y = np.asarray(y, dtype=float)
+    except (TypeError, ValueError) as e:
+        raise ValueError(
+            f"{_OWNER}: parameter `y` must be a 1-D array of samples; got {type(y).__name__} ({e})"
+        ) from None
+    if t.ndim != 1:
+        raise ValueError(f"{_OWNER}: parameter `t` must be a 1-D array of times [s]; got shape {t.shape}")
+    if y.shape != t.shape:
+        raise ValueError(f"{_OWNER}: parameter `y` must have the shape of `t`, {t.shape}; got shape {y.shape}")
+    p = 4 * n + int(bool(offset))
+    n_min = SAMPLES_PER_PARAMETER * p
+    if t.size < n_min:
+        raise ValueError(
+            f"{_OWNER}: the record (parameters `t`, `y`) is too short: {n} mode(s){' and an offset' if offset else ''} "
+            f"are {p} parameters, which need at least {n_min} samples ({SAMPLES_PER_PARAMETER} per parameter); "
+            f"got {t.size}"
+        )
+    _first_bad("t", t)
+    _first_bad("y", y)
+    steps = np.diff(t)
+    if np.any(steps <= 0):
+        k = int(np.flatnonzero(steps <= 0)[0])
+        raise ValueError(
+            f"{_OWNER}: parameter `t` must be strictly increasing; got t[{k}] = {t[k]!r} >= t[{k + 1}] = {t[k + 1]!r}"
+        )
+    dt = (t[-1] - t[0]) / (t.size - 1)
+    dev = np.abs(t - (t[0] + dt * np.arange(t.size))) / dt
+    k = int(np.argmax(dev))
+    if dev[k] > UNIFORM_RTOL:
+        raise ValueError(
+            f"{_OWNER}: parameter `t` must be uniformly sampled: every time within {UNIFORM_RTOL:g} of a step "
+            f"of the grid t[0] + k*dt (dt = {dt:.6g} s); the largest deviation is {dev[k]:.3g} steps at index {k} "
+            f"(t = {t[k]!r} s). Resample the record to a uniform rate first"
+        )
+    if np.ptp(y) == 0.0:
+        raise ValueError(f"{_OWNER}: parameter `y` is constant ({y[0]!r}): the record holds no vibration to identify")
+    return t, y, float(dt), n, p
+
+
+# --------------------------------------------------------------------------------------------
+# step 1: the matrix pencil (Hua and Sarkar, 1990)
+# --------------------------------------------------------------------------------------------
+def _orthonormal(A):
+    """Orthonormal columns spanning those of `A` (classical Gram-Schmidt, twice: as accurate as Householder
+    QR for the few columns here, and plain matrix products in XLA)."""
+
+    def column(j, Q):
+        v = A[:, j]
+        v = v - Q @ (Q.T @ v)  # the columns of Q after j are still zero
+        v = v - Q @ (Q.T @ v)
+        return Q.at[:, j].set(v / jnp.maximum(jnp.linalg.norm(v), 1e-300))
+
+    return jax.lax.fori_loop(0, A.shape[1], column, jnp.zeros_like(A))
+
+
+@functools.partial(jax.jit, static_argnames=("iters",))
+def _dominant_right_vectors(Y, Q0, *, iters):
+    """The dominant right singular vectors of `Y`, as columns, dominant first (as many as `Q0` has columns):
+    block subspace iteration on the Gram matrix $G = Y^TY$ from the start `Q0` ($Q \\leftarrow
+    \\mathrm{orth}(GQ)$, `iters` times), then a Rayleigh-Ritz step (the eigenvectors of $Q^TGQ$).
+
+    The signal's singular values stand far above the noise's (the ratio of their squares, about
+    $L A^2/4\\sigma^2$ for a mode of amplitude $A$ in noise $\\sigma$, is 10^3-10^4 at 5 % noise), so a few
+    products with $G$ find them to rounding; the noise's vectors, kept only to fill the model order, need
+    no accuracy. Matrix products only, plus an eigensolver of the block's size: a full SVD or eigensolver
+    of size L (LAPACK over a multi-threaded BLAS) takes seconds instead of milliseconds on a busy machine.
+    One compilation per record length and `n_modes` (the shapes)."""
+    G = Y.T @ Y
+    Q = jax.lax.fori_loop(0, iters, lambda _, Q: _orthonormal(G @ Q), _orthonormal(Q0))
+    H = Q.T @ G @ Q
+    _, W = jnp.linalg.eigh(0.5 * (H + H.T))
+    return (Q @ W)[:, ::-1]
+
+
+def _pencil_poles(V: np.ndarray, order: int) -> np.ndarray:
+    """The `order` poles $z_k$ of the total-least-squares matrix pencil from the right singular vectors `V`
+    (dominant first) of the Hankel matrix: the eigenvalues of $V_1^{+}V_2$ ($V_1$, nearly orthonormal,
+    by its normal equations)."""
+    V = V[:, :order]  # (L + 1, order): the signal subspace in the shift direction
+    V1, V2 = V[:-1], V[1:]
+    return np.linalg.eigvals(np.linalg.solve(V1.T @ V1, V1.T @ V2))
+
+
+def _hankel_vectors(x: np.ndarray, k: int) -> np.ndarray:
+    """The `k` dominant right singular vectors of the Hankel matrix $Y_{kj} = x_{k+j}$, $j = 0..L$,
+    $L = \\min(N/3, 500)$ (in Hua and Sarkar's range N/3..N/2 for noisy data, capped for the cost). Any set
+    of rows spans the same row space of exponentials: beyond 2500 rows every m-th is used."""
+    N = x.size
+    L = int(min(N // 3, _PENCIL_MAX_L))
+    rows = np.arange(N - L)
+    if rows.size > _PENCIL_MAX_ROWS:
+        rows = rows[:: int(math.ceil(rows.size / _PENCIL_MAX_ROWS))]
+    Y = x[rows[:, None] + np.arange(L + 1)[None, :]]
+    Q0 = np.random.default_rng(0).standard_normal((L + 1, min(k, L + 1)))  # a fixed start: reproducible
+    return np.asarray(_dominant_right_vectors(Y, Q0, iters=_PENCIL_ITERATIONS))
+
+
+def _pencil(y: np.ndarray, dt: float, n: int, offset: bool):
+    """Start point of the fit from the matrix pencil: `(f [Hz], zeta, a, b, c0)` with the modes sorted by
+    frequency, amplitudes in the units of `y` at the first sample (`c0` = 0 with `offset=False`).
+    Raises `ValueError` when the record holds fewer than `n` stable oscillating poles."""
+    N = y.size
+    mean = float(np.mean(y)) if offset else 0.0
+    x = y - mean
+    k = np.arange(N)
+    base = 2 * n + int(offset)
+    found = 0
+    V = _hankel_vectors(x, base + 2 * _PENCIL_EXTRA_ORDERS + _PENCIL_OVERSAMPLE)
+    max_order = min(V.shape[1], V.shape[0] - 2)
+    for extra in range(_PENCIL_EXTRA_ORDERS + 1):
+        order = min(base + 2 * extra, max_order)
+        z = _pencil_poles(V, order)
+        z = z[np.log(np.abs(z)) * N < 20.0]  # for the least squares only: a growing pole's z^k would overflow
+        logz = np.log(z.astype(complex))
+        basis = np.exp(k[:, None] * logz[None, :])
+        c, *_ = np.linalg.lstsq(basis, x.astype(complex), rcond=None)
+        rms = np.abs(c) * np.linalg.norm(basis, axis=0) / math.sqrt(N)
+        angle = np.imag(logz)
+        # one member of each oscillating pair (angle in (0, pi): below Nyquist, not real), decaying
+        good = (angle > 1e-9) & (angle < math.pi - 1e-9) & (np.abs(z) < 1.0)
+        found = int(good.sum())
+        if found >= n:
+            break
+        if order >= max_order:
+            break
+    if found < n:
+        raise ValueError(
+            f"{_OWNER}: the matrix pencil finds {found} decaying oscillation(s) in the record, fewer than "
+            f"`n_modes` = {n}: the record (`y`) may be noise, growing, or hold fewer modes; try a smaller "
+            f"`n_modes` or a record of the free decay only (after the excitation has ended)"
+        )
+    idx = np.flatnonzero(good)
+    idx = idx[np.argsort(-rms[idx])][:n]
+    s = logz[idx] / dt
+    sigma, wd = -s.real, s.imag
+    w = np.abs(s)
+    f, zeta = w / (2 * math.pi), sigma / w
+    order_f = np.argsort(f)
+    f, zeta, sigma, wd = f[order_f], zeta[order_f], sigma[order_f], wd[order_f]
+    # amplitudes (and offset) by linear least squares at these poles: the fit's start point
+    tau = k * dt
+    env = np.exp(-np.outer(tau, sigma))
+    cols = [env * np.cos(np.outer(tau, wd)), env * np.sin(np.outer(tau, wd))]
+    if offset:
+        cols.append(np.ones((N, 1)))
+    A = np.concatenate(cols, axis=1)
+    coef, *_ = np.linalg.lstsq(A, x, rcond=None)
+    a, b = coef[:n], coef[n : 2 * n]
+    c0 = mean + (coef[2 * n] if offset else 0.0)
+    return f, zeta, a, b, float(c0)
+
+
+# --------------------------------------------------------------------------------------------
+# step 2: Levenberg-Marquardt on all parameters
+# --------------------------------------------------------------------------------------------
+def _model(theta, tau, n: int, offset: bool):
+    """The record model at the coordinates `theta` = (ln f, logit zeta, a, b[, c]), times `tau` [s]."""
+    f = jnp.exp(theta[:n])
+    lz = theta[n : 2 * n]
+    zeta = jax.nn.sigmoid(lz)
+    w = 2.0 * jnp.pi * f
+    sigma = zeta * w
+    wd = w * jnp.sqrt(jax.nn.sigmoid(-lz) * (1.0 + zeta))  # 1 - zeta^2 = (1 - zeta)(1 + zeta), no cancellation
+    a, b = theta[2 * n : 3 * n], theta[3 * n : 4 * n]
+    ph = tau[:, None] * wd[None, :]
+    y = jnp.sum(jnp.exp(-tau[:, None] * sigma[None, :]) * (a * jnp.cos(ph) + b * jnp.sin(ph)), axis=1)
+    return y + theta[4 * n] if offset else y
+
+
+@functools.partial(jax.jit, static_argnames=("n", "offset", "rtol", "atol", "max_steps"))
+def _fit(tau, yn, theta0, scale, *, n, offset, rtol, atol, max_steps):
+    """LM on `u` with `theta = theta0 + scale * u` (`scale` conditions the Jacobian's columns).
+    Returns (u, residuals, the singular values and right singular vectors (rows) of the Jacobian d r / d u,
+    dominant first, the result's index in `_RESULT_NAMES`, steps).
+
+    Matrix products and LAPACK calls of the parameters' size only (the damped steps by their normal
+    equations, the Jacobian's singular vectors from $J^TJ$): LAPACK's QR or SVD of the tall Jacobian runs
+    over a multi-threaded BLAS, which takes 10x longer on a busy machine. $J$'s columns are scaled to
+    comparable norms, so squaring its condition number costs nothing that matters."""
+
+    def resid(u, _):
+        return _model(theta0 + scale * u, tau, n, offset) - yn
+
+    solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, linear_solver=lx.Normal(lx.Cholesky()))
+    sol = optx.least_squares(
+        resid, solver, jnp.zeros_like(theta0), options={"jac": "fwd"}, max_steps=max_steps, throw=False
+    )
+    u = sol.value
+    jac, r = jax.jacfwd(lambda v: (resid(v, None),) * 2, has_aux=True)(u)
+    lam, W = jnp.linalg.eigh(jac.T @ jac)
+    sv, vt = jnp.sqrt(jnp.maximum(lam[::-1], 0.0)), W[:, ::-1].T
+    hits = jnp.stack([sol.result == getattr(optx.RESULTS, name) for name in _RESULT_NAMES])
+    code = jnp.where(jnp.any(hits), jnp.argmax(hits), -1)
+    return u, r, sv, vt, code, sol.stats["num_steps"]
+
+
+def _standard_errors(theta, r, sv, vt, scale, n: int, p: int):
+    """Standard errors of f [Hz] and zeta, and each mode's significance (amplitude at t0 over its standard
+    error), from the residuals `r` and the singular values `sv` and vectors `vt` of the Jacobian dr/du at the
+    optimum ($\\theta = \\theta_0 + $ `scale` $u$): $C_u = s^2 (J^TJ)^{-1}$ (a direction whose singular value is
+    below 1e-7 of the largest is unidentified: infinite variance), $s^2 = \\mathrm{SSR}/(N - p)$, mapped by the delta method."""
+    s2 = float(r @ r) / (r.size - p)
+    keep = sv > 1e-7 * sv[0]
+    cov_u = (vt[keep].T / sv[keep] ** 2) @ vt[keep] * s2
+    if keep.sum() < p:
+        free = np.any(np.abs(vt[~keep]) > 1e-8, axis=0)
+        cov_u[np.ix_(free, free)] = np.inf
+    cov = cov_u * np.outer(scale, scale)  # in theta = (ln f, logit zeta, a, b[, c])
+    var = np.diag(cov)
+    f = np.exp(theta[:n])
+    zeta = 1.0 / (1.0 + np.exp(-theta[n : 2 * n]))
+    f_std = f * np.sqrt(var[:n])
+    z_std = zeta * (1.0 - zeta) * np.sqrt(var[n : 2 * n])
+    ia, ib = slice(2 * n, 3 * n), slice(3 * n, 4 * n)
+    a, b = theta[ia], theta[ib]
+    amp = np.hypot(a, b)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        amp_var = (a**2 * var[ia] + b**2 * var[ib] + 2 * a * b * np.diag(cov[ia, ib])) / amp**2
+        significance = amp / np.sqrt(amp_var)
+    return f_std, z_std, np.nan_to_num(significance, nan=0.0, posinf=np.inf)
+
+
+def _fmt(v) -> str:
+    return "[" + ", ".join(f"{x:.6g}" for x in np.atleast_1d(v)) + "]"
+
+
+def identify_axis(
+    t,
+    y,
+    n_modes: int,
+    *,
+    offset: bool = True,
+    rtol: float = 1e-10,
+    atol: float = 1e-12,
+    max_steps: int = 256,
+):
+    """The modes of a belt-driven axis from a measured free decay or step response: a `ModalAxis` with the
+    frequencies [Hz], damping ratios and their standard errors.
+
+    ```python
+    t, y = jb.load_record("response.csv")          # t [s], y: any unit (m, m/s², counts)
+    axis = jb.identify_axis(t, y, n_modes=2)
+    axis.frequencies, axis.frequency_std            # Hz
+    ```
+
+    - `t`: sample times [s], 1-D, strictly increasing and uniform (every time within `UNIFORM_RTOL` = 1e-3
+      of a step of the grid $t_0 + k\\Delta t$: time stamps rounded in a CSV file are accepted, the fit uses
+      the exact grid); any start time $t_0$.
+    - `y`: the samples, same shape, any unit: a free decay, or a step response from the end of the move on
+      (the model holds only where nothing drives the axis: crop the move away).
+    - `n_modes`: number of modes $n \\ge 1$ to fit. The record needs at least
+      `SAMPLES_PER_PARAMETER` = 10 samples per parameter ($4n$, +1 with the offset).
+    - `offset`: fit a constant $c_0$ (the final value of a step response, an encoder's position, a sensor
+      bias); `False` for a record that decays to zero.
+    - `rtol`, `atol`: step tolerances of the Levenberg-Marquardt solver (relative, absolute, in the fit's
+      coordinates); `max_steps`: its step budget.
+
+    The model, $y(t) = c_0 + \\sum_i e^{-\\sigma_i\\tau}(a_i\\cos\\omega_{d,i}\\tau + b_i\\sin\\omega_{d,i}\\tau)$ with
+    $\\tau = t - t_0$, $\\sigma_i = \\zeta_i\\omega_i$, $\\omega_{d,i} = \\omega_i\\sqrt{1-\\zeta_i^2}$,
+    $\\omega_i = 2\\pi f_i$, starts from a matrix-pencil estimate (Hua and Sarkar, 1990) and is refined by
+    Levenberg-Marquardt on all parameters; see the module's documentation.
+
+    Returns `ModalAxis(frequencies, damping_ratios, gains=None, frequency_std=..., damping_std=...)`, the
+    modes sorted by frequency, with the linearised standard errors $\\sqrt{\\mathrm{diag}\\,C}$,
+    $C = s^2(J^TJ)^{-1}$, $s^2 = \\mathrm{SSR}/(N-p)$. **The gains are unit gains**: a free decay fixes each
+    mode's frequency and damping, not how strongly the commanded acceleration drives it (that would need
+    the excitation as well); unit gains are the form input shapers assume.
+
+    Raises `ValueError` for a bad record (shapes, NaN or inf, non-uniform or non-increasing times, too few
+    samples, `n_modes` not an integer >= 1) before anything is compiled, and after the fit when a result
+    cannot be trusted: a frequency at or above the record's Nyquist frequency $1/(2\\Delta t)$, fewer than
+    `MIN_PERIODS` = 2 periods of the lowest mode in the record, a damping ratio outside [0, 1), or a mode
+    whose amplitude is below `MIN_SIGNIFICANCE` = 8 standard errors (a fit to noise, or more `n_modes`
+    than the record holds; also when the fit did not converge, or when the matrix pencil finds fewer than
+    `n_modes` decaying oscillations). Raises `RuntimeError` when Levenberg-Marquardt does not converge
+    although every mode stands out of the noise (the reason, and what to change), and when JAX's 64-bit mode
+    is off (the fit needs float64).
+    """
+    _require_x64()
+    t, y, dt, n, p = _check_record(t, y, n_modes, offset)
+    offset = bool(offset)
+    rtol, atol = float(rtol), float(atol)
+    if not (math.isfinite(rtol) and rtol > 0):
+        raise ValueError(f"{_OWNER}: parameter `rtol` must be finite and > 0; got {rtol}")
+    if not (math.isfinite(atol) and atol >= 0):
+        raise ValueError(f"{_OWNER}: parameter `atol` must be finite and >= 0; got {atol}")
+    max_steps = check_int(_OWNER, "max_steps", max_steps, lo=1)
+    N = t.size
+    duration = (N - 1) * dt  # t[-1] - t[0]
+    nyquist = 0.5 / dt
+
+    f0, z0, a0, b0, c0 = _pencil(y, dt, n, offset)
+    # coordinates: amplitudes and offset in units of the record's spread, about its mean
+    mean = float(np.mean(y)) if offset else 0.0  # without an offset the model has no constant to take the mean
+    spread = float(np.max(np.abs(y - mean)))
+    w0 = 2 * math.pi * f0
+    theta0 = np.concatenate(
+        [np.log(f0), np.log(z0) - np.log1p(-z0), a0 / spread, b0 / spread]
+        + ([np.array([(c0 - mean) / spread])] if offset else [])
+    )
+    # column scaling: a change 1 of u moves every mode's phase (or decay) by about one radian over the
+    # time the mode rings in the record, and the amplitudes by the spread
+    ring = np.minimum(duration, 1.0 / (z0 * w0))
+    scale = np.concatenate([1.0 / (w0 * ring), np.ones(n), np.ones(2 * n)] + ([np.ones(1)] if offset else []))
+    tau = dt * np.arange(N)
+    yn = (y - mean) / spread
+    u, r, sv, vt, code, steps = _fit(
+        jnp.asarray(tau),
+        jnp.asarray(yn),
+        jnp.asarray(theta0),
+        jnp.asarray(scale),
+        n=n,
+        offset=offset,
+        rtol=rtol,
+        atol=atol,
+        max_steps=max_steps,
+    )
+    u, r, sv, vt, code, steps = jax.device_get((u, r, sv, vt, code, steps))
+    code, steps = int(code), int(steps)
+    start = f"started from the matrix-pencil estimate f = {_fmt(f0)} Hz, zeta = {_fmt(z0)}"
+    finite = bool(
+        np.all(np.isfinite(r)) and np.all(np.isfinite(sv)) and np.all(np.isfinite(vt)) and np.all(np.isfinite(u))
+    )
+    theta = theta0 + scale * u
+    f = np.exp(theta[:n])
+    zeta = 1.0 / (1.0 + np.exp(-theta[n : 2 * n]))
+    if finite:
+        f_std, z_std, significance = _standard_errors(theta, r, sv, vt, scale, n, p)
+    if code != 0:
+        reason = _RESULT_NAMES[code] if code >= 0 else "unknown solver failure"
+        hint = {
+            "max_steps_reached": f"give a larger `max_steps` (now {max_steps})",
+            "nonlinear_max_steps_reached": f"give a larger `max_steps` (now {max_steps})",
+        }.get(reason, "check that the record is a free decay of the axis")
+        failed = f"the Levenberg-Marquardt fit of {n} mode(s) did not converge ({reason}) after {steps} steps"
+        if finite and np.any(~(significance >= MIN_SIGNIFICANCE)):
+            # the record, not the solver: a mode of the last iterate is lost in the noise
+            i = int(np.argmin(significance))
+            raise ValueError(
+                f"{_OWNER}: {failed}, and its last iterate has a mode ({f[i]:.6g} Hz) of only "
+                f"{significance[i]:.3g} standard errors (at least {MIN_SIGNIFICANCE:g} are needed): the record (`y`) "
+                f"may be noise, or hold fewer than `n_modes` = {n} modes: try a smaller `n_modes` ({start})"
+            )
+        raise RuntimeError(
+            f"{_OWNER}: {failed}, {start}. {hint[0].upper() + hint[1:]}, try another `n_modes` (the record may "
+            f"hold fewer or more modes), or crop the record to where the axis rings freely"
+        )
+    if not finite:
+        raise RuntimeError(
+            f"{_OWNER}: the fit of {n} mode(s) ended at non-finite values ({start}); try another `n_modes` "
+            f"or a record of the free decay only"
+        )
+    order = np.argsort(f)
+    f, zeta, f_std, z_std, significance = (v[order] for v in (f, zeta, f_std, z_std, significance))
+    found = f"identified f = {_fmt(f)} Hz, zeta = {_fmt(zeta)}"
+    if np.any(f >= nyquist):
+        i = int(np.argmax(f))
+        raise ValueError(
+            f"{_OWNER}: mode {i + 1} comes out at {f[i]:.6g} Hz, not below the record's Nyquist frequency "
+            f"{nyquist:.6g} Hz (1/(2 dt), dt = {dt:.6g} s of `t`): sample faster, or fit fewer `n_modes` "
+            f"({found})"
+        )
+    periods = duration * f[0]
+    if periods < MIN_PERIODS:
+        raise ValueError(
+            f"{_OWNER}: the record (`t`) lasts {duration:.6g} s, {periods:.3g} periods of the lowest mode "
+            f"({f[0]:.6g} Hz); at least {MIN_PERIODS:g} periods are needed, i.e. a record of at least "
+            f"{MIN_PERIODS / f[0]:.6g} s ({found})"
+        )
+    if not np.all((zeta >= 0.0) & (zeta < 1.0)):
+        raise ValueError(f"{_OWNER}: a damping ratio comes out outside [0, 1) ({found}): the record is not underdamped")
+    weak = np.flatnonzero(~(significance >= MIN_SIGNIFICANCE))
+    if weak.size:
+        i = int(weak[0])
+        raise ValueError(
+            f"{_OWNER}: mode {i + 1} ({f[i]:.6g} Hz, zeta = {zeta[i]:.3g}) is not resolved above the noise: its "
+            f"amplitude is {significance[i]:.3g} standard errors (at least {MIN_SIGNIFICANCE:g} are needed): the "
+            f"record (`y`) may be noise, or hold fewer than `n_modes` = {n} modes: try a smaller `n_modes` ({found})"
+        )
+    from ..models.axis import ModalAxis
+
+    return ModalAxis(f, zeta, None, frequency_std=f_std, damping_std=z_std)
+
+
+# --------------------------------------------------------------------------------------------
+# reading a record
+# --------------------------------------------------------------------------------------------
+def load_record(path):
+    """Read a measured record `(t, y)` (two float numpy arrays) from a CSV file with the columns `t,y`.
+
+    - comma-separated, one sample per line: the time [s] and the measured value (any unit);
+    - an optional header line (any names, e.g. `t,y` or `time_s,accel`) as the first non-empty line;
+    - blank lines and lines starting with `#` are skipped; spaces around the values are allowed;
+    - **exactly two columns**: a third column is an error rather than silently ignored (a file
+      `t,ax,ay,az` would otherwise be read as its first channel): write the one channel to identify.
+
+    Raises `FileNotFoundError` (`OSError`) for a missing or unreadable path and `ValueError`, naming the file
+    and the line, for anything else (not text, wrong number of columns, a value that is not a number, fewer
+    than two samples). The times are not checked here: `identify_axis` checks them.
+    """
+    path = os.fspath(path)
+    if not os.path.exists(path):
+        raise FileNotFoundError(f"load_record: no file {path!r} (a CSV file with the columns t,y)")
+    if os.path.isdir(path):
+        raise IsADirectoryError(f"load_record: {path!r} is a folder, not a CSV file with the columns t,y")
+    try:
+        with open(path, encoding="utf-8-sig") as fh:  # utf-8-sig: a spreadsheet's byte-order mark is skipped
+            lines = fh.read().splitlines()
+    except UnicodeDecodeError as e:
+        raise ValueError(f"load_record: {path!r} is not a text (CSV) file ({e.reason} at byte {e.start})") from None
+    rows = []
+    header_seen = False
+    for lineno, line in enumerate(lines, start=1):
+        text = line.strip()
+        if not text or text.startswith("#"):
+            continue
+        fields = [s.strip() for s in text.split(",")]
+        if len(fields) != 2:
+            raise ValueError(
+                f"load_record: {path}:{lineno}: expected 2 comma-separated columns t,y; got {len(fields)} in "
+                f"{line!r}" + (" (one channel per file: drop the other columns)" if len(fields) > 2 else "")
+            )
+        try:
+            rows.append((float(fields[0]), float(fields[1])))
+        except ValueError:
+            if rows or header_seen:
+                raise ValueError(f"load_record: {path}:{lineno}: the values must be numbers; got {line!r}") from None
+            header_seen = True  # the first non-empty line: a header
+    if len(rows) < 2:
+        raise ValueError(f"load_record: {path!r} holds {len(rows)} sample(s); a record needs at least 2 lines t,y")
+    data = np.asarray(rows, dtype=float)
+    return data[:, 0].copy(), data[:, 1].copy()
