@@ -51,10 +51,11 @@ def wall(cmd, env=ENV) -> float:
 
 def imports(repeats: int) -> dict:
     base, ours = [], []
-    wall([sys.executable, "-c", "import jaxbelt"])  # writes jaxbelt's bytecode cache
+    # `import jaxbelt` alone no longer imports JAX (nothing to configure): a program imports both
+    wall([sys.executable, "-c", "import jax, jaxbelt"])  # writes jaxbelt's bytecode cache
     for _ in range(repeats):  # interleaved, so that load changes hit both
         base.append(wall([sys.executable, "-c", "import jax, diffrax, equinox, optax"]))
-        ours.append(wall([sys.executable, "-c", "import jaxbelt"]))
+        ours.append(wall([sys.executable, "-c", "import jax, jaxbelt"]))
     b, o = float(np.median(base)), float(np.median(ours))
     return {"deps_s": b, "jaxbelt_s": o, "ratio": o / b, "repeats": repeats}
 
@@ -210,6 +211,7 @@ def closed_form(quick: bool) -> dict:
     # process high-water mark (RSS) at 100 000: a fresh process, baseline without the call
     code = (
         "import resource, jax, jax.numpy as jnp, jaxbelt as jb; from jaxbelt.fast import startup_gamma_batch;"
+        "jax.config.update('jax_enable_x64', True);"
         "m = jb.BeltStartup(); ts = jnp.linspace(0, 0.5, 501); g = jnp.linspace(0.01, 0.1, {n});"
         "f = jax.jit(lambda g: startup_gamma_batch(m, g, ts)); c = f.lower(g).compile();"
         "r0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss; y = c(g).block_until_ready();"

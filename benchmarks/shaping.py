@@ -21,6 +21,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import jax  # noqa: E402
+
+jax.config.update("jax_enable_x64", True)  # jaxbelt computes in float64 (it leaves the setting to its caller)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 from _common import RESULTS, rel_error, time_jax, time_py, write_results  # noqa: E402

@@ -1,29 +1,32 @@
 """jaxbelt: differentiable simulation and optimisation of belt drives and DC-motor mechanisms.
 
-**Precision.** `import jaxbelt` switches JAX to float64 (`jax_enable_x64`), which the papers'
-checks need (closed forms to 1e-12, energy balances); `jaxbelt.X64_SWITCHED_ON` says whether this
-import changed the setting. To keep JAX's float32 default, set the environment variable
-`JAXBELT_X64=0` before the import (or build models and inputs inside `jax.enable_x64(False)`):
-every scene then runs in float32, with the accuracy the stress tests measure.
+**Precision.** jaxbelt computes in float64, which the papers' checks need (closed forms to 1e-12,
+energy balances, the folds of the non-linear belt), and it does not change JAX's configuration on
+import: a program that imports it keeps its own settings (a float32 network next to it stays float32).
+Turn JAX's 64-bit mode on yourself, once, right after importing JAX and before any array is made:
 
-**Imports.** `import jaxbelt` imports JAX alone; each public name imports its module on first use
+```python
+import jax
+jax.config.update("jax_enable_x64", True)
+import jaxbelt as jb
+```
+
+With the mode off, the first jaxbelt call that builds a model, a command or an array raises
+`RuntimeError` naming that line (a config read, no cost). The `jaxbelt` command switches the mode on
+itself. Why an error and not the caller's precision: in float32 the scenes lose most of the digits
+their checks rely on (the start-up closed form kept a relative error of 1e-3 against 2e-13 in float64
+when jaxbelt still ran in float32 on request), and nothing would say so; an error at the first call
+costs one line and no digit (docs: Errors and guarantees, Precision).
+
+**Imports.** `import jaxbelt` imports nothing heavy (not even JAX); each public name imports its module on first use
 (`jaxbelt.simulate`, `jaxbelt.tune_pid`, ...), so a session that only solves the start-up in closed
 form never loads diffrax, optax or matplotlib.
 """
 
-import os as _os
 import typing as _typing
 
-import jax as _jax
-
-#: True when `import jaxbelt` switched JAX to float64 (it was off and `JAXBELT_X64` is not "0").
-X64_SWITCHED_ON = False
-if _os.environ.get("JAXBELT_X64", "1") != "0" and not _jax.config.jax_enable_x64:
-    _jax.config.update("jax_enable_x64", True)
-    X64_SWITCHED_ON = True
-
-# Every public name below is imported on first use (`jaxbelt._lazy`): `import jaxbelt` costs JAX's own
-# import time, and a scene loads only what it needs (the start-up closed form never loads diffrax,
+# Every public name below is imported on first use (`jaxbelt._lazy`): `import jaxbelt` costs next to nothing
+# (JAX is imported by the first name that needs it), and a scene loads only what it needs (the start-up closed form never loads diffrax,
 # optax or matplotlib). This block is the list of public names: type checkers and the documentation
 # read it as imports, `jaxbelt._lazy.attach` as the table of where each name lives.
 if _typing.TYPE_CHECKING:
@@ -63,11 +66,11 @@ if _typing.TYPE_CHECKING:
 
     # --- command shaping of a belt-driven platform (Incerti, pseudo-polynomial commands) --------------------------------------
     from .models import BeltPlatform as BeltPlatform
-    from .models import ModalAxis as ModalAxis
 
     # --- belt spans: contact, moving string, crossing diagrams (belt-vibration report; Moon & Wickert, 1997) --------------------
     from .models import BeltPulleyContact as BeltPulleyContact
     from .models import BeltStartup as BeltStartup
+    from .models import ModalAxis as ModalAxis
     from .models import MovingString as MovingString
     from .models import RunoutRig as RunoutRig
     from .models import SlipError as SlipError
@@ -135,4 +138,4 @@ from ._lazy import attach as _attach  # noqa: E402
 
 __getattr__, __dir__, _names = _attach(__name__, __file__)
 __version__ = "0.1.0"
-__all__ = ["X64_SWITCHED_ON", *_names]
+__all__ = [*_names]

@@ -19,6 +19,25 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+#: what the first use of jaxbelt with JAX's 64-bit mode off says (see `require_x64`)
+X64_MESSAGE = (
+    "jaxbelt computes in float64, and JAX's 64-bit mode is off. Add the line\n\n"
+    '    jax.config.update("jax_enable_x64", True)\n\n'
+    "right after `import jax`, before any array is made (arrays made before it stay float32). jaxbelt does "
+    "not switch it on itself: importing a library leaves the process's configuration alone."
+)
+
+_F64 = np.dtype(np.float64)
+
+
+def require_x64(owner: str = "jaxbelt") -> None:
+    """Raise `RuntimeError` (`X64_MESSAGE`) unless JAX makes float64 arrays (`jax_enable_x64`, also inside
+    a `jax.enable_x64(False)` block). A config read: the first call that builds a model, a command or an
+    array (`as_float_array`), and the public functions that take raw arrays, call it."""
+    if jax.dtypes.canonicalize_dtype(float) != _F64:
+        raise RuntimeError(f"{owner}: {X64_MESSAGE}")
+
+
 _SCALARS: dict = {}
 _SCALARS_MAX = 4096
 #: id -> (array, its value) of the arrays in `_SCALARS`: checks read a cached default without a transfer
@@ -26,8 +45,9 @@ _HOST: dict = {}
 
 
 def as_float_array(x):
-    """Field converter of every model and command: parameters become float arrays (float64 with x64),
-    so they are traced under jit instead of being baked in as constants.
+    """Field converter of every model and command: parameters become float64 arrays, so they are traced
+    under jit instead of being baked in as constants. With JAX's 64-bit mode off it raises `RuntimeError`
+    naming the line to add (`require_x64`): every model, command and scene is built through here.
 
     A construction converts ~30 fields; `jnp.asarray` costs tens of microseconds each, so the common
     cases are short-cut: an array that already has the float dtype is returned as is, Python scalars
@@ -35,6 +55,8 @@ def as_float_array(x):
     converted on the host and transferred (`jnp.asarray` would compile a small program for each new
     shape: ~10 ms in a fresh process)."""
     dtype = jax.dtypes.canonicalize_dtype(float)
+    if dtype != _F64:
+        require_x64()
     t = type(x)
     if t is not np.ndarray and concrete_array_type(t) and x.dtype == dtype and not x.weak_type:
         return x

@@ -7,7 +7,7 @@ a name's module the first time the name is used, and the names for `__all__`. A 
 imported when it is first used as an attribute (`jaxbelt.models.fourbar`), as an eager import
 would have made it available.
 
-So `import jaxbelt` costs JAX's own import time: the start-up scene never loads the ODE solvers,
+So `import jaxbelt` costs next to nothing (not even JAX's import): the start-up scene never loads the ODE solvers,
 optimisers or plotting libraries that the other scenes need.
 
 A module may then be imported for the first time inside a caller's `jit`: its import-time code must

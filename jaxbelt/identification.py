@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from ._checks import check_int, check_nonnegative, check_positive
+from ._checks import check_int, check_nonnegative, check_positive, require_x64
 
 __all__ = ["identify", "IdentifyResult"]
 
@@ -150,6 +150,7 @@ def identify(
     `ValueError` on bad input and `RuntimeError` when the solver does not converge or the
     prediction is not finite at the optimum.
     """
+    require_x64("identify")
     if not isinstance(params0, dict) or not params0:
         raise ValueError("identify: `params0` must be a non-empty dict {name: initial value}")
     if solver not in _SOLVERS:

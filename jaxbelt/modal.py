@@ -22,6 +22,8 @@ import jax
 import jax.numpy as jnp
 from jax.scipy.linalg import expm as _jexpm
 
+from ._checks import require_x64
+
 # Above this condition number of the eigenvector matrix the modal solution may lose more than
 # about 1e-9 relative accuracy; the expm path is used instead.
 MODAL_COND_LIMIT = 1e6
@@ -101,6 +103,7 @@ def expm_solve(A, F, s, x0, t0, ts, uniform: bool = False):
     `uniform=True` (a static promise that `ts` is evenly spaced) uses one exponential and a
     scan of matrix-vector products; otherwise each time gets its own exponential.
     """
+    require_x64("jaxbelt.modal.expm_solve")
     n = A.shape[0]
     Aa = augmented_matrix(A, F, s)
     z0 = jnp.concatenate([x0, jnp.exp(s * t0)])
@@ -127,6 +130,7 @@ def modal_decomposition(A):
     Rows of $X^{-1}$ are left eigenvectors ($y_i^T A = \\lambda_i y_i^T$) normalised as in
     Incerti (2014) eq. (40): $y_i^T x_i = 1$. Also returns the condition number of X.
     """
+    require_x64("jaxbelt.modal.modal_decomposition")
     lam, X = jnp.linalg.eig(A)
     Yt = jnp.linalg.inv(X)
     return lam, X, Yt, jnp.linalg.cond(X)
@@ -134,6 +138,7 @@ def modal_decomposition(A):
 
 def modal_solve_raw(A, F, s, x0, t0, ts):
     """The modal solution (eq. 22-29) without a conditioning check; returns (xs, cond(X))."""
+    require_x64("jaxbelt.modal.modal_solve_raw")
     lam, X, Yt, cond = modal_decomposition(A)
     eta0 = Yt @ x0.astype(complex)
     q = Yt @ F.astype(complex)  # (n, m): modal participation of each input term (eq. 25)
@@ -150,6 +155,7 @@ def modal_solve_raw(A, F, s, x0, t0, ts):
 
 def modal_solve(A, F, s, x0, t0, ts, uniform: bool = False):
     """Modal closed form, falling back to `expm_solve` when X is ill-conditioned."""
+    require_x64("jaxbelt.modal.modal_solve")
     xs, cond = modal_solve_raw(A, F, s, x0, t0, ts)
     # The test depends on A only: under a vmap over the input (e.g. gamma) it stays unbatched, so
     # lax.cond runs one branch instead of turning into a select that computes both. Non-finite

@@ -125,7 +125,7 @@ def test_eager_programs_hold_no_host_callback(tmp_path):
     # JAX's persistent cache never stores a program that holds a host callback (eqx.error_if): the
     # programs jaxbelt runs eagerly return their checks as values instead, so a second process loads them
     code = (
-        "import jax, jax.numpy as jnp, jaxbelt as jb; "
+        "import jax, jax.numpy as jnp, jaxbelt as jb; jax.config.update('jax_enable_x64', True); "
         f"jb.enable_compilation_cache({str(tmp_path / 'xla')!r}); "
         "jax.config.update('jax_explain_cache_misses', True); "
         "jb.simulate_fig4(jb.FourBarDrive(), n=201); "

@@ -70,7 +70,11 @@ def test_docs_build_strict(tmp_path):
         for name, (p, _) in declared(cls).items():
             assert name in rows, (cls.__name__, name)
             symbol, unit, default, valid, meaning = rows[name]
-            assert unit == (p.unit or "–") and valid.startswith(valid_range(p).replace("`", "")), (cls.__name__, name, rows[name])
+            assert unit == (p.unit or "–") and valid.startswith(valid_range(p).replace("`", "")), (
+                cls.__name__,
+                name,
+                rows[name],
+            )
 
 
 def test_api_pages_cover_the_public_names():
@@ -80,9 +84,9 @@ def test_api_pages_cover_the_public_names():
     documented = set(re.findall(r"^::: jaxbelt\.(\w+)", text, re.M))
     documented |= set(re.findall(r"^\s+heading: jaxbelt\.(\w+)", text, re.M))
     # public: `jaxbelt.__all__`, the names of the TYPE_CHECKING block of jaxbelt/__init__.py (imported on first
-    # use) and X64_SWITCHED_ON; sub-modules reached as attributes (`jaxbelt.models`) are not in it
+    # use); sub-modules reached as attributes (`jaxbelt.models`) are not in it
     public = set(jaxbelt.__all__)
-    assert {"simulate", "modal", "plots", "X64_SWITCHED_ON"} <= public
+    assert {"simulate", "modal", "plots"} <= public
     missing = sorted(public - documented)
     assert not missing, f"public names with no `::: jaxbelt.NAME` entry in docs/api/*.md: {missing}"
 

@@ -1,7 +1,6 @@
 """The package's import graph has no cycle, and `import jaxbelt` has no surprising side effects."""
 
 import ast
-import os
 import pathlib
 import subprocess
 import sys
@@ -149,44 +148,30 @@ def test_folder_loop_detector_finds_a_loop_through_a_package():
     assert _folder_loop(graph, {"m.n"}) == ["m.n", "x", "m.n"]
 
 
-def test_import_loads_no_plotting_library_and_announces_float64():
-    code = (
-        "import sys, jax; import jaxbelt as jb; "
-        "print('matplotlib' in sys.modules, jax.config.jax_enable_x64, jb.X64_SWITCHED_ON)"
-    )
-    env = {k: v for k, v in os.environ.items() if k != "JAXBELT_X64"}
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
+def test_import_loads_no_plotting_library_and_changes_no_configuration():
+    code = "import sys, jax; import jaxbelt as jb; print('matplotlib' in sys.modules, jax.config.jax_enable_x64)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
-    assert out.stdout.split() == ["False", "True", "True"]
-    # the opt-out leaves JAX's default (float32) alone
-    out = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, env={**env, "JAXBELT_X64": "0"}, timeout=120
-    )
-    assert out.stdout.split() == ["False", "False", "False"], out.stderr
+    assert out.stdout.split() == ["False", "False"]
 
 
 def _loaded_after(code: str) -> set:
     """The heavy libraries loaded by `code` in a fresh process."""
     heavy = ("diffrax", "optax", "optimistix", "lineax", "matplotlib", "matplotlib.pyplot")
     probe = f"import sys; {code}; print(' '.join(m for m in {heavy!r} if m in sys.modules))"
-    out = subprocess.run(
-        [sys.executable, "-c", probe],
-        capture_output=True,
-        text=True,
-        timeout=120,
-        env={k: v for k, v in os.environ.items() if k != "JAXBELT_X64"},
-    )
+    out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     return set(out.stdout.split())
 
 
 def test_import_and_the_startup_closed_form_load_only_what_they_use():
-    # `import jaxbelt` imports JAX alone; the start-up closed form adds equinox, never an ODE solver,
+    # `import jaxbelt` imports no heavy library; the start-up closed form adds equinox, never an ODE solver,
     # an optimiser or a plotting library; the first name of another scene loads that scene's libraries
     assert _loaded_after("import jaxbelt") == set()
     assert (
         _loaded_after(
-            "import jaxbelt as jb, numpy as np; ts, c = jb.startup_curves(gammas=[0.02], n_points=11); "
+            "import jax, jaxbelt as jb, numpy as np; jax.config.update('jax_enable_x64', True); "
+            "ts, c = jb.startup_curves(gammas=[0.02], n_points=11); "
             "assert np.all(np.isfinite(c['current']))"
         )
         == set()
@@ -242,6 +227,7 @@ def test_first_use_inside_a_callers_jit_gives_the_eager_values():
     # that run as host callbacks inside a trace); the same values eagerly afterwards, to 1e-12.
     code = """
 import jax, jax.numpy as jnp, numpy as np
+jax.config.update("jax_enable_x64", True)
 import jaxbelt as jb
 ts = jnp.linspace(0.0, 0.1, 11)
 ode = jax.jit(lambda v: jb.simulate(jb.Scene(jb.BeltStartup(), jb.ExponentialVoltage(v, 0.02), ts=ts), method="ode",
@@ -255,11 +241,5 @@ np.testing.assert_allclose(h_jit, h, rtol=1e-12)
 assert float(h) > 0 and np.all(np.isfinite(y))
 print("ok")
 """
-    out = subprocess.run(
-        [sys.executable, "-c", code],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        env={k: v for k, v in os.environ.items() if k != "JAXBELT_X64"},
-    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0 and out.stdout.split() == ["ok"], out.stderr[-3000:]

@@ -83,3 +83,17 @@ def test_notebook_executes(path, tmp_path):
                     f"{path.name}: code cell {k + 1} raised:\n{cell.source}\n\n{result.error_in_exec or result.error_before_exec!r}"
                 )
             _render_open_figures()
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
+def test_notebook_turns_64_bit_mode_on_in_its_first_cell(path):
+    """jaxbelt changes no configuration on import: each notebook turns JAX's 64-bit mode on itself, in its
+    first code cell, right after the imports (before anything can make an array)."""
+    import json
+
+    first = next(c for c in json.loads(path.read_text())["cells"] if c["cell_type"] == "code")
+    source = "".join(first["source"])
+    line = 'jax.config.update("jax_enable_x64", True)'
+    assert line in source, f"{path.name}: the first code cell does not turn 64-bit mode on"
+    above = source[: source.index(line)].splitlines()
+    assert all(ln.startswith(("import ", "from ")) or not ln.strip() for ln in above), above

@@ -237,7 +237,8 @@ def test_a_new_process_runs_the_stored_closed_form(tmp_path):
     # the start-up closed form calls LAPACK (a matrix exponential): a stored program must bind LAPACK's
     # kernels itself, since nothing is lowered in the process that loads it
     code = (
-        "import jax.numpy as jnp, numpy as np, equinox as eqx, jaxbelt as jb\n"
+        "import jax, jax.numpy as jnp, numpy as np, equinox as eqx, jaxbelt as jb\n"
+        "jax.config.update('jax_enable_x64', True)\n"
         "from jaxbelt import solve\n"
         f"jb.enable_compilation_cache({str(tmp_path / 'xla')!r})\n"
         "sol = jb.simulate(jb.Scene(jb.BeltStartup(), jb.ExponentialVoltage(24.0, 0.04), ts=jnp.linspace(0, 0.5, 51),"

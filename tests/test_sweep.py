@@ -20,6 +20,7 @@ SCRIPT = textwrap.dedent(
     """
     import json, sys
     import diffrax, jax, jax.numpy as jnp, numpy as np
+    jax.config.update("jax_enable_x64", True)
     import jaxbelt as jb
     assert jb.cpu_devices(4) == 4          # before any JAX work: 4 CPU devices
     try:

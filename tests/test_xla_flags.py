@@ -12,6 +12,7 @@ import pytest
 # one program of each kind; leaves a dict of lists of floats in `out`
 PROBE = r"""
 import jax, jax.numpy as jnp
+jax.config.update("jax_enable_x64", True)
 import jaxbelt as jb
 
 out = {}

@@ -54,6 +54,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    """Run the command line `argv` (default: `sys.argv[1:]`); returns the exit status. JAX's 64-bit mode
+    must be on, as for every jaxbelt call (`entry`, the command's own process, turns it on)."""
     args = build_parser().parse_args(argv)
     check = getattr(args, "check", None)  # what argparse cannot see: relations between arguments
     problem = check(args) if check is not None else None
@@ -140,7 +142,8 @@ def _prepare_figures() -> None:
 def entry() -> None:
     """The `jaxbelt` command (and `python -m jaxbelt`): `main()`, then the end of the process.
 
-    The command runs as a short-lived process:
+    The command runs as a short-lived process, which turns JAX's 64-bit mode on first (jaxbelt computes in
+    float64; a library import changes no configuration, the command is its own program):
 
     - Python's cyclic garbage collector is off. Its collections cost ~0.2 s of a 1.8 s warm
       `jaxbelt startup` (each one walks JAX's and matplotlib's module objects); with it off the peak
@@ -153,6 +156,11 @@ def entry() -> None:
     """
     global _OWN_PROCESS
     _OWN_PROCESS = True
+    import jax
+
+    # jaxbelt computes in float64 and leaves JAX's configuration to whoever runs it (the `jaxbelt` docstring):
+    # here that is the command itself, so 64-bit mode goes on before anything (argument checks too) makes an array
+    jax.config.update("jax_enable_x64", True)
     gc.disable()
     _bind_lapack_tables()
     code = main()

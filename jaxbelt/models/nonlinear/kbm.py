@@ -47,7 +47,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..._checks import check_int, check_nonnegative, collecting, is_concrete
+from ..._checks import check_int, check_nonnegative, collecting, is_concrete, require_x64
 from ..._guard import guard, traced_checks
 from .model import NonlinearBelt, _gauss, mode_shapes
 
@@ -74,6 +74,7 @@ def kappa(v, v_l, n: int = 1):
 
 def backbone_frequency(v, a, v_l, n: int = 1):
     """Exact-resonance frequency (dimensionless) at modal amplitude `a` (eq. 33, sign corrected)."""
+    require_x64("backbone_frequency")
     return n * jnp.pi * (1 - jnp.asarray(v) ** 2) + kappa(v, v_l, n) * jnp.asarray(a) ** 2
 
 
