@@ -1,0 +1,342 @@
+"""The least worst-case residual any smooth command can leave: a convex (linear) programme, solved to its global optimum.
+
+For a move of distance D in time T whose acceleration is a cubic B-spline (`SplineMove`:
+$a(t) = \\sum_j c_j B_j(t)$ on N knot intervals), every quantity a designer constrains is linear in $c$:
+
+- the residual integral of mode $i$ at frequency factor $r$: $W_{ir}(c) = \\sum_j c_j\\,h\\,e^{s(T-t_j)}\\varphi_1(-sh)^4$
+  (`jaxbelt.shaping.moves`), whose modulus times $|g_i|/\\omega_d$ is the residual amplitude;
+- the B-spline coefficients of the velocity (partial sums of $c$ times h), acceleration ($c$) and jerk
+  (differences of $c$ over h), which bound those quantities everywhere (a B-spline lies in the convex hull of
+  its coefficients); the distance $x(T) = h^2\\sum_j c_j(N-2-j) = D$ and the end velocity $h\\sum_j c_j = 0$
+  (rest to rest; the B-splines inside $[0, T]$ start and stop with zero acceleration, jerk and its derivative).
+
+So the minimax design
+
+$\\min_{c,\\,t}\\ t$ subject to $\\dfrac{|g_i|}{\\omega_d\\,R_i}|W_{ir}(c)| \\le t$ for every mode $i$ and every factor
+$r$ of a grid over $[1 - u, 1 + u]$; every velocity, acceleration (and jerk) coefficient within
+$\\pm v_{max}$, $\\pm a_{max}$ ($\\pm j_{max}$), so the limits hold at every instant; $x(T) = D$, $v(T) = 0$
+
+is convex: the modulus constraint is a second-order cone, written here as $P$ linear cuts
+$\\mathrm{Re}(e^{-i\\theta_p}W) \\le \\dots$, $\\theta_p = 2\\pi p/P$ (an inscribed polygon: the true modulus at the
+grid points exceeds $t$ by at most $1/\\cos(\\pi/P) - 1$, 1.9 % for P = 16). $R_i$ is the reference of mode $i$
+(the unshaped move's worst residual over the band, `reference_residuals`), so $t$ is the worst residual as a
+fraction of the unshaped move's.
+
+**The frequency grid by exchange.** Between grid points the residual of the optimum can rise well above $t$
+(the optimum presses the grid points down). The design starts from a uniform grid of `n_freq` factors per
+mode, evaluates the residual on a fine grid, adds the worst new frequencies (local maxima above
+$t(1 + 3\\,\\%)$) to the LP and solves again, up to `n_rounds` times (a classical exchange method for
+semi-infinite programmes, Hettich and Kortanek, 1993, SIAM Rev. 35(3)). The LP keeps one shape: the added
+frequencies fill reserved rows, which are zero rows until used, so no round recompiles.
+
+The LP of the last round has one optimum value, which `jaxbelt.shaping.lp.solve_lp` reaches and certifies
+(an optimal vertex, or a rigorous dual bound; the test suite checks it against scipy's HiGHS on the same LP).
+Differentiation: the optimal value is differentiable in the axis (frequencies, damping ratios, gains) and in
+the move time by the envelope theorem (`solve_lp`), with the references $R_i$ and the grid held fixed.
+"""
+
+import math
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._checks import as_float_array
+from ..models.axis import ModalAxis
+from .lp import LPResult, solve_lp
+from .moves import SplineMove, peaks, phi1
+
+#: knot counts the design chooses from (one compiled program per count and axis size)
+KNOT_COUNTS = (32, 48, 64, 96, 128, 160, 192, 256)
+#: how far (relative) the fine-grid worst residual may exceed the LP's bound before a frequency is added
+EXCHANGE_TOL = 0.03
+
+
+class DesignOptions(NamedTuple):
+    """The discretisation of the minimax LP (all static: each combination is one compiled program).
+
+    - `n_knots`: N, knot intervals of the B-spline acceleration (N - 3 coefficients);
+    - `n_freq`: frequency factors per mode of the starting grid on $[1 - u, 1 + u]$ (odd: the nominal
+      frequency is one of them);
+    - `n_extra`: reserved rows per mode for the frequencies the exchange adds;
+    - `n_rounds`: exchange rounds at most; `n_fine`: points per mode of the fine grid it checks;
+    - `n_angles`: P, cuts of the modulus constraint;
+    - `jerk`: whether a jerk limit is imposed.
+    """
+
+    n_knots: int
+    n_freq: int
+    n_extra: int = 12
+    n_rounds: int = 4
+    n_fine: int = 401
+    n_angles: int = 16
+    jerk: bool = False
+
+
+def default_options(axis_freqs, move_time, uncertainty, jerk: bool) -> DesignOptions:
+    """Knots and frequency points that resolve the band (host decision from concrete values): about 4 knots per
+    period of the highest frequency of the band over the move; a starting grid of about one point per radian
+    of $2u\\omega T$ (the residual's own scale in frequency is $1/T$), 9 to 41 points."""
+    fmax = float(np.max(np.asarray(axis_freqs))) * (1.0 + float(uncertainty))
+    cycles = fmax * float(move_time)
+    need = max(32, int(math.ceil(4.0 * cycles)))
+    n_knots = next((n for n in KNOT_COUNTS if n >= need), KNOT_COUNTS[-1])
+    if float(uncertainty) == 0.0:
+        return DesignOptions(n_knots=n_knots, n_freq=1, n_extra=0, n_rounds=0, n_fine=1, jerk=jerk)
+    span = 2.0 * float(uncertainty) * 2.0 * math.pi * fmax * float(move_time)
+    n_freq = int(min(41, max(9, 2 * (int(math.ceil(span)) // 2) + 1)))
+    return DesignOptions(n_knots=n_knots, n_freq=n_freq, jerk=jerk)
+
+
+class MinimaxProblem(eqx.Module):
+    """The data of the minimax design: axis, move and limits (arrays, traced under jit), the references and
+    the frequency grid (`factors`, `mask`: shape (n_modes, n_freq + n_extra); rows with mask 0 are unused)."""
+
+    axis: ModalAxis
+    distance: jax.Array
+    move_time: jax.Array
+    v_max: jax.Array
+    a_max: jax.Array
+    j_max: jax.Array
+    uncertainty: jax.Array
+    reference: jax.Array  # (n_modes,) residual amplitude [m] of the unshaped move, worst over the band
+    factors: jax.Array
+    mask: jax.Array
+
+
+def lp_data(problem: MinimaxProblem, opts: DesignOptions, scale_t=1.0):
+    """`(c, G, h, A, b)` of the minimax LP in the variables $(\\hat c, t/\\tau)$, $\\hat c = c / (D/T^2)$,
+    $\\tau$ = `scale_t` (the objective's expected size: solving in units of it keeps the LP well scaled)."""
+    ax = problem.axis
+    N, J = opts.n_knots, opts.n_knots - 3
+    T, D = problem.move_time, problem.distance
+    h = T / N
+    aref = D / T**2
+    # --- residual rows: |g| / (omega_d R) |sum_j c_j k_j| <= t, as P cuts Re(e^{-i theta} .) <= t
+    r = problem.factors
+    w = ax.omega[:, None] * r
+    z = ax.damping_ratios[:, None]
+    wd = w * jnp.sqrt(1.0 - z**2)
+    s = -z * w + 1j * wd  # (modes, K)
+    tj = jnp.arange(J) * h
+    kern = h * jnp.exp(s[..., None] * (T - tj)) * phi1(-s * h)[..., None] ** 4  # (modes, K, J)
+    weight = problem.mask * jnp.abs(ax.gains)[:, None] / (wd * jax.lax.stop_gradient(problem.reference)[:, None])
+    kern = kern * (weight * aref)[..., None]
+    theta = 2.0 * jnp.pi * jnp.arange(opts.n_angles) / opts.n_angles
+    cuts = jnp.real(jnp.exp(-1j * theta)[:, None, None, None] * kern[None])  # (P, modes, K, J)
+    cuts = cuts.reshape(-1, J)
+    used = jnp.broadcast_to(problem.mask[None], (opts.n_angles, *problem.mask.shape)).reshape(-1)
+    res_rows = jnp.concatenate([cuts, -used[:, None] * scale_t], axis=1)
+    res_rhs = 1.0 - used  # an unused row reads 0 <= 1: never active
+    # --- limits through the B-spline coefficients (convex hull: never exceeded anywhere, not only at check times):
+    # a = sum c_j B_j with B_j >= 0 summing to <= 1, so |a| <= max |c_j|; the velocity is the quartic spline with
+    # coefficients h * (partial sums of c), the jerk the quadratic spline with coefficients (c_j - c_{j-1}) / h
+    eye = jnp.eye(J)
+    blocks = [(eye * aref, problem.a_max), (jnp.tril(jnp.ones((J - 1, J))) * h * aref, problem.v_max)]
+    if opts.jerk:
+        diff = jnp.eye(J + 1, J) - jnp.eye(J + 1, J, k=-1)
+        blocks.append((diff * aref / h, problem.j_max))
+    lim_rows, lim_rhs = [], []
+    for mat, lim in blocks:
+        zc = jnp.zeros((mat.shape[0], 1))
+        lim_rows += [jnp.concatenate([mat, zc], 1), jnp.concatenate([-mat, zc], 1)]
+        lim_rhs += [jnp.full((mat.shape[0],), 1.0) * lim] * 2
+    G = jnp.concatenate([res_rows, *lim_rows], axis=0)
+    hv = jnp.concatenate([res_rhs, *lim_rhs])
+    # --- rest to rest and the distance (x(T) = h^2 aref sum c_j (N - 2 - j) = D, i.e. sum c_j (N-2-j) / N^2 = 1)
+    j = jnp.arange(J, dtype=G.dtype)
+    A = jnp.stack(
+        [jnp.concatenate([jnp.ones((J,)), jnp.zeros((1,))]), jnp.concatenate([(N - 2 - j) / N**2, jnp.zeros((1,))])]
+    )
+    b = jnp.array([0.0, 1.0])
+    c = jnp.zeros((J + 1,)).at[-1].set(1.0)
+    return c, G, hv, A, b
+
+
+def _x_bound(problem: MinimaxProblem, opts: DesignOptions, tau):
+    """Bounds on the LP variables at the optimum: |c_j| <= a_max / aref (its own constraints), 0 <= t <= 1."""
+    J = opts.n_knots - 3
+    aref = problem.distance / problem.move_time**2
+    return jnp.concatenate([jnp.full((J,), problem.a_max / aref), jnp.full((1,), 1.0 / tau)])
+
+
+@eqx.filter_jit
+def _solve_round(problem: MinimaxProblem, opts: DesignOptions, tau, tol):
+    """One LP of the exchange, in units of `tau` (<= 0: estimate it by a coarse first solve)."""
+
+    def coarse(_):
+        c, G, hv, A, b = lp_data(problem, opts, 1.0)
+        return jnp.maximum(solve_lp(c, G, hv, A, b, tol=1e-5, max_iter=60).value, 1e-12)
+
+    # the coarse solve gives the size of the optimum; solving in units of it makes the interior point method's
+    # relative tolerances mean relative accuracy of the worst residual
+    tau = jax.lax.stop_gradient(jax.lax.cond(tau > 0, lambda _: tau, coarse, None))
+    c, G, hv, A, b = lp_data(problem, opts, tau)
+    res = solve_lp(c, G, hv, A, b, x_bound=_x_bound(problem, opts, tau), tol=tol, max_iter=100)
+    return res, tau
+
+
+@eqx.filter_jit
+def _fine_ratios(problem: MinimaxProblem, opts: DesignOptions, coef):
+    """Residual over reference of every mode on the fine grid: (fine factors (F,), ratios (n_modes, F))."""
+    u = problem.uncertainty
+    fine = 1.0 + u * jnp.linspace(-1.0, 1.0, opts.n_fine)
+    move = SplineMove(coef, problem.move_time)
+    ax = problem.axis
+    w = ax.omega[:, None] * fine[None, :]
+    z = ax.damping_ratios[:, None]
+    wd = w * jnp.sqrt(1.0 - z**2)
+    W = move.residual_integral(-z * w + 1j * wd)
+    return fine, jnp.abs(ax.gains)[:, None] / wd * jnp.abs(W) / problem.reference[:, None]
+
+
+class MinimaxDesign(eqx.Module):
+    """A solved minimax design.
+
+    - `command`: the `SplineMove` [m, s];
+    - `worst`: the LP's optimal value: the worst residual over the final frequency grid as a fraction of each
+      mode's reference (the unshaped move's worst residual); `fine_worst`: the same on the fine grid;
+    - `lower_bound`: a certified lower bound of the LP's optimum (equal to `worst` at a certified vertex);
+      `gap`: their relative difference;
+    - `lp`: the `LPResult`; `rounds`: exchange rounds used; `options`, `problem`: the discretisation and data.
+    """
+
+    command: SplineMove
+    worst: jax.Array
+    fine_worst: jax.Array
+    lower_bound: jax.Array
+    lp: LPResult
+    problem: MinimaxProblem
+    rounds: int = eqx.field(static=True)
+    options: DesignOptions = eqx.field(static=True)
+
+    @property
+    def gap(self):
+        """Certified relative optimality gap of the final LP: (worst - lower_bound) / worst."""
+        return (self.worst - self.lower_bound) / jnp.maximum(self.worst, 1e-300)
+
+    @property
+    def converged(self) -> bool:
+        """The LP is solved to a certified relative gap below 1e-6."""
+        return bool(self.gap < 1e-6)
+
+
+def _initial_grid(opts: DesignOptions, n_modes: int, uncertainty: float):
+    K = opts.n_freq + opts.n_extra
+    base = np.linspace(-1.0, 1.0, opts.n_freq) if opts.n_freq > 1 else np.zeros(1)
+    factors = np.ones((n_modes, K))
+    factors[:, : opts.n_freq] = 1.0 + uncertainty * base
+    mask = np.zeros((n_modes, K))
+    mask[:, : opts.n_freq] = 1.0
+    return factors, mask
+
+
+def _local_maxima(f, r):
+    """Indices of the interior local maxima of r (and its ends when they are maxima)."""
+    left = np.r_[True, r[1:] >= r[:-1]]
+    right = np.r_[r[:-1] >= r[1:], True]
+    return np.where(left & right)[0]
+
+
+def minimax_design(problem: MinimaxProblem, opts: DesignOptions, tol=1e-9, per_round: int = 3) -> MinimaxDesign:
+    """Solve the minimax design by the exchange method (see the module docstring); the caller has checked that
+    the move is feasible (`max_distance(problem, opts) >= 1`). `problem.factors`, `problem.mask` are replaced
+    by the exchange's grid. The returned `worst` differentiates with respect to the problem's arrays (the
+    final grid held fixed): `jax.grad(lambda p: minimax_value(p, opts, design))`."""
+    n_modes = problem.axis.n_modes
+    u = float(problem.uncertainty)
+    factors, mask = _initial_grid(opts, n_modes, u)
+    tol_a = jnp.asarray(tol, dtype=float)
+    tau = jnp.asarray(-1.0)
+    rounds = 0
+    while True:
+        problem = eqx.tree_at(lambda p: (p.factors, p.mask), problem, (jnp.asarray(factors), jnp.asarray(mask)))
+        res, tau = _solve_round(problem, opts, tau, tol_a)
+        T, D = problem.move_time, problem.distance
+        coef = res.x[:-1] * D / T**2
+        worst = float(res.value * tau)
+        if opts.n_rounds == 0 or u == 0.0:
+            fine_worst = worst
+            break
+        fine, ratios = (np.asarray(x) for x in _fine_ratios(problem, opts, coef))
+        fine_worst = float(ratios.max())
+        if fine_worst <= worst * (1 + EXCHANGE_TOL) or rounds >= opts.n_rounds:
+            break
+        added = 0
+        for i in range(n_modes):
+            free = np.where(mask[i] == 0)[0]
+            peaks_i = _local_maxima(fine, ratios[i])
+            peaks_i = peaks_i[ratios[i, peaks_i] > worst * (1 + EXCHANGE_TOL)]
+            peaks_i = peaks_i[np.argsort(-ratios[i, peaks_i])][: min(per_round, len(free))]
+            for slot, k in zip(free, peaks_i):
+                factors[i, slot] = fine[k]
+                mask[i, slot] = 1.0
+                added += 1
+        if added == 0:
+            break
+        rounds += 1
+        tau = jnp.asarray(worst)
+    T, D = problem.move_time, problem.distance
+    return MinimaxDesign(
+        command=SplineMove(res.x[:-1] * D / T**2, T),
+        worst=res.value * tau,
+        fine_worst=jnp.asarray(fine_worst),
+        lower_bound=res.lower_bound * tau,
+        lp=res,
+        problem=problem,
+        rounds=rounds,
+        options=opts,
+    )
+
+
+def minimax_value(problem: MinimaxProblem, opts: DesignOptions, tau=None):
+    """The optimal value of the minimax LP on `problem`'s grid (`factors`, `mask`): a differentiable function of
+    the problem's arrays (axis, move time, limits; envelope theorem). `tau`: the objective's scale (default: a
+    coarse first solve). Use it for gradients at a design's final grid: `minimax_value(design.problem, ...)`."""
+    res, tau = _solve_round(problem, opts, jnp.asarray(-1.0 if tau is None else tau), jnp.asarray(1e-9))
+    return res.value * tau
+
+
+def _distance_lp(problem: MinimaxProblem, opts: DesignOptions):
+    """The LP of the largest distance the spline moves in T within the limits (rest to rest): feasibility of D."""
+    c, G, hv, A, b = lp_data(problem, opts)
+    n_res = opts.n_angles * problem.factors.size
+    G, hv = G[n_res:, :-1], hv[n_res:]
+    # maximise sum c_j (N-2-j)/N^2 (the distance in units of D) at zero end velocity
+    return -A[1, :-1], G, hv, A[:1, :-1], b[:1]
+
+
+@eqx.filter_jit
+def _max_distance(problem: MinimaxProblem, opts: DesignOptions):
+    c, G, hv, A, b = _distance_lp(problem, opts)
+    return -solve_lp(c, G, hv, A, b, tol=1e-9, max_iter=100).value
+
+
+def max_distance(problem: MinimaxProblem, opts: DesignOptions) -> float:
+    """The largest distance, in units of D (feasible when >= 1), that a spline of these options moves in the
+    problem's time within its limits, rest to rest."""
+    return float(_max_distance(problem, opts))
+
+
+def make_problem(axis, distance, move_time, v_max, a_max, j_max, uncertainty, reference, opts) -> MinimaxProblem:
+    f = as_float_array
+    factors, mask = _initial_grid(opts, axis.n_modes, float(uncertainty))
+    return MinimaxProblem(
+        axis=axis,
+        distance=f(distance),
+        move_time=f(move_time),
+        v_max=f(v_max),
+        a_max=f(a_max),
+        j_max=f(1.0 if j_max is None else j_max),
+        uncertainty=f(uncertainty),
+        reference=f(reference),
+        factors=f(factors),
+        mask=f(mask),
+    )
+
+
+def command_peaks(design: MinimaxDesign):
+    """`(peak |v|, peak |a|, peak |jerk|)` of the design's command on a fine grid (64 points per knot interval)."""
+    return peaks(design.command, n=64 * design.options.n_knots + 1)

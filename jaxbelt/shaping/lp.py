@@ -1,0 +1,285 @@
+"""A dense linear programme solver in JAX: primal-dual interior point with Mehrotra's predictor-corrector.
+
+$\\min_x c^T x$ subject to $G x \\le h$, $A x = b$ (x free).
+
+Why jaxbelt solves its LPs itself: the minimax command design (`jaxbelt.shaping.design`) is a dense LP of
+a few hundred variables and a few thousand inequalities, most of them inactive at the optimum, and the
+design's claim of a global optimum needs a duality gap near round-off. Of the JAX-native solvers,
+qpax (0.1.4) floors every slack and multiplier at $\\sqrt{\\varepsilon}$ on each iteration (to keep float32
+Cholesky factorisations alive), so on this LP its dual residual never falls below ~1e-5 and it stops
+at its iteration limit 1 % off the optimum; mpax's first-order PDHG (raPDHG) needed minutes and millions
+of iterations for 1e-4 on the same problem. An interior point method on the normal equations
+$G^TWG$ (W the diagonal scaling $z/s$) converges in 20-40 iterations to a relative gap of 1e-10 here.
+
+The method (Wright, 1997, Primal-Dual Interior-Point Methods, ch. 10; Mehrotra, 1992, SIAM J. Optim.
+2(4)): each iteration factorises $H = G^T W G + \\delta I$ once (Cholesky), solves the affine-scaling
+(predictor) step, takes the centring parameter $\\sigma = (\\mu_{aff}/\\mu)^3$, and solves the combined
+step with the second-order correction; primal and dual step lengths are taken separately (0.99 of the
+distance to the boundary). The equality constraints are eliminated through the Schur complement
+$A H^{-1} A^T$. Rows of G and A are scaled to unit infinity norm first.
+
+Stops when the relative primal and dual residuals and the relative duality gap are all below `tol`.
+`LPResult.converged` says whether it did; an infeasible or unbounded problem is not detected as such
+(its residuals stall): callers pose only problems they know to be feasible and bounded.
+
+The optimal value differentiates (forward and reverse mode) by the envelope theorem: with the optimal
+primal and dual variables held fixed, $dV = \\dot c^Tx + z^T(\\dot G x - \\dot h) + y^T(\\dot A x - \\dot b)$
+(the derivative of the Lagrangian), exact where the optimum's multipliers are unique.
+"""
+
+import functools
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+import jax.scipy.linalg as jsl
+from jaxtyping import Array, Float
+
+
+class LPResult(NamedTuple):
+    """Solution of `solve_lp`: primal `x`, slacks `s` ($h - Gx$), inequality multipliers `z` (>= 0),
+    equality multipliers `y`, the objective `value` $c^Tx$, the relative duality `gap`, the relative
+    primal and dual residuals, the iteration count, whether the tolerances were met (`converged`) and whether
+    the answer is the certified optimal vertex of the crossover (`vertex`)."""
+
+    x: Float[Array, " n"]
+    s: Float[Array, " m"]
+    z: Float[Array, " m"]
+    y: Float[Array, " p"]
+    value: Float[Array, ""]
+    gap: Float[Array, ""]
+    primal_residual: Float[Array, ""]
+    dual_residual: Float[Array, ""]
+    iterations: Array
+    converged: Array
+    vertex: Array
+    lower_bound: Float[Array, ""]
+
+
+def _max_step(v, dv):
+    """Largest alpha <= 1 with v + alpha dv >= 0 (v > 0)."""
+    ratio = jnp.where(dv < 0, -v / jnp.where(dv < 0, dv, -1.0), jnp.inf)
+    return jnp.minimum(1.0, jnp.min(ratio))
+
+
+def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter: int):
+    n = c.shape[0]
+    m = G.shape[0]
+    # row scaling (each constraint to unit infinity norm); the multipliers are scaled back at the end
+    gs = jnp.max(jnp.abs(G), axis=1)
+    gs = jnp.where(gs > 0, gs, 1.0)
+    G, h = G / gs[:, None], h / gs
+    as_ = jnp.max(jnp.abs(A), axis=1)
+    as_ = jnp.where(as_ > 0, as_, 1.0)
+    A, b = A / as_[:, None], b / as_
+    # column scaling (each variable to unit infinity norm over the inequalities): x = x~ / cs
+    cs = jnp.max(jnp.abs(G), axis=0)
+    cs = jnp.where(cs > 0, cs, 1.0)
+    G, A, c = G / cs, A / cs, c / cs
+    eye = jnp.eye(n, dtype=c.dtype)
+    scale_h = 1.0 + jnp.max(jnp.abs(h))
+    scale_c = 1.0 + jnp.max(jnp.abs(c))
+    reg = 1e-13
+
+    def factor(w):
+        H = (G.T * w) @ G
+        H = H + reg * jnp.diag(jnp.diag(H)) + 1e-300 * eye  # relative to each diagonal entry
+        L = jsl.cho_factor(H, lower=True)
+        HiAt = jsl.cho_solve(L, A.T)
+        S = A @ HiAt
+        Ls = jsl.cho_factor(S, lower=True)
+        return L, Ls
+
+    def newton(L, Ls, r1, r2):
+        """Solve H dx + A^T dy = r1, A dx = r2."""
+        Hr = jsl.cho_solve(L, r1)
+        dy = jsl.cho_solve(Ls, A @ Hr - r2)
+        dx = jsl.cho_solve(L, r1 - A.T @ dy)
+        return dx, dy
+
+    # start (as in CVXOPT, Vandenberghe 2010): x minimises ||h - Gx|| subject to Ax = b, s = h - Gx; z = Gw has
+    # the least norm with G^T z + A^T y + c = 0; both shifted into the positive orthant when they are not in it
+    L0, Ls0 = factor(jnp.ones((m,), dtype=c.dtype))
+    x, _ = newton(L0, Ls0, G.T @ h, b)
+    s = h - G @ x
+    wv, y = newton(L0, Ls0, -c, jnp.zeros_like(b))
+    z = G @ wv
+    s = jnp.where(jnp.min(s) > 0, s, s + 1.0 - jnp.min(s))
+    z = jnp.where(jnp.min(z) > 0, z, z + 1.0 - jnp.min(z))
+
+    def residuals(x, s, z, y):
+        rd = c + G.T @ z + A.T @ y
+        rp = G @ x + s - h
+        re = A @ x - b
+        return rd, rp, re
+
+    def measures(x, s, z, y):
+        rd, rp, re = residuals(x, s, z, y)
+        pres = jnp.maximum(jnp.max(jnp.abs(rp)), jnp.max(jnp.abs(re), initial=0.0)) / scale_h
+        dres = jnp.max(jnp.abs(rd)) / scale_c
+        gap = jnp.abs(s @ z) / (1.0 + jnp.abs(c @ x))
+        return pres, dres, gap
+
+    p = A.shape[0]
+    k_act = n - p
+
+    def vertex_at(act):
+        K = jnp.concatenate([G[act], A], axis=0)
+        xv = jnp.linalg.solve(K, jnp.concatenate([h[act], b]))
+        mult = jnp.linalg.solve(K.T, -c)
+        sv = h - G @ xv
+        feas = jnp.min(sv) >= -tol * scale_h
+        dual_ok = jnp.min(mult[:k_act]) >= -tol * (1.0 + jnp.max(jnp.abs(mult)))
+        zv = jnp.zeros_like(z).at[act].set(jnp.maximum(mult[:k_act], 0.0))
+        yv = mult[k_act:]
+        vgap = jnp.abs(c @ xv + h @ zv + b @ yv) / (jnp.abs(c @ xv) + tol * scale_c)
+        ok = feas & dual_ok & jnp.all(jnp.isfinite(xv)) & jnp.all(jnp.isfinite(mult)) & (vgap < tol)
+        return ok, (xv, jnp.maximum(sv, 0.0), zv, yv), sv, mult
+
+    def repaired(act):
+        """Up to 8 exchanges of the active-set guess: the most violated inequality enters, the active one with
+        the least multiplier leaves (the interior point iterate may rank a few constraints wrongly)."""
+
+        def step(carry):
+            act, ok, vert, i = carry
+            _, _, sv, mult = vertex_at(act)
+            inside = jnp.zeros((m,), dtype=bool).at[act].set(True)
+            enter = jnp.argmin(jnp.where(inside, jnp.inf, sv))
+            leave = jnp.argmin(mult[:k_act])
+            act = act.at[leave].set(enter.astype(act.dtype))
+            ok, vert, _, _ = vertex_at(act)
+            return act, ok, vert, i + 1
+
+        ok, vert, _, _ = vertex_at(act)
+        _, ok, vert, _ = jax.lax.while_loop(lambda cr: ~cr[1] & (cr[3] < 8), step, (act, ok, vert, 0))
+        return ok, vert
+
+    def crossover(x, s, z, y):
+        """The vertex of the n - p inequalities marked active (largest z/s) and the equalities, solved exactly for
+        x and the multipliers (and repaired by a few exchanges); certified when primal feasible with non-negative
+        multipliers and a zero duality gap (to `tol`)."""
+        return repaired(jax.lax.top_k(z / s, k_act)[1])
+
+    def merit(x, s, z, y):
+        pres, dres, gap = measures(x, s, z, y)
+        m_ = jnp.maximum(jnp.maximum(pres, dres), gap)
+        return jnp.where(jnp.all(jnp.isfinite(x)) & jnp.isfinite(m_), m_, jnp.inf)
+
+    def gap_of(x, s, z, y):
+        return measures(x, s, z, y)[2]
+
+    def cond(state):
+        it, done = state[4], state[5]
+        return (it < max_iter) & ~done
+
+    def body(state):
+        x, s, z, y, it, _, best, best_merit, stall = state
+        rd, rp, re = residuals(x, s, z, y)
+        mu = (s @ z) / m
+        w = z / s
+        L, Ls = factor(w)
+
+        def direction(rc):
+            # G^T W G dx + A^T dy = -rd - G^T (W rp - rc / s) ; A dx = -re, then two rounds of iterative
+            # refinement on the full Newton system (the normal equations lose accuracy as W spreads over
+            # many orders of magnitude near the optimum)
+            r1 = -rd - G.T @ (w * rp - rc / s)
+            dx, dy = newton(L, Ls, r1, -re)
+            for _ in range(2):
+                ds = -rp - G @ dx
+                dz = -(rc + z * ds) / s
+                e1 = -rd - G.T @ dz - A.T @ dy
+                e2 = -re - A @ dx
+                ddx, ddy = newton(L, Ls, e1, e2)
+                dx, dy = dx + ddx, dy + ddy
+            ds = -rp - G @ dx
+            dz = -(rc + z * ds) / s
+            return dx, ds, dz, dy
+
+        # predictor (affine scaling)
+        dx_a, ds_a, dz_a, dy_a = direction(s * z)
+        ap = _max_step(s, ds_a)
+        ad = _max_step(z, dz_a)
+        mu_aff = ((s + ap * ds_a) @ (z + ad * dz_a)) / m
+        sigma = jnp.clip(mu_aff / mu, 0.0, 1.0) ** 3
+        # corrector with centring
+        dx, ds, dz, dy = direction(s * z + ds_a * dz_a - sigma * mu)
+        ap = 0.99 * _max_step(s, ds)
+        ad = 0.99 * _max_step(z, dz)
+        x, s = x + ap * dx, s + ap * ds
+        z, y = z + ad * dz, y + ad * dy
+        s = jnp.maximum(s, 1e-300)
+        z = jnp.maximum(z, 1e-300)
+        m_now = merit(x, s, z, y)
+        better = m_now < best_merit
+        best = jax.tree_util.tree_map(lambda new, old: jnp.where(better, new, old), (x, s, z, y), best)
+        best_merit = jnp.where(better, m_now, best_merit)
+        # near round-off the normal equations break down and the iterates drift away again: stop after 5
+        # iterations without a new best merit, and keep the best iterate
+        stall = jnp.where(better, 0, stall + 1)
+        # once near the optimum, try the crossover at every iteration: a certified vertex ends the solve
+        ok, vert = jax.lax.cond(
+            gap_of(x, s, z, y) < 1e-3, crossover, lambda *a: (jnp.asarray(False), a), x, s, z, y
+        )
+        best = jax.tree_util.tree_map(lambda v, o: jnp.where(ok, v, o), vert, best)
+        best_merit = jnp.where(ok, -1.0, best_merit)  # a certified vertex beats every interior point
+        done = (best_merit < tol) | (stall >= 15)
+        return x, s, z, y, it + 1, done, best, best_merit, stall
+
+    m0 = merit(x, s, z, y)
+    init = (x, s, z, y, jnp.asarray(0), jnp.asarray(False), (x, s, z, y), m0, jnp.asarray(0))
+    out = jax.lax.while_loop(cond, body, init)
+    it = out[4]
+    x, s, z, y = out[6]
+    certified_in_loop = out[7] < 0
+    ok, vert = crossover(x, s, z, y)
+    vertex = certified_in_loop | ok
+    x, s, z, y = jax.tree_util.tree_map(lambda v, o: jnp.where(ok & ~certified_in_loop, v, o), vert, (x, s, z, y))
+    pres, dres, gap = measures(x, s, z, y)
+    gap = jnp.where(vertex, jnp.abs(c @ x + h @ z + b @ y) / (jnp.abs(c @ x) + tol * scale_c), gap)
+    converged = vertex | ((pres < tol) & (dres < tol) & (gap < tol) & jnp.all(jnp.isfinite(x)))
+    # a rigorous lower bound from the dual iterate, valid even where its residual is not zero: for x within
+    # the box |x| <= x_bound, c^T x >= -h^T z - b^T y - sum |r_d| x_bound (weak duality on the box)
+    rd = c + G.T @ z + A.T @ y
+    lower = -(h @ z) - (b @ y) - jnp.sum(jnp.where(rd == 0, 0.0, jnp.abs(rd) * x_bound * cs))
+    value = c @ x
+    lower = jnp.where(vertex, value, jnp.minimum(lower, value))
+    return LPResult(
+        x=x / cs, s=s * gs, z=z / gs, y=y / as_, value=value, gap=gap, primal_residual=pres, dual_residual=dres,
+        iterations=it, converged=converged, vertex=vertex, lower_bound=lower,
+    )
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(7,))
+def _value_and_solution(c, G, h, A, b, x_bound, tol, max_iter):
+    return _solve_impl(c, G, h, A, b, x_bound, tol, max_iter)
+
+
+@_value_and_solution.defjvp
+def _value_jvp(max_iter, primals, tangents):
+    c, G, h, A, b, x_bound, tol = primals
+    dc, dG, dh, dA, dB, _, _ = tangents
+    res = _solve_impl(c, G, h, A, b, x_bound, tol, max_iter)
+    x, z, y = res.x, res.z, res.y
+    # envelope theorem: the derivative of the Lagrangian at the fixed primal-dual optimum
+    dval = dc @ x + z @ (dG @ x - dh) + y @ (dA @ x - dB)
+    zeros = jax.tree_util.tree_map(jnp.zeros_like, res)
+    return res, zeros._replace(value=dval)
+
+
+def solve_lp(c, G, h, A, b, *, x_bound=None, tol=1e-9, max_iter: int = 100) -> LPResult:
+    """Solve $\\min c^Tx$ s.t. $Gx \\le h$, $Ax = b$ (see the module docstring).
+
+    Shapes: `c` (n,), `G` (m, n), `h` (m,), `A` (p, n) with p >= 1, `b` (p,). `G` must have full
+    column rank (every variable bounded by some inequality). `x_bound` (n,): bounds on |x| that hold at the
+    optimum (from the constraints), for the rigorous `lower_bound` (default: infinite, the bound is then
+    only finite at a certified vertex). Pure JAX: jit, vmap compose; `value` differentiates (envelope
+    theorem); the other fields carry no derivative.
+    """
+    c, G, h, A, b = (jnp.asarray(v, dtype=float) for v in (c, G, h, A, b))
+    if c.ndim != 1 or G.ndim != 2 or G.shape[1] != c.shape[0] or h.shape != (G.shape[0],):
+        raise ValueError(f"solve_lp: shapes c (n,), G (m, n), h (m,) expected; got {c.shape}, {G.shape}, {h.shape}")
+    if A.ndim != 2 or A.shape[1] != c.shape[0] or b.shape != (A.shape[0],) or A.shape[0] < 1:
+        raise ValueError(f"solve_lp: shapes A (p, n), b (p,) with p >= 1 expected; got {A.shape}, {b.shape}")
+    xb = jnp.full(c.shape, jnp.inf) if x_bound is None else jnp.broadcast_to(jnp.asarray(x_bound, dtype=float), c.shape)
+    return _value_and_solution(c, G, h, A, b, xb, jnp.asarray(tol, dtype=float), int(max_iter))

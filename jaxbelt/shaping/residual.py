@@ -1,0 +1,154 @@
+"""The vibration a rest-to-rest move leaves on a `ModalAxis`: residual amplitudes, band curves, tolerance bands.
+
+Mode $i$ (frequency $f_i$ scaled by a factor $r$ for a frequency error, damping ratio $\\zeta_i$ kept, gain
+$g_i$) rings after the move with the amplitude (the envelope of its free oscillation at the end $T$)
+
+$A_i = \\dfrac{|g_i|}{\\omega_{d}}\\,|W(s)|$, $W(s) = \\int_0^T a(\\tau)e^{s(T-\\tau)}d\\tau$,
+$s = -\\zeta_i\\omega + i\\omega_d$, $\\omega = 2\\pi r f_i$, $\\omega_d = \\omega\\sqrt{1-\\zeta_i^2}$.
+
+This is the amplitude measure of input-shaping practice (Singer and Seering, 1990): the ratio of two
+commands' amplitudes is their "percentage vibration". $W$ comes in closed form for `SplineMove` and
+`PiecewiseMove` (`jaxbelt.shaping.moves`), by a Gauss-Legendre rule for a `PseudoPolynomial` (the
+substitution of Incerti's eq. 30 integrals, `jaxbelt.objectives.residual`), as the shaper's factor times the
+base's for a `ShapedCommand`, and by an ODE solve (diffrax) for any other motion command.
+"""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._checks import check_range
+from ..commands import AbstractMotionCommand, PseudoPolynomial, ShapedCommand, falling_factorial
+from ..models.axis import ModalAxis
+from .moves import PiecewiseMove, SplineMove, fastest_move
+
+_P = 4  # substitution power u = v**p of the pseudo-polynomial rule (as in jaxbelt.objectives.residual)
+
+
+def _nodes_for(cmd, s) -> int:
+    """Gauss-Legendre nodes that resolve $e^{sT u}$ for the pseudo-polynomial rule (host decision, bucketed)."""
+    try:
+        wT = float(jnp.max(jnp.abs(s))) * float(cmd.duration)
+    except jax.errors.ConcretizationTypeError:
+        return 512
+    need = int(2.5 * _P * wT / 4 + 64)
+    for n in (128, 256, 512, 1024, 2048):
+        if n >= need:
+            return n
+    return 4096
+
+
+def _pseudo_polynomial_w(cmd: PseudoPolynomial, s, n_nodes: int):
+    x, w = np.polynomial.legendre.leggauss(n_nodes)
+    v, w = 0.5 * (x + 1.0), 0.5 * w
+    T = cmd.duration
+    coef = falling_factorial(cmd.gammas, 2) * cmd.coefficients  # phi'' = -Phi/T^2 sum_i a_i u^(g_i - 2)
+    e = _P * (cmd.gammas - 1.0) - 1.0  # p v^(p(g-1)-1) dv = u^(g-2) du, u = v^p
+    powers = jnp.exp(jnp.log(jnp.asarray(v))[:, None] * e[None, :])  # (nodes, terms)
+    u = jnp.asarray(v**_P)
+    kern = _P * jnp.asarray(w) * jnp.exp(jnp.asarray(s)[..., None] * T * u)  # (..., nodes)
+    moments = kern @ powers.astype(kern.dtype)  # (..., terms)
+    return -(cmd.displacement / T) * (moments @ coef.astype(moments.dtype))
+
+
+def residual_integral(cmd: AbstractMotionCommand, s):
+    """$W(s) = \\int_0^T a(\\tau)e^{s(T-\\tau)}d\\tau$ [m/s] of a move for complex `s` (any shape), T its end time."""
+    if isinstance(cmd, SplineMove | PiecewiseMove):
+        return cmd.residual_integral(s)
+    if isinstance(cmd, PseudoPolynomial):
+        return _pseudo_polynomial_w(cmd, s, _nodes_for(cmd, s))
+    if isinstance(cmd, ShapedCommand):
+        base = residual_integral(cmd.base, s)
+        lag = cmd.times[-1] - cmd.times
+        fac = jnp.sum(cmd.amplitudes * jnp.exp(jnp.asarray(s)[..., None] * lag), axis=-1)
+        return base * fac
+    return None
+
+
+def _poles(axis: ModalAxis, factors):
+    """`(s, omega_d)` of every mode at every frequency factor: shapes (n_modes, K)."""
+    r = jnp.atleast_1d(jnp.asarray(factors, dtype=float))
+    w = axis.omega[:, None] * r[None, :]
+    z = axis.damping_ratios[:, None]
+    wd = w * jnp.sqrt(1.0 - z**2)
+    return -z * w + 1j * wd, wd
+
+
+def residual_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors=1.0, *, rtol=1e-10, atol=1e-14):
+    """Residual amplitudes [m] (units of the command's position) of every mode after the move `cmd`, at the mode
+    frequencies scaled by each of `factors` (damping ratios and gains kept): shape (n_modes, len(factors)).
+
+    `factors` > 0 (1.0: the nominal axis; `np.linspace(0.8, 1.2, 41)`: a ±20 % frequency error).
+    Closed form or quadrature where the command allows (see the module docstring); otherwise an ODE solve
+    of every mode at every factor with `rtol`, `atol`.
+    """
+    if not isinstance(axis, ModalAxis):
+        raise TypeError(f"residual_curve: `axis` must be a ModalAxis; got {type(axis).__name__}")
+    if not isinstance(cmd, AbstractMotionCommand):
+        raise TypeError(f"residual_curve: `cmd` must be a motion command; got {type(cmd).__name__}")
+    r = jnp.atleast_1d(jnp.asarray(factors, dtype=float))
+    if r.ndim != 1:
+        raise ValueError(f"residual_curve: parameter `factors` must be a scalar or a 1-D array; got shape {r.shape}")
+    check_range("factors", r, lo=0.0, lo_open=True, owner="residual_curve")
+    s, wd = _poles(axis, r)
+    W = residual_integral(cmd, s)
+    if W is None:
+        return _residual_ode(axis, cmd, r, rtol, atol)
+    return jnp.abs(axis.gains)[:, None] / wd * jnp.abs(W)
+
+
+def residual_amplitudes(axis: ModalAxis, cmd: AbstractMotionCommand, **kw):
+    """Residual amplitude [m] of each mode of `axis` after the move `cmd` (nominal frequencies): shape (n_modes,)."""
+    return residual_curve(axis, cmd, 1.0, **kw)[:, 0]
+
+
+def _residual_ode(axis, cmd, r, rtol, atol):
+    import diffrax
+
+    def one(factor):
+        ax = axis.scaled(factor)
+        sol = diffrax.diffeqsolve(
+            diffrax.ODETerm(ax), diffrax.Dopri8(), 0.0, cmd.end_time, None, ax.initial_state(cmd), args=cmd,
+            saveat=diffrax.SaveAt(t1=True), stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
+            max_steps=200_000,
+        )
+        y = sol.ys[-1]
+        n = ax.n_modes
+        q, qd = y[:n], y[n:]
+        return jnp.sqrt(q**2 + ((qd + ax.sigma * q) / ax.omega_d) ** 2)
+
+    return jax.vmap(one, out_axes=1)(r)
+
+
+def reference_residuals(axis: ModalAxis, distance, v_max, a_max, j_max=None, uncertainty=0.2, n: int = 201):
+    """The reference of "% of the unshaped move": for each mode, the worst residual amplitude [m] over the band
+    (frequency × [1 - uncertainty, 1 + uncertainty]) of the unshaped time-optimal move of `distance` within the
+    limits (`fastest_move`: the move a planner runs without shaping). Shape (n_modes,)."""
+    move = fastest_move(distance, v_max, a_max, j_max)
+    u = float(uncertainty)
+    return jnp.max(residual_curve(axis, move, np.linspace(1 - u, 1 + u, n) if u > 0 else 1.0), axis=1), move
+
+
+def tolerance_band(factors, ratio, level: float = 0.05):
+    """`(low, high)` frequency factors of the contiguous band around factor 1 where `ratio` (residual over
+    reference, on the grid `factors`) stays at or below `level`; `(nan, nan)` when the ratio at 1 is above it.
+    The edges are interpolated linearly; a band that reaches the grid's end is cut there."""
+    f = np.asarray(factors, dtype=float)
+    r = np.asarray(ratio, dtype=float)
+    i0 = int(np.argmin(np.abs(f - 1.0)))
+    if not r[i0] <= level:
+        return math.nan, math.nan
+    lo = i0
+    while lo > 0 and r[lo - 1] <= level:
+        lo -= 1
+    hi = i0
+    while hi < len(f) - 1 and r[hi + 1] <= level:
+        hi += 1
+
+    def cross(a, b):
+        t = (level - r[a]) / (r[b] - r[a])
+        return f[a] + t * (f[b] - f[a])
+
+    return (f[0] if lo == 0 else cross(lo, lo - 1)), (f[-1] if hi == len(f) - 1 else cross(hi, hi + 1))
