@@ -18,6 +18,7 @@ import threading
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.core import Tracer
 
 #: what the first use of jaxbelt with JAX's 64-bit mode off says (see `require_x64`)
 X64_MESSAGE = (
@@ -67,7 +68,7 @@ def as_float_array(x):
             # made outside any trace: a cached tracer would leak into later, unrelated programs
             with jax.ensure_compile_time_eval():
                 hit = jax.device_put(np.asarray(x, dtype=dtype))
-            if isinstance(hit, jax.core.Tracer):
+            if isinstance(hit, Tracer):
                 return hit
             if len(_SCALARS) >= _SCALARS_MAX:
                 _SCALARS.clear()
@@ -83,7 +84,7 @@ def as_float_array(x):
             host = np.asarray(x, dtype=dtype)
             with jax.ensure_compile_time_eval():
                 hit = jax.device_put(host)
-            if isinstance(hit, jax.core.Tracer):
+            if isinstance(hit, Tracer):
                 return hit
             if len(_SCALARS) >= _SCALARS_MAX:
                 _SCALARS.clear()
@@ -107,7 +108,7 @@ def concrete_array_type(t) -> bool:
     """True when `t` is the type of a concrete array (numpy, or a jax array that is not a tracer)."""
     if t in _ARRAY_TYPES:
         return True
-    if issubclass(t, jax.Array) and not issubclass(t, jax.core.Tracer):
+    if issubclass(t, jax.Array) and not issubclass(t, Tracer):
         _ARRAY_TYPES.add(t)
         return True
     return False
@@ -116,7 +117,7 @@ def concrete_array_type(t) -> bool:
 def is_concrete(x) -> bool:
     """True when `x` holds values (not a tracer inside jit/vmap/grad)."""
     leaves = jax.tree_util.tree_leaves(x)
-    return not any(isinstance(leaf, jax.core.Tracer) for leaf in leaves)
+    return not any(isinstance(leaf, Tracer) for leaf in leaves)
 
 
 _collector = threading.local()

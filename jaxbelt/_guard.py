@@ -24,6 +24,8 @@ import contextlib
 import dataclasses
 import functools
 import threading
+from collections.abc import Callable
+from typing import Any, Literal
 
 import equinox as eqx
 import jax
@@ -93,6 +95,9 @@ class _Off:
     """Stand-in for `_host_checks` where JAX has no user contexts (jax < 0.6): host checks are off."""
 
     value = False
+
+    def __call__(self, value):  # not entered: the callers leave host checks out when they find `_Off`
+        return contextlib.nullcontext()
 
 
 #: True while jaxbelt traces or runs a `host_checked` program (part of JAX's jit cache keys, so that a
@@ -164,7 +169,7 @@ def eager() -> bool:
     return type(jax.extend.core.find_top_trace(())) is _EAGER_TRACE
 
 
-def host_checked(fun=None, *, jit=eqx.filter_jit, store: bool = False, **jit_kwargs):
+def host_checked(fun=None, *, jit=eqx.filter_jit, store: bool = False, **jit_kwargs) -> Callable[..., Any]:
     """`jit(fun, **jit_kwargs)` for a program jaxbelt runs eagerly: its guards come back as values.
 
     Called outside any trace, the program that runs is `checkify`-transformed: `error_if` (and so
@@ -245,7 +250,7 @@ def _equinox_errors_as_checks() -> None:
     original = eqx.error_if
 
     @functools.wraps(original)
-    def error_if(x, pred, msg, *, on_error="default"):
+    def error_if(x, pred, msg, *, on_error: Literal["default", "raise", "breakpoint", "nan", "off"] = "default"):
         if on_error in ("default", "raise"):
             if _validated.value and (msg in _VALIDATED_BY_JAXBELT or str(msg).startswith(_VALIDATED_PREFIX)):
                 return x
@@ -254,7 +259,7 @@ def _equinox_errors_as_checks() -> None:
                 return x
         return original(x, pred, msg, on_error=on_error)
 
-    error_if._jaxbelt_checks = True
+    setattr(error_if, "_jaxbelt_checks", True)  # noqa: B010 - a mark on a function object
     eqx.error_if = error_if
     if getattr(eqxi, "error_if", None) is original:
         eqxi.error_if = error_if

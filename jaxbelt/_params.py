@@ -3,7 +3,7 @@
 A model's physical parameter is written once, as a field:
 
 ```python
-k: FloatScalar = param(9e4, unit="N/m", check="positive", doc="stiffness of each belt branch")
+k: FloatParam = param(9e4, unit="N/m", check="positive", doc="stiffness of each belt branch")
 ```
 
 and from that single declaration follow
@@ -30,13 +30,37 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, NamedTuple
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import equinox as eqx
 import jax
 import numpy as np
+from jax.core import Tracer
 
 from ._checks import _HOST, _RULES, _enforce, _message, _Scalar, as_float_array
+
+if TYPE_CHECKING:
+    from jax.typing import ArrayLike
+
+    class FloatParam:
+        """The type of a `param` field for type checkers: built from numbers, numpy arrays or tuples of
+        numbers (what the float converter takes), read as a JAX array. (A descriptor type: its `__set__`
+        gives the constructor's argument type, its `__get__` the attribute's; equinox fields converted by
+        a function of ours are otherwise typed by their annotation alone.)"""
+
+        def __get__(self, obj: Any, owner: Any = None) -> jax.Array: ...
+        def __set__(self, obj: Any, value: ArrayLike | tuple[float, ...]) -> None: ...
+
+    class OptionalFloatParam:
+        """`FloatParam` that may be None (`param(optional=True)`)."""
+
+        def __get__(self, obj: Any, owner: Any = None) -> jax.Array | None: ...
+        def __set__(self, obj: Any, value: ArrayLike | tuple[float, ...] | None) -> None: ...
+
+else:  # at run time the annotation says what the field holds
+    FloatParam = jax.Array
+    OptionalFloatParam = jax.Array | None
+
 
 #: metadata keys of a declared parameter and of a declared option
 _KEY = "jaxbelt_param"
@@ -234,14 +258,14 @@ def _check_option(owner: str, name: str, o: Option, value) -> None:
     if o.choices is not None:
         if value not in o.choices:
             raise ValueError(f"{owner}: parameter `{name}` must be one of {o.choices}; got {value!r}")
-    elif isinstance(value, bool) or not isinstance(value, int | np.integer) or value < o.minimum:
+    elif isinstance(value, bool) or not isinstance(value, int | np.integer) or value < (o.minimum or 0):
         raise ValueError(f"{owner}: parameter `{name}` must be an integer >= {o.minimum}; got {value!r}")
 
 
 def _shape_ok(p: Param, shape: tuple) -> bool:
     if p.shape is None or shape == p.shape:
         return True
-    return p.batch and len(shape) == len(p.shape) + 1 and shape[1:] == p.shape
+    return p.batch and shape[1:] == p.shape and len(shape) == len(p.shape) + 1
 
 
 def check_declared(module, owner: str | None = None) -> dict:
@@ -261,7 +285,7 @@ def check_declared(module, owner: str | None = None) -> dict:
     fetch, traced = [], []
     for name, p in spec.params:
         value = getattr(module, name)
-        if value is None and p.optional:
+        if value is None:  # an optional parameter left out (the converter refuses None elsewhere)
             continue
         shape = tuple(value.shape)
         if not _shape_ok(p, shape):
@@ -271,7 +295,7 @@ def check_declared(module, owner: str | None = None) -> dict:
         known = _HOST.get(id(value))
         if known is not None and known[0] is value:
             host[name] = known[1]
-        elif isinstance(value, jax.core.Tracer):
+        elif isinstance(value, Tracer):
             traced.append((name, value, p))
         else:
             fetch.append((name, value))
@@ -284,8 +308,8 @@ def check_declared(module, owner: str | None = None) -> dict:
             continue
         v = host[name]
         what, ok = _rule(p)
-        if not bool(ok(v, _Scalar if type(v) is float else np)):
-            got = v if type(v) is float else v.tolist()
+        if not bool(ok(v, _Scalar if isinstance(v, float) else np)):
+            got = v if isinstance(v, float) else v.tolist()
             raise ValueError(f"{_message(name, what, p.unit, owner)}; got {got}")
     for name, value, p in traced:
         if p.check != "none":

@@ -128,12 +128,13 @@ def settings() -> tuple:
             v if _plain(v) or isinstance(v, enum.Enum) else type(v).__qualname__ for v in _config.trace_context()
         )
     except Exception:  # noqa: BLE001 - another JAX layout: the settings jaxbelt knows of
-        trace = (
-            bool(c.jax_enable_x64),
-            str(c.jax_default_matmul_precision),
-            str(c.jax_numpy_dtype_promotion),
-            str(c.jax_numpy_rank_promotion),
+        names = (
+            "jax_enable_x64",
+            "jax_default_matmul_precision",
+            "jax_numpy_dtype_promotion",
+            "jax_numpy_rank_promotion",
         )
+        trace = tuple(str(getattr(c, name)) for name in names)  # the values in effect (context managers too)
     return (
         trace,
         os.environ.get("XLA_FLAGS", ""),
@@ -200,9 +201,10 @@ def aval(x) -> tuple:
 
 
 try:  # what a checkify error keeps of the Python stack where its check was written
-    from jax._src.lib import _jax as _jaxlib_ext
+    import importlib
 
-    _TRACEBACK = _jaxlib_ext.Traceback
+    # jaxlib's extension module (private, hence looked up by name): only its Traceback type is used
+    _TRACEBACK = importlib.import_module("jax._src.lib")._jax.Traceback
 except Exception:  # noqa: BLE001 - another jaxlib layout: such outputs are not written, only used in-process
     _TRACEBACK = None
 

@@ -69,7 +69,7 @@ def enable_compilation_cache(path=None, *, min_compile_time: float = 0.0, progra
 
     folder = Path(path).expanduser() if path is not None else default_cache_dir()
     folder.mkdir(parents=True, exist_ok=True)
-    previous = jax.config.jax_compilation_cache_dir
+    previous = jax.config.values["jax_compilation_cache_dir"]
     jax.config.update("jax_enable_compilation_cache", True)
     jax.config.update("jax_compilation_cache_dir", str(folder))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_time))
@@ -95,6 +95,6 @@ def disable_compilation_cache() -> None:
 
 def compilation_cache_dir():
     """The folder of the persistent cache in use, or None."""
-    if not jax.config.jax_enable_compilation_cache:
+    if not jax.config.values["jax_enable_compilation_cache"]:
         return None
-    return jax.config.jax_compilation_cache_dir
+    return jax.config.values["jax_compilation_cache_dir"]

@@ -25,7 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._checks import check_positive, check_range, record
-from ._params import Parametrised, document, param
+from ._params import FloatParam, Parametrised, document, param
 
 
 class AbstractInput(Parametrised):
@@ -50,7 +50,7 @@ class AbstractVoltageSource(AbstractInput):
     """Anything that sets a DC motor's armature voltage: `voltage_at(t, motor)` [V]."""
 
     @abc.abstractmethod
-    def voltage_at(self, t, motor: MotorState):
+    def voltage_at(self, t, motor: MotorState) -> jax.Array:
         """Armature voltage [V] at time `t` [s] for the motor state `motor`."""
 
 
@@ -58,7 +58,7 @@ class AbstractVoltageCommand(AbstractVoltageSource):
     """An open-loop voltage command $V(t)$ [V]: `cmd(t)`; the motor state is not used."""
 
     @abc.abstractmethod
-    def __call__(self, t):
+    def __call__(self, t) -> jax.Array:
         """$V(t)$ [V]."""
 
     def voltage_at(self, t, motor: MotorState):
@@ -69,7 +69,7 @@ class AbstractExponentialVoltage(AbstractVoltageCommand):
     """A voltage command that is a finite sum of exponentials, $V(t) = \\sum_j a_j e^{s_j t}$."""
 
     @abc.abstractmethod
-    def exp_terms(self):
+    def exp_terms(self) -> tuple[jax.Array, jax.Array]:
         """`(amplitudes, rates)`, each of shape (J,): $a_j$ [V] and $s_j$ [1/s]."""
 
 
@@ -84,8 +84,13 @@ class AbstractMotionCommand(AbstractInput):
     """
 
     @abc.abstractmethod
-    def derivative(self, t, k: int = 0):
+    def derivative(self, t, k: int = 0) -> jax.Array:
         """k-th time derivative of the command [rad/s^k]."""
+
+    @property
+    @abc.abstractmethod
+    def end_time(self) -> jax.Array:
+        """Time at which the motion ends [s] (the command holds its final position after it)."""
 
     def __call__(self, t):
         return self.derivative(t, 0)
@@ -98,12 +103,25 @@ class AbstractMotionCommand(AbstractInput):
         """$\\ddot\\varphi_m(t)$ [rad/s²]."""
         return self.derivative(t, 2)
 
+    def sample(self, rate_hz: float):
+        """`(t, x, v, a)` numpy arrays of the command sampled every `1 / rate_hz` seconds from t = 0 through the
+        end of the move (the last sample at or after `end_time`, where the command holds still): what a drive's
+        motion table takes. `rate_hz` [Hz] finite and > 0."""
+        import math
+
+        check_positive("rate_hz", rate_hz, "Hz", f"{type(self).__name__}.sample")
+        n = int(math.ceil(float(self.end_time) * float(rate_hz) - 1e-9))
+        t = np.arange(n + 1) / float(rate_hz)
+        tj = jnp.asarray(t)
+        x, v, a = (np.asarray(jax.device_get(self.derivative(tj, k))) for k in (0, 1, 2))
+        return t, x, v, a
+
 
 class AbstractRunningSpeed(AbstractInput):
     """The running speed of a belt, $v(t)$ [m/s]: `speed_at(t)`."""
 
     @abc.abstractmethod
-    def speed_at(self, t):
+    def speed_at(self, t) -> jax.Array:
         """Belt speed [m/s] at time `t` [s]."""
 
 
@@ -114,7 +132,7 @@ class ConstantVoltage(AbstractExponentialVoltage):
     {parameters}
     """
 
-    voltage: jnp.ndarray = param(unit="V", check="finite", symbol="$V_0$", doc="the constant voltage")
+    voltage: FloatParam = param(unit="V", check="finite", symbol="$V_0$", doc="the constant voltage")
 
     def __call__(self, t):
         return self.voltage * jnp.ones_like(jnp.asarray(t, dtype=float))
@@ -135,10 +153,10 @@ class ExponentialVoltage(AbstractExponentialVoltage):
     solves all of them at once (batched closed form).
     """
 
-    v_max: jnp.ndarray = param(
+    v_max: FloatParam = param(
         24.0, unit="V", check="finite", symbol="$V_{max}$", default_note="Table I", doc="final voltage"
     )
-    gamma: jnp.ndarray = param(0.02, unit="s", batch=True, symbol="$\\gamma$", doc="time constant")
+    gamma: FloatParam = param(0.02, unit="s", batch=True, symbol="$\\gamma$", doc="time constant")
 
     def __call__(self, t):
         t = jnp.asarray(t, dtype=float)
@@ -213,10 +231,10 @@ class PseudoPolynomial(AbstractMotionCommand):
     Everything is differentiable with respect to `gammas` (and Φ, T).
     """
 
-    gammas: jnp.ndarray = param(
+    gammas: FloatParam = param(
         unit="–", check="none", shape=None, symbol="$\\gamma_i$", doc="the n + 1 >= 2 exponents (shape parameters), 1-D"
     )
-    displacement: jnp.ndarray = param(
+    displacement: FloatParam = param(
         15 * 2 * 3.141592653589793,
         unit="rad",
         check="finite",
@@ -224,7 +242,7 @@ class PseudoPolynomial(AbstractMotionCommand):
         default_note="15 rev",
         doc="total motor displacement",
     )
-    duration: jnp.ndarray = param(1.0, unit="s", symbol="$T$", doc="motion time")
+    duration: FloatParam = param(1.0, unit="s", symbol="$T$", doc="motion time")
 
     def _check_relations(self, host):
         o = "PseudoPolynomial"
@@ -327,8 +345,8 @@ class ShapedCommand(AbstractMotionCommand):
     """
 
     base: AbstractMotionCommand
-    times: jnp.ndarray = param(unit="s", check="nonnegative", shape=None, symbol="$t_j$", doc="impulse times")
-    amplitudes: jnp.ndarray = param(
+    times: FloatParam = param(unit="s", check="nonnegative", shape=None, symbol="$t_j$", doc="impulse times")
+    amplitudes: FloatParam = param(
         unit="–", check="finite", shape=None, symbol="$A_j$", doc="impulse amplitudes (summing to 1)"
     )
 

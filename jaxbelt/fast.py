@@ -33,6 +33,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from ._checks import is_concrete
 from .modal import MODAL_COND_LIMIT, exp_convolution, expm_solve, modal_decomposition, phi1
@@ -163,7 +164,9 @@ def exp_input_batch(A, F, s, x0, t0, ts, f_var, s_var, *, uniform: bool = False,
     return jax.lax.switch(branch, [separated, exact, expm_path])
 
 
-def startup_gamma_batch(model, gammas, ts, v_max=24.0, y0=None, *, t0=None, n_fix: int = 8, chunk: int = 256):
+def startup_gamma_batch(
+    model, gammas, ts, v_max: ArrayLike = 24.0, y0=None, *, t0=None, n_fix: int = 8, chunk: int = 256
+):
     """State histories of a belt start-up model for a batch of voltage time constants.
 
     $V_b(t) = V_{max}(1 - e^{-t/\\gamma_b})$ (Incerti, 2014, eq. 30) drives `model` (a `BeltStartup`

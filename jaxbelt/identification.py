@@ -193,7 +193,7 @@ def identify(
         solver,
     )
     try:
-        u, r, jac, ok, steps = _fit(*args, jac, rtol, atol, int(max_steps))
+        u, r, jmat, ok, steps = _fit(*args, jac, rtol, atol, int(max_steps))
     except TypeError as e:
         if jac != "fwd" or "custom_vjp" not in str(e):
             raise
@@ -203,21 +203,21 @@ def identify(
             "reverse-mode adjoint); using jac='bwd'. Pass adjoint='forward' to simulate for the faster forward Jacobian.",
             stacklevel=2,
         )
-        u, r, jac, ok, steps = _fit(*args, "bwd", rtol, atol, int(max_steps))
-    u, r, jac = np.asarray(u), np.asarray(r), np.asarray(jac)
+        u, r, jmat, ok, steps = _fit(*args, "bwd", rtol, atol, int(max_steps))
+    u, r, jmat = np.asarray(u), np.asarray(r), np.asarray(jmat)
     if not bool(ok):
         raise RuntimeError(
             f"identify: the {solver.upper()} solver did not converge in {int(steps)} steps "
             f"(parameters {names}); try better initial values or a larger `max_steps`"
         )
-    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(jac))):
+    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(jmat))):
         raise RuntimeError("identify: the prediction or its Jacobian is not finite at the optimum")
     p = np.asarray(_to_params(u, p0, is_log, scale))
     cost = float(r @ r)
     dof = N - n
     s2 = cost / dof if sigma is None else 1.0
     # Covariance in u from the SVD of the Jacobian (stable where J^T J is badly conditioned).
-    _, sv, vt = np.linalg.svd(jac, full_matrices=False)
+    _, sv, vt = np.linalg.svd(jmat, full_matrices=False)
     keep = sv > 1e-12 * sv[0] if sv.size else sv > 0
     cov_u = (vt[keep].T / sv[keep] ** 2) @ vt[keep] * s2
     if keep.sum() < n:

@@ -14,6 +14,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._checks import as_float_array, is_concrete
+from ._model import AbstractModel
+from .commands import AbstractInput
 
 
 def _as_tuple(observe):
@@ -67,8 +69,8 @@ class Scene(eqx.Module):
     shape does not recompile `simulate`.
     """
 
-    model: eqx.Module
-    input: eqx.Module
+    model: AbstractModel
+    input: AbstractInput
     ts: jnp.ndarray | None = None
     t0: jnp.ndarray | None = None
     t1: jnp.ndarray | None = None
@@ -188,12 +190,18 @@ class Scene(eqx.Module):
     @property
     def start_time(self):
         """Time [s] at which the initial state holds: `t0`, or `ts[0]` when `t0` was not given."""
-        return self.ts[0] if self.t0 is None else self.t0
+        if self.t0 is not None:
+            return self.t0
+        assert self.ts is not None  # a final-state scene always has its `t0` (`__init__`)
+        return self.ts[0]
 
     @property
     def times(self):
         """Output times: `ts`, or `[t1]` for a final-state scene."""
-        return self.ts if self.ts is not None else self.t1[None]
+        if self.ts is not None:
+            return self.ts
+        assert self.t1 is not None  # `__init__`: `ts` or `t1`
+        return self.t1[None]
 
     def time_errors(self):
         """`[(ok, message)]` for the time checks that values decide (evaluated under `jit` too)."""
@@ -211,7 +219,8 @@ class Scene(eqx.Module):
                 )
             )
         elif self.ts is None:
-            checks.append((jnp.isfinite(self.t1) & (self.t1 > self.t0), "Scene: `t1` must be finite and > t0"))
+            t1 = self.times[0]
+            checks.append((jnp.isfinite(t1) & (t1 > t0), "Scene: `t1` must be finite and > t0"))
         if self.y0 is not None:
             checks.append((jnp.all(jnp.isfinite(self.y0)), "Scene: `y0` must be finite"))
         return checks

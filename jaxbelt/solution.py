@@ -4,10 +4,15 @@ from __future__ import annotations
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 
 
 class SolveError(RuntimeError):
-    """A simulation failed (solver did not reach the final time, or produced non-finite values)."""
+    """A simulation failed (solver did not reach the final time, or produced non-finite values).
+
+    `indices`: the failing elements of a `jb.sweep` (None otherwise)."""
+
+    indices: np.ndarray | None = None
 
 
 class Solution(eqx.Module):

@@ -28,6 +28,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.core import Tracer
+from jax.typing import ArrayLike
 
 from . import _store
 from ._checks import as_float_array, concrete_array_type, is_concrete, positive_checks
@@ -98,14 +100,13 @@ def _run_impl(scene: Scene, method: str, solver, rtol, atol, dt0, max_steps: int
     else:
         if integrals:
 
-            def vf(t, y, args):
+            def augmented(t, y, args):  # the state and the integrands of the integral outputs
                 x, _ = y
                 return model.vector_field(t, x, args), jnp.stack([model.rate(n, t, x, args) for n in integrals])
 
-            y_init = (y0, jnp.zeros((len(integrals),)))
+            vf, y_init = augmented, (y0, jnp.zeros((len(integrals),)))
         else:
-            vf = lambda t, y, args: model.vector_field(t, y, args)  # noqa: E731
-            y_init = y0
+            vf, y_init = (lambda t, y, args: model.vector_field(t, y, args)), y0
         import diffrax
 
         from ._rk4 import RK4
@@ -132,6 +133,7 @@ def _run_impl(scene: Scene, method: str, solver, rtol, atol, dt0, max_steps: int
                 progress_meter=meter,
                 adjoint=adjoint,
             )
+        assert sol.ys is not None  # saved at `times` (or t1)
         if integrals:
             ys, acc = sol.ys
             integral_vals = {n: acc[:, i] for i, n in enumerate(integrals)}
@@ -220,10 +222,10 @@ def simulate(
     method: str = "auto",
     *,
     solver=None,
-    rtol=1e-8,
-    atol=1e-10,
-    dt0=None,
-    dt=1e-4,
+    rtol: ArrayLike = 1e-8,
+    atol: ArrayLike = 1e-10,
+    dt0: ArrayLike | None = None,
+    dt: ArrayLike = 1e-4,
     max_steps: int = 100_000,
     throw: bool = True,
     progress: bool = False,
@@ -266,7 +268,7 @@ def simulate(
         raise TypeError(f"simulate expects a jaxbelt.Scene; got {type(scene).__name__}")
     sol = _simulate_concrete(scene, method, solver, rtol, atol, dt0, dt, max_steps, progress, adjoint)
     if sol is not None:
-        if throw and not isinstance(sol.success, jax.core.Tracer) and bool(np.all(np.asarray(sol.success))):
+        if throw and not isinstance(sol.success, Tracer) and bool(np.all(np.asarray(sol.success))):
             return sol  # the common eager case: nothing to attach, nothing to raise
         return _finish(sol, [], throw, _describe(scene, sol.method), _failure_hint(sol.method))
     model, inp = scene.model, scene.input
@@ -535,6 +537,7 @@ def _simulate_concrete(scene, method, solver, rtol, atol, dt0, dt, max_steps, pr
     else:
         rtol, atol = _as_scalar(rtol), _as_scalar(atol)
         dt0 = None if dt0 is None else _as_scalar(dt0)
+    assert plan.program is not None  # every plan that is not batched holds its program (`_make_plan`)
     return plan.program(leaves, rtol, atol, dt0, solver)
 
 
@@ -553,7 +556,7 @@ def _check_scalar_fields(obj) -> None:
         }
         for f in dataclasses.fields(m):
             v = getattr(m, f.name, None)
-            if f.name in allowed or not hasattr(v, "shape") or isinstance(v, eqx.Module):
+            if v is None or f.name in allowed or not hasattr(v, "shape") or isinstance(v, eqx.Module):
                 continue
             if jnp.ndim(v) != 0:
                 raise ValueError(

@@ -74,7 +74,7 @@ def int_at_least(lo: int):
     """An integer >= lo."""
 
     def parse(text: str) -> int:
-        v = _number(text, int)
+        v = int(_number(text, int))
         if v < lo:
             raise argparse.ArgumentTypeError(f"must be an integer >= {lo}, got {text}")
         return v

@@ -39,6 +39,7 @@ def _check_scenes(args):
     import importlib.util
 
     spec = importlib.util.spec_from_file_location("_jaxbelt_bench_run_all", where / "run_all.py")
+    assert spec is not None and spec.loader is not None  # a .py file: Python's source loader
     run_all = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(run_all)
     scenes = run_all.discover()

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from ._args import float_in, image_path, int_at_least, positive_float
 
 
@@ -50,7 +52,9 @@ def run(args) -> int:
     from ..plots.nonlinear import response_figure
 
     damping = None if args.damping is None else (args.damping[0] if len(args.damping) == 1 else tuple(args.damping))
-    kw = {k: v for k, v in (("damping", damping), ("v_l", args.v_l), ("wave_speed", args.wave_speed)) if v is not None}
+    kw: dict[str, Any] = {
+        k: v for k, v in (("damping", damping), ("v_l", args.v_l), ("wave_speed", args.wave_speed)) if v is not None
+    }
     belt = NonlinearBelt(**kw)
     c1 = float(belt.crossing_speeds(1)[0])
     rng = (7.5, 10.5) if not kw else (c1 - 1.0, c1 + 2.0)

@@ -21,7 +21,7 @@ import numpy as np
 from .._checks import as_float_array as _arr
 from .._checks import check_finite, check_range, collecting, is_concrete, record
 from .._guard import checked
-from .._params import Parametrised, document, param
+from .._params import FloatParam, Parametrised, document, param
 
 __all__ = ["BeltPulleyContact", "SlipError", "SlipReport"]
 
@@ -80,17 +80,17 @@ class BeltPulleyContact(Parametrised):
     Pulley speeds `omega` are angular [rad/s].
     """
 
-    radius: jnp.ndarray = param(
+    radius: FloatParam = param(
         unit="m",
         symbol="$R$",
         default_note="the motor pulley's is not in the belt-vibration report",
         doc="pulley radius",
     )
-    slack_tension: jnp.ndarray = param(120.0, unit="N", symbol="$T_1$", doc="slack-side tension")
-    tight_tension: jnp.ndarray = param(140.0, unit="N", symbol="$T_2$", doc="tight-side tension")
-    density: jnp.ndarray = param(0.05, unit="kg/m", symbol="$\\rho$", doc="belt mass per length")
-    friction: jnp.ndarray = param(0.2, unit="–", symbol="$\\mu$", doc="friction coefficient")
-    wrap_angle: jnp.ndarray = param(
+    slack_tension: FloatParam = param(120.0, unit="N", symbol="$T_1$", doc="slack-side tension")
+    tight_tension: FloatParam = param(140.0, unit="N", symbol="$T_2$", doc="tight-side tension")
+    density: FloatParam = param(0.05, unit="kg/m", symbol="$\\rho$", doc="belt mass per length")
+    friction: FloatParam = param(0.2, unit="–", symbol="$\\mu$", doc="friction coefficient")
+    wrap_angle: FloatParam = param(
         2.094,
         unit="rad",
         check="range",

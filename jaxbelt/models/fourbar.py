@@ -30,7 +30,7 @@ import numpy as np
 
 from .._checks import record
 from .._model import AbstractModel, integrand, observable
-from .._params import document, option, param
+from .._params import FloatParam, document, option, param
 from ..commands import AbstractVoltageSource, MotorState
 
 #: The first, assumed set of the values lost with Table I (not from the paper); see the module docstring.
@@ -113,62 +113,60 @@ class FourBarDrive(AbstractModel):
     when a length, inductance, resistance or inertia is not positive.
     """
 
-    a: jnp.ndarray = param(
-        0.0884, unit="m", symbol="$a$", default_note="*identified*; assumed 0.10", doc="crank length"
-    )
-    b: jnp.ndarray = param(0.30, unit="m", symbol="$b$", default_note="*assumed*", doc="coupler length")
-    c: jnp.ndarray = param(0.30, unit="m", symbol="$c$", default_note="*assumed*", doc="rocker length")
-    hx: jnp.ndarray = param(
+    a: FloatParam = param(0.0884, unit="m", symbol="$a$", default_note="*identified*; assumed 0.10", doc="crank length")
+    b: FloatParam = param(0.30, unit="m", symbol="$b$", default_note="*assumed*", doc="coupler length")
+    c: FloatParam = param(0.30, unit="m", symbol="$c$", default_note="*assumed*", doc="rocker length")
+    hx: FloatParam = param(
         0.30, unit="m", check="finite", symbol="$h_x$", default_note="*assumed*", doc="abscissa of the rocker pivot D"
     )
-    hy: jnp.ndarray = param(0.05, unit="m", check="finite", symbol="$h_y$", doc="ordinate of the rocker pivot D")
-    f1: jnp.ndarray = param(
+    hy: FloatParam = param(0.05, unit="m", check="finite", symbol="$h_y$", doc="ordinate of the rocker pivot D")
+    f1: FloatParam = param(
         0.05, unit="m", check="nonnegative", symbol="$f_1$", default_note="*assumed*", doc="distance of $G_1$ from A"
     )
-    f2: jnp.ndarray = param(
+    f2: FloatParam = param(
         0.15, unit="m", check="nonnegative", symbol="$f_2$", default_note="*assumed*", doc="distance of $G_2$ from B"
     )
-    f3: jnp.ndarray = param(
+    f3: FloatParam = param(
         0.15, unit="m", check="nonnegative", symbol="$f_3$", default_note="*assumed*", doc="distance of $G_3$ from D"
     )
-    theta1: jnp.ndarray = param(
+    theta1: FloatParam = param(
         0.0, unit="rad", check="finite", symbol="$\\vartheta_1$", doc="angle of $G_1$ off the crank line"
     )
-    theta2: jnp.ndarray = param(
+    theta2: FloatParam = param(
         0.0, unit="rad", check="finite", symbol="$\\vartheta_2$", doc="angle of $G_2$ off the coupler line"
     )
-    theta3: jnp.ndarray = param(
+    theta3: FloatParam = param(
         0.0, unit="rad", check="finite", symbol="$\\vartheta_3$", doc="angle of $G_3$ off the rocker line"
     )
-    m1: jnp.ndarray = param(
+    m1: FloatParam = param(
         0.40, unit="kg", check="nonnegative", symbol="$m_1$", default_note="*assumed*", doc="crank mass"
     )
-    m2: jnp.ndarray = param(
+    m2: FloatParam = param(
         0.38, unit="kg", check="nonnegative", symbol="$m_2$", default_note="*assumed*", doc="coupler mass"
     )
-    m3: jnp.ndarray = param(
+    m3: FloatParam = param(
         0.38, unit="kg", check="nonnegative", symbol="$m_3$", default_note="*assumed*", doc="rocker mass"
     )
-    jg1: jnp.ndarray = param(3.5e-4, unit="kg m²", symbol="$J_{G1}$", doc="crank inertia about $G_1$")
-    jg2: jnp.ndarray = param(1.7e-2, unit="kg m²", symbol="$J_{G2}$", doc="coupler inertia about $G_2$")
-    jg3: jnp.ndarray = param(1.7e-2, unit="kg m²", symbol="$J_{G3}$", doc="rocker inertia about $G_3$")
-    g: jnp.ndarray = param(9.81, unit="m/s²", check="nonnegative", symbol="$g$", doc="gravity")
-    R: jnp.ndarray = param(
+    jg1: FloatParam = param(3.5e-4, unit="kg m²", symbol="$J_{G1}$", doc="crank inertia about $G_1$")
+    jg2: FloatParam = param(1.7e-2, unit="kg m²", symbol="$J_{G2}$", doc="coupler inertia about $G_2$")
+    jg3: FloatParam = param(1.7e-2, unit="kg m²", symbol="$J_{G3}$", doc="rocker inertia about $G_3$")
+    g: FloatParam = param(9.81, unit="m/s²", check="nonnegative", symbol="$g$", doc="gravity")
+    R: FloatParam = param(
         0.886, unit="Ω", symbol="$R$", default_note="*identified*; assumed 1.5", doc="armature resistance"
     )
-    L: jnp.ndarray = param(9e-3, unit="H", symbol="$L$", doc="armature inductance")
-    km: jnp.ndarray = param(0.48, unit="N m/A", symbol="$k_m$", doc="torque / back-emf constant")
-    jm: jnp.ndarray = param(13e-4, unit="kg m²", symbol="$J_m$", doc="motor inertia")
-    ja: jnp.ndarray = param(9.8e-5, unit="kg m²", symbol="$J_a$", doc="inertia of gear a (motor side)")
-    jb: jnp.ndarray = param(9.8e-5, unit="kg m²", symbol="$J_b$", doc="inertia of gear b (crank side)")
-    z: jnp.ndarray = param(1.0, unit="–", symbol="$z$", doc="gear ratio $\\dot\\varphi/\\dot\\alpha$")
-    T0: jnp.ndarray = param(
+    L: FloatParam = param(9e-3, unit="H", symbol="$L$", doc="armature inductance")
+    km: FloatParam = param(0.48, unit="N m/A", symbol="$k_m$", doc="torque / back-emf constant")
+    jm: FloatParam = param(13e-4, unit="kg m²", symbol="$J_m$", doc="motor inertia")
+    ja: FloatParam = param(9.8e-5, unit="kg m²", symbol="$J_a$", doc="inertia of gear a (motor side)")
+    jb: FloatParam = param(9.8e-5, unit="kg m²", symbol="$J_b$", doc="inertia of gear b (crank side)")
+    z: FloatParam = param(1.0, unit="–", symbol="$z$", doc="gear ratio $\\dot\\varphi/\\dot\\alpha$")
+    T0: FloatParam = param(
         0.0, unit="N m", check="nonnegative", symbol="$T_0$", doc="constant friction torque on the motor shaft"
     )
-    lam: jnp.ndarray = param(
+    lam: FloatParam = param(
         0.08, unit="N m s/rad", check="nonnegative", symbol="$\\lambda$", doc="viscous friction on the motor shaft"
     )
-    alpha0: jnp.ndarray = param(
+    alpha0: FloatParam = param(
         0.0, unit="rad", check="finite", symbol="$\\alpha_0$", doc="crank angle at the scene start (rest state)"
     )
     assembly: int = option(1, choices=(1, -1), symbol="$k$", doc="the assembly mode of Appendix A (*assumed*)")

@@ -12,9 +12,10 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jax.typing import ArrayLike
 
 from .._checks import check_nonnegative
-from .._params import document, option, param
+from .._params import FloatParam, OptionalFloatParam, document, option, param
 from ..commands import AbstractController, MotorState
 
 _LIMITERS = ("hard", "smooth")
@@ -57,26 +58,24 @@ class PID(AbstractController):
     `kp` is in V/rad for the ramped gain (it multiplies $t$) and in V s/rad for the constant one.
     """
 
-    kp: jnp.ndarray = param(
+    kp: FloatParam = param(
         80.0, unit="V/rad", check="finite", symbol="$K_p$", doc="proportional gain (ramped: multiplies $t$)"
     )
-    ki: jnp.ndarray = param(32.0, unit="V/rad", check="finite", symbol="$K_i$", doc="integral gain")
-    kd: jnp.ndarray = param(0.015, unit="V s²/rad", check="finite", symbol="$K_d$", doc="derivative gain")
-    omega_ref: jnp.ndarray = param(
-        30.0, unit="rad/s", check="finite", symbol="$\\omega_0$", doc="motor speed set point"
-    )
-    v_limit: jnp.ndarray | None = param(
+    ki: FloatParam = param(32.0, unit="V/rad", check="finite", symbol="$K_i$", doc="integral gain")
+    kd: FloatParam = param(0.015, unit="V s²/rad", check="finite", symbol="$K_d$", doc="derivative gain")
+    omega_ref: FloatParam = param(30.0, unit="rad/s", check="finite", symbol="$\\omega_0$", doc="motor speed set point")
+    v_limit: OptionalFloatParam = param(
         None, unit="V", optional=True, symbol="$V_{lim}$", doc="voltage limit (None: no limiter; Fig. 3)"
     )
     limiter: str = option("hard", choices=_LIMITERS, doc="the limiter's shape: clip or smooth")
-    v_smooth: jnp.ndarray = param(0.5, unit="V", symbol="$s$", doc="width of the smooth limiter")
+    v_smooth: FloatParam = param(0.5, unit="V", symbol="$s$", doc="width of the smooth limiter")
     gain: str = option("ramped", choices=_GAINS, doc="proportional gain $K_p t$ (eq. 16) or $K_p$ (eq. 14)")
 
     def proportional_gain(self, t):
         """Proportional gain at time `t`: $K_p t$ (ramped, eq. 16) or $K_p$ (constant, eq. 14) [V s/rad]."""
         return self.kp * t if self.gain == "ramped" else self.kp * jnp.ones_like(jnp.asarray(t, dtype=float))
 
-    def raw_voltage(self, t, phi, phi_dot, phi_ddot, phi0=0.0):
+    def raw_voltage(self, t, phi, phi_dot, phi_ddot, phi0: ArrayLike = 0.0):
         """Regulator output before the limiter [V] (eq. 14 or 16 with the constant set point);
         `phi0` is the motor angle at $t = 0$ [rad]."""
         w0 = self.omega_ref

@@ -17,7 +17,7 @@ import numpy as np
 
 from .._checks import check_positive, is_concrete, record
 from .._model import AbstractModel, observable
-from .._params import document, param, recheck
+from .._params import FloatParam, document, param, recheck
 from ..commands import AbstractMotionCommand
 
 
@@ -47,16 +47,12 @@ class BeltPlatform(AbstractModel):
     `to_axis()` gives the same dynamics as a one-mode `ModalAxis` (command: the motor angle).
     """
 
-    J: jnp.ndarray = param(6.0, unit="kg m²", symbol="$J$", doc="platform moment of inertia", default_note="Table III")
-    k: jnp.ndarray = param(9e4, unit="N/m", symbol="$k$", doc="stiffness of each belt branch")
-    c: jnp.ndarray = param(
-        150.0, unit="N s/m", symbol="$c$", check="nonnegative", doc="damping constant of each branch"
-    )
-    r: jnp.ndarray = param(0.060, unit="m", symbol="$r$", doc="radius of the driving pulley (1)")
-    R: jnp.ndarray = param(0.180, unit="m", symbol="$R$", doc="radius of the platform pulley (2)")
-    z: jnp.ndarray = param(
-        0.1, unit="–", symbol="$z$", doc="gear ratio of the reducer, $\\varphi = z\\varphi_m$ (1:10)"
-    )
+    J: FloatParam = param(6.0, unit="kg m²", symbol="$J$", doc="platform moment of inertia", default_note="Table III")
+    k: FloatParam = param(9e4, unit="N/m", symbol="$k$", doc="stiffness of each belt branch")
+    c: FloatParam = param(150.0, unit="N s/m", symbol="$c$", check="nonnegative", doc="damping constant of each branch")
+    r: FloatParam = param(0.060, unit="m", symbol="$r$", doc="radius of the driving pulley (1)")
+    R: FloatParam = param(0.180, unit="m", symbol="$R$", doc="radius of the platform pulley (2)")
+    z: FloatParam = param(0.1, unit="–", symbol="$z$", doc="gear ratio of the reducer, $\\varphi = z\\varphi_m$ (1:10)")
 
     input_types: ClassVar[tuple[type, ...]] = (AbstractMotionCommand,)
 

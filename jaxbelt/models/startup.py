@@ -18,7 +18,7 @@ from equinox import AbstractVar
 
 from .._checks import is_concrete
 from .._model import AbstractLinearModel, integrand, observable, observable_family
-from .._params import document, param
+from .._params import FloatParam, document, param
 from ..commands import AbstractVoltageCommand
 
 
@@ -262,12 +262,12 @@ class BeltStartup(AbstractBeltDrive):
     """
 
     jm: jnp.ndarray = _jm()
-    j1: jnp.ndarray = param(0.018, unit="kg m²", symbol="$J_1$", doc="driving pulley inertia")
-    j2: jnp.ndarray = param(0.25, unit="kg m²", symbol="$J_2$", doc="driven pulley + load inertia")
-    k: jnp.ndarray = param(120e3, unit="N/m", symbol="$k$", doc="stiffness of each belt branch")
-    c: jnp.ndarray = param(20.0, unit="N s/m", symbol="$c$", check="nonnegative", doc="damping of each belt branch")
-    r1: jnp.ndarray = param(0.08, unit="m", symbol="$r_1$", doc="driving pulley radius")
-    r2: jnp.ndarray = param(0.16, unit="m", symbol="$r_2$", doc="driven pulley radius")
+    j1: FloatParam = param(0.018, unit="kg m²", symbol="$J_1$", doc="driving pulley inertia")
+    j2: FloatParam = param(0.25, unit="kg m²", symbol="$J_2$", doc="driven pulley + load inertia")
+    k: FloatParam = param(120e3, unit="N/m", symbol="$k$", doc="stiffness of each belt branch")
+    c: FloatParam = param(20.0, unit="N s/m", symbol="$c$", check="nonnegative", doc="damping of each belt branch")
+    r1: FloatParam = param(0.08, unit="m", symbol="$r_1$", doc="driving pulley radius")
+    r2: FloatParam = param(0.16, unit="m", symbol="$r_2$", doc="driven pulley radius")
     tau_r0: jnp.ndarray = _tau_r0()
     mu: jnp.ndarray = _mu()
     z: jnp.ndarray = _z()
@@ -299,13 +299,11 @@ class BeltChain(AbstractBeltDrive):
     {parameters}
     """
 
-    inertias: jnp.ndarray = param(unit="kg m²", shape=None, doc="the n + 1 shaft inertias (pulleys on each shaft)")
-    k: jnp.ndarray = param(unit="N/m", shape=None, doc="branch stiffness of each stage, shape (n,)")
-    c: jnp.ndarray = param(
-        unit="N s/m", check="nonnegative", shape=None, doc="branch damping of each stage, shape (n,)"
-    )
-    r_drive: jnp.ndarray = param(unit="m", shape=None, doc="driving pulley radius of each stage, shape (n,)")
-    r_driven: jnp.ndarray = param(unit="m", shape=None, doc="driven pulley radius of each stage, shape (n,)")
+    inertias: FloatParam = param(unit="kg m²", shape=None, doc="the n + 1 shaft inertias (pulleys on each shaft)")
+    k: FloatParam = param(unit="N/m", shape=None, doc="branch stiffness of each stage, shape (n,)")
+    c: FloatParam = param(unit="N s/m", check="nonnegative", shape=None, doc="branch damping of each stage, shape (n,)")
+    r_drive: FloatParam = param(unit="m", shape=None, doc="driving pulley radius of each stage, shape (n,)")
+    r_driven: FloatParam = param(unit="m", shape=None, doc="driven pulley radius of each stage, shape (n,)")
     jm: jnp.ndarray = _jm()
     tau_r0: jnp.ndarray = _tau_r0()
     mu: jnp.ndarray = _mu()

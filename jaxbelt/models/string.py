@@ -35,6 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
+from jax.typing import ArrayLike
 
 from .._checks import as_float_array as _arr
 from .._checks import (
@@ -48,7 +49,7 @@ from .._checks import (
     record,
 )
 from .._guard import all_ok, checked, error_if, guard, host_checked, stored_jit, traced_checks
-from .._params import Parametrised, document, param
+from .._params import FloatParam, Parametrised, document, param
 
 __all__ = [
     "MovingString",
@@ -153,13 +154,13 @@ class MovingString(Parametrised):
     Speeds are belt speeds $V$ [m/s]; frequencies are angular [rad/s].
     """
 
-    tension: jnp.ndarray = param(
+    tension: FloatParam = param(
         140.0, unit="N", symbol="$T$", default_note="belt-vibration report, tight side", doc="span tension"
     )
-    density: jnp.ndarray = param(
+    density: FloatParam = param(
         0.05, unit="kg/m", symbol="$\\rho$", default_note="belt-vibration report", doc="mass per unit length"
     )
-    length: jnp.ndarray = param(
+    length: FloatParam = param(
         0.2621,
         unit="m",
         symbol="$L$",
@@ -182,7 +183,7 @@ class MovingString(Parametrised):
             check_positive("pulley_radius", pulley_radius, "m", "MovingString.critical_rotor_speed")
         return checked(self.critical_speed / jnp.asarray(pulley_radius, dtype=float), self, checks=found)
 
-    def natural_frequencies(self, speed=0.0, n_modes: int = 3):
+    def natural_frequencies(self, speed: ArrayLike = 0.0, n_modes: int = 3):
         """$\\omega_n(V) = (n\\pi/L) V_{cr} (1 - V^2/V_{cr}^2)$ [rad/s] (eq. 39), $n = 1..n\\_modes$.
 
         `speed` [m/s] of any shape; returns shape `speed.shape + (n_modes,)`. Raises `ValueError`
@@ -340,10 +341,10 @@ class RunoutRig(Parametrised):
     wave speed is identified from the measured jump speeds (37.94 m/s).
     """
 
-    length: jnp.ndarray = param(
+    length: FloatParam = param(
         0.86, unit="m", symbol="$L$", default_note="Moon & Wickert, 1997, test stand", doc="free span length"
     )
-    pulley_radii: jnp.ndarray = param(
+    pulley_radii: FloatParam = param(
         (0.063, 0.063),
         unit="m",
         shape=None,
@@ -351,14 +352,14 @@ class RunoutRig(Parametrised):
         default_note="test stand",
         doc="pulley pitch radii (one value per pulley, 1-D)",
     )
-    wave_speed: jnp.ndarray = param(
+    wave_speed: FloatParam = param(
         41.0,
         unit="m/s",
         symbol="$v_t$",
         default_note="ASSUMED: not in the text; puts the first crossing at 9.0 m/s",
         doc="transverse wave speed $v_t = \\sqrt{P/\\rho A}$",
     )
-    runouts: jnp.ndarray = param(
+    runouts: FloatParam = param(
         (0.355e-3, 0.21e-3),
         unit="m",
         check="nonnegative",
@@ -367,7 +368,7 @@ class RunoutRig(Parametrised):
         default_note="test stand: 0.71 and 0.42 mm peak-to-peak",
         doc="run-out amplitudes, half the peak-to-peak",
     )
-    phase: jnp.ndarray = param(
+    phase: FloatParam = param(
         4.18879,
         unit="rad",
         check="finite",
@@ -375,7 +376,7 @@ class RunoutRig(Parametrised):
         default_note="240°, test stand; its sign is ASSUMED",
         doc="phase of pulley 1's run-out",
     )
-    damping_ratio: jnp.ndarray = param(
+    damping_ratio: FloatParam = param(
         0.0,
         unit="–",
         check="range",
@@ -386,7 +387,7 @@ class RunoutRig(Parametrised):
         default_note="ASSUMED: the paper's linear analysis is undamped",
         doc="modal damping ratio",
     )
-    position: jnp.ndarray = param(
+    position: FloatParam = param(
         0.01,
         unit="m",
         check="none",
@@ -815,5 +816,6 @@ def simulate_runout_response(
     )
     k = jnp.arange(1, nb + 1, dtype=float)
     xm = rig.position
+    assert sol.ys is not None  # saved at `ts`
     w = shift(ts, xm) + sol.ys[:, :nb] @ jnp.sin(k * jnp.pi * xm / L)
     return jnp.max(w) - jnp.min(w)

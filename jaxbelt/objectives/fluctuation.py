@@ -29,6 +29,7 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from .._checks import check_positive, collecting, is_concrete, record
 from .._guard import guard
@@ -98,7 +99,9 @@ def _check_average(average) -> None:
         raise ValueError(f"{_O}: `average` must be one of {_AVERAGES}; got {average!r}")
 
 
-def chi_from_samples(ts, speed, t0=None, t1=None, *, smooth: bool = False, temperature=3e-4, average="mean"):
+def chi_from_samples(
+    ts, speed, t0=None, t1=None, *, smooth: bool = False, temperature: ArrayLike = 3e-4, average="mean"
+):
     """χ of the sampled signal `speed` (..., N) at times `ts` (N,) over [t0, t1].
 
     `average`: `"mean"` (time mean, default) or `"midrange"` ((max + min)/2) for $\\dot\\varphi_{av}$.
@@ -190,16 +193,16 @@ def _run_from_rest(drive, pid, ts, observe, state, method, rtol, atol, dt, max_s
 def closed_loop_metrics(
     drive,
     pid,
-    t0=0.375,
-    t1=0.5,
+    t0: ArrayLike = 0.375,
+    t1: ArrayLike = 0.5,
     *,
-    temperature=3e-4,
-    peak_temperature=0.5,
-    dt_save=5e-4,
+    temperature: ArrayLike = 3e-4,
+    peak_temperature: ArrayLike = 0.5,
+    dt_save: ArrayLike = 5e-4,
     method="ode",
-    rtol=1e-8,
-    atol=1e-8,
-    dt=1e-3,
+    rtol: ArrayLike = 1e-8,
+    atol: ArrayLike = 1e-8,
+    dt: ArrayLike = 1e-3,
     max_steps=100_000,
     adjoint=None,
     average="mean",
@@ -215,6 +218,7 @@ def closed_loop_metrics(
     ts = _grid(t1, *((dt, "dt") if method == "rk4" else (dt_save, "dt_save")))
     sol = _run_from_rest(drive, pid, ts, ("motor_speed", "voltage"), True, method, rtol, atol, dt, max_steps, adjoint)
     speed, v, ys = sol.outputs["motor_speed"], sol.outputs["voltage"], sol.ys
+    assert ys is not None  # `_run_from_rest(..., state=True)`
     i = ys[:, 2]
 
     def speak(x):

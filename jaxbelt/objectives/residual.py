@@ -184,6 +184,7 @@ def _end_state_ode(plat, cmd, rtol, atol, max_steps):
         stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
         max_steps=max_steps,
     )
+    assert sol.ys is not None  # saved at t1
     return sol.ys[-1]
 
 
@@ -247,7 +248,8 @@ _MIN_NODES = 8
 
 
 def _end(cmd):
-    return cmd.base.duration if isinstance(cmd, ShapedCommand) else cmd.duration
+    """The duration T of the (base) command's move [s]."""
+    return cmd.base.end_time if isinstance(cmd, ShapedCommand) else cmd.end_time
 
 
 def residual_energy_joules(plat, cmd, **kwargs):

@@ -24,6 +24,7 @@ natural frequency sweeps a band around the design value, and compare with ZV/ZVD
 from __future__ import annotations
 
 import functools
+from typing import cast
 
 import equinox as eqx
 import jax
@@ -34,6 +35,7 @@ import optax
 from .._checks import check_int, check_penalised_limits, check_positive, check_range
 from .._guard import host_checked
 from ..commands import MIN_EXPONENT_GAP, PseudoPolynomial, ShapedCommand
+from ..models.platform import BeltPlatform
 from ..objectives.residual import residual_energy, residual_energy_joules
 
 
@@ -72,7 +74,7 @@ class ShapingProblem(eqx.Module):
     (sampled on `n_peak` times).
     """
 
-    plat: eqx.Module
+    plat: BeltPlatform
     displacement: jnp.ndarray
     duration: jnp.ndarray
     lower: float = eqx.field(static=True)
@@ -101,6 +103,7 @@ class ShapingProblem(eqx.Module):
         cmd = self.command(theta)
         if self.kind == "nominal":
             return residual_energy(self.plat, cmd, n_nodes=self.n_nodes)
+        assert self.omegas is not None and self.ref_energy is not None  # a band problem has both
         e = jax.vmap(lambda w: residual_energy_joules(self.plat.with_natural_frequency(w), cmd, n_nodes=self.n_nodes))(
             self.omegas
         )
@@ -188,7 +191,7 @@ def _step(opt, problem, theta, state, use_state_value: bool):
     else:
         updates, state = opt.update(grad, state, theta)
     theta = optax.apply_updates(theta, updates)
-    return theta, state, problem(theta), jnp.max(jnp.abs(grad)), problem.gammas(theta)
+    return theta, state, problem(theta), jnp.max(jnp.abs(cast(jax.Array, grad))), problem.gammas(theta)
 
 
 def _run(problem: ShapingProblem, theta0, optimizer, learning_rate, max_steps, tol, gtol, progress, desc):

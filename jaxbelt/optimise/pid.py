@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+from typing import Any, cast
 
 import equinox as eqx
 import jax
@@ -99,7 +100,7 @@ def tune_pid(
         # one transformation object for every call; the learning rate lives in its state, so a
         # new rate reuses the compiled step
         opt = _default_adam()
-        state = opt.init(jnp.zeros(3))
+        state: Any = opt.init(jnp.zeros(3))  # inject_hyperparams' state (optax types the union of its states)
         state.hyperparams["learning_rate"] = jnp.asarray(learning_rate, dtype=float)
     else:
         opt = optimizer
@@ -122,12 +123,12 @@ def tune_pid(
     p = jnp.zeros(3)
     hist = {k: [] for k in ("loss", "chi_smooth", "v_peak", "i_peak", "kp", "ki", "kd")}
     best = (np.inf, p, 0)
-    it = range(steps)
+    bar = None
     if progress:
         from tqdm.auto import tqdm
 
-        it = tqdm(it, desc="tune_pid", leave=False)
-    for k in it:
+        bar = tqdm(range(steps), desc="tune_pid", leave=False)
+    for k in range(steps) if bar is None else bar:
         p_new, state, loss, m, gains = _tune_step(opt, drive, train_pid, g0, cfg, p, state)
         loss, m, gains = jax.device_get((loss, m, gains))
         loss = float(loss)
@@ -145,8 +146,8 @@ def tune_pid(
             hist[name].append(float(val))
         if loss < best[0]:
             best = (loss, p, k)
-        if progress:
-            it.set_postfix(chi_smooth=f"{float(m['chi_smooth']):.4f}")
+        if bar is not None:
+            bar.set_postfix(chi_smooth=f"{float(m['chi_smooth']):.4f}")
         p = p_new
     _, p_best, k_best = best
     m0, mb = jax.device_get(
@@ -218,7 +219,8 @@ def _tune_step(opt, drive, train_pid, g0, cfg: _Config, p, state):
 
     grad, (loss, m) = jax.jacfwd(loss_aux, has_aux=True)(p)
     updates, state = opt.update(grad, state, p)
-    return optax.apply_updates(p, updates), state, loss, m, g0 * jnp.exp(p)
+    p_new = cast(jax.Array, optax.apply_updates(p, updates))  # optax types a pytree; here one array
+    return p_new, state, loss, m, g0 * jnp.exp(p)
 
 
 @eqx.filter_jit

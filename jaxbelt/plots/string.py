@@ -260,8 +260,8 @@ def plot_mode_shapes(x, t, shapes, *, axes=None, labels=None):
     x, t, shapes = np.asarray(x), np.asarray(t), np.asarray(shapes)
     n = shapes.shape[0]
     if axes is None:
-        _, axes = plt.subplots(1, n, figsize=(4.5 * n, 3.2))
-    axes = np.atleast_1d(axes)
+        axes = plt.subplots(1, n, figsize=(4.5 * n, 3.2), squeeze=False)[1][0]
+    axes = np.ravel(np.asarray(axes, dtype=object))  # one Axes or a sequence of them
     cmap = plt.get_cmap("viridis")
     for i in range(n):
         ax = axes[i]

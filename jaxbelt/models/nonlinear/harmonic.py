@@ -322,6 +322,7 @@ def _floquet(belt, speed, Y, H: int):
             max_steps=steps + 1,
             throw=False,
         )
+    assert sol.ys is not None  # saved at t1 (diffrax's default)
     M = sol.ys[-1]
     ok = (sol.result == diffrax.RESULTS.successful) & jnp.all(jnp.isfinite(M))
     return jnp.where(ok, jnp.linalg.eigvals(jnp.where(ok, M, jnp.eye(2 * n))), jnp.nan)

@@ -73,7 +73,7 @@ import numpy as np
 from ..._checks import as_float_array as _arr
 from ..._checks import is_concrete, record
 from ..._model import AbstractModel, observable
-from ..._params import document, option, param
+from ..._params import FloatParam, document, option, param
 from ...commands import AbstractRunningSpeed
 
 
@@ -91,7 +91,7 @@ class RunningSpeed(AbstractRunningSpeed):
     """
 
     # the sub-critical bound (speed < the belt's wave speed) is the belt's: `NonlinearBelt.check_speed`
-    speed: jnp.ndarray = param(unit="m/s", check="nonnegative", symbol="$V$", doc="belt running speed")
+    speed: FloatParam = param(unit="m/s", check="nonnegative", symbol="$V$", doc="belt running speed")
 
     def speed_at(self, t):
         return self.speed + 0.0 * jnp.asarray(t, dtype=float)
@@ -116,9 +116,9 @@ class SpeedRamp(AbstractRunningSpeed):
     {parameters}
     """
 
-    v_start: jnp.ndarray = param(unit="m/s", check="nonnegative", symbol="$V_0$", doc="speed at the start")
-    v_end: jnp.ndarray = param(unit="m/s", check="nonnegative", symbol="$V_1$", doc="speed at the end")
-    duration: jnp.ndarray = param(unit="s", symbol="$T$", doc="ramp time")
+    v_start: FloatParam = param(unit="m/s", check="nonnegative", symbol="$V_0$", doc="speed at the start")
+    v_end: FloatParam = param(unit="m/s", check="nonnegative", symbol="$V_1$", doc="speed at the end")
+    duration: FloatParam = param(unit="s", symbol="$T$", doc="ramp time")
 
     def speed_at(self, t):
         s = jnp.clip(jnp.asarray(t, dtype=float) / self.duration, 0.0, 1.0)  # hold outside [0, T] (by definition)
@@ -135,8 +135,9 @@ class SpeedRamp(AbstractRunningSpeed):
 def distance_travelled(inp: AbstractRunningSpeed, t):
     """$\\int_0^t V(s)\\,ds$ [m] for any running-speed input (closed form when the input offers
     `distance_at`, else 24-point Gauss-Legendre quadrature of `speed_at`)."""
-    if hasattr(inp, "distance_at"):
-        return inp.distance_at(t)
+    distance_at = getattr(inp, "distance_at", None)
+    if distance_at is not None:
+        return distance_at(t)
     xg, wg = np.polynomial.legendre.leggauss(24)
     t = jnp.asarray(t, dtype=float)
     s = 0.5 * t * (jnp.asarray(xg) + 1.0)
@@ -258,14 +259,14 @@ class NonlinearBelt(AbstractModel):
     1 cm from the sensor pulley; `"speed"` [m/s].
     """
 
-    span: jnp.ndarray = param(0.86, unit="m", symbol="$L$", doc="free span length")
-    wave_speed: jnp.ndarray = param(
+    span: FloatParam = param(0.86, unit="m", symbol="$L$", doc="free span length")
+    wave_speed: FloatParam = param(
         37.94, unit="m/s", symbol="$v_t$", default_note="identified", doc="transverse wave speed $\\sqrt{P/\\rho A}$"
     )
-    v_l: jnp.ndarray = param(
+    v_l: FloatParam = param(
         50.0, unit="–", check="nonnegative", symbol="$v_l$", doc="longitudinal / transverse wave speed ratio"
     )
-    pulley_radii: jnp.ndarray = param(
+    pulley_radii: FloatParam = param(
         (0.063, 0.063),
         unit="m",
         shape=(2,),
@@ -273,7 +274,7 @@ class NonlinearBelt(AbstractModel):
         symbol="$(r_d, r_i)$",
         doc="drive and idle pulley radii (one value: both)",
     )
-    runout: jnp.ndarray = param(
+    runout: FloatParam = param(
         (0.355e-3, 0.21e-3),
         unit="m",
         check="nonnegative",
@@ -283,7 +284,7 @@ class NonlinearBelt(AbstractModel):
         default_note="0.71, 0.42 mm p-p",
         doc="eccentricities, half the peak-to-peak run-out; < 0.1 `span`",
     )
-    phase: jnp.ndarray = param(
+    phase: FloatParam = param(
         float(np.deg2rad(240.0)),
         unit="rad",
         check="range",
@@ -291,7 +292,7 @@ class NonlinearBelt(AbstractModel):
         default_note="+240°",
         doc="phase of the idle pulley's run-out, $\\theta_i = \\theta_d + \\phi$",
     )
-    damping: jnp.ndarray = param(
+    damping: FloatParam = param(
         (0.01219, 0.02713),
         unit="–",
         check="range",

@@ -75,6 +75,7 @@ def speed_ramp(
     sol = simulate(
         scene, "ode", solver=diffrax.Tsit5(), rtol=jnp.asarray(rtol), atol=jnp.asarray(atol), max_steps=_RAMP_MAX_STEPS
     )
+    assert sol.ys is not None  # the scene keeps its state (Scene(state=True), the default)
     return RampRecord(t=ts, speed=ramp.speed_at(ts), w=sol.outputs["w_sensor"], z=sol.ys)
 
 

@@ -104,6 +104,7 @@ def _solve_period(sys: ModalSystem, z, tau0, T, theta00, n_save: int, rtol, atol
         throw=False,
     )
     ok = sol.result == diffrax.RESULTS.successful
+    assert sol.ys is not None  # saved at `ts`
     return ts, jnp.where(ok, sol.ys, jnp.nan)
 
 
@@ -351,7 +352,9 @@ def check_converged(result: SweepResult | SteadyState, speeds=None, max_periods=
     conv = np.asarray(conv)
     if np.all(conv):
         return result
-    sp = np.atleast_1d(np.asarray(result.speeds if speeds is None else speeds, dtype=float))
+    if speeds is None:  # a sweep knows its speeds; a single steady state is named by its caller's
+        speeds = result.speeds if isinstance(result, SweepResult) else np.nan
+    sp = np.atleast_1d(np.asarray(speeds, dtype=float))
     bad = np.broadcast_to(sp, conv.shape)[~conv] if sp.shape == conv.shape or sp.size == 1 else sp
     lim = f" within max_periods={max_periods} forcing periods" if max_periods else ""
     raise SteadyStateError(

@@ -1,0 +1,70 @@
+"""Habits of the project: one version source, a changelog section for it, every imported package declared,
+and CI that lints, format-checks and type-checks before the README's test command."""
+
+import ast
+import re
+import sys
+from pathlib import Path
+
+import pytest
+
+import jaxbelt
+
+ROOT = Path(__file__).resolve().parents[1]
+tomllib = pytest.importorskip("tomllib")
+PYPROJECT = tomllib.loads((ROOT / "pyproject.toml").read_text())
+
+
+def _requirement_names(requirements) -> set:
+    return {re.split(r"[\s<>=!~;\[]", r, maxsplit=1)[0].lower().replace("_", "-") for r in requirements}
+
+
+def test_the_version_is_written_once():
+    project = PYPROJECT["project"]
+    assert "version" not in project and "version" in project["dynamic"]
+    assert PYPROJECT["tool"]["hatch"]["version"]["path"] == "jaxbelt/__init__.py"
+    assert re.fullmatch(r"\d+\.\d+\.\d+", jaxbelt.__version__)
+
+
+def test_the_changelog_opens_with_this_version():
+    text = (ROOT / "CHANGELOG.md").read_text()
+    versions = re.findall(r"^## (\d+\.\d+\.\d+)", text, re.M)
+    assert versions and versions[0] == jaxbelt.__version__, versions[:2]
+
+
+def _imported_packages() -> set:
+    """Top-level names of every package the library's modules import (at module level or inside functions)."""
+    found = set()
+    for path in (ROOT / "jaxbelt").rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                found |= {a.name.split(".")[0] for a in node.names}
+            elif isinstance(node, ast.ImportFrom) and not node.level and node.module:
+                found.add(node.module.split(".")[0])
+    return found - set(sys.stdlib_module_names) - {"jaxbelt", "__future__"}
+
+
+def test_every_imported_package_is_a_declared_dependency():
+    declared = _requirement_names(PYPROJECT["project"]["dependencies"])
+    imported = {name.lower().replace("_", "-") for name in _imported_packages()}  # import name = distribution name
+    assert {"jax", "equinox", "diffrax", "optax", "optimistix", "lineax", "jaxtyping"} <= imported
+    missing = sorted(imported - declared)
+    assert not missing, f"imported by jaxbelt/ but not in [project] dependencies: {missing}"
+
+
+def test_the_tools_of_ci_and_the_tests_references_are_dev_dependencies():
+    dev = _requirement_names(PYPROJECT["project"]["optional-dependencies"]["dev"])
+    assert {"ruff", "pyright", "pytest", "pytest-xdist", "hypothesis", "scipy", "highspy"} <= dev
+    assert "qpax" in _requirement_names(PYPROJECT["project"]["dependencies"])
+
+
+def test_ci_lints_formats_and_type_checks_before_the_readme_test_command():
+    lines = [ln.strip() for ln in (ROOT / ".ci" / "run").read_text().splitlines()]
+    lines = [ln for ln in lines if ln and not ln.startswith("#")]
+    install = lines.index('python -m pip install -e ".[dev]"')
+    order = [
+        lines.index(cmd) for cmd in ("ruff check .", "ruff format --check .", "pyright", "python -m pytest -n 2 -q")
+    ]
+    assert install < order[0] and order == sorted(order)
+    assert lines[-1] == "python -m pytest -n 2 -q"  # the README's test command (tests/test_docs.py)
+    assert PYPROJECT["tool"]["pyright"]["typeCheckingMode"] in ("basic", "standard", "strict")
