@@ -1,8 +1,9 @@
 """`sweep(fn, params)`: a `vmap` over a batch of parameters, sharded over devices (module `jaxbelt.batch`).
 
 ```python
-import jax.numpy as jnp, jaxbelt as jb
+import jax, jax.numpy as jnp, jaxbelt as jb
 
+jax.config.update("jax_enable_x64", True)  # jaxbelt computes in float64
 model = jb.BeltStartup()
 ts = jnp.linspace(0.0, 0.5, 501)
 
@@ -44,6 +45,7 @@ jax.distributed.initialize(
     num_processes=4,                    # total number of processes
     process_id=int(os.environ["RANK"]), # 0 .. num_processes - 1 (SLURM/OpenMPI are auto-detected
 )                                       # when initialize() is called without arguments)
+jax.config.update("jax_enable_x64", True)
 import jaxbelt as jb
 out = jb.sweep(run, params, devices=jax.devices())   # all devices of all hosts
 ```

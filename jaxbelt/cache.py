@@ -8,7 +8,8 @@ switches it on with a per-user folder. The `jaxbelt` command does this by defaul
 simulation:
 
 ```python
-import jaxbelt as jb
+import jax, jaxbelt as jb
+jax.config.update("jax_enable_x64", True)
 jb.enable_compilation_cache()          # ~/.cache/jaxbelt/xla (or $XDG_CACHE_HOME/jaxbelt/xla)
 ```
 
