@@ -126,10 +126,23 @@ if _typing.TYPE_CHECKING:
     from .runs import startup_curves as startup_curves
     from .scene import Scene as Scene
     from .scene import TracedGridWarning as TracedGridWarning
+    from .shaping.codesign import best_residual as best_residual
+    from .shaping.codesign import shortest_move_time as shortest_move_time
 
     # --- command shaping on the user's axis ---------------------------------------------------------
     from .shaping.identify import identify_axis as identify_axis
     from .shaping.identify import load_record as load_record
+    from .shaping.moves import PiecewiseMove as PiecewiseMove
+    from .shaping.moves import SplineMove as SplineMove
+    from .shaping.moves import fastest_move as fastest_move
+    from .shaping.moves import shape_move as shape_move
+    from .shaping.moves import trapezoid_move as trapezoid_move
+    from .shaping.plan import Candidate as Candidate
+    from .shaping.plan import MovePlan as MovePlan
+    from .shaping.plan import design_move as design_move
+    from .shaping.residual import residual_amplitudes as residual_amplitudes
+    from .shaping.residual import residual_curve as residual_curve
+    from .shaping.shapers import shaper_impulses as shaper_impulses
     from .solution import Solution as Solution
     from .solution import SolveError as SolveError
     from .solve import simulate as simulate

@@ -85,6 +85,18 @@ def check(args) -> str | None:
 
 
 def run(args) -> int:
+    if getattr(args, "mode", None) or getattr(args, "measured", None):
+        return _axis_run(args)
+    return _paper_run(args)
+
+
+def _axis_run(args) -> int:
+    """`jaxbelt shaping --mode F:Z ... | --measured FILE`: every design for the user's axis (jaxbelt.design_move)."""
+    raise NotImplementedError
+
+
+def _paper_run(args) -> int:
+    """Without an axis: the paper's figure (Incerti, pseudo-polynomial commands) and its comparison."""
     import jax.numpy as jnp
     import matplotlib
 

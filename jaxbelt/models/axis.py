@@ -54,10 +54,18 @@ class ModalAxis(AbstractModel):
 
     frequencies: Float[Array, " n"] = param(unit="Hz", shape=None, symbol="$f_i$", doc="natural frequency of each mode")
     damping_ratios: Float[Array, " n"] = param(
-        unit="–", check="range", lo=0.0, hi=1.0, hi_open=True, shape=None, symbol="$\\zeta_i$",
+        unit="–",
+        check="range",
+        lo=0.0,
+        hi=1.0,
+        hi_open=True,
+        shape=None,
+        symbol="$\\zeta_i$",
         doc="damping ratio of each mode (underdamped)",
     )
-    gains: Float[Array, " n"] = param(unit="–", check="finite", shape=None, symbol="$g_i$", doc="participation of each mode")
+    gains: Float[Array, " n"] = param(
+        unit="–", check="finite", shape=None, symbol="$g_i$", doc="participation of each mode"
+    )
     frequency_std: Float[Array, " n"] | None = eqx.field(default=None)
     damping_std: Float[Array, " n"] | None = eqx.field(default=None)
 
@@ -76,7 +84,9 @@ class ModalAxis(AbstractModel):
         o = "ModalAxis"
         f = self.frequencies
         if f.ndim != 1 or f.shape[0] < 1:
-            raise ValueError(f"{o}: parameter `frequencies` must be a 1-D array of n >= 1 frequencies [Hz]; got shape {f.shape}")
+            raise ValueError(
+                f"{o}: parameter `frequencies` must be a 1-D array of n >= 1 frequencies [Hz]; got shape {f.shape}"
+            )
         n = f.shape[0]
         for name in ("damping_ratios", "gains"):
             if getattr(self, name).shape != (n,):

@@ -12,6 +12,7 @@ if _typing.TYPE_CHECKING:  # the public names, imported on first use (`jaxbelt._
     from .fourbar import linkage_strip as linkage_strip
     from .fourbar import plot_regulators as plot_regulators
     from .nonlinear import response_figure as response_figure
+    from .plan import plan_figure as plan_figure
     from .shaping import plot_fig3 as plot_fig3
     from .shaping import plot_sensitivity as plot_sensitivity
     from .shaping import shaping_figure as shaping_figure

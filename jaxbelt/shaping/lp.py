@@ -27,13 +27,16 @@ primal and dual variables held fixed, $dV = \\dot c^Tx + z^T(\\dot G x - \\dot h
 (the derivative of the Lagrangian), exact where the optimum's multipliers are unique.
 """
 
-import functools
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
 from jaxtyping import Array, Float
+
+#: relative regularisation of the normal matrix's diagonal, and rounds of iterative refinement per solve
+_REG = 1e-15
+_REFINE = 4
 
 
 class LPResult(NamedTuple):
@@ -62,7 +65,7 @@ def _max_step(v, dv):
     return jnp.minimum(1.0, jnp.min(ratio))
 
 
-def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter: int):
+def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter):
     n = c.shape[0]
     m = G.shape[0]
     # row scaling (each constraint to unit infinity norm); the multipliers are scaled back at the end
@@ -79,7 +82,7 @@ def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter: int):
     eye = jnp.eye(n, dtype=c.dtype)
     scale_h = 1.0 + jnp.max(jnp.abs(h))
     scale_c = 1.0 + jnp.max(jnp.abs(c))
-    reg = 1e-13
+    reg = _REG
 
     def factor(w):
         H = (G.T * w) @ G
@@ -184,14 +187,15 @@ def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter: int):
             # refinement on the full Newton system (the normal equations lose accuracy as W spreads over
             # many orders of magnitude near the optimum)
             r1 = -rd - G.T @ (w * rp - rc / s)
-            dx, dy = newton(L, Ls, r1, -re)
-            for _ in range(2):
+
+            def refine(_, d):
+                dx, dy = d
                 ds = -rp - G @ dx
                 dz = -(rc + z * ds) / s
-                e1 = -rd - G.T @ dz - A.T @ dy
-                e2 = -re - A @ dx
-                ddx, ddy = newton(L, Ls, e1, e2)
-                dx, dy = dx + ddx, dy + ddy
+                ddx, ddy = newton(L, Ls, -rd - G.T @ dz - A.T @ dy, -re - A @ dx)
+                return dx + ddx, dy + ddy
+
+            dx, dy = jax.lax.fori_loop(0, _REFINE, refine, newton(L, Ls, r1, -re))
             ds = -rp - G @ dx
             dz = -(rc + z * ds) / s
             return dx, ds, dz, dy
@@ -218,9 +222,7 @@ def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter: int):
         # iterations without a new best merit, and keep the best iterate
         stall = jnp.where(better, 0, stall + 1)
         # once near the optimum, try the crossover at every iteration: a certified vertex ends the solve
-        ok, vert = jax.lax.cond(
-            gap_of(x, s, z, y) < 1e-3, crossover, lambda *a: (jnp.asarray(False), a), x, s, z, y
-        )
+        ok, vert = jax.lax.cond(gap_of(x, s, z, y) < 1e-3, crossover, lambda *a: (jnp.asarray(False), a), x, s, z, y)
         best = jax.tree_util.tree_map(lambda v, o: jnp.where(ok, v, o), vert, best)
         best_merit = jnp.where(ok, -1.0, best_merit)  # a certified vertex beats every interior point
         done = (best_merit < tol) | (stall >= 15)
@@ -245,26 +247,33 @@ def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter: int):
     value = c @ x
     lower = jnp.where(vertex, value, jnp.minimum(lower, value))
     return LPResult(
-        x=x / cs, s=s * gs, z=z / gs, y=y / as_, value=value, gap=gap, primal_residual=pres, dual_residual=dres,
-        iterations=it, converged=converged, vertex=vertex, lower_bound=lower,
+        x=x / cs,
+        s=s * gs,
+        z=z / gs,
+        y=y / as_,
+        value=value,
+        gap=gap,
+        primal_residual=pres,
+        dual_residual=dres,
+        iterations=it,
+        converged=converged,
+        vertex=vertex,
+        lower_bound=lower,
     )
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(7,))
-def _value_and_solution(c, G, h, A, b, x_bound, tol, max_iter):
-    return _solve_impl(c, G, h, A, b, x_bound, tol, max_iter)
+@jax.custom_jvp
+def lp_value(c, G, h, A, b, x, z, y):
+    """$c^Tx$ at a solved LP's optimum `(x, z, y)`, whose derivative with respect to the data is the envelope
+    theorem's: $\\dot c^Tx + z^T(\\dot G x - \\dot h) + y^T(\\dot A x - \\dot b)$ (the optimum held fixed)."""
+    return c @ x
 
 
-@_value_and_solution.defjvp
-def _value_jvp(max_iter, primals, tangents):
-    c, G, h, A, b, x_bound, tol = primals
-    dc, dG, dh, dA, dB, _, _ = tangents
-    res = _solve_impl(c, G, h, A, b, x_bound, tol, max_iter)
-    x, z, y = res.x, res.z, res.y
-    # envelope theorem: the derivative of the Lagrangian at the fixed primal-dual optimum
-    dval = dc @ x + z @ (dG @ x - dh) + y @ (dA @ x - dB)
-    zeros = jax.tree_util.tree_map(jnp.zeros_like, res)
-    return res, zeros._replace(value=dval)
+@lp_value.defjvp
+def _lp_value_jvp(primals, tangents):
+    c, G, h, A, b, x, z, y = primals
+    dc, dG, dh, dA, dB, _, _, _ = tangents
+    return c @ x, dc @ x + z @ (dG @ x - dh) + y @ (dA @ x - dB)
 
 
 def solve_lp(c, G, h, A, b, *, x_bound=None, tol=1e-9, max_iter: int = 100) -> LPResult:
@@ -282,4 +291,13 @@ def solve_lp(c, G, h, A, b, *, x_bound=None, tol=1e-9, max_iter: int = 100) -> L
     if A.ndim != 2 or A.shape[1] != c.shape[0] or b.shape != (A.shape[0],) or A.shape[0] < 1:
         raise ValueError(f"solve_lp: shapes A (p, n), b (p,) with p >= 1 expected; got {A.shape}, {b.shape}")
     xb = jnp.full(c.shape, jnp.inf) if x_bound is None else jnp.broadcast_to(jnp.asarray(x_bound, dtype=float), c.shape)
-    return _value_and_solution(c, G, h, A, b, xb, jnp.asarray(tol, dtype=float), int(max_iter))
+    return solve_lp_data(c, G, h, A, b, xb, tol, max_iter)
+
+
+def solve_lp_data(c, G, h, A, b, x_bound, tol, max_iter):
+    """`solve_lp` on arrays of the right shapes, with `tol` and `max_iter` as (traceable) values: the interior
+    point method runs on the data with its derivatives stopped; `value` carries the envelope derivative."""
+    stop = jax.lax.stop_gradient
+    res = _solve_impl(*(stop(v) for v in (c, G, h, A, b, x_bound)), jnp.asarray(tol, dtype=float), max_iter)
+    value = lp_value(c, G, h, A, b, stop(res.x), stop(res.z), stop(res.y))
+    return res._replace(value=value, lower_bound=stop(res.lower_bound))

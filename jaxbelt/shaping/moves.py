@@ -28,7 +28,6 @@ import math
 from typing import ClassVar
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -331,6 +330,7 @@ def fastest_time(distance, v_max, a_max, j_max=None) -> float:
     if j_max is None:
         return D / v + v / a if D >= v * v / a else 2 * math.sqrt(D / a)
     j = float(j_max)
+
     # acceleration phase to speed w with jerk-limited ramps: time t(w) and distance w t(w) / 2 (symmetric)
     def t_acc(w):
         return 2 * math.sqrt(w / j) if w <= a * a / j else w / a + a / j
@@ -369,27 +369,33 @@ def shape_move(base: PiecewiseMove, amplitudes, delays) -> PiecewiseMove:
     return PiecewiseMove(times, steps, ramps, base.duration + tau[-1])
 
 
-def _sample_times(end, rate_hz):
-    n = int(math.ceil(float(end) * rate_hz - 1e-9))
-    return np.arange(n + 1) / rate_hz
-
-
-def sample(cmd: AbstractMotionCommand, rate_hz: float):
-    """`(t, x, v, a)` numpy arrays of `cmd` sampled at `rate_hz` [Hz] from 0 through the end of the move (the
-    last sample at or after the end, where the carriage is at rest)."""
-    check_positive("rate_hz", rate_hz, "Hz", "sample")
-    t = _sample_times(cmd.end_time, float(rate_hz))
-    tj = jnp.asarray(t)
-    x, v, a = (np.asarray(jax.device_get(cmd.derivative(tj, k))) for k in (0, 1, 2))
-    return t, x, v, a
+@eqx.filter_jit
+def _peaks(cmd, n: int):
+    ts = jnp.linspace(0.0, cmd.end_time, n)
+    if isinstance(cmd, PiecewiseMove):
+        eps = 1e-12 * cmd.duration
+        ts = jnp.concatenate(
+            [ts, cmd.times, jnp.maximum(cmd.times - eps, 0.0), jnp.minimum(cmd.times + eps, cmd.duration)]
+        )
+    return jnp.stack([jnp.max(jnp.abs(cmd.derivative(ts, k))) for k in (1, 2, 3)])
 
 
 def peaks(cmd: AbstractMotionCommand, n: int = 20001):
     """`(peak |v|, peak |a|, peak |jerk|)` of a move over its duration, on `n` equally spaced times plus the
-    breakpoints of a `PiecewiseMove`."""
-    ts = jnp.linspace(0.0, cmd.end_time, n)
-    if isinstance(cmd, PiecewiseMove):
-        eps = 1e-12 * cmd.duration
-        ts = jnp.concatenate([ts, cmd.times, jnp.maximum(cmd.times - eps, 0.0), cmd.times + eps])
-    out = [jnp.max(jnp.abs(cmd.derivative(ts, k))) for k in (1, 2, 3)]
-    return tuple(float(x) for x in jax.device_get(out))
+    breakpoints of a `PiecewiseMove` (one compiled program per command structure and shape)."""
+    return tuple(float(x) for x in np.asarray(_peaks(cmd, int(n))))
+
+
+def padded(move: PiecewiseMove, size: int) -> PiecewiseMove:
+    """The same move with its terms padded to `size` by zero terms at t = 0 (moves of one padded size share their
+    compiled programs)."""
+    k = int(move.times.shape[0])
+    if k >= size:
+        return move
+    z = jnp.zeros((size - k,))
+    return PiecewiseMove(
+        jnp.concatenate([move.times, z]),
+        jnp.concatenate([move.steps, z]),
+        jnp.concatenate([move.ramps, z]),
+        move.duration,
+    )

@@ -15,6 +15,7 @@ base's for a `ShapedCommand`, and by an ODE solve (diffrax) for any other motion
 
 import math
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -67,6 +68,12 @@ def residual_integral(cmd: AbstractMotionCommand, s):
     return None
 
 
+def _has_closed_form(cmd) -> bool:
+    if isinstance(cmd, SplineMove | PiecewiseMove | PseudoPolynomial):
+        return True
+    return isinstance(cmd, ShapedCommand) and _has_closed_form(cmd.base)
+
+
 def _poles(axis: ModalAxis, factors):
     """`(s, omega_d)` of every mode at every frequency factor: shapes (n_modes, K)."""
     r = jnp.atleast_1d(jnp.asarray(factors, dtype=float))
@@ -92,10 +99,23 @@ def residual_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors=1.0, *, 
     if r.ndim != 1:
         raise ValueError(f"residual_curve: parameter `factors` must be a scalar or a 1-D array; got shape {r.shape}")
     check_range("factors", r, lo=0.0, lo_open=True, owner="residual_curve")
-    s, wd = _poles(axis, r)
-    W = residual_integral(cmd, s)
-    if W is None:
+    if not _has_closed_form(cmd):
         return _residual_ode(axis, cmd, r, rtol, atol)
+    n_nodes = _nodes_for(cmd, _poles(axis, r)[0]) if isinstance(cmd, PseudoPolynomial) else 0
+    return _closed_form_curve(axis, cmd, r, n_nodes)
+
+
+@eqx.filter_jit
+def _closed_form_curve(axis, cmd, r, n_nodes: int):
+    s, wd = _poles(axis, r)
+    if isinstance(cmd, PseudoPolynomial):
+        W = _pseudo_polynomial_w(cmd, s, n_nodes)
+    elif isinstance(cmd, ShapedCommand) and isinstance(cmd.base, PseudoPolynomial):
+        lag = cmd.times[-1] - cmd.times
+        fac = jnp.sum(cmd.amplitudes * jnp.exp(s[..., None] * lag), axis=-1)
+        W = _pseudo_polynomial_w(cmd.base, s, n_nodes) * fac
+    else:
+        W = residual_integral(cmd, s)
     return jnp.abs(axis.gains)[:, None] / wd * jnp.abs(W)
 
 
@@ -110,8 +130,15 @@ def _residual_ode(axis, cmd, r, rtol, atol):
     def one(factor):
         ax = axis.scaled(factor)
         sol = diffrax.diffeqsolve(
-            diffrax.ODETerm(ax), diffrax.Dopri8(), 0.0, cmd.end_time, None, ax.initial_state(cmd), args=cmd,
-            saveat=diffrax.SaveAt(t1=True), stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
+            diffrax.ODETerm(ax),
+            diffrax.Dopri8(),
+            0.0,
+            cmd.end_time,
+            None,
+            ax.initial_state(cmd),
+            args=cmd,
+            saveat=diffrax.SaveAt(t1=True),
+            stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
             max_steps=200_000,
         )
         y = sol.ys[-1]

@@ -33,17 +33,17 @@ def _k_td(freq: float, zeta: float):
     return math.exp(-zeta * math.pi / df), 1.0 / (freq * df)
 
 
-def impulses(name: str, freq: float, zeta: float, tolerance: float = 0.05):
+def shaper_impulses(name: str, freq: float, zeta: float, tolerance: float = 0.05):
     """`(amplitudes, times)` (numpy, amplitudes summing to 1, times [s] from 0) of the shaper `name` for a mode of
     frequency `freq` [Hz] and damping ratio `zeta` in [0, 1); `tolerance` V of the EI shapers (0 < V < 1)."""
     if name not in SHAPERS:
-        raise ValueError(f"impulses: parameter `name` must be one of {SHAPERS}; got {name!r}")
+        raise ValueError(f"shaper_impulses: parameter `name` must be one of {SHAPERS}; got {name!r}")
     if not (math.isfinite(freq) and freq > 0):
-        raise ValueError(f"impulses: parameter `freq` must be finite and > 0 Hz; got {freq}")
+        raise ValueError(f"shaper_impulses: parameter `freq` must be finite and > 0 Hz; got {freq}")
     if not (0.0 <= zeta < 1.0):
-        raise ValueError(f"impulses: parameter `zeta` must lie in [0, 1); got {zeta}")
+        raise ValueError(f"shaper_impulses: parameter `zeta` must lie in [0, 1); got {zeta}")
     if not (0.0 < tolerance < 1.0):
-        raise ValueError(f"impulses: parameter `tolerance` must lie in (0, 1); got {tolerance}")
+        raise ValueError(f"shaper_impulses: parameter `tolerance` must lie in (0, 1); got {tolerance}")
     K, td = _k_td(freq, zeta)
     V = tolerance
     if name == "ZV":
@@ -79,7 +79,10 @@ def convolve(sequences):
 def shaper_for_axis(name: str, frequencies, damping_ratios, tolerance: float = 0.05):
     """The shaper `name` for every mode of an axis, convolved: `(amplitudes, times)`."""
     return convolve(
-        [impulses(name, float(f), float(z), tolerance) for f, z in zip(np.asarray(frequencies), np.asarray(damping_ratios))]
+        [
+            shaper_impulses(name, float(f), float(z), tolerance)
+            for f, z in zip(np.asarray(frequencies), np.asarray(damping_ratios))
+        ]
     )
 
 

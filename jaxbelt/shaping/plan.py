@@ -1,0 +1,455 @@
+"""`design_move`: every command for the user's axis under the same limits and move time, ranked, with a recommendation.
+
+The candidates (all rest to rest over the same distance, all within the same |v|, |a| (|jerk|) limits):
+
+- **minimax** — the convex design (`jaxbelt.shaping.design`): the least worst-case residual over the band that
+  any move with a smooth (cubic B-spline) acceleration can leave, solved to a certified optimum;
+- **ZV, MZV, ZVD, EI, 2-hump EI** — the classic input shapers (`jaxbelt.shaping.shapers`), one per mode and
+  convolved, applied to the gentlest trapezoidal (or, with `j_max`, S-curve) base move that ends at the same
+  total time: the base is shortened by the shaper's length, never the whole move lengthened;
+- **pseudo-polynomial (optimal / robust)** — Incerti's commands (eq. 17-23) with exponents optimised for the axis
+  (`jaxbelt.shaping.pseudo`);
+- **unshaped** — the gentlest trapezoid (S-curve) of the same time.
+
+**The measure** (the one input-shaping practice uses): the residual vibration amplitude of each mode after the
+move, over the band $f_i(1 \\pm u)$ (frequency error $\\pm u$, damping ratio kept), in length units and in % of the
+unshaped move: of the worst residual over the band that the *time-optimal unshaped move* (what a planner runs
+without shaping, `fastest_move`) leaves on that mode. The 5 % band of a mode is the contiguous frequency range
+around its nominal value where the residual stays within 5 % of that reference.
+
+With `move_time=None`, each classic shaper runs at its own shortest time (time-optimal base + shaper length),
+the best of them (least worst residual) sets the target, and the minimax design is placed at the shortest move
+time at which it reaches that target (bisection on the time).
+"""
+
+import csv
+import dataclasses
+import math
+
+import jax.numpy as jnp
+import numpy as np
+
+from .._checks import check_positive, check_range
+from ..commands import AbstractMotionCommand
+from ..models.axis import ModalAxis
+from . import design as _design
+from .moves import PiecewiseMove, fastest_move, fastest_time, padded, peaks, shape_move, trapezoid_move
+from .residual import residual_curve, tolerance_band
+from .shapers import SHAPERS, shaper_for_axis
+
+#: frequency factors of the curves the table and the figure are computed on: the band, and a wider view
+_N_BAND = 401
+_WIDE = (0.5, 1.5)
+_N_WIDE = 501
+
+
+@dataclasses.dataclass(frozen=True)
+class Candidate:
+    """One row of a `MovePlan`'s table.
+
+    - `name`; `command`: the motion command (None when the candidate is infeasible at this move time);
+    - `move_time` [s];
+    - `worst_percent`, `mean_percent`: worst and mean residual over every mode's band, in % of the unshaped
+      move's worst residual on that mode; `worst_m`: the worst residual amplitude in length units [m];
+    - `band_hz`: per mode, `(low, high)` [Hz] of the 5 % band (NaN when the nominal residual is above 5 %);
+    - `peak_v` [m/s], `peak_a` [m/s²], `peak_j` [m/s³];
+    - `ok`: feasible, converged and within the limits; `note`: why not, or what to know.
+    """
+
+    name: str
+    command: AbstractMotionCommand | None
+    move_time: float
+    worst_percent: float
+    mean_percent: float
+    worst_m: float
+    band_hz: tuple
+    peak_v: float
+    peak_a: float
+    peak_j: float
+    ok: bool
+    note: str = ""
+
+    def sample(self, rate_hz: float):
+        """`(t, x, v, a)` of the command sampled at `rate_hz` [Hz] (see `AbstractMotionCommand.sample`)."""
+        if self.command is None:
+            raise ValueError(f"{self.name}: no command ({self.note})")
+        return self.command.sample(rate_hz)
+
+    def as_dict(self) -> dict:
+        d = {k: getattr(self, k) for k in ("name", "move_time", "worst_percent", "mean_percent", "worst_m")}
+        d.update(peak_v=self.peak_v, peak_a=self.peak_a, peak_j=self.peak_j, ok=self.ok, note=self.note)
+        for i, (lo, hi) in enumerate(self.band_hz):
+            d[f"band5_mode{i + 1}_hz"] = (lo, hi)
+        return d
+
+
+@dataclasses.dataclass(frozen=True)
+class MovePlan:
+    """The result of `design_move`: `table` (candidates ranked, best first), `best` (the recommended
+    `Candidate`), the axis, the move's data, `reference_m` (per mode, the unshaped move's worst residual over the
+    band [m]) and the minimax design's details (`minimax`: a `MinimaxDesign` or None)."""
+
+    axis: ModalAxis
+    distance: float
+    move_time: float
+    v_max: float
+    a_max: float
+    j_max: float | None
+    uncertainty: float
+    reference_m: np.ndarray
+    table: tuple
+    best: Candidate
+    minimax: object = None
+
+    def __str__(self) -> str:
+        return self.format_table()
+
+    def format_table(self) -> str:
+        """The ranked table as text (what `jaxbelt shaping` prints)."""
+        n = self.axis.n_modes
+        head = f"{'candidate':28s} {'T [s]':>7s} {'worst %':>9s} {'mean %':>9s} {'worst [m]':>10s} "
+        head += " ".join(f"{'5% band m' + str(i + 1) + ' [Hz]':>19s}" for i in range(n))
+        head += f" {'peak v':>8s} {'peak a':>8s}  note"
+        lines = [head]
+        for c in self.table:
+            bands = " ".join(f"{'-':>19s}" if not np.isfinite(lo) else f"{lo:8.3f}-{hi:<10.3f}" for lo, hi in c.band_hz)
+            mark = "*" if c is self.best else " "
+            lines.append(
+                f"{mark}{c.name:27s} {c.move_time:7.3f} {c.worst_percent:9.4f} {c.mean_percent:9.4f} "
+                f"{c.worst_m:10.3e} {bands} {c.peak_v:8.4f} {c.peak_a:8.4f}  {c.note}"
+            )
+        return "\n".join(lines)
+
+    def to_csv(self, path, rate_hz: float, candidate: str | None = None) -> None:
+        """Write the recommended command (or the candidate named `candidate`) sampled at `rate_hz` [Hz] as CSV
+        columns `t,x,v,a` (s, m, m/s, m/s²) with that header line. A drive that executes the acceleration
+        linearly between samples reproduces the table's residual (the design's acceleration is continuous).
+        `rate_hz` must exceed twice the highest frequency of the band (the samples must carry the modes)."""
+        c = self.best if candidate is None else self.candidate(candidate)
+        check_positive("rate_hz", rate_hz, "Hz", "MovePlan.to_csv")
+        fmax = float(np.max(np.asarray(self.axis.frequencies))) * (1 + self.uncertainty)
+        if not float(rate_hz) > 2 * fmax:
+            raise ValueError(
+                f"MovePlan.to_csv: parameter `rate_hz` must exceed twice the highest frequency of the band "
+                f"(Nyquist: > {2 * fmax:g} Hz); got {rate_hz}"
+            )
+        t, x, v, a = c.sample(rate_hz)
+        with open(path, "w", newline="") as fh:
+            w = csv.writer(fh)
+            w.writerow(["t", "x", "v", "a"])
+            for row in zip(t, x, v, a):
+                w.writerow([repr(float(q)) for q in row])
+
+    def candidate(self, name: str) -> Candidate:
+        for c in self.table:
+            if c.name == name:
+                return c
+        raise ValueError(f"MovePlan: no candidate named {name!r}; candidates: {[c.name for c in self.table]}")
+
+    def curves(self, factors=None):
+        """`(factors, {name: residual % of shape (n_modes, len(factors))})` for every candidate with a command."""
+        f = np.linspace(*_WIDE, _N_WIDE) if factors is None else np.asarray(factors, dtype=float)
+        ref = self.reference_m[:, None]
+        out = {}
+        for c in self.table:
+            if c.command is not None:
+                out[c.name] = 100.0 * np.asarray(residual_curve(self.axis, c.command, f)) / ref
+        return f, out
+
+    def plot(self, path=None):
+        """The figure a firmware calibration prints: residual % against frequency for every candidate (one panel
+        per mode, the band shaded), and the commands' velocity and acceleration. Returns the figure; saved to
+        `path` when given."""
+        from ..plots.plan import plan_figure
+
+        fig = plan_figure(self)
+        if path is not None:
+            fig.savefig(path, dpi=120)
+        return fig
+
+
+def _check_inputs(axis, distance, move_time, v_max, a_max, j_max, uncertainty):
+    o = "design_move"
+    if not isinstance(axis, ModalAxis):
+        raise TypeError(
+            f"{o}: `axis` must be a jaxbelt.ModalAxis (or BeltPlatform(...).to_axis()); got {type(axis).__name__}"
+        )
+    d = float(np.asarray(distance))
+    if not (math.isfinite(d) and d != 0.0):
+        raise ValueError(f"{o}: parameter `distance` must be finite and non-zero [m]; got {distance}")
+    check_positive("v_max", v_max, "m/s", o)
+    check_positive("a_max", a_max, "m/s^2", o)
+    if j_max is not None:
+        check_positive("j_max", j_max, "m/s^3", o)
+    check_range("uncertainty", uncertainty, lo=0.0, hi=0.9, hi_open=True, owner=o)
+    t_min = fastest_time(d, v_max, a_max, j_max)
+    if move_time is not None:
+        check_positive("move_time", move_time, "s", o)
+        if float(move_time) < t_min * (1 - 1e-12):
+            raise ValueError(
+                f"{o}: parameter `move_time` = {float(move_time):g} s is shorter than the limits allow: the shortest "
+                f"rest-to-rest move of {d:g} m with v_max = {float(v_max):g}, a_max = {float(a_max):g}"
+                + (f", j_max = {float(j_max):g}" if j_max is not None else "")
+                + f" takes {t_min:.6g} s"
+            )
+    return d, t_min
+
+
+def _measure(axis, cmd, ref, u, limits):
+    """The table's numbers for one command."""
+    band = np.linspace(1 - u, 1 + u, _N_BAND) if u > 0 else np.ones(1)
+    res = np.asarray(residual_curve(axis, cmd, band))  # (modes, K)
+    ratio = res / ref[:, None]
+    wide = np.linspace(*_WIDE, _N_WIDE)
+    wr = np.asarray(residual_curve(axis, cmd, wide)) / ref[:, None]
+    f = np.asarray(axis.frequencies)
+    bands = []
+    for i in range(axis.n_modes):
+        lo, hi = tolerance_band(wide, wr[i], 0.05)
+        bands.append((lo * f[i], hi * f[i]))
+    pv, pa, pj = peaks(cmd)
+    v_max, a_max, j_max = limits
+    within = pv <= v_max * (1 + 1e-6) and pa <= a_max * (1 + 1e-6) and (j_max is None or pj <= j_max * (1 + 1e-6))
+    return dict(
+        worst_percent=100.0 * float(ratio.max()),
+        mean_percent=100.0 * float(ratio.mean()),
+        worst_m=float(res.max()),
+        band_hz=tuple(bands),
+        peak_v=pv,
+        peak_a=pa,
+        peak_j=pj,
+    ), within
+
+
+def _pad_size(axis, jerk: bool) -> int:
+    """One padded size for every piecewise move of a plan (the longest: 2-hump EI, 4 impulses per mode)."""
+    return (8 if jerk else 4) * 4**axis.n_modes
+
+
+def _row(name, axis, cmd, T, ref, u, limits, note="", ok=True):
+    if isinstance(cmd, PiecewiseMove):
+        cmd = padded(cmd, _pad_size(axis, limits[2] is not None))
+    if cmd is None:
+        nan = math.nan
+        return Candidate(
+            name, None, T, nan, nan, nan, tuple((nan, nan) for _ in range(axis.n_modes)), nan, nan, nan, False, note
+        )
+    m, within = _measure(axis, cmd, ref, u, limits)
+    if not within:
+        ok = False
+        note = (note + "; " if note else "") + "exceeds the limits"
+    return Candidate(name, cmd, float(T), ok=ok, note=note, **m)
+
+
+def _shaped(axis, name, distance, T, v_max, a_max, j_max):
+    """The classic shaper `name` on the gentlest base that ends at T, or (None, shortest time)."""
+    A, tau = shaper_for_axis(name, axis.frequencies, axis.damping_ratios)
+    base = trapezoid_move(distance, T - tau[-1], v_max, a_max, j_max) if T > tau[-1] else None
+    t_short = fastest_time(distance, v_max, a_max, j_max) + float(tau[-1])
+    if base is None:
+        return None, t_short
+    return shape_move(base, A, tau), t_short
+
+
+class _Minimax:
+    """The convex design at a move time, with its feasibility (one problem structure per axis size)."""
+
+    def __init__(self, axis, distance, v_max, a_max, j_max, u, ref, opts):
+        self.args = (axis, distance, v_max, a_max, j_max, u, ref)
+        self.opts = opts
+
+    def problem(self, T):
+        axis, distance, v_max, a_max, j_max, u, ref = self.args
+        return _design.make_problem(axis, distance, T, v_max, a_max, j_max, u, ref, self.opts)
+
+    def feasible(self, T) -> bool:
+        return _design.max_distance(self.problem(T), self.opts) >= 1.0
+
+    def shortest_feasible(self, t_min):
+        """The least time at which the spline can move the distance within the limits (bisection)."""
+        lo, hi = t_min, t_min * 1.05
+        while not self.feasible(hi):
+            lo, hi = hi, hi * 1.2
+        for _ in range(30):
+            if hi - lo <= 1e-4 * hi:
+                break
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if self.feasible(mid) else (mid, hi)
+        return hi
+
+    def design(self, T):
+        return _design.minimax_design(self.problem(T), self.opts)
+
+
+def design_move(
+    axis: ModalAxis,
+    distance,
+    move_time=None,
+    *,
+    v_max,
+    a_max,
+    j_max=None,
+    uncertainty=0.2,
+    include=("minimax", *SHAPERS, "pseudo-polynomial", "unshaped"),
+    progress: bool = False,
+) -> MovePlan:
+    """Design the move of `distance` [m] on `axis` every way jaxbelt knows, under the same limits and move time,
+    and rank them (see the module docstring).
+
+    - `axis`: a `ModalAxis` (`jb.ModalAxis([f1, f2], [z1, z2])`, `jb.identify_axis(t, y, 2)`,
+      `jb.BeltPlatform().to_axis()`);
+    - `distance` [m] (or rad: the units of the axis' command), finite and non-zero;
+    - `move_time` [s]: every candidate ends at this time (it must be at least the time-optimal move's, which an
+      error states); `None`: the shortest time at which the minimax design reaches the best classic shaper's
+      worst residual (each shaper at its own shortest time);
+    - `v_max` [m/s], `a_max` [m/s²], `j_max` [m/s³] (optional): limits every candidate respects;
+    - `uncertainty` u in [0, 0.9): the band $f_i(1 \\pm u)$ every residual is judged on (damping ratio kept);
+    - `include`: which candidates to build.
+
+    Returns a `MovePlan`: `plan.table` (ranked), `plan.best` (the recommendation: the least worst residual among
+    the candidates that are feasible, converged and within the limits; a design the solver did not converge on
+    is reported in the table, never recommended), `plan.to_csv(path, rate_hz)`, `plan.plot()`.
+    """
+    d, t_min = _check_inputs(axis, distance, move_time, v_max, a_max, j_max, uncertainty)
+    u = float(uncertainty)
+    v_max, a_max = float(v_max), float(a_max)
+    j_max = None if j_max is None else float(j_max)
+    limits = (v_max, a_max, j_max)
+    ref_cmd = fastest_move(d, v_max, a_max, j_max)
+    band = np.linspace(1 - u, 1 + u, _N_BAND) if u > 0 else np.ones(1)
+    ref = np.max(np.asarray(residual_curve(axis, ref_cmd, band)), axis=1)
+    rows = []
+    # --- classic shapers
+    shaped = {}
+    for name in SHAPERS:
+        if name not in include:
+            continue
+        if move_time is None:
+            T_s = fastest_time(d, v_max, a_max, j_max) + float(
+                shaper_for_axis(name, axis.frequencies, axis.damping_ratios)[1][-1]
+            )
+            cmd, _ = _shaped(axis, name, d, T_s * (1 + 1e-12), v_max, a_max, j_max)
+            shaped[name] = (cmd, T_s)
+        else:
+            cmd, t_short = _shaped(axis, name, d, float(move_time), v_max, a_max, j_max)
+            shaped[name] = (cmd, float(move_time) if cmd is not None else t_short)
+    for name, (cmd, T_s) in shaped.items():
+        note = "" if cmd is not None else f"infeasible: needs a move time >= {T_s:.4g} s"
+        rows.append(_row(name, axis, cmd, T_s, ref, u, limits, note=note, ok=cmd is not None))
+    classic = [r for r in rows if r.ok]
+    target = min((r.worst_percent for r in classic), default=math.nan)
+    # --- the minimax design
+    mm = None
+    if "minimax" in include:
+        T_guess = (
+            float(move_time) if move_time is not None else (min(r.move_time for r in classic) if classic else 2 * t_min)
+        )
+        opts = _design.default_options(axis.frequencies, T_guess, u, j_max is not None)
+        solver = _Minimax(axis, d, v_max, a_max, j_max, u, ref, opts)
+        if move_time is not None:
+            T = float(move_time)
+            if not solver.feasible(T):
+                t_f = solver.shortest_feasible(t_min)
+                rows.append(
+                    _row(
+                        "minimax",
+                        axis,
+                        None,
+                        T,
+                        ref,
+                        u,
+                        limits,
+                        ok=False,
+                        note=f"infeasible for the smooth design: needs a move time >= {t_f:.4g} s",
+                    )
+                )
+            else:
+                mm = solver.design(T)
+        else:
+            mm = _shortest_minimax(solver, t_min, target, progress)
+        if mm is not None:
+            note = f"certified gap {float(mm.gap):.1e}"
+            ok = mm.converged
+            if not ok:
+                note = f"not converged (gap {float(mm.gap):.1e})"
+            rows.append(_row("minimax", axis, mm.command, float(mm.command.duration), ref, u, limits, note=note, ok=ok))
+    # --- Incerti's pseudo-polynomial commands
+    T_common = (
+        float(move_time)
+        if move_time is not None
+        else (float(mm.command.duration) if mm is not None else min((r.move_time for r in classic), default=2 * t_min))
+    )
+    if "pseudo-polynomial" in include:
+        rows += _pseudo_rows(axis, d, T_common, v_max, a_max, j_max, u, ref, limits, progress)
+    if "unshaped" in include:
+        if move_time is None:
+            rows.append(_row("unshaped (time-optimal)", axis, ref_cmd, float(ref_cmd.duration), ref, u, limits))
+        else:
+            base = trapezoid_move(d, T_common, v_max, a_max, j_max)
+            rows.append(_row("unshaped", axis, base, T_common, ref, u, limits))
+    ranked = sorted(rows, key=lambda r: (not r.ok, r.worst_percent if math.isfinite(r.worst_percent) else math.inf))
+    best = next((r for r in ranked if r.ok), ranked[0])
+    return MovePlan(
+        axis=axis,
+        distance=d,
+        move_time=T_common,
+        v_max=v_max,
+        a_max=a_max,
+        j_max=j_max,
+        uncertainty=u,
+        reference_m=ref,
+        table=tuple(ranked),
+        best=best,
+        minimax=mm,
+    )
+
+
+def _pseudo_rows(axis, d, T, v_max, a_max, j_max, u, ref, limits, progress):
+    try:
+        from .pseudo import pseudo_polynomial_designs
+    except ImportError:  # pragma: no cover - the module is part of the package
+        return []
+    out = []
+    designs = pseudo_polynomial_designs(
+        axis,
+        d,
+        T,
+        v_max=v_max,
+        a_max=a_max,
+        j_max=j_max,
+        uncertainty=u,
+        reference=jnp.asarray(ref),
+        progress=progress,
+    )
+    for name, pd in designs.items():
+        ok = bool(pd.converged) and bool(pd.within_limits)
+        out.append(_row(name, axis, pd.command, T, ref, u, limits, note="" if ok else pd.message, ok=ok))
+    return out
+
+
+def _shortest_minimax(solver: _Minimax, t_min, target, progress):
+    """The minimax design at the least move time whose worst residual (fine grid) reaches `target` (%):
+    bisection between the least feasible time and a time where the target is met."""
+    if not math.isfinite(target):
+        return None
+    lo = solver.shortest_feasible(t_min)
+    d_lo = solver.design(lo)
+    if 100 * float(d_lo.fine_worst) <= target:
+        return d_lo
+    hi = lo * 1.25
+    d_hi = solver.design(hi)
+    while 100 * float(d_hi.fine_worst) > target:
+        lo, hi = hi, hi * 1.25
+        if hi > 20 * t_min:
+            return d_hi
+        d_hi = solver.design(hi)
+    for _ in range(12):
+        if hi - lo <= 2e-3 * hi:
+            break
+        mid = 0.5 * (lo + hi)
+        d_mid = solver.design(mid)
+        if 100 * float(d_mid.fine_worst) <= target:
+            hi, d_hi = mid, d_mid
+        else:
+            lo = mid
+    return d_hi

@@ -1,0 +1,362 @@
+"""Command shaping on the user's axis: the axis model, closed-form residuals, classic shapers, the convex
+minimax design (global optimum against scipy's HiGHS), the plan, the exported samples, gradients, bad input.
+
+Every number is checked against an independent reference: scipy `solve_ivp` at tight tolerance, scipy's
+HiGHS on the same LP, closed forms of the shapers (Singer and Seering, 1990; Singhose et al., 1994), or
+central finite differences.
+"""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from scipy.integrate import solve_ivp
+from scipy.optimize import linprog
+
+import jaxbelt as jb
+from jaxbelt.shaping import design as dsg
+from jaxbelt.shaping.lp import solve_lp
+from jaxbelt.shaping.moves import SplineMove, fastest_time, peaks, shape_move, trapezoid_move
+from jaxbelt.shaping.residual import reference_residuals, residual_curve
+from jaxbelt.shaping.shapers import shaper_for_axis, shaper_impulses, shaper_response
+
+AXIS2 = dict(frequencies=[7.3, 18.0], damping_ratios=[0.015, 0.01])
+LIMITS = dict(v_max=0.3, a_max=1.2)
+CLASSIC = ("ZV", "MZV", "ZVD", "EI", "2-hump EI")
+
+
+def _jitted(cmd):
+    """`cmd.acceleration` compiled once, called with floats (the solver's right-hand side runs thousands of times)."""
+    f = jax.jit(lambda c, t: c.acceleration(t))
+    return lambda t: float(f(cmd, t))
+
+
+def _scipy_residual(axis, accel, T, n_modes):
+    """Residual amplitude of each mode after a move with acceleration `accel(t)` ending at T, by solve_ivp."""
+    w = np.asarray(axis.omega)
+    z = np.asarray(axis.damping_ratios)
+    g = np.asarray(axis.gains)
+
+    def f(t, y):
+        q, qd = y[:n_modes], y[n_modes:]
+        return np.r_[qd, -2 * z * w * qd - w**2 * q - g * accel(t)]
+
+    sol = solve_ivp(f, (0.0, T), np.zeros(2 * n_modes), method="DOP853", rtol=1e-12, atol=1e-15, max_step=T / 400)
+    y = sol.y[:, -1]
+    q, qd = y[:n_modes], y[n_modes:]
+    sigma, wd = np.asarray(axis.sigma), np.asarray(axis.omega_d)
+    return np.sqrt(q**2 + ((qd + sigma * q) / wd) ** 2)
+
+
+# --------------------------------------------------------------------------------------------
+# The axis
+# --------------------------------------------------------------------------------------------
+@pytest.mark.parametrize(
+    "kw, name",
+    [
+        (dict(frequencies=[-1.0], damping_ratios=[0.1]), "frequencies"),
+        (dict(frequencies=[np.nan], damping_ratios=[0.1]), "frequencies"),
+        (dict(frequencies=[0.0], damping_ratios=[0.1]), "frequencies"),
+        (dict(frequencies=[3.0], damping_ratios=[1.0]), "damping_ratios"),
+        (dict(frequencies=[3.0], damping_ratios=[-0.1]), "damping_ratios"),
+        (dict(frequencies=[3.0, 5.0], damping_ratios=[0.1]), "damping_ratios"),
+        (dict(frequencies=[3.0], damping_ratios=[0.1], gains=[0.0]), "gains"),
+        (dict(frequencies=[3.0], damping_ratios=[0.1], gains=[np.inf]), "gains"),
+    ],
+)
+def test_axis_refuses_bad_parameters_by_name(kw, name):
+    with pytest.raises(ValueError, match=f"`{name}`"):
+        jb.ModalAxis(**kw)
+
+
+def test_platform_axis_gives_the_platform_residual():
+    # the platform's own ODE (eq. 2) against the axis' closed form, for a pseudo-polynomial and a shaped move
+    plat = jb.BeltPlatform()
+    ax = plat.to_axis()
+    np.testing.assert_allclose(float(ax.frequencies[0]) * 2 * np.pi, float(plat.omega_n), rtol=1e-14)
+    cmd = jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]))
+    T = float(cmd.duration)
+    sol = jb.simulate(jb.Scene(plat, cmd, t1=T, observe=("alpha",)), method="ode", rtol=1e-12, atol=1e-14)
+    theta, omega = float(sol.ys[-1, 0]), float(sol.ys[-1, 1])
+    alpha = theta - float(plat.lam) * float(cmd(T))
+    alpha_dot = omega - float(plat.lam) * float(cmd.velocity(T))
+    amp = math.hypot(alpha, (alpha_dot + float(plat.damping_ratio * plat.omega_n) * alpha) / float(plat.omega_d))
+    np.testing.assert_allclose(float(jb.residual_amplitudes(ax, cmd)[0]), amp, rtol=1e-7)
+
+
+# --------------------------------------------------------------------------------------------
+# Closed-form residuals against scipy
+# --------------------------------------------------------------------------------------------
+def _moves():
+    rng = np.random.default_rng(3)
+    c = rng.normal(size=37)
+    c -= c.mean()  # rest to rest: zero end velocity
+    A, tau = shaper_for_axis("ZVD", AXIS2["frequencies"], AXIS2["damping_ratios"])
+    return {
+        "trapezoid": trapezoid_move(0.1, 0.8, 0.3, 1.2),
+        "s-curve": trapezoid_move(0.1, 0.8, 0.3, 1.2, j_max=20.0),
+        "shaped": shape_move(trapezoid_move(0.1, 0.8 - tau[-1], 0.3, 1.2), A, tau),
+        "spline": SplineMove(c, 0.9),
+        "pseudo-polynomial": jb.PseudoPolynomial(jnp.array([3.0, 4.4, 6.1]), 0.1, 0.8),
+    }
+
+
+@pytest.mark.parametrize("name", ["trapezoid", "s-curve", "shaped", "spline", "pseudo-polynomial"])
+def test_closed_form_residual_matches_scipy(name):
+    ax = jb.ModalAxis(**AXIS2, gains=[1.0, 0.4])
+    cmd = _moves()[name]
+    T = float(cmd.end_time)
+    ref = _scipy_residual(ax, _jitted(cmd), T, 2)
+    got = np.asarray(jb.residual_amplitudes(ax, cmd))
+    # the ZVD-shaped move cancels both modes at their nominal frequencies: compare absolutely there
+    np.testing.assert_allclose(got, ref, rtol=2e-7, atol=1e-13)
+
+
+def test_moves_are_rest_to_rest_and_within_their_limits():
+    for name, m in _moves().items():
+        if name == "spline":
+            continue
+        T = float(m.end_time)
+        assert float(m(T + 1.0)) == pytest.approx(0.1, rel=1e-12)
+        assert abs(float(m.velocity(T))) < 1e-12
+        if name != "pseudo-polynomial":
+            pv, pa, _ = peaks(m)
+            assert pv <= 0.3 * (1 + 1e-9) and pa <= 1.2 * (1 + 1e-9)
+
+
+@pytest.mark.parametrize("j_max", [None, 20.0])
+def test_fastest_time_is_the_least_feasible_time(j_max):
+    # closed form (or 1-D root) against a bisection on the feasibility of the gentlest move of a given length
+    for D in (0.01, 0.1, 0.5):
+        t = fastest_time(D, 0.3, 1.2, j_max)
+        assert trapezoid_move(D, t * (1 + 1e-6), 0.3, 1.2 * (1 + 1e-9), j_max) is not None
+        assert trapezoid_move(D, t * (1 - 1e-3), 0.3, 1.2, j_max) is None
+
+
+# --------------------------------------------------------------------------------------------
+# Classic shapers
+# --------------------------------------------------------------------------------------------
+def test_shapers_against_their_closed_forms():
+    f, z = 5.0, 0.0
+    # ZV and ZVD cancel the design frequency; EI leaves exactly V = 5 % there (undamped) and zero at two
+    # frequencies around it; the 2-hump EI stays within V over a wider band than the EI
+    for name in ("ZV", "ZVD", "MZV"):
+        A, t = shaper_impulses(name, f, 0.02)
+        assert shaper_response(A, t, f, 0.02) < 1e-12
+    A, t = shaper_impulses("EI", f, z)
+    assert shaper_response(A, t, f, z) == pytest.approx(0.05, abs=1e-12)
+    fine = np.linspace(0.5 * f, 1.5 * f, 4001)
+    r_ei = shaper_response(A, t, fine, z)
+    A2, t2 = shaper_impulses("2-hump EI", f, z)
+    r_2h = shaper_response(A2, t2, fine, z)
+    width = lambda r: np.ptp(fine[r <= 0.05 + 1e-9]) / f  # noqa: E731
+    assert 0.38 < width(r_ei) < 0.42  # Singhose et al. (1994): I(5 %) = 0.40
+    assert width(r_2h) > 0.55  # Singhose et al. (1996): the 2-hump EI's 5 % band is wider (0.59)
+    for name in CLASSIC:
+        A, t = shaper_impulses(name, 7.0, 0.05)
+        assert A.sum() == pytest.approx(1.0) and np.all(A > 0) and t[0] == 0.0
+
+
+# --------------------------------------------------------------------------------------------
+# The LP solver and the minimax design: global optimum against HiGHS
+# --------------------------------------------------------------------------------------------
+def test_lp_solver_matches_highs_on_random_bounded_lps():
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        n, m = 12, 60
+        G = rng.normal(size=(m, n))
+        h = rng.uniform(0.5, 2.0, m)
+        A = rng.normal(size=(2, n))
+        b = A @ (0.01 * rng.normal(size=n))  # a strictly feasible point near 0
+        c = rng.normal(size=n)
+        ref = linprog(c, A_ub=G, b_ub=h, A_eq=A, b_eq=b, bounds=[(None, None)] * n, method="highs")
+        if ref.status != 0:
+            continue
+        got = solve_lp(c, G, h, A, b)
+        assert bool(got.converged)
+        np.testing.assert_allclose(float(got.value), ref.fun, rtol=1e-8, atol=1e-9)
+
+
+def _design(axis, T, u=0.2, D=0.1, jerk=None):
+    ref, _ = reference_residuals(axis, D, 0.3, 1.2, jerk, u)
+    opts = dsg.default_options(axis.frequencies, T, u, jerk is not None)
+    prob = dsg.make_problem(axis, D, T, 0.3, 1.2, jerk, u, ref, opts)
+    return dsg.minimax_design(prob, opts), opts
+
+
+@pytest.mark.parametrize("jerk", [None, 40.0])
+def test_minimax_is_the_global_optimum_of_its_lp(jerk):
+    ax = jb.ModalAxis(**AXIS2)
+    des, opts = _design(ax, 0.9, jerk=jerk)
+    assert des.converged
+    c, G, h, A, b = (np.asarray(x) for x in dsg.lp_data(des.problem, opts, float(des.worst)))
+    ref = linprog(
+        c,
+        A_ub=G,
+        b_ub=h,
+        A_eq=A,
+        b_eq=b,
+        bounds=[(None, None)] * len(c),
+        method="highs",
+        options=dict(primal_feasibility_tolerance=1e-10, dual_feasibility_tolerance=1e-10),
+    )
+    assert ref.status == 0
+    highs = ref.fun * float(des.worst)
+    # HiGHS's own feasibility tolerance (1e-10 absolute on rows of size ~1) allows ~1e-6 relative here; the
+    # design's certificate (a vertex, or a dual bound) holds to its stated gap
+    assert abs(float(des.worst) - highs) <= max(2e-6, 2 * float(des.gap)) * highs
+    assert float(des.lower_bound) <= highs * (1 + 2e-6)
+    # the command is what the LP says: distance, rest to rest, limits everywhere (convex-hull bounds)
+    cmd = des.command
+    assert float(cmd.distance) == pytest.approx(0.1, rel=1e-10)
+    assert abs(float(cmd.velocity(0.9 - 1e-12))) < 1e-9
+    pv, pa, pj = dsg.command_peaks(des)
+    assert pv <= 0.3 * (1 + 1e-9) and pa <= 1.2 * (1 + 1e-9)
+    if jerk is not None:
+        assert pj <= jerk * (1 + 1e-9)
+    # the exchange leaves the fine-grid worst within 3 % (plus the polygon's 1.9 %) of the LP's bound
+    assert float(des.fine_worst) <= float(des.worst) * 1.03 * 1.02
+
+
+def test_minimax_value_gradients_match_finite_differences():
+    # the optimal value of an LP is piecewise smooth in its data: where the optimal vertex changes, the left and
+    # right derivatives differ and the envelope derivative is one of them. The check: each derivative lies
+    # between the one-sided differences (to 1e-3), which agree to a few %
+    ax = jb.ModalAxis(**AXIS2)
+    des, _ = _design(ax, 0.9)
+
+    def V(f1, T):
+        return float(jb.best_residual(jb.ModalAxis([f1, 18.0], AXIS2["damping_ratios"]), T, des))
+
+    g_f, g_T = (
+        float(g)
+        for g in jax.grad(
+            lambda f1, T: jb.best_residual(jb.ModalAxis([f1, 18.0], AXIS2["damping_ratios"]), T, des), argnums=(0, 1)
+        )(7.3, 0.9)
+    )
+    v0 = V(7.3, 0.9)
+    assert v0 == pytest.approx(float(des.worst), rel=1e-9)
+    for g, (lo, hi) in (
+        (g_f, ((v0 - V(7.3 - 1e-5, 0.9)) / 1e-5, (V(7.3 + 1e-5, 0.9) - v0) / 1e-5)),
+        (g_T, ((v0 - V(7.3, 0.9 - 1e-5)) / 1e-5, (V(7.3, 0.9 + 1e-5) - v0) / 1e-5)),
+    ):
+        assert abs(hi - lo) <= 0.03 * abs(lo)
+        assert min(lo, hi) - 1e-3 * abs(lo) <= g <= max(lo, hi) + 1e-3 * abs(lo)
+
+
+def test_shortest_move_time_gradient_of_the_platform_stiffness():
+    # co-design on Incerti's platform: d T* / d k by the implicit function theorem against finite differences
+    plat = jb.BeltPlatform()
+    D = 15 * 2 * np.pi
+    plan = jb.design_move(plat.to_axis(), D, 1.0, v_max=200.0, a_max=600.0, include=("minimax",))
+    des = plan.minimax
+    target = 0.5 * float(des.worst)
+
+    def S(k):
+        return jb.shortest_move_time(jb.BeltPlatform(k=k).to_axis(), target, des)
+
+    k0 = 9e4
+    g = float(jax.grad(S)(k0))
+    fd = (float(S(k0 * (1 + 1e-4))) - float(S(k0 * (1 - 1e-4)))) / (2e-4 * k0)
+    np.testing.assert_allclose(g, fd, rtol=1e-2)
+    T = float(S(k0))
+    assert float(jb.best_residual(plat.to_axis(), T, des)) == pytest.approx(target, rel=1e-5)
+
+
+# --------------------------------------------------------------------------------------------
+# The plan
+# --------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def plan_08():
+    return jb.design_move(jb.ModalAxis(**AXIS2), 0.1, 0.8, **LIMITS, include=("minimax", *CLASSIC, "unshaped"))
+
+
+def test_plan_at_equal_move_time_beats_every_classic_shaper(plan_08):
+    rows = {c.name: c for c in plan_08.table}
+    assert plan_08.best.name == "minimax"
+    shapers = [rows[n] for n in CLASSIC if rows[n].ok]
+    assert shapers, "no classic shaper is feasible at 0.8 s"
+    best_shaper = min(s.worst_percent for s in shapers)
+    assert rows["minimax"].worst_percent <= 0.1 * best_shaper
+    for c in plan_08.table:
+        assert c.command is None or c.move_time == pytest.approx(0.8, rel=1e-9)
+        if c.ok:
+            assert c.peak_v <= 0.3 * (1 + 1e-6) and c.peak_a <= 1.2 * (1 + 1e-6)
+    # the table's residual of a shaper equals an independent solve_ivp of its acceleration at 1 +- 20 %
+    zvd = rows["ZVD"].command
+    accel = _jitted(zvd)
+    for factor in (0.8, 1.0, 1.2):
+        ax = jb.ModalAxis(np.array(AXIS2["frequencies"]) * factor, AXIS2["damping_ratios"])
+        ref = _scipy_residual(ax, accel, 0.8, 2)
+        got = np.asarray(residual_curve(jb.ModalAxis(**AXIS2), zvd, factor))[:, 0]
+        np.testing.assert_allclose(got, ref, rtol=1e-6, atol=1e-13)
+
+
+def test_exported_samples_replay_the_stated_residual(plan_08, tmp_path):
+    # the drive executes the acceleration linearly between samples; replayed through scipy, the CSV leaves the
+    # residual the table states (1 %)
+    path = tmp_path / "move.csv"
+    plan_08.to_csv(path, 1000.0)
+    data = np.genfromtxt(path, delimiter=",", names=True)
+    assert data.dtype.names == ("t", "x", "v", "a")
+    t, a = data["t"], data["a"]
+    assert data["x"][-1] == pytest.approx(0.1, rel=1e-12) and abs(data["v"][-1]) < 1e-12
+    ax = jb.ModalAxis(**AXIS2)
+    replay = _scipy_residual(ax, lambda s: np.interp(s, t, a), float(t[-1]), 2)
+    stated = np.asarray(jb.residual_amplitudes(ax, plan_08.best.command))
+    # the replay runs to the last sample (>= T): propagate the free decay back to T for the comparison
+    decay = np.exp(-np.asarray(ax.sigma) * (float(t[-1]) - 0.8))
+    np.testing.assert_allclose(replay / decay, stated, rtol=0.01)
+
+
+def test_shortest_time_plan_reaches_the_best_shaper_sooner():
+    plan = jb.design_move(jb.ModalAxis(**AXIS2), 0.1, None, **LIMITS, include=("minimax", *CLASSIC))
+    rows = {c.name: c for c in plan.table}
+    shapers = [rows[n] for n in CLASSIC if rows[n].ok]
+    best = min(shapers, key=lambda r: r.worst_percent)
+    mm = rows["minimax"]
+    assert mm.ok and mm.worst_percent <= best.worst_percent * (1 + 1e-9)
+    assert mm.move_time <= 0.9 * best.move_time
+
+
+@pytest.mark.parametrize(
+    "kw, name",
+    [
+        (dict(distance=0.0), "distance"),
+        (dict(distance=np.nan), "distance"),
+        (dict(v_max=0.0), "v_max"),
+        (dict(a_max=-1.0), "a_max"),
+        (dict(j_max=0.0), "j_max"),
+        (dict(uncertainty=0.95), "uncertainty"),
+        (dict(uncertainty=-0.1), "uncertainty"),
+        (dict(move_time=0.2), "move_time"),
+        (dict(move_time=np.nan), "move_time"),
+    ],
+)
+def test_design_move_refuses_bad_input_by_name(kw, name):
+    args = dict(distance=0.1, move_time=0.8, **LIMITS)
+    args.update(kw)
+    with pytest.raises(ValueError, match=f"`{name}`"):
+        jb.design_move(jb.ModalAxis(**AXIS2), **args)
+
+
+def test_too_short_move_time_states_the_shortest_feasible_time():
+    t_min = fastest_time(0.1, 0.3, 1.2)
+    with pytest.raises(ValueError, match=f"{t_min:.6g} s"):
+        jb.design_move(jb.ModalAxis(**AXIS2), 0.1, 0.5 * t_min, **LIMITS)
+
+
+def test_csv_rate_below_nyquist_is_refused(plan_08, tmp_path):
+    with pytest.raises(ValueError, match="`rate_hz`"):
+        plan_08.to_csv(tmp_path / "m.csv", 30.0)
+
+
+def test_second_axis_of_the_same_size_compiles_nothing(plan_08):
+    from compiles import count_compiles
+
+    ax = jb.ModalAxis([7.9, 17.1], [0.02, 0.012])
+    with count_compiles() as box:
+        jb.design_move(ax, 0.12, 0.8, **LIMITS, include=("minimax", *CLASSIC, "unshaped"))
+    assert box["n"] == 0
