@@ -360,3 +360,53 @@ def test_second_axis_of_the_same_size_compiles_nothing(plan_08):
     with count_compiles() as box:
         jb.design_move(ax, 0.12, 0.8, **LIMITS, include=("minimax", *CLASSIC, "unshaped"))
     assert box["n"] == 0
+
+
+# --------------------------------------------------------------------------------------------
+# The command line
+# --------------------------------------------------------------------------------------------
+def test_cli_prints_the_plan_it_writes(tmp_path, capsys, plan_08):
+    from jaxbelt.cli import main
+
+    out = tmp_path / "move.csv"
+    args = ["--no-cache", "shaping", "--mode", "7.3:0.015", "--mode", "18:0.01", "--distance", "0.1"]
+    args += ["--move-time", "0.8", "--v-max", "0.3", "--a-max", "1.2", "--out", str(out), "--no-progress"]
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    # the printed row of every classic shaper and of the design is the plan's (same inputs, same numbers)
+    rows = {c.name: c for c in plan_08.table}
+    for line in text.splitlines():
+        name = line[1:28].strip()
+        if name in rows and rows[name].ok:
+            worst = float(line[28:].split()[1])
+            assert worst == pytest.approx(rows[name].worst_percent, rel=1e-3, abs=1e-4), name
+    assert out.exists() and out.with_suffix(".png").exists()
+    data = np.genfromtxt(out, delimiter=",", names=True)
+    t, x, v, a = plan_08.best.sample(1000.0)
+    np.testing.assert_allclose(data["a"], a, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "extra, needle",
+    [
+        (["--mode", "0:0.01"], "frequency F must be > 0"),
+        (["--mode", "5:1.5"], "damping ratio Z must lie in [0, 1)"),
+        (["--mode", "5"], "expected F:Z"),
+        (["--mode", "5:0.01", "--v-max", "0.3", "--a-max", "1"], "--distance"),
+        (["--distance", "0.1"], "only with an axis"),
+        (
+            ["--mode", "5:0.01", "--distance", "0.1", "--v-max", "0.3", "--a-max", "1", "--uncertainty", "0.95"],
+            "uncertainty",
+        ),
+    ],
+)
+def test_cli_refuses_bad_arguments_in_one_line(extra, needle, capsys):
+    from jaxbelt.cli import main
+
+    try:
+        code = main(["--no-cache", "shaping", *extra])
+    except SystemExit as e:  # argparse's own errors
+        code = e.code
+    assert code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and needle in err[0]

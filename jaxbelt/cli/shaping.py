@@ -1,13 +1,15 @@
-"""`jaxbelt shaping`: command shaping of the belt-driven platform (Incerti, pseudo-polynomial commands).
+"""`jaxbelt shaping`: command shaping on the user's axis, or the paper's platform (Incerti, pseudo-polynomial commands).
 
-Optimises the pseudo-polynomial exponents from (3, 4, 5), optionally a robust higher-order
-command over a frequency band, compares with ZV/ZVD shapers, prints H and the 5 % tolerance
-band widths, and writes the figure (paper's Fig. 3 + sensitivity plot).
+With `--mode F:Z` (one per mode) or `--measured record.csv`, every design for that axis under the same limits
+and move time (`jaxbelt.design_move`): the ranked table is printed, the recommended command written as CSV
+(`--out move.csv`, columns t,x,v,a) and the figure beside it (or to an image `--out`). Without an axis, the
+paper's figure: the optimised pseudo-polynomial command of the belt-driven platform, its Fig. 3, and the
+comparison with shapers.
 """
 
 from __future__ import annotations
 
-from ._args import float_in, image_path, positive_float
+from ._args import finite_float, float_in, image_path, positive_float
 
 
 def register(subparsers):
@@ -19,7 +21,38 @@ def register(subparsers):
         "frequency band; compare with ZV/ZVD shapers and write the figure (the paper's Fig. 3 and a "
         "sensitivity plot), or the paper's Fig. 2 with --figure profiles.",
     )
-    p.add_argument("--out", type=image_path, default="shaping.png", help="figure file (default shaping.png)")
+    p.add_argument(
+        "--out",
+        type=_out_path,
+        nargs="+",
+        default=None,
+        help="with an axis: the command as CSV (.csv; the figure goes beside it as .png) and/or the figure (an image "
+        "format); without: the figure (default shaping.png)",
+    )
+    axis = p.add_argument_group("your axis (jaxbelt.design_move)")
+    axis.add_argument(
+        "--mode",
+        type=_mode,
+        action="append",
+        metavar="F:Z[:G]",
+        help="a mode of the axis: frequency F [Hz], damping ratio Z (and gain G, default 1); repeat for each mode",
+    )
+    axis.add_argument(
+        "--measured", type=_record_path, metavar="FILE", help="identify the modes from a measured record (CSV t,y)"
+    )
+    axis.add_argument("--n-modes", type=_positive_int, default=None, help="modes to identify from --measured (default 1)")
+    axis.add_argument("--distance", type=finite_float, help="move distance [m] (or rad), non-zero")
+    axis.add_argument("--move-time", type=positive_float, help="move time [s] (default: the shortest that beats the shapers)")
+    axis.add_argument("--v-max", type=positive_float, help="velocity limit [m/s]")
+    axis.add_argument("--a-max", type=positive_float, help="acceleration limit [m/s^2]")
+    axis.add_argument("--j-max", type=positive_float, help="jerk limit [m/s^3] (optional)")
+    axis.add_argument(
+        "--uncertainty",
+        type=float_in(0.0, 0.9, hi_open=True),
+        default=0.2,
+        help="frequency error every residual is judged over, +- (default 0.2)",
+    )
+    axis.add_argument("--rate", type=positive_float, default=1000.0, help="CSV sample rate [Hz] (default 1000)")
     p.add_argument(
         "--figure",
         choices=["overview", "profiles"],
@@ -67,8 +100,86 @@ def register(subparsers):
     p.set_defaults(func=run, check=check)
 
 
+def _out_path(text: str):
+    """A .csv path (the command) or an image path (the figure); the folder must exist and be writable."""
+    import argparse
+    from pathlib import Path
+
+    p = Path(text).expanduser()
+    if p.suffix.lower() == ".csv":
+        folder = p.parent if str(p.parent) else Path(".")
+        if not folder.is_dir():
+            raise argparse.ArgumentTypeError(f"folder {str(folder)!r} does not exist")
+        return p
+    return image_path(text)
+
+
+def _mode(text: str):
+    """F:Z or F:Z:G -> (frequency [Hz] > 0, damping ratio in [0, 1), gain != 0)."""
+    import argparse
+    import math
+
+    parts = text.split(":")
+    try:
+        vals = [float(x) for x in parts]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected F:Z or F:Z:G (numbers), got {text!r}") from None
+    if len(vals) not in (2, 3) or not all(math.isfinite(v) for v in vals):
+        raise argparse.ArgumentTypeError(f"expected F:Z or F:Z:G (finite numbers), got {text!r}")
+    f, z = vals[0], vals[1]
+    g = vals[2] if len(vals) == 3 else 1.0
+    if not f > 0:
+        raise argparse.ArgumentTypeError(f"frequency F must be > 0 Hz, got {f:g}")
+    if not 0 <= z < 1:
+        raise argparse.ArgumentTypeError(f"damping ratio Z must lie in [0, 1), got {z:g}")
+    if g == 0:
+        raise argparse.ArgumentTypeError("gain G must be non-zero")
+    return f, z, g
+
+
+def _record_path(text: str):
+    import argparse
+    from pathlib import Path
+
+    p = Path(text).expanduser()
+    if not p.is_file():
+        raise argparse.ArgumentTypeError(f"no such file: {text!r}")
+    return p
+
+
+def _positive_int(text: str) -> int:
+    import argparse
+
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
+    return v
+
+
 def check(args) -> str | None:
     """The relations between arguments that argparse does not check (run before anything is computed)."""
+    if args.mode or args.measured:
+        if args.mode and args.measured:
+            return "argument --measured: give the axis either by --mode or by --measured, not both"
+        for name in ("distance", "v_max", "a_max"):
+            if getattr(args, name) is None:
+                return f"argument --{name.replace('_', '-')}: required with an axis (--mode or --measured)"
+        if args.distance == 0:
+            return "argument --distance: must be non-zero"
+        if args.n_modes is not None and not args.measured:
+            return "argument --n-modes: only with --measured"
+        return None
+    for name in ("distance", "move_time", "v_max", "a_max", "j_max", "n_modes"):
+        if getattr(args, name) is not None:
+            return f"argument --{name.replace('_', '-')}: only with an axis (--mode or --measured)"
+    outs = args.out or []
+    if any(str(o).lower().endswith(".csv") for o in outs):
+        return "argument --out: a .csv command is written only with an axis (--mode or --measured)"
+    if len(outs) > 1:
+        return "argument --out: one figure file without an axis"
     from ..commands import MIN_EXPONENT_GAP, exponents_apart
 
     low, high = args.band
@@ -87,12 +198,62 @@ def check(args) -> str | None:
 def run(args) -> int:
     if getattr(args, "mode", None) or getattr(args, "measured", None):
         return _axis_run(args)
+    from pathlib import Path
+
+    args.out = args.out[0] if args.out else Path("shaping.png")  # the paper's figure: one image
     return _paper_run(args)
 
 
 def _axis_run(args) -> int:
     """`jaxbelt shaping --mode F:Z ... | --measured FILE`: every design for the user's axis (jaxbelt.design_move)."""
-    raise NotImplementedError
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..models.axis import ModalAxis
+    from ..shaping.plan import design_move
+
+    if args.measured:
+        from ..shaping.identify import identify_axis, load_record
+
+        t, y = load_record(args.measured)
+        axis = identify_axis(t, y, args.n_modes or 1)
+        print(f"identified from {args.measured}:")
+        for i in range(axis.n_modes):
+            f, z = float(axis.frequencies[i]), float(axis.damping_ratios[i])
+            sf = float(axis.frequency_std[i]) if axis.frequency_std is not None else float("nan")
+            sz = float(axis.damping_std[i]) if axis.damping_std is not None else float("nan")
+            print(f"  mode {i + 1}: {f:.4f} +- {sf:.2g} Hz, damping ratio {z:.4f} +- {sz:.2g}")
+    else:
+        f, z, g = zip(*args.mode)
+        axis = ModalAxis(list(f), list(z), list(g))
+    plan = design_move(
+        axis, args.distance, args.move_time, v_max=args.v_max, a_max=args.a_max, j_max=args.j_max,
+        uncertainty=args.uncertainty, progress=not args.no_progress,
+    )
+    print(plan.format_table())
+    best = plan.best
+    print(
+        f"recommended: {best.name}, move time {best.move_time:.4f} s, worst residual {best.worst_percent:.4g} % of the "
+        f"unshaped move ({best.worst_m:.3e} m) over +-{100 * args.uncertainty:.0f} %"
+    )
+    from pathlib import Path
+
+    outs = list(args.out or [Path("move.csv")])
+    figures = [o for o in outs if not str(o).lower().endswith(".csv")]
+    for o in outs:
+        if str(o).lower().endswith(".csv"):
+            plan.to_csv(o, args.rate)
+            print(f"wrote {o} ({args.rate:g} Hz, columns t,x,v,a)")
+            if not figures:
+                figures.append(o.with_suffix(".png"))
+    fig = plan.plot()
+    for o in figures:
+        fig.savefig(o, dpi=120)
+        print(f"wrote {o}")
+    plt.close(fig)
+    return 0
 
 
 def _paper_run(args) -> int:

@@ -113,7 +113,7 @@ class MinimaxProblem(eqx.Module):
     mask: jax.Array
 
 
-def lp_data(problem: MinimaxProblem, opts: DesignOptions, scale_t=1.0):
+def lp_data(problem: MinimaxProblem, opts: DesignOptions, scale_t: float | jax.Array = 1.0):
     """`(c, G, h, A, b)` of the minimax LP in the variables $(\\hat c, t/\\tau)$, $\\hat c = c / (D/T^2)$,
     $\\tau$ = `scale_t` (the objective's expected size: solving in units of it keeps the LP well scaled)."""
     ax = problem.axis
@@ -179,8 +179,7 @@ def _lower_bound(problem, opts, tau, res, data):
     return jnp.where(res.vertex, res.value, jnp.minimum(jnp.maximum(lower, res.lower_bound), res.value))
 
 
-@eqx.filter_jit(compiler_options=_LP_COMPILE)
-def _solve_round(problem: MinimaxProblem, opts: DesignOptions, tau, tol):
+def _solve_round_impl(problem: MinimaxProblem, opts: DesignOptions, tau, tol):
     """One LP of the exchange, in units of `tau` (<= 0: estimate it by a coarse first solve).
 
     Solving in units of the optimum's size makes the interior point method's relative tolerances mean relative
@@ -212,6 +211,9 @@ def _solve_round(problem: MinimaxProblem, opts: DesignOptions, tau, tol):
     value = lp_value(*data, stop(res.x), stop(res.z), stop(res.y))
     res = res._replace(value=value)
     return res._replace(lower_bound=stop(_lower_bound(prob_s, opts, tau, res, lp_data(prob_s, opts, tau)))), tau
+
+
+_solve_round = eqx.filter_jit(_solve_round_impl, compiler_options=_LP_COMPILE)  # pyright: ignore[reportCallIssue]
 
 
 @eqx.filter_jit
@@ -345,10 +347,12 @@ def _distance_lp(problem: MinimaxProblem, opts: DesignOptions):
     return -A[1, :-1], G, hv, A[:1, :-1], b[:1]
 
 
-@eqx.filter_jit(compiler_options=_LP_COMPILE)
-def _max_distance(problem: MinimaxProblem, opts: DesignOptions):
+def _max_distance_impl(problem: MinimaxProblem, opts: DesignOptions):
     c, G, hv, A, b = _distance_lp(problem, opts)
     return -solve_lp(c, G, hv, A, b, tol=1e-9, max_iter=100).value
+
+
+_max_distance = eqx.filter_jit(_max_distance_impl, compiler_options=_LP_COMPILE)  # pyright: ignore[reportCallIssue]
 
 
 def max_distance(problem: MinimaxProblem, opts: DesignOptions) -> float:

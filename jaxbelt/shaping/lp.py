@@ -298,6 +298,7 @@ def solve_lp_data(c, G, h, A, b, x_bound, tol, max_iter):
     """`solve_lp` on arrays of the right shapes, with `tol` and `max_iter` as (traceable) values: the interior
     point method runs on the data with its derivatives stopped; `value` carries the envelope derivative."""
     stop = jax.lax.stop_gradient
-    res = _solve_impl(*(stop(v) for v in (c, G, h, A, b, x_bound)), jnp.asarray(tol, dtype=float), max_iter)
+    c_, G_, h_, A_, b_, xb_ = (stop(v) for v in (c, G, h, A, b, x_bound))
+    res = _solve_impl(c_, G_, h_, A_, b_, xb_, jnp.asarray(tol, dtype=float), max_iter)
     value = lp_value(c, G, h, A, b, stop(res.x), stop(res.z), stop(res.y))
     return res._replace(value=value, lower_bound=stop(res.lower_bound))

@@ -25,6 +25,7 @@ time at which it reaches that target (bisection on the time).
 import csv
 import dataclasses
 import math
+from typing import Any
 
 import jax.numpy as jnp
 import numpy as np
@@ -195,7 +196,7 @@ def _check_inputs(axis, distance, move_time, v_max, a_max, j_max, uncertainty):
     return d, t_min
 
 
-def _measure(axis, cmd, ref, u, limits):
+def _measure(axis, cmd, ref, u, limits) -> tuple[dict[str, Any], bool]:
     """The table's numbers for one command."""
     band = np.linspace(1 - u, 1 + u, _N_BAND) if u > 0 else np.ones(1)
     res = np.asarray(residual_curve(axis, cmd, band))  # (modes, K)

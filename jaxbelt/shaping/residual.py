@@ -19,6 +19,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.typing import ArrayLike
 
 from .._checks import check_range
 from ..commands import AbstractMotionCommand, PseudoPolynomial, ShapedCommand, falling_factorial
@@ -83,7 +84,7 @@ def _poles(axis: ModalAxis, factors):
     return -z * w + 1j * wd, wd
 
 
-def residual_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors=1.0, *, rtol=1e-10, atol=1e-14):
+def residual_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors: ArrayLike = 1.0, *, rtol=1e-10, atol=1e-14):
     """Residual amplitudes [m] (units of the command's position) of every mode after the move `cmd`, at the mode
     frequencies scaled by each of `factors` (damping ratios and gains kept): shape (n_modes, len(factors)).
 
@@ -141,6 +142,7 @@ def _residual_ode(axis, cmd, r, rtol, atol):
             stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
             max_steps=200_000,
         )
+        assert sol.ys is not None  # SaveAt(t1=True) saves the end state
         y = sol.ys[-1]
         n = ax.n_modes
         q, qd = y[:n], y[n:]
