@@ -40,9 +40,13 @@ def register(subparsers):
     axis.add_argument(
         "--measured", type=_record_path, metavar="FILE", help="identify the modes from a measured record (CSV t,y)"
     )
-    axis.add_argument("--n-modes", type=_positive_int, default=None, help="modes to identify from --measured (default 1)")
+    axis.add_argument(
+        "--n-modes", type=_positive_int, default=None, help="modes to identify from --measured (default 1)"
+    )
     axis.add_argument("--distance", type=finite_float, help="move distance [m] (or rad), non-zero")
-    axis.add_argument("--move-time", type=positive_float, help="move time [s] (default: the shortest that beats the shapers)")
+    axis.add_argument(
+        "--move-time", type=positive_float, help="move time [s] (default: the shortest that beats the shapers)"
+    )
     axis.add_argument("--v-max", type=positive_float, help="velocity limit [m/s]")
     axis.add_argument("--a-max", type=positive_float, help="acceleration limit [m/s^2]")
     axis.add_argument("--j-max", type=positive_float, help="jerk limit [m/s^3] (optional)")
@@ -229,8 +233,14 @@ def _axis_run(args) -> int:
         f, z, g = zip(*args.mode)
         axis = ModalAxis(list(f), list(z), list(g))
     plan = design_move(
-        axis, args.distance, args.move_time, v_max=args.v_max, a_max=args.a_max, j_max=args.j_max,
-        uncertainty=args.uncertainty, progress=not args.no_progress,
+        axis,
+        args.distance,
+        args.move_time,
+        v_max=args.v_max,
+        a_max=args.a_max,
+        j_max=args.j_max,
+        uncertainty=args.uncertainty,
+        progress=not args.no_progress,
     )
     print(plan.format_table())
     best = plan.best
