@@ -303,12 +303,18 @@ def test_exported_samples_replay_the_stated_residual(plan_08, tmp_path):
     assert data.dtype.names == ("t", "x", "v", "a")
     t, a = data["t"], data["a"]
     assert data["x"][-1] == pytest.approx(0.1, rel=1e-12) and abs(data["v"][-1]) < 1e-12
-    ax = jb.ModalAxis(**AXIS2)
-    replay = _scipy_residual(ax, lambda s: np.interp(s, t, a), float(t[-1]), 2)
-    stated = np.asarray(jb.residual_amplitudes(ax, plan_08.best.command))
-    # the replay runs to the last sample (>= T): propagate the free decay back to T for the comparison
-    decay = np.exp(-np.asarray(ax.sigma) * (float(t[-1]) - 0.8))
-    np.testing.assert_allclose(replay / decay, stated, rtol=0.01)
+    # at the nominal frequencies and at the band's edges
+    for factor in (0.8, 1.0, 1.2):
+        ax = jb.ModalAxis(np.array(AXIS2["frequencies"]) * factor, AXIS2["damping_ratios"])
+        replay = _scipy_residual(ax, lambda s: np.interp(s, t, a), float(t[-1]), 2)
+        stated = np.asarray(residual_curve(jb.ModalAxis(**AXIS2), plan_08.best.command, factor))[:, 0]
+        # the replay runs to the last sample (>= T): propagate the free decay back to T for the comparison
+        decay = np.exp(-np.asarray(ax.sigma) * (float(t[-1]) - 0.8))
+        np.testing.assert_allclose(replay / decay, stated, rtol=0.01)
+    # the correction is small: the samples stay within the limits to 1e-3 and near the continuous command
+    _, _, _, a_exact = plan_08.best.sample(1000.0)
+    assert np.max(np.abs(a)) <= 1.2 * (1 + 1e-3)
+    assert np.max(np.abs(a - a_exact)) <= 1e-2 * 1.2
 
 
 def test_shortest_time_plan_reaches_the_best_shaper_sooner():
@@ -382,7 +388,7 @@ def test_cli_prints_the_plan_it_writes(tmp_path, capsys, plan_08):
             assert worst == pytest.approx(rows[name].worst_percent, rel=1e-3, abs=1e-4), name
     assert out.exists() and out.with_suffix(".png").exists()
     data = np.genfromtxt(out, delimiter=",", names=True)
-    t, x, v, a = plan_08.best.sample(1000.0)
+    t, x, v, a = plan_08.samples(1000.0)
     np.testing.assert_allclose(data["a"], a, rtol=1e-9, atol=1e-12)
 
 

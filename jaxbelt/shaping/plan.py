@@ -34,7 +34,17 @@ from .._checks import check_positive, check_range
 from ..commands import AbstractMotionCommand
 from ..models.axis import ModalAxis
 from . import design as _design
-from .moves import PiecewiseMove, fastest_move, fastest_time, padded, peaks, shape_move, trapezoid_move
+from .moves import (
+    PiecewiseMove,
+    SplineMove,
+    executable_samples,
+    fastest_move,
+    fastest_time,
+    padded,
+    peaks,
+    shape_move,
+    trapezoid_move,
+)
 from .residual import residual_curve, tolerance_band
 from .shapers import SHAPERS, shaper_for_axis
 
@@ -134,12 +144,22 @@ class MovePlan:
                 f"MovePlan.to_csv: parameter `rate_hz` must exceed twice the highest frequency of the band "
                 f"(Nyquist: > {2 * fmax:g} Hz); got {rate_hz}"
             )
-        t, x, v, a = c.sample(rate_hz)
+        t, x, v, a = self.samples(rate_hz, c.name)
         with open(path, "w", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(["t", "x", "v", "a"])
             for row in zip(t, x, v, a):
                 w.writerow([repr(float(q)) for q in row])
+
+    def samples(self, rate_hz: float, candidate: str | None = None):
+        """`(t, x, v, a)` of the recommended command (or `candidate`) sampled at `rate_hz` [Hz], as `to_csv` writes
+        them: for the smooth minimax design, corrected so that a drive that executes the acceleration linearly
+        between samples leaves the residual the table states (`jaxbelt.shaping.moves.executable_samples`); for
+        the others, the exact samples."""
+        c = self.best if candidate is None else self.candidate(candidate)
+        if isinstance(c.command, SplineMove):
+            return executable_samples(c.command, rate_hz, self.axis, self.reference_m, self.uncertainty)
+        return c.sample(rate_hz)
 
     def candidate(self, name: str) -> Candidate:
         for c in self.table:

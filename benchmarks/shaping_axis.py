@@ -1,0 +1,285 @@
+"""Benchmark of command shaping on the user's axis: the minimax design against the classic input shapers.
+
+On axes drawn from a fixed seed (1 to 3 modes, 1-20 Hz, damping ratio 0.005-0.1), a 0.1 m move with
+|v| <= 0.3 m/s, |a| <= 1.2 m/s², a ±20 % frequency error; residual amplitude in % of the unshaped
+(time-optimal) move, worst over every mode's band, as `jaxbelt.design_move` measures it. For each axis:
+
+- the classic shapers (ZV, MZV, ZVD, EI, 2-hump EI, convolved over the modes) each at its own shortest time
+  (time-optimal base + shaper length); the best of them (least worst residual) is the anchor;
+- **equal time, limits no looser**: the minimax design at the anchor's move time, with the anchor's own peak
+  velocity and acceleration as its limits: worst residual ratio minimax / anchor (target <= 0.1);
+- **shortest time**: the minimax design's least move time at the anchor's residual, same user limits: time
+  ratio (target <= 0.9);
+- **export**: the minimax command sampled at 1 kHz, its acceleration replayed linearly between samples through
+  scipy's `solve_ivp` (DOP853, rtol 1e-11): relative difference from the residual the table states (target 1 %);
+- **speed**: `design_move` at a fixed time, warm (median of repeats) and in a fresh process (1, 2, 3 modes);
+- **identification**: `identify_axis` on 2-mode records with 5 % noise: frequency and damping errors.
+
+Writes `benchmarks/results/shaping_axis.json` and `.png`. Run: `python benchmarks/shaping_axis.py [--quick]`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent))
+sys.path.insert(0, str(HERE))
+
+import jax  # noqa: E402
+
+jax.config.update("jax_enable_x64", True)  # jaxbelt computes in float64 (it leaves the setting to its caller)
+import numpy as np  # noqa: E402
+from _common import machine_info, results_dir, write_results  # noqa: E402
+from scipy.integrate import solve_ivp  # noqa: E402
+
+import jaxbelt as jb  # noqa: E402
+
+D, V_MAX, A_MAX, U = 0.1, 0.3, 1.2, 0.2
+CLASSIC = ("ZV", "MZV", "ZVD", "EI", "2-hump EI")
+
+
+def draw_axes(n: int, seed: int = 2026):
+    rng = np.random.default_rng(seed)
+    out = []
+    for k in range(n):
+        m = 1 + k % 3
+        while True:
+            f = np.sort(rng.uniform(1.0, 20.0, m))
+            if m == 1 or np.min(np.diff(f)) / f[-1] > 0.15:  # distinct modes (no two within one band)
+                break
+        z = rng.uniform(0.005, 0.1, m)
+        out.append((f, z))
+    return out
+
+
+def replay(axis, plan, rate=1000.0):
+    """The residual after the move when a drive executes the plan's exported samples (`plan.samples`, what
+    `to_csv` writes) with the acceleration linear between them (scipy solve_ivp), propagated back to the end of
+    the move for the comparison."""
+    t, _, _, a = plan.samples(rate)
+    cmd = plan.best.command
+    n = axis.n_modes
+    w, z, g = (np.asarray(x) for x in (axis.omega, axis.damping_ratios, axis.gains))
+
+    def f(s, y):
+        acc = np.interp(s, t, a)
+        return np.r_[y[n:], -2 * z * w * y[n:] - w**2 * y[:n] - g * acc]
+
+    sol = solve_ivp(f, (0.0, float(t[-1])), np.zeros(2 * n), method="DOP853", rtol=1e-11, atol=1e-15, max_step=1 / rate)
+    q, qd = sol.y[:n, -1], sol.y[n:, -1]
+    sigma, wd = np.asarray(axis.sigma), np.asarray(axis.omega_d)
+    amp = np.sqrt(q**2 + ((qd + sigma * q) / wd) ** 2)
+    return amp / np.exp(-sigma * (float(t[-1]) - float(cmd.end_time)))
+
+
+def compare(f, z):
+    axis = jb.ModalAxis(f, z)
+    t0 = time.perf_counter()
+    own = jb.design_move(axis, D, None, v_max=V_MAX, a_max=A_MAX, uncertainty=U, include=("minimax", *CLASSIC))
+    t_plan = time.perf_counter() - t0
+    rows = {c.name: c for c in own.table}
+    shapers = [rows[n] for n in CLASSIC if rows[n].ok]
+    anchor = min(shapers, key=lambda r: r.worst_percent)
+    mm_short = rows["minimax"]
+    # equal time, the anchor's own peaks as limits
+    eq = jb.design_move(
+        axis, D, anchor.move_time, v_max=anchor.peak_v, a_max=anchor.peak_a, uncertainty=U, include=("minimax",)
+    )
+    mm_eq = eq.candidate("minimax")
+    stated = np.asarray(jb.residual_amplitudes(axis, mm_eq.command))
+    replayed = replay(axis, eq)
+    return dict(
+        frequencies=[float(x) for x in f],
+        damping=[float(x) for x in z],
+        anchor=anchor.name,
+        anchor_time=anchor.move_time,
+        anchor_worst=anchor.worst_percent,
+        anchor_peak_v=anchor.peak_v,
+        anchor_peak_a=anchor.peak_a,
+        shapers={r.name: dict(time=r.move_time, worst=r.worst_percent) for r in shapers},
+        equal_time_worst=mm_eq.worst_percent,
+        equal_time_ratio=mm_eq.worst_percent / anchor.worst_percent,
+        equal_time_ok=bool(mm_eq.ok),
+        equal_time_peaks=(mm_eq.peak_v, mm_eq.peak_a),
+        shortest_time=mm_short.move_time,
+        shortest_worst=mm_short.worst_percent,
+        time_ratio=mm_short.move_time / anchor.move_time,
+        replay_rel=float(np.max(np.abs(replayed - stated) / stated)),
+        plan_s=t_plan,
+    )
+
+
+def speed(repeats: int):
+    out = {}
+    axes = {1: ([6.0], [0.02]), 2: ([7.3, 18.0], [0.015, 0.01]), 3: ([3.1, 9.7, 17.0], [0.03, 0.02, 0.01])}
+    for m, (f, z) in axes.items():
+        axis = jb.ModalAxis(f, z)
+
+        def run(axis=axis):
+            return jb.design_move(axis, D, 1.0, v_max=V_MAX, a_max=A_MAX, uncertainty=U, include=("minimax",))
+
+        run()
+        ts = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            run()
+            ts.append(time.perf_counter() - t0)
+        code = (
+            "import time; t0 = time.perf_counter(); import jax; jax.config.update('jax_enable_x64', True); "
+            "import jaxbelt as jb; "
+            f"jb.design_move(jb.ModalAxis({f}, {z}), {D}, 1.0, v_max={V_MAX}, a_max={A_MAX}, uncertainty={U}, "
+            "include=('minimax',)); print(time.perf_counter() - t0)"
+        )
+        env = dict(os.environ, PYTHONPATH=str(HERE.parent))
+        env.pop("XLA_FLAGS", None)
+        fresh = []
+        for _ in range(max(2, repeats // 3)):
+            r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=600)
+            fresh.append(float(r.stdout.split()[-1]))
+        out[m] = dict(
+            warm_median_s=float(np.median(ts)),
+            warm_min_s=float(np.min(ts)),
+            warm_max_s=float(np.max(ts)),
+            fresh_median_s=float(np.median(fresh)),
+            fresh_min_s=float(np.min(fresh)),
+            fresh_max_s=float(np.max(fresh)),
+        )
+    return out
+
+
+def identification(seeds):
+    errs_f, errs_z = [], []
+    for s in seeds:
+        rng = np.random.default_rng(s)
+        f, z, amp = np.array([7.3, 18.0]), np.array([0.015, 0.01]), np.array([1.0, 0.6])
+        t = np.arange(2000) / 1000.0
+        w = 2 * np.pi * f
+        wd = w * np.sqrt(1 - z**2)
+        y = np.sum(amp[:, None] * np.exp(-z[:, None] * w[:, None] * t) * np.cos(wd[:, None] * t), axis=0)
+        y = y + 0.05 * np.max(np.abs(y)) * rng.normal(size=t.size)
+        ax = jb.identify_axis(t, y, 2)
+        errs_f.append(np.max(np.abs(np.asarray(ax.frequencies) / f - 1)))
+        errs_z.append(np.max(np.abs(np.asarray(ax.damping_ratios) / z - 1)))
+    return dict(max_freq_err=float(np.max(errs_f)), max_damping_err=float(np.max(errs_z)), seeds=len(seeds))
+
+
+def figure(cases, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
+    n = np.arange(len(cases))
+    modes = [len(c["frequencies"]) for c in cases]
+    a1.semilogy(n, [c["anchor_worst"] for c in cases], "o", label="best classic shaper (its own time)")
+    a1.semilogy(n, [c["equal_time_worst"] for c in cases], "s", color="C3", label="minimax, same time, its peaks")
+    a1.set_xticks(n, [f"{m}m" for m in modes])
+    a1.set_ylabel("worst residual over ±20 % [% of unshaped]")
+    a1.set_xlabel("axis (number of modes)")
+    a1.legend(fontsize=8)
+    a1.grid(alpha=0.3, which="both")
+    a2.plot(n, [c["time_ratio"] for c in cases], "o", color="C3")
+    a2.axhline(0.9, color="k", ls="--", lw=0.8, label="target 0.9")
+    a2.set_xticks(n, [f"{m}m" for m in modes])
+    a2.set_ylabel("minimax move time / best shaper's, same residual")
+    a2.set_xlabel("axis (number of modes)")
+    a2.legend(fontsize=8)
+    a2.grid(alpha=0.3)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--quick", action="store_true")
+    args = ap.parse_args(argv)
+    n_axes = 3 if args.quick else 12
+    cases = []
+    for k, (f, z) in enumerate(draw_axes(n_axes)):
+        c = compare(f, z)
+        cases.append(c)
+        print(
+            f"axis {k}: f={np.round(f, 2).tolist()} z={np.round(z, 3).tolist()}: anchor {c['anchor']} "
+            f"{c['anchor_worst']:.3g} % at {c['anchor_time']:.3f} s; minimax same time {c['equal_time_worst']:.3g} % "
+            f"(x{c['equal_time_ratio']:.3f}); same residual in x{c['time_ratio']:.3f} time; replay {c['replay_rel']:.1e}",
+            flush=True,
+        )
+    sp = speed(3 if args.quick else 9)
+    ident = identification(range(3 if args.quick else 10))
+    ratios = np.array([c["equal_time_ratio"] for c in cases])
+    tratios = np.array([c["time_ratio"] for c in cases])
+    replays = np.array([c["replay_rel"] for c in cases])
+    headline = [
+        dict(
+            what="worst residual ratio minimax / best shaper, equal time and peaks (max over axes)",
+            value=float(ratios.max()),
+            unit="x",
+            target="<= 0.1",
+        ),
+        dict(what="median of that ratio", value=float(np.median(ratios)), unit="x", target=None),
+        dict(
+            what="move time at the best shaper's residual / its move time (max over axes)",
+            value=float(tratios.max()),
+            unit="x",
+            target="<= 0.9",
+        ),
+        dict(
+            what="exported 1 kHz samples: replayed residual vs stated (max relative difference)",
+            value=float(replays.max()),
+            unit="",
+            target="<= 0.01",
+        ),
+        dict(
+            what="identify_axis, 2 modes, 5 % noise: worst frequency error",
+            value=100 * ident["max_freq_err"],
+            unit="%",
+            target="<= 1",
+        ),
+        dict(
+            what="identify_axis, 2 modes, 5 % noise: worst damping error",
+            value=100 * ident["max_damping_err"],
+            unit="%",
+            target="<= 15",
+        ),
+    ]
+    for m, s in sp.items():
+        headline.append(
+            dict(what=f"design_move warm, {m} mode(s), median", value=s["warm_median_s"], unit="s", target="<= 1")
+        )
+        headline.append(
+            dict(
+                what=f"design_move in a fresh process, {m} mode(s), median",
+                value=s["fresh_median_s"],
+                unit="s",
+                target="<= 5",
+            )
+        )
+    rows = [
+        dict(
+            name=f"axis {k}",
+            method="design_move",
+            error=None,
+            median_s=c["plan_s"],
+            compile_s=None,
+            repeats=1,
+            **{key: val for key, val in c.items() if key != "plan_s"},
+        )
+        for k, c in enumerate(cases)
+    ]
+    out = results_dir(args.quick)
+    write_results("shaping_axis", rows, headline, quick=args.quick, extra=dict(speed=sp, identification=ident))
+    figure(cases, out / "shaping_axis.png")
+    for h in headline:
+        print(f"{h['what']}: {h['value']:.4g} {h['unit']} (target {h['target']})")
+    print(f"machine: {machine_info()}")
+
+
+if __name__ == "__main__":
+    main()
