@@ -62,12 +62,14 @@ _GROUPS = {
     "tests/test_notebooks.py::test_notebook_executes[03_fourbar]": "tests/test_fourbar.py",
     "tests/test_notebooks.py::test_notebook_executes[04_belt_spans]": "tests/test_string.py",
     "tests/test_notebooks.py::test_notebook_executes[05_nonlinear_belt]": "tests/test_nonlinear_harmonic.py",
+    "tests/test_notebooks.py::test_notebook_executes[06_shaping_axis]": "tests/test_shaping_axis.py",
     # the same tuning programs as test_fourbar.py's tune_pid test
     "tests/test_coldstart.py::test_tune_pid_": "tests/test_fourbar.py",
 }
 
 #: approximate seconds of one core per group (measured); only the order matters
 _COST = {
+    "tests/test_shaping_axis.py": 120,
     "tests/test_fourbar.py": 70,
     "tests/test_nonlinear_harmonic.py": 67,
     "tests/test_fuzz.py": 49,

@@ -43,7 +43,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import as_float_array
+from .._checks import as_float_array, is_concrete
 from ..models.axis import ModalAxis
 from .lp import LPResult, lp_value, solve_lp, solve_lp_data
 from .moves import SplineMove, peaks, phi1
@@ -215,7 +215,15 @@ def _solve_round_impl(problem: MinimaxProblem, opts: DesignOptions, tau, tol, ce
     return res._replace(lower_bound=stop(_lower_bound(prob_s, opts, tau, res, lp_data(prob_s, opts, tau)))), tau
 
 
-_solve_round = eqx.filter_jit(_solve_round_impl, compiler_options=_LP_COMPILE)  # pyright: ignore[reportCallIssue]
+_solve_round_top = eqx.filter_jit(_solve_round_impl, compiler_options=_LP_COMPILE)  # pyright: ignore[reportCallIssue]
+_solve_round_nested = eqx.filter_jit(_solve_round_impl)
+
+
+def _solve_round(problem, opts, tau, tol, certify=True):
+    # XLA options apply to top-level programs only: inside a caller's trace (grad, jit) the plain program
+    if is_concrete((problem, tau, tol)):
+        return _solve_round_top(problem, opts, tau, tol, certify)
+    return _solve_round_nested(problem, opts, tau, tol, certify)
 
 
 @eqx.filter_jit
@@ -354,7 +362,13 @@ def _max_distance_impl(problem: MinimaxProblem, opts: DesignOptions):
     return -solve_lp(c, G, hv, A, b, tol=1e-9, max_iter=100).value
 
 
-_max_distance = eqx.filter_jit(_max_distance_impl, compiler_options=_LP_COMPILE)  # pyright: ignore[reportCallIssue]
+_max_distance_top = eqx.filter_jit(_max_distance_impl, compiler_options=_LP_COMPILE)  # pyright: ignore[reportCallIssue]
+
+
+def _max_distance(problem, opts):
+    if is_concrete(problem):
+        return _max_distance_top(problem, opts)
+    return eqx.filter_jit(_max_distance_impl)(problem, opts)
 
 
 def max_distance(problem: MinimaxProblem, opts: DesignOptions) -> float:
