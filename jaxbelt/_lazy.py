@@ -58,6 +58,10 @@ def attach(package: str, path):
             module, attr = name, None  # a sub-module: `jaxbelt.models.fourbar` works without an import
         else:
             raise AttributeError(f"module {package!r} has no attribute {name!r}")
+        # jaxbelt's tracing contexts first (`_guard`: JAX user contexts, part of every jit cache key): made
+        # while a first program is being traced, they would change the key under it and every program
+        # compiled before would be compiled again at its next call
+        importlib.import_module("jaxbelt._guard")
         mod = importlib.import_module(f".{module}", package)  # may run inside a caller's jit (module docstring)
         value = mod if attr is None else getattr(mod, attr)
         setattr(sys.modules[package], name, value)  # later uses skip this function

@@ -64,6 +64,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._callables import by_value
 from .solution import SolveError
 
 _MAX_LISTED = 10
@@ -171,8 +172,15 @@ def sweep(fn, params, *, devices=None, check: bool = True, name: str | None = No
     - `name`: what the sweep is, used in the error message (default: the name of `fn`).
 
     Returns the batched result of `fn` (leading axis B), as `jax.vmap(fn)(params)` would.
+
+    Compiles once per program: a new `fn` with the same code and equal closed-over, default and global
+    values (numbers, arrays, models: compared by value) reuses the compiled sweep, so `sweep(lambda g: ...,
+    gains)` in a loop or a re-run notebook cell compiles once; a changed value compiles anew (it is a
+    constant of the program, as for `jax.jit`). `params` are data: new values of the same shapes reuse it.
     """
     n = _batch_size(params)
+    what = name or getattr(fn, "__name__", "fn")
+    fn = by_value(fn)
     devices = list(jax.local_devices() if devices is None else devices)
     n_dev = len(devices)
     if n_dev > 1:
@@ -197,7 +205,6 @@ def sweep(fn, params, *, devices=None, check: bool = True, name: str | None = No
             ok = np.asarray(ok).reshape(n, -1).all(axis=1)
             bad = np.flatnonzero(~ok)
             if bad.size:
-                what = name or getattr(fn, "__name__", "fn")
                 listed = "; ".join(f"[{i}] {_describe(params, int(i))}" for i in bad[:_MAX_LISTED])
                 more = f" (and {bad.size - _MAX_LISTED} more)" if bad.size > _MAX_LISTED else ""
                 err = SolveError(

@@ -32,10 +32,8 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jax.typing import ArrayLike
 
-from ._checks import is_concrete
 from .modal import MODAL_COND_LIMIT, exp_convolution, expm_solve, modal_decomposition, phi1
 
 RESONANCE_REL = 1e-2
@@ -56,7 +54,9 @@ def _exact_one(lam, X, q, s_b, tau):
     return jnp.real((conv * q[None, :]) @ X.T)
 
 
-def exp_input_batch(A, F, s, x0, t0, ts, f_var, s_var, *, uniform: bool = False, n_fix: int = 8, chunk: int = 256):
+def exp_input_batch(
+    A, F, s, x0, t0, ts, f_var, s_var, *, uniform: bool | None = None, n_fix: int = 8, chunk: int = 256
+):
     """States of $\\dot x = A x + \\sum_j F_{:,j}e^{s_j t} + f_b e^{s_b t}$ for a batch of $(f_b, s_b)$.
 
     - `A` (n, n), `F` (n, J), `s` (J,): the system and the inputs shared by the batch
@@ -64,7 +64,8 @@ def exp_input_batch(A, F, s, x0, t0, ts, f_var, s_var, *, uniform: bool = False,
     - `x0` (n,), `t0`: initial state at time `t0` [s]; `ts` (N,) output times;
     - `f_var` (n,) or (B, n): amplitude vector of the varying term; `s_var` (B,) its real
       rates [1/s] (e.g. $-1/\\gamma_b$);
-    - `uniform`: static promise that `ts` is evenly spaced (used by the expm fall-back only);
+    - `uniform`: whether `ts` is evenly spaced (`None`: decided from its values in the program; used by
+      the expm fall-back only);
     - `n_fix`: near-resonant elements per chunk corrected one by one (with more, the correction
       is evaluated for the whole chunk);
     - `chunk`: batch elements per chunk of the separated form (memory locality).
@@ -182,10 +183,7 @@ def startup_gamma_batch(
     A, F, s = model.exponential_form(ConstantVoltage(v_max))  # load torque + constant V_max
     f_var = -jnp.asarray(v_max, dtype=float) * model.linear_system()[1]
     x0 = jnp.zeros((A.shape[0],)) if y0 is None else jnp.asarray(y0, dtype=float)
-    uniform = False
-    if is_concrete(ts) and ts.shape[0] > 1:
-        d = np.diff(np.asarray(ts))
-        uniform = bool(np.allclose(d, d[0], rtol=1e-12, atol=0.0))
+    uniform = None  # decided from the values in the program (the expm fall-back only)
     t0 = ts[0] if t0 is None else jnp.asarray(t0, dtype=float)
     return exp_input_batch(A, F, s, x0, t0, ts, f_var, -1.0 / gammas, uniform=uniform, n_fix=n_fix, chunk=chunk)
 

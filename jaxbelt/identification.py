@@ -34,6 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from ._callables import by_value
 from ._checks import check_int, check_nonnegative, check_positive, require_x64
 
 __all__ = ["identify", "IdentifyResult"]
@@ -134,8 +135,9 @@ def identify(
 
     - `predict(params) -> array`: a JAX-differentiable function of a dict of scalar parameters,
       returning an array of the shape of `data` (a time series, or a few scalar features);
-      fixed parameters are closed over. Pass the same function object to repeated calls
-      (e.g. a Monte-Carlo over noise draws) to compile once.
+      fixed parameters are closed over. Repeated calls (e.g. a Monte-Carlo over noise draws) compile
+      once: a function with the same code and equal closed-over values reuses the program, a new lambda
+      included (`data`, `sigma` and `params0` are data: new values of the same shapes reuse it).
     - `params0`: initial values, `{name: float}`; positive ones are fitted in log space.
     - `data`: the measurements, array of any shape.
     - `sigma`: standard deviation of the noise on `data` [data units]: a scalar or an array
@@ -183,7 +185,7 @@ def identify(
         w = 1.0 / sig
     is_log, scale = _transform(p0)
     args = (
-        predict,
+        by_value(predict),  # keyed by its code and values: a new lambda of the same code reuses the program
         names,
         jnp.asarray(p0),
         jnp.asarray(data),

@@ -10,7 +10,8 @@ model driven by a sum of exponentials (constants are $s_j = 0$). Two independent
   (the rigid-body mode of the belt drive has $\\lambda = 0$ exactly);
 - **expm**: the exponential generators are appended to the state, $w_j' = s_j w_j$, and the
   augmented homogeneous system is advanced by its matrix exponential. On a uniform time grid one
-  exponential $\\Phi = e^{A_a\\Delta t}$ is computed and applied step by step.
+  exponential $\\Phi = e^{A_a\\Delta t}$ is computed and applied step by step (decided from the values
+  of the grid inside the program: grids of any spacing share one program).
 
 The modal form needs a diagonalisable A. When the eigenvector matrix is ill-conditioned
 (repeated eigenvalues, e.g. a critically damped belt) `modal_solve` falls back to the expm form.
@@ -97,18 +98,35 @@ def augmented_matrix(A, F, s):
     return jnp.concatenate([top, bot], axis=0)
 
 
-def expm_solve(A, F, s, x0, t0, ts, uniform: bool = False):
+#: a grid is evenly spaced when every step is within this fraction of the first (as `Scene` decides)
+UNIFORM_RTOL = 1e-12
+
+
+def is_uniform(ts):
+    """Whether the times `ts` (N,) are evenly spaced to `UNIFORM_RTOL` (a traced boolean)."""
+    d = jnp.diff(ts)
+    return jnp.max(jnp.abs(d - d[0])) <= UNIFORM_RTOL * jnp.abs(d[0])
+
+
+def expm_solve(A, F, s, x0, t0, ts, uniform: bool | None = False):
     """States at times `ts` (shape (N, n)) by the matrix exponential of the augmented system.
 
-    `uniform=True` (a static promise that `ts` is evenly spaced) uses one exponential and a
-    scan of matrix-vector products; otherwise each time gets its own exponential.
+    On an evenly spaced grid one exponential $\\Phi = e^{A_a\\Delta t}$ is computed and the state is
+    stepped by matrix-vector products (a scan); otherwise each time gets its own exponential.
+    `uniform`: `True`, a static promise that `ts` is evenly spaced (the step is taken as
+    `(ts[-1] - ts[0]) / (N - 1)`); `False`, the general path; `None`, decided from the values of `ts`
+    inside the program (one program for grids of any spacing).
     """
     require_x64("jaxbelt.modal.expm_solve")
     n = A.shape[0]
     Aa = augmented_matrix(A, F, s)
     z0 = jnp.concatenate([x0, jnp.exp(s * t0)])
     ts = jnp.asarray(ts)
-    if uniform and ts.shape[0] > 1:
+
+    def general():
+        return jax.vmap(lambda t: expm(Aa * (t - t0)) @ z0)(ts)
+
+    def stepped():
         dt = (ts[-1] - ts[0]) / (ts.shape[0] - 1)
         Phi = expm(Aa * dt)
         z_first = expm(Aa * (ts[0] - t0)) @ z0
@@ -118,9 +136,14 @@ def expm_solve(A, F, s, x0, t0, ts, uniform: bool = False):
             return z_next, z_next
 
         _, zs = jax.lax.scan(step, z_first, None, length=ts.shape[0] - 1)
-        zs = jnp.concatenate([z_first[None], zs], axis=0)
+        return jnp.concatenate([z_first[None], zs], axis=0)
+
+    if ts.shape[0] < 2 or uniform is False:
+        zs = general()
+    elif uniform:
+        zs = stepped()
     else:
-        zs = jax.vmap(lambda t: expm(Aa * (t - t0)) @ z0)(ts)
+        zs = jax.lax.cond(is_uniform(ts), stepped, general)
     return zs[:, :n]
 
 
@@ -153,7 +176,7 @@ def modal_solve_raw(A, F, s, x0, t0, ts):
     return jax.vmap(at)(tau), cond
 
 
-def modal_solve(A, F, s, x0, t0, ts, uniform: bool = False):
+def modal_solve(A, F, s, x0, t0, ts, uniform: bool | None = False):
     """Modal closed form, falling back to `expm_solve` when X is ill-conditioned."""
     require_x64("jaxbelt.modal.modal_solve")
     xs, cond = modal_solve_raw(A, F, s, x0, t0, ts)

@@ -59,11 +59,12 @@ class Scene(eqx.Module):
     - `y0`: initial state (default: the model's rest state), shape `(model.n_states,)`.
     - `state`: whether the full state history `ys` is returned (set `False` to get only
       the observed outputs).
-    - `uniform`: whether `ts` is evenly spaced. Default `None`: read from the values when they are
-      concrete. Under `jax.jit` with a traced `ts` the spacing cannot be seen; the closed form then
-      takes one matrix exponential per output time (slower) and a `TracedGridWarning` says so, unless
-      you pass `uniform=True` (a promise: the spacing is taken as `(ts[-1] - ts[0]) / (N - 1)`) or
-      `uniform=False` (explicitly the general path, no warning).
+    - `uniform`: whether `ts` is evenly spaced. Default `None`: for concrete times the closed form reads
+      the spacing from the values inside its compiled program (one program for grids of any spacing;
+      an evenly spaced grid is stepped with one transition matrix). Under `jax.jit` with a traced `ts`
+      the closed form takes one matrix exponential per output time (slower) and a `TracedGridWarning`
+      says so, unless you pass `uniform=True` (a promise: the spacing is taken as
+      `(ts[-1] - ts[0]) / (N - 1)`) or `uniform=False` (explicitly the general path, no warning).
 
     Times and the initial state are data: a new grid, start time or initial state of the same
     shape does not recompile `simulate`.
@@ -77,7 +78,7 @@ class Scene(eqx.Module):
     observe: tuple[str, ...] = eqx.field(static=True, default=())
     y0: jnp.ndarray | None = None
     state: bool = eqx.field(static=True, default=True)
-    uniform: bool = eqx.field(static=True, default=False)
+    uniform: bool | None = eqx.field(static=True, default=False)
 
     def __init__(self, model, input, ts=None, *, t0=None, t1=None, observe=None, y0=None, state=True, uniform=None):
         types = getattr(type(model), "input_types", None)
@@ -132,12 +133,12 @@ class Scene(eqx.Module):
                     raise ValueError(
                         f"Scene: `ts` must be strictly increasing; ts[{i}] = {tv[i]} >= ts[{i + 1}] = {tv[i + 1]}"
                     )
-                # evenly spaced to 1e-12 relative (np.allclose(d, d[0], rtol=1e-12, atol=0), without its overhead)
-                seen = bool(d.size > 0 and np.abs(d - d[0]).max() <= 1e-12 * abs(d[0]))
-                if uniform is None:
-                    uniform = seen
-                elif uniform and not seen:
-                    raise ValueError("Scene: `uniform=True` but `ts` is not evenly spaced")
+                if uniform:
+                    # evenly spaced to 1e-12 relative (np.allclose(d, d[0], rtol=1e-12, atol=0), without its overhead)
+                    if not (d.size > 0 and np.abs(d - d[0]).max() <= 1e-12 * abs(d[0])):
+                        raise ValueError("Scene: `uniform=True` but `ts` is not evenly spaced")
+                # uniform=None: the closed form reads the spacing from the values inside its program, so that
+                # grids of any spacing are data (one program), and takes one transition matrix where it is even
             elif uniform is None:
                 if ts.shape[0] > 2:
                     warnings.warn(
@@ -149,7 +150,7 @@ class Scene(eqx.Module):
                     )
                 uniform = False
             self.ts = ts
-            self.uniform = bool(uniform)
+            self.uniform = None if uniform is None else bool(uniform)
             # None: the start is ts[0], taken inside the compiled program (no device op here)
             self.t0 = start = None if t0 is None else jnp.asarray(t0, dtype=float)
             if start is not None and jnp.ndim(start) != 0:

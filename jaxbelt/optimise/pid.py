@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
+from .._callables import by_value
 from .._checks import check_penalised_limits, check_positive
 from ..models.motor import PID, check_pid_nonnegative
 from ..objectives.fluctuation import closed_loop_metrics
@@ -103,7 +104,8 @@ def tune_pid(
         state: Any = opt.init(jnp.zeros(3))  # inject_hyperparams' state (optax types the union of its states)
         state.hyperparams["learning_rate"] = jnp.asarray(learning_rate, dtype=float)
     else:
-        opt = optimizer
+        # keyed by its functions' code and values: `optax.adam(0.07)` made anew reuses the compiled step
+        opt = jax.tree_util.tree_map(by_value, optimizer)
         state = opt.init(jnp.zeros(3))
     # Values travel as arrays (traced: a new value reuses the compiled step); only what fixes the
     # shapes or the program is static: t1 (the output grid), the method, and the RK4 step.
