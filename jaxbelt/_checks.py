@@ -177,6 +177,8 @@ def _enforce(name: str, value, what: str, unit: str, owner: str, ok) -> None:
     one Python float (a jax array keeps its host copy after the first read, so a cached default costs no
     transfer)."""
     t = type(value)
+    if t is not float and t is not int:
+        check_real(name, value, unit, owner)
     known = _HOST.get(id(value))
     if known is not None and known[0] is value:
         v = known[1]
@@ -194,6 +196,49 @@ def _enforce(name: str, value, what: str, unit: str, owner: str, ok) -> None:
         record(ok(jnp.asarray(value), jnp), _message(name, what, unit, owner))
         return
     _check_host(name, _values(value), what, unit, owner, ok)
+
+
+def _describe(value) -> str:
+    text = repr(value)
+    if len(text) > 60:
+        text = text[:57] + "..."
+    dtype = getattr(value, "dtype", None)
+    return f"{text} ({type(value).__name__}{'' if dtype is None else f' of dtype {dtype}'})"
+
+
+def check_real(name: str, value, unit: str = "", owner: str = "") -> None:
+    """Raise `TypeError` naming `name` unless `value` is a real number or an array (or sequence) of them: a
+    string, bytes, a complex number, a bool, None or a mapping would otherwise fail inside NumPy or JAX with a
+    message that names nothing, or pass silently (True as 1, a complex value without its imaginary part)."""
+    bad = value is None or isinstance(value, bool | np.bool_ | str | bytes | complex | dict | set)
+    if not bad:
+        kind = getattr(getattr(value, "dtype", None), "kind", None)
+        if kind is not None:
+            bad = kind not in "fiu"
+        elif isinstance(value, list | tuple):
+            bad = not all(
+                isinstance(v, numbers.Real) and not isinstance(v, bool)
+                for v in np.ravel(np.asarray(value, dtype=object))
+            )
+        else:
+            bad = not isinstance(value, numbers.Real)
+    if bad:
+        where = f"{owner}: " if owner else ""
+        raise TypeError(
+            f"{where}parameter `{name}` must be a real number or an array of real numbers"
+            f"{(' [' + unit + ']') if unit else ''}; got {_describe(value)}"
+        )
+
+
+def check_scalar(name: str, value, unit: str = "", owner: str = "") -> None:
+    """`check_real`, and `ValueError` naming `name` unless `value` is a single number (a 0-d array or tracer)."""
+    check_real(name, value, unit, owner)
+    if np.ndim(value) != 0:
+        where = f"{owner}: " if owner else ""
+        raise ValueError(
+            f"{where}parameter `{name}` must be a scalar{(' [' + unit + ']') if unit else ''}; got an array of shape "
+            f"{np.shape(value)}"
+        )
 
 
 def _positive(v, xp):

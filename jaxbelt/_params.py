@@ -132,16 +132,72 @@ def param(
     meta = {
         _KEY: Param(unit, doc, check, lo, hi, lo_open, hi_open, shape, symbol, default_note, batch, optional, valid)
     }
-    convert = as_float_array if converter is None else converter
-    if optional:
-        base = convert
-
-        def convert(x):
-            return None if x is None else base(x)
-
+    convert = _Convert(as_float_array if converter is None else converter, optional, unit)
     if default is dataclasses.MISSING:
         return eqx.field(converter=convert, metadata=meta)
     return eqx.field(converter=convert, default=default, metadata=meta)
+
+
+def _describe(x) -> str:
+    """A value in a message: short, with its type."""
+    text = repr(x)
+    if len(text) > 60:
+        text = text[:57] + "..."
+    dtype = getattr(x, "dtype", None)
+    return f"{text} ({type(x).__name__}{'' if dtype is None else f' of dtype {dtype}'})"
+
+
+class _Convert:
+    """The converter of a declared parameter: `base` (the float converter of every model, or the field's
+    own) after refusing what is not a real number or an array of them, by the parameter's name.
+
+    A string, a complex number, a bool or None (of a parameter that is not optional) would otherwise fail
+    inside JAX's conversion with a message that names no parameter (`could not convert string to float`),
+    or pass silently (a bool as 1.0, a complex value without its imaginary part). The field's name and its
+    class are filled in when the class is made (`Parametrised.__init_subclass__`)."""
+
+    __slots__ = ("base", "optional", "unit", "name", "owner")
+
+    def __init__(self, base, optional: bool, unit: str):
+        self.base, self.optional, self.unit = base, optional, unit
+        self.name, self.owner = "?", ""
+
+    def refuse(self, x, why: str = ""):
+        where = f"{self.owner}: " if self.owner else ""
+        unit = f" [{self.unit}]" if self.unit not in ("", "–", "-") else ""
+        raise TypeError(
+            f"{where}parameter `{self.name}` must be a real number or an array of real numbers{unit}"
+            f"{'' if not why else ' (' + why + ')'}; got {_describe(x)}"
+        )
+
+    def __call__(self, x):
+        t = type(x)
+        if t is float or t is int:  # the common case (defaults, literals): nothing to refuse
+            return self.base(x)
+        if x is None:
+            if self.optional:
+                return None
+            self.refuse(x)
+        if isinstance(x, bool | complex | str | bytes):
+            self.refuse(x)
+        kind = getattr(getattr(x, "dtype", None), "kind", "f")
+        if kind not in "fiu":  # bool, complex, strings, objects
+            self.refuse(x, "complex values would lose their imaginary part" if kind == "c" else "")
+        try:
+            return self.base(x)
+        except (TypeError, ValueError) as e:
+            if "parameter `" in str(e):  # the field's own converter names it already
+                raise
+            self.refuse(x)
+
+
+def converted(cls, name: str, value):
+    """`value` through the converter of `cls`'s declared parameter `name` (for a class with an `__init__` of
+    its own that reshapes its arguments before the fields are set: the type is refused by the parameter's
+    name, as in a generated `__init__`)."""
+    field = next(f for f in dataclasses.fields(cls) if f.name == name)
+    convert = field.metadata.get("converter", as_float_array)
+    return convert(value)
 
 
 def option(
@@ -328,6 +384,15 @@ class Parametrised(eqx.Module):
     parameter alone, so that a bad value is named as such and not through a relation it breaks.
     Subclasses do not define `__check_init__`.
     """
+
+    def __init_subclass__(cls, **kwargs):
+        super().__init_subclass__(**kwargs)
+        # the converters of the fields declared here learn their names (for the messages of `_Convert`)
+        for name, value in list(vars(cls).items()):
+            if isinstance(value, dataclasses.Field) and _KEY in value.metadata:
+                convert = value.metadata.get("converter")
+                if isinstance(convert, _Convert):
+                    convert.name, convert.owner = name, cls.__name__
 
     def __check_init__(self):
         spec = _spec(type(self))

@@ -64,7 +64,7 @@ def test_the_table_says_default_unit_range_and_shape():
     assert "| `damping` | $\\xi$ | – | (0.01219, 0.02713) (identified) | [0, 1); an array |" in table
     assert '| `sensor_pulley` | – | – | `"idle"` | one of `"drive"`, `"idle"` (static) |' in table
     assert "| `n_modes` | $N$ | – | 1 | integer >= 1 (static) |" in table
-    assert "| `gamma` | $\\gamma$ | s | 0.02 | > 0; or a 1-D batch | time constant |" in (
+    assert "| `gamma` | $\\gamma$ | s | 0.02 | [1e-06, inf); or a 1-D batch | time constant (" in (
         _params.parameter_table(jb.ExponentialVoltage)
     )
     assert "| `v_limit` | $V_{lim}$ | V | None | > 0; or None |" in _params.parameter_table(jb.PID)

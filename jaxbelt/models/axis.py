@@ -26,7 +26,7 @@ from jaxtyping import Array, Float
 
 from .._checks import as_float_array, is_concrete, record
 from .._model import AbstractModel, observable
-from .._params import document, param
+from .._params import converted, document, param
 from ..commands import AbstractMotionCommand
 
 
@@ -73,10 +73,11 @@ class ModalAxis(AbstractModel):
     array_fields: ClassVar[tuple[str, ...]] = ("frequency_std", "damping_std")
 
     def __init__(self, frequencies, damping_ratios, gains=None, *, frequency_std=None, damping_std=None):
-        f = jnp.atleast_1d(as_float_array(frequencies))
+        # the declared converters: a value of the wrong type is refused by the parameter's name
+        f = jnp.atleast_1d(converted(ModalAxis, "frequencies", frequencies))
         self.frequencies = f
-        self.damping_ratios = jnp.atleast_1d(as_float_array(damping_ratios))
-        self.gains = jnp.ones_like(f) if gains is None else jnp.atleast_1d(as_float_array(gains))
+        self.damping_ratios = jnp.atleast_1d(converted(ModalAxis, "damping_ratios", damping_ratios))
+        self.gains = jnp.ones_like(f) if gains is None else jnp.atleast_1d(converted(ModalAxis, "gains", gains))
         self.frequency_std = None if frequency_std is None else jnp.atleast_1d(as_float_array(frequency_std))
         self.damping_std = None if damping_std is None else jnp.atleast_1d(as_float_array(damping_std))
 

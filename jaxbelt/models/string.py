@@ -120,10 +120,10 @@ def _check_subcritical(speed, critical, owner: str, name: str = "speed"):
                 f"(at and above it the span has no stiffness, eq. 39); got |{name}| up to {worst:.6g} m/s"
             )
         return speed
-    # a critical speed that is not finite comes from invalid parameters: their own check reports it
+    # a critical speed that is not finite and > 0 comes from invalid parameters: their own check reports it
     return error_if(
         speed,
-        jnp.any(~(jnp.abs(speed) < critical) & jnp.isfinite(critical)),
+        jnp.any(~(jnp.abs(speed) < critical) & jnp.isfinite(critical) & (critical > 0)),
         f"{owner}: `{name}` must be below the critical speed sqrt(T/rho)",
     )
 
@@ -451,7 +451,7 @@ def _roots(k, c, s):
 def _positive_int(value, name, owner) -> int:
     """A positive integer argument (static): anything else, a fraction included, is refused, not truncated."""
     ok = False
-    if not isinstance(value, bool) and np.ndim(value) == 0 and is_concrete(value):
+    if not isinstance(value, bool | str | bytes) and np.ndim(value) == 0 and is_concrete(value):
         try:
             v = float(value)
             ok = np.isfinite(v) and v >= 1 and v == int(v)
