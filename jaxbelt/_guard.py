@@ -23,6 +23,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import functools
+import re
 import threading
 from collections.abc import Callable
 from typing import Any, Literal
@@ -283,6 +284,41 @@ def error_if(value, pred, message: str):
         return x
 
     return jax.tree_util.tree_map(one, value)
+
+
+_RUNTIME_MESSAGE = re.compile(r"EquinoxRuntimeError: (.*?)\n\s*\n\s*-{5,}", re.DOTALL)
+
+
+def runtime_message(error: BaseException) -> str | None:
+    """The message of the check that failed inside a compiled program, from the run-time error JAX raises
+    (`equinox.EquinoxRuntimeError` under `eqx.filter_jit`, `JaxRuntimeError` wrapping it under `jax.jit`,
+    checkify's `JaxRuntimeError` in a `host_checked` program); None when `error` is not such an error.
+
+    Their text starts with the stack of the program ("Above is the stack outside of JIT", a host callback's
+    traceback); a caller that runs a program for the user re-raises with this message first (`reraise_checks`).
+    """
+    text = str(error)
+    found = _RUNTIME_MESSAGE.search(text)
+    if found:
+        return found.group(1).strip()
+    if type(error).__name__ == "JaxRuntimeError" and "Traceback" not in text and text.strip():
+        return text.strip().splitlines()[0].split(" (`check` failed")[0]  # a checkify check: its message first
+    return None
+
+
+@contextlib.contextmanager
+def reraise_checks(owner: str, context: str = ""):
+    """Inside the block, a check that fails at run time inside a compiled program (a parameter out of its
+    range in a model the user's function builds, ...) is re-raised as `ValueError` whose message leads with
+    the check's own (the parameter, its range), then `context` (what was being run), instead of JAX's
+    stack. Any other error passes unchanged."""
+    try:
+        yield
+    except (eqx.EquinoxRuntimeError, jax.errors.JaxRuntimeError) as e:
+        message = runtime_message(e)
+        if message is None:
+            raise
+        raise ValueError(f"{owner}: {message}{f' ({context})' if context else ''}") from e
 
 
 def all_ok(checks):

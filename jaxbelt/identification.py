@@ -36,6 +36,7 @@ import optimistix as optx
 
 from ._callables import by_value
 from ._checks import check_int, check_nonnegative, check_positive, require_x64
+from ._guard import reraise_checks
 
 __all__ = ["identify", "IdentifyResult"]
 
@@ -116,7 +117,21 @@ def _fit(predict, names, p0, data, w, is_log, scale, solver_kind, jac_mode, rtol
     u = sol.value
     # the residual at the solution comes with its Jacobian (one evaluation of the prediction)
     jac, r = (jax.jacfwd if jac_mode == "fwd" else jax.jacrev)(lambda v: (resid(v, None),) * 2, has_aux=True)(u)
-    return u, r, jac, sol.result == optx.RESULTS.successful, sol.stats["num_steps"]
+    return u, r, jac, sol.result == optx.RESULTS.successful, sol.stats["num_steps"], sol.result
+
+
+def _real_array(name: str, value) -> np.ndarray:
+    """`value` as a float numpy array, refusing what is not real numbers (complex, strings, bools) by name."""
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError):
+        arr = np.asarray(value, dtype=object)
+    if arr.dtype.kind not in "fiu":
+        raise ValueError(
+            f"identify: parameter `{name}` must be an array of real numbers; got {type(value).__name__} of dtype "
+            f"{arr.dtype}"
+        )
+    return arr.astype(float)
 
 
 def identify(
@@ -153,8 +168,19 @@ def identify(
     prediction is not finite at the optimum.
     """
     require_x64("identify")
+    if not callable(predict):
+        raise TypeError(
+            f"identify: parameter `predict` must be a function params -> array; got {type(predict).__name__}"
+        )
     if not isinstance(params0, dict) or not params0:
         raise ValueError("identify: `params0` must be a non-empty dict {name: initial value}")
+    for name, value in params0.items():
+        if not isinstance(name, str):
+            raise TypeError(f"identify: the keys of `params0` must be parameter names (str); got {name!r}")
+        if isinstance(value, bool | complex | str | bytes) or np.ndim(value) != 0:
+            raise ValueError(
+                f"identify: parameter `params0[{name!r}]` (an initial value) must be a real number; got {value!r}"
+            )
     if solver not in _SOLVERS:
         raise ValueError(f"identify: `solver` must be one of {_SOLVERS}; got {solver!r}")
     if jac not in ("fwd", "bwd"):
@@ -163,13 +189,16 @@ def identify(
     check_nonnegative("atol", atol, owner="identify")
     check_int("identify", "max_steps", max_steps)
     names = tuple(params0)
-    p0 = np.array([float(params0[n]) for n in names])
+    try:
+        p0 = np.array([float(params0[n]) for n in names])
+    except (TypeError, ValueError):
+        raise ValueError(f"identify: the initial values `params0` must be real numbers; got {params0!r}") from None
     if not np.all(np.isfinite(p0)):
         bad = [n for n, v in zip(names, p0) if not np.isfinite(v)]
         raise ValueError(f"identify: initial values must be finite; got non-finite {bad}")
-    data = np.asarray(data, dtype=float)
+    data = _real_array("data", data)
     if data.size == 0 or not np.all(np.isfinite(data)):
-        raise ValueError("identify: `data` must be a non-empty array of finite values")
+        raise ValueError("identify: parameter `data` must be a non-empty array of finite values")
     n, N = len(names), data.size
     if sigma is None:
         if N <= n:
@@ -179,7 +208,14 @@ def identify(
             )
         w = np.ones_like(data)
     else:
-        sig = np.broadcast_to(np.asarray(sigma, dtype=float), data.shape)
+        sig = _real_array("sigma", sigma)
+        try:
+            sig = np.broadcast_to(sig, data.shape)
+        except ValueError:
+            raise ValueError(
+                f"identify: parameter `sigma` must be a scalar or an array broadcastable to the shape of `data` "
+                f"{data.shape}; got shape {sig.shape}"
+            ) from None
         if not np.all(np.isfinite(sig)) or np.any(sig <= 0):
             raise ValueError("identify: `sigma` (noise standard deviation, data units) must be finite and > 0")
         w = 1.0 / sig
@@ -194,27 +230,55 @@ def identify(
         jnp.asarray(scale),
         solver,
     )
-    try:
-        u, r, jmat, ok, steps = _fit(*args, jac, rtol, atol, int(max_steps))
-    except TypeError as e:
-        if jac != "fwd" or "custom_vjp" not in str(e):
-            raise
-        # `predict` holds a reverse-mode-only solve (diffrax's default adjoint): use a reverse Jacobian
-        warnings.warn(
-            "identify: `predict` cannot be differentiated in forward mode (a simulate(...) with the default "
-            "reverse-mode adjoint); using jac='bwd'. Pass adjoint='forward' to simulate for the faster forward Jacobian.",
-            stacklevel=2,
-        )
-        u, r, jmat, ok, steps = _fit(*args, "bwd", rtol, atol, int(max_steps))
+    # a check inside `predict` (a model built from the parameters, ...) fails inside the compiled fit: its
+    # message comes first, not JAX's stack
+    context = (
+        f"inside `predict`, at the start values {dict(zip(names, p0.tolist()))} or at a step of the fit: a "
+        "parameter that starts > 0 is fitted in log space and stays > 0, one that starts <= 0 is fitted linearly "
+        "and may cross zero"
+    )
+    with reraise_checks("identify", context):
+        try:
+            u, r, jmat, ok, steps, result = _fit(*args, jac, rtol, atol, int(max_steps))
+        except TypeError as e:
+            if jac != "fwd" or "custom_vjp" not in str(e):
+                raise
+            # `predict` holds a reverse-mode-only solve (diffrax's default adjoint): use a reverse Jacobian
+            warnings.warn(
+                "identify: `predict` cannot be differentiated in forward mode (a simulate(...) with the default "
+                "reverse-mode adjoint); using jac='bwd'. Pass adjoint='forward' to simulate for the faster forward "
+                "Jacobian.",
+                stacklevel=2,
+            )
+            u, r, jmat, ok, steps, result = _fit(*args, "bwd", rtol, atol, int(max_steps))
     u, r, jmat = np.asarray(u), np.asarray(r), np.asarray(jmat)
-    if not bool(ok):
-        raise RuntimeError(
-            f"identify: the {solver.upper()} solver did not converge in {int(steps)} steps "
-            f"(parameters {names}); try better initial values or a larger `max_steps`"
-        )
-    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(jmat))):
-        raise RuntimeError("identify: the prediction or its Jacobian is not finite at the optimum")
     p = np.asarray(_to_params(u, p0, is_log, scale))
+    at = dict(zip(names, p.tolist()))
+    if not np.all(np.isfinite(r)):
+        where = "at the start values" if not np.any(u) else "at a step of the fit"
+        bad = np.flatnonzero(~np.isfinite(r))
+        raise RuntimeError(
+            f"identify: `predict` returned non-finite values (NaN or inf at {bad.size} of {r.size} points, the "
+            f"first at flat index {int(bad[0])}) {where}, parameters {at}: NaN in the model, not a convergence "
+            "problem. Check `predict` at these values (a parameter outside the model's range, a failed "
+            "simulation inside it: simulate(..., throw=False) returns NaN for it), or start elsewhere"
+        )
+    if not bool(ok):
+        reason = optx.RESULTS[result]
+        steps = int(steps)
+        if bool(result == optx.RESULTS.max_steps_reached) or bool(result == optx.RESULTS.nonlinear_max_steps_reached):
+            what = (
+                f"reached the step limit max_steps={int(max_steps)} without converging (cost "
+                f"{float(r @ r):.6g}); raise `max_steps`, or start nearer the optimum"
+            )
+        else:
+            what = f"stopped after {steps} steps: {reason} Try other initial values or the other solver"
+        raise RuntimeError(f"identify: the {solver.upper()} solver {what} (parameters at the stop: {at})")
+    if not np.all(np.isfinite(jmat)):
+        raise RuntimeError(
+            f"identify: the Jacobian of `predict` is not finite at the optimum {at} (a parameter at which the "
+            "model is not differentiable, or an overflow in its derivative)"
+        )
     cost = float(r @ r)
     dof = N - n
     s2 = cost / dof if sigma is None else 1.0

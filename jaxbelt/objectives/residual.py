@@ -211,6 +211,11 @@ def residual_energy(
     if method not in ("quadrature", "ode"):
         raise ValueError(f"residual_energy: `method` must be 'quadrature' or 'ode'; got {method!r}")
     check_int(o, "n_nodes", n_nodes, _MIN_NODES)
+    if n_nodes > _MAX_NODES:  # the nodes come from an n x n eigenproblem: memory and time grow as n^2, n^3
+        raise ValueError(
+            f"{o}: parameter `n_nodes` must be an integer in [{_MIN_NODES}, {_MAX_NODES}]; got {n_nodes} "
+            "(a move that needs more nodes holds too many vibration periods for the quadrature: method='ode')"
+        )
     if method == "quadrature":  # the tolerances play no part: fixed values keep one compiled program
         rtol, atol, max_steps = 0.0, 0.0, 0
         checks = traced_checks(plat, cmd)  # empty when the values are concrete (checked at construction)
@@ -228,10 +233,11 @@ def residual_energy(
     if is_concrete(err):
         if not float(err) <= QUADRATURE_TOL:
             wT = float(plat.omega_d * _end(cmd))
+            need = int(2.5 * wT) + 32
+            way = f"pass n_nodes >= {need} or method='ode'" if need <= _MAX_NODES else "pass method='ode'"
             raise ValueError(
                 f"residual_energy: the {n_nodes}-node quadrature does not resolve the vibration during the move "
-                f"(omega_d*T = {wT:.0f} rad, estimated relative error {float(err):.1e} > {QUADRATURE_TOL:g}); "
-                f"pass n_nodes >= {int(2.5 * wT) + 32} or method='ode'"
+                f"(omega_d*T = {wT:.0f} rad, estimated relative error {float(err):.1e} > {QUADRATURE_TOL:g}); {way}"
             )
     else:
         H = error_if(
@@ -245,6 +251,8 @@ def residual_energy(
 
 #: Fewest Gauss-Legendre nodes of the quadrature (its error estimate compares with a rule of 3/4 as many).
 _MIN_NODES = 8
+#: Most nodes: the rule's nodes come from an n x n eigenproblem (2048: 32 MiB, a fraction of a second)
+_MAX_NODES = 2048
 
 
 def _end(cmd):

@@ -12,13 +12,15 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import warnings
 
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from ..._checks import check_int
+from ..._checks import check_int, is_concrete
+from ..._guard import reraise_checks
 from .harmonic import fold_speeds, jumps
 from .model import NonlinearBelt
 
@@ -137,13 +139,15 @@ def jump_residuals(belt: NonlinearBelt, n_harmonics: int = 3, *, amplitudes: boo
 class Calibration(eqx.Module):
     """Result of `calibrate`: the identified `belt`, the weighted residuals `residuals`, `cost`
     (half the sum of squares), the model's four `fold_speeds` [m/s] (as `model_fold_speeds`) and
-    the solver `success`."""
+    the solver `success`; `message` says why it failed and what to do ("" on success; a failure is also
+    warned about, `RuntimeWarning`)."""
 
     belt: NonlinearBelt
     residuals: jnp.ndarray
     cost: jnp.ndarray
     fold_speeds: jnp.ndarray
     success: jnp.ndarray
+    message: str = eqx.field(static=True, default="")
 
 
 _FREE = ("wave_speed", "damping", "v_l")
@@ -200,36 +204,89 @@ def calibrate(
       fold speeds exclude (the amplitudes at a fold are set by how far the fold lies above the
       crossing, i.e. by the fold speeds themselves).
     """
+    o = "calibrate"
     belt = NonlinearBelt() if belt is None else belt
+    if not isinstance(belt, NonlinearBelt):
+        raise TypeError(f"{o}: parameter `belt` must be a NonlinearBelt (or None); got {type(belt).__name__}")
+    if isinstance(free, str) or not isinstance(free, tuple | list) or not free:
+        raise ValueError(f"{o}: parameter `free` must be a non-empty tuple of names among {_FREE}; got {free!r}")
     for f in free:
         if f not in _FREE:
-            raise ValueError(f"calibrate: parameter `free` may name {_FREE}; got {f!r}")
+            raise ValueError(f"{o}: parameter `free` may name {_FREE}; got {f!r}")
     free = tuple(free)
-    n_harmonics = check_int("calibrate", "n_harmonics", n_harmonics)
-    max_steps = check_int("calibrate", "max_steps", max_steps)
+    if len(set(free)) != len(free):
+        raise ValueError(f"{o}: parameter `free` names a field twice; got {free!r}")
+    if not isinstance(amplitudes, bool):
+        raise TypeError(f"{o}: parameter `amplitudes` must be True or False; got {amplitudes!r}")
+    n_harmonics = check_int(o, "n_harmonics", n_harmonics)
+    max_steps = check_int(o, "max_steps", max_steps)
+    if not is_concrete(belt):
+        raise ValueError(f"{o}: the start `belt` must hold concrete values (calibrate is not traced)")
+    for f in free:  # fitted in log coordinates: a start at 0 has no logarithm
+        v = np.asarray(getattr(belt, f), dtype=float)
+        if not np.all(v > 0):
+            raise ValueError(
+                f"{o}: the start value of the free field `{f}` must be > 0 (the fit works on its logarithm); got "
+                f"{v.tolist()}"
+            )
+    top = max(MODE1_RANGE[1], MODE2_RANGE[1])
+    if float(belt.wave_speed) <= top:
+        raise ValueError(
+            f"{o}: parameter `wave_speed` of the start belt must exceed the running speeds the measurements are "
+            f"matched over (up to {top:g} m/s: the jumps lie there, and the belt must be sub-critical); got "
+            f"{float(belt.wave_speed):g} m/s"
+        )
     belt = two_mode(belt)
     shapes = tuple(tuple(int(d) for d in jnp.shape(getattr(belt, f))) for f in free)
     build, fn = _log_problem(free, shapes, n_harmonics, bool(amplitudes))
 
     p0 = jnp.concatenate([jnp.log(jnp.ravel(jnp.asarray(getattr(belt, f), float))) for f in free])
     # reverse-mode Jacobian: four residuals, one backward pass each
-    sol = optx.least_squares(
-        fn,
-        optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8),
-        p0,
-        args=belt,
-        max_steps=max_steps,
-        throw=False,
-        options=dict(jac="bwd"),
-    )
-    out = build(sol.value, belt)
-    r = fn(sol.value, belt)
+    with reraise_checks(o, "at a step of the fit: the free fields left their valid range"):
+        sol = optx.least_squares(
+            fn,
+            optx.LevenbergMarquardt(rtol=1e-8, atol=1e-8),
+            p0,
+            args=belt,
+            max_steps=max_steps,
+            throw=False,
+            options=dict(jac="bwd"),
+        )
+        out = build(sol.value, belt)
+        r = fn(sol.value, belt)
+        folds = model_fold_speeds(out, n_harmonics)
+    success = sol.result == optx.RESULTS.successful
+    message = "" if bool(success) else _failure(sol, r, folds, max_steps, free)
+    if message:
+        warnings.warn(message, RuntimeWarning, stacklevel=2)
     return Calibration(
-        belt=out,
-        residuals=r,
-        cost=0.5 * jnp.sum(r**2),
-        fold_speeds=model_fold_speeds(out, n_harmonics),
-        success=sol.result == optx.RESULTS.successful,
+        belt=out, residuals=r, cost=0.5 * jnp.sum(r**2), fold_speeds=folds, success=success, message=message
+    )
+
+
+def _failure(sol, r, folds, max_steps: int, free) -> str:
+    """Why `calibrate` did not converge, and what to do."""
+    r, folds = np.asarray(r), np.asarray(folds)
+    missing = np.flatnonzero(~np.isfinite(folds))
+    if missing.size:
+        names = ("first-mode lower fold", "first-mode upper fold", "second-mode lower fold", "second-mode upper fold")
+        return (
+            f"calibrate: the model has no {', '.join(names[i] for i in missing)} in the measured speed ranges "
+            f"{MODE1_RANGE}, {MODE2_RANGE} m/s at the last step (residual 1e3 each): the fit cannot see the "
+            "measurements from there. Start nearer (the default belt's wave_speed and damping), or free fewer fields"
+        )
+    steps = int(np.asarray(sol.stats["num_steps"]))
+    if bool(sol.result == optx.RESULTS.max_steps_reached) or bool(
+        sol.result == optx.RESULTS.nonlinear_max_steps_reached
+    ):
+        return (
+            f"calibrate: Levenberg-Marquardt reached the step limit max_steps={max_steps} without converging "
+            f"(cost {0.5 * float(r @ r):.4g}, fold speeds {np.round(folds, 4).tolist()} m/s); raise `max_steps` or "
+            "start nearer the measured folds"
+        )
+    return (
+        f"calibrate: Levenberg-Marquardt stopped after {steps} steps: {optx.RESULTS[sol.result]} (free {free}, cost "
+        f"{0.5 * float(r @ r):.4g}); start elsewhere or free fewer fields"
     )
 
 

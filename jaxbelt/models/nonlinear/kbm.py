@@ -47,7 +47,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..._checks import check_int, check_nonnegative, collecting, is_concrete, require_x64
+from ..._checks import check_int, check_nonnegative, check_range, collecting, is_concrete, require_x64
 from ..._guard import guard, traced_checks
 from .model import NonlinearBelt, _gauss, mode_shapes
 
@@ -73,8 +73,24 @@ def kappa(v, v_l, n: int = 1):
 
 
 def backbone_frequency(v, a, v_l, n: int = 1):
-    """Exact-resonance frequency (dimensionless) at modal amplitude `a` (eq. 33, sign corrected)."""
+    """Exact-resonance frequency (dimensionless) at modal amplitude `a` (eq. 33, sign corrected).
+
+    `v`: dimensionless running speed $V/v_t$ in [0, 1) (sub-critical); `a` >= 0: modal amplitude; `v_l` >= 0:
+    longitudinal to transverse wave speed ratio; `n` >= 1: the mode. Arrays broadcast. Invalid values raise
+    `ValueError` naming them (under jit: a run-time error)."""
     require_x64("backbone_frequency")
+    o = "backbone_frequency"
+    check_int(o, "n", n)
+    with collecting() as checks:
+        check_range("v", v, lo=0.0, hi=1.0, hi_open=True, unit="(V / wave speed)", owner=o)
+        check_nonnegative("a", a, owner=o)
+        check_nonnegative("v_l", v_l, owner=o)
+    value = n * jnp.pi * (1 - jnp.asarray(v, dtype=float) ** 2) + kappa(v, v_l, n) * jnp.asarray(a, dtype=float) ** 2
+    return guard(value, checks, throw=True)[0]
+
+
+def _backbone_frequency(v, a, v_l, n: int = 1):
+    """`backbone_frequency` without its checks (the callers check their own arguments)."""
     return n * jnp.pi * (1 - jnp.asarray(v) ** 2) + kappa(v, v_l, n) * jnp.asarray(a) ** 2
 
 
@@ -105,7 +121,7 @@ def backbone_speed(belt: NonlinearBelt, a, n: int = 1):
     c = belt.span / belt.pulley_radii[0]
 
     def resid(v):
-        return v * c - backbone_frequency(v, a, belt.v_l, n)
+        return v * c - _backbone_frequency(v, a, belt.v_l, n)
 
     def body(_, lohi):
         lo, hi = lohi

@@ -72,6 +72,7 @@ import numpy as np
 
 from ..._checks import as_float_array as _arr
 from ..._checks import is_concrete, record
+from ..._guard import all_ok, nan_where, traced_checks
 from ..._model import AbstractModel, observable
 from ..._params import FloatParam, document, option, param
 from ...commands import AbstractRunningSpeed
@@ -405,13 +406,19 @@ class NonlinearBelt(AbstractModel):
         return self.pulley_radii[::-1], self.runout[::-1], -self.phase
 
     def modal(self, speed) -> ModalSystem:
-        """The dimensionless Galerkin system at running speed `speed` [m/s]."""
+        """The dimensionless Galerkin system at running speed `speed` [m/s].
+
+        A belt whose parameters are traced (a `vmap` over damping ratios, ...) and break their declared
+        ranges gives a system of NaN: every result computed from it (a steady state, a sweep) is NaN for that
+        element, never a number."""
         self.check_speed(speed)
         v = self.dimensionless_speed(speed)
         v = eqx.error_if(
             v, (v < 0) | (v >= 1), "NonlinearBelt: running speed must be sub-critical, 0 <= V < wave_speed"
         )
-        return self._modal_v(v)
+        sys = self._modal_v(v)
+        checks = traced_checks(self)  # empty for a concrete belt (checked when it was built)
+        return nan_where(sys, all_ok(checks)) if checks else sys
 
     def _modal_v(self, v) -> ModalSystem:
         # no range check: Newton iterates may visit any speed; the caller checks its result
