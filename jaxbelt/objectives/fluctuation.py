@@ -26,14 +26,17 @@ All functions are pure and work under `jax.jit`, `jax.grad` and `jax.vmap`.
 
 from __future__ import annotations
 
+import warnings
+
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
 
-from .._checks import check_positive, collecting, is_concrete, record
+from .._checks import check_positive, check_range, check_scalar, collecting, is_concrete, record
 from .._guard import guard
 from ..scene import Scene
+from ..solution import Solution
 from ..solve import simulate
 
 _O = "fluctuation index"
@@ -66,8 +69,9 @@ def _check_window(inside, w):
 
 
 def _check_bound(name, value):
-    """A window bound must be finite (an infinite one would silently mean 'from the first sample')."""
+    """A window bound must be a finite scalar (an infinite one would silently mean 'from the first sample')."""
     msg = f"{_O}: parameter `{name}` (a bound of the window [t0, t1]) must be finite"
+    check_scalar(name, value, "s", _O)
     if is_concrete(value):
         v = np.asarray(value, dtype=float)
         if not np.all(np.isfinite(v)):
@@ -95,8 +99,52 @@ _AVERAGES = ("mean", "midrange")
 
 
 def _check_average(average) -> None:
-    if average not in _AVERAGES:
-        raise ValueError(f"{_O}: `average` must be one of {_AVERAGES}; got {average!r}")
+    if not isinstance(average, str) or average not in _AVERAGES:
+        raise ValueError(f"{_O}: parameter `average` must be one of {_AVERAGES}; got {average!r}")
+
+
+def _check_smooth(smooth) -> None:
+    """`smooth` chooses the program: a Python (or numpy) bool, not any truthy value."""
+    if not isinstance(smooth, bool | np.bool_):
+        raise TypeError(f"{_O}: parameter `smooth` must be True or False; got {smooth!r}")
+
+
+#: the smooth index's temperature (relative to the mean speed) may not exceed this: beyond it the smooth
+#: max and min both tend to the mean, and the smooth χ to 0, whatever the fluctuation
+MAX_TEMPERATURE = 1.0
+
+
+def _check_temperature(temperature) -> None:
+    check_scalar("temperature", temperature, owner=_O)
+    check_range("temperature", temperature, lo=0.0, hi=MAX_TEMPERATURE, lo_open=True, owner=_O)
+
+
+def _warn_if_not_running(speed, inside) -> None:
+    """Warn when the motor speed changes sign inside the window, or its mean is 0 (concrete values only): χ
+    compares the fluctuation with the mean speed of a drive that runs one way, and a speed through zero makes
+    that mean ~0 or meaningless, so the index is a large, arbitrary number. (A run from rest, whose speed is 0
+    at the first sample, runs one way.)"""
+    if not is_concrete((speed, inside)):
+        return
+    w, m = np.asarray(speed, dtype=float), np.asarray(inside, dtype=bool)
+    if w.size == 0 or not m.any():
+        return
+    sel = w[..., m]
+    lo, hi = np.min(sel, axis=-1), np.max(sel, axis=-1)
+    mean_zero = np.mean(sel, axis=-1) == 0
+    stops = np.isfinite(lo) & np.isfinite(hi) & (((lo < 0) & (hi > 0)) | mean_zero)
+    if np.any(stops):
+        k = int(np.argmax(np.ravel(stops)))
+        lo_k, hi_k, mean_k = np.ravel(lo)[k], np.ravel(hi)[k], float(np.mean(np.reshape(sel, (-1, sel.shape[-1]))[k]))
+        where = "" if stops.ndim == 0 else f" (element {np.unravel_index(k, stops.shape)} of the batch)"
+        warnings.warn(
+            f"{_O}: the motor speed changes sign inside the window{where} (from {lo_k:.4g} to {hi_k:.4g} "
+            f"rad/s, mean {mean_k:.4g} rad/s): the drive reverses or stands, so χ = (max - min)/|mean| divides by a "
+            "mean that is not a running speed and is no measure of the drive's fluctuation. Choose a window where "
+            "the drive runs (a larger voltage or set point, a later window).",
+            RuntimeWarning,
+            stacklevel=3,
+        )
 
 
 def chi_from_samples(
@@ -112,6 +160,7 @@ def chi_from_samples(
     `temperature` × average speed (dimensionless, default 3e-4).
     """
     _check_average(average)
+    _check_smooth(smooth)
     speed = jnp.asarray(speed, dtype=float)
     # concrete: each check raises at once; traced: recorded and attached to the result (a run-time error)
     with collecting() as checks:
@@ -120,9 +169,10 @@ def chi_from_samples(
                 _check_bound(name, bound)
                 _check_inside(name, bound, ts)
         if smooth:
-            check_positive("temperature", temperature, owner=_O)
+            _check_temperature(temperature)
         inside, w = _node_weights(ts, t0, t1)
         _check_window(inside, w)
+    _warn_if_not_running(speed, inside)
     return guard(_chi(speed, inside, w, smooth, temperature, average), checks, throw=True)[0]
 
 
@@ -164,8 +214,12 @@ def fluctuation_index(sol, t0=None, t1=None, *, smooth: bool = False, temperatur
     Uses the observed `motor_speed` output, else the crank speed state (the gear ratio cancels
     in the ratio). `smooth=True` gives the log-sum-exp version (see module docstring).
     `average` is `"mean"` (time mean, default) or `"midrange"` (see module docstring).
-    Returns a dimensionless scalar (0.543 means 54.3 %).
+    Returns a dimensionless scalar (0.543 means 54.3 %). Called eagerly, it warns (`RuntimeWarning`) when the
+    motor speed passes through zero inside the window: the drive stops or reverses there, and χ is no
+    measure of its fluctuation.
     """
+    if not isinstance(sol, Solution):
+        raise TypeError(f"{_O}: parameter `sol` must be a jaxbelt Solution (from `simulate`); got {type(sol).__name__}")
     return chi_from_samples(sol.ts, _speed(sol), t0, t1, smooth=smooth, temperature=temperature, average=average)
 
 
@@ -176,12 +230,47 @@ def _grid(t1, step, step_name):
             raise ValueError(
                 f"{_O}: `{name}` fixes the number of output times, so it must be a concrete number (not traced)"
             )
+        check_scalar(name, value, "s", _O)
         check_positive(name, value, "s", owner=_O)
     t1, step = float(t1), float(step)
     if t1 / step > 1e7:
         raise ValueError(f"{_O}: `t1` / `{step_name}` = {t1 / step:.3g} output times; at most 1e7")
     n = int(round(t1 / step)) + 1
     return np.linspace(0.0, t1, n)
+
+
+def _check_window_on_grid(ts, t0, t1, owner: str = _O, hint: str = "`dt_save`, or `dt` with method='rk4'") -> None:
+    """The window's checks on the output grid `ts` (host values), before anything is simulated: bounds
+    finite and within the grid, at least two output times inside (`chi_from_samples` checks the same,
+    after the simulation). Traced bounds: left to `chi_from_samples`."""
+    for name, bound in (("t0", t0), ("t1", t1)):
+        if bound is not None:
+            _check_bound(name, bound)
+    if not is_concrete((t0, t1)):
+        return
+    for name, bound in (("t0", t0), ("t1", t1)):
+        if bound is not None:
+            _check_inside(name, bound, ts)
+    tol = _WINDOW_RTOL * max(abs(float(ts[-1])), 1.0)
+    lo = ts[0] if t0 is None else float(t0)
+    hi = ts[-1] if t1 is None else float(t1)
+    inside = (ts >= lo - tol) & (ts <= hi + tol)
+    if int(np.sum(inside)) < 2:
+        step = ts[1] - ts[0] if ts.size > 1 else 0.0
+        raise ValueError(
+            f"{owner}: the window [t0, t1] must contain at least two output times; [{lo:g}, {hi:g}] s holds "
+            f"{int(np.sum(inside))} of the output times, spaced {step:g} s (widen the window or refine the grid: "
+            f"{hint})"
+        )
+
+
+def _check_options(peak_temperature, temperature, smooth=True) -> None:
+    """Concrete checks of the options of `closed_loop_metrics` and `fluctuation_objective` (traced: recorded)."""
+    _check_smooth(smooth)
+    check_scalar("peak_temperature", peak_temperature, "V or A", _O)
+    check_positive("peak_temperature", peak_temperature, owner=_O)
+    if smooth:
+        _check_temperature(temperature)
 
 
 def _run_from_rest(drive, pid, ts, observe, state, method, rtol, atol, dt, max_steps, adjoint):
@@ -211,11 +300,15 @@ def closed_loop_metrics(
 
     Simulates `drive` with the controller (or command) `pid` from rest at t = 0. Peaks are given
     exact (`v_peak`, `i_peak`) and smooth (`v_peak_smooth`, `i_peak_smooth`: log-sum-exp with
-    temperature `peak_temperature` in V or A, >= the exact peak). `average` as in `chi_from_samples`.
+    temperature `peak_temperature` in V or A, >= the exact peak); `mean_speed` is the time mean of the
+    motor speed over [t0, t1] [rad/s] (what χ divides by). `average` as in `chi_from_samples`.
     Returns a dict of scalars.
     """
     _check_average(average)
     ts = _grid(t1, *((dt, "dt") if method == "rk4" else (dt_save, "dt_save")))
+    with collecting() as option_checks:  # concrete: raise now, before the simulation; traced: attached below
+        _check_options(peak_temperature, temperature)
+        _check_window_on_grid(ts, t0, t1)
     sol = _run_from_rest(drive, pid, ts, ("motor_speed", "voltage"), True, method, rtol, atol, dt, max_steps, adjoint)
     speed, v, ys = sol.outputs["motor_speed"], sol.outputs["voltage"], sol.ys
     assert ys is not None  # `_run_from_rest(..., state=True)`
@@ -224,14 +317,22 @@ def closed_loop_metrics(
     def speak(x):
         return peak_temperature * jax.nn.logsumexp(jnp.abs(x) / peak_temperature)
 
-    return {
+    out = {
         "chi": chi_from_samples(ts, speed, t0, t1, average=average),
         "chi_smooth": chi_from_samples(ts, speed, t0, t1, smooth=True, temperature=temperature, average=average),
         "v_peak": jnp.max(jnp.abs(v)),
         "i_peak": jnp.max(jnp.abs(i)),
         "v_peak_smooth": speak(v),
         "i_peak_smooth": speak(i),
+        "mean_speed": _window_mean(ts, speed, t0, t1),
     }
+    return guard(out, option_checks, throw=True)[0]
+
+
+def _window_mean(ts, speed, t0, t1):
+    """Time mean (trapezoid rule) of `speed` over the samples in [t0, t1]."""
+    _, w = _node_weights(ts, t0, t1)
+    return jnp.sum(w * speed, axis=-1) / jnp.sum(w)
 
 
 def fluctuation_objective(
@@ -262,6 +363,7 @@ def fluctuation_objective(
     samples inside the window is stored (a quarter of them for the paper's window), which makes a
     batched sweep about 25 % faster.
     """
+    _check_smooth(smooth)
     if not (is_concrete(t0) and is_concrete(t1)):  # a traced window: the whole grid, as closed_loop_metrics
         m = closed_loop_metrics(
             drive,
@@ -282,10 +384,13 @@ def fluctuation_objective(
         return m["chi_smooth"] if smooth else m["chi"]
     _check_average(average)
     ts = _grid(t1, *((dt, "dt") if method == "rk4" else (dt_save, "dt_save")))
-    _check_bound("t0", t0)
+    with collecting() as option_checks:  # concrete: raise now, before the simulation; traced: attached below
+        _check_options(peak_temperature, temperature, smooth)
+    _check_window_on_grid(ts, t0, t1)
     keep = ts >= float(t0) - _WINDOW_RTOL * max(abs(float(ts[-1])), 1.0)  # as `_node_weights` decides
     window = ts[keep] if keep.sum() >= 2 else ts  # fewer than two: chi_from_samples names the error
     sol = _run_from_rest(drive, pid, window, ("motor_speed",), False, method, rtol, atol, dt, max_steps, adjoint)
-    return chi_from_samples(
+    chi = chi_from_samples(
         window, sol.outputs["motor_speed"], t0, t1, smooth=smooth, temperature=temperature, average=average
     )
+    return guard(chi, option_checks, throw=True)[0]

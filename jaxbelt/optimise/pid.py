@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import warnings
 from typing import Any, cast
 
 import equinox as eqx
@@ -18,7 +19,7 @@ import numpy as np
 import optax
 
 from .._callables import by_value
-from .._checks import check_penalised_limits, check_positive
+from .._checks import check_int, check_penalised_limits, check_positive, check_scalar
 from ..models.motor import PID, check_pid_nonnegative
 from ..objectives.fluctuation import closed_loop_metrics
 
@@ -33,7 +34,11 @@ class PIDTuneResult:
     - `v_peak`, `i_peak`: peak |voltage| [V] and |current| [A] over [0, t1] with `pid`;
     - `history`: dict of arrays per iteration: `loss`, `chi_smooth`, `v_peak`, `i_peak`,
       `kp`, `ki`, `kd`;
-    - `best_step`: iteration whose gains were returned (lowest loss seen).
+    - `best_step`: iteration whose gains were returned (lowest loss seen);
+    - `mean_speed`: time mean of the motor speed over [t0, t1] with `pid` [rad/s];
+    - `status`: `"ok"`, or what the request could not get (`"v_max not met"`, `"i_max not met"`,
+      `"set point not held"`, `"no improvement"`; several joined by `"; "`), each also warned about
+      (`RuntimeWarning`) with `message` saying why and what to do.
     """
 
     pid: PID
@@ -43,6 +48,9 @@ class PIDTuneResult:
     i_peak: float
     history: dict
     best_step: int
+    mean_speed: float = float("nan")
+    status: str = "ok"
+    message: str = ""
 
 
 def tune_pid(
@@ -81,20 +89,18 @@ def tune_pid(
     - `method`, `rtol`, `atol`, `dt`: the simulation (see `simulate`).
     - `progress`: tqdm progress bar.
 
-    Returns a `PIDTuneResult` (the gains with the lowest loss seen).
+    Returns a `PIDTuneResult` (the gains with the lowest loss seen). What the request cannot get is said
+    before any work (a `RuntimeWarning` when `v_max` or the PID's `v_limit` is below the back-emf at the set
+    point, $k_m\\omega_0$: no gains hold the set point within it) and after it, on the result (`status`,
+    `message`) and as a warning.
     """
-    check_pid_nonnegative(pid)
+    _check_tune_arguments(drive, pid, t0, t1, steps, learning_rate, optimizer, temperature, method, rtol, atol, dt)
     o = "tune_pid"
+    for name, value in (("v_max", v_max), ("i_max", i_max), ("penalty", penalty)):
+        if value is not None:
+            check_scalar(name, value, owner=o)
     check_penalised_limits(o, penalty, (("v_max", v_max, "V"), ("i_max", i_max, "A")))
-    check_positive("learning_rate", learning_rate, owner=o)
-    check_positive("temperature", temperature, owner=o)
-    for name in ("kp", "ki", "kd"):
-        if not float(getattr(pid, name)) > 0:
-            raise ValueError(f"tune_pid: starting gain `{name}` must be > 0 (the tuner works on log-gains)")
-    if not 0 <= t0 < t1:
-        raise ValueError(f"tune_pid: need 0 <= t0 < t1; got t0={t0}, t1={t1}")
-    if steps < 1:
-        raise ValueError(f"tune_pid: `steps` must be >= 1; got {steps}")
+    _warn_unreachable_set_point(drive, pid, v_max)
     train_pid = pid.with_limiter("smooth") if pid.v_limit is not None else pid
     g0 = pid.gains
     if optimizer is None:
@@ -135,7 +141,12 @@ def tune_pid(
         loss, m, gains = jax.device_get((loss, m, gains))
         loss = float(loss)
         if not np.isfinite(loss):
-            raise FloatingPointError(f"tune_pid: non-finite loss at step {k} with gains {gains.tolist()}")
+            raise FloatingPointError(
+                f"tune_pid: the loss is not finite at step {k} (NaN in the simulation, not a convergence problem) "
+                f"with gains (kp, ki, kd) = {gains.tolist()}: the closed loop with these gains cannot be simulated "
+                "(unstable, or a step the solver cannot take). Lower `learning_rate`, start from gains that give a "
+                "finite χ, or bound the voltage (`v_max`, or a limiter: PID(v_limit=...))"
+            )
         for name, val in (
             ("loss", loss),
             ("chi_smooth", m["chi_smooth"]),
@@ -155,6 +166,9 @@ def tune_pid(
     m0, mb = jax.device_get(
         (_tune_report(drive, pid, g0, cfg, jnp.zeros(3)), _tune_report(drive, pid, g0, cfg, p_best))
     )
+    status, message = _tune_status(pid, mb, m0, v_max, i_max, int(k_best), steps)
+    if status != "ok":
+        warnings.warn(message, RuntimeWarning, stacklevel=2)
     return PIDTuneResult(
         pid=pid.with_gains(g0 * jnp.exp(p_best)),
         chi=float(mb["chi"]),
@@ -163,7 +177,108 @@ def tune_pid(
         i_peak=float(mb["i_peak"]),
         history={k: np.asarray(v) for k, v in hist.items()},
         best_step=int(k_best),
+        mean_speed=float(mb["mean_speed"]),
+        status=status,
+        message=message,
     )
+
+
+_METHODS = ("ode", "rk4")
+
+
+def _check_tune_arguments(drive, pid, t0, t1, steps, learning_rate, optimizer, temperature, method, rtol, atol, dt):
+    """Every argument of `tune_pid` that can be checked before anything is traced (`ValueError` or
+    `TypeError` naming it, its valid range and the value)."""
+    from ..models.fourbar import FourBarDrive
+    from ..objectives.fluctuation import _check_temperature, _check_window_on_grid, _grid
+
+    o = "tune_pid"
+    if not isinstance(pid, PID):
+        raise TypeError(f"{o}: parameter `pid` must be a jaxbelt.PID (the regulator to tune); got {type(pid).__name__}")
+    if not isinstance(drive, FourBarDrive):
+        raise TypeError(f"{o}: parameter `drive` must be a jaxbelt.FourBarDrive; got {type(drive).__name__}")
+    check_pid_nonnegative(pid)
+    for name in ("kp", "ki", "kd"):
+        if not float(getattr(pid, name)) > 0:
+            raise ValueError(
+                f"{o}: starting gain `{name}` must be > 0 (the tuner works on log-gains); got {float(getattr(pid, name))}"
+            )
+    check_int(o, "steps", steps, 1)
+    if not (isinstance(method, str) and method in _METHODS):
+        raise ValueError(f"{o}: parameter `method` must be one of {_METHODS}; got {method!r}")
+    for name, value in (("learning_rate", learning_rate), ("rtol", rtol), ("atol", atol), ("dt", dt)):
+        check_scalar(name, value, "s" if name == "dt" else "", o)
+        check_positive(name, value, "s" if name == "dt" else "", owner=o)
+    _check_temperature(temperature)
+    if optimizer is not None and not (hasattr(optimizer, "init") and hasattr(optimizer, "update")):
+        raise TypeError(
+            f"{o}: parameter `optimizer` must be an optax.GradientTransformation (or None); got {type(optimizer).__name__}"
+        )
+    for name, value in (("t0", t0), ("t1", t1)):
+        check_scalar(name, value, "s", o)
+        if not np.isfinite(float(value)):
+            raise ValueError(f"{o}: parameter `{name}` must be finite [s]; got {value!r}")
+    if not 0 <= t0 < t1:
+        raise ValueError(f"{o}: the window must satisfy 0 <= t0 < t1 [s]; got t0={t0}, t1={t1}")
+    ts = _grid(t1, *((dt, "dt") if method == "rk4" else (5e-4, "dt_save")))
+    _check_window_on_grid(ts, t0, t1, o, "the tuner saves the speed every 0.5 ms, or every `dt` with method='rk4'")
+
+
+def _back_emf(drive, pid) -> float:
+    """The back-emf at the set point, $k_m\\omega_0$ [V]: the mean voltage that holds the motor at $\\omega_0$ is
+    this plus $R\\bar I$, the loss in the armature (the load's friction makes the mean current positive)."""
+    return abs(float(drive.km) * float(pid.omega_ref))
+
+
+def _warn_unreachable_set_point(drive, pid, v_max) -> None:
+    """Warn, before any work, of a voltage bound that no gains can meet at the set point."""
+    need = _back_emf(drive, pid)
+    for name, bound in (("v_max", v_max), ("the PID's `v_limit`", pid.v_limit)):
+        if bound is not None and float(bound) < need:
+            warnings.warn(
+                f"tune_pid: {name} = {float(bound):g} V is below the back-emf at the set point, k_m * omega_ref = "
+                f"{float(drive.km):g} * {float(pid.omega_ref):g} = {need:.4g} V: no gains hold the motor at "
+                f"omega_ref = {float(pid.omega_ref):g} rad/s within it, so the tuner can only trade χ against the "
+                "bound. Raise the bound above the back-emf (plus the armature loss R * I), or lower the set point",
+                RuntimeWarning,
+                stacklevel=3,
+            )
+
+
+#: the tuned run misses the set point when its mean speed over the window is further than this from it (relative)
+_SET_POINT_RTOL = 0.05
+#: a peak over its bound by more than this (relative) is not met
+_BOUND_RTOL = 1e-3
+
+
+def _tune_status(pid, mb, m0, v_max, i_max, best_step: int, steps: int) -> tuple[str, str]:
+    """`(status, message)` of a tuning run: what the request did not get, why, and what to do."""
+    found, why = [], []
+    for name, bound, peak, unit in (("v_max", v_max, mb["v_peak"], "V"), ("i_max", i_max, mb["i_peak"], "A")):
+        if bound is not None and float(peak) > float(bound) * (1 + _BOUND_RTOL):
+            found.append(f"{name} not met")
+            why.append(
+                f"the peak |{'voltage' if unit == 'V' else 'current'}| {float(peak):.4g} {unit} exceeds {name} = "
+                f"{float(bound):g} {unit} (the bound is a penalty: raise `penalty`, or `steps`, or relax the bound)"
+            )
+    ref, mean = float(pid.omega_ref), float(mb["mean_speed"])
+    if abs(mean - ref) > _SET_POINT_RTOL * abs(ref):
+        found.append("set point not held")
+        limit = "" if pid.v_limit is None else f", the limiter v_limit = {float(pid.v_limit):g} V"
+        why.append(
+            f"the mean motor speed over the window is {mean:.4g} rad/s against the set point omega_ref = {ref:g} "
+            f"rad/s (the voltage available{limit} or the bounds keep the drive from it; χ then measures another "
+            "motion). Raise the voltage bounds, or start from gains that reach the set point"
+        )
+    if steps > 1 and best_step == 0:
+        found.append("no improvement")
+        why.append(
+            f"no step lowered the loss below that of the starting gains (χ = {float(m0['chi']):.4g}): lower "
+            "`learning_rate`, or the bounds leave nothing to gain"
+        )
+    if not found:
+        return "ok", ""
+    return "; ".join(found), "tune_pid: " + "; ".join(why)
 
 
 class _Config(eqx.Module):
