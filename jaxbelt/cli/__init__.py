@@ -12,10 +12,12 @@ from __future__ import annotations
 
 import argparse
 import atexit
+import contextlib
 import gc
 import importlib
 import os
 import sys
+import warnings
 
 SUBCOMMANDS = ("startup", "shaping", "fourbar", "string", "nonlinear", "bench")
 
@@ -73,10 +75,58 @@ def main(argv=None) -> int:
             except OSError as e:  # an unwritable cache folder costs time, not the result
                 print(f"jaxbelt: compilation cache disabled ({e})", file=sys.stderr)
     try:
-        return int(args.func(args) or 0)
-    except ValueError as e:  # bad parameters: say which, no traceback
-        print(f"jaxbelt {args.command}: error: {e}", file=sys.stderr)
-        return 2
+        with _OneLineWarnings(f"jaxbelt {args.command}"):
+            return int(args.func(args) or 0)
+    except Exception as e:
+        found = _failure(e)
+        if found is None:
+            raise
+        message, code = found
+        print(f"jaxbelt {args.command}: error: {message}", file=sys.stderr)
+        return code
+
+
+def _failure(error: BaseException) -> tuple[str, int] | None:
+    """`(one-line message, exit status)` of an error a command reports without a traceback: bad parameters
+    (`ValueError`, status 2), a computation that failed for a reason jaxbelt states (`SolveError`,
+    `SteadyStateError`, `FloatingPointError`, or a check that failed inside a compiled program: status 1).
+    None for anything else (a bug: the traceback is wanted)."""
+    from .._guard import runtime_message
+
+    inner = runtime_message(error)  # a check inside a compiled program: its message, not JAX's stack
+    if inner is not None:
+        return inner, 1
+    if isinstance(error, ValueError):
+        return str(error), 2
+    if isinstance(error, RuntimeError | FloatingPointError) and type(error).__module__.startswith("jaxbelt"):
+        return str(error), 1
+    return None
+
+
+class _OneLineWarnings(contextlib.ContextDecorator):
+    """jaxbelt's warnings as one line each on stderr (`jaxbelt CMD: warning: ...`), without the file and line
+    of the code that raised them; other libraries' warnings as usual."""
+
+    def __init__(self, prefix: str):
+        self.prefix = prefix
+        self._saved = None
+
+    def __enter__(self):
+        self._saved = warnings.showwarning
+        prefix, usual = self.prefix, warnings.showwarning
+
+        def show(message, category, filename, lineno, file=None, line=None):
+            if f"{os.sep}jaxbelt{os.sep}" in str(filename):
+                print(f"{prefix}: warning: {message}", file=sys.stderr if file is None else file)
+            else:
+                usual(message, category, filename, lineno, file, line)
+
+        warnings.showwarning = show
+        return self
+
+    def __exit__(self, *exc):
+        warnings.showwarning = self._saved
+        return False
 
 
 def _bind_lapack_tables() -> None:

@@ -83,6 +83,31 @@ def int_at_least(lo: int):
     return parse
 
 
+def int_in(lo: int, hi: int, why: str = ""):
+    """An integer in [lo, hi] (`why`: the reason for the upper end, added in parentheses)."""
+
+    def parse(text: str) -> int:
+        v = int(_number(text, int))
+        if not lo <= v <= hi:
+            raise argparse.ArgumentTypeError(
+                f"must be an integer in [{lo}, {hi}]{f' ({why})' if why else ''}, got {text}"
+            )
+        return v
+
+    parse.__name__ = "integer"
+    return parse
+
+
+def signed_peak(x):
+    """The value of largest magnitude along the last axis, with its sign (what a printed "peak" means: a
+    current that reaches -37 A peaks at -37 A, not at the largest value, 0)."""
+    import numpy as np
+
+    x = np.asarray(x, dtype=float)
+    i = np.argmax(np.abs(x), axis=-1)
+    return np.take_along_axis(x, np.expand_dims(i, -1), axis=-1)[..., 0]
+
+
 def image_path(text: str) -> Path:
     """An output image path whose folder exists and is writable; the suffix names the format.
 

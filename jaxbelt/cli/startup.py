@@ -4,7 +4,12 @@ from __future__ import annotations
 
 import time
 
-from ._args import finite_float, image_path, int_at_least, positive_float
+from ._args import float_in, image_path, int_in, positive_float, signed_peak
+
+#: most output points (the eight curves of every time constant are held in memory and drawn)
+MAX_POINTS = 1_000_000
+#: RK4's fixed step [s] and step budget (`simulate`'s defaults): the longest start-up it can run
+RK4_STEP, RK4_MAX_STEPS = 1e-4, 100_000
 
 
 def register(sub):
@@ -16,14 +21,21 @@ def register(sub):
     )
     p.add_argument(
         "--gamma",
-        type=positive_float,
+        type=float_in(1e-6, 1e6),
         nargs="+",
         default=[0.02, 0.04, 0.06],
-        help="time constants [s] (default 0.02 0.04 0.06)",
+        help="time constants [s], in [1e-6, 1e6] (default 0.02 0.04 0.06; a shorter one is a step)",
     )
-    p.add_argument("--v-max", type=finite_float, default=24.0, help="final voltage Vmax [V] (default 24)")
+    p.add_argument(
+        "--v-max", type=float_in(-1e4, 1e4), default=24.0, help="final voltage Vmax [V], |Vmax| <= 1e4 (default 24)"
+    )
     p.add_argument("--t-end", type=positive_float, default=0.5, help="simulated time [s] (default 0.5)")
-    p.add_argument("--points", type=int_at_least(2), default=501, help="output points (default 501)")
+    p.add_argument(
+        "--points",
+        type=int_in(2, MAX_POINTS, "the curves are held in memory"),
+        default=501,
+        help="output points (default 501)",
+    )
     p.add_argument(
         "--method",
         default="auto",
@@ -31,7 +43,32 @@ def register(sub):
         help="solution method (default: closed form)",
     )
     p.add_argument("--out", type=image_path, default="startup.png", help="output image (default startup.png)")
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, check=check)
+
+
+def check(args) -> str | None:
+    """RK4 takes fixed steps of 0.1 ms within `simulate`'s step budget: a longer start-up cannot be run."""
+    longest = RK4_STEP * RK4_MAX_STEPS
+    if args.method == "rk4" and args.t_end > longest:
+        return (
+            f"argument --t-end: with --method rk4 (fixed steps of {RK4_STEP * 1e3:g} ms, at most {RK4_MAX_STEPS} of "
+            f"them) at most {longest:g} s, got {args.t_end:g} (use --method auto, the closed form, for longer runs)"
+        )
+    return None
+
+
+def summary(gammas, curves) -> list[str]:
+    """One line per time constant: the peaks of the current and the electric power (values of largest
+    magnitude, with their sign) and the final pulley speeds, read from the arrays `curves` (as
+    `startup_curves` returns them)."""
+    lines = []
+    for i, g in enumerate(gammas):
+        lines.append(
+            f"  gamma = {1e3 * g:5.4g} ms: peak current {signed_peak(curves['current'][i]):7.2f} A, "
+            f"peak electric power {signed_peak(curves['electric_power'][i]):7.1f} W, "
+            f"final speeds {curves['omega1'][i][-1]:.3f} / {curves['omega2'][i][-1]:.3f} rad/s"
+        )
+    return lines
 
 
 def run(args) -> int:
@@ -48,12 +85,7 @@ def run(args) -> int:
     print(
         f"simulated {len(args.gamma)} start-ups ({args.method}) in {time.perf_counter() - t:.2f} s (incl. compilation)"
     )
-    for i, g in enumerate(args.gamma):
-        print(
-            f"  gamma = {1e3 * g:5.1f} ms: peak current {c['current'][i].max():7.2f} A, "
-            f"peak electric power {c['electric_power'][i].max():7.1f} W, "
-            f"final speeds {c['omega1'][i][-1]:.3f} / {c['omega2'][i][-1]:.3f} rad/s"
-        )
+    print("\n".join(summary(args.gamma, c)))
     # a figure of its own on the Agg canvas (pyplot and its GUI backend are not loaded) with fixed
     # margins (constrained layout would add ~0.35 s to the save of these 8 panels)
     fig = Figure(figsize=(11, 12))

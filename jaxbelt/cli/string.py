@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ._args import float_in, image_path, positive_float
+from ._args import float_in, image_path
 
 
 def register(subparsers):
@@ -21,9 +21,10 @@ def register(subparsers):
     )
     p.add_argument(
         "--contact-radius",
-        type=positive_float,
+        type=float_in(1e-3, 10.0),
         default=0.025,
-        help="motor pulley radius [m] for the pressure plot (not in the belt-vibration report; default 0.025)",
+        help="motor pulley radius [m] for the pressure plot, in [0.001, 10] (not in the belt-vibration report; "
+        "default 0.025)",
     )
     p.add_argument(
         "--belt-speed",
@@ -33,9 +34,9 @@ def register(subparsers):
     )
     p.add_argument(
         "--pulley-radius",
-        type=positive_float,
+        type=float_in(1e-3, 10.0),
         default=0.1166,
-        help="driven pulley radius R_U [m] for omega_CR (fitted to Table 2; default 0.1166)",
+        help="driven pulley radius R_U [m] for omega_CR, in [0.001, 10] (fitted to Table 2; default 0.1166)",
     )
     p.set_defaults(func=run)
 
@@ -80,12 +81,27 @@ def run(args) -> int:
         contact=jb.BeltPulleyContact(radius=args.contact_radius),
     )
     fig.savefig(args.out, dpi=110)
-    print(f"critical speed (belt-vibration report span): {float(span.critical_speed):.3f} m/s")
-    print(
-        f"Moon & Wickert crossings: mode 1 {float(crossings[0, 0, 0]):.3f} m/s, mode 2 {float(crossings[1, 0, 0]):.3f} m/s"
-    )
+    print("\n".join(summary(span, crossings)))
     print(f"wrote {args.out}")
     return 0
+
+
+def summary(span, crossings) -> list[str]:
+    """The overview's printed figures: the span's critical speed and the first two crossing speeds of
+    Moon & Wickert's stand (pulley 0, first harmonic), read from `span` and the array `crossings`."""
+    return [
+        f"critical speed (belt-vibration report span): {float(span.critical_speed):.3f} m/s",
+        f"Moon & Wickert crossings: mode 1 {float(crossings[0, 0, 0]):.3f} m/s, mode 2 {float(crossings[1, 0, 0]):.3f} m/s",
+    ]
+
+
+def modes_summary(w_cr: float, pulley_radius: float) -> str:
+    """The modes figure's printed line: the critical rotor speed omega_CR [rad/s] and in rpm."""
+    from ..plots.string import RPM
+
+    return (
+        f"critical rotor speed omega_CR = {w_cr:.5g} rad/s = {w_cr * RPM:.5g} rpm (eq. 53, R_U = {pulley_radius:g} m)"
+    )
 
 
 def _modes(args, span) -> int:
@@ -109,8 +125,6 @@ def _modes(args, span) -> int:
         x, times[0], np.stack(shapes), rotor * RPM, freqs, w_cr * RPM, title=f"moving span, V = {args.belt_speed:g} m/s"
     )
     fig.savefig(args.out, dpi=110)
-    print(
-        f"critical rotor speed omega_CR = {w_cr:.1f} rad/s = {w_cr * RPM:.0f} rpm (eq. 53, R_U = {args.pulley_radius:g} m)"
-    )
+    print(modes_summary(w_cr, args.pulley_radius))
     print(f"wrote {args.out}")
     return 0
