@@ -29,6 +29,7 @@ import weakref
 
 import jax
 import numpy as np
+from jax.core import Tracer
 
 __all__ = ["by_value", "ByValue"]
 
@@ -82,7 +83,7 @@ def _digest(x) -> bytes:
         hit = _DIGESTS.get(id(x))
         if hit is not None and hit[0]() is x:
             return hit[1]
-        d = hashlib.blake2b(np.ascontiguousarray(np.asarray(x)).view(np.uint8), digest_size=16).digest()
+        d = hashlib.blake2b(np.ascontiguousarray(np.asarray(x)).view(np.uint8).data, digest_size=16).digest()
         key = id(x)
         try:
             ref = weakref.ref(x, lambda _: _DIGESTS.pop(key, None))
@@ -91,7 +92,7 @@ def _digest(x) -> bytes:
             pass
         return d
     # numpy arrays are mutable: hashed at each call
-    return hashlib.blake2b(np.ascontiguousarray(x).view(np.uint8), digest_size=16).digest()
+    return hashlib.blake2b(np.ascontiguousarray(x).view(np.uint8).data, digest_size=16).digest()
 
 
 class _Keyer:
@@ -104,7 +105,7 @@ class _Keyer:
         t = type(v)
         if t in _NUMBERS or t is str or v is None or t is bytes:
             return (t, v)
-        if isinstance(v, jax.core.Tracer):
+        if isinstance(v, Tracer):
             raise _Unkeyable
         if isinstance(v, (jax.Array, np.ndarray)):
             return ("array", v.shape, str(v.dtype), bool(getattr(v, "weak_type", False)), _digest(v))

@@ -40,7 +40,7 @@ RESONANCE_REL = 1e-2
 
 
 def _shared_response(lam, X, Yt, F, s, x0, t0, tau):
-    """Free response plus the shared exponential inputs (eq. 27), shape (N, n)."""
+    """Free response plus the shared exponential inputs (eq. 27), shape (N, k) for the k rows of X."""
     eta0 = Yt @ x0.astype(complex)
     qw = (Yt @ F.astype(complex)) * jnp.exp(s * t0)[None, :]
     conv = exp_convolution(lam[None, :, None], s[None, None, :], tau[:, None, None])  # (N, m, j)
@@ -49,13 +49,46 @@ def _shared_response(lam, X, Yt, F, s, x0, t0, tau):
 
 
 def _exact_one(lam, X, q, s_b, tau):
-    """Cancellation-free response of one element to $q e^{s_b t}$ (modal coordinates q), (N, n)."""
+    """Cancellation-free response of one element to $q e^{s_b t}$ (modal coordinates q), (N, k)."""
     conv = exp_convolution(lam[None, :], s_b, tau[:, None])  # (N, m)
     return jnp.real((conv * q[None, :]) @ X.T)
 
 
+def _real_basis(lam, tau):
+    r"""The real functions spanning $\mathrm{Re}\sum_i c_i e^{\lambda_i\tau}$, one per eigenvalue, (N, m), and the
+    map from complex coefficients to theirs.
+
+    A real A has real eigenvalues and complex conjugate pairs with conjugate eigenvectors (LAPACK returns them
+    exactly so). For a pair, $c e^{\lambda\tau} + \bar c e^{\bar\lambda\tau} = 2\,\mathrm{Re}(c)\,
+    \mathrm{Re}(e^{\lambda\tau}) - 2\,\mathrm{Im}(c)\,\mathrm{Im}(e^{\lambda\tau})$: the member with
+    $\mathrm{Im}\lambda > 0$ carries the cosine-like function, its partner the sine-like one
+    ($\mathrm{Im}\,e^{\bar\lambda\tau} = -\mathrm{Im}\,e^{\lambda\tau}$). So m real functions instead of 2m:
+    the batch's matrix product does half the work."""
+    E = jnp.exp(lam[None, :] * tau[:, None])  # (N, m)
+    lower = jnp.imag(lam) < 0
+    G = jnp.where(lower[None, :], jnp.imag(E), jnp.real(E))
+    upper = jnp.imag(lam) > 0
+
+    def coefficients(c):  # c (..., m) complex, summed as Re(sum_i c_i e^{lam_i tau}) -> (..., m) real
+        return jnp.where(lower, -2.0 * jnp.imag(c), jnp.where(upper, 2.0, 1.0) * jnp.real(c))
+
+    return G, coefficients
+
+
 def exp_input_batch(
-    A, F, s, x0, t0, ts, f_var, s_var, *, uniform: bool | None = None, n_fix: int = 8, chunk: int = 256
+    A,
+    F,
+    s,
+    x0,
+    t0,
+    ts,
+    f_var,
+    s_var,
+    *,
+    uniform: bool | None = None,
+    n_fix: int = 8,
+    chunk: int = 256,
+    components: tuple[int, ...] | None = None,
 ):
     """States of $\\dot x = A x + \\sum_j F_{:,j}e^{s_j t} + f_b e^{s_b t}$ for a batch of $(f_b, s_b)$.
 
@@ -66,20 +99,24 @@ def exp_input_batch(
       rates [1/s] (e.g. $-1/\\gamma_b$);
     - `uniform`: whether `ts` is evenly spaced (`None`: decided from its values in the program; used by
       the expm fall-back only);
-    - `n_fix`: near-resonant elements per chunk corrected one by one (with more, the correction
-      is evaluated for the whole chunk);
-    - `chunk`: batch elements per chunk of the separated form (memory locality).
+    - `n_fix`, `chunk`: up to `n_fix` near-resonant elements per `chunk` elements of the batch are
+      corrected one by one in the separated form (with more, the batch takes the exact per-element form);
+    - `components`: the state components to compute (static indices; default all): the others are
+      never computed nor stored (an output that needs only the current costs a fifth of the state).
 
-    Returns (B, N, n). Differentiable with respect to `f_var`, `s_var` (and `x0`, `F`, `s`);
-    not with respect to A (JAX does not differentiate eigenvectors).
+    Returns (B, N, k), k = `len(components)` (default n). Differentiable with respect to `f_var`, `s_var`
+    (and `x0`, `F`, `s`); not with respect to A (JAX does not differentiate eigenvectors).
     """
     A = jnp.asarray(A, dtype=float)
     s_var = jnp.asarray(s_var, dtype=float)
     f_var = jnp.asarray(f_var, dtype=float)
     nb = s_var.shape[0]
-    f_var = jnp.broadcast_to(f_var, (nb, A.shape[0]))
+    n = A.shape[0]
+    rows = tuple(range(n)) if components is None else tuple(int(i) for i in components)
+    f_var = jnp.broadcast_to(f_var, (nb, n))
     tau = jnp.asarray(ts, dtype=float) - t0
-    lam, X, Yt, cond = modal_decomposition(A)
+    lam, X_all, Yt, cond = modal_decomposition(A)
+    X = X_all[jnp.asarray(rows, dtype=int)] if rows != tuple(range(n)) else X_all  # (k, m): the rows asked for
     q = (f_var.astype(complex) @ Yt.T) * jnp.exp(s_var * t0)[:, None]  # (B, m), eq. 25
     delta = s_var[:, None] - lam[None, :]
     scale = jnp.maximum(jnp.maximum(jnp.abs(lam)[None, :], jnp.abs(s_var)[:, None]), 1.0 / jnp.max(tau))
@@ -89,64 +126,53 @@ def exp_input_batch(
     # a cheap real correction handles one near-resonant real mode per element; anything else
     # (a nearly real complex pair, two modes near one rate) takes the exact per-element form
     simple = jnp.all((n_near <= 1) & ~jnp.any(near & ~is_real[None, :], axis=1))
-    n_chunks = -(-nb // chunk)
-    size = -(-nb // n_chunks)
-    shared = _shared_response(lam, X, Yt, F, s, x0, t0, tau)
-    E = jnp.exp(lam[None, :] * tau[:, None])  # (N, m)
-    G = jnp.concatenate([jnp.real(E), -jnp.imag(E)], axis=1)  # (N, 2m)
+    # the cheap correction takes up to n_fix near-resonant elements per `chunk` of the batch; more (a sweep
+    # that dwells on a resonance) take the exact per-element form
+    n_sel = min(n_fix * -(-nb // chunk), nb)
+    simple = simple & (jnp.sum(jnp.any(near, axis=1)) <= n_sel)
+    shared = _shared_response(lam, X, Yt, F, s, x0, t0, tau)  # (N, k)
+    G, coefficients = _real_basis(lam, tau)  # (N, m)
 
-    def separated_chunk(s_c, q_c):
-        nc = s_c.shape[0]
-        delta = s_c[:, None] - lam[None, :]
-        scale = jnp.maximum(jnp.maximum(jnp.abs(lam)[None, :], jnp.abs(s_c)[:, None]), 1.0 / jnp.max(tau))
-        near = jnp.abs(delta) < RESONANCE_REL * scale
-        w = jnp.where(near, 0.0, q_c / jnp.where(near, 1.0, delta))  # (B, m)
-        v = jnp.real(w @ X.T)  # (B, n)
-        M = X[None, :, :] * w[:, None, :]  # (B, n, m)
-        W = jnp.concatenate([jnp.real(M), jnp.imag(M)], axis=2)  # (B, n, 2m)
-        # (B, n, N) then transposed: XLA's CPU GEMM is several times faster in this layout
-        xs = jnp.einsum("tk,bnk->bnt", G, W).transpose(0, 2, 1)
-        xs = shared[None] + jnp.exp(s_c[:, None] * tau[None, :])[:, :, None] * v[:, None, :] - xs
+    def separated():
+        w = jnp.where(near, 0.0, q / jnp.where(near, 1.0, delta))  # (B, m)
+        # v = Re(X w) and W[b, :, i] = coefficients(X[:, i] w_i), as one real matrix product (B, 2m) x (2m, k + km):
+        # a product is never fused into the output's loop, where these would be recomputed at every time
+        k, m = X.shape
+        eye = jnp.eye(m)
+        re_part = coefficients(X[:, :, None] * eye[None])  # (k, m, m): from Re w
+        im_part = coefficients(1j * X[:, :, None] * eye[None])  # from Im w
+        M = jnp.concatenate(
+            [
+                jnp.concatenate([jnp.real(X).T, re_part.transpose(2, 0, 1).reshape(m, k * m)], axis=1),
+                jnp.concatenate([-jnp.imag(X).T, im_part.transpose(2, 0, 1).reshape(m, k * m)], axis=1),
+            ],
+            axis=0,
+        )  # (2m, k + km)
+        vW = jnp.concatenate([jnp.real(w), jnp.imag(w)], axis=1) @ M
+        v, W = vW[:, :k], vW[:, k:].reshape(nb, k, m)
+        # one pass over the output: each element is its shared part, the input's own exponential and m
+        # products of the real basis (unrolled; XLA fuses them into the loop that writes the output, which
+        # is faster than a matrix product whose (B, k, N) result is written, read back and transposed)
+        xs = shared[None] + jnp.exp(s_var[:, None] * tau[None, :])[:, :, None] * v[:, None, :]
+        for i in range(lam.shape[0]):
+            xs = xs - G[None, :, i, None] * W[:, None, :, i]
 
         # near-resonant real mode i: conv = e^{lam tau} tau phi1((s - lam) tau), all real
         i_star = jnp.argmax(near, axis=1)
         lam_b = jnp.real(lam[i_star])
-        coef = jnp.real(X[:, i_star].T * q_c[jnp.arange(nc), i_star][:, None])  # (B, n)
+        coef = jnp.real(X[:, i_star].T * q[jnp.arange(nb), i_star][:, None])  # (B, k)
         has = jnp.any(near, axis=1)
 
         def correction(sel):
-            d = s_c[sel] - lam_b[sel]
+            d = s_var[sel] - lam_b[sel]
             tt = tau[None, :]
             c = jnp.exp(lam_b[sel][:, None] * tt) * tt * phi1(d[:, None] * tt)  # (K, N)
             return jnp.where(has[sel][:, None, None], c[:, :, None] * coef[sel][:, None, :], 0.0)
 
-        # usually a handful of elements per chunk are near resonance: correct only those
-        k = min(n_fix, nc)
-        _, idx = jax.lax.top_k(has.astype(float), k)
-        return jax.lax.cond(
-            jnp.sum(has) > k,
-            lambda x: x + correction(jnp.arange(nc)),
-            lambda x: x.at[idx].add(correction(idx)),
-            xs,
-        )
-
-    def separated():
-        if n_chunks == 1:
-            return separated_chunk(s_var, q)
-        # chunks keep the intermediates of one GEMM in cache instead of streaming B x N x n
-        # arrays through memory several times. Each chunk is written into the output in place
-        # (a loop of dynamic_update_slice): no padded copy of the batch. The last chunk starts at
-        # B - size, overlapping its predecessor when `size` does not divide B; the overlap is
-        # recomputed from the same inputs and written with the same values.
-        out = jnp.zeros((nb, tau.shape[0], A.shape[0]), dtype=shared.dtype)
-
-        def body(i, out):
-            start = jnp.minimum(i * size, nb - size)
-            s_c = jax.lax.dynamic_slice_in_dim(s_var, start, size)
-            q_c = jax.lax.dynamic_slice_in_dim(q, start, size)
-            return jax.lax.dynamic_update_slice_in_dim(out, separated_chunk(s_c, q_c), start, axis=0)
-
-        return jax.lax.fori_loop(0, n_chunks, body, out)
+        # a handful of elements are near resonance (`simple` holds at most `n_sel`): correct only those, in
+        # place (the output is never copied)
+        _, idx = jax.lax.top_k(has.astype(float), n_sel)
+        return xs.at[idx].add(correction(idx))
 
     def exact():
         return shared[None] + jax.lax.map(lambda a: _exact_one(lam, X, a[0], a[1], tau), (q, s_var))
@@ -154,9 +180,10 @@ def exp_input_batch(
     def expm_path():
         def one(a):
             f, sv = a
-            return expm_solve(
+            xs = expm_solve(
                 A, jnp.concatenate([F, f[:, None]], axis=1), jnp.concatenate([s, sv[None]]), x0, t0, ts, uniform
             )
+            return xs[:, jnp.asarray(rows, dtype=int)] if rows != tuple(range(n)) else xs
 
         return jax.lax.map(one, (f_var, s_var))
 
@@ -166,7 +193,16 @@ def exp_input_batch(
 
 
 def startup_gamma_batch(
-    model, gammas, ts, v_max: ArrayLike = 24.0, y0=None, *, t0=None, n_fix: int = 8, chunk: int = 256
+    model,
+    gammas,
+    ts,
+    v_max: ArrayLike = 24.0,
+    y0=None,
+    *,
+    t0=None,
+    n_fix: int = 8,
+    chunk: int = 256,
+    components: tuple[int, ...] | None = None,
 ):
     """State histories of a belt start-up model for a batch of voltage time constants.
 
@@ -174,7 +210,8 @@ def startup_gamma_batch(
     or `BeltChain`) from rest (or `y0`) at t = `ts[0]`. Equivalent to
     `jax.vmap(lambda g: simulate(Scene(model, ExponentialVoltage(v_max, g), ts=ts)).ys)(gammas)`
     with shape (B, N, n_states), but with the modal decomposition and the shared responses
-    computed once for the batch (see module docstring).
+    computed once for the batch (see module docstring). `components`: only these states (static
+    indices), shape (B, N, len(components)).
     """
     from .commands import ConstantVoltage
 
@@ -185,7 +222,62 @@ def startup_gamma_batch(
     x0 = jnp.zeros((A.shape[0],)) if y0 is None else jnp.asarray(y0, dtype=float)
     uniform = None  # decided from the values in the program (the expm fall-back only)
     t0 = ts[0] if t0 is None else jnp.asarray(t0, dtype=float)
-    return exp_input_batch(A, F, s, x0, t0, ts, f_var, -1.0 / gammas, uniform=uniform, n_fix=n_fix, chunk=chunk)
+    return exp_input_batch(
+        A, F, s, x0, t0, ts, f_var, -1.0 / gammas, uniform=uniform, n_fix=n_fix, chunk=chunk, components=components
+    )
+
+
+def _depends_on(jaxpr, n: int):
+    """The components of the first input (a vector of n) that the outputs of `jaxpr` read, or None where that
+    cannot be told (then all of them). Follows `y[i]` (a slice, then a squeeze or reshape) element by element;
+    any other operation depends on everything its operands depend on (an over-estimate, never an under-one)."""
+    from jax.extend.core import Literal
+
+    y = jaxpr.invars[0]
+    elems: dict = {y: [frozenset((i,)) for i in range(n)]}  # vectors whose elements are tracked one by one
+    whole: dict = {}  # any other variable -> the components it depends on
+
+    def deps(v):
+        if isinstance(v, Literal):
+            return frozenset()
+        if v in elems:
+            return frozenset().union(*elems[v])
+        return whole.get(v, frozenset())
+
+    for eqn in jaxpr.eqns:
+        prim = eqn.primitive.name
+        src = eqn.invars[0] if eqn.invars else None
+        if prim == "slice" and src in elems and len(eqn.params["start_indices"]) == 1:
+            start, stop = eqn.params["start_indices"][0], eqn.params["limit_indices"][0]
+            step = (eqn.params.get("strides") or (1,))[0]
+            elems[eqn.outvars[0]] = elems[src][start:stop:step]
+        elif prim in ("squeeze", "reshape") and src in elems and len(elems[src]) == 1:
+            whole[eqn.outvars[0]] = elems[src][0]
+        else:
+            d = frozenset().union(*(deps(v) for v in eqn.invars))
+            for out in eqn.outvars:
+                whole[out] = d
+    return frozenset().union(*(deps(v) for v in jaxpr.outvars))
+
+
+def output_components(model, names, inp, t) -> tuple[int, ...]:
+    """The state components that the outputs `names` of `model` read (at time `t`, input `inp`), in order; all of
+    them where that cannot be told; none for outputs that read no state (the voltage of a command). Decided from the
+    traced program of the outputs, nothing is computed."""
+    n = model.n_states
+    if not names:
+        return tuple(range(n))
+    try:
+        import equinox as eqx
+
+        def outputs(y, model, inp, t):
+            return [model.output(name, t, y, inp) for name in names]
+
+        closed = eqx.filter_make_jaxpr(outputs)(jax.ShapeDtypeStruct((n,), jnp.float64), model, inp, t)[0]
+        needed = _depends_on(closed.jaxpr, n)
+    except Exception:  # noqa: BLE001 - an output the analysis cannot trace alone: every component
+        return tuple(range(n))
+    return tuple(sorted(needed))
 
 
 def batched_exponential_scene(scene):
@@ -210,16 +302,39 @@ def batched_exponential_scene(scene):
         return None
     if any(n in model.integral_names() for n in scene.observe):
         return None
-    ys = startup_gamma_batch(model, inp.gamma, scene.ts, v_max=inp.v_max, y0=scene.y0, t0=scene.start_time)
+    n = model.n_states
+    # without the state, only the components the observed outputs read are computed (and never stored)
+    comps = tuple(range(n))
+    if not scene.state and scene.observe:
+        one_cmd = ExponentialVoltage(inp.v_max, inp.gamma[0])
+        comps = output_components(model, scene.observe, one_cmd, scene.ts[0])
+    part = None if comps == tuple(range(n)) else comps
+    if comps:
+        ys = startup_gamma_batch(
+            model, inp.gamma, scene.ts, v_max=inp.v_max, y0=scene.y0, t0=scene.start_time, components=part
+        )
+    else:  # the outputs read no state at all
+        ys = jnp.zeros((inp.gamma.shape[0], scene.ts.shape[0], 0))
+    where = {c: k for k, c in enumerate(comps)}
+
+    def state(yk):  # the full state vector of one time, zeros where a component was not computed
+        zero = jnp.zeros((), yk.dtype)
+        return jnp.stack([yk[where[i]] if i in where else zero for i in range(n)])
+
     outputs = {}
     for name in scene.observe:
 
         def one(g, yb, name=name):
             cmd = ExponentialVoltage(inp.v_max, g)
-            return jax.vmap(lambda t, y: model.output(name, t, y, cmd))(scene.ts, yb)
+            return jax.vmap(lambda t, y: model.output(name, t, state(y), cmd))(scene.ts, yb)
 
         outputs[name] = jax.vmap(one)(inp.gamma, ys)
-    success = jnp.all(jnp.isfinite(ys), axis=(1, 2))
+    if part is None:
+        success = jnp.all(jnp.isfinite(ys), axis=(1, 2))
+    else:  # what was computed: the components the outputs read, and the outputs
+        success = jnp.all(jnp.isfinite(ys), axis=(1, 2))
+        for v in outputs.values():
+            success = success & jnp.all(jnp.isfinite(v), axis=1)
     return Solution(
         ts=scene.ts,
         ys=ys if scene.state else None,

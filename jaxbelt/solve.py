@@ -95,6 +95,7 @@ def _run_impl(scene: Scene, method: str, solver, rtol, atol, dt0, max_steps: int
     stats = {}
     integral_vals = {}
     success = jnp.array(True)
+    saved_outputs = None
     if method in _CLOSED:
         ys = _closed(model, inp, y0, t0, times, method, scene.uniform)
     else:
@@ -111,7 +112,16 @@ def _run_impl(scene: Scene, method: str, solver, rtol, atol, dt0, max_steps: int
 
         from ._rk4 import RK4
 
-        saveat = diffrax.SaveAt(t1=True) if scene.final_only else diffrax.SaveAt(ts=times)
+        outputs_only = not scene.state  # the states are never stored: only the outputs asked for, and the last state
+        if outputs_only:
+
+            def asked(t, y, args):  # the observed outputs (and running integrals) at one output time
+                x, acc = y if integrals else (y, None)
+                return {n: model.output(n, t, x, args) for n in pointwise}, acc
+
+            saveat = diffrax.SaveAt(subs=[diffrax.SubSaveAt(ts=times, fn=asked), diffrax.SubSaveAt(t1=True)])
+        else:
+            saveat = diffrax.SaveAt(t1=True) if scene.final_only else diffrax.SaveAt(ts=times)
         if isinstance(solver, diffrax.AbstractAdaptiveSolver) and not isinstance(solver, RK4):
             controller = diffrax.PIDController(rtol=rtol, atol=atol)
         else:
@@ -134,11 +144,17 @@ def _run_impl(scene: Scene, method: str, solver, rtol, atol, dt0, max_steps: int
                 adjoint=adjoint,
             )
         assert sol.ys is not None  # saved at `times` (or t1)
-        if integrals:
-            ys, acc = sol.ys
-            integral_vals = {n: acc[:, i] for i, n in enumerate(integrals)}
+        if outputs_only:
+            (saved, acc), last = sol.ys
+            last = last[0] if integrals else last
+            ys = last  # the last state only: it decides `success` with the outputs (below)
+            saved_outputs = saved
         else:
-            ys = sol.ys
+            ys, acc = sol.ys if integrals else (sol.ys, None)
+            saved_outputs = None
+        if integrals:
+            assert acc is not None  # the augmented state's running integrals
+            integral_vals = {n: acc[:, i] for i, n in enumerate(integrals)}
         success = sol.result == diffrax.RESULTS.successful
         stats = {"num_steps": sol.stats["num_steps"]}
         if method == "rk4":
@@ -151,7 +167,10 @@ def _run_impl(scene: Scene, method: str, solver, rtol, atol, dt0, max_steps: int
     success = success & jnp.all(jnp.isfinite(ys))
     outputs = dict(integral_vals)
     for name in pointwise:
-        outputs[name] = jax.vmap(lambda t, y, name=name: model.output(name, t, y, inp))(times, ys)
+        if saved_outputs is not None:
+            outputs[name] = saved_outputs[name]
+        else:
+            outputs[name] = jax.vmap(lambda t, y, name=name: model.output(name, t, y, inp))(times, ys)
     for v in outputs.values():
         success = success & jnp.all(jnp.isfinite(v))
     return Solution(

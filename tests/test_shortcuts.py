@@ -104,3 +104,71 @@ def test_unobserved_outputs_shrink_the_program():
     n0 = size(())
     n_all = size(("electric_power", "mechanical_power", "alpha1", "alpha2", "kinetic_energy", "elastic_energy"))
     assert n_all > n0 + 10
+
+
+# --- asked-only outputs: a scene without the state computes and stores only what its outputs read ------------
+
+
+def test_output_components_read_from_the_outputs_program():
+    from jaxbelt.fast import output_components
+
+    model, cmd = jb.BeltStartup(), jb.ExponentialVoltage(V, GAMMA)
+    # state order: theta1, theta2, omega1, omega2, current
+    assert output_components(model, ("current",), cmd, 0.1) == (4,)
+    assert output_components(model, ("electric_power",), cmd, 0.1) == (4,)  # V(t) I: the voltage reads no state
+    assert output_components(model, ("mechanical_power",), cmd, 0.1) == (2, 4)
+    assert output_components(model, ("kinetic_energy", "theta2"), cmd, 0.1) == (1, 2, 3)
+    assert output_components(model, ("voltage",), cmd, 0.1) == ()
+    assert output_components(model, ("alpha2",), cmd, 0.1) == (0, 1, 2, 3, 4)  # A @ y: every component
+    assert output_components(model, (), cmd, 0.1) == (0, 1, 2, 3, 4)
+
+
+@pytest.mark.parametrize(
+    "model", [jb.BeltStartup(), jb.BeltStartup(tau_r0=2.0, L=1e-7)], ids=["tableI", "load,L=1e-7H"]
+)
+def test_batch_without_state_equals_the_full_state_run(model):
+    gammas = jnp.concatenate([jnp.linspace(0.005, 0.1, 37), jnp.array([0.02])])
+    names = tuple(n for n in model.available_outputs() if n not in model.integral_names())
+    full = jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V, gammas), ts=TS, observe=names))
+    for name in names:
+        one = jb.simulate(jb.Scene(model, jb.ExponentialVoltage(V, gammas), ts=TS, observe=(name,), state=False))
+        assert one.ys is None and set(one.outputs) == {name}
+        np.testing.assert_array_equal(np.asarray(one.success), np.asarray(full.success))
+        ref = np.asarray(full.outputs[name])
+        np.testing.assert_allclose(one.outputs[name], ref, rtol=1e-13, atol=1e-13 * np.max(np.abs(ref)))
+
+
+def test_batch_without_state_computes_only_the_components_read():
+    from jaxbelt.fast import batched_exponential_scene
+
+    model, gammas = jb.BeltStartup(), jnp.linspace(0.01, 0.1, 16)
+
+    def largest_array(observe, state):
+        scene = jb.Scene(model, jb.ExponentialVoltage(V, gammas), ts=TS, observe=observe, state=state)
+        text = jax.jit(batched_exponential_scene).lower(scene).compile().as_text()
+        return max(text.count(f"f64[16,{TS.shape[0]},{k}]") and k for k in range(1, 6))
+
+    assert largest_array(("electric_power",), False) == 1  # the current alone
+    assert largest_array(("mechanical_power",), False) == 2
+    assert largest_array(("electric_power",), True) == 5
+
+
+@pytest.mark.parametrize("method", ["ode", "rk4"])
+def test_ode_without_state_stores_only_the_outputs(method):
+    drive, pid = jb.FourBarDrive(), jb.PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0, v_limit=60.0)
+    ts = jnp.linspace(0.0, 0.5, 101)
+    names = ("motor_speed", "voltage")
+    full = jb.simulate(jb.Scene(drive, pid, ts=ts, observe=names), method=method, dt=1e-3)
+    one = jb.simulate(jb.Scene(drive, pid, ts=ts, observe=names, state=False), method=method, dt=1e-3)
+    assert one.ys is None
+    assert int(one.stats["num_steps"]) == int(full.stats["num_steps"])  # the same solve
+    for n in names:
+        ref = np.asarray(full.outputs[n])
+        np.testing.assert_allclose(one.outputs[n], ref, rtol=1e-13, atol=1e-13 * np.max(np.abs(ref)))
+    # integrals: running values at the output times, as with the state
+    model, cmd = jb.BeltStartup(), jb.ExponentialVoltage(V, GAMMA)
+    names = ("current", "electric_energy", "copper_loss")
+    full = jb.simulate(jb.Scene(model, cmd, ts=TS, observe=names), method="ode")
+    one = jb.simulate(jb.Scene(model, cmd, ts=TS, observe=names, state=False), method="ode")
+    for n in names:
+        np.testing.assert_array_equal(one.outputs[n], full.outputs[n])
