@@ -1,24 +1,27 @@
 """Optimisation of pseudo-polynomial motion commands (Incerti, pseudo-polynomial commands, section V, and beyond).
 
-`optimise_command` minimises the residual energy $\\mathcal H(\\gamma)$ of eq. (32) over the
-exponents; `optimise_robust` minimises the residual over a band of natural frequencies (a
-`vmap` inside the objective). Both use optax (`optax.lbfgs` by default, any optax
-transformation accepted) with one jitted step per iteration and a tqdm progress bar.
+`optimise_command` minimises the paper's target, the residual *energy* $\\mathcal H(\\gamma)$ of eq. (32), over
+the exponents (optax L-BFGS, one jitted step per iteration). `optimise_robust` minimises the residual *amplitude*
+over a band of natural frequencies (the measure of input-shaping practice: the platform's residual deflection
+$|\\lambda||W|/\\omega_d$, as a fraction of a reference command's), with the exponent optimiser of
+`jaxbelt.shaping.pseudo` (L-BFGS directions from optax, an Armijo line search, the band a `vmap`). Both report
+progress with tqdm.
 
-Feasibility by reparametrisation. The exponents must be distinct and each exceed
-$b = \\max(n, 2)$. The optimiser works on unconstrained $\\theta\\in\\mathbb R^{n+1}$ with
-$\\gamma_0 = b + \\epsilon + s\\,\\sigma(\\theta_0)$ and
-$\\gamma_i = \\gamma_{i-1} + \\delta + s\\,\\sigma(\\theta_i)$ ($\\sigma$ the logistic function): every
-$\\theta$ maps to sorted exponents with $\\gamma_0 > b$, gaps $> \\delta$ and increments below
-$\\delta + s$ (defaults $\\epsilon = \\delta = 10^{-3}$, shrunk when the start point is closer than
-that; `max_step` $s = 10$). No iterate, line-search trials included, is ever infeasible and
-nothing is clipped; the cap $s$ keeps trial points from running to exponents so large that
-$\\gamma + \\delta = \\gamma$ in floating point. H is symmetric under permutation of the
+Feasibility by reparametrisation. The exponents must be distinct and each exceed $b = \\max(n, 2)$. The
+optimisers work on unconstrained $\\theta\\in\\mathbb R^{n+1}$ with $\\gamma_0 = b + \\epsilon + s\\sin^2\\theta_0$
+and $\\gamma_i = \\gamma_{i-1} + \\delta + s\\sin^2\\theta_i$: every $\\theta$ maps to sorted exponents with
+$\\gamma_0 > b$, gaps $\\ge \\delta$ and increments at most $\\delta + s$ (`margin` ε, `gap` δ, `max_step` s). No
+iterate, line-search trials included, is ever infeasible and nothing is clipped; the cap $s$ keeps trial points
+from running to exponents so large that $\\gamma + \\delta = \\gamma$ in floating point. Every face of the box is
+reached at a finite θ, where the objective has an ordinary stationary point: the band optimum lies on such faces,
+and the logistic map used before ($s\\,\\sigma(\\theta)$) put them at θ = ±∞, where the robust optimiser froze
+short of the optimum (see `jaxbelt.shaping.pseudo`). The objectives are symmetric under permutation of the
 exponents, so sorting loses nothing.
 
-Sensitivity tools (`sensitivity_curve`, `tolerance_band`) evaluate the residual energy
-$E(T) = h\\mathcal H$ [J] of a command on platforms whose belt stiffness is scaled so that the
-natural frequency sweeps a band around the design value, and compare with ZV/ZVD input shapers.
+Sensitivity tools (`sensitivity_curve`, `tolerance_band`) evaluate a command's residual amplitude (or, as in the
+paper, the energy $E(T) = h\\mathcal H$ [J]) on platforms whose belt stiffness is scaled so that the natural
+frequency sweeps a band around the design value, and `shaped_commands` gives the ZV/ZVD shapers of a base command
+at the same total move time.
 """
 
 from __future__ import annotations
@@ -36,42 +39,31 @@ from .._checks import check_int, check_penalised_limits, check_positive, check_r
 from .._guard import host_checked
 from ..commands import MIN_EXPONENT_GAP, PseudoPolynomial, ShapedCommand
 from ..models.platform import BeltPlatform
-from ..objectives.residual import residual_energy, residual_energy_joules
+from ..objectives.residual import _w_quadrature, residual_energy, residual_energy_joules
+from ..shaping.pseudo import exponents_from_params, params_from_exponents
 
 
 # --------------------------------------------------------------------------------------------
 # Reparametrisation
 # --------------------------------------------------------------------------------------------
 def gammas_from_params(theta, lower, margin, gap, max_step):
-    """Map unconstrained `theta` to sorted exponents: $\\gamma_0 >$ `lower`, gaps > `gap`."""
-    inc = max_step * jax.nn.sigmoid(theta)
-    steps = jnp.concatenate([jnp.stack([lower + margin]), jnp.full((theta.shape[0] - 1,), gap)])
-    return jnp.cumsum(steps + inc)
+    """Map unconstrained `theta` to sorted exponents: $\\gamma_0 \\ge$ `lower` + `margin`, gaps >= `gap`, increments
+    <= `gap` + `max_step` (the sine map of `jaxbelt.shaping.pseudo.exponents_from_params`)."""
+    return exponents_from_params(theta, lower, margin, gap, max_step)
 
 
 def params_from_gammas(gammas, lower, margin, gap, max_step):
     """Inverse of `gammas_from_params` (the start point must lie inside its box)."""
-    g = jnp.sort(jnp.asarray(gammas, dtype=float))
-    d = jnp.diff(jnp.concatenate([jnp.stack([jnp.asarray(lower, dtype=float)]), g]))
-    steps = jnp.concatenate([jnp.stack([jnp.asarray(margin, dtype=float)]), jnp.full((g.shape[0] - 1,), gap)])
-    x = (d - steps) / max_step
-    return jnp.log(x) - jnp.log1p(-x)
+    return params_from_exponents(gammas, lower, margin, gap, max_step)
 
 
 # --------------------------------------------------------------------------------------------
 # The problem (an eqx.Module so that one compiled step serves every call with the same shapes)
 # --------------------------------------------------------------------------------------------
 class ShapingProblem(eqx.Module):
-    """Objective of the command optimisation as a function of the unconstrained parameters.
-
-    `kind="nominal"`: $\\mathcal H(\\gamma)/\\mathcal H_0$. `kind="band"`: with residual energies
-    $E(\\omega)$ on the frequency grid `omegas`, `mode="mean"` gives
-    $\\overline{E_\\gamma}/\\overline{E_{ref}}$ (mean over the band, relative to the reference
-    command's mean) and `mode="max"` a smooth maximum, the $L^{16}$ mean of
-    $E_\\gamma(\\omega)/\\max E_{ref}$. Normalising by the reference's band mean or maximum, not
-    pointwise, keeps the near-zeros of the reference's own residual curve from dominating.
-    Soft limits add $w\\,\\max(0, x/x_{max} - 1)^2$ for the peak motor speed and acceleration
-    (sampled on `n_peak` times).
+    """Objective of `optimise_command` as a function of the unconstrained parameters: the paper's residual energy
+    $\\mathcal H(\\gamma)/\\mathcal H_0$ (eq. 32) on the nominal platform. Soft limits add
+    $w\\,\\max(0, x/x_{max} - 1)^2$ for the peak motor speed and acceleration (sampled on `n_peak` times).
     """
 
     plat: BeltPlatform
@@ -82,13 +74,9 @@ class ShapingProblem(eqx.Module):
     gap: jnp.ndarray
     max_step: jnp.ndarray
     scale: jnp.ndarray
-    omegas: jnp.ndarray | None = None
-    ref_energy: jnp.ndarray | None = None
     max_speed: jnp.ndarray | None = None
     max_accel: jnp.ndarray | None = None
     penalty: jnp.ndarray = eqx.field(default_factory=lambda: jnp.asarray(10.0))
-    kind: str = eqx.field(static=True, default="nominal")
-    mode: str = eqx.field(static=True, default="mean")
     n_nodes: int = eqx.field(static=True, default=128)
     n_peak: int = eqx.field(static=True, default=401)
 
@@ -99,18 +87,8 @@ class ShapingProblem(eqx.Module):
         return PseudoPolynomial(self.gammas(theta), self.displacement, self.duration)
 
     def raw(self, theta):
-        """Unscaled objective: H [rad²/s⁴] (nominal) or the band measure (dimensionless)."""
-        cmd = self.command(theta)
-        if self.kind == "nominal":
-            return residual_energy(self.plat, cmd, n_nodes=self.n_nodes)
-        assert self.omegas is not None and self.ref_energy is not None  # a band problem has both
-        e = jax.vmap(lambda w: residual_energy_joules(self.plat.with_natural_frequency(w), cmd, n_nodes=self.n_nodes))(
-            self.omegas
-        )
-        if self.mode == "max":
-            r = e / jnp.max(self.ref_energy)
-            return jnp.mean(r**16) ** (1.0 / 16)
-        return jnp.mean(e) / jnp.mean(self.ref_energy)
+        """Unscaled objective: the residual energy H [rad²/s⁴]."""
+        return residual_energy(self.plat, self.command(theta), n_nodes=self.n_nodes)
 
     def penalties(self, theta):
         cmd = self.command(theta)
@@ -136,7 +114,8 @@ class CommandOptimResult(eqx.Module):
       measure for `optimise_robust`; `initial_value`: the same at the start point;
     - `history`: objective after each iteration (index 0: start), `gammas_history` likewise;
       the result is the best iterate (lowest objective), normally the last;
-    - `n_steps`, `converged` (stopping test met before `max_steps`);
+    - `n_steps`, `converged` (a stopping test met: gradient or objective below its tolerance, or, for
+      `optimise_robust`, no descent left at the objective's rounding level); `message`: why the run stopped;
     - `peak_speed` [rad/s], `peak_accel` [rad/s²] of the final motor command.
     """
 
@@ -150,6 +129,7 @@ class CommandOptimResult(eqx.Module):
     converged: bool = eqx.field(static=True)
     peak_speed: jnp.ndarray | None = None
     peak_accel: jnp.ndarray | None = None
+    message: str = eqx.field(static=True, default="")
 
     @property
     def relative(self):
@@ -230,15 +210,22 @@ def _run(problem: ShapingProblem, theta0, optimizer, learning_rate, max_steps, t
         if bar is not None:
             bar.update(1)
             bar.set_postfix(objective=f"{f:.3e}")
-        # a line-search method that no longer decreases has converged as far as float64 allows;
         # first-order methods (adam) oscillate by design and run to max_steps
         if f <= tol or float(gmax) <= gtol or (use_state_value and stall >= 5):
             converged = f <= tol or float(gmax) <= gtol
+            if f <= tol:
+                message = f"converged: objective {f:.2e} <= tol {tol:g}"
+            elif float(gmax) <= gtol:
+                message = f"converged: largest gradient component {float(gmax):.1e} <= gtol {gtol:g}"
+            else:
+                message = f"stopped: no decrease in 5 iterations, largest gradient component {float(gmax):.1e}"
             break
+    else:
+        message = f"stopped at the iteration limit (max_steps = {max_steps})"
     if bar is not None:
         bar.close()
     # a line search that fails may still move; report the best iterate, not the last
-    return best_theta, np.asarray(hist), np.stack(ghist), n, converged
+    return best_theta, np.asarray(hist), np.stack(ghist), n, converged, message
 
 
 @host_checked
@@ -254,7 +241,7 @@ def _final(problem, theta, theta0):
     )
 
 
-def _finish(problem, theta, theta0, hist, ghist, n, converged):
+def _finish(problem, theta, theta0, hist, ghist, n, converged, message=""):
     cmd, value, v0, vmax, amax = _final(problem, theta, theta0)
     return CommandOptimResult(
         gammas=cmd.gammas,
@@ -268,6 +255,7 @@ def _finish(problem, theta, theta0, hist, ghist, n, converged):
         converged=bool(converged),
         peak_speed=vmax,
         peak_accel=amax,
+        message=message,
     )
 
 
@@ -275,20 +263,8 @@ _params_jit = jax.jit(params_from_gammas)
 
 
 @host_checked
-def _raw(problem, theta):
-    return problem.raw(theta)
-
-
-@host_checked
 def _residual_jit(plat, cmd, n_nodes):
     return residual_energy(plat, cmd, n_nodes=n_nodes)
-
-
-@host_checked
-def _band_reference(plat, reference, omegas, n_nodes):
-    return jax.vmap(lambda w: residual_energy_joules(plat.with_natural_frequency(w), reference, n_nodes=n_nodes))(
-        omegas
-    )
 
 
 def _check_options(owner, margin, gap, max_speed, max_accel, penalty, learning_rate):
@@ -314,7 +290,7 @@ def _bounds(cmd: PseudoPolynomial, margin, gap, max_step):
     if not float(max_step) > 0:
         raise ValueError(f"`max_step` must be > 0; got {max_step}")
     d = np.diff(np.concatenate([[lower], g])) - np.array([margin] + [gap] * (len(g) - 1))
-    if np.any(d >= float(max_step)):
+    if np.any(d > float(max_step)):
         raise ValueError(
             f"start exponents {g.tolist()} need increments up to {float(np.max(d)):.3g} above the minimum gaps; "
             f"raise `max_step` (now {max_step}) above that"
@@ -374,13 +350,12 @@ def optimise_command(
         max_speed=None if max_speed is None else jnp.asarray(max_speed, dtype=float),
         max_accel=None if max_accel is None else jnp.asarray(max_accel, dtype=float),
         penalty=jnp.asarray(penalty, dtype=float),
-        kind="nominal",
         n_nodes=n_nodes,
     )
-    theta, hist, ghist, n, conv = _run(
+    theta, hist, ghist, n, conv, message = _run(
         problem, theta0, optimizer, learning_rate, max_steps, tol, gtol, progress, "optimise_command"
     )
-    return _finish(problem, theta, theta0, hist, ghist, n, conv)
+    return _finish(problem, theta, theta0, hist, ghist, n, conv, message)
 
 
 def optimise_robust(
@@ -393,117 +368,255 @@ def optimise_robust(
     reference: PseudoPolynomial | None = None,
     optimizer="lbfgs",
     learning_rate=None,
-    max_steps: int = 150,
+    max_steps: int = 400,
     tol: float = 0.0,
-    gtol: float = 1e-12,
+    gtol: float = 1e-4,
     margin: float = 1e-3,
-    gap: float = 0.25,
+    gap: float = 0.5,
     max_step: float = 10.0,
     max_speed=None,
     max_accel=None,
-    penalty: float = 10.0,
+    penalty: float = 1e4,
     n_nodes: int = 128,
     progress: bool = True,
 ) -> CommandOptimResult:
-    """Minimise the residual energy over a band of natural frequencies (robust shaping).
+    """Minimise the residual vibration *amplitude* over a band of natural frequencies (robust shaping).
 
-    $E(\\omega)$ is the residual energy [J] on the platform with its belt stiffness scaled to
-    natural frequency ω (`BeltPlatform.with_natural_frequency`), for `n_freq` frequencies in
-    `band` × $\\omega_n$ (a `vmap` inside the objective). Objective (`ShapingProblem`):
-    `mode="mean"`: $\\overline{E_\\gamma}/\\overline{E_{ref}}$; `mode="max"`: the $L^{16}$ mean of
-    $E_\\gamma/\\max E_{ref}$ (a smooth worst case). The reference is the 3-4-5 polynomial (or
-    `reference`) with the same Φ and T. Higher orders (4 or 5 exponents; each must exceed n)
-    give more freedom.
+    $A(\\omega) = |\\lambda||W(s)|/\\omega_d$ [rad] is the amplitude of the platform's residual deflection after the
+    move on the platform with its belt stiffness scaled to natural frequency ω (`BeltPlatform.with_natural_frequency`:
+    J and c kept, so ξ scales as 1/ω), for `n_freq` frequencies in `band` × $\\omega_n$. Objective:
+    `mode="mean"`: $\\overline{A_\\gamma}/\\overline{A_{ref}}$; `mode="max"`: the worst $A_\\gamma/\\max A_{ref}$, as a
+    power mean of the ratios with the power raised 4 → 16 → 64 → 256 (a smooth maximum that converges to the
+    maximum). The reference is the 3-4-5 polynomial (or `reference`) with the same Φ and T. The amplitude, not the
+    energy: the energy weighs the band by $\\omega^2$ and squares the amplitude (its "5 %" is a 22 % amplitude).
 
-    The minimum gap between exponents defaults to 0.25 here: the band optimum pushes exponents
-    together, and clustered exponents make the $C_i$ grow like gap$^{-n}$ and cancel in floating
-    point. `max_step` bounds each increment (module docstring).
-    `value` is the final band measure; `initial_value` the start point's.
+    Guarantees: the result is never worse than the start, neither by the band measure (the best iterate is returned)
+    nor at the design frequency: the amplitude at $\\omega_n$ is held at or below the start's (a penalty, checked
+    on the result; were it broken the start is returned, not converged). `converged` is True only when a stopping
+    test is met (largest gradient component of the log of the measure <= `gtol`, the measure <= `tol`, or no
+    descent left at the objective's rounding level with the gradient <= 1e-2), and `message` says why it stopped.
+
+    - `cmd`: the start (its order n; every exponent > max(n, 2)); higher orders (4 to 6 exponents) give more freedom;
+    - `optimizer`: `"lbfgs"` (default: optax's L-BFGS direction with an Armijo backtracking line search), `"adam"`
+      (`learning_rate`, default 0.05), or any optax `GradientTransformation` (its update taken as the step);
+    - `max_steps`: iterations in all (shared by the stages); `margin`, `gap`, `max_step`: the exponent map (module
+      docstring; the gap defaults to 0.5: clustered exponents make the coefficients grow like gap$^{-n}$, and the
+      objective's rounding noise with them, which stalls the line search);
+    - `max_speed` [rad/s], `max_accel` [rad/s²]: limits on the motor command, as penalties of weight `penalty`;
+    - `n_nodes`: Gauss-Legendre nodes, raised where the band's highest frequency needs more (about
+      $2.5\\omega T + 64$).
+
+    `value` is the final band measure (for `"max"` the worst ratio on the grid), `initial_value` the start's;
+    `history` the smoothed measure (penalties included) after each iteration, stage after stage; `gammas_history`
+    the exponents at the start and at the end of each stage.
     """
+    from ..models.axis import ModalAxis
+    from ..shaping import pseudo as _pp
+
+    o = "optimise_robust"
     if not isinstance(cmd, PseudoPolynomial):
-        raise ValueError(f"optimise_robust: `cmd` must be a PseudoPolynomial; got {type(cmd).__name__}")
+        raise ValueError(f"{o}: `cmd` must be a PseudoPolynomial; got {type(cmd).__name__}")
     if mode not in ("mean", "max"):
-        raise ValueError(f"optimise_robust: `mode` must be 'mean' or 'max'; got {mode!r}")
+        raise ValueError(f"{o}: `mode` must be 'mean' or 'max'; got {mode!r}")
     lo_b, hi_b = float(band[0]), float(band[1])
     if not (0 < lo_b < hi_b):
-        raise ValueError(f"optimise_robust: `band` must satisfy 0 < low < high (fractions of omega_n); got {band}")
-    _check_options("optimise_robust", margin, gap, max_speed, max_accel, penalty, learning_rate)
-    n_freq = check_int("optimise_robust", "n_freq", n_freq, 2)
+        raise ValueError(f"{o}: `band` must satisfy 0 < low < high (fractions of omega_n); got {band}")
+    _check_options(o, margin, gap, max_speed, max_accel, penalty, learning_rate)
+    n_freq = check_int(o, "n_freq", n_freq, 2)
+    n_nodes = check_int(o, "n_nodes", n_nodes, 8)
+    max_steps = check_int(o, "max_steps", max_steps, 0)
+    check_positive("gtol", gtol, owner=o)
     if reference is None:
         reference = PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]), cmd.displacement, cmd.duration)
-    omegas = jnp.linspace(lo_b, hi_b, n_freq) * plat.omega_n
-    e_ref = _band_reference(plat, reference, omegas, n_nodes)
     lower, margin, gap = _bounds(cmd, margin, gap, max_step)
-    theta0 = _params_jit(cmd.gammas, lower, margin, gap, max_step)
-    problem = ShapingProblem(
-        plat=plat,
-        displacement=cmd.displacement,
-        duration=cmd.duration,
-        lower=lower,
-        margin=jnp.asarray(margin),
-        gap=jnp.asarray(gap),
-        max_step=jnp.asarray(max_step, dtype=float),
-        scale=jnp.asarray(1.0),
-        omegas=omegas,
-        ref_energy=e_ref,
-        max_speed=None if max_speed is None else jnp.asarray(max_speed, dtype=float),
-        max_accel=None if max_accel is None else jnp.asarray(max_accel, dtype=float),
-        penalty=jnp.asarray(penalty, dtype=float),
-        kind="band",
-        mode=mode,
-        n_nodes=n_nodes,
+    # the band as modes of one axis: frequency omega_k, damping ratio xi * omega_n / omega_k (c kept), gain lambda;
+    # the last mode is the nominal platform (the design frequency)
+    wn, xi, lam = float(plat.omega_n), float(plat.damping_ratio), float(plat.lam)
+    omegas = np.linspace(lo_b, hi_b, n_freq) * wn
+    if not float(np.max(xi * wn / omegas)) < 1.0:
+        raise ValueError(f"{o}: the band reaches an overdamped platform (xi >= 1 at {lo_b:g} omega_n); raise `band`")
+    w_all = np.concatenate([omegas, [wn]])
+    axis = ModalAxis(w_all / (2 * np.pi), xi * wn / w_all, np.full(w_all.shape, lam))
+    T, phi = float(cmd.duration), float(cmd.displacement)
+    n_nodes = max(n_nodes, _pp.n_nodes_for(float(np.max(w_all)) * T))  # the rule must resolve the band
+    kern1 = _pp._kernels_np(axis, T, np.ones(1), np.ones(n_freq + 1), n_nodes)
+    pad = np.ones((1, reference.order + 1))
+    a_ref, _ = _pp._evaluate_np(kern1, n_freq + 1, n_nodes, phi, T, np.sort(np.asarray(reference.gammas))[None], pad)
+    a_ref = a_ref[0, :n_freq, 0]
+    scale = float(np.max(a_ref)) if mode == "max" else float(np.mean(a_ref))
+    kern = _pp._kernels_np(axis, T, np.ones(1), np.full(n_freq + 1, scale), n_nodes)
+    band_w = np.concatenate([np.full(n_freq, 1.0 / n_freq), [0.0]])[:, None]
+    g0 = np.sort(np.asarray(cmd.gammas, dtype=float))
+    # exponent slots padded to a fixed count (inactive ones masked out): one compiled program for orders up to 7
+    slots = max(_SLOTS, g0.shape[0])
+    act = (np.arange(slots) < g0.shape[0]).astype(float)[None]
+    g0_pad = np.concatenate([g0, g0[-1] + (1.0 + gap) * np.arange(1, slots - g0.shape[0] + 1)])
+    r0, _ = _pp._evaluate_np(kern, n_freq + 1, n_nodes, phi, T, g0_pad[None], act)
+    nominal0 = float(r0[0, -1, 0])
+    guard = np.concatenate([np.full(n_freq, np.inf), [nominal0]])
+    limits = (None if max_speed is None else float(max_speed), None if max_accel is None else float(max_accel), None)
+    shared = _pp.make_shared(
+        jnp.asarray(kern), n_nodes, band_w, np.zeros(n_freq + 1), guard, phi, T, limits, max_step=float(max_step),
+        margin=margin, penalty=float(penalty),
+    )  # fmt: skip
+    theta = jnp.asarray(_pp._params_np(g0_pad, lower, margin, gap, float(max_step)))[None]
+    if isinstance(optimizer, str):
+        if optimizer not in ("lbfgs", "adam"):
+            raise ValueError(
+                f"optimiser name must be 'lbfgs' or 'adam' (or pass an optax transformation); got {optimizer!r}"
+            )
+        opt = _pp.LBFGS if optimizer == "lbfgs" else _adam(learning_rate)
+        linesearch = optimizer == "lbfgs"
+    else:
+        opt, linesearch = optimizer, False
+    powers = (1.0,) if mode == "mean" else _pp.POWERS
+    budget = [max_steps // len(powers)] * len(powers)
+    budget[-1] += max_steps - sum(budget)
+    hist, ghist = [], [g0]
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=len(powers), desc=o, leave=False)
+    n_steps, reason, gmax = 0, 2, float("nan")
+    ftol = float(np.log(tol)) if tol > 0 else -np.inf
+    try:
+        for p, k in zip(powers, budget):
+            runs = _pp.make_runs(
+                act, lower, gap, p=p, w_band=1.0, w_guard=_pp.PENALTY, gtol=gtol, gtol_loose=_pp.ROBUST_GTOL_LOOSE, ftol=ftol,
+                max_iter=k,
+            )  # fmt: skip
+            st = _pp.run_stage(opt, shared, runs, theta, n_hist=_N_HIST, linesearch=linesearch)
+            theta = st.theta
+            done = int(st.n_iter[0])
+            n_steps += done
+            hist += np.exp(np.asarray(st.history[0, : min(done, _N_HIST)])).tolist()
+            ghist.append(_pp._exponents_np(np.asarray(theta[0]), lower, margin, gap, float(max_step))[: g0.shape[0]])
+            reason, gmax = int(st.reason[0]), float(st.gmax[0])
+            if bar is not None:
+                bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
+    g = ghist[-1]
+    r, _ = _pp._evaluate_np(kern, n_freq + 1, n_nodes, phi, T, g[None], np.ones((1, g.shape[0])))
+    r = r[0, :, 0]
+    measure = (lambda x: float(np.max(x))) if mode == "max" else (lambda x: float(np.mean(x)))
+    value, value0 = measure(r[:n_freq]), measure(r0[0, :n_freq, 0])
+    converged = reason in _pp.CONVERGED
+    message = f"{_pp.REASONS[reason]} (largest gradient component {gmax:.1e})"
+    if not (value <= value0 and r[-1] <= nominal0 * (1 + 1e-12)):
+        # never end worse than the start, by the band measure or at the design frequency
+        g, value, converged = g0, value0, False
+        message = f"returned the start: the end point was worse than it ({message})"
+    out = PseudoPolynomial(jnp.asarray(g), cmd.displacement, cmd.duration)
+    ts = jnp.linspace(0.0, 1.0, 2001) * out.duration
+    return CommandOptimResult(
+        gammas=out.gammas,
+        value=jnp.asarray(value),
+        initial_value=jnp.asarray(value0),
+        history=jnp.asarray([value0] + hist),
+        gammas_history=jnp.asarray(np.stack(ghist)),
+        command=out,
+        n_steps=n_steps,
+        converged=bool(converged),
+        peak_speed=jnp.max(jnp.abs(out.velocity(ts))),
+        peak_accel=jnp.max(jnp.abs(out.acceleration(ts))),
+        message=message,
     )
-    problem = eqx.tree_at(lambda p: p.scale, problem, _raw(problem, theta0))
-    theta, hist, ghist, n, conv = _run(
-        problem, theta0, optimizer, learning_rate, max_steps, tol, gtol, progress, "optimise_robust"
-    )
-    return _finish(problem, theta, theta0, hist, ghist, n, conv)
+
+
+#: iterations of optimise_robust's history kept per stage, and its exponent slots
+_N_HIST = 512
+_SLOTS = 8
+
+
+@functools.cache
+def _adam(learning_rate):
+    return optax.adam(learning_rate if learning_rate is not None else 0.05)
 
 
 # --------------------------------------------------------------------------------------------
 # Sensitivity to the natural frequency, and input-shaper comparison
 # --------------------------------------------------------------------------------------------
-def shaped_commands(plat, base: PseudoPolynomial) -> dict:
-    """ZV and ZVD shapers of `base` tuned to the platform's $(\\omega_n, \\xi)$."""
-    return {
-        "ZV": ShapedCommand.zv(base, plat.omega_n, plat.damping_ratio),
-        "ZVD": ShapedCommand.zvd(base, plat.omega_n, plat.damping_ratio),
-    }
+def shaped_commands(plat, base: PseudoPolynomial, *, equal_time: bool = True) -> dict:
+    """ZV and ZVD shapers (Singer and Seering, 1990) of `base`, tuned to the platform's $(\\omega_n, \\xi)$.
+
+    `equal_time=True` (default): the comparison on equal terms: each shaped command ends at the same total time
+    T as `base`: the base is the same pseudo-polynomial shortened by the shaper's length ($\\pi/\\omega_d$ for ZV,
+    $2\\pi/\\omega_d$ for ZVD), so its peaks rise as $(T/T')$ and $(T/T')^2$. `equal_time=False`: the shaper is
+    applied to `base` itself and lengthens the move by its own length. Raises ValueError when the shaper is as long
+    as the move."""
+    T = float(base.duration)
+    out = {}
+    for name, make in (("ZV", ShapedCommand.zv), ("ZVD", ShapedCommand.zvd)):
+        probe = make(base, plat.omega_n, plat.damping_ratio)
+        length = float(probe.times[-1])
+        if not equal_time:
+            out[name] = probe
+            continue
+        if not length < T:
+            raise ValueError(
+                f"shaped_commands: the {name} shaper lasts {length:.4g} s, not less than the move time {T:g} s; "
+                "no shortened base can end at the same time"
+            )
+        short = PseudoPolynomial(base.gammas, base.displacement, T - length)
+        out[name] = make(short, plat.omega_n, plat.damping_ratio)
+    return out
 
 
-def sensitivity_curve(plat, commands: dict, *, rel: float = 0.3, n: int = 121, n_nodes: int = 128):
-    """Residual energy $E(T)$ [J] of each command against the actual natural frequency.
+def sensitivity_curve(plat, commands: dict, *, rel: float = 0.3, n: int = 121, n_nodes: int = 128, measure="amplitude"):
+    """The residual vibration of each command against the actual natural frequency.
 
-    The belt stiffness is scaled so that $\\omega$ sweeps $[1-rel, 1+rel]\\,\\omega_n$ (`n`
-    points; the design value sits at the centre when `n` is odd). `rel` in (0, 1), `n` >= 2.
-    Returns `(omegas, {name: E})`.
+    The belt stiffness is scaled so that $\\omega$ sweeps $[1-rel, 1+rel]\\,\\omega_n$ (`n` points; the design value
+    sits at the centre when `n` is odd). `measure="amplitude"` (default): the amplitude of the platform's residual
+    deflection $A = |\\lambda||W|/\\omega_d$ [rad] (the measure of input-shaping practice); `measure="energy"`: the
+    paper's residual energy $E(T) = h\\mathcal H$ [J] (eq. 31). `rel` in (0, 1), `n` >= 2.
+    Returns `(omegas, {name: values})`.
     """
     o = "sensitivity_curve"
     check_range("rel", rel, 0.0, 1.0, lo_open=True, hi_open=True, owner=o)  # 1 - rel > 0: omega stays > 0
     n = check_int(o, "n", n, 2)
+    if measure not in ("amplitude", "energy"):
+        raise ValueError(f"{o}: parameter `measure` must be 'amplitude' or 'energy'; got {measure!r}")
     omegas = jnp.linspace(1.0 - rel, 1.0 + rel, n) * plat.omega_n
-    out = {}
-    for name, cmd in commands.items():
-        out[name] = _band_reference(plat, cmd, omegas, n_nodes)
-    return omegas, out
+    f = _band_amplitude if measure == "amplitude" else _band_energy
+    return omegas, {name: f(plat, cmd, omegas, n_nodes) for name, cmd in commands.items()}
 
 
-def tolerance_band(omegas, energy, reference, omega0, level: float = 0.05):
-    """Width of the frequency band around `omega0` where `energy / reference < level`.
+@host_checked
+def _band_energy(plat, cmd, omegas, n_nodes):
+    return jax.vmap(lambda w: residual_energy_joules(plat.with_natural_frequency(w), cmd, n_nodes=n_nodes))(omegas)
+
+
+@host_checked
+def _band_amplitude(plat, cmd, omegas, n_nodes):
+    def one(w):
+        q = plat.with_natural_frequency(w)
+        re, im = _w_quadrature(q, cmd, n_nodes)
+        return jnp.abs(q.lam) / q.omega_d * jnp.hypot(re, im)
+
+    return jax.vmap(one)(omegas)
+
+
+def tolerance_band(omegas, values, reference, omega0, level: float = 0.05):
+    """Width of the frequency band around `omega0` where `values / reference < level`: with residual amplitudes
+    (`sensitivity_curve`'s default) and the unshaped command's amplitude as `reference`, the "5 % band" of
+    input-shaping practice (with energies, `level` = 0.05 is a 22 % amplitude).
 
     Returns the width as a fraction of `omega0` (0 when the ratio at `omega0` is not below the
     level), with the band edges found by linear interpolation of the ratio on the grid; a band
     that reaches the end of the grid is cut there. `omegas` [rad/s]: a strictly increasing grid;
-    `energy` of its shape, `reference` of its shape or a scalar; `omega0` within the grid; `level` > 0.
+    `values` of its shape, `reference` of its shape or a scalar; `omega0` within the grid; `level` > 0.
     """
     o = "tolerance_band"
     w = np.asarray(omegas, dtype=float)
-    e, ref = np.asarray(energy, dtype=float), np.asarray(reference, dtype=float)
+    e, ref = np.asarray(values, dtype=float), np.asarray(reference, dtype=float)
     if w.ndim != 1 or w.size < 2 or not np.all(np.isfinite(w)) or not np.all(np.diff(w) > 0):
         raise ValueError(f"{o}: `omegas` must be a finite, strictly increasing 1-D grid of >= 2 frequencies [rad/s]")
     if e.shape != w.shape or ref.shape not in ((), w.shape):
         raise ValueError(
-            f"{o}: `energy` must have the shape of `omegas` {w.shape} and `reference` that shape or "
+            f"{o}: `values` must have the shape of `omegas` {w.shape} and `reference` that shape or "
             f"none (a scalar); got {e.shape} and {ref.shape}"
         )
     check_positive("level", level, owner=o)

@@ -1,7 +1,9 @@
-"""Figures of the command-shaping scene (Incerti, pseudo-polynomial commands): the paper's Fig. 3 and the sensitivity plot.
+"""Figures of the command-shaping scene (Incerti, pseudo-polynomial commands): the paper's Fig. 2 and Fig. 3, and the
+sensitivity plot.
 
 Drawing only: the responses come from `jaxbelt.platform_response`, the sensitivity curves from
-`jaxbelt.sensitivity_curve`.
+`jaxbelt.sensitivity_curve` (residual amplitudes by default, drawn in % of a reference: the measure of
+input-shaping practice; the paper's residual energy when asked, labelled as such).
 """
 
 from __future__ import annotations
@@ -51,33 +53,74 @@ def plot_fig3(before: dict, after: dict, *, move_times=None, axes=None, titles=(
     return axes
 
 
-def plot_sensitivity(omegas, curves: dict, omega0, *, ax=None, reference: str | None = None, level: float = 0.05):
-    """Residual energy E(T) [J] against the actual natural frequency (relative to the design
-    value `omega0`), log scale, one line per command; with `reference` named, the level
-    `level` × E_ref is drawn dotted (the 5 % tolerance of the band widths)."""
+def reference_level(omegas, curves: dict, omega0, reference, band=None) -> float:
+    """The number a sensitivity plot divides by: `reference` itself when it is a number, else the worst value of
+    the curve it names over `band` ((low, high) fractions of `omega0`; None: the whole sweep)."""
+    if not isinstance(reference, str):
+        return float(reference)
+    x = np.asarray(omegas) / float(omega0)
+    y = np.asarray(curves[reference])
+    inside = np.ones_like(x, dtype=bool) if band is None else (x >= band[0] - 1e-12) & (x <= band[1] + 1e-12)
+    return float(np.max(y[inside]))
+
+
+def plot_sensitivity(
+    omegas, curves: dict, omega0, *, ax=None, reference=None, level: float = 0.05, measure: str = "amplitude",
+    band=None,
+):  # fmt: skip
+    """Residual vibration of each command against the actual natural frequency (relative to the design value
+    `omega0`), log scale, one line per command.
+
+    `measure="amplitude"` (default): `curves` are residual amplitudes (`sensitivity_curve`'s default). With
+    `reference` (the name of a curve, standing for its worst over `band`, fractions of `omega0`, default the whole
+    sweep; or a number in the curves' units) they are drawn in % of it, with the `level` line dotted (the 5 % band
+    of input-shaping practice); without, in the curves' units [rad].
+    `measure="energy"`: `curves` are the paper's residual energies E(T) [J]; with `reference` named, `level` × that
+    curve is drawn dotted (an energy level: 5 % of the energy is 22 % of the amplitude).
+    """
     import matplotlib.pyplot as plt
 
     if ax is None:
         _, ax = plt.subplots(figsize=(8, 4))
     x = np.asarray(omegas) / float(omega0)
-    floor = 1e-12 * max(float(np.max(np.asarray(c))) for c in curves.values())
-    for name, e in curves.items():
-        ax.semilogy(x, np.maximum(np.asarray(e), floor), label=name, lw=1.3)
-    if reference is not None:
-        ax.semilogy(x, level * np.asarray(curves[reference]), "k:", lw=0.9, label=f"{level:.0%} of {reference}")
+    if measure == "energy":
+        floor = 1e-12 * max(float(np.max(np.asarray(c))) for c in curves.values())
+        for name, e in curves.items():
+            ax.semilogy(x, np.maximum(np.asarray(e), floor), label=name, lw=1.3)
+        if reference is not None:
+            ax.semilogy(x, level * np.asarray(curves[reference]), "k:", lw=0.9, label=f"{level:.0%} of {reference}")
+        ax.set_ylabel("residual energy E(T) [J] (Incerti eq. 31)")
+    else:
+        scale, unit = 1.0, "residual amplitude [rad]"
+        if reference is not None:
+            scale = 100.0 / reference_level(omegas, curves, omega0, reference, band)
+            what = reference if isinstance(reference, str) else "the reference"
+            where = "" if band is None else f" over {band[0]:g}-{band[1]:g}"
+            unit = f"residual amplitude [% of {what}'s worst{where}]"
+        ys = {name: scale * np.asarray(c) for name, c in curves.items()}
+        floor = 1e-6 * max(float(np.max(y)) for y in ys.values())
+        for name, y in ys.items():
+            ax.semilogy(x, np.maximum(y, floor), label=name, lw=1.3)
+        if reference is not None:
+            ax.axhline(100.0 * level, color="k", ls=":", lw=0.9, label=f"{level:.0%} level")
+        ax.set_ylabel(unit)
     ax.axvline(1.0, color="0.6", lw=0.6)
+    if band is not None:
+        for b in band:
+            ax.axvline(float(b), color="0.8", lw=0.6, ls="--")
     ax.set_xlabel("actual / design natural frequency")
-    ax.set_ylabel("residual energy E(T) [J]")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8, ncol=2)
     return ax
 
 
 def shaping_figure(
-    before: dict, after: dict, omegas, curves: dict, omega_n, *, move_times=None, reference: str | None = None
-):
+    before: dict, after: dict, omegas, curves: dict, omega_n, *, move_times=None, reference=None, band=None,
+    measure: str = "amplitude",
+):  # fmt: skip
     """One figure: Fig. 3 (rows 1-4, from the `jaxbelt.platform_response` dicts `before`, `after`) and the
-    sensitivity plot (row 5: `omegas` [rad/s], `curves` {label: E(T) [J]}, design `omega_n` [rad/s]).
+    sensitivity plot (row 5: `omegas` [rad/s], `curves` {label: residual amplitude [rad]} (or, with
+    `measure="energy"`, E(T) [J]), design `omega_n` [rad/s]; `reference`, `band` as in `plot_sensitivity`).
     Returns the Figure."""
     import matplotlib.pyplot as plt
 
@@ -88,7 +131,9 @@ def shaping_figure(
         for j in range(2):
             axes[i, j] = fig.add_subplot(gs[i, j], sharex=axes[0, 0] if (i, j) != (0, 0) else None)
     plot_fig3(before, after, move_times=move_times, axes=axes)
-    plot_sensitivity(omegas, curves, omega_n, ax=fig.add_subplot(gs[4, :]), reference=reference)
+    plot_sensitivity(
+        omegas, curves, omega_n, ax=fig.add_subplot(gs[4, :]), reference=reference, band=band, measure=measure
+    )
     return fig
 
 
