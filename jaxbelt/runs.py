@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import check_positive
+from ._checks import check_int, check_positive, check_scalar
 from .commands import ConstantVoltage, ExponentialVoltage
 from .models.fourbar import FourBarDrive
 from .models.motor import PID
@@ -47,8 +47,11 @@ def startup_curves(model=None, gammas=(0.02, 0.04, 0.06), v_max=24.0, t_end=0.5,
     Default model: `BeltStartup()` (Incerti, 2014, Table I).
     """
 
+    n_points = check_int("startup_curves", "n_points", n_points, 2)
+    check_scalar("t_end", t_end, "s", "startup_curves")
+    check_positive("t_end", t_end, "s", "startup_curves")
     model = BeltStartup() if model is None else model
-    ts = np.linspace(0.0, float(t_end), int(n_points))
+    ts = np.linspace(0.0, float(t_end), n_points)
     observe = tuple(n for n in STARTUP_OUTPUTS if n not in model.state_names)
     rows = []
     for g in np.atleast_1d(np.asarray(gammas, dtype=float)).tolist():
@@ -72,10 +75,12 @@ def simulate_fig4(drive=None, pid=None, *, voltage: float = 25.0, t1: float = 1.
     Returns `(open_loop, closed_loop)` `Solution`s.
     """
 
+    check_scalar("t1", t1, "s", "simulate_fig4")
     check_positive("t1", t1, "s", "simulate_fig4")
+    n = check_int("simulate_fig4", "n", n, 2)
     drive = FourBarDrive() if drive is None else drive
     pid = PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0) if pid is None else pid
-    ts = jnp.linspace(0.0, float(t1), int(n))
+    ts = jnp.linspace(0.0, float(t1), n)
     open_loop = simulate(Scene(drive, ConstantVoltage(voltage), ts=ts, observe=FIG4_OUTPUTS), **kw)
     closed_loop = simulate(Scene(drive, pid, ts=ts, observe=FIG4_OUTPUTS), **kw)
     return open_loop, closed_loop
@@ -97,8 +102,10 @@ def platform_response(platform, command, t_end: float | None = None, n: int = 90
 
     if t_end is None:
         t_end = 1.5 * float(command.end_time)
+    check_scalar("t_end", t_end, "s", "platform_response")
     check_positive("t_end", t_end, "s", "platform_response")
-    ts = jnp.linspace(0.0, float(t_end), int(n))
+    n = check_int("platform_response", "n", n, 2)
+    ts = jnp.linspace(0.0, float(t_end), n)
     sol = simulate(Scene(platform, command, ts=ts, observe=PLATFORM_OUTPUTS), method="ode", rtol=rtol, atol=atol)
     out = {"t": np.asarray(ts), "velocity": np.asarray(sol.omega)}
     out.update({k: np.asarray(sol[k]) for k in PLATFORM_OUTPUTS})

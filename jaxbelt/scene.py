@@ -13,17 +13,32 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import as_float_array, is_concrete
+from ._checks import as_float_array, check_real, is_concrete
 from ._model import AbstractModel
 from .commands import AbstractInput
 
 
 def _as_tuple(observe):
+    """`observe` as a tuple of output names: a bare string (whose letters would be the names) is refused."""
     if observe is None:
         return ()
-    if isinstance(observe, str):
-        return (observe,)
-    return tuple(observe)
+    message = (
+        "Scene: parameter `observe` must be a tuple (or list) of output names, e.g. "
+        f"observe=('current',); got {observe!r} ({type(observe).__name__})"
+    )
+    if isinstance(observe, (str, bytes)):
+        raise TypeError(message)
+    try:
+        return tuple(observe)
+    except TypeError:
+        raise TypeError(message) from None
+
+
+def _check_real(name: str, value, unit: str) -> None:
+    """`TypeError` naming `name` unless it holds real numbers (a string or complex times would fail in NumPy
+    without naming it, or lose their imaginary part); a list of tracers is left to the conversion."""
+    if value is not None and (is_concrete(value) or hasattr(value, "dtype")):
+        check_real(name, value, unit, "Scene")
 
 
 class TracedGridWarning(UserWarning):
@@ -105,6 +120,8 @@ class Scene(eqx.Module):
             if unknown:
                 raise ValueError(f"Scene: {type(model).__name__} has no output {unknown[0]!r}; available: {known}")
         self.state = bool(state)
+        for name, v, unit in (("ts", ts, "s"), ("t0", t0, "s"), ("t1", t1, "s"), ("y0", y0, "")):
+            _check_real(name, v, unit)
         if y0 is None:
             self.y0 = None
         else:

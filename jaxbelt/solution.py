@@ -22,7 +22,12 @@ class Solution(eqx.Module):
     - `ys` (N, n_states): state history in the model's order (None if `Scene(state=False)`);
     - `outputs`: dict of observed outputs, each (N,) (integrals: value at each output time);
     - `success`: bool (array; per element under `vmap`);
-    - `stats`: solver statistics (`num_steps` for ODE methods).
+    - `stats`: solver statistics of the ODE and RK4 methods (empty for the closed forms): `num_steps`,
+      `num_rejected_steps`, `result` (why the solver stopped: 0 at the final time, 1 the step budget
+      `max_steps` reached, 2 the step size at the controller's minimum, 3 another stop of diffrax) and
+      `t_final` (the time reached [s]: where the solve stopped when the scene keeps no state history or
+      has no output times, otherwise the last output time reached); RK4 adds `rk4_stable` and
+      `spectral_radius`.
 
     Named access: `sol.current`, `sol["omega2"]`, `sol.electric_power` for any state or
     observed output.

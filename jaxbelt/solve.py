@@ -23,6 +23,7 @@ import dataclasses
 import functools
 import math
 import sys
+from collections.abc import Callable
 
 import equinox as eqx
 import jax
@@ -156,7 +157,12 @@ def _run_impl(scene: Scene, method: str, solver, rtol, atol, dt0, max_steps: int
             assert acc is not None  # the augmented state's running integrals
             integral_vals = {n: acc[:, i] for i, n in enumerate(integrals)}
         success = sol.result == diffrax.RESULTS.successful
-        stats = {"num_steps": sol.stats["num_steps"]}
+        stats = {
+            "num_steps": sol.stats["num_steps"],
+            "num_rejected_steps": sol.stats["num_rejected_steps"],
+            "result": _result_code(sol.result),
+            "t_final": jax.lax.stop_gradient(_time_reached(sol.ts, t0, scene.final_only or outputs_only)),
+        }
         if method == "rk4":
             g0, rho0 = rk4_growth(model, t0, y0, inp, dt0)
             g1, rho1 = rk4_growth(model, times[-1], ys[-1], inp, dt0)
@@ -221,19 +227,124 @@ def _describe(scene: Scene, method: str) -> str:
     return f"{type(scene.model).__name__} driven by {type(scene.input).__name__} (method={method!r})"
 
 
-def _failure_hint(method: str) -> str:
-    if method == "rk4":
-        return (
-            "The fixed RK4 step is too large for the fastest mode of this scene (dt * spectral radius beyond "
-            "RK4's stability region), or the solution is not finite. Use a smaller `dt` or method='ode'."
-        )
-    if method == "ode":
+#: `Solution.stats["result"]` of an ODE or RK4 solve: why diffrax stopped, by index (3: another stop of diffrax)
+_RESULTS = ("successful", "max_steps_reached", "dt_min_reached")
+
+
+def _result_code(result):
+    """diffrax's result as an integer (`_RESULTS`): a plain array, kept in `Solution.stats`."""
+    import diffrax
+
+    code = jnp.asarray(len(_RESULTS), dtype=jnp.int32)
+    for i, name in reversed(list(enumerate(_RESULTS))):
+        code = jnp.where(result == getattr(diffrax.RESULTS, name), jnp.int32(i), code)
+    return code
+
+
+def _time_reached(ts, t0, final_saved: bool):
+    """The time a solve reached: where it stopped when its final state is saved (`SaveAt(t1=True)`, the last
+    of the saves), otherwise the last output time it reached (diffrax fills the others with inf), or `t0`."""
+    if final_saved:
+        last = ts[-1] if isinstance(ts, (list, tuple)) else ts
+        return last[-1]
+    return jnp.max(jnp.where(jnp.isfinite(ts), ts, t0))
+
+
+def _failure_hint(method: str, sol: Solution | None = None, *, scene=None, max_steps=None, dt=None) -> str:
+    """Why a solve failed and what to do. Without a concrete solution (under a transformation, where the
+    message is fixed when the program is traced) the possible causes; with one (eager), the cause diffrax
+    reports (`stats["result"]`), where it stopped (`stats["t_final"]`) and the way out."""
+    if method in _CLOSED:
+        return "The closed form produced non-finite values (check the parameters)."
+    known = sol is not None and scene is not None and "result" in sol.stats and is_concrete(sol.stats)
+    if sol is None or scene is None or not known or np.ndim(sol.success) != 0:
+        if method == "rk4":
+            return (
+                "The RK4 solve stopped at its step budget (`max_steps` below the (t1 - t0) / dt steps it takes), "
+                "its fixed step is too large for the fastest mode of this scene (dt * spectral radius beyond "
+                "RK4's stability region), or the solution is not finite. Raise max_steps for the budget; use a "
+                "smaller `dt` or method='ode' for the step. Called with throw=False, `stats['result']` (1: "
+                "max_steps reached) and `stats['rk4_stable']` say which."
+            )
         return (
             "The solver did not reach the final time (step budget `max_steps` exhausted or step size collapsed) "
             "or produced non-finite values. Try an implicit solver (diffrax.Kvaerno5()), looser tolerances or a "
-            "larger max_steps."
+            "larger max_steps. Called with throw=False, `stats['result']` (1: max_steps reached, 2: minimum step "
+            "size reached) and `stats['t_final']` say which and where."
         )
-    return "The closed form produced non-finite values (check the parameters)."
+    stats = jax.device_get(sol.stats)
+    step = math.nan if dt is None else float(dt)  # the RK4 step [s]
+    code, tf = int(stats["result"]), float(stats["t_final"])
+    n, rejected = int(stats["num_steps"]), int(stats["num_rejected_steps"])
+    t0, t1 = float(scene.start_time), float(scene.times[-1])
+    exact = scene.final_only or not scene.state  # the solve saved its final state: the time it stopped
+    if method == "rk4" and code == 1 and step > 0:  # fixed steps, all of them taken
+        tf, exact = min(t0 + n * step, t1), True
+    if exact:
+        where = f"at t = {tf:.6g} s (the final time is {t1:.6g} s)"
+    else:  # the last output time it reached (the time it stopped is not saved)
+        ts = np.asarray(scene.times, dtype=float)
+        later = ts[ts > tf]
+        nxt = f" and t = {float(later[0]):.6g} s" if later.size else ""
+        where = f"between t = {tf:.6g} s{nxt} (output times; the final time is {t1:.6g} s)"
+    if code == 1 and method == "rk4":
+        need = math.ceil((t1 - t0) / step - 1e-9) if step > 0 else None
+        if need is None:
+            return f"The step budget `max_steps` = {max_steps} was reached {where}. Raise max_steps."
+        return (
+            f"The step budget `max_steps` = {max_steps} was reached {where}: RK4 with dt = {step:g} s takes {need} "
+            f"steps from t0 to t1. Raise max_steps to at least {need}."
+        )
+    if code == 1:
+        text = f"The step budget `max_steps` = {max_steps} was reached {where}: {n} steps, {rejected} of them rejected."
+        if 2 * rejected > n:
+            return (
+                f"{text} Most steps were rejected: the step size collapsed (a stiff or singular model, or a vector "
+                "field that is not finite there). Try an implicit solver (diffrax.Kvaerno5()) or check the "
+                "parameters; a larger max_steps rarely helps."
+            )
+        pace = f" (at this pace about {n * (t1 - t0) / (tf - t0):.3g} steps)" if exact and tf > t0 else ""
+        return (
+            f"{text} Raise max_steps{pace}, loosen rtol/atol, or, for a stiff model, take an implicit solver "
+            "(diffrax.Kvaerno5())."
+        )
+    if code == 2:
+        return (
+            f"The step size collapsed to the step-size controller's minimum (diffrax: dt_min_reached) {where}: a "
+            "stiff or singular model, or a vector field that is not finite there. Try an implicit solver "
+            "(diffrax.Kvaerno5()), looser tolerances, or check the parameters."
+        )
+    if code != 0:
+        return (
+            f"diffrax stopped the solve before the final time {where} (a result other than max_steps_reached and "
+            "dt_min_reached)."
+        )
+    if method == "rk4" and not bool(stats.get("rk4_stable", True)):
+        product = step * float(stats["spectral_radius"])
+        return (
+            f"The fixed RK4 step dt = {step:g} s is too large for the fastest mode of this scene (dt * spectral "
+            f"radius = {product:.3g}, beyond RK4's stability region). Use a smaller `dt` or method='ode'."
+        )
+    return (
+        f"The solution is not finite (NaN or inf){_first_nonfinite(sol)}: the model diverges or a parameter makes "
+        "it singular; check the parameters and the input"
+        + (
+            " (or take a smaller `dt`: the RK4 step is checked for stability at the first and last state only)."
+            if method == "rk4"
+            else "."
+        )
+    )
+
+
+def _first_nonfinite(sol: Solution) -> str:
+    """` from t = ... s`: the first output time where a state or an output is not finite ('' if none is)."""
+    n = np.shape(sol.ts)[0]
+    rows = [np.asarray(v) for v in (sol.ys, *sol.outputs.values()) if v is not None]
+    rows = [r.reshape(n, -1) for r in rows if r.ndim and r.shape[0] == n]
+    if not rows:
+        return ""
+    bad = ~np.all(np.isfinite(np.concatenate(rows, axis=1)), axis=1)
+    return f" from t = {float(np.asarray(sol.ts)[np.argmax(bad)]):.6g} s" if bad.any() else ""
 
 
 def simulate(
@@ -289,7 +400,8 @@ def simulate(
     if sol is not None:
         if throw and not isinstance(sol.success, Tracer) and bool(np.all(np.asarray(sol.success))):
             return sol  # the common eager case: nothing to attach, nothing to raise
-        return _finish(sol, [], throw, _describe(scene, sol.method), _failure_hint(sol.method))
+        hint = functools.partial(_failure_hint, sol.method, scene=scene, max_steps=max_steps, dt=dt)
+        return _finish(sol, [], throw, _describe(scene, sol.method), hint)
     model, inp = scene.model, scene.input
     if isinstance(inp, AbstractExponentialVoltage) and _batched_input(inp):
         return _simulate_batch(scene, method, throw)
@@ -331,7 +443,8 @@ def simulate(
         bool(progress),
         adjoint,
     )
-    return _finish(sol, checks, throw, _describe(scene, method), _failure_hint(method))
+    hint = functools.partial(_failure_hint, method, scene=scene, max_steps=max_steps, dt=dt)
+    return _finish(sol, checks, throw, _describe(scene, method), hint)
 
 
 def _structure(scene: Scene, method: str, adjoint):
@@ -589,8 +702,9 @@ def _time_checks(scene):
     return [] if is_concrete((scene.ts, scene.t0, scene.t1, scene.y0)) else scene.time_errors()
 
 
-def _finish(sol: Solution, checks, throw: bool, what: str, hint: str) -> Solution:
-    """Apply the failure policy to a solution (see `simulate`'s `throw`)."""
+def _finish(sol: Solution, checks, throw: bool, what: str, hint: Callable[[Solution | None], str]) -> Solution:
+    """Apply the failure policy to a solution (see `simulate`'s `throw`). `hint(sol)`: why it failed, read
+    from a concrete solution; `hint(None)`: the possible causes (the fixed message of a traced check)."""
     if throw and not checks and is_concrete(sol.success):
         if bool(np.all(np.asarray(sol.success))):
             return sol  # the common eager case: nothing to attach, nothing to raise
@@ -602,10 +716,10 @@ def _finish(sol: Solution, checks, throw: bool, what: str, hint: str) -> Solutio
             if not bool(np.all(np.asarray(success))):
                 bad = np.flatnonzero(~np.asarray(success).ravel())
                 where = f" (batch elements {bad.tolist()[:10]})" if np.ndim(success) else ""
-                raise SolveError(f"simulate failed for the scene {what}{where}. {hint}")
+                raise SolveError(f"simulate failed for the scene {what}{where}. {hint(sol)}")
         else:
             # only where the parameters are valid: an invalid one raises its own, more precise error
-            values = error_if(values, ~sol.success & ok, f"jaxbelt.simulate failed for the scene {what}. {hint}")
+            values = error_if(values, ~sol.success & ok, f"jaxbelt.simulate failed for the scene {what}. {hint(None)}")
     else:
         values = nan_where(values, success)
     ys, outputs = values
@@ -636,4 +750,4 @@ def _simulate_batch(scene: Scene, method: str, throw: bool) -> Solution:
             "output times `ts` and no integral outputs; otherwise use jax.vmap over scalar commands"
         )
     checks = traced_checks(scene.model, scene.input)
-    return _finish(sol, checks, throw, _describe(scene, "closed"), _failure_hint("closed"))
+    return _finish(sol, checks, throw, _describe(scene, "closed"), functools.partial(_failure_hint, "closed"))

@@ -44,7 +44,7 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 
-from ..._checks import check_int, check_positive, collecting, is_concrete
+from ..._checks import check_int, check_positive, check_real, collecting, is_concrete, record
 from ..._guard import all_ok, guard, stored_jit, traced_checks, validated_inputs
 from .model import ModalSystem, NonlinearBelt, mode_shapes
 
@@ -417,13 +417,34 @@ def _folds_from(belt, us, ts, acc, v0, v1, H, n_folds):
 _DS0, _DS_MAX = 0.05, 0.25  # default initial / largest arclength step (scaled coefficients, m/s)
 
 
-def _check_range_speeds(belt, speed_range):
-    v0, v1 = speed_range
-    belt.check_speed(jnp.asarray([v0, v1], float))
-    if is_concrete(v0) and is_concrete(v1) and not float(v0) < float(v1):
-        raise ValueError(f"parameter `speed_range` must be increasing (v0 < v1) [m/s]; got {(float(v0), float(v1))}")
-    if is_concrete(v0) and float(v0) <= 0:
-        raise ValueError(f"parameter `speed_range` must start above 0 m/s; got {float(v0)}")
+def _check_range_speeds(owner, belt, speed_range):
+    """`speed_range` = (v0, v1): two real running speeds, 0 < v0 < v1 < wave_speed [m/s] (checked when concrete,
+    recorded when traced); returns them as arrays."""
+    what = "must be two running speeds (v0, v1) with 0 < v0 < v1 < wave_speed [m/s]"
+    if isinstance(speed_range, (tuple, list)):
+        shape = (len(speed_range),) + (() if all(np.ndim(v) == 0 for v in speed_range) else (-1,))
+    else:
+        shape = np.shape(speed_range) if hasattr(speed_range, "shape") else None
+    if shape != (2,):
+        got = repr(speed_range) if shape is None or len(repr(speed_range)) <= 60 else f"shape {shape}"
+        raise ValueError(f"{owner}: parameter `speed_range` {what}; got {got}")
+    if is_concrete(speed_range):
+        check_real("speed_range", speed_range, "m/s", owner)
+    v0, v1 = speed_range[0], speed_range[1]
+    if is_concrete((v0, v1)) and is_concrete(belt.wave_speed):
+        a, b = float(v0), float(v1)
+        vt = float(np.min(np.asarray(belt.wave_speed)))
+        if not (0 < a < b < vt):  # NaN fails too
+            raise ValueError(
+                f"{owner}: parameter `speed_range` must be two running speeds (v0, v1) with 0 < v0 < v1 < "
+                f"wave_speed = {vt:g} m/s; got {(a, b)}"
+            )
+    else:
+        s = jnp.asarray([v0, v1], float)
+        record(
+            jnp.all(jnp.isfinite(s)) & (s[0] > 0) & (s[0] < s[1]) & (s[1] < jnp.min(belt.wave_speed)),
+            f"{owner}: parameter `speed_range` {what}",
+        )
     return jnp.asarray(v0, float), jnp.asarray(v1, float)
 
 
@@ -433,7 +454,7 @@ def _fold_options(owner, belt, speed_range, n_harmonics, n_folds, max_points):
     _check_equal_radii(belt)
     n_folds = check_int(owner, "n_folds", n_folds)
     max_points = check_int(owner, "max_points", max_points, 2)
-    v0, v1 = _check_range_speeds(belt, speed_range)
+    v0, v1 = _check_range_speeds(owner, belt, speed_range)
     return H, n_folds, max_points, v0, v1
 
 
@@ -624,7 +645,7 @@ def response_curve(
     check_positive("max_step", max_step, owner=o)
     if not float(step) <= float(max_step):
         raise ValueError(f"{o}: parameter `step` must be <= `max_step`; got step = {step}, max_step = {max_step}")
-    v0, v1 = _check_range_speeds(belt, speed_range)
+    v0, v1 = _check_range_speeds(o, belt, speed_range)
     us, ts, acc = _trace(belt, v0, v1, H, max_points, step, max_step)
     acc_n = np.asarray(acc)
     us_n = np.asarray(us)

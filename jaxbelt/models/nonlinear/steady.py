@@ -41,7 +41,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..._checks import is_concrete
+from ..._checks import check_int, check_real, check_scalar, is_concrete
 from .model import ModalSystem, NonlinearBelt, _gauss, mode_shapes
 
 
@@ -219,31 +219,66 @@ def _project(belt: NonlinearBelt, v_old, v_new, z):
     return jnp.linalg.solve(gram, cross @ z)
 
 
-def _check_common(belt, speeds, at):
+def _check_common(owner, belt, speeds, at, name="speed"):
+    """The belt, the running speed(s) `name` (real; in (0, wave_speed) when concrete, recorded when traced)
+    and the measurement point `at` (inside the span)."""
     if not isinstance(belt, NonlinearBelt):
-        raise TypeError(f"expected a NonlinearBelt, got {type(belt).__name__}")
-    belt.check_speed(speeds)
-    if is_concrete(speeds):
+        raise TypeError(f"{owner}: parameter `belt` must be a NonlinearBelt; got {type(belt).__name__}")
+    check_real(name, speeds, "m/s", owner)
+    if is_concrete(speeds) and is_concrete(belt.wave_speed):
         s = np.atleast_1d(np.asarray(speeds, dtype=float))
+        vt = float(np.min(np.asarray(belt.wave_speed)))
+        bad = s[~np.isfinite(s) | (s < 0) | (s >= vt)]
+        if bad.size:
+            raise ValueError(
+                f"{owner}: parameter `{name}` (running speed) must lie in [0, wave_speed) = [0, {vt:g}) m/s "
+                f"(sub-critical travelling string); got {bad.tolist()} m/s"
+            )
         if np.any(s <= 0):
             raise ValueError(
-                f"steady state needs a running speed > 0 m/s (the pulleys must turn); got {s[s <= 0].tolist()} m/s"
+                f"{owner}: parameter `{name}` must be > 0 m/s (a steady state needs the pulleys to turn); "
+                f"got {s[s <= 0].tolist()} m/s"
             )
-    if at is not None and is_concrete(at) and is_concrete(belt.span):
-        a = float(np.asarray(at))
-        if not (0 < a < float(np.max(np.asarray(belt.span)))):
-            raise ValueError(f"measurement point `at` must lie inside the span (0, {float(belt.span):g}) m; got {a}")
+    else:
+        belt.check_speed(speeds)  # traced: recorded
+    if at is not None:
+        check_scalar("at", at, "m", owner)
+        if is_concrete(at) and is_concrete(belt.span):
+            a, span = float(np.asarray(at)), float(np.max(np.asarray(belt.span)))
+            if not (0 < a < span):
+                raise ValueError(
+                    f"{owner}: parameter `at` (measurement point) must lie inside the span (0, {span:g}) m; got {a}"
+                )
 
 
-def _z0(belt, z0):
+def _z0(owner, belt, z0, name="z0", batch=False):
+    """The initial modal state(s) `z0`: shape (2N,) ((K, 2N) for `batch`), real; rest when None."""
+    n2 = 2 * belt.n_modes
     if z0 is None:
-        return jnp.zeros((2 * belt.n_modes,))
+        return jnp.zeros((n2,))
+    check_real(name, z0, owner=owner)
     z0 = jnp.asarray(z0, dtype=float)
-    if z0.shape[-1] != 2 * belt.n_modes:
+    if batch:
+        z0 = jnp.atleast_2d(z0)
+    if z0.shape != ((max(z0.shape[0], 1), n2) if batch and z0.ndim == 2 else (n2,)):
+        shape = f"(K, {n2})" if batch else f"({n2},)"
         raise ValueError(
-            f"initial modal state must have {2 * belt.n_modes} entries (zeta_r, zeta_i); got shape {z0.shape}"
+            f"{owner}: parameter `{name}` (initial modal state{'s' if batch else ''}: zeta_r, zeta_i of the belt's "
+            f"{belt.n_modes} mode{'s' if belt.n_modes != 1 else ''}) must have shape {shape}; got shape {z0.shape}"
         )
+    if is_concrete(z0) and not bool(np.all(np.isfinite(np.asarray(z0)))):
+        raise ValueError(f"{owner}: parameter `{name}` must be finite; got {np.asarray(z0).tolist()}")
     return z0
+
+
+def _options(owner, min_periods, max_periods, steps_per_period, periods_per_chunk=1):
+    """The integer options of the steady-state solves, checked (a float or bool is refused, not truncated)."""
+    return (
+        check_int(owner, "min_periods", min_periods),
+        check_int(owner, "max_periods", max_periods),
+        check_int(owner, "steps_per_period", steps_per_period),
+        check_int(owner, "periods_per_chunk", periods_per_chunk),
+    )
 
 
 @functools.partial(jax.jit, static_argnames=("min_periods", "max_periods", "min_steps", "periods_per_chunk"))
@@ -272,11 +307,17 @@ def nonlinear_steady_state(
     tolerances on the per-period peak-to-peak (atol relative to the pulleys' total run-out).
     Does not raise when not converged: check `.converged` (see `speed_sweep` for raising).
     """
-    _check_common(belt, speed, at)
+    o = "nonlinear_steady_state"
+    check_scalar("speed", speed, "m/s", o)
+    _check_common(o, belt, speed, at)
+    min_periods, max_periods, steps_per_period, periods_per_chunk = _options(
+        o, min_periods, max_periods, steps_per_period, periods_per_chunk
+    )
+    check_scalar("theta0", theta0, "rad", o)
     return _steady_jit(
         belt,
         jnp.asarray(speed, dtype=float),
-        _z0(belt, z0),
+        _z0(o, belt, z0),
         jnp.asarray(theta0, dtype=float),
         belt.sensor_x(at),
         jnp.asarray(rtol, dtype=float),
@@ -325,14 +366,41 @@ def nonlinear_sweep(
     previous speed's final state (the first from `z0`, default rest). Jit-compiled; `vmap` it
     over belts (damping, v_l, ...) or initial states for many sweeps at once. Does not raise on
     non-convergence: see `.converged` (or use `speed_sweep`)."""
+    return _nonlinear_sweep(
+        "nonlinear_sweep",
+        belt,
+        speeds,
+        z0,
+        theta0,
+        at,
+        rtol,
+        atol,
+        min_periods,
+        max_periods,
+        steps_per_period,
+        periods_per_chunk,
+    )
+
+
+def _nonlinear_sweep(
+    o, belt, speeds, z0, theta0, at, rtol, atol, min_periods, max_periods, steps_per_period, periods_per_chunk
+) -> SweepResult:
+    """`nonlinear_sweep`, its arguments checked in the name of `o` (the function the user called)."""
+    check_real("speeds", speeds, "m/s", o)
     speeds = jnp.asarray(speeds, dtype=float)
     if speeds.ndim != 1 or speeds.shape[0] < 1:
-        raise ValueError(f"`speeds` must be a 1-D array of running speeds [m/s]; got shape {speeds.shape}")
-    _check_common(belt, speeds, at)
+        raise ValueError(
+            f"{o}: parameter `speeds` must be a 1-D array of running speeds [m/s]; got shape {speeds.shape}"
+        )
+    _check_common(o, belt, speeds, at, "speeds")
+    min_periods, max_periods, steps_per_period, periods_per_chunk = _options(
+        o, min_periods, max_periods, steps_per_period, periods_per_chunk
+    )
+    check_scalar("theta0", theta0, "rad", o)
     return _sweep_jit(
         belt,
         speeds,
-        _z0(belt, z0),
+        _z0(o, belt, z0),
         jnp.asarray(theta0, dtype=float),
         belt.sensor_x(at),
         jnp.asarray(rtol, dtype=float),
@@ -383,17 +451,19 @@ def speed_sweep(
     Raises `SteadyStateError` naming the speeds where the steady state was not reached
     (`throw=False` returns the amplitudes anyway; under `jit`/`vmap` an `eqx.error_if` fires).
     """
-    res = nonlinear_sweep(
+    res = _nonlinear_sweep(
+        "speed_sweep",
         belt,
         speeds,
         z0,
-        at=at,
-        rtol=rtol,
-        atol=atol,
-        min_periods=min_periods,
-        max_periods=max_periods,
-        steps_per_period=steps_per_period,
-        periods_per_chunk=periods_per_chunk,
+        0.0,
+        at,
+        rtol,
+        atol,
+        min_periods,
+        max_periods,
+        steps_per_period,
+        periods_per_chunk,
     )
     pp = res.pp
     if throw:
@@ -422,9 +492,13 @@ def nonlinear_basins(
 ) -> SteadyState:
     """Steady states at one speed reached from each initial modal state in `z0s` (shape (K, 2N)),
     computed with `vmap` (Fig. 6: in the hysteresis band, two stable branches)."""
-    z0s = jnp.atleast_2d(jnp.asarray(z0s, dtype=float))
-    _z0(belt, z0s)
-    _check_common(belt, speed, at)
+    o = "nonlinear_basins"
+    check_scalar("speed", speed, "m/s", o)
+    _check_common(o, belt, speed, at)
+    if z0s is None:
+        raise TypeError(f"{o}: parameter `z0s` (initial modal states, shape (K, {2 * belt.n_modes})) is required")
+    z0s = _z0(o, belt, z0s, "z0s", batch=True)
+    min_periods, max_periods, steps_per_period, _ = _options(o, min_periods, max_periods, steps_per_period)
 
     def f(z):
         return _steady_jit(
@@ -458,8 +532,12 @@ def nonlinear_trajectory(belt: NonlinearBelt, speed, z0=None, periods: int = 200
     """Modal state history from `z0` at a fixed speed: `(t [s], zs (periods*steps+1, 2N))`,
     for phase-plane plots ($\\zeta^R_1$ against $\\zeta^I_1$, Fig. 6). diffrax (Tsit5, tight
     tolerances), saved `steps_per_period` times per forcing period."""
-    _check_common(belt, speed, None)
+    o = "nonlinear_trajectory"
+    check_scalar("speed", speed, "m/s", o)
+    _check_common(o, belt, speed, None)
+    periods = check_int(o, "periods", periods)
+    steps_per_period = check_int(o, "steps_per_period", steps_per_period)
     ts, zs, _ = _trajectory_jit(
-        belt, jnp.asarray(speed, dtype=float), _z0(belt, z0), periods=periods, steps_per_period=steps_per_period
+        belt, jnp.asarray(speed, dtype=float), _z0(o, belt, z0), periods=periods, steps_per_period=steps_per_period
     )
     return jnp.concatenate([jnp.zeros((1,)), ts]), zs
