@@ -12,7 +12,7 @@ The key is the function's name, the tree structure and static values of its argu
 and dtypes of its arrays, a fingerprint of jaxbelt's own source and of the versions of its
 dependencies, and the JAX settings that change a traced program (x64, matmul precision, XLA flags,
 jaxbelt's check contexts). A program is stored only when every node type in its arguments comes
-from jaxbelt, equinox or diffrax and every static value is a plain number, string or tuple of
+from jaxbelt, equinox, diffrax or optax and every static value is a plain number, string or tuple of
 them: a user's own model class (whose code jaxbelt cannot fingerprint) always takes the traced
 path. A program JAX cannot export (a host callback) is marked so, and later processes trace it as
 before. Any failure to load or call a stored program falls back to the traced path, which computes
@@ -41,7 +41,7 @@ _state = {"folder": None, "usable": None, "fingerprint": None, "lapack": False, 
 _MEMO: dict = {}  # (name, structure, input types, static values, settings) -> _Entry, or False: not storable
 _MEMO_MAX = 1024
 
-_TRUSTED_PREFIXES = ("jaxbelt.", "equinox.", "diffrax.")
+_TRUSTED_PREFIXES = ("jaxbelt.", "equinox.", "diffrax.", "optax.")
 _PLAIN_TYPES = (str, int, float, bool, complex, type(None))
 _MISSING = None
 try:  # equinox marks absent fields of a module's flattened form with a private singleton
@@ -99,7 +99,7 @@ def _fingerprint() -> str:
         for p in sorted(root.rglob("*.py")):
             h.update(str(p.relative_to(root)).encode())
             h.update(p.read_bytes())
-        for dist in ("jax", "jaxlib", "equinox", "diffrax", "optimistix", "lineax", "numpy"):
+        for dist in ("jax", "jaxlib", "equinox", "diffrax", "optimistix", "lineax", "optax", "numpy"):
             try:
                 h.update(f"{dist}={md.version(dist)};".encode())
             except md.PackageNotFoundError:
@@ -148,7 +148,7 @@ def _trusted_type(t) -> bool:
     return (
         t in (tuple, list, dict, type(None))
         or module.startswith(_TRUSTED_PREFIXES)
-        or (module in ("jaxbelt", "equinox", "diffrax"))
+        or (module in ("jaxbelt", "equinox", "diffrax", "optax"))
     )
 
 

@@ -26,6 +26,7 @@ All functions are pure and work under `jax.jit`, `jax.grad` and `jax.vmap`.
 
 from __future__ import annotations
 
+import functools
 import warnings
 
 import jax
@@ -49,6 +50,8 @@ _WINDOW_RTOL = 1e-9
 
 def _node_weights(ts, t0, t1):
     """Trapezoid weights of the samples inside [t0, t1] (zero outside)."""
+    if is_concrete((ts, t0, t1)):  # host values: numpy, the same operations (no small programs to compile)
+        return _node_weights_host(ts, t0, t1)
     ts = jnp.asarray(ts, dtype=float)
     tol = _WINDOW_RTOL * jnp.maximum(jnp.abs(ts[-1]), 1.0)
     lo = ts[0] if t0 is None else t0
@@ -56,6 +59,19 @@ def _node_weights(ts, t0, t1):
     inside = (ts >= lo - tol) & (ts <= hi + tol)
     seg = 0.5 * jnp.diff(ts) * (inside[:-1] & inside[1:])
     w = jnp.zeros_like(ts).at[:-1].add(seg).at[1:].add(seg)
+    return inside, w
+
+
+def _node_weights_host(ts, t0, t1):
+    ts = np.asarray(ts, dtype=float)
+    tol = _WINDOW_RTOL * max(abs(float(ts[-1])), 1.0)
+    lo = ts[0] if t0 is None else float(np.asarray(t0, dtype=float))
+    hi = ts[-1] if t1 is None else float(np.asarray(t1, dtype=float))
+    inside = (ts >= lo - tol) & (ts <= hi + tol)
+    seg = 0.5 * np.diff(ts) * (inside[:-1] & inside[1:])
+    w = np.zeros_like(ts)
+    w[:-1] += seg
+    w[1:] += seg
     return inside, w
 
 
@@ -148,7 +164,15 @@ def _warn_if_not_running(speed, inside) -> None:
 
 
 def chi_from_samples(
-    ts, speed, t0=None, t1=None, *, smooth: bool = False, temperature: ArrayLike = 3e-4, average="mean"
+    ts,
+    speed,
+    t0=None,
+    t1=None,
+    *,
+    smooth: bool = False,
+    temperature: ArrayLike = 3e-4,
+    average="mean",
+    throw: bool = True,
 ):
     """χ of the sampled signal `speed` (..., N) at times `ts` (N,) over [t0, t1].
 
@@ -157,7 +181,8 @@ def chi_from_samples(
     `smooth=False`: exact $(\\max - \\min)/|\\text{average}|$ over the samples in the window (time
     average by the trapezoid rule; its magnitude, so that a drive running backwards has the χ of the
     same motion forwards). `t0`, `t1` must lie within the sampled times. `smooth=True`: log-mean-exp max and min at temperature
-    `temperature` × average speed (dimensionless, default 3e-4).
+    `temperature` × average speed (dimensionless, default 3e-4). `throw=False`: a traced check that fails
+    makes the value NaN instead of raising (see `simulate`).
     """
     _check_average(average)
     _check_smooth(smooth)
@@ -173,7 +198,14 @@ def chi_from_samples(
         inside, w = _node_weights(ts, t0, t1)
         _check_window(inside, w)
     _warn_if_not_running(speed, inside)
-    return guard(_chi(speed, inside, w, smooth, temperature, average), checks, throw=True)[0]
+    if not checks and is_concrete((speed, temperature)):  # eager: one compiled program, not one per operation
+        return _chi_program(speed, inside, w, jnp.asarray(temperature, dtype=float), bool(smooth), average)
+    return guard(_chi(speed, inside, w, smooth, temperature, average), checks, throw=throw)[0]
+
+
+@functools.partial(jax.jit, static_argnums=(4, 5))
+def _chi_program(speed, inside, w, temperature, smooth, average):
+    return _chi(speed, inside, w, smooth, temperature, average)
 
 
 def _chi(speed, inside, w, smooth, temperature, average):
@@ -273,10 +305,12 @@ def _check_options(peak_temperature, temperature, smooth=True) -> None:
         _check_temperature(temperature)
 
 
-def _run_from_rest(drive, pid, ts, observe, state, method, rtol, atol, dt, max_steps, adjoint):
+def _run_from_rest(drive, pid, ts, observe, state, method, rtol, atol, dt, max_steps, adjoint, throw=True):
     """`simulate` of `drive` under `pid` from rest at t = 0, with outputs at the times `ts`."""
     scene = Scene(drive, pid, ts=ts, t0=0.0, observe=observe, state=state)
-    return simulate(scene, method=method, rtol=rtol, atol=atol, dt=dt, max_steps=max_steps, adjoint=adjoint)
+    return simulate(
+        scene, method=method, rtol=rtol, atol=atol, dt=dt, max_steps=max_steps, adjoint=adjoint, throw=throw
+    )
 
 
 def closed_loop_metrics(
@@ -295,6 +329,7 @@ def closed_loop_metrics(
     max_steps=100_000,
     adjoint=None,
     average="mean",
+    throw: bool = True,
 ):
     """χ (exact and smooth) over [t0, t1] and peak |voltage| and |current| over [0, t1].
 
@@ -302,14 +337,17 @@ def closed_loop_metrics(
     exact (`v_peak`, `i_peak`) and smooth (`v_peak_smooth`, `i_peak_smooth`: log-sum-exp with
     temperature `peak_temperature` in V or A, >= the exact peak); `mean_speed` is the time mean of the
     motor speed over [t0, t1] [rad/s] (what χ divides by). `average` as in `chi_from_samples`.
-    Returns a dict of scalars.
+    `throw`: as in `simulate` (False: a failed solve or check gives NaN values, nothing raises; the program
+    then holds no host callback). Returns a dict of scalars.
     """
     _check_average(average)
     ts = _grid(t1, *((dt, "dt") if method == "rk4" else (dt_save, "dt_save")))
     with collecting() as option_checks:  # concrete: raise now, before the simulation; traced: attached below
         _check_options(peak_temperature, temperature)
         _check_window_on_grid(ts, t0, t1)
-    sol = _run_from_rest(drive, pid, ts, ("motor_speed", "voltage"), True, method, rtol, atol, dt, max_steps, adjoint)
+    sol = _run_from_rest(
+        drive, pid, ts, ("motor_speed", "voltage"), True, method, rtol, atol, dt, max_steps, adjoint, throw
+    )
     speed, v, ys = sol.outputs["motor_speed"], sol.outputs["voltage"], sol.ys
     assert ys is not None  # `_run_from_rest(..., state=True)`
     i = ys[:, 2]
@@ -318,15 +356,17 @@ def closed_loop_metrics(
         return peak_temperature * jax.nn.logsumexp(jnp.abs(x) / peak_temperature)
 
     out = {
-        "chi": chi_from_samples(ts, speed, t0, t1, average=average),
-        "chi_smooth": chi_from_samples(ts, speed, t0, t1, smooth=True, temperature=temperature, average=average),
+        "chi": chi_from_samples(ts, speed, t0, t1, average=average, throw=throw),
+        "chi_smooth": chi_from_samples(
+            ts, speed, t0, t1, smooth=True, temperature=temperature, average=average, throw=throw
+        ),
         "v_peak": jnp.max(jnp.abs(v)),
         "i_peak": jnp.max(jnp.abs(i)),
         "v_peak_smooth": speak(v),
         "i_peak_smooth": speak(i),
         "mean_speed": _window_mean(ts, speed, t0, t1),
     }
-    return guard(out, option_checks, throw=True)[0]
+    return guard(out, option_checks, throw=throw)[0]
 
 
 def _window_mean(ts, speed, t0, t1):

@@ -20,6 +20,7 @@ import optax
 
 from .._callables import by_value
 from .._checks import check_int, check_penalised_limits, check_positive, check_scalar
+from .._guard import host_checked
 from ..models.motor import PID, check_pid_nonnegative
 from ..objectives.fluctuation import closed_loop_metrics
 
@@ -106,8 +107,8 @@ def tune_pid(
     if optimizer is None:
         # one transformation object for every call; the learning rate lives in its state, so a
         # new rate reuses the compiled step
-        opt = _default_adam()
-        state: Any = opt.init(jnp.zeros(3))  # inject_hyperparams' state (optax types the union of its states)
+        opt = _DEFAULT_OPTIMIZER  # named: the compiled step can be stored (`jaxbelt.cache`)
+        state: Any = _default_adam().init(jnp.zeros(3))  # inject_hyperparams' state (optax types a union)
         state.hyperparams["learning_rate"] = jnp.asarray(learning_rate, dtype=float)
     else:
         # keyed by its functions' code and values: `optax.adam(0.07)` made anew reuses the compiled step
@@ -299,7 +300,11 @@ def _default_adam():
     return optax.inject_hyperparams(optax.adam)(learning_rate=0.1)
 
 
-def _metrics(drive, which, g0, cfg: _Config, p):
+#: the default optimizer's name in the step's arguments (a string is a plain static value: the program is storable)
+_DEFAULT_OPTIMIZER = "adam"
+
+
+def _metrics(drive, which, g0, cfg: _Config, p, throw: bool = True):
     # Three parameters: forward-mode derivatives (one JVP per gain, diffrax.ForwardMode) cost about
     # 5 forward solves, a third of reverse mode through the checkpointed solve, and compile faster.
     return closed_loop_metrics(
@@ -313,6 +318,7 @@ def _metrics(drive, which, g0, cfg: _Config, p):
         atol=cfg.atol,
         dt=cfg.dt,
         adjoint="forward",
+        throw=throw,
     )
 
 
@@ -320,12 +326,15 @@ def _metrics(drive, which, g0, cfg: _Config, p):
 TRACE_COUNT = {"step": 0, "report": 0}
 
 
-@eqx.filter_jit
-def _tune_step(opt, drive, train_pid, g0, cfg: _Config, p, state):
+def _tune_step_impl(opt, drive, train_pid, g0, cfg: _Config, p, state):
     TRACE_COUNT["step"] += 1
+    if isinstance(opt, str):
+        opt = _default_adam()
 
     def loss_aux(q):
-        m = _metrics(drive, train_pid, g0, cfg, q)
+        # throw=False: a failed solve is a NaN loss, refused on the host (`tune_pid`); the program then holds no
+        # run-time check, which is both the larger part of its tracing time and what keeps it out of the caches
+        m = _metrics(drive, train_pid, g0, cfg, q, throw=False)
         # v_max, i_max = inf when unbounded: the penalty terms are then exactly zero
         loss = (
             m["chi_smooth"]
@@ -340,7 +349,13 @@ def _tune_step(opt, drive, train_pid, g0, cfg: _Config, p, state):
     return p_new, state, loss, m, g0 * jnp.exp(p)
 
 
-@eqx.filter_jit
-def _tune_report(drive, pid, g0, cfg: _Config, p):
+def _tune_report_impl(drive, pid, g0, cfg: _Config, p):
     TRACE_COUNT["report"] += 1
     return _metrics(drive, pid, g0, cfg, p)
+
+
+# Compiled once per structure; their checks come back as values (`host_checked`), so that JAX's persistent cache
+# and jaxbelt's program store (`jb.enable_compilation_cache`) keep them: a later process neither traces nor
+# compiles them again.
+_tune_step = host_checked(_tune_step_impl, store=True)
+_tune_report = host_checked(_tune_report_impl, store=True)
