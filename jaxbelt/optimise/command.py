@@ -8,15 +8,16 @@ $|\\lambda||W|/\\omega_d$, as a fraction of a reference command's), with the exp
 progress with tqdm.
 
 Feasibility by reparametrisation. The exponents must be distinct and each exceed $b = \\max(n, 2)$. The
-optimisers work on unconstrained $\\theta\\in\\mathbb R^{n+1}$ with $\\gamma_0 = b + \\epsilon + s\\sin^2\\theta_0$
-and $\\gamma_i = \\gamma_{i-1} + \\delta + s\\sin^2\\theta_i$: every $\\theta$ maps to sorted exponents with
-$\\gamma_0 > b$, gaps $\\ge \\delta$ and increments at most $\\delta + s$ (`margin` ε, `gap` δ, `max_step` s). No
-iterate, line-search trials included, is ever infeasible and nothing is clipped; the cap $s$ keeps trial points
-from running to exponents so large that $\\gamma + \\delta = \\gamma$ in floating point. Every face of the box is
-reached at a finite θ, where the objective has an ordinary stationary point: the band optimum lies on such faces,
-and the logistic map used before ($s\\,\\sigma(\\theta)$) put them at θ = ±∞, where the robust optimiser froze
-short of the optimum (see `jaxbelt.shaping.pseudo`). The objectives are symmetric under permutation of the
-exponents, so sorting loses nothing.
+optimisers work on unconstrained $\\theta\\in\\mathbb R^{n+1}$: every $\\theta$ maps to sorted exponents with
+$\\gamma_0 > b$, gaps at least $\\delta$ and increments at most $\\delta + s$ (`margin` ε, `gap` δ, `max_step` s);
+no iterate, line-search trials included, is ever infeasible and nothing is clipped; the cap $s$ keeps trial points
+from running to exponents so large that $\\gamma + \\delta = \\gamma$ in floating point. `optimise_command` uses
+$\\gamma_0 = b + \\epsilon + s\\,\\sigma(\\theta_0)$, $\\gamma_i = \\gamma_{i-1} + \\delta + s\\,\\sigma(\\theta_i)$
+($\\sigma$ the logistic function): the zero set of $\\mathcal H$ it looks for lies inside the box. `optimise_robust`
+uses the sine map of `jaxbelt.shaping.pseudo` ($s\\sin^2\\theta_i$ for $s\\,\\sigma(\\theta_i)$): the band optimum
+lies on the faces of the box, which the logistic map puts at θ = ±∞, where the robust optimiser used to freeze short
+of the optimum (see `jaxbelt.shaping.pseudo`). The objectives are symmetric under permutation of the exponents, so
+sorting loses nothing.
 
 Sensitivity tools (`sensitivity_curve`, `tolerance_band`) evaluate a command's residual amplitude (or, as in the
 paper, the energy $E(T) = h\\mathcal H$ [J]) on platforms whose belt stiffness is scaled so that the natural
@@ -40,21 +41,26 @@ from .._guard import host_checked
 from ..commands import MIN_EXPONENT_GAP, PseudoPolynomial, ShapedCommand
 from ..models.platform import BeltPlatform
 from ..objectives.residual import _w_quadrature, residual_energy, residual_energy_joules
-from ..shaping.pseudo import exponents_from_params, params_from_exponents
 
 
 # --------------------------------------------------------------------------------------------
 # Reparametrisation
 # --------------------------------------------------------------------------------------------
 def gammas_from_params(theta, lower, margin, gap, max_step):
-    """Map unconstrained `theta` to sorted exponents: $\\gamma_0 \\ge$ `lower` + `margin`, gaps >= `gap`, increments
-    <= `gap` + `max_step` (the sine map of `jaxbelt.shaping.pseudo.exponents_from_params`)."""
-    return exponents_from_params(theta, lower, margin, gap, max_step)
+    """Map unconstrained `theta` to sorted exponents: $\\gamma_0 >$ `lower`, gaps > `gap` (the logistic map of
+    `optimise_command`)."""
+    inc = max_step * jax.nn.sigmoid(theta)
+    steps = jnp.concatenate([jnp.stack([lower + margin]), jnp.full((theta.shape[0] - 1,), gap)])
+    return jnp.cumsum(steps + inc)
 
 
 def params_from_gammas(gammas, lower, margin, gap, max_step):
     """Inverse of `gammas_from_params` (the start point must lie inside its box)."""
-    return params_from_exponents(gammas, lower, margin, gap, max_step)
+    g = jnp.sort(jnp.asarray(gammas, dtype=float))
+    d = jnp.diff(jnp.concatenate([jnp.stack([jnp.asarray(lower, dtype=float)]), g]))
+    steps = jnp.concatenate([jnp.stack([jnp.asarray(margin, dtype=float)]), jnp.full((g.shape[0] - 1,), gap)])
+    x = (d - steps) / max_step
+    return jnp.log(x) - jnp.log1p(-x)
 
 
 # --------------------------------------------------------------------------------------------
@@ -290,7 +296,7 @@ def _bounds(cmd: PseudoPolynomial, margin, gap, max_step):
     if not float(max_step) > 0:
         raise ValueError(f"`max_step` must be > 0; got {max_step}")
     d = np.diff(np.concatenate([[lower], g])) - np.array([margin] + [gap] * (len(g) - 1))
-    if np.any(d > float(max_step)):
+    if np.any(d >= float(max_step)):
         raise ValueError(
             f"start exponents {g.tolist()} need increments up to {float(np.max(d)):.3g} above the minimum gaps; "
             f"raise `max_step` (now {max_step}) above that"
