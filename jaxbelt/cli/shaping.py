@@ -217,6 +217,7 @@ def _axis_run(args) -> int:
 
     from ..models.axis import ModalAxis
     from ..shaping.plan import design_move
+    from ..solution import SolveError
 
     if args.measured:
         from ..shaping.identify import identify_axis, load_record
@@ -244,6 +245,10 @@ def _axis_run(args) -> int:
     )
     print(plan.format_table())
     best = plan.best
+    if best is None:
+        raise SolveError(
+            "no candidate is feasible, converged and within the limits (the table's notes say why); nothing written"
+        )
     print(
         f"recommended: {best.name}, move time {best.move_time:.4f} s, worst residual {best.worst_percent:.4g} % of the "
         f"unshaped move ({best.worst_m:.3e} m) over +-{100 * args.uncertainty:.0f} %"

@@ -66,9 +66,14 @@ def plan_figure(plan):
     for i in range(2, axes.shape[1]):
         axes[1, i].axis("off")
     best = plan.best
+    rec = (
+        f"recommended: {best.name} ({best.move_time:.3f} s, worst {best.worst_percent:.3g} %)"
+        if best is not None
+        else "no candidate recommended"
+    )
     fig.suptitle(
         f"{plan.distance:g} m move, limits v ≤ {plan.v_max:g}, a ≤ {plan.a_max:g}"
         + (f", j ≤ {plan.j_max:g}" if plan.j_max is not None else "")
-        + f"; band ±{100 * u:.0f} %; recommended: {best.name} ({best.move_time:.3f} s, worst {best.worst_percent:.3g} %)"
+        + f"; band ±{100 * u:.0f} %; {rec}"
     )
     return fig

@@ -25,6 +25,7 @@ time at which it reaches that target (bisection on the time).
 import csv
 import dataclasses
 import math
+import warnings
 from typing import Any
 
 import jax.numpy as jnp
@@ -47,6 +48,10 @@ from .moves import (
 )
 from .residual import residual_curve, tolerance_band
 from .shapers import SHAPERS, shaper_for_axis
+
+#: move time, relative to the time-optimal move's, above which the smooth design is feasible (measured: it needs
+#: 3-7 % more with 48-96 knots; the design's convergence is checked, and the feasibility LP decides otherwise)
+_SURELY_FEASIBLE = 1.15
 
 #: frequency factors of the curves the table and the figure are computed on: the band, and a wider view
 _N_BAND = 401
@@ -97,7 +102,7 @@ class Candidate:
 @dataclasses.dataclass(frozen=True)
 class MovePlan:
     """The result of `design_move`: `table` (candidates ranked, best first), `best` (the recommended
-    `Candidate`), the axis, the move's data, `reference_m` (per mode, the unshaped move's worst residual over the
+    `Candidate`; None when no candidate is feasible, converged and within the limits), the axis, the move's data, `reference_m` (per mode, the unshaped move's worst residual over the
     band [m]) and the minimax design's details (`minimax`: a `MinimaxDesign` or None)."""
 
     axis: ModalAxis
@@ -109,7 +114,7 @@ class MovePlan:
     uncertainty: float
     reference_m: np.ndarray
     table: tuple
-    best: Candidate
+    best: Candidate | None
     minimax: object = None
 
     def __str__(self) -> str:
@@ -136,7 +141,7 @@ class MovePlan:
         columns `t,x,v,a` (s, m, m/s, m/s²) with that header line. A drive that executes the acceleration
         linearly between samples reproduces the table's residual (the design's acceleration is continuous).
         `rate_hz` must exceed twice the highest frequency of the band (the samples must carry the modes)."""
-        c = self.best if candidate is None else self.candidate(candidate)
+        c = self._chosen(candidate, "MovePlan.to_csv")
         check_positive("rate_hz", rate_hz, "Hz", "MovePlan.to_csv")
         fmax = float(np.max(np.asarray(self.axis.frequencies))) * (1 + self.uncertainty)
         if not float(rate_hz) > 2 * fmax:
@@ -156,10 +161,24 @@ class MovePlan:
         them: for the smooth minimax design, corrected so that a drive that executes the acceleration linearly
         between samples leaves the residual the table states (`jaxbelt.shaping.moves.executable_samples`); for
         the others, the exact samples."""
-        c = self.best if candidate is None else self.candidate(candidate)
+        c = self._chosen(candidate, "MovePlan.samples")
         if isinstance(c.command, SplineMove):
             return executable_samples(c.command, rate_hz, self.axis, self.reference_m, self.uncertainty)
         return c.sample(rate_hz)
+
+    def _chosen(self, name: str | None, owner: str) -> Candidate:
+        if name is not None:
+            c = self.candidate(name)
+        elif self.best is None:
+            raise ValueError(
+                f"{owner}: no candidate is feasible, converged and within the limits, so none is recommended (see "
+                f"the table's notes); name one with `candidate` to export it anyway"
+            )
+        else:
+            c = self.best
+        if c.command is None:
+            raise ValueError(f"{owner}: candidate {c.name!r} has no command ({c.note})")
+        return c
 
     def candidate(self, name: str) -> Candidate:
         for c in self.table:
@@ -189,7 +208,7 @@ class MovePlan:
         return fig
 
 
-def _check_inputs(axis, distance, move_time, v_max, a_max, j_max, uncertainty):
+def _check_inputs(axis, distance, move_time, v_max, a_max, j_max, uncertainty, include):
     o = "design_move"
     if not isinstance(axis, ModalAxis):
         raise TypeError(
@@ -203,6 +222,21 @@ def _check_inputs(axis, distance, move_time, v_max, a_max, j_max, uncertainty):
     if j_max is not None:
         check_positive("j_max", j_max, "m/s^3", o)
     check_range("uncertainty", uncertainty, lo=0.0, hi=0.9, hi_open=True, owner=o)
+    valid = ("minimax", *SHAPERS, "pseudo-polynomial", "unshaped")
+    if isinstance(include, str) or not all(isinstance(n, str) for n in include):
+        raise TypeError(f"{o}: parameter `include` must be a tuple of candidate names out of {valid}; got {include!r}")
+    unknown = [n for n in include if n not in valid]
+    if unknown or not include:
+        raise ValueError(
+            f"{o}: parameter `include` must name at least one candidate out of {valid}; got {tuple(include)!r}"
+            + (f" ({', '.join(map(repr, unknown))} unknown)" if unknown else "")
+        )
+    if move_time is None and not any(n in SHAPERS for n in include):
+        raise ValueError(
+            f"{o}: with `move_time` None the shortest time is the one at which the minimax design reaches the best "
+            f"classic shaper's residual, so parameter `include` must name at least one of {SHAPERS}; got "
+            f"{tuple(include)!r} (or give `move_time`)"
+        )
     t_min = fastest_time(d, v_max, a_max, j_max)
     if move_time is not None:
         check_positive("move_time", move_time, "s", o)
@@ -331,7 +365,7 @@ def design_move(
     the candidates that are feasible, converged and within the limits; a design the solver did not converge on
     is reported in the table, never recommended), `plan.to_csv(path, rate_hz)`, `plan.plot()`.
     """
-    d, t_min = _check_inputs(axis, distance, move_time, v_max, a_max, j_max, uncertainty)
+    d, t_min = _check_inputs(axis, distance, move_time, v_max, a_max, j_max, uncertainty, include)
     u = float(uncertainty)
     v_max, a_max = float(v_max), float(a_max)
     j_max = None if j_max is None else float(j_max)
@@ -365,11 +399,17 @@ def design_move(
         T_guess = (
             float(move_time) if move_time is not None else (min(r.move_time for r in classic) if classic else 2 * t_min)
         )
-        opts = _design.default_options(axis.frequencies, T_guess, u, j_max is not None)
+        per_cycle = 6.0 if move_time is not None else 12.0
+        opts = _design.default_options(axis.frequencies, T_guess, u, j_max is not None, per_cycle)
         solver = _Minimax(axis, d, v_max, a_max, j_max, u, ref, opts)
         if move_time is not None:
             T = float(move_time)
-            if not solver.feasible(T):
+            # a smooth (B-spline) move needs a little more time than the time-optimal one: well above that, skip
+            # the feasibility LP (its program costs a compile) unless the design then fails to converge
+            clearly = T >= _SURELY_FEASIBLE * t_min
+            mm = solver.design(T) if clearly else None
+            if (mm is None or not mm.converged) and not solver.feasible(T):
+                mm = None
                 t_f = solver.shortest_feasible(t_min)
                 rows.append(
                     _row(
@@ -384,12 +424,14 @@ def design_move(
                         note=f"infeasible for the smooth design: needs a move time >= {t_f:.4g} s",
                     )
                 )
-            else:
+            elif mm is None:
                 mm = solver.design(T)
         else:
             mm = _shortest_minimax(solver, t_min, target, progress)
         if mm is not None:
             note = f"certified gap {float(mm.gap):.1e}"
+            if float(mm.gap) > _design.CERTIFIED_GAP:  # accepted by the absolute gap (an optimum near zero)
+                note = f"certified within {100 * float(mm.worst - mm.lower_bound):.1e} % of the optimum"
             ok = mm.converged
             if not ok:
                 note = f"not converged (gap {float(mm.gap):.1e})"
@@ -409,7 +451,14 @@ def design_move(
             base = trapezoid_move(d, T_common, v_max, a_max, j_max)
             rows.append(_row("unshaped", axis, base, T_common, ref, u, limits))
     ranked = sorted(rows, key=lambda r: (not r.ok, r.worst_percent if math.isfinite(r.worst_percent) else math.inf))
-    best = next((r for r in ranked if r.ok), ranked[0])
+    best = next((r for r in ranked if r.ok), None)
+    if best is None:
+        warnings.warn(
+            "design_move: no candidate is feasible, converged and within the limits; nothing is recommended (the "
+            "table's notes say why)",
+            RuntimeWarning,
+            stacklevel=2,
+        )
     return MovePlan(
         axis=axis,
         distance=d,
