@@ -18,6 +18,10 @@ import tempfile
 import time
 from pathlib import Path
 
+# one OpenBLAS thread (jaxlib's LAPACK kernels): its pool spins against XLA's threads on 2 cores; set before
+# scipy loads, inherited by the fresh processes this benchmark starts
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 import numpy as np
 
 HERE = Path(__file__).resolve().parent

@@ -55,7 +55,6 @@ def test_every_imported_package_is_a_declared_dependency():
 def test_the_tools_of_ci_and_the_tests_references_are_dev_dependencies():
     dev = _requirement_names(PYPROJECT["project"]["optional-dependencies"]["dev"])
     assert {"ruff", "pyright", "pytest", "pytest-xdist", "hypothesis", "scipy", "highspy"} <= dev
-    assert "qpax" in _requirement_names(PYPROJECT["project"]["dependencies"])
 
 
 def test_ci_lints_formats_and_type_checks_before_the_readme_test_command():

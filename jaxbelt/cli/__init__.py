@@ -231,6 +231,11 @@ def entry() -> None:
     """
     global _OWN_PROCESS
     _OWN_PROCESS = True
+    # jaxlib's LAPACK kernels (Cholesky, solves) run on scipy's OpenBLAS: its thread pool, started for matrices
+    # of a few hundred rows, spins against XLA's own threads; a 157 x 157 factor and solve of the shaping LP took
+    # 376 ms with OpenBLAS's default threads on 2 loaded cores and 10 ms with one. Read when OpenBLAS loads, so
+    # set before anything loads scipy; a caller's own setting wins.
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
     import jax
 
     # jaxbelt computes in float64 and leaves JAX's configuration to whoever runs it (the `jaxbelt` docstring):
