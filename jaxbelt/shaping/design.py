@@ -45,7 +45,7 @@ import numpy as np
 
 from .._checks import as_float_array, is_concrete
 from ..models.axis import ModalAxis
-from .lp import LPResult, lp_value, solve_lp, solve_lp_data
+from .lp import LPResult, RowGroups, lp_value, solve_lp, solve_lp_data
 from .moves import SplineMove, peaks, phi1
 
 #: XLA options of the programs that hold the interior point method: its loop is compiled 3-4x faster at LLVM level
@@ -126,6 +126,13 @@ class MinimaxProblem(eqx.Module):
 def lp_data(problem: MinimaxProblem, opts: DesignOptions, scale_t: float | jax.Array = 1.0):
     """`(c, G, h, A, b)` of the minimax LP in the variables $(\\hat c, t/\\tau)$, $\\hat c = c / (D/T^2)$,
     $\\tau$ = `scale_t` (the objective's expected size: solving in units of it keeps the LP well scaled)."""
+    c, G, hv, A, b, _ = lp_data_grouped(problem, opts, scale_t)
+    return c, G, hv, A, b
+
+
+def lp_data_grouped(problem: MinimaxProblem, opts: DesignOptions, scale_t: float | jax.Array = 1.0):
+    """`lp_data` and the `RowGroups` of G (each frequency's P cuts span 3 columns; each limit is a pair of rows
+    $\\pm g$), for the interior point method's factorisation."""
     ax = problem.axis
     N, J = opts.n_knots, opts.n_knots - 3
     T, D = problem.move_time, problem.distance
@@ -169,7 +176,23 @@ def lp_data(problem: MinimaxProblem, opts: DesignOptions, scale_t: float | jax.A
     )
     b = jnp.array([0.0, 1.0])
     c = jnp.zeros((J + 1,)).at[-1].set(1.0)
-    return c, G, hv, A, b
+    # row p * MK + g of the cuts is (cos theta_p, sin theta_p, 1) @ [[Re k_g, 0], [Im k_g, 0], [0, -used_g tau]]
+    P, MK = opts.n_angles, kern.shape[0] * kern.shape[1]
+    kg = kern.reshape(MK, J)
+    col_t = jnp.zeros((MK, J + 1)).at[:, -1].set(-problem.mask.reshape(-1) * scale_t)
+    V = jnp.stack([jnp.pad(jnp.real(kg), ((0, 0), (0, 1))), jnp.pad(jnp.imag(kg), ((0, 0), (0, 1))), col_t], axis=1)
+    U = jnp.broadcast_to(jnp.stack([jnp.cos(theta), jnp.sin(theta), jnp.ones_like(theta)], axis=1)[None], (MK, P, 3))
+    res_idx = (np.arange(P)[None, :] * MK + np.arange(MK)[:, None]).astype(np.int32)
+    out = [RowGroups(res_idx, U, V)]
+    off = P * MK
+    for mat, _ in blocks:
+        r = mat.shape[0]
+        idx = (off + np.stack([np.arange(r), r + np.arange(r)], axis=1)).astype(np.int32)
+        Vp = jnp.concatenate([mat, jnp.zeros((r, 1))], axis=1)[:, None, :]  # (r, 1, n)
+        Up = jnp.broadcast_to(jnp.array([[1.0], [-1.0]])[None], (r, 2, 1))
+        out.append(RowGroups(idx, Up, Vp))
+        off += 2 * r
+    return c, G, hv, A, b, tuple(out)
 
 
 def _x_bound(problem: MinimaxProblem, opts: DesignOptions, tau):
@@ -189,7 +212,7 @@ def _lower_bound(problem, opts, tau, res, data):
     return jnp.where(res.vertex, res.value, jnp.minimum(jnp.maximum(lower, res.lower_bound), res.value))
 
 
-def _solve_round_impl(problem: MinimaxProblem, opts: DesignOptions, tau, tol, certify=True):
+def _solve_round_impl(problem: MinimaxProblem, opts: DesignOptions, tau, tol, certify: bool | jax.Array = True):
     """One LP of the exchange, in units of `tau` (<= 0: estimate it by a coarse first solve).
 
     Solving in units of the optimum's size makes the interior point method's relative tolerances mean relative
@@ -207,9 +230,17 @@ def _solve_round_impl(problem: MinimaxProblem, opts: DesignOptions, tau, tol, ce
         k, tau, _, _ = state
         coarse = tau <= 0
         t_use = jnp.where(coarse, 1.0, tau)
-        data = lp_data(prob_s, opts, t_use)
+        c, G, hv, A, b, groups = lp_data_grouped(prob_s, opts, t_use)
         res = solve_lp_data(
-            *data, _x_bound(prob_s, opts, t_use), jnp.where(coarse, 1e-5, tol), jnp.where(coarse, 60, 100)
+            c,
+            G,
+            hv,
+            A,
+            b,
+            _x_bound(prob_s, opts, t_use),
+            jnp.where(coarse, 1e-5, tol),
+            jnp.where(coarse, 60, 100),
+            groups,
         )
         # stop at a certified vertex, or when the LP posed in units of the value found before finds that value
         # again (a solve on an optimal face that is not a single vertex: a new scale changes nothing)
@@ -236,7 +267,10 @@ _solve_round_nested = eqx.filter_jit(_solve_round_impl)
 
 
 def _solve_round(problem, opts, tau, tol, certify=True):
-    # XLA options apply to top-level programs only: inside a caller's trace (grad, jit) the plain program
+    # XLA options apply to top-level programs only: inside a caller's trace (grad, jit) the plain program.
+    # `certify` as an array: one compiled program for the exchange's rounds and the final one (a Python bool is a
+    # static argument of filter_jit: a second compilation of the whole interior point method)
+    certify = jnp.asarray(certify)
     if is_concrete((problem, tau, tol)):
         return _solve_round_top(problem, opts, tau, tol, certify)
     return _solve_round_nested(problem, opts, tau, tol, certify)

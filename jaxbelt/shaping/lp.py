@@ -33,11 +33,12 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import jax.scipy.linalg as jsl
+import numpy as np
 from jaxtyping import Array, Float
 
 #: relative regularisation of the normal matrix's diagonal, and rounds of iterative refinement per solve
 _REG = 1e-15
-_REFINE = 4
+_REFINE = 1
 _REG_RETRIES = (1e-11, 1e-7)  # larger regularisations tried in turn when a Cholesky factor is not finite
 
 
@@ -67,9 +68,37 @@ def _max_step(v, dv):
     return jnp.minimum(1.0, jnp.min(ratio))
 
 
-def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter):
+class RowGroups(NamedTuple):
+    """Rows of G that come in groups sharing a small basis: row `idx[g, p]` of G is `U[g, p] @ V[g]` (`idx`
+    (groups, P) a host integer array, `U` (groups, P, q), `V` (groups, q, n)). The interior point method then
+    factorises the q rows of each group in place of its P rows: $\\sum_p w_p g_p g_p^T = V^T R^T R V$ with R the
+    triangular factor of the (P, q) matrix $W^{1/2} U$ (a modulus cut into P angles spans q = 3 columns; a pair of
+    rows $\\pm g$, q = 1). Same factor, fewer rows: the QR decomposition costs rows x n²."""
+
+    idx: np.ndarray
+    U: jax.Array
+    V: jax.Array
+
+
+def _group_rows(groups, w, gs, cs):
+    """The compressed rows $R_g V_g$ of every group (scaled as the solver scales G), stacked."""
+    out = []
+    for grp in groups:
+        sw = jnp.sqrt(w[grp.idx])[..., None] * (grp.U / gs[grp.idx][..., None])  # (groups, P, q)
+        q = sw.shape[-1]
+        if q == 1:
+            R = jnp.sqrt(jnp.sum(sw * sw, axis=1))[..., None]  # (groups, 1, 1)
+        else:
+            R = jnp.linalg.qr(sw, mode="r")  # (groups, q, q)
+        out.append((R @ (grp.V / cs)).reshape(-1, cs.shape[0]))
+    return out
+
+
+def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter, groups=()):
     n = c.shape[0]
     m = G.shape[0]
+    grouped = np.concatenate([g.idx.ravel() for g in groups]) if groups else np.zeros(0, dtype=int)
+    free = np.setdiff1d(np.arange(m), grouped)  # rows outside every group, factorised as they are
     # row scaling (each constraint to unit infinity norm); the multipliers are scaled back at the end
     gs = jnp.max(jnp.abs(G), axis=1)
     gs = jnp.where(gs > 0, gs, 1.0)
@@ -90,7 +119,7 @@ def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter):
         # rows sqrt(r d_j)), without forming H, whose condition number is the square of B's (near the optimum W
         # spans 16 orders of magnitude: the Cholesky factor of the formed H left dual residuals of 1e-7 and
         # gradients 1-3 % off; this one 1e-9 and 0.2 %)
-        B = jnp.sqrt(w)[:, None] * G
+        B = jnp.concatenate([*_group_rows(groups, w, gs, cs), jnp.sqrt(w[free])[:, None] * G[free]], axis=0)
         d0 = jnp.sum(B * B, axis=0)
 
         def chol(r):
@@ -145,8 +174,9 @@ def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter):
 
     def vertex_at(act):
         K = jnp.concatenate([G[act], A], axis=0)
-        xv = jnp.linalg.solve(K, jnp.concatenate([h[act], b]))
-        mult = jnp.linalg.solve(K.T, -c)
+        lu = jsl.lu_factor(K)  # one factorisation for both systems
+        xv = jsl.lu_solve(lu, jnp.concatenate([h[act], b]))
+        mult = jsl.lu_solve(lu, -c, trans=1)
         sv = h - G @ xv
         feas = jnp.min(sv) >= -tol * scale_h
         dual_ok = jnp.min(mult[:k_act]) >= -tol * (1.0 + jnp.max(jnp.abs(mult)))
@@ -156,9 +186,9 @@ def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter):
         ok = feas & dual_ok & jnp.all(jnp.isfinite(xv)) & jnp.all(jnp.isfinite(mult)) & (vgap < tol)
         return ok, (xv, jnp.maximum(sv, 0.0), zv, yv), sv, mult
 
-    def repaired(act):
-        """Up to 8 exchanges of the active-set guess: the most violated inequality enters, the active one with
-        the least multiplier leaves (the interior point iterate may rank a few constraints wrongly)."""
+    def repaired(act, repairs):
+        """Up to `repairs` exchanges of the active-set guess: the most violated inequality enters, the active one
+        with the least multiplier leaves (the interior point iterate may rank a few constraints wrongly)."""
 
         def step(carry):
             act, ok, vert, i = carry
@@ -171,14 +201,18 @@ def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter):
             return act, ok, vert, i + 1
 
         ok, vert, _, _ = vertex_at(act)
-        _, ok, vert, _ = jax.lax.while_loop(lambda cr: ~cr[1] & (cr[3] < 8), step, (act, ok, vert, 0))
+        if repairs == 0:
+            return ok, vert
+        _, ok, vert, _ = jax.lax.while_loop(lambda cr: ~cr[1] & (cr[3] < repairs), step, (act, ok, vert, 0))
         return ok, vert
 
-    def crossover(x, s, z, y):
+    def crossover(x, s, z, y, repairs=8):
         """The vertex of the n - p inequalities marked active (largest z/s) and the equalities, solved exactly for
-        x and the multipliers (and repaired by a few exchanges); certified when primal feasible with non-negative
-        multipliers and a zero duality gap (to `tol`)."""
-        return repaired(jax.lax.top_k(z / s, k_act)[1])
+        x and the multipliers (and repaired by up to `repairs` exchanges); certified when primal feasible with
+        non-negative multipliers and a zero duality gap (to `tol`). Inside the iterations without repairs (one
+        factorisation each: a repaired crossover at every iteration cost more than the iteration itself), with
+        them once at the end."""
+        return repaired(jax.lax.top_k(z / s, k_act)[1], repairs)
 
     # a rigorous lower bound of the optimum from any dual iterate (z >= 0, y), valid even where its residual
     # rd = c + G^T z + A^T y is not zero: for feasible x, c^T x >= rd^T x - h^T z - b^T y. Terms of variables
@@ -259,7 +293,15 @@ def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter):
         # iterations without a new best merit, and keep the best iterate
         stall = jnp.where(better, 0, stall + 1)
         # once near the optimum, try the crossover at every iteration: a certified vertex ends the solve
-        ok, vert = jax.lax.cond(gap_of(x, s, z, y) < 1e-3, crossover, lambda *a: (jnp.asarray(False), a), x, s, z, y)
+        ok, vert = jax.lax.cond(
+            gap_of(x, s, z, y) < 1e-3,
+            lambda *a: crossover(*a, repairs=0),
+            lambda *a: (jnp.asarray(False), a),
+            x,
+            s,
+            z,
+            y,
+        )
         best = jax.tree_util.tree_map(lambda v, o: jnp.where(ok, v, o), vert, best)
         best_merit = jnp.where(ok, -1.0, best_merit)  # a certified vertex beats every interior point
         done = (best_merit < tol) | (stall >= 15)
@@ -331,11 +373,13 @@ def solve_lp(c, G, h, A, b, *, x_bound=None, tol=1e-9, max_iter: int = 100) -> L
     return solve_lp_data(c, G, h, A, b, xb, tol, max_iter)
 
 
-def solve_lp_data(c, G, h, A, b, x_bound, tol, max_iter):
+def solve_lp_data(c, G, h, A, b, x_bound, tol, max_iter, groups=()):
     """`solve_lp` on arrays of the right shapes, with `tol` and `max_iter` as (traceable) values: the interior
-    point method runs on the data with its derivatives stopped; `value` carries the envelope derivative."""
+    point method runs on the data with its derivatives stopped; `value` carries the envelope derivative.
+    `groups`: `RowGroups` of G's rows (the factorisation's shortcut; G itself holds every row)."""
     stop = jax.lax.stop_gradient
     c_, G_, h_, A_, b_, xb_ = (stop(v) for v in (c, G, h, A, b, x_bound))
-    res = _solve_impl(c_, G_, h_, A_, b_, xb_, jnp.asarray(tol, dtype=float), max_iter)
+    groups = tuple(RowGroups(g.idx, stop(g.U), stop(g.V)) for g in groups)
+    res = _solve_impl(c_, G_, h_, A_, b_, xb_, jnp.asarray(tol, dtype=float), max_iter, groups)
     value = lp_value(c, G, h, A, b, stop(res.x), stop(res.z), stop(res.y))
     return res._replace(value=value, lower_bound=stop(res.lower_bound))
