@@ -1,16 +1,20 @@
 """Cold start and throughput: imports, CLI with and without the compilation cache, compile-once,
-eager dispatch, construction costs, the batched closed form's memory and the four-bar sweep.
+eager dispatch, construction costs, the batched closed form's memory, the four-bar sweep, and the first
+call of every public entry point (cold, warm cache, second call, with their XLA compilations).
 
 Writes `benchmarks/results/coldstart.json` (+ `.png`). Every ratio is measured in the same run
 (medians of repeats); the machine is shared with other work, so absolute times are noisy.
 
 Run: `python benchmarks/coldstart.py [--quick] [--cli startup fourbar ...]` (not part of
-`run_all.py`: the cold CLI runs alone take minutes).
+`run_all.py`: the cold CLI runs alone take minutes). `python benchmarks/coldstart.py --entry-points [NAME ...]`
+measures only the entry points (about 6 minutes on 2 cores), merges them into the existing JSON and
+regenerates the first-call tables of README.md and docs/benchmarks.md.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import subprocess
 import sys
@@ -315,6 +319,285 @@ def fourbar_sweep(quick: bool) -> dict:
     return out
 
 
+# --- first call of every public entry point: cold, warm cache, second call ----------------------------------------
+
+#: One small call per public entry point, the papers' defaults. `setup` (statements, numpy only, no JAX work)
+#: makes the inputs a user already has (a measured record, a prediction function); `call` (one expression) is
+#: timed: the first call, then the same expression again in the same process (like re-running a notebook
+#: cell). `prelude` runs right after `import jaxbelt` (before any JAX work); `data` runs once per benchmark
+#: run in a process of its own and saves what `setup` loads from `DATA` (a synthetic record made with jaxbelt,
+#: so that making it does not warm the measured process).
+ENTRY_POINTS = {
+    "simulate_startup": {
+        "label": "`simulate`: BeltStartup start-up, closed form, 501 points",
+        "call": "jb.simulate(jb.Scene(jb.BeltStartup(), jb.ExponentialVoltage(24.0, 0.02), "
+        "ts=jnp.linspace(0.0, 0.5, 501), observe=('electric_power',)))",
+    },
+    "simulate_fourbar": {
+        "label": "`simulate`: FourBarDrive + PID, 1 s, Tsit5",
+        "call": "jb.simulate(jb.Scene(jb.FourBarDrive(), jb.PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0, "
+        "v_limit=60.0), ts=jnp.linspace(0.0, 1.0, 2001), observe=('motor_speed',)))",
+    },
+    "fluctuation_objective": {
+        "label": "`fluctuation_objective`: four-bar, smooth χ over 0.375-0.5 s",
+        "call": "jb.fluctuation_objective(jb.FourBarDrive(), jb.PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0, "
+        "v_limit=60.0), 0.375, 0.5)",
+    },
+    "tune_pid": {
+        "label": "`tune_pid`: four-bar PID, 3 Adam steps",
+        "call": "jb.tune_pid(jb.FourBarDrive(), jb.PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0, v_limit=60.0), "
+        "steps=3, progress=False)",
+    },
+    "optimise_command": {
+        "label": "`optimise_command`: BeltPlatform, exponents (3, 4, 5), L-BFGS",
+        "call": "jb.optimise_command(jb.BeltPlatform(), jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0])), "
+        "progress=False)",
+    },
+    "optimise_robust": {
+        "label": "`optimise_robust`: BeltPlatform, order 4 (exponents 5-9), band 0.8-1.2",
+        "call": "jb.optimise_robust(jb.BeltPlatform(), jb.PseudoPolynomial(jnp.arange(5.0, 10.0)), progress=False)",
+    },
+    "residual_energy": {
+        "label": "`residual_energy`: BeltPlatform, exponents (3, 4, 5)",
+        "call": "jb.residual_energy(jb.BeltPlatform(), jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0])))",
+    },
+    "response_curve": {
+        "label": "`response_curve`: NonlinearBelt(), 7.5-10.5 m/s, 3 harmonics",
+        "call": "jb.response_curve(jb.NonlinearBelt())",
+    },
+    "fold_speeds": {
+        "label": "`fold_speeds`: NonlinearBelt(), 7.5-10.5 m/s",
+        "call": "jb.fold_speeds(jb.NonlinearBelt())",
+    },
+    "crossing_speeds": {
+        "label": "`crossing_speeds`: RunoutRig(), 2 modes",
+        "call": "jb.crossing_speeds(jb.RunoutRig(), n_modes=2)",
+    },
+    "exciting_speeds": {
+        "label": "`exciting_speeds`: MovingString span (Table 2), m = 8",
+        "call": "jb.exciting_speeds(jb.MovingString(tension=140.0, density=0.05, length=0.2621), "
+        "pulley_radius=0.1166, n=1, m=8)",
+    },
+    "identify": {
+        "label": "`identify`: start-up k, c, R from 301 noisy samples of speed and current",
+        "data": "import numpy as np\n"
+        "ts = jnp.linspace(0.0, 0.3, 301)\n"
+        "sol = jb.simulate(jb.Scene(jb.BeltStartup(k=120e3, c=20.0, R=0.15), jb.ExponentialVoltage(24.0, 0.02), "
+        "ts=ts))\n"
+        "clean = np.stack([np.asarray(sol['omega2']), np.asarray(sol['current'])], -1)\n"
+        "np.save(DATA + '/identify.npy', clean + np.array([0.02, 0.5]) * "
+        "np.random.default_rng(0).standard_normal(clean.shape))",
+        "setup": "data = np.load(DATA + '/identify.npy')\n"
+        "def predict(p):\n"
+        "    m = jb.BeltStartup(k=p['k'], c=p['c'], R=p['R'])\n"
+        "    sol = jb.simulate(jb.Scene(m, jb.ExponentialVoltage(24.0, 0.02), ts=jnp.linspace(0.0, 0.3, 301)))\n"
+        "    return jnp.stack([sol['omega2'], sol['current']], -1)",
+        "call": "jb.identify(predict, {'k': 80e3, 'c': 30.0, 'R': 0.2}, data, sigma=np.array([0.02, 0.5]))",
+    },
+    "sweep": {
+        "label": "`sweep`: exact χ of 16 four-bar PID gain sets, one CPU device per core",
+        "prelude": "jb.cpu_devices()",
+        "setup": "drive, base = jb.FourBarDrive(), jb.PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0, v_limit=60.0)\n"
+        "gains = np.array([80.0, 32.0, 0.015]) * np.exp(np.random.default_rng(0).uniform(-0.3, 0.3, (16, 3)))\n"
+        "def chi(g):\n"
+        "    return jb.fluctuation_objective(drive, base.with_gains(g), smooth=False, rtol=1e-6, atol=1e-6)",
+        "call": "jb.sweep(chi, jnp.asarray(gains))",
+    },
+    "design_move": {
+        "label": "`design_move`: 1-mode ModalAxis, 0.8 s move, minimax only",
+        "call": "jb.design_move(jb.ModalAxis([7.3], [0.015]), 0.1, 0.8, v_max=0.3, a_max=1.2, include=('minimax',))",
+    },
+    "identify_axis": {
+        "label": "`identify_axis`: synthetic 2-mode decay, 2000 samples, 5 % noise",
+        "setup": "t = np.arange(2000) / 1000.0\n"
+        "y = sum(a * np.exp(-z * 2 * np.pi * f * t) * np.cos(2 * np.pi * f * np.sqrt(1 - z * z) * t + ph) "
+        "for f, z, a, ph in ((7.3, 0.015, 1.0, 0.3), (18.0, 0.01, 0.6, -1.1)))\n"
+        "y = y + 0.05 * np.max(np.abs(y)) * np.random.default_rng(0).standard_normal(t.size)",
+        "call": "jb.identify_axis(t, y, 2)",
+    },
+}
+
+#: The issue's targets for a first call on 2 cores [s].
+TARGET_COLD_S, TARGET_WARM_S = 3.0, 1.0
+
+#: What a measured process runs: `import jax, jaxbelt`, the cache on in `$JAXBELT_CACHE_DIR`, the entry's
+#: prelude and setup, then its call twice; it prints one JSON line with each phase's time and the number of XLA
+#: compilations (JAX's backend-compile events less its persistent-cache hits, as in tests/compiles.py), cache
+#: hits and traces.
+CHILD = r"""
+import json, sys, time
+spec = json.loads(sys.argv[1])
+t0 = time.perf_counter()
+import jax
+jax.config.update("jax_enable_x64", True)
+import jax.monitoring
+counts = {"requests": 0, "hits": 0, "traces": 0}
+def _duration(name, secs, **kw):
+    if name == "/jax/core/compile/backend_compile_duration":
+        counts["requests"] += 1
+    elif name == "/jax/core/compile/jaxpr_trace_duration":
+        counts["traces"] += 1
+def _event(name, **kw):
+    if name == "/jax/compilation_cache/cache_hits":
+        counts["hits"] += 1
+jax.monitoring.register_event_duration_secs_listener(_duration)
+jax.monitoring.register_event_listener(_event)
+import jax.numpy as jnp
+import numpy as np
+import jaxbelt as jb
+if spec["cache"]:
+    jb.enable_compilation_cache()  # the folder: $JAXBELT_CACHE_DIR
+ns = {"jax": jax, "jnp": jnp, "np": np, "jb": jb, "DATA": spec["data_dir"]}
+exec(spec.get("prelude", ""), ns)
+out = {"import_s": time.perf_counter() - t0}
+def phase(run):
+    before = dict(counts)
+    t = time.perf_counter()
+    jax.block_until_ready(run())
+    d = {k: counts[k] - before[k] for k in counts}
+    return {"s": time.perf_counter() - t, "compiles": d["requests"] - d["hits"], "cache_hits": d["hits"],
+            "traces": d["traces"]}
+out["setup"] = phase(lambda: exec(spec.get("setup", ""), ns))
+call = compile(spec["call"], "<call>", "eval")
+out["first"] = phase(lambda: eval(call, ns))
+out["second"] = phase(lambda: eval(call, ns))
+print("RESULT " + json.dumps(out))
+"""
+
+
+def _child(name: str, env: dict, data_dir: str, cache: bool = True, timeout: float = 600.0) -> dict:
+    spec = dict(ENTRY_POINTS[name], data_dir=data_dir, cache=cache)
+    with tempfile.TemporaryDirectory() as cwd:
+        t = time.perf_counter()
+        out = subprocess.run(
+            [sys.executable, "-c", CHILD, json.dumps(spec)],
+            env=env,
+            capture_output=True,
+            text=True,
+            cwd=cwd,
+            timeout=timeout,
+        )
+        wall_s = time.perf_counter() - t
+    lines = [x for x in out.stdout.splitlines() if x.startswith("RESULT ")]
+    if out.returncode != 0 or not lines:
+        raise RuntimeError(f"{name}: exit {out.returncode}: {out.stderr[-3000:]}")
+    res = json.loads(lines[-1][len("RESULT ") :])
+    res["wall_s"] = wall_s
+    return res
+
+
+def _entry_env(cache_dir: str) -> dict:
+    """A user's process: one OpenBLAS thread, no display, 64-bit mode, the cache in `cache_dir`."""
+    return dict(ENV, OPENBLAS_NUM_THREADS="1", MPLBACKEND="Agg", JAX_ENABLE_X64="1", JAXBELT_CACHE_DIR=cache_dir)
+
+
+def _summary(samples: list, key: str) -> dict:
+    ts = [s[key]["s"] for s in samples]
+    return {
+        "median_s": float(np.median(ts)),
+        "min_s": float(np.min(ts)),
+        "max_s": float(np.max(ts)),
+        "samples_s": ts,
+        "compiles": int(np.median([s[key]["compiles"] for s in samples])),
+        "cache_hits": int(np.median([s[key]["cache_hits"] for s in samples])),
+        "traces": int(np.median([s[key]["traces"] for s in samples])),
+        "compiles_samples": [s[key]["compiles"] for s in samples],
+    }
+
+
+def entry_points(repeats: int, names=None, budget_s: float = 780.0) -> dict:
+    """First call of each public entry point (ENTRY_POINTS) in a fresh process: "cold" (an empty cache folder),
+    "warm" (a fresh process on the folder the cold one filled) and "second" (the same call again in the cold
+    process), medians of `repeats` cold/warm pairs, each pair with a new folder; entries are interleaved within a
+    repeat, so that a change of load hits all of them. After the first repeat, the most expensive entries get
+    fewer repeats when all of them would take longer than `budget_s` (each entry records its own count)."""
+    names = list(ENTRY_POINTS) if not names else list(names)
+    start = time.perf_counter()
+    runs = {n: [] for n in names}
+    cost = {}
+    errors = {}
+    with tempfile.TemporaryDirectory() as data_dir:
+        data = [n for n in names if "data" in ENTRY_POINTS[n]]
+        if data:  # synthetic records, made once in a process of their own
+            code = "import jax; jax.config.update('jax_enable_x64', True); import jax.numpy as jnp, jaxbelt as jb\n"
+            code += f"DATA = {data_dir!r}\n" + "\n".join(ENTRY_POINTS[n]["data"] for n in data)
+            with tempfile.TemporaryDirectory() as d:
+                wall([sys.executable, "-c", code], _entry_env(d))
+        todo = list(names)
+        for r in range(repeats):
+            if r == 1 and todo:  # the budget: drop the most expensive entries' further repeats until the rest fits
+                left = budget_s - (time.perf_counter() - start)
+                todo.sort(key=lambda n: cost[n])
+                while todo and (repeats - 1) * sum(cost[n] for n in todo) > left:
+                    todo.pop()
+                todo.sort(key=names.index)
+            for name in todo if r else names:
+                if name in errors:
+                    continue
+                t = time.perf_counter()
+                try:
+                    with tempfile.TemporaryDirectory() as cache_dir:
+                        env = _entry_env(cache_dir)
+                        cold = _child(name, env, data_dir)
+                        warm = _child(name, env, data_dir)
+                except (RuntimeError, subprocess.TimeoutExpired) as e:
+                    errors[name] = str(e)[-2000:]
+                    print(f"entry {name}: FAILED {str(e)[-500:]}", flush=True)
+                    continue
+                cost[name] = time.perf_counter() - t
+                runs[name].append({"cold": cold, "warm": warm})
+                print(
+                    f"entry {name} [{r + 1}/{repeats}]: cold {cold['first']['s']:.2f} s "
+                    f"({cold['first']['compiles']} compiles), warm {warm['first']['s']:.2f} s "
+                    f"({warm['first']['compiles']} compiles, {warm['first']['cache_hits']} cache hits), second "
+                    f"{cold['second']['s'] * 1e3:.1f} ms ({cold['second']['compiles']} compiles)",
+                    flush=True,
+                )
+    entries = {}
+    for name in names:
+        spec = ENTRY_POINTS[name]
+        row: dict = {"label": spec["label"], "call": spec["call"]}
+        if "prelude" in spec:
+            row["prelude"] = spec["prelude"]
+        rs = runs[name]
+        if not rs:
+            row["error"] = errors.get(name, "not measured")
+            entries[name] = row
+            continue
+        colds, warms = [x["cold"] for x in rs], [x["warm"] for x in rs]
+        row.update(
+            repeats=len(rs),
+            cold=_summary(colds, "first"),
+            warm=_summary(warms, "first"),
+            second=_summary(colds, "second"),
+            second_warm=_summary(warms, "second"),
+            setup=dict(_summary(colds, "setup"), code=spec.get("setup", "")),
+            import_s=float(np.median([x["import_s"] for x in colds + warms])),
+        )
+        if name in errors:
+            row["error"] = errors[name]
+        row["meets_cold"] = row["cold"]["median_s"] <= TARGET_COLD_S
+        row["meets_warm"] = row["warm"]["median_s"] <= TARGET_WARM_S
+        entries[name] = row
+    done = [e["repeats"] for e in entries.values() if "repeats" in e]
+    fewer = [n for n, e in entries.items() if e.get("repeats", repeats) < repeats]
+    return {
+        "machine": machine_info(),
+        "repeats": repeats,
+        "note": (
+            f"medians of {repeats} repeats"
+            + (f"; fewer (budget {budget_s:.0f} s) for: {', '.join(fewer)}" if fewer else "")
+            + "; the first call's time excludes `import jax, jaxbelt` and `jb.enable_compilation_cache()` "
+            "(import_s)"
+        ),
+        "targets": {"cold_s": TARGET_COLD_S, "warm_s": TARGET_WARM_S},
+        "env": {"OPENBLAS_NUM_THREADS": "1", "MPLBACKEND": "Agg", "JAX_ENABLE_X64": "1"},
+        "import_s": float(np.median([e["import_s"] for e in entries.values() if "import_s" in e])) if done else None,
+        "total_s": time.perf_counter() - start,
+        "entries": entries,
+    }
+
+
 def plot(data, path):
     import matplotlib
 
@@ -361,7 +644,7 @@ def main(argv=None) -> int:
         "--skip",
         nargs="*",
         default=(),
-        help="parts to skip: imports cli compile_once construction closed_form fourbar_sweep",
+        help="parts to skip: imports cli compile_once construction closed_form fourbar_sweep entry_points",
     )
     p.add_argument(
         "--cli-repeats", type=int, default=None, help="cold/warm pairs per CLI command (default 3; quick: 1)"
@@ -373,7 +656,29 @@ def main(argv=None) -> int:
         help="seconds per CLI command: short commands are repeated until it is spent, up to 25 times "
         "(default 90; quick: 0)",
     )
+    p.add_argument(
+        "--entry-points",
+        nargs="*",
+        default=None,
+        metavar="NAME",
+        help="measure only the first call of the public entry points (all, or the NAMEs: "
+        + " ".join(ENTRY_POINTS)
+        + ") and merge them into the existing coldstart.json, the other parts and entries unchanged",
+    )
+    p.add_argument("--entry-repeats", type=int, default=None, help="cold/warm pairs per entry point (default 3)")
+    p.add_argument(
+        "--entry-budget",
+        type=float,
+        default=780.0,
+        help="seconds for the entry points: after the first repeat the most expensive ones get fewer repeats "
+        "when all would take longer (default 780)",
+    )
     args = p.parse_args(argv)
+    if args.entry_points is not None:
+        unknown = sorted(set(args.entry_points) - set(ENTRY_POINTS))
+        if unknown:
+            p.error(f"unknown entry point(s) {' '.join(unknown)} (choose from {' '.join(ENTRY_POINTS)})")
+        return merge_entry_points(args)
     import jax
 
     import jaxbelt as jb
@@ -400,8 +705,10 @@ def main(argv=None) -> int:
         "construction": construction,
         "closed_form": lambda: closed_form(args.quick),
         "fourbar_sweep": lambda: fourbar_sweep(args.quick),
+        "entry_points": lambda: entry_points(
+            args.entry_repeats or (1 if args.quick else 3), budget_s=args.entry_budget
+        ),
     }
-    import json
 
     previous = results_dir(args.quick) / "coldstart.json"
     previous = json.loads(previous.read_text()) if previous.exists() else {}
@@ -524,6 +831,34 @@ def main(argv=None) -> int:
         print(f"  {h['what']}: {h['value']:.3g} (target {h['target']})")
     if "compile_once" in data and "imports" in data:
         plot(data, out_dir / "coldstart.png")
+    if "entry_points" in data and not args.quick and not os.environ.get("JAXBELT_BENCH_OUT"):
+        import readme_table
+
+        readme_table.update_coldstart_blocks()
+    return 0
+
+
+def merge_entry_points(args) -> int:
+    """`--entry-points [NAME ...]`: measure those entry points and merge them into the existing coldstart.json
+    (its other parts, and the entries not named, are kept as they are); then regenerate the first-call tables of
+    README.md and docs/benchmarks.md (a full run only)."""
+    path = results_dir(args.quick) / "coldstart.json"
+    data = json.loads(path.read_text()) if path.exists() else {"scene": "coldstart", "quick": bool(args.quick)}
+    t = time.perf_counter()
+    new = entry_points(
+        args.entry_repeats or (1 if args.quick else 3), names=args.entry_points or None, budget_s=args.entry_budget
+    )
+    old = data.get("entry_points", {}).get("entries", {})
+    entries = {k: new["entries"].get(k, old.get(k)) for k in ENTRY_POINTS if k in new["entries"] or k in old}
+    data["entry_points"] = dict(new, entries=entries)
+    print(f"entry_points: {time.perf_counter() - t:.1f} s", flush=True)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(data, indent=2, default=float))
+    print("wrote", path)
+    if not args.quick and not os.environ.get("JAXBELT_BENCH_OUT"):
+        import readme_table
+
+        readme_table.update_coldstart_blocks()
     return 0
 
 

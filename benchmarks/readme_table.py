@@ -6,6 +6,10 @@ markers is left untouched (for the README the table is printed instead). Each JS
 list gives the rows (see `_common.py` for the schema). The README shows the matched-error
 comparison and folds the long headline table into a `<details>` block; the docs page shows both.
 
+The first-call table of the public entry points (`coldstart.json`'s `entry_points`, written by
+`python benchmarks/coldstart.py --entry-points`) goes between `<!-- coldstart:start -->` and
+`<!-- coldstart:end -->` in both files.
+
 Run: `python benchmarks/readme_table.py [--print]`.
 """
 
@@ -21,6 +25,7 @@ RESULTS = HERE / "results"
 README = HERE.parent / "README.md"
 DOCS_PAGE = HERE.parent / "docs" / "benchmarks.md"
 START, END = "<!-- bench:start -->", "<!-- bench:end -->"
+COLD_START, COLD_END = "<!-- coldstart:start -->", "<!-- coldstart:end -->"
 
 
 def _fmt(v) -> str:
@@ -192,14 +197,113 @@ def build_table(results_dir: Path = RESULTS, fold: bool = False) -> str:
     return "\n".join(lines + ["", _FOOTER])
 
 
-def _replace_block(path: Path, table: str) -> bool:
+def _replace_block(path: Path, table: str, start: str = START, end: str = END) -> bool:
     text = path.read_text() if path.exists() else ""
-    if START not in text or END not in text or text.index(START) > text.index(END):
+    if start not in text or end not in text or text.index(start) > text.index(end):
         return False
-    a = text.index(START) + len(START)
-    b = text.index(END)
-    path.write_text(text[:a] + "\n" + table + "\n" + text[b:])
+    a = text.index(start) + len(start)
+    b = text.index(end)
+    new = text[:a] + "\n" + table + "\n" + text[b:]
+    if new != text:
+        path.write_text(new)
     return True
+
+
+def _fmt_time(s) -> str:
+    if s < 1.0:
+        return f"{1e3 * s:.3g} ms" if s >= 1e-3 else f"{1e6 * s:.3g} µs"
+    return f"{s:.3g} s"
+
+
+def coldstart_table(results_dir: Path = RESULTS) -> str:
+    """The first-call table of the public entry points, from `coldstart.json`'s `entry_points` section
+    (written by `python benchmarks/coldstart.py --entry-points`): one sentence saying what the columns mean,
+    the table (time, and in brackets the XLA compilations), whether each entry meets the targets, the count."""
+    path = results_dir / "coldstart.json"
+    data = json.loads(path.read_text()) if path.exists() else {}
+    ep = data.get("entry_points")
+    if not ep or not ep.get("entries"):
+        return "_No first-call measurement yet: run `python benchmarks/coldstart.py --entry-points`._"
+    m = ep.get("machine", {})
+    targets = ep.get("targets", {"cold_s": 3.0, "warm_s": 1.0})
+    tc, tw = float(targets["cold_s"]), float(targets["warm_s"])
+    measured = {k: e for k, e in ep["entries"].items() if "cold" in e}
+    reps = sorted({e["repeats"] for e in measured.values()})
+    most = max(reps) if reps else 0
+    fewer = [f"`{k}` {e['repeats']}" for k, e in measured.items() if e["repeats"] != most]
+    # spread: half the range of the repeats, relative to the median, over every first-call cell
+    spreads = [
+        (0.5 * (e[c]["max_s"] - e[c]["min_s"]) / e[c]["median_s"], k, c)
+        for k, e in measured.items()
+        for c in ("cold", "warm")
+        if e["repeats"] > 1 and e[c]["median_s"] > 0
+    ]
+    if spreads:
+        med = sorted(s for s, _, _ in spreads)[len(spreads) // 2]
+        worst = max(spreads)
+        spread = (
+            f"half the range of the repeats is {100 * med:.0f} % of the median in the typical first-call cell, "
+            f"{100 * worst[0]:.0f} % at most (`{worst[1]}`, {worst[2]})"
+        )
+    else:
+        spread = "no spread measured"
+    imp = ep.get("import_s")
+    machine = f"{m.get('cpu_count', '?')} {str(m.get('backend', '?')).upper()} cores ({m.get('processor', '?')}, JAX {m.get('jax', '?')})"
+    repeats = "a single repeat" if most == 1 else f"medians of {most} repeats"
+    lines = [
+        "First call of each public entry point in a fresh process with the compilation cache on "
+        "(`jb.enable_compilation_cache()`): **cold** with an empty cache folder, **warm cache** with the folder a "
+        "previous process filled, **second** the same call again in the cold process, each with its XLA "
+        "compilations in brackets (`+ n loaded`: programs read from the cache), the modules the call imports "
+        "included, `import jax, jaxbelt` not"
+        + (f" (about {imp:.1f} s)" if imp else "")
+        + f"; one run of `python benchmarks/coldstart.py --entry-points` on {machine}, {repeats}"
+        + (f" (fewer for the slowest: {', '.join(fewer)})" if fewer else "")
+        + f"; {spread}.",
+        "",
+        f"| entry point | cold | warm cache | second | cold ≤ {tc:g} s | warm ≤ {tw:g} s |",
+        "|---|---|---|---|---|---|",
+    ]
+    yes = {True: "yes", False: "**no**"}
+    n_cold = n_warm = 0
+    for k, e in ep["entries"].items():
+        if "cold" not in e:
+            lines.append(f"| {e.get('label', k)} | failed | – | – | – | – |")
+            continue
+        c, w, s = e["cold"], e["warm"], e["second"]
+        ok_c, ok_w = c["median_s"] <= tc, w["median_s"] <= tw
+        n_cold += ok_c
+        n_warm += ok_w
+        loaded = f" + {w['cache_hits']} loaded" if w.get("cache_hits") else ""
+        lines.append(
+            f"| {e.get('label', k)} | {_fmt_time(c['median_s'])} ({c['compiles']}) | "
+            f"{_fmt_time(w['median_s'])} ({w['compiles']}{loaded}) | {_fmt_time(s['median_s'])} ({s['compiles']}) | "
+            f"{yes[ok_c]} | {yes[ok_w]} |"
+        )
+    n = len(ep["entries"])
+    lines += [
+        "",
+        f"Targets (first call ≤ {tc:g} s cold, ≤ {tw:g} s with a warm cache, on 2 cores): {n_cold} of {n} entry "
+        f"points meet the cold one, {n_warm} of {n} the warm one.",
+        "",
+        "_Generated by `python benchmarks/coldstart.py --entry-points` (or `python benchmarks/readme_table.py`) "
+        "from `benchmarks/results/coldstart.json`._",
+    ]
+    return "\n".join(lines)
+
+
+def update_coldstart_blocks(
+    readme: Path | None = README, docs_page: Path | None = DOCS_PAGE, results_dir: Path = RESULTS
+) -> list:
+    """Write the first-call table between the coldstart markers of `readme` and `docs_page`; return the files
+    that have the markers."""
+    table = coldstart_table(results_dir)
+    done = []
+    for f in (readme, docs_page):
+        if f is not None and _replace_block(f, table, COLD_START, COLD_END):
+            done.append(f)
+            print(f"readme_table: updated the first-call table in {f}")
+    return done
 
 
 def update_docs_page(page: Path = DOCS_PAGE, results_dir: Path = RESULTS) -> bool:
@@ -224,9 +328,12 @@ def update_readme(
     table = build_table(results_dir, fold=True)
     if print_only:
         print(build_table(results_dir))
+        print()
+        print(coldstart_table(results_dir))
         return False
     if docs_page is not None:
         update_docs_page(docs_page, results_dir)
+    update_coldstart_blocks(readme, docs_page, results_dir)
     if not _replace_block(readme, table):
         print(f"readme_table: {readme.name} has no '{START}' ... '{END}' markers; the tables are:\n")
         print(build_table(results_dir))

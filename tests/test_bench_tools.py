@@ -158,3 +158,66 @@ def test_every_committed_numeric_target_is_judged():
             if t and t != "reported" and readme_table.target_met(t, h.get("value")) is None:
                 unread.append((path.name, t))
     assert not unread
+
+
+def _cell(median, lo, hi, compiles, hits=0):
+    return {"median_s": median, "min_s": lo, "max_s": hi, "compiles": compiles, "cache_hits": hits, "traces": 0}
+
+
+def test_coldstart_table_reads_the_entry_points_section(tmp_path):
+    """Hand-made measurements: times with their compilations, the targets judged per entry, the spread and the
+    repeats named in the heading sentence, a failed entry shown as failed; only the marked block is replaced."""
+    entries = {
+        "fast": {
+            "label": "`fast`",
+            "repeats": 3,
+            "cold": _cell(2.5, 2.4, 2.7, 4),
+            "warm": _cell(0.31, 0.3, 0.32, 0, 4),
+            "second": _cell(0.0017, 0.0016, 0.0018, 0),
+        },
+        "slow": {
+            "label": "`slow`",
+            "repeats": 1,
+            "cold": _cell(12.0, 12.0, 12.0, 30),
+            "warm": _cell(1.5, 1.5, 1.5, 1, 29),
+            "second": _cell(2.0, 2.0, 2.0, 0),
+        },
+        "broken": {"label": "`broken`", "error": "exit 1"},
+    }
+    d = tmp_path / "results"
+    d.mkdir()
+    (d / "coldstart.json").write_text(
+        json.dumps(
+            {
+                "scene": "coldstart",
+                "entry_points": {
+                    "machine": {"backend": "cpu", "cpu_count": 2, "processor": "x86_64", "jax": "0.1"},
+                    "targets": {"cold_s": 3.0, "warm_s": 1.0},
+                    "import_s": 0.5,
+                    "entries": entries,
+                },
+            }
+        )
+    )
+    table = readme_table.coldstart_table(d)
+    assert "on 2 CPU cores (x86_64, JAX 0.1), medians of 3 repeats (fewer for the slowest: `slow` 1)" in table
+    assert "is 6 % of the median in the typical first-call cell, 6 % at most (`fast`, cold)." in table
+    assert "| `fast` | 2.5 s (4) | 310 ms (0 + 4 loaded) | 1.7 ms (0) | yes | yes |" in table
+    assert "| `slow` | 12 s (30) | 1.5 s (1 + 29 loaded) | 2 s (0) | **no** | **no** |" in table
+    assert "| `broken` | failed | – | – | – | – |" in table
+    assert "1 of 3 entry points meet the cold one, 1 of 3 the warm one." in table
+    page = tmp_path / "page.md"
+    page.write_text("a\n<!-- coldstart:start -->\nold\n<!-- coldstart:end -->\nb\n")
+    assert readme_table.update_coldstart_blocks(None, page, d) == [page]
+    assert page.read_text() == f"a\n<!-- coldstart:start -->\n{table}\n<!-- coldstart:end -->\nb\n"
+
+
+@pytest.mark.parametrize("name", ["README.md", "docs/benchmarks.md"])
+def test_committed_first_call_table_is_generated_from_the_committed_json(name):
+    """The first-call table of the README and of the docs page is what the generator makes from the committed
+    benchmarks/results/coldstart.json (regenerate: `python benchmarks/readme_table.py`)."""
+    text = (ROOT / name).read_text()
+    start, end = readme_table.COLD_START, readme_table.COLD_END
+    assert start in text and end in text
+    block = text[text.index(start) + len(start) : text.index(end)]
+    assert block == "\n" + readme_table.coldstart_table() + "\n"

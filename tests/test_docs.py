@@ -117,6 +117,13 @@ def test_prose_timings_match_the_committed_benchmark():
     two, one = sweep["diffrax Tsit5 rtol 1e-6"]["time_s"], sweep["diffrax Tsit5 rtol 1e-6, one device"]["time_s"]
     lsoda = sweep["scipy LSODA rtol 1e-6"]["time_s"]
 
+    entries = data["entry_points"]["entries"]
+    n_warm, n_entries = sum(e["warm"]["median_s"] <= 1.0 for e in entries.values()), len(entries)
+
+    def warm(name):
+        e = entries[name]
+        return f"{e['warm']['median_s']:.2f} s against {e['cold']['median_s']:.2f} s"
+
     def text(path):
         return re.sub(r"\s+", " ", (ROOT / path).read_text())
 
@@ -126,6 +133,11 @@ def test_prose_timings_match_the_committed_benchmark():
             f"{one:.2f} s on one device, {two:.2f} s on two",
             f"LSODA loop at the same χ error takes {lsoda:.0f} s",
             f"({cli['warm_s']:.1f} s against {cli['cold_s']:.1f} s on 2 CPU cores",
+            # the first-call table (`coldstart.py --entry-points`): the warm-cache column against the cold one
+            f"four-bar simulation of a fresh process takes {warm('simulate_fourbar')} with an empty cache folder",
+            f"response curve of the non-linear belt {warm('response_curve')}, and {n_warm} of the {n_entries} "
+            "public entry points measured answer their first call within 1 s",
+            f"gain little ({warm('identify')}, {warm('sweep')})",
         ],
         "jaxbelt/batch.py": [f"(measured: {one / two:.1f}x on 2 cores"],
     }
