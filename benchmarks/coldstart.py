@@ -505,6 +505,14 @@ def _summary(samples: list, key: str) -> dict:
     }
 
 
+def _note(repeats: int, budget_s: float, fewer: list) -> str:
+    return (
+        f"medians of {repeats} repeats"
+        + (f"; fewer (budget {budget_s:.0f} s) for: {', '.join(fewer)}" if fewer else "")
+        + "; the first call's time excludes `import jax, jaxbelt` and `jb.enable_compilation_cache()` (import_s)"
+    )
+
+
 def entry_points(repeats: int, names=None, budget_s: float = 780.0) -> dict:
     """First call of each public entry point (ENTRY_POINTS) in a fresh process: "cold" (an empty cache folder),
     "warm" (a fresh process on the folder the cold one filled) and "second" (the same call again in the cold
@@ -584,12 +592,7 @@ def entry_points(repeats: int, names=None, budget_s: float = 780.0) -> dict:
     return {
         "machine": machine_info(),
         "repeats": repeats,
-        "note": (
-            f"medians of {repeats} repeats"
-            + (f"; fewer (budget {budget_s:.0f} s) for: {', '.join(fewer)}" if fewer else "")
-            + "; the first call's time excludes `import jax, jaxbelt` and `jb.enable_compilation_cache()` "
-            "(import_s)"
-        ),
+        "note": _note(repeats, budget_s, fewer),
         "targets": {"cold_s": TARGET_COLD_S, "warm_s": TARGET_WARM_S},
         "env": {"OPENBLAS_NUM_THREADS": "1", "MPLBACKEND": "Agg", "JAX_ENABLE_X64": "1"},
         "import_s": float(np.median([e["import_s"] for e in entries.values() if "import_s" in e])) if done else None,
@@ -850,7 +853,16 @@ def merge_entry_points(args) -> int:
     )
     old = data.get("entry_points", {}).get("entries", {})
     entries = {k: new["entries"].get(k, old.get(k)) for k in ENTRY_POINTS if k in new["entries"] or k in old}
-    data["entry_points"] = dict(new, entries=entries)
+    # the section's figures describe every entry kept, not only the ones measured now
+    imports = [e["import_s"] for e in entries.values() if "import_s" in e]
+    fewer = [k for k, e in entries.items() if e.get("repeats", new["repeats"]) < new["repeats"]]
+    data["entry_points"] = dict(
+        new,
+        entries=entries,
+        import_s=float(np.median(imports)) if imports else None,
+        measured_now=sorted(new["entries"]),
+        note=_note(new["repeats"], args.entry_budget, fewer),
+    )
     print(f"entry_points: {time.perf_counter() - t:.1f} s", flush=True)
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(data, indent=2, default=float))
