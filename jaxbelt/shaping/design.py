@@ -377,7 +377,8 @@ def minimax_design(problem: MinimaxProblem, opts: DesignOptions, tol=1e-9, per_r
             break
         rounds += 1
         tau = jnp.asarray(worst)
-    if not bool(res.vertex) or float(tol_round) > float(tol):  # the final LP to `tol`, certified where it can be
+    certified = (float(worst_a) - float(lower_a)) <= max(CERTIFIED_GAP * float(worst_a), CERTIFIED_ABS)
+    if not (bool(res.vertex) or certified):  # the final LP to `tol`, certified where it can be
         res, tau, (coef, worst_a, lower_a) = _solve_round(problem, opts, jnp.asarray(worst), tol_a, True)
         if opts.n_rounds > 0 and u > 0.0:
             fine_worst = float(np.asarray(_fine_ratios(problem, opts, coef)[1]).max())
