@@ -26,6 +26,8 @@ README = HERE.parent / "README.md"
 DOCS_PAGE = HERE.parent / "docs" / "benchmarks.md"
 START, END = "<!-- bench:start -->", "<!-- bench:end -->"
 COLD_START, COLD_END = "<!-- coldstart:start -->", "<!-- coldstart:end -->"
+SHAPING_START, SHAPING_END = "<!-- shaping:start -->", "<!-- shaping:end -->"
+SHAPING_PAGE = HERE.parent / "docs" / "scenes" / "shaping.md"
 
 
 def _fmt(v) -> str:
@@ -306,6 +308,62 @@ def update_coldstart_blocks(
     return done
 
 
+def shaping_table(results_dir: Path = RESULTS) -> str:
+    """The side-by-side table of command shaping on the user's axis (README.md and the shaping docs page), from
+    `benchmarks/results/shaping_axis.json` (`python benchmarks/shaping_axis.py`)."""
+    data = json.loads((results_dir / "shaping_axis.json").read_text())
+    rows = data["rows"]
+    head = data["headline"]
+    lines = [
+        "| axis: modes [Hz] (damping ratio) | best classic shaper (its shortest time) | worst residual | minimax, same "
+        "time and peaks | ratio | minimax at the shaper's residual: time | time ratio |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        modes = ", ".join(f"{f:.2f} ({z:.3f})" for f, z in zip(r["frequencies"], r["damping"]))
+        lines.append(
+            f"| {modes} | {r['anchor']}, {r['anchor_time']:.3f} s | {r['anchor_worst']:.3g} % | "
+            f"{r['equal_time_worst']:.3g} % | {r['equal_time_ratio']:.2g} | {r['shortest_time']:.3f} s | "
+            f"{r['time_ratio']:.3f} |"
+        )
+    by = {h["what"]: h for h in head}
+
+    def val(key):
+        return next(h for w, h in by.items() if w.startswith(key))
+
+    speed = data.get("speed", {})
+    sp = "; ".join(
+        f"{m} mode{'s' if str(m) != '1' else ''}: {s['warm_median_s']:.2f} s warm ({s['warm_min_s']:.2f}-"
+        f"{s['warm_max_s']:.2f}), {s['fresh_median_s']:.1f} s in a fresh process ({s['fresh_min_s']:.1f}-"
+        f"{s['fresh_max_s']:.1f})"
+        for m, s in speed.items()
+    )
+    ident = data.get("identification", {})
+    m = data["machine"]
+    lines += [
+        "",
+        f"Worst residual over ±20 % of every mode, in % of the unshaped time-optimal move's; {len(rows)} axes drawn "
+        f"from a fixed seed (1-3 modes, 1-20 Hz, ζ 0.005-0.1), a 0.1 m move with |v| ≤ 0.3 m/s, |a| ≤ 1.2 m/s². "
+        f"Ratio minimax / best shaper at equal time with the shaper's own peaks as limits: at most "
+        f"{val('worst residual ratio')['value']:.3f} (median {val('median of that ratio')['value']:.4f}; target "
+        f"≤ 0.1); move time at the shaper's residual: at most {val('move time at')['value']:.3f}× (target ≤ 0.9). "
+        f"Exported 1 kHz samples replayed through scipy: within {100 * val('exported')['value']:.2g} % of the "
+        f"stated residual (target 1 %). `design_move` at a fixed time (medians, spread min-max): {sp} "
+        f"(targets 1 s and 5 s). `identify_axis` (2 modes, 5 % noise, {ident.get('seeds', '?')} records): "
+        f"frequencies within {100 * ident.get('max_freq_err', float('nan')):.2g} %, damping ratios within "
+        f"{100 * ident.get('max_damping_err', float('nan')):.2g} %. One run of `python benchmarks/shaping_axis.py` "
+        f"({m.get('cpu_count', '?')} CPU cores, jax {m.get('jax', '?')}); figure: `benchmarks/results/shaping_axis.png`.",
+    ]
+    return "\n".join(lines)
+
+
+def update_shaping_blocks(readme: Path | None = README, page: Path | None = SHAPING_PAGE, results_dir: Path = RESULTS):
+    """Write the side-by-side shaping table between the shaping markers of `readme` and `page`; return the files
+    that have the markers."""
+    table = shaping_table(results_dir)
+    return [f for f in (readme, page) if f is not None and _replace_block(f, table, SHAPING_START, SHAPING_END)]
+
+
 def update_docs_page(page: Path = DOCS_PAGE, results_dir: Path = RESULTS) -> bool:
     """Write the full tables into the docs page between the markers; return True if written."""
     if _replace_block(page, build_table(results_dir, fold=False)):
@@ -334,6 +392,9 @@ def update_readme(
     if docs_page is not None:
         update_docs_page(docs_page, results_dir)
     update_coldstart_blocks(readme, docs_page, results_dir)
+    if (results_dir / "shaping_axis.json").exists():
+        # the shaping docs page only with the repository's own README (a test's README stands alone)
+        update_shaping_blocks(readme, SHAPING_PAGE if readme == README else None, results_dir)
     if not _replace_block(readme, table):
         print(f"readme_table: {readme.name} has no '{START}' ... '{END}' markers; the tables are:\n")
         print(build_table(results_dir))

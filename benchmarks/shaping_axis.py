@@ -40,6 +40,7 @@ import jax  # noqa: E402
 jax.config.update("jax_enable_x64", True)  # jaxbelt computes in float64 (it leaves the setting to its caller)
 import numpy as np  # noqa: E402
 from _common import machine_info, results_dir, write_results  # noqa: E402
+from readme_table import update_shaping_blocks  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 
 import jaxbelt as jb  # noqa: E402
@@ -203,7 +204,11 @@ def figure(cases, path):
 def main(argv=None):
     ap = argparse.ArgumentParser()
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--table", action="store_true", help="only rewrite the pages' table from the last results")
     args = ap.parse_args(argv)
+    if args.table:
+        print("\n".join(map(str, update_shaping_blocks())))
+        return
     n_axes = 3 if args.quick else 12
     cases = []
     for k, (f, z) in enumerate(draw_axes(n_axes)):
@@ -280,6 +285,8 @@ def main(argv=None):
     out = results_dir(args.quick)
     write_results("shaping_axis", rows, headline, quick=args.quick, extra=dict(speed=sp, identification=ident))
     figure(cases, out / "shaping_axis.png")
+    if not args.quick:
+        update_shaping_blocks()
     for h in headline:
         print(f"{h['what']}: {h['value']:.4g} {h['unit']} (target {h['target']})")
     print(f"machine: {machine_info()}")

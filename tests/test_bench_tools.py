@@ -221,3 +221,15 @@ def test_committed_first_call_table_is_generated_from_the_committed_json(name):
     assert start in text and end in text
     block = text[text.index(start) + len(start) : text.index(end)]
     assert block == "\n" + readme_table.coldstart_table() + "\n"
+
+
+@pytest.mark.parametrize("name", ["README.md", "docs/scenes/shaping.md"])
+def test_committed_shaping_table_is_generated_from_the_committed_json(name):
+    """The side-by-side shaping table (minimax against the best classic shaper) of the README and of the shaping
+    page is what the generator makes from the committed benchmarks/results/shaping_axis.json (one run of
+    `python benchmarks/shaping_axis.py`; regenerate the text: `python benchmarks/shaping_axis.py --table`)."""
+    text = (ROOT / name).read_text()
+    start, end = readme_table.SHAPING_START, readme_table.SHAPING_END
+    assert start in text and end in text
+    block = text[text.index(start) + len(start) : text.index(end)]
+    assert block == "\n" + readme_table.shaping_table() + "\n"
