@@ -217,12 +217,10 @@ def _design(axis, T, u=0.2, D=0.1, jerk=None):
     return dsg.minimax_design(prob, opts), opts
 
 
-@pytest.mark.parametrize("jerk", [None, 40.0])
-def test_minimax_is_the_global_optimum_of_its_lp(jerk):
-    ax = jb.ModalAxis(**AXIS2)
-    des, opts = _design(ax, 0.9, jerk=jerk)
-    assert des.converged
-    c, G, h, A, b = (np.asarray(x) for x in dsg.lp_data(des.problem, opts, float(des.worst)))
+def _highs_value(problem, opts, scale=1e-4):
+    """The minimax LP's optimal value by scipy's HiGHS (tight tolerances), posed in units of `scale`: the
+    independent reference."""
+    c, G, h, A, b = (np.asarray(x) for x in dsg.lp_data(problem, opts, scale))
     ref = linprog(
         c,
         A_ub=G,
@@ -234,7 +232,15 @@ def test_minimax_is_the_global_optimum_of_its_lp(jerk):
         options=dict(primal_feasibility_tolerance=1e-10, dual_feasibility_tolerance=1e-10),
     )
     assert ref.status == 0
-    highs = ref.fun * float(des.worst)
+    return ref.fun * scale
+
+
+@pytest.mark.parametrize("jerk", [None, 40.0])
+def test_minimax_is_the_global_optimum_of_its_lp(jerk):
+    ax = jb.ModalAxis(**AXIS2)
+    des, opts = _design(ax, 0.9, jerk=jerk)
+    assert des.converged
+    highs = _highs_value(des.problem, opts, float(des.worst))
     # HiGHS's own feasibility tolerance (1e-10 absolute on rows of size ~1) allows ~1e-6 relative here; the
     # design's certificate (a vertex, or a dual bound) holds to its stated gap
     assert abs(float(des.worst) - highs) <= max(2e-6, 2 * float(des.gap)) * highs
@@ -249,23 +255,6 @@ def test_minimax_is_the_global_optimum_of_its_lp(jerk):
         assert pj <= jerk * (1 + 1e-9)
     # the exchange leaves the fine-grid worst within 3 % (plus the polygon's 1.9 %) of the LP's bound
     assert float(des.fine_worst) <= float(des.worst) * 1.03 * 1.02
-
-
-def _highs_value(problem, opts):
-    """The minimax LP's optimal value by scipy's HiGHS (tight tolerances): the independent reference."""
-    c, G, h, A, b = (np.asarray(x) for x in dsg.lp_data(problem, opts, 1e-4))
-    ref = linprog(
-        c,
-        A_ub=G,
-        b_ub=h,
-        A_eq=A,
-        b_eq=b,
-        bounds=[(None, None)] * len(c),
-        method="highs",
-        options=dict(primal_feasibility_tolerance=1e-10, dual_feasibility_tolerance=1e-10),
-    )
-    assert ref.status == 0
-    return ref.fun * 1e-4
 
 
 def test_minimax_value_gradients_match_finite_differences():

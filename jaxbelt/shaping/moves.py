@@ -324,7 +324,7 @@ def trapezoid_move(distance, duration, v_max, a_max, j_max=None) -> PiecewiseMov
     return PiecewiseMove(np.array(times), np.zeros(8), sign * np.array(ramps), T)
 
 
-def _check_move_limits(owner, distance, v_max, a_max, j_max) -> None:
+def check_move_limits(owner, distance, v_max, a_max, j_max) -> None:
     """Refuse a distance that is NaN, infinite or 0 and limits that are not finite and > 0, by name."""
     check_scalar("distance", distance, "m", owner)
     d = float(np.asarray(distance))
@@ -339,7 +339,7 @@ def _check_move_limits(owner, distance, v_max, a_max, j_max) -> None:
 def fastest_time(distance, v_max, a_max, j_max=None) -> float:
     """The shortest rest-to-rest time [s] for `distance` [m] with |v| <= `v_max`, |a| <= `a_max` (and |jerk| <=
     `j_max`): the time-optimal bang-coast-bang (or 7-segment S-curve) move, in closed form."""
-    _check_move_limits("fastest_time", distance, v_max, a_max, j_max)
+    check_move_limits("fastest_time", distance, v_max, a_max, j_max)
     D, v, a = abs(float(distance)), float(v_max), float(a_max)
     if j_max is None:
         return D / v + v / a if D >= v * v / a else 2 * math.sqrt(D / a)
@@ -364,7 +364,7 @@ def fastest_time(distance, v_max, a_max, j_max=None) -> float:
 
 def fastest_move(distance, v_max, a_max, j_max=None) -> PiecewiseMove:
     """The time-optimal rest-to-rest move within the limits (`fastest_time`): the unshaped move a planner runs."""
-    _check_move_limits("fastest_move", distance, v_max, a_max, j_max)
+    check_move_limits("fastest_move", distance, v_max, a_max, j_max)
     T = fastest_time(distance, v_max, a_max, j_max)
     for grow in (1.0, 1 + 1e-12, 1 + 1e-9, 1 + 1e-6):
         m = trapezoid_move(distance, T * grow, v_max, a_max * (1 + 1e-9), j_max)

@@ -38,6 +38,7 @@ from . import design as _design
 from .moves import (
     PiecewiseMove,
     SplineMove,
+    check_move_limits,
     executable_samples,
     fastest_move,
     fastest_time,
@@ -214,13 +215,8 @@ def _check_inputs(axis, distance, move_time, v_max, a_max, j_max, uncertainty, i
         raise TypeError(
             f"{o}: `axis` must be a jaxbelt.ModalAxis (or BeltPlatform(...).to_axis()); got {type(axis).__name__}"
         )
+    check_move_limits(o, distance, v_max, a_max, j_max)
     d = float(np.asarray(distance))
-    if not (math.isfinite(d) and d != 0.0):
-        raise ValueError(f"{o}: parameter `distance` must be finite and non-zero [m]; got {distance}")
-    check_positive("v_max", v_max, "m/s", o)
-    check_positive("a_max", a_max, "m/s^2", o)
-    if j_max is not None:
-        check_positive("j_max", j_max, "m/s^3", o)
     check_range("uncertainty", uncertainty, lo=0.0, hi=0.9, hi_open=True, owner=o)
     valid = ("minimax", *SHAPERS, "pseudo-polynomial", "unshaped")
     if isinstance(include, str) or not all(isinstance(n, str) for n in include):
