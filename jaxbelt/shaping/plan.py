@@ -70,7 +70,9 @@ class Candidate:
       move's worst residual on that mode; `worst_m`: the worst residual amplitude in length units [m];
     - `band_hz`: per mode, `(low, high)` [Hz] of the 5 % band (NaN when the nominal residual is above 5 %);
     - `peak_v` [m/s], `peak_a` [m/s²], `peak_j` [m/s³];
-    - `ok`: feasible, converged and within the limits; `note`: why not, or what to know.
+    - `ok`: feasible, converged and within the limits; `note`: why not, or what to know;
+    - `outside_percent`: the worst residual outside the band, between 0.5 and 1.5 times each mode's frequency,
+      in % of the same references (what an unmodelled or mistaken mode there would see; the ranking ignores it).
     """
 
     name: str
@@ -85,6 +87,7 @@ class Candidate:
     peak_j: float
     ok: bool
     note: str = ""
+    outside_percent: float = math.nan
 
     def sample(self, rate_hz: float):
         """`(t, x, v, a)` of the command sampled at `rate_hz` [Hz] (see `AbstractMotionCommand.sample`)."""
@@ -94,6 +97,7 @@ class Candidate:
 
     def as_dict(self) -> dict:
         d = {k: getattr(self, k) for k in ("name", "move_time", "worst_percent", "mean_percent", "worst_m")}
+        d.update(outside_percent=self.outside_percent)
         d.update(peak_v=self.peak_v, peak_a=self.peak_a, peak_j=self.peak_j, ok=self.ok, note=self.note)
         for i, (lo, hi) in enumerate(self.band_hz):
             d[f"band5_mode{i + 1}_hz"] = (lo, hi)
@@ -124,7 +128,7 @@ class MovePlan:
     def format_table(self) -> str:
         """The ranked table as text (what `jaxbelt shaping` prints)."""
         n = self.axis.n_modes
-        head = f"{'candidate':28s} {'T [s]':>7s} {'worst %':>9s} {'mean %':>9s} {'worst [m]':>10s} "
+        head = f"{'candidate':28s} {'T [s]':>7s} {'worst %':>9s} {'mean %':>9s} {'worst [m]':>10s} {'outside %':>9s} "
         head += " ".join(f"{'5% band m' + str(i + 1) + ' [Hz]':>19s}" for i in range(n))
         head += f" {'peak v':>8s} {'peak a':>8s}  note"
         lines = [head]
@@ -133,7 +137,7 @@ class MovePlan:
             mark = "*" if c is self.best else " "
             lines.append(
                 f"{mark}{c.name:27s} {c.move_time:7.3f} {c.worst_percent:9.4f} {c.mean_percent:9.4f} "
-                f"{c.worst_m:10.3e} {bands} {c.peak_v:8.4f} {c.peak_a:8.4f}  {c.note}"
+                f"{c.worst_m:10.3e} {c.outside_percent:9.3g} {bands} {c.peak_v:8.4f} {c.peak_a:8.4f}  {c.note}"
             )
         return "\n".join(lines)
 
@@ -261,7 +265,9 @@ def _measure(axis, cmd, ref, u, limits) -> tuple[dict[str, Any], bool]:
     pv, pa, pj = peaks(cmd)
     v_max, a_max, j_max = limits
     within = pv <= v_max * (1 + 1e-6) and pa <= a_max * (1 + 1e-6) and (j_max is None or pj <= j_max * (1 + 1e-6))
+    outside = (wide < 1.0 - u) | (wide > 1.0 + u)
     return dict(
+        outside_percent=100.0 * float(wr[:, outside].max()) if outside.any() else math.nan,
         worst_percent=100.0 * float(ratio.max()),
         mean_percent=100.0 * float(ratio.mean()),
         worst_m=float(res.max()),
