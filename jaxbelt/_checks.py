@@ -153,7 +153,8 @@ def _values(x):
 
 def _message(name: str, what: str, unit: str, owner: str) -> str:
     where = f"{owner}: " if owner else ""
-    return f"{where}parameter `{name}` {what}{(' ' + unit) if unit else ''}"
+    shown = unit not in ("", "–", "-")  # a dimensionless quantity has no unit to print
+    return f"{where}parameter `{name}` {what}{(' ' + unit) if shown else ''}"
 
 
 def _check_host(name: str, v, what: str, unit: str, owner: str, ok) -> None:
