@@ -314,7 +314,7 @@ def reraise_checks(owner: str, context: str = ""):
     stack. Any other error passes unchanged."""
     try:
         yield
-    except (eqx.EquinoxRuntimeError, jax.errors.JaxRuntimeError) as e:
+    except (eqx.EquinoxRuntimeError, jax.errors.JaxRuntimeError, checkify.JaxRuntimeError) as e:
         message = runtime_message(e)
         if message is None:
             raise

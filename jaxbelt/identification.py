@@ -28,7 +28,6 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass, field
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -36,7 +35,7 @@ import optimistix as optx
 
 from ._callables import by_value
 from ._checks import check_int, check_nonnegative, check_positive, require_x64
-from ._guard import reraise_checks
+from ._guard import host_checked, reraise_checks
 
 __all__ = ["identify", "IdentifyResult"]
 
@@ -89,7 +88,9 @@ def _to_params(u, p0, is_log, scale):
     return jnp.where(is_log, p0 * jnp.exp(u), p0 + scale * u)
 
 
-@eqx.filter_jit
+# checks inside `predict` (a model's parameter ranges) come back as values (`host_checked`): the program holds no
+# host callback, so the persistent compilation cache stores it and a later process loads it instead of compiling
+@host_checked
 def _fit(predict, names, p0, data, w, is_log, scale, solver_kind, jac_mode, rtol, atol, max_steps):
     def unpack(u):
         p = _to_params(u, p0, is_log, scale)
@@ -106,6 +107,26 @@ def _fit(predict, names, p0, data, w, is_log, scale, solver_kind, jac_mode, rtol
                 f"{tuple(data.shape)}; got shape {tuple(pred.shape)}"
             )
         return jnp.ravel((pred - data) * w)
+
+    if jac_mode == "fwd":
+        # the solver linearises the residuals at every step and applies the linear map several times (to
+        # materialise the Jacobian, in the damped solve): here that map is the Jacobian itself, computed once per
+        # step by forward mode (n tangents through `predict`, batched), so the map is a matrix product instead
+        # of a replay of the linearised prediction (a scan in a closed form, an ODE solve) per application
+        plain = resid
+
+        @jax.custom_jvp
+        def resid_fwd(u):
+            return plain(u, None)
+
+        @resid_fwd.defjvp
+        def _resid_jvp(primals, tangents):
+            (u,), (du,) = primals, tangents
+            jac, r = jax.jacfwd(lambda v: (plain(v, None),) * 2, has_aux=True)(u)
+            return r, jac @ du
+
+        def resid(u, _):
+            return resid_fwd(u)
 
     if solver_kind == "lm":
         solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol)
@@ -252,7 +273,7 @@ def identify(
             )
             u, r, jmat, ok, steps, result = _fit(*args, "bwd", rtol, atol, int(max_steps))
     u, r, jmat = np.asarray(u), np.asarray(r), np.asarray(jmat)
-    p = np.asarray(_to_params(u, p0, is_log, scale))
+    p = np.where(is_log, p0 * np.exp(u), p0 + scale * u)  # `_to_params` on the host: no eager device ops
     at = dict(zip(names, p.tolist()))
     if not np.all(np.isfinite(r)):
         where = "at the start values" if not np.any(u) else "at a step of the fit"

@@ -111,8 +111,9 @@ def is_uniform(ts):
 def expm_solve(A, F, s, x0, t0, ts, uniform: bool | None = False):
     """States at times `ts` (shape (N, n)) by the matrix exponential of the augmented system.
 
-    On an evenly spaced grid one exponential $\\Phi = e^{A_a\\Delta t}$ is computed and the state is
-    stepped by matrix-vector products (a scan); otherwise each time gets its own exponential.
+    The state is stepped from one output time to the next by matrix-vector products (a scan). On an evenly
+    spaced grid one exponential $\\Phi = e^{A_a\\Delta t}$ serves every step; otherwise each step that
+    differs from the last one computed (by more than `UNIFORM_RTOL`) gets its own exponential.
     `uniform`: `True`, a static promise that `ts` is evenly spaced (the step is taken as
     `(ts[-1] - ts[0]) / (N - 1)`); `False`, the general path; `None`, decided from the values of `ts`
     inside the program (one program for grids of any spacing).
@@ -124,7 +125,20 @@ def expm_solve(A, F, s, x0, t0, ts, uniform: bool | None = False):
     ts = jnp.asarray(ts)
 
     def general():
-        return jax.vmap(lambda t: expm(Aa * (t - t0)) @ z0)(ts)
+        # stepped from the start to each output time in turn; a step equal (to UNIFORM_RTOL) to the one the
+        # transition matrix was computed for reuses it, so an evenly spaced grid costs two exponentials, not one
+        # per output time, whether or not its spacing was known when the program was traced
+        steps = ts - jnp.concatenate([jnp.reshape(jnp.asarray(t0, ts.dtype), (1,)), ts[:-1]])
+
+        def step(carry, dt):
+            z, Phi, dt_phi = carry
+            same = jnp.abs(dt - dt_phi) <= UNIFORM_RTOL * jnp.abs(dt_phi)
+            Phi, dt_phi = jax.lax.cond(same, lambda: (Phi, dt_phi), lambda: (expm(Aa * dt), dt))
+            z_next = Phi @ z
+            return (z_next, Phi, dt_phi), z_next
+
+        start = (z0, jnp.eye(Aa.shape[0], dtype=Aa.dtype), jnp.full((), jnp.nan, ts.dtype))
+        return jax.lax.scan(step, start, steps)[1]
 
     def stepped():
         dt = (ts[-1] - ts[0]) / (ts.shape[0] - 1)

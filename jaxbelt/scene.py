@@ -77,8 +77,8 @@ class Scene(eqx.Module):
     - `uniform`: whether `ts` is evenly spaced. Default `None`: for concrete times the closed form reads
       the spacing from the values inside its compiled program (one program for grids of any spacing;
       an evenly spaced grid is stepped with one transition matrix). Under `jax.jit` with a traced `ts`
-      the closed form takes one matrix exponential per output time (slower) and a `TracedGridWarning`
-      says so, unless you pass `uniform=True` (a promise: the spacing is taken as
+      the closed form compares each step with the last in its program (one matrix exponential per distinct
+      step, a test per output time) and a `TracedGridWarning` says so, unless you pass `uniform=True` (a promise: the spacing is taken as
       `(ts[-1] - ts[0]) / (N - 1)`) or `uniform=False` (explicitly the general path, no warning).
 
     Times and the initial state are data: a new grid, start time or initial state of the same
@@ -159,8 +159,8 @@ class Scene(eqx.Module):
             elif uniform is None:
                 if ts.shape[0] > 2:
                     warnings.warn(
-                        "Scene: `ts` is traced, so its spacing cannot be checked; a closed-form solve takes one "
-                        "matrix exponential per output time. Pass uniform=True if the grid is evenly spaced "
+                        "Scene: `ts` is traced, so its spacing cannot be checked; a closed-form solve compares each "
+                        "step with the last in its program (a new matrix exponential wherever the step changes). Pass uniform=True if the grid is evenly spaced "
                         "(or uniform=False to silence this warning).",
                         TracedGridWarning,
                         stacklevel=2,

@@ -141,6 +141,47 @@ def test_identify_with_a_fresh_lambda_compiles_once():
     assert r == pytest.approx(0.15, rel=1e-3)
 
 
+def test_identify_second_identical_call_traces_and_compiles_nothing():
+    """The start-up fit of the first-call table, its grid built inside `predict` (traced there): a second
+    identical call runs the stored program (no trace, no compilation) and finds the fit of a closed-over grid."""
+    data = np.asarray(
+        jb.simulate(
+            jb.Scene(
+                jb.BeltStartup(k=120e3, c=20.0, R=0.15),
+                jb.ExponentialVoltage(24.0, 0.02),
+                ts=jnp.linspace(0.0, 0.3, 301),
+            )
+        ).ys[:, :2]
+    )
+    data = data + 1e-3 * np.sin(np.arange(data.size)).reshape(data.shape)
+
+    def fit(inside):
+        def predict(p):
+            ts = jnp.linspace(0.0, 0.3, 301) if inside else TS301
+            scene = jb.Scene(
+                jb.BeltStartup(k=p["k"], c=p["c"], R=p["R"]),
+                jb.ExponentialVoltage(24.0, 0.02),
+                ts=ts,
+                uniform=None if inside else True,
+            )
+            return jb.simulate(scene).ys[:, :2]
+
+        return jb.identify(predict, {"k": 80e3, "c": 30.0, "R": 0.2}, data, sigma=1e-3)
+
+    with pytest.warns(jb.TracedGridWarning):
+        first = fit(True)
+    with count_compiles() as c:
+        second = fit(True)
+    assert (c["n"], c["traces"]) == (0, 0)
+    assert second.params == first.params
+    ref = fit(False)
+    for name in ref.params:
+        assert abs(first.params[name] - ref.params[name]) < 1e-6 * ref.stderr[name], name
+
+
+TS301 = np.linspace(0.0, 0.3, 301)
+
+
 def test_tune_pid_with_a_new_optax_transformation_of_the_same_rate_compiles_nothing():
     drive, pid = jb.FourBarDrive(), jb.PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0, v_limit=60.0)
     kw = dict(t0=0.375, t1=0.5, steps=2, progress=False)
