@@ -153,45 +153,75 @@ def _named_optimizer(name: str, learning_rate):
     raise ValueError(f"optimiser name must be 'lbfgs' or 'adam' (or pass an optax transformation); got {name!r}")
 
 
-@eqx.filter_jit
-def _init(opt, problem, theta):
+def _transformation(opt, learning_rate):
+    # the programs take a named optimiser by its name (a plain static value: the program store keeps them)
+    return _named_optimizer(opt, learning_rate) if isinstance(opt, str) else opt
+
+
+def _peaks(cmd):
+    ts = jnp.linspace(0.0, 1.0, 2001) * cmd.duration
+    return jnp.max(jnp.abs(cmd.velocity(ts))), jnp.max(jnp.abs(cmd.acceleration(ts)))
+
+
+def _report(problem, theta):
+    """What the result reports at `theta`: the command, H [rad²/s⁴] and its peak motor speed and acceleration."""
+    cmd = problem.command(theta)
+    return (cmd, problem.raw(theta)) + _peaks(cmd)
+
+
+def _start_impl(opt, learning_rate, problem, cmd):
+    # one program for the start: the parameters of `cmd`, the scale H0, the optimiser state and the start's report
+    theta = params_from_gammas(cmd.gammas, problem.lower, problem.margin, problem.gap, problem.max_step)
+    h0 = residual_energy(problem.plat, cmd, n_nodes=problem.n_nodes)
+    problem = eqx.tree_at(lambda p: p.scale, problem, h0)
+    state = _transformation(opt, learning_rate).init(theta)
     # strong-typed leaves: optax initialises some line-search statistics as weak-typed Python
     # scalars, which would make the first update's state differ in type and compile the step twice
-    state = opt.init(theta)
-    return jax.tree_util.tree_map(lambda x: jax.lax.convert_element_type(x, x.dtype) if eqx.is_array(x) else x, state)
+    state = jax.tree_util.tree_map(lambda x: jax.lax.convert_element_type(x, x.dtype) if eqx.is_array(x) else x, state)
+    return theta, h0, state, problem(theta), problem.gammas(theta), _report(problem, theta)
 
 
-@host_checked
-def _evaluate(problem, theta):
-    return problem(theta), problem.gammas(theta)
-
-
-@host_checked
-def _step(opt, problem, theta, state, use_state_value: bool):
+def _step_impl(opt, learning_rate, problem, theta, state, use_state_value: bool):
+    fn = _transformation(opt, learning_rate)
     if use_state_value:
         value, grad = optax.value_and_grad_from_state(problem)(theta, state=state)
     else:
         value, grad = jax.value_and_grad(problem)(theta)
-    if isinstance(opt, optax.GradientTransformationExtraArgs):
-        updates, state = opt.update(grad, state, theta, value=value, grad=grad, value_fn=problem)
+    if isinstance(fn, optax.GradientTransformationExtraArgs):
+        updates, state = fn.update(grad, state, theta, value=value, grad=grad, value_fn=problem)
     else:
-        updates, state = opt.update(grad, state, theta)
+        updates, state = fn.update(grad, state, theta)
     theta = optax.apply_updates(theta, updates)
-    return theta, state, problem(theta), jnp.max(jnp.abs(cast(jax.Array, grad))), problem.gammas(theta)
+    return (
+        theta,
+        state,
+        problem(theta),
+        jnp.max(jnp.abs(cast(jax.Array, grad))),
+        problem.gammas(theta),
+        _report(problem, theta),
+    )
 
 
-def _run(problem: ShapingProblem, theta0, optimizer, learning_rate, max_steps, tol, gtol, progress, desc):
+# Compiled once per structure, checks returned as values (`host_checked`): JAX's persistent cache and jaxbelt's
+# program store (`jb.enable_compilation_cache`) keep them, so a later process neither traces nor compiles them.
+#: XLA's quicker compilation for these top-level programs (LLVM level 0, the classic CPU emitters, as
+#: `jaxbelt.shaping.design`): the cold first call compiles them in half the time; the same HLO, results equal to
+#: rounding, and the run time (about ten steps) is not what a first call waits for
+_COMPILE = {"xla_backend_optimization_level": 0, "xla_cpu_use_fusion_emitters": False}
+_start = host_checked(_start_impl, store=True, compiler_options=_COMPILE)
+_step = host_checked(_step_impl, store=True, compiler_options=_COMPILE)
+
+
+def _run(problem: ShapingProblem, cmd, optimizer, learning_rate, max_steps, tol, gtol, progress, desc):
     if isinstance(optimizer, str):
         use_state_value = optimizer == "lbfgs"
-        opt = _named_optimizer(optimizer, learning_rate)
+        _named_optimizer(optimizer, learning_rate)  # an unknown name raises here
     else:
         use_state_value = False
-        opt = optimizer
     if max_steps < 0:
         raise ValueError(f"`max_steps` must be >= 0; got {max_steps}")
-    theta = theta0
-    state = _init(opt, problem, theta)
-    f0, g0 = _evaluate(problem, theta)
+    theta, h0, state, f0, g0, start = _start(optimizer, learning_rate, problem, cmd)
+    problem = eqx.tree_at(lambda p: p.scale, problem, h0)
     hist = [float(f0)]
     ghist = [np.asarray(g0)]
     converged = False
@@ -202,15 +232,15 @@ def _run(problem: ShapingProblem, theta0, optimizer, learning_rate, max_steps, t
         bar = tqdm(total=max_steps, desc=desc, leave=False)
     n = 0
     stall = 0
-    best_f, best_theta = hist[0], theta
+    best_f, best = hist[0], start
     for n in range(1, max_steps + 1):
-        theta, state, f, gmax, g = _step(opt, problem, theta, state, use_state_value)
+        theta, state, f, gmax, g, report = _step(optimizer, learning_rate, problem, theta, state, use_state_value)
         f = float(f)
         if not np.isfinite(f):
             raise FloatingPointError(f"{desc}: the objective became non-finite at iteration {n}")
         stall = stall + 1 if f >= best_f * (1 - 1e-12) else 0
         if f < best_f:
-            best_f, best_theta = f, theta
+            best_f, best = f, report
         hist.append(f)
         ghist.append(np.asarray(g))
         if bar is not None:
@@ -231,32 +261,15 @@ def _run(problem: ShapingProblem, theta0, optimizer, learning_rate, max_steps, t
     if bar is not None:
         bar.close()
     # a line search that fails may still move; report the best iterate, not the last
-    return best_theta, np.asarray(hist), np.stack(ghist), n, converged, message
-
-
-@host_checked
-def _final(problem, theta, theta0):
-    cmd = problem.command(theta)
-    ts = jnp.linspace(0.0, 1.0, 2001) * cmd.duration
-    return (
-        cmd,
-        problem.raw(theta),
-        problem.raw(theta0),
-        jnp.max(jnp.abs(cmd.velocity(ts))),
-        jnp.max(jnp.abs(cmd.acceleration(ts))),
-    )
-
-
-def _finish(problem, theta, theta0, hist, ghist, n, converged, message=""):
-    cmd, value, v0, vmax, amax = _final(problem, theta, theta0)
+    cmd_best, value, vmax, amax = best
     return CommandOptimResult(
-        gammas=cmd.gammas,
+        gammas=cmd_best.gammas,
         value=value,
-        initial_value=v0,
+        initial_value=start[1],
         # recorded on the scaled objective (penalties included); reported in the units of `value`
-        history=jnp.asarray(hist) * problem.scale,
-        gammas_history=jnp.asarray(ghist),
-        command=cmd,
+        history=_device(np.asarray(hist) * float(h0)),
+        gammas_history=_device(np.stack(ghist)),
+        command=cmd_best,
         n_steps=int(n),
         converged=bool(converged),
         peak_speed=vmax,
@@ -265,12 +278,9 @@ def _finish(problem, theta, theta0, hist, ghist, n, converged, message=""):
     )
 
 
-_params_jit = jax.jit(params_from_gammas)
-
-
-@host_checked
-def _residual_jit(plat, cmd, n_nodes):
-    return residual_energy(plat, cmd, n_nodes=n_nodes)
+def _device(x):
+    """A host value as a float array on the device (`jax.device_put`: no program compiled, unlike `jnp.asarray`)."""
+    return jax.device_put(np.asarray(x, dtype=float))
 
 
 def _check_options(owner, margin, gap, max_speed, max_accel, penalty, learning_rate):
@@ -342,26 +352,21 @@ def optimise_command(
         raise ValueError(f"optimise_command: `cmd` must be a PseudoPolynomial; got {type(cmd).__name__}")
     _check_options("optimise_command", margin, gap, max_speed, max_accel, penalty, learning_rate)
     lower, margin, gap = _bounds(cmd, margin, gap, max_step)
-    theta0 = _params_jit(cmd.gammas, lower, margin, gap, max_step)
-    h0 = _residual_jit(plat, cmd, n_nodes)
     problem = ShapingProblem(
         plat=plat,
         displacement=cmd.displacement,
         duration=cmd.duration,
         lower=lower,
-        margin=jnp.asarray(margin),
-        gap=jnp.asarray(gap),
-        max_step=jnp.asarray(max_step, dtype=float),
-        scale=h0,
-        max_speed=None if max_speed is None else jnp.asarray(max_speed, dtype=float),
-        max_accel=None if max_accel is None else jnp.asarray(max_accel, dtype=float),
-        penalty=jnp.asarray(penalty, dtype=float),
+        margin=_device(margin),
+        gap=_device(gap),
+        max_step=_device(max_step),
+        scale=_device(1.0),  # H0, set by the start program
+        max_speed=None if max_speed is None else _device(max_speed),
+        max_accel=None if max_accel is None else _device(max_accel),
+        penalty=_device(penalty),
         n_nodes=n_nodes,
     )
-    theta, hist, ghist, n, conv, message = _run(
-        problem, theta0, optimizer, learning_rate, max_steps, tol, gtol, progress, "optimise_command"
-    )
-    return _finish(problem, theta, theta0, hist, ghist, n, conv, message)
+    return _run(problem, cmd, optimizer, learning_rate, max_steps, tol, gtol, progress, "optimise_command")
 
 
 def optimise_robust(
@@ -432,12 +437,12 @@ def optimise_robust(
     n_nodes = check_int(o, "n_nodes", n_nodes, 8)
     max_steps = check_int(o, "max_steps", max_steps, 0)
     check_positive("gtol", gtol, owner=o)
-    if reference is None:
-        reference = PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]), cmd.displacement, cmd.duration)
+    # the reference's exponents (the 3-4-5 polynomial by default: no command built, no program run)
+    g_ref = np.array([3.0, 4.0, 5.0]) if reference is None else np.sort(np.asarray(reference.gammas, dtype=float))
     lower, margin, gap = _bounds(cmd, margin, gap, max_step)
     # the band as modes of one axis: frequency omega_k, damping ratio xi * omega_n / omega_k (c kept), gain lambda;
     # the last mode is the nominal platform (the design frequency)
-    wn, xi, lam = float(plat.omega_n), float(plat.damping_ratio), float(plat.lam)
+    wn, xi, lam = (float(x) for x in _platform_scalars(plat))
     omegas = np.linspace(lo_b, hi_b, n_freq) * wn
     if not float(np.max(xi * wn / omegas)) < 1.0:
         raise ValueError(f"{o}: the band reaches an overdamped platform (xi >= 1 at {lo_b:g} omega_n); raise `band`")
@@ -446,8 +451,8 @@ def optimise_robust(
     T, phi = float(cmd.duration), float(cmd.displacement)
     n_nodes = max(n_nodes, _pp.n_nodes_for(float(np.max(w_all)) * T))  # the rule must resolve the band
     kern1 = _pp._kernels_np(axis, T, np.ones(1), np.ones(n_freq + 1), n_nodes)
-    pad = np.ones((1, reference.order + 1))
-    a_ref, _ = _pp._evaluate_np(kern1, n_freq + 1, n_nodes, phi, T, np.sort(np.asarray(reference.gammas))[None], pad)
+    pad = np.ones((1, g_ref.shape[0]))
+    a_ref, _ = _pp._evaluate_np(kern1, n_freq + 1, n_nodes, phi, T, g_ref[None], pad)
     a_ref = a_ref[0, :n_freq, 0]
     scale = float(np.max(a_ref)) if mode == "max" else float(np.mean(a_ref))
     kern = _pp._kernels_np(axis, T, np.ones(1), np.full(n_freq + 1, scale), n_nodes)
@@ -462,10 +467,10 @@ def optimise_robust(
     guard = np.concatenate([np.full(n_freq, np.inf), [nominal0]])
     limits = (None if max_speed is None else float(max_speed), None if max_accel is None else float(max_accel), None)
     shared = _pp.make_shared(
-        jnp.asarray(kern), n_nodes, band_w, np.zeros(n_freq + 1), guard, phi, T, limits, max_step=float(max_step),
+        _device(kern), n_nodes, band_w, np.zeros(n_freq + 1), guard, phi, T, limits, max_step=float(max_step),
         margin=margin, penalty=float(penalty),
     )  # fmt: skip
-    theta = jnp.asarray(_pp._params_np(g0_pad, lower, margin, gap, float(max_step)))[None]
+    theta = _device(_pp._params_np(g0_pad, lower, margin, gap, float(max_step))[None])
     if isinstance(optimizer, str):
         if optimizer not in ("lbfgs", "adam"):
             raise ValueError(
@@ -494,11 +499,12 @@ def optimise_robust(
             )  # fmt: skip
             st = _pp.run_stage(opt, shared, runs, theta, n_hist=_N_HIST, linesearch=linesearch)
             theta = st.theta
-            done = int(st.n_iter[0])
+            n_iter, history, st_reason, st_gmax = jax.device_get((st.n_iter, st.history, st.reason, st.gmax))
+            done = int(n_iter[0])
             n_steps += done
-            hist += np.exp(np.asarray(st.history[0, : min(done, _N_HIST)])).tolist()
-            ghist.append(_pp._exponents_np(np.asarray(theta[0]), lower, margin, gap, float(max_step))[: g0.shape[0]])
-            reason, gmax = int(st.reason[0]), float(st.gmax[0])
+            hist += np.exp(np.asarray(history[0, : min(done, _N_HIST)])).tolist()
+            ghist.append(_pp._exponents_np(np.asarray(theta)[0], lower, margin, gap, float(max_step))[: g0.shape[0]])
+            reason, gmax = int(st_reason[0]), float(st_gmax[0])
             if bar is not None:
                 bar.update(1)
     finally:
@@ -515,21 +521,35 @@ def optimise_robust(
         # never end worse than the start, by the band measure or at the design frequency
         g, value, converged = g0, value0, False
         message = f"returned the start: the end point was worse than it ({message})"
-    out = PseudoPolynomial(jnp.asarray(g), cmd.displacement, cmd.duration)
-    ts = jnp.linspace(0.0, 1.0, 2001) * out.duration
+    out, vmax, amax = _command_report(_device(g), cmd.displacement, cmd.duration)
     return CommandOptimResult(
         gammas=out.gammas,
-        value=jnp.asarray(value),
-        initial_value=jnp.asarray(value0),
-        history=jnp.asarray([value0] + hist),
-        gammas_history=jnp.asarray(np.stack(ghist)),
+        value=_device(value),
+        initial_value=_device(value0),
+        history=_device([value0] + hist),
+        gammas_history=_device(np.stack(ghist)),
         command=out,
         n_steps=n_steps,
         converged=bool(converged),
-        peak_speed=jnp.max(jnp.abs(out.velocity(ts))),
-        peak_accel=jnp.max(jnp.abs(out.acceleration(ts))),
+        peak_speed=vmax,
+        peak_accel=amax,
         message=message,
     )
+
+
+def _platform_scalars_impl(plat):
+    return plat.omega_n, plat.damping_ratio, plat.lam
+
+
+def _command_report_impl(gammas, displacement, duration):
+    cmd = PseudoPolynomial(gammas, displacement, duration)
+    return (cmd,) + _peaks(cmd)
+
+
+# optimise_robust's programs around the optimiser's own (`jaxbelt.shaping.pseudo`): one each, stored like
+# optimise_command's, instead of a compiled program per eager operation
+_platform_scalars = host_checked(_platform_scalars_impl, store=True)
+_command_report = host_checked(_command_report_impl, store=True, compiler_options=_COMPILE)
 
 
 #: iterations of optimise_robust's history kept per stage, and its exponent slots
