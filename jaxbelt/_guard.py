@@ -170,7 +170,15 @@ def eager() -> bool:
     return type(jax.extend.core.find_top_trace(())) is _EAGER_TRACE
 
 
-def host_checked(fun=None, *, jit=eqx.filter_jit, store: bool = False, **jit_kwargs) -> Callable[..., Any]:
+def host_checked(
+    fun=None,
+    *,
+    jit=eqx.filter_jit,
+    store: bool = False,
+    compiler_options: dict | None = None,
+    checks: bool = True,
+    **jit_kwargs,
+) -> Callable[..., Any]:
     """`jit(fun, **jit_kwargs)` for a program jaxbelt runs eagerly: its guards come back as values.
 
     Called outside any trace, the program that runs is `checkify`-transformed: `error_if` (and so
@@ -184,14 +192,24 @@ def host_checked(fun=None, *, jit=eqx.filter_jit, store: bool = False, **jit_kwa
     callers trace other checked programs that share its inner functions: checkify numbers its
     checks from one process-wide counter, so skipping this program's trace would renumber theirs
     and make them miss the persistent cache once.
+
+    `compiler_options`: XLA's options for the checked (top-level) program and its stored form only; the plain
+    program, inlined into a caller's trace, compiles with the caller's.
+
+    `checks=False`: for a program that records no check (its solves and checks made with `throw=False`): the
+    same, without checkify's pass over the traced program (a third of a diffrax solve's tracing time); a check
+    it did record would fail its tracing (`checkify.check` outside `checkify`), never pass unseen.
     """
     if fun is None:
-        return functools.partial(host_checked, jit=jit, store=store, **jit_kwargs)
+        return functools.partial(
+            host_checked, jit=jit, store=store, compiler_options=compiler_options, checks=checks, **jit_kwargs
+        )
     plain = jit(fun, **jit_kwargs)
     if isinstance(_host_checks, _Off):
         return plain
-    checkified = checkify.checkify(fun, errors=checkify.user_checks)
-    checked = jit(checkified, **jit_kwargs)
+    checkified = checkify.checkify(fun, errors=checkify.user_checks) if checks else fun
+    top_kwargs = dict(jit_kwargs, compiler_options=compiler_options) if compiler_options else jit_kwargs
+    checked = jit(checkified, **top_kwargs)
     name = f"{getattr(fun, '__module__', '?')}.{getattr(fun, '__qualname__', '?')}"
     # the store's static/dynamic split is filter_jit's; only jaxbelt's own module-level functions are stored
     storable = store and jit is eqx.filter_jit and _store.storable_function(fun)
@@ -203,9 +221,12 @@ def host_checked(fun=None, *, jit=eqx.filter_jit, store: bool = False, **jit_kwa
         _equinox_errors_as_checks()
         with _host_checks(True):
             if storable and not kwargs and _store.folder() is not None:
-                err, out = _store.call(name, checkified, args, checked)
+                result = _store.call(name, checkified, args, checked, compiler_options)
             else:
-                err, out = checked(*args, **kwargs)
+                result = checked(*args, **kwargs)
+        if not checks:
+            return result
+        err, out = result
         err.throw()
         return out
 

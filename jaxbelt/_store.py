@@ -253,15 +253,20 @@ def _ensure_lapack() -> None:
 class _Entry:
     """A stored program: `jit` of the exported module's call, and the structure of its output."""
 
-    __slots__ = ("fn", "out_tree", "lapack")
+    __slots__ = ("fn", "out_tree", "lapack", "device")
 
-    def __init__(self, exported, out_tree, lapack):
-        self.fn, self.out_tree, self.lapack = jax.jit(exported.call), out_tree, lapack
+    def __init__(self, exported, out_tree, lapack, compiler_options=None):
+        self.fn = (
+            jax.jit(exported.call, compiler_options=compiler_options) if compiler_options else jax.jit(exported.call)
+        )
+        self.out_tree, self.lapack, self.device = out_tree, lapack, jax.devices()[0]
 
     def __call__(self, dynamic):
         if self.lapack:
             _ensure_lapack()
-        return jax.tree_util.tree_unflatten(self.out_tree, self.fn(*dynamic))
+        # committed arguments, always: jit compiles the exported call once for fresh (uncommitted) arrays and again
+        # for its own outputs (committed), so that a loop feeding a program its outputs would compile it twice
+        return jax.tree_util.tree_unflatten(self.out_tree, self.fn(*jax.device_put(list(dynamic), self.device)))
 
 
 def _codes_used(before=None) -> int:
@@ -293,7 +298,7 @@ def _exported_fields(exported) -> dict:
     return fields
 
 
-def _load(path: Path, key: str):
+def _load(path: Path, key: str, compiler_options=None):
     with open(path, "rb") as f:
         data = _Unpickler(f).load()
     if data[0] != _FORMAT or data[1] != key:
@@ -302,7 +307,7 @@ def _load(path: Path, key: str):
     if data[3] is None:  # marked: this program cannot be stored
         return False
     fields, out_tree, lapack = data[3:]
-    return _Entry(jax.export.Exported(**fields), out_tree, lapack)
+    return _Entry(jax.export.Exported(**fields), out_tree, lapack, compiler_options)
 
 
 def _write(path: Path, data) -> None:
@@ -322,7 +327,7 @@ def _debug(message: str) -> None:
         print(f"jaxbelt store: {message}", file=sys.stderr)
 
 
-def _export(fun, name, static_leaves, treedef, dynamic, key, path):
+def _export(fun, name, static_leaves, treedef, dynamic, key, path, compiler_options=None):
     """Trace and export `fun` at these arguments and write it; False (and a mark on disk) when JAX
     cannot export it."""
     positions = [i for i, v in enumerate(static_leaves) if v is _DYNAMIC]
@@ -355,7 +360,7 @@ def _export(fun, name, static_leaves, treedef, dynamic, key, path):
         _write(path, (_FORMAT, key, codes, _exported_fields(exported), out_tree, lapack))
     except Exception as e:  # noqa: BLE001 - not picklable or not writable: this process still uses it
         _debug(f"{name}: not written: {type(e).__name__}: {e}")
-    return _Entry(exported, out_tree, lapack)
+    return _Entry(exported, out_tree, lapack, compiler_options)
 
 
 class _Dynamic:
@@ -376,7 +381,7 @@ def lookup(name: str, fun, args: tuple):
     return _resolve(name, fun, args)[0]
 
 
-def _resolve(name: str, fun, args: tuple):
+def _resolve(name: str, fun, args: tuple, compiler_options=None):
     """`(lookup(name, fun, args), the program's inputs)`: the arguments are flattened once."""
     if not _usable():
         return False, None
@@ -389,7 +394,7 @@ def _resolve(name: str, fun, args: tuple):
         memo_key = (name, treedef, tuple(map(aval, dynamic)), tuple(map(repr, static_leaves)), settings())
         entry = _MEMO.get(memo_key)
         if entry is None:
-            entry = _lookup(name, fun, treedef, static_leaves, dynamic, memo_key)
+            entry = _lookup(name, fun, treedef, static_leaves, dynamic, memo_key, compiler_options)
             if len(_MEMO) >= _MEMO_MAX:
                 _MEMO.clear()
             _MEMO[memo_key] = entry
@@ -399,10 +404,11 @@ def _resolve(name: str, fun, args: tuple):
         return False, None
 
 
-def call(name: str, fun, args: tuple, fallback):
+def call(name: str, fun, args: tuple, fallback, compiler_options=None):
     """`fun(*args)` through its stored program (see `lookup`); `fallback(*args)` (the traced path, same
-    result) where there is none. Call it outside any trace only."""
-    entry, dynamic = _resolve(name, fun, args)
+    result) where there is none. Call it outside any trace only. `compiler_options`: XLA's, for compiling the
+    stored program (fixed per `name`)."""
+    entry, dynamic = _resolve(name, fun, args, compiler_options)
     if entry is False:
         return fallback(*args)
     try:
@@ -412,7 +418,7 @@ def call(name: str, fun, args: tuple, fallback):
         return fallback(*args)
 
 
-def _lookup(name, fun, treedef, static_leaves, dynamic, memo_key):
+def _lookup(name, fun, treedef, static_leaves, dynamic, memo_key, compiler_options=None):
     nodes = _describe_tree(treedef)
     folder = _state["folder"]
     if nodes is None or folder is None:
@@ -422,9 +428,9 @@ def _lookup(name, fun, treedef, static_leaves, dynamic, memo_key):
     path = folder / (hashlib.sha256(key.encode()).hexdigest() + ".jaxbelt-program")
     if path.exists():
         try:
-            entry = _load(path, key)
+            entry = _load(path, key, compiler_options)
             if entry is not None:
                 return entry
         except Exception as e:  # noqa: BLE001 - unreadable or from another build: export it again
             _debug(f"{name}: not loaded: {type(e).__name__}: {e}")
-    return _export(fun, name, static_leaves, treedef, dynamic, key, path)
+    return _export(fun, name, static_leaves, treedef, dynamic, key, path, compiler_options)

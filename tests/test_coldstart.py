@@ -222,3 +222,62 @@ def test_fourbar_algebraic_vector_field_matches_arctan2_route(kw):
     ref = _reference_energy(d, alpha)
     for g, r in zip(got, ref):
         np.testing.assert_allclose(g, r, rtol=1e-12, atol=1e-12 * float(jnp.max(jnp.abs(r))))
+
+
+_FIRST_TUNE = r"""
+import jax
+jax.config.update("jax_enable_x64", True)
+import jax.monitoring
+import jaxbelt as jb
+n = {"compiles": 0}
+def listener(name, secs, **kw):
+    if name == "/jax/core/compile/backend_compile_duration":
+        n["compiles"] += 1
+jax.monitoring.register_event_duration_secs_listener(listener)
+jb.enable_compilation_cache()
+drive = jb.FourBarDrive()
+pid = jb.PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0, v_limit=60.0)
+jb.tune_pid(drive, pid, steps=3, progress=False)
+first = n["compiles"]
+jb.tune_pid(drive, pid, steps=3, progress=False)
+print(first, n["compiles"] - first)
+"""
+
+
+def test_tune_pid_first_call_compiles_each_program_once(tmp_path):
+    # A fresh process, an empty cache folder (the README's cold first call): the step's program and the report's
+    # are compiled once each (not again for the committed arrays the step feeds itself), no small eager programs
+    # around the loop; two tiny programs inside diffrax's set-up remain. It was 15 compilations.
+    first, second = map(int, _subprocess(_FIRST_TUNE, JAXBELT_CACHE_DIR=str(tmp_path)).split())
+    assert first <= 4, first
+    assert second == 0
+
+
+def test_tune_pid_default_adam_state_is_adams_init():
+    # the host-made initial state (no small programs to compile) is optax's own
+    state = pid_mod._default_adam().init(jnp.zeros(3))
+    host = pid_mod._default_adam_state()
+    host.hyperparams["learning_rate"] = np.asarray(0.1)  # set by `tune_pid` from its argument
+    assert jax.tree_util.tree_structure(state) == jax.tree_util.tree_structure(host)
+    for a, b in zip(jax.tree_util.tree_leaves(state), jax.tree_util.tree_leaves(host), strict=True):
+        assert np.asarray(a).dtype == np.asarray(b).dtype
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+def test_tune_pid_report_with_a_non_finite_value_reruns_the_checked_program(monkeypatch):
+    # the report runs without checks first; a non-finite value (a failed solve or check) reruns the checked
+    # program, which raises what failed, or here (nothing failed) gives the same numbers
+    kw = dict(TUNE_WINDOW, steps=1, progress=False)
+    ref = jb.tune_pid(jb.FourBarDrive(), TUNE_PID, **kw)
+    calls = []
+
+    def failed(*args):
+        calls.append(1)
+        return {k: jnp.nan for k in ("chi", "chi_smooth", "v_peak", "i_peak", "mean_speed")}
+
+    monkeypatch.setattr(pid_mod, "_tune_report_unchecked", failed)
+    res = jb.tune_pid(jb.FourBarDrive(), TUNE_PID, **kw)
+    assert len(calls) == 2
+    np.testing.assert_allclose(
+        [res.chi, res.chi_initial, res.v_peak], [ref.chi, ref.chi_initial, ref.v_peak], rtol=1e-12
+    )
