@@ -259,3 +259,24 @@ def test_a_new_process_runs_the_stored_closed_form(tmp_path):
         np.testing.assert_allclose(
             [float(o[1]), float(o[2])], [float(ref.current[-1]), float(ref.ys[-1, 3])], rtol=1e-12
         )
+
+
+def test_minimax_design_through_the_store(tmp_path):
+    # the minimax LP's round (the interior point method, the largest shaping program) is stored: a later process
+    # runs it untraced and designs the same command
+    axis = jb.ModalAxis([6.0], [0.02])
+
+    def run():
+        plan = jb.design_move(axis, 0.1, 0.8, v_max=0.3, a_max=1.2, include=("minimax",))
+        return plan.minimax.command.coefficients, plan.minimax.worst, plan.candidate("minimax").worst_percent
+
+    reference = run()
+    with store_in(tmp_path / "xla") as folder:
+        run()
+        written = len(_programs(folder))
+        assert written >= 1
+        _store.forget()
+        stored = run()
+        assert len(_programs(folder)) == written  # loaded, not exported again
+    for a, b in zip(stored, reference):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-9, atol=0)

@@ -44,6 +44,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import as_float_array, is_concrete
+from .._guard import host_checked
 from ..models.axis import ModalAxis
 from .lp import LPResult, RowGroups, lp_value, solve_lp, solve_lp_data
 from .moves import SplineMove, peaks, phi1
@@ -262,7 +263,8 @@ def _solve_round_impl(problem: MinimaxProblem, opts: DesignOptions, tau, tol, ce
     return res, tau, (coef, res.value * tau, res.lower_bound * tau)
 
 
-_solve_round_top = eqx.filter_jit(_solve_round_impl, compiler_options=_LP_COMPILE)  # pyright: ignore[reportCallIssue]
+# kept by the program store while the compilation cache is on: a later process neither traces nor lowers it
+_solve_round_top = host_checked(_solve_round_impl, store=True, compiler_options=_LP_COMPILE, checks=False)
 _solve_round_nested = eqx.filter_jit(_solve_round_impl)
 
 
