@@ -69,6 +69,13 @@ ROUND_TOL = 1e-6
 EXCHANGE_TOL = 0.03
 
 
+def certified(worst, lower_bound) -> bool:
+    """Whether an LP value `worst` is certified optimal by its rigorous `lower_bound`: within `CERTIFIED_GAP`
+    (relative) or `CERTIFIED_ABS` (absolute, in units of the references) of it."""
+    worst, lower_bound = float(worst), float(lower_bound)
+    return worst - lower_bound <= max(CERTIFIED_GAP * worst, CERTIFIED_ABS)
+
+
 class DesignOptions(NamedTuple):
     """The discretisation of the minimax LP (all static: each combination is one compiled program).
 
@@ -322,7 +329,7 @@ class MinimaxDesign(eqx.Module):
         """The LP is solved to a certified relative optimality gap of at most `CERTIFIED_GAP` (1 %), or to an
         absolute gap of at most `CERTIFIED_ABS` (1e-5 of the references); at an optimal vertex the gap is zero to
         round-off."""
-        return bool(self.gap <= CERTIFIED_GAP or float(self.worst - self.lower_bound) <= CERTIFIED_ABS)
+        return certified(self.worst, self.lower_bound)
 
 
 def _initial_grid(opts: DesignOptions, n_modes: int, uncertainty: float):
@@ -379,8 +386,7 @@ def minimax_design(problem: MinimaxProblem, opts: DesignOptions, tol=1e-9, per_r
             break
         rounds += 1
         tau = jnp.asarray(worst)
-    certified = (float(worst_a) - float(lower_a)) <= max(CERTIFIED_GAP * float(worst_a), CERTIFIED_ABS)
-    if not (bool(res.vertex) or certified):  # the final LP to `tol`, certified where it can be
+    if not (bool(res.vertex) or certified(worst_a, lower_a)):  # the final LP to `tol`, certified where it can be
         res, tau, (coef, worst_a, lower_a) = _solve_round(problem, opts, jnp.asarray(worst), tol_a, True)
         if opts.n_rounds > 0 and u > 0.0:
             fine_worst = float(np.asarray(_fine_ratios(problem, opts, coef)[1]).max())

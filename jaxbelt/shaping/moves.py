@@ -340,6 +340,11 @@ def fastest_time(distance, v_max, a_max, j_max=None) -> float:
     """The shortest rest-to-rest time [s] for `distance` [m] with |v| <= `v_max`, |a| <= `a_max` (and |jerk| <=
     `j_max`): the time-optimal bang-coast-bang (or 7-segment S-curve) move, in closed form."""
     check_move_limits("fastest_time", distance, v_max, a_max, j_max)
+    return _fastest_time(distance, v_max, a_max, j_max)
+
+
+def _fastest_time(distance, v_max, a_max, j_max) -> float:
+    """`fastest_time` of arguments already checked."""
     D, v, a = abs(float(distance)), float(v_max), float(a_max)
     if j_max is None:
         return D / v + v / a if D >= v * v / a else 2 * math.sqrt(D / a)
@@ -365,7 +370,7 @@ def fastest_time(distance, v_max, a_max, j_max=None) -> float:
 def fastest_move(distance, v_max, a_max, j_max=None) -> PiecewiseMove:
     """The time-optimal rest-to-rest move within the limits (`fastest_time`): the unshaped move a planner runs."""
     check_move_limits("fastest_move", distance, v_max, a_max, j_max)
-    T = fastest_time(distance, v_max, a_max, j_max)
+    T = _fastest_time(distance, v_max, a_max, j_max)
     for grow in (1.0, 1 + 1e-12, 1 + 1e-9, 1 + 1e-6):
         m = trapezoid_move(distance, T * grow, v_max, a_max * (1 + 1e-9), j_max)
         if m is not None:
