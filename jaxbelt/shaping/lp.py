@@ -39,7 +39,7 @@ from jaxtyping import Array, Float
 #: relative regularisation of the normal matrix's diagonal, and rounds of iterative refinement per solve
 _REG = 1e-15
 _REFINE = 1
-_REG_RETRIES = (1e-11, 1e-7)  # larger regularisations tried in turn when a Cholesky factor is not finite
+_REG_RETRIES = (1e-11, 1e-7)  # larger regularisations tried in turn when a factorisation is not finite
 
 
 class LPResult(NamedTuple):
@@ -122,7 +122,7 @@ def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter, groups=()):
         B = jnp.concatenate([*_group_rows(groups, w, gs, cs), jnp.sqrt(w[free])[:, None] * G[free]], axis=0)
         d0 = jnp.sum(B * B, axis=0)
 
-        def chol(r):
+        def factorise(r):
             Bq = jnp.concatenate([B, jnp.diag(jnp.sqrt(r * d0 + 1e-300))], axis=0)
             L = jnp.linalg.qr(Bq, mode="r").T
             S = A @ jsl.cho_solve((L, True), A.T)
@@ -131,12 +131,12 @@ def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter, groups=()):
         def finite(f):
             return jnp.all(jnp.isfinite(f[0])) & jnp.all(jnp.isfinite(f[1]))
 
-        # near the optimum W spreads over many orders of magnitude and H may lose its numerical positive
-        # definiteness: then factorise again with a larger regularisation (the refinement steps recover the
-        # accuracy the regularisation costs)
-        f = chol(reg)
+        # near the optimum W spreads over many orders of magnitude and the triangular factor may become
+        # numerically singular (the Schur complement A H^-1 A^T, then its Cholesky factor, not finite): then
+        # factorise again with a larger regularisation (the refinement step recovers the accuracy it costs)
+        f = factorise(reg)
         for r in _REG_RETRIES:
-            f = jax.lax.cond(finite(f), lambda _, f=f: f, lambda r_: chol(r_), r)
+            f = jax.lax.cond(finite(f), lambda _, f=f: f, lambda r_: factorise(r_), r)
         return f
 
     def newton(L, Ls, r1, r2):
