@@ -20,39 +20,17 @@ Known bugs are pinned as `xfail(strict=True)` tests at the end of the file (see 
 import math
 import re
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import given
 from hypothesis import strategies as st
+from hypothesis_profile import NONFINITE, RUNTIME, inf, nan
+from hypothesis_profile import examples as fuzz
 
 import jaxbelt as jb
 
-# A database-less, derandomized profile: the same examples on every run (CI is reproducible).
-settings.register_profile(
-    "jaxbelt-fuzz",
-    derandomize=True,
-    database=None,
-    deadline=None,
-    print_blob=True,
-    phases=[Phase.explicit, Phase.reuse, Phase.generate, Phase.shrink],  # no explain phase: writes no patch files
-    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large],
-)
-_PROFILE = settings.get_profile("jaxbelt-fuzz")
-
-
-def fuzz(n):
-    """`@settings` of this suite with `n` examples."""
-    return settings(_PROFILE, max_examples=n)
-
-
-# What an `eqx.error_if` raises at run time (see tests/test_guarantees.py): match the message.
-RUNTIME = (eqx.EquinoxRuntimeError, jax.errors.JaxRuntimeError, ValueError)
-
-nan, inf = math.nan, math.inf
-NONFINITE = st.sampled_from([nan, inf, -inf])
 NEGATIVE = st.floats(min_value=-1e6, max_value=-1e-9)
 BAD_POSITIVE = st.one_of(NONFINITE, st.just(0.0), st.just(-0.0), NEGATIVE)  # violates "finite and > 0"
 BAD_NONNEG = st.one_of(NONFINITE, NEGATIVE)  # violates "finite and >= 0"

@@ -22,39 +22,19 @@ class at module level, so the examples share them.
 """
 
 import dataclasses
-import math
 import re
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import given
 from hypothesis import strategies as st
+from hypothesis_profile import NONFINITE, RUNTIME, examples, nan
 
 import jaxbelt as jb
 from jaxbelt._params import Parametrised, declared
 
-settings.register_profile(
-    "jaxbelt-property",
-    derandomize=True,
-    database=None,
-    deadline=None,
-    print_blob=True,
-    phases=[Phase.explicit, Phase.reuse, Phase.generate, Phase.shrink],
-    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large, HealthCheck.function_scoped_fixture],
-)
-_PROFILE = settings.get_profile("jaxbelt-property")
-
-
-def examples(n):
-    return settings(_PROFILE, max_examples=n)
-
-
-RUNTIME = (eqx.EquinoxRuntimeError, jax.errors.JaxRuntimeError, ValueError)
-nan, inf = math.nan, math.inf
-NONFINITE = st.sampled_from([nan, inf, -inf])
 WRONG_TYPE = st.sampled_from(["x", 1 + 1j, True, b"1", {"a": 1.0}, np.array([1 + 0j]), np.array([True])])
 
 
