@@ -65,6 +65,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._callables import by_value
+from ._guard import host_checked, reraise_checks
 from .solution import SolveError
 
 _MAX_LISTED = 10
@@ -109,13 +110,11 @@ def _describe(params, i: int) -> str:
     return repr(flat)
 
 
-@eqx.filter_jit
-def _vmapped(fn, params):
+def _vmapped_impl(fn, params):
     return jax.vmap(fn)(params)
 
 
-@eqx.filter_jit
-def _sharded(fn, params, mesh):
+def _sharded_impl(fn, params, mesh):
     from jax.sharding import PartitionSpec
 
     static = []
@@ -128,6 +127,13 @@ def _sharded(fn, params, mesh):
     spec = PartitionSpec("batch")
     dyn = jax.shard_map(local, mesh=mesh, in_specs=spec, out_specs=spec, check_vma=False)(params)
     return eqx.combine(dyn, static[0])
+
+
+# The checks `fn` makes (a model's parameter ranges, diffrax's own) come back as values (`host_checked`): the
+# program holds no host callback, so JAX's persistent compilation cache keeps it and a later process (a re-run
+# notebook, a script run again) compiles nothing. Inside a caller's jit, the plain program.
+_vmapped = host_checked(_vmapped_impl)
+_sharded = host_checked(_sharded_impl)
 
 
 def cpu_devices(n: int | None = None) -> int:
@@ -190,7 +196,8 @@ def sweep(fn, params, *, devices=None, check: bool = True, name: str | None = No
         padded = _pad(params, n_pad)
         sharding = NamedSharding(Mesh(np.asarray(devices), ("batch",)), PartitionSpec("batch"))
         padded = jax.device_put(padded, sharding)
-        out = _sharded(fn, padded, sharding.mesh)
+        with reraise_checks("sweep", f"in {what!r}"):
+            out = _sharded(fn, padded, sharding.mesh)
         if not all(getattr(x, "is_fully_addressable", True) for x in jax.tree_util.tree_leaves(out)):
             from jax.experimental import multihost_utils
 
@@ -198,7 +205,8 @@ def sweep(fn, params, *, devices=None, check: bool = True, name: str | None = No
         if n_pad:
             out = jax.tree_util.tree_map(lambda x: x[:n] if np.ndim(x) else x, out)
     else:
-        out = _vmapped(fn, params)
+        with reraise_checks("sweep", f"in {what!r}"):
+            out = _vmapped(fn, params)
     if check:
         ok = _success(out)
         if ok is not None:

@@ -131,7 +131,10 @@ def test_eager_programs_hold_no_host_callback(tmp_path):
         "jb.simulate_fig4(jb.FourBarDrive(), n=201); "
         "plat, cmd = jb.BeltPlatform(), jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0])); "
         "jb.residual_energy(plat, cmd); jb.optimise_command(plat, cmd, max_steps=2, progress=False); "
-        "jb.crossing_speeds(jb.RunoutRig(), n_modes=2); jb.MovingString().galerkin_frequencies(20.0, 8, 3)"
+        "jb.crossing_speeds(jb.RunoutRig(), n_modes=2); jb.MovingString().galerkin_frequencies(20.0, 8, 3); "
+        # a sweep: the checks of the user's function (here the command's traced gamma) come back as values too
+        "jb.sweep(lambda g: jb.simulate(jb.Scene(jb.BeltStartup(), jb.ExponentialVoltage(24.0, g), "
+        "ts=jnp.linspace(0.0, 0.1, 11))).ys, jnp.array([0.01, 0.02]))"
     )
     full = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=full, timeout=600)

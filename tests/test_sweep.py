@@ -101,3 +101,20 @@ def test_sweep_plain_function_and_bad_params():
         jb.sweep(lambda p: p[0] + p[1], (jnp.ones(3), jnp.ones(4)))
     with pytest.raises(ValueError, match="leading batch axis"):
         jb.sweep(lambda p: p, jnp.asarray(1.0))
+
+
+def test_sweep_with_an_out_of_range_parameter_raises_naming_it():
+    # the user's function builds a command with a traced gamma: the element with gamma < 0 fails its check inside
+    # the compiled sweep, which comes back as a ValueError naming the parameter and the sweep
+    ts = jnp.linspace(0.0, 0.1, 11)
+
+    def run(g):
+        return jb.simulate(jb.Scene(jb.BeltStartup(), jb.ExponentialVoltage(24.0, g), ts=ts)).ys
+
+    with pytest.raises(ValueError, match=r"sweep: .*gamma.*in 'run'"):
+        jb.sweep(run, jnp.array([0.02, -0.01]))
+    np.testing.assert_allclose(  # the valid elements alone give the closed form's values
+        np.asarray(jb.sweep(run, jnp.array([0.02]))[0]),
+        np.asarray(jb.simulate(jb.Scene(jb.BeltStartup(), jb.ExponentialVoltage(24.0, 0.02), ts=ts)).ys),
+        rtol=1e-12,
+    )
