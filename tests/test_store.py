@@ -280,3 +280,31 @@ def test_minimax_design_through_the_store(tmp_path):
         assert len(_programs(folder)) == written  # loaded, not exported again
     for a, b in zip(stored, reference):
         np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-9, atol=0)
+
+
+def test_robust_pseudo_polynomial_stage_through_the_store(tmp_path, monkeypatch):
+    # the L-BFGS stage of optimise_robust (jaxbelt.shaping.pseudo) is stored: a later process runs it untraced and
+    # ends at the same exponents
+    from jaxbelt.shaping import pseudo
+
+    plat, cmd = jb.BeltPlatform(), jb.PseudoPolynomial(jnp.arange(5.0, 10.0))
+
+    def run():
+        res = jb.optimise_robust(plat, cmd, max_steps=40, progress=False)
+        return res.gammas, res.value, res.n_steps
+
+    reference = run()
+    with store_in(tmp_path / "xla") as folder:
+        run()
+        written = len(_programs(folder))
+        _store.forget()
+
+        def traced(*args):
+            raise AssertionError("the stage was traced, not loaded from the store")
+
+        monkeypatch.setattr(pseudo, "_run_stage_jit", traced)
+        stored = run()
+        assert len(_programs(folder)) == written  # loaded, not exported again
+    np.testing.assert_allclose(np.asarray(stored[0]), np.asarray(reference[0]), rtol=1e-12, atol=0)
+    np.testing.assert_allclose(float(stored[1]), float(reference[1]), rtol=1e-12, atol=0)
+    assert stored[2] == reference[2]
