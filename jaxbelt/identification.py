@@ -29,6 +29,7 @@ import warnings
 from dataclasses import dataclass, field
 
 import jax
+import jax.extend.core
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
@@ -88,19 +89,26 @@ def _to_params(u, p0, is_log, scale):
     return jnp.where(is_log, p0 * jnp.exp(u), p0 + scale * u)
 
 
+def _traced_once(fun, *args):
+    """`fun`, traced here once to a jaxpr that every call evaluates: its Python (a user's `predict` and its
+    derivative) runs once however many places of the program call it. (A `jax.jit` of it would be traced again
+    where optimistix calls it under another tracing context.)"""
+    closed, shape = jax.make_jaxpr(fun, return_shape=True)(*args)
+    run = jax.extend.core.jaxpr_as_fun(closed)
+    tree = jax.tree_util.tree_structure(shape)
+    return lambda *a: jax.tree_util.tree_unflatten(tree, run(*jax.tree_util.tree_leaves(a)))
+
+
 # checks inside `predict` (a model's parameter ranges) come back as values (`host_checked`): the program holds no
 # host callback, so the persistent compilation cache stores it and a later process loads it instead of compiling
 @host_checked
 def _fit(predict, names, p0, data, w, is_log, scale, solver_kind, jac_mode, rtol, atol, max_steps):
-    def unpack(u):
-        p = _to_params(u, p0, is_log, scale)
-        return {n: p[i] for i, n in enumerate(names)}
-
     # traced once: the solver and the Jacobians below call it several times, each a re-trace otherwise
     predict_once = jax.jit(predict)
 
-    def resid(u, _):
-        pred = jnp.asarray(predict_once(unpack(u)), dtype=float)
+    def resid_of(u, p0, data, w, is_log, scale):  # the traced arrays as arguments: jit programs of it are reused
+        p = _to_params(u, p0, is_log, scale)
+        pred = jnp.asarray(predict_once({n: p[i] for i, n in enumerate(names)}), dtype=float)
         if pred.shape != data.shape:  # broadcasting would fit a scalar to every point without a word
             raise ValueError(
                 f"identify: `predict(params)` must return an array of the shape of `data` "
@@ -108,21 +116,30 @@ def _fit(predict, names, p0, data, w, is_log, scale, solver_kind, jac_mode, rtol
             )
         return jnp.ravel((pred - data) * w)
 
+    consts = (p0, data, w, is_log, scale)
+    # traced once (`_traced_once`): the solver evaluates the residuals in several places of its program
+    resid_once = _traced_once(resid_of, p0, *consts)
+
+    def resid(u, _):
+        return resid_once(u, *consts)
+
     if jac_mode == "fwd":
         # the solver linearises the residuals at every step and applies the linear map several times (to
         # materialise the Jacobian, in the damped solve): here that map is the Jacobian itself, computed once per
         # step by forward mode (n tangents through `predict`, batched), so the map is a matrix product instead
-        # of a replay of the linearised prediction (a scan in a closed form, an ODE solve) per application
-        plain = resid
+        # of a replay of the linearised prediction (a scan in a closed form, an ODE solve) per application.
+        # The Jacobian and the residuals are traced once: the solver's steps and the final covariance below share
+        # them instead of tracing the forward-mode derivative of `predict` at each place
+        jac_and_resid = _traced_once(jax.jacfwd(lambda v, *c: (resid_of(v, *c),) * 2, has_aux=True), p0, *consts)
 
         @jax.custom_jvp
         def resid_fwd(u):
-            return plain(u, None)
+            return resid_once(u, *consts)
 
         @resid_fwd.defjvp
         def _resid_jvp(primals, tangents):
             (u,), (du,) = primals, tangents
-            jac, r = jax.jacfwd(lambda v: (plain(v, None),) * 2, has_aux=True)(u)
+            jac, r = jac_and_resid(u, *consts)
             return r, jac @ du
 
         def resid(u, _):
@@ -137,7 +154,10 @@ def _fit(predict, names, p0, data, w, is_log, scale, solver_kind, jac_mode, rtol
     )
     u = sol.value
     # the residual at the solution comes with its Jacobian (one evaluation of the prediction)
-    jac, r = (jax.jacfwd if jac_mode == "fwd" else jax.jacrev)(lambda v: (resid(v, None),) * 2, has_aux=True)(u)
+    if jac_mode == "fwd":
+        jac, r = jac_and_resid(u, *consts)
+    else:
+        jac, r = jax.jacrev(lambda v: (resid(v, None),) * 2, has_aux=True)(u)
     return u, r, jac, sol.result == optx.RESULTS.successful, sol.stats["num_steps"], sol.result
 
 

@@ -85,6 +85,24 @@ def test_startup_recovers_known_parameters():
         assert abs(res2.stderr[name] / res.stderr[name] - 2.0) < 0.04, name
 
 
+@pytest.mark.parametrize("jac", ["fwd", "bwd"])
+def test_identify_runs_the_users_predict_once_per_compilation(jac):
+    # the solver evaluates the residuals and their Jacobian at several places of one program: the user's `predict`
+    # is traced once (its Python runs once), not once per place; the fit is that of the plain line's OLS
+    calls = []
+    x = np.linspace(0.0, 1.0, 11)
+    y = 2.0 + 3.0 * x + 0.01 * np.sin(7 * x)
+
+    def line(p, mode=jac):  # `mode`: a function of its own per case (an equal one would reuse the traced program)
+        calls.append(1)
+        return p["a"] + p["b"] * jnp.asarray(x)
+
+    res = jb.identify(line, {"a": 1.0, "b": 1.0}, y, sigma=0.01, jac=jac)
+    assert len(calls) == 1
+    b, a = np.polyfit(x, y, 1)
+    np.testing.assert_allclose([res.params["a"], res.params["b"]], [a, b], rtol=1e-8)
+
+
 # --- belt-driven platform (Incerti, pseudo-polynomial commands): stiffness and damping ----------
 PL_TS = jnp.linspace(0.0, 1.5, 201)
 PL_CMD = jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]))
