@@ -38,6 +38,7 @@ import optax
 
 from .._checks import check_int, check_penalised_limits, check_positive, check_range
 from .._guard import host_checked
+from .._xla import QUICK_COMPILE
 from ..commands import MIN_EXPONENT_GAP, PseudoPolynomial, ShapedCommand
 from ..models.platform import BeltPlatform
 from ..objectives.residual import _w_quadrature, residual_energy, residual_energy_joules
@@ -207,7 +208,7 @@ def _step_impl(opt, learning_rate, problem, theta, state, use_state_value: bool)
 #: XLA's quicker compilation for these top-level programs (LLVM level 0, the classic CPU emitters, as
 #: `jaxbelt.shaping.design`): the cold first call compiles them in half the time; the same HLO, results equal to
 #: rounding, and the run time (about ten steps) is not what a first call waits for
-_COMPILE = {"xla_backend_optimization_level": 0, "xla_cpu_use_fusion_emitters": False}
+_COMPILE = QUICK_COMPILE
 _start = host_checked(_start_impl, store=True, compiler_options=_COMPILE)
 _step = host_checked(_step_impl, store=True, compiler_options=_COMPILE)
 

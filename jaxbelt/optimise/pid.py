@@ -22,6 +22,7 @@ import optax
 from .._callables import by_value
 from .._checks import check_int, check_penalised_limits, check_positive, check_scalar
 from .._guard import host_checked
+from .._xla import QUICK_COMPILE
 from ..models.motor import PID, check_pid_nonnegative
 from ..objectives.fluctuation import closed_loop_metrics
 
@@ -395,7 +396,7 @@ def _report(drive, pid, g0, cfg: _Config, p) -> dict:
 #: the caller's): XLA's classic CPU emitters at LLVM level 0 compile them 2.2x faster (step 3.0 s -> 1.3 s, report
 #: 1.3 s -> 0.6 s on 2 cores); the same HLO, results equal to rounding (~1e-13 relative), each step runs ~6 ms
 #: slower (12 -> 18 ms), which pays back only after some 150 steps
-_COMPILE = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 0}
+_COMPILE = QUICK_COMPILE
 
 # Compiled once per structure; their checks come back as values (`host_checked`), so that JAX's persistent cache
 # and jaxbelt's program store (`jb.enable_compilation_cache`) keep them: a later process neither traces nor

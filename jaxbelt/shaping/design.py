@@ -45,6 +45,7 @@ import numpy as np
 
 from .._checks import as_float_array, is_concrete
 from .._guard import host_checked
+from .._xla import QUICK_COMPILE, quick_jit
 from ..models.axis import ModalAxis
 from .lp import LPResult, RowGroups, lp_value, solve_lp, solve_lp_data
 from .moves import SplineMove, peaks, phi1
@@ -52,7 +53,7 @@ from .moves import SplineMove, peaks, phi1
 #: XLA options of the programs that hold the interior point method: its loop is compiled 3-4x faster at LLVM level
 #: 0 with the classic emitters (8 s -> 2.4 s on a 2-core machine), and the solve itself, dominated by the
 #: Cholesky factorisations that XLA calls into a library for, loses little (see benchmarks/shaping.py)
-_LP_COMPILE = {"xla_backend_optimization_level": 0, "xla_cpu_use_fusion_emitters": False}
+_LP_COMPILE = QUICK_COMPILE
 
 #: knot counts the design chooses from (one compiled program per count and axis size)
 KNOT_COUNTS = (32, 48, 64, 96, 128, 160, 192, 256)
@@ -285,7 +286,7 @@ def _solve_round(problem, opts, tau, tol, certify=True):
     return _solve_round_nested(problem, opts, tau, tol, certify)
 
 
-@eqx.filter_jit
+@quick_jit
 def _fine_ratios(problem: MinimaxProblem, opts: DesignOptions, coef):
     """Residual over reference of every mode on the fine grid: (fine factors (F,), ratios (n_modes, F))."""
     u = problem.uncertainty

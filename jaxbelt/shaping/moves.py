@@ -34,6 +34,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._checks import as_float_array, check_positive, check_scalar
+from .._xla import quick_jit
 from ..commands import AbstractMotionCommand
 
 # --------------------------------------------------------------------------------------------
@@ -389,7 +390,7 @@ def shape_move(base: PiecewiseMove, amplitudes, delays) -> PiecewiseMove:
     return PiecewiseMove(times, steps, ramps, base.duration + tau[-1])
 
 
-@eqx.filter_jit
+@quick_jit
 def _peaks(cmd, n: int):
     ts = jnp.linspace(0.0, cmd.end_time, n)
     if isinstance(cmd, PiecewiseMove):

@@ -15,13 +15,13 @@ base's for a `ShapedCommand`, and by an ODE solve (diffrax) for any other motion
 
 import math
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
 
 from .._checks import check_range
+from .._xla import quick_jit
 from ..commands import AbstractMotionCommand, PseudoPolynomial, ShapedCommand, falling_factorial
 from ..models.axis import ModalAxis
 from .moves import PiecewiseMove, SplineMove, fastest_move
@@ -63,6 +63,8 @@ def residual_integral(cmd: AbstractMotionCommand, s):
         return _pseudo_polynomial_w(cmd, s, _nodes_for(cmd, s))
     if isinstance(cmd, ShapedCommand):
         base = residual_integral(cmd.base, s)
+        if base is None:  # a base move without a closed form
+            return None
         lag = cmd.times[-1] - cmd.times
         fac = jnp.sum(cmd.amplitudes * jnp.exp(jnp.asarray(s)[..., None] * lag), axis=-1)
         return base * fac
@@ -106,7 +108,7 @@ def residual_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors: ArrayLi
     return _closed_form_curve(axis, cmd, r, n_nodes)
 
 
-@eqx.filter_jit
+@quick_jit
 def _closed_form_curve(axis, cmd, r, n_nodes: int):
     s, wd = _poles(axis, r)
     if isinstance(cmd, PseudoPolynomial):
@@ -117,6 +119,8 @@ def _closed_form_curve(axis, cmd, r, n_nodes: int):
         W = _pseudo_polynomial_w(cmd.base, s, n_nodes) * fac
     else:
         W = residual_integral(cmd, s)
+        if W is None:  # `residual_curve` calls this for closed-form commands only
+            raise TypeError(f"residual_curve: {type(cmd).__name__} has no closed-form residual")
     return jnp.abs(axis.gains)[:, None] / wd * jnp.abs(W)
 
 
