@@ -26,7 +26,7 @@ import functools
 import re
 import threading
 from collections.abc import Callable
-from typing import Any, Literal
+from typing import Any, Literal, TypeVar, overload
 
 import equinox as eqx
 import jax
@@ -233,19 +233,36 @@ def host_checked(
     return call
 
 
-def stored_jit(fun):
+_F = TypeVar("_F", bound=Callable[..., Any])
+
+
+@overload
+def stored_jit(fun: _F, *, compiler_options: dict | None = None) -> _F: ...
+@overload
+def stored_jit(fun: None = None, *, compiler_options: dict | None = None) -> Callable[[_F], _F]: ...
+def stored_jit(fun: Any = None, *, compiler_options: dict | None = None) -> Any:  # noqa: E302
     """`eqx.filter_jit(fun)` whose calls outside any trace go through the program store
-    (`jaxbelt._store`) while the compilation cache is on: a later process runs it untraced."""
-    jitted = eqx.filter_jit(fun)
+    (`jaxbelt._store`) while the compilation cache is on: a later process runs it untraced.
+
+    `compiler_options`: XLA's options of the program called at top level (and of its stored form); inside a
+    caller's trace it is inlined and compiles with the caller's."""
+    if fun is None:
+        return functools.partial(stored_jit, compiler_options=compiler_options)
+    plain = eqx.filter_jit(fun)
+    top = (
+        eqx.filter_jit(fun, compiler_options=compiler_options)  # pyright: ignore[reportCallIssue]
+        if compiler_options
+        else plain
+    )
     name = f"{fun.__module__}.{fun.__qualname__}"
-    if not _store.storable_function(fun):
-        return jitted
 
     @functools.wraps(fun)
     def wrapper(*args, **kwargs):
-        if kwargs or _store.folder() is None or not eager():
-            return jitted(*args, **kwargs)
-        return _store.call(name, fun, args, jitted)
+        if not eager():
+            return plain(*args, **kwargs)
+        if kwargs or _store.folder() is None or not _store.storable_function(fun):
+            return top(*args, **kwargs)
+        return _store.call(name, fun, args, top, compiler_options)
 
     return wrapper
 

@@ -71,3 +71,34 @@ def attach(package: str, path):
         return sorted(set(vars(sys.modules[package])) | set(table))
 
     return __getattr__, __dir__, list(table)
+
+
+class _LazyModule:
+    """A stand-in for the module `name`, imported at the first attribute read (see `lazy_module`)."""
+
+    __slots__ = ("_name",)
+
+    def __init__(self, name: str):
+        self._name = name
+
+    def __getattr__(self, attr: str):
+        module = sys.modules.get(self._name)
+        if module is None:
+            import jax
+
+            # often first read while a program is traced: the library's import-time arrays must be concrete
+            # values, not tracers of that program (they would leak out of it)
+            with jax.ensure_compile_time_eval():
+                module = importlib.import_module(self._name)
+        return getattr(module, attr)
+
+    def __repr__(self):
+        return f"<lazy module {self._name!r}>"
+
+
+def lazy_module(name: str):
+    """The module `name`, imported when one of its attributes is first read: a library only a traced program
+    needs (an ODE solver, a root finder) is never imported by a process that loads that program from the
+    store (`jaxbelt._store`). Write it as `if TYPE_CHECKING: import x` / `else: x = lazy_module("x")` so that
+    type checkers see the module itself."""
+    return _LazyModule(name)

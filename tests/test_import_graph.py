@@ -1,6 +1,7 @@
 """The package's import graph has no cycle, and `import jaxbelt` has no surprising side effects."""
 
 import ast
+import os
 import pathlib
 import subprocess
 import sys
@@ -243,3 +244,22 @@ print("ok")
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
     assert out.returncode == 0 and out.stdout.split() == ["ok"], out.stderr[-3000:]
+
+
+def test_lazy_module_imported_inside_a_trace_keeps_concrete_arrays(tmp_path):
+    # a library a traced program needs is imported at its first attribute read, often while jaxbelt traces a
+    # program: its import-time arrays are values, not tracers of that program (a leaked tracer fails later)
+    (tmp_path / "lib_with_arrays.py").write_text("import jax.numpy as jnp\nTABLE = jnp.arange(3.0) * 2.0\n")
+    code = (
+        "import jax, jax.numpy as jnp, numpy as np\n"
+        "from jaxbelt._lazy import lazy_module\n"
+        "lib = lazy_module('lib_with_arrays')\n"
+        "out = jax.jit(lambda x: x + lib.TABLE)(1.0)\n"
+        "import lib_with_arrays\n"
+        "assert not isinstance(lib_with_arrays.TABLE, jax.core.Tracer)\n"
+        "np.testing.assert_array_equal(np.asarray(out), [1.0, 3.0, 5.0])\n"
+        "np.testing.assert_array_equal(np.asarray(lib.TABLE), [0.0, 2.0, 4.0])\n"
+    )
+    env = dict(os.environ, PYTHONPATH=f"{tmp_path}{os.pathsep}{PKG.parent}")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
+    assert out.returncode == 0, out.stderr[-3000:]

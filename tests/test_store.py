@@ -3,6 +3,7 @@ programs without tracing them, with the results of the traced path, and never fo
 fingerprint."""
 
 import contextlib
+import json
 import os
 import subprocess
 import sys
@@ -308,3 +309,27 @@ def test_robust_pseudo_polynomial_stage_through_the_store(tmp_path, monkeypatch)
     np.testing.assert_allclose(np.asarray(stored[0]), np.asarray(reference[0]), rtol=1e-12, atol=0)
     np.testing.assert_allclose(float(stored[1]), float(reference[1]), rtol=1e-12, atol=0)
     assert stored[2] == reference[2]
+
+
+def test_a_new_process_runs_the_stored_fold_speeds_without_the_solver_libraries(tmp_path):
+    # a process that loads the harmonic-balance programs from the store traces nothing, so it never imports the
+    # libraries only tracing needs (optimistix, lineax; diffrax for the Floquet multipliers: a third of a second); the folds are the traced ones
+    code = (
+        "import json, sys, jax, numpy as np, jaxbelt as jb\n"
+        "jax.config.update('jax_enable_x64', True)\n"
+        f"jb.enable_compilation_cache({str(tmp_path / 'xla')!r})\n"
+        "v = jb.fold_speeds(jb.NonlinearBelt(n_modes=1), (7.5, 10.5), 1)\n"
+        "loaded = [m for m in ('diffrax', 'optimistix', 'lineax') if m in sys.modules]\n"
+        "print(json.dumps({'loaded': loaded, 'folds': np.asarray(v).tolist()}))\n"
+    )
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    outs = []
+    for _ in range(2):
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=600)
+        assert out.returncode == 0, out.stderr[-3000:]
+        outs.append(json.loads(out.stdout.strip().splitlines()[-1]))
+    # the first process traced (and imported them), the second loaded the programs
+    assert {"optimistix", "lineax"} <= set(outs[0]["loaded"]) and outs[1]["loaded"] == []
+    ref = np.asarray(jb.fold_speeds(jb.NonlinearBelt(n_modes=1), (7.5, 10.5), 1))
+    for o in outs:
+        np.testing.assert_allclose(np.asarray(o["folds"]), ref, rtol=1e-12)

@@ -35,17 +35,25 @@ eigenvalues of the monodromy matrix of the variational equation over one forcing
 from __future__ import annotations
 
 import functools
+from typing import TYPE_CHECKING
 
-import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import lineax as lx
 import numpy as np
-import optimistix as optx
+
+from ..._lazy import lazy_module
+
+if TYPE_CHECKING:
+    import diffrax
+    import lineax as lx
+    import optimistix as optx
+else:  # imported by the first trace only: a process that loads the stored programs never needs them
+    diffrax, lx, optx = lazy_module("diffrax"), lazy_module("lineax"), lazy_module("optimistix")
 
 from ..._checks import check_int, check_positive, check_real, collecting, is_concrete, record
 from ..._guard import all_ok, guard, stored_jit, traced_checks, validated_inputs
+from ..._xla import QUICK_COMPILE
 from .model import ModalSystem, NonlinearBelt, mode_shapes
 
 __all__ = ["HarmonicSolution", "ResponseCurve", "Jumps", "harmonic_balance", "response_curve", "fold_speeds", "jumps"]
@@ -377,7 +385,7 @@ def _locate_folds(us, ts, acc, n_folds: int):
     return pick, count
 
 
-@stored_jit
+@stored_jit(compiler_options=QUICK_COMPILE)
 def _continue_jit(belt, v0, v1, H, max_points, ds0, ds_max):
     """The continuation, compiled once per (belt structure, H, max_points) and shared by
     `response_curve`, `fold_speeds` and `jumps` (not differentiated: the folds are refined apart)."""
@@ -393,7 +401,7 @@ def _trace(belt, v0, v1, H, max_points, ds0, ds_max):
 _MAX_FOLDS = 6  # folds located and refined per curve (one compiled refinement for every caller)
 
 
-@stored_jit
+@stored_jit(compiler_options=QUICK_COMPILE)
 def _folds_jit(belt, us, ts, acc, H):
     """Up to `_MAX_FOLDS` folds (in arclength order) refined on the extended system; `ok` marks real ones."""
     pick, count = _locate_folds(us, ts, acc, _MAX_FOLDS)
@@ -601,7 +609,7 @@ class ResponseCurve(eqx.Module):
         return s[keep], p[keep]
 
 
-@stored_jit
+@stored_jit(compiler_options=QUICK_COMPILE)
 def _curve_post_jit(belt, us, acc, H):
     """pp, modal amplitudes and Floquet multipliers of the accepted points (a sequential map:
     the rows past the last accepted point cost nothing)."""
