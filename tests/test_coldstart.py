@@ -284,3 +284,29 @@ def test_tune_pid_report_with_a_non_finite_value_reruns_the_checked_program(monk
     np.testing.assert_allclose(
         [res.chi, res.chi_initial, res.v_peak], [ref.chi, ref.chi_initial, ref.v_peak], rtol=1e-12
     )
+
+
+def test_tune_pid_without_a_limiter_reports_the_steps_own_metrics(monkeypatch):
+    # a regulator without a limiter is the one the step simulates: the report takes the step's metrics at the start
+    # and at the best gains (no report program to compile), equal to the report program's own to rounding
+    pid = jb.PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0)
+    drive = jb.FourBarDrive()
+    kw = dict(TUNE_WINDOW, steps=2, progress=False)
+    calls = []
+    monkeypatch.setattr(pid_mod, "_report", lambda *a: calls.append(1))
+    res = jb.tune_pid(drive, pid, **kw)
+    assert calls == []
+    monkeypatch.undo()
+    g0 = np.array([80.0, 32.0, 0.015])
+    cfg = pid_mod._Config(
+        t0=np.asarray(0.375), v_max=np.asarray(np.inf), i_max=np.asarray(np.inf), penalty=np.asarray(10.0),
+        temperature=np.asarray(3e-4), rtol=np.asarray(1e-7), atol=np.asarray(1e-7), t1=0.5, method="ode", dt=1e-3,
+    )  # fmt: skip
+    start = pid_mod._report(drive, pid, g0, cfg, np.zeros(3))
+    best = pid_mod._report(drive, pid, g0, cfg, np.log(np.array([res.pid.kp, res.pid.ki, res.pid.kd]) / g0))
+    np.testing.assert_allclose(res.chi_initial, start["chi"], rtol=1e-9)
+    np.testing.assert_allclose(
+        [res.chi, res.v_peak, res.i_peak, res.mean_speed],
+        [best["chi"], best["v_peak"], best["i_peak"], best["mean_speed"]],
+        rtol=1e-9,
+    )

@@ -234,6 +234,18 @@ def test_off_unless_the_cache_is_on(tmp_path):
     assert _store.folder() is None
 
 
+def _two_processes(code: str) -> list:
+    """The standard output of `code` run in two fresh processes one after the other (the second finds what the
+    first stored)."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    outs = []
+    for _ in range(2):
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=600)
+        assert out.returncode == 0, out.stderr[-3000:]
+        outs.append(out.stdout)
+    return outs
+
+
 def test_a_new_process_runs_the_stored_closed_form(tmp_path):
     # the start-up closed form calls LAPACK (a matrix exponential): a stored program must bind LAPACK's
     # kernels itself, since nothing is lowered in the process that loads it
@@ -246,12 +258,7 @@ def test_a_new_process_runs_the_stored_closed_form(tmp_path):
         " observe=('current',)))\n"
         "print(eqx.debug.get_num_traces(solve._run_traced), float(sol.current[-1]), float(sol.ys[-1, 3]))\n"
     )
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    outs = []
-    for _ in range(2):
-        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
-        assert out.returncode == 0, out.stderr
-        outs.append(out.stdout.split())
+    outs = [out.split() for out in _two_processes(code)]
     assert outs[0][0] == "1" and outs[1][0] == "0"  # traced once, then loaded
     ref = jb.simulate(
         jb.Scene(jb.BeltStartup(), jb.ExponentialVoltage(24.0, 0.04), ts=jnp.linspace(0, 0.5, 51), observe=("current",))
@@ -313,7 +320,8 @@ def test_robust_pseudo_polynomial_stage_through_the_store(tmp_path, monkeypatch)
 
 def test_a_new_process_runs_the_stored_fold_speeds_without_the_solver_libraries(tmp_path):
     # a process that loads the harmonic-balance programs from the store traces nothing, so it never imports the
-    # libraries only tracing needs (optimistix, lineax; diffrax for the Floquet multipliers: a third of a second); the folds are the traced ones
+    # libraries only tracing needs (optimistix, lineax; diffrax for the Floquet multipliers: a third of a second);
+    # the folds are the traced ones
     code = (
         "import json, sys, jax, numpy as np, jaxbelt as jb\n"
         "jax.config.update('jax_enable_x64', True)\n"
@@ -322,12 +330,7 @@ def test_a_new_process_runs_the_stored_fold_speeds_without_the_solver_libraries(
         "loaded = [m for m in ('diffrax', 'optimistix', 'lineax') if m in sys.modules]\n"
         "print(json.dumps({'loaded': loaded, 'folds': np.asarray(v).tolist()}))\n"
     )
-    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    outs = []
-    for _ in range(2):
-        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=600)
-        assert out.returncode == 0, out.stderr[-3000:]
-        outs.append(json.loads(out.stdout.strip().splitlines()[-1]))
+    outs = [json.loads(out.strip().splitlines()[-1]) for out in _two_processes(code)]
     # the first process traced (and imported them), the second loaded the programs
     assert {"optimistix", "lineax"} <= set(outs[0]["loaded"]) and outs[1]["loaded"] == []
     ref = np.asarray(jb.fold_speeds(jb.NonlinearBelt(n_modes=1), (7.5, 10.5), 1))

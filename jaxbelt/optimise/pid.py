@@ -135,6 +135,9 @@ def tune_pid(
     p = np.zeros(3)
     hist = {k: [] for k in ("loss", "chi_smooth", "v_peak", "i_peak", "kp", "ki", "kd")}
     best = (np.inf, p, 0)
+    # the metrics the step computed at the start and at the best gains (host values): they are the report's when
+    # the step simulates the regulator itself (no limiter to smooth)
+    m_start, m_best = None, None
     bar = None
     if progress:
         from tqdm.auto import tqdm
@@ -161,13 +164,21 @@ def tune_pid(
             ("kd", gains[2]),
         ):
             hist[name].append(float(val))
+        if k == 0:
+            m_start = m
         if loss < best[0]:
             best = (loss, p, k)
+            m_best = m
         if bar is not None:
             bar.set_postfix(chi_smooth=f"{float(m['chi_smooth']):.4f}")
         p = p_new
     _, p_best, k_best = best
-    m0, mb = _report(drive, pid, g0, cfg, np.zeros(3)), _report(drive, pid, g0, cfg, p_best)
+    if train_pid is pid and m_start is not None and m_best is not None and _finite(m_start) and _finite(m_best):
+        # the step simulated `pid` itself at these gains: its metrics are the report's (the same solve, not
+        # differentiated there), and no report program is compiled (a third of a cold first call)
+        m0, mb = m_start, m_best
+    else:  # the step's regulator had the smooth limiter: the report simulates `pid`'s own
+        m0, mb = _report(drive, pid, g0, cfg, np.zeros(3)), _report(drive, pid, g0, cfg, p_best)
     status, message = _tune_status(pid, mb, m0, v_max, i_max, int(k_best), steps)
     if status != "ok":
         warnings.warn(message, RuntimeWarning, stacklevel=2)
@@ -383,11 +394,15 @@ def _tune_report_unchecked_impl(drive, pid, g0, cfg: _Config, p):
     return _metrics(drive, pid, g0, cfg, p, throw=False)
 
 
+def _finite(m: dict) -> bool:
+    return all(np.isfinite(v) for v in m.values())
+
+
 def _report(drive, pid, g0, cfg: _Config, p) -> dict:
     """The report's metrics (host values): from the program without checks, the same numbers where every one is
     finite; else from the checked program, which raises what failed (or gives the same non-finite values)."""
     m = jax.device_get(_tune_report_unchecked(drive, pid, g0, cfg, p))
-    if all(np.isfinite(v) for v in m.values()):
+    if _finite(m):
         return m
     return jax.device_get(_tune_report(drive, pid, g0, cfg, p))
 

@@ -45,7 +45,7 @@ import numpy as np
 
 from .._checks import as_float_array, is_concrete
 from .._guard import host_checked
-from .._xla import QUICK_COMPILE, quick_jit
+from .._xla import QUICK_COMPILE
 from ..models.axis import ModalAxis
 from .lp import LPResult, RowGroups, lp_value, solve_lp, solve_lp_data
 from .moves import SplineMove, peaks, phi1
@@ -286,7 +286,7 @@ def _solve_round(problem, opts, tau, tol, certify=True):
     return _solve_round_nested(problem, opts, tau, tol, certify)
 
 
-@quick_jit
+@eqx.filter_jit  # called in the exchange loop: XLA's default options
 def _fine_ratios(problem: MinimaxProblem, opts: DesignOptions, coef):
     """Residual over reference of every mode on the fine grid: (fine factors (F,), ratios (n_modes, F))."""
     u = problem.uncertainty
