@@ -227,7 +227,11 @@ def host_checked(
         if not checks:
             return result
         err, out = result
-        err.throw()
+        # read on the host first: checkify's `throw` indexes and compares the (per-device) error arrays with JAX
+        # operations, a small compiled program each (a dozen for a sharded sweep); it runs only when a check failed
+        err = jax.device_get(err)
+        if err.get() is not None:
+            err.throw()
         return out
 
     return call

@@ -162,6 +162,39 @@ def test_host_checked_programs_raise_on_the_host():
         jax.block_until_ready(jax.jit(lambda x: eqx.error_if(x, x > 1, "x must be <= 1"))(2.0))
 
 
+_ONE_PROGRAM = r"""
+import jax, jax.numpy as jnp, numpy as np
+import jaxbelt as jb
+jb.cpu_devices(2)
+jax.config.update("jax_enable_x64", True)
+import jax.monitoring
+from jaxbelt._guard import error_if
+n = {"compiles": 0}
+def listener(name, secs, **kw):
+    if name == "/jax/core/compile/backend_compile_duration":
+        n["compiles"] += 1
+good, bad = np.arange(1.0, 5.0), np.array([1.0, -1.0, 2.0, 3.0])
+jax.monitoring.register_event_duration_secs_listener(listener)
+jb.sweep(lambda x: error_if(jnp.sqrt(x), x < 0, "x must be >= 0"), good)
+first = n["compiles"]
+try:
+    jb.sweep(lambda x: error_if(jnp.sqrt(x), x < 0, "x must be >= 0"), bad)
+    raised = ""
+except ValueError as e:
+    raised = str(e).splitlines()[0]
+print(first, repr(raised))
+"""
+
+
+def test_a_sharded_sweep_compiles_its_program_only():
+    # the checks come back as values, read on the host: the first sweep over two devices compiles its program and
+    # nothing else (checkify's own reading indexes and compares the per-device error arrays, a small compiled
+    # program each: 17 compilations in all for a four-bar sweep); a failed check still raises its message
+    first, raised = _subprocess(_ONE_PROGRAM).split(" ", 1)
+    assert int(first) == 1
+    assert "x must be >= 0" in raised
+
+
 def test_default_cache_folder_respects_xdg(tmp_path, monkeypatch):
     from jaxbelt.cache import default_cache_dir
 
