@@ -259,12 +259,13 @@ def stored_jit(fun: Any = None, *, compiler_options: dict | None = None) -> Any:
         else plain
     )
     name = f"{fun.__module__}.{fun.__qualname__}"
+    storable = _store.storable_function(fun)
 
     @functools.wraps(fun)
     def wrapper(*args, **kwargs):
         if not eager():
             return plain(*args, **kwargs)
-        if kwargs or _store.folder() is None or not _store.storable_function(fun):
+        if kwargs or not storable or _store.folder() is None:
             return top(*args, **kwargs)
         return _store.call(name, fun, args, top, compiler_options)
 
