@@ -234,7 +234,26 @@ def host_checked(
             err.throw()
         return out
 
+    def prepare(*args):
+        """Start compiling the program `call(*args)` will run and return its output's types (see
+        `jaxbelt._store.prepare`): while the program store is on, outside any trace; else None."""
+        if not (storable and _store.folder() is not None and not _host_checks.value and eager()):
+            return None
+        _equinox_errors_as_checks()
+        with _host_checks(True):
+            types = _store.prepare(name, checkified, args, compiler_options)
+        return types[1] if checks and types is not None else types  # without checkify's error
+
+    call.prepare = prepare  # pyright: ignore[reportAttributeAccessIssue]
     return call
+
+
+def prepare(fn, *args):
+    """Start compiling the program `fn(*args)` will run, in the background, and return its output's types
+    (`jax.ShapeDtypeStruct`s) where `fn` is a `host_checked` or `stored_jit` function and the program store is
+    on; else do nothing and return None. An array argument may be given by its type."""
+    start = getattr(fn, "prepare", None)
+    return None if start is None else start(*args)
 
 
 _F = TypeVar("_F", bound=Callable[..., Any])
@@ -269,6 +288,14 @@ def stored_jit(fun: Any = None, *, compiler_options: dict | None = None) -> Any:
             return top(*args, **kwargs)
         return _store.call(name, fun, args, top, compiler_options)
 
+    def prepare(*args):
+        """Start compiling the program `wrapper(*args)` will run and return its output's types (see
+        `jaxbelt._store.prepare`): while the program store is on, outside any trace; else None."""
+        if not (storable and _store.folder() is not None and eager()):
+            return None
+        return _store.prepare(name, fun, args, compiler_options)
+
+    wrapper.prepare = prepare  # pyright: ignore[reportAttributeAccessIssue]
     return wrapper
 
 

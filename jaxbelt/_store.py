@@ -8,6 +8,10 @@ input and output types), keyed by everything that determines it; a later process
 module directly (`Exported.call`): no Python tracing, and XLA's compilation comes from JAX's own
 persistent cache as before (0.25 s instead of 0.7 s for that simulation).
 
+Each program is compiled in a background thread (XLA releases the GIL while it compiles). A call that runs
+several programs `prepare`s them first: each is traced (or loaded) in turn, given its inputs' types (the
+outputs' types of the programs before it), and compiles while the next is traced and the first ones run.
+
 The key is the function's name, the tree structure and static values of its arguments, the shapes
 and dtypes of its arrays, a fingerprint of jaxbelt's own source and of the versions of its
 dependencies, and the JAX settings that change a traced program (x64, matmul precision, XLA flags,
@@ -193,7 +197,8 @@ def storable_function(fun) -> bool:
 
 
 def _is_array(x) -> bool:
-    return isinstance(x, (jax.Array, np.ndarray))
+    """An input of the program (a `jax.ShapeDtypeStruct` stands for one in `prepare`)."""
+    return isinstance(x, (jax.Array, np.ndarray, jax.ShapeDtypeStruct))
 
 
 def aval(x) -> tuple:
@@ -250,23 +255,56 @@ def _ensure_lapack() -> None:
         _state["lapack"] = True
 
 
-class _Entry:
-    """A stored program: `jit` of the exported module's call, and the structure of its output."""
+def _executor():
+    """The threads that compile stored programs: XLA releases the GIL while it compiles, so a program compiles
+    while the caller traces the next one (`prepare`) or runs another."""
+    if _state.get("executor") is None:
+        from concurrent.futures import ThreadPoolExecutor
 
-    __slots__ = ("fn", "out_tree", "lapack", "device")
-
-    def __init__(self, exported, out_tree, lapack, compiler_options=None):
-        self.fn = (
-            jax.jit(exported.call, compiler_options=compiler_options) if compiler_options else jax.jit(exported.call)
+        _state["executor"] = ThreadPoolExecutor(
+            max_workers=max(1, min(4, os.cpu_count() or 1)), thread_name_prefix="jaxbelt-compile"
         )
+    return _state["executor"]
+
+
+def _after_fork_in_child() -> None:
+    # a forked process has none of its parent's threads: a new pool, and the programs compiled anew (a
+    # compilation pending in the parent would never finish here)
+    _state["executor"] = None
+    forget()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_after_fork_in_child)
+
+
+class _Entry:
+    """A stored program: the exported module's call, lowered here for its input types and compiled in a
+    background thread (JAX's persistent cache serves that compilation in a later process); the structure of
+    its output."""
+
+    __slots__ = ("compiled", "out_tree", "lapack", "device", "out_types")
+
+    def __init__(self, exported, out_tree, lapack, specs, compiler_options=None):
+        fn = jax.jit(exported.call, compiler_options=compiler_options) if compiler_options else jax.jit(exported.call)
+        if lapack:
+            _ensure_lapack()
         self.out_tree, self.lapack, self.device = out_tree, lapack, jax.devices()[0]
+        self.out_types = jax.tree_util.tree_unflatten(out_tree, [_spec(a) for a in exported.out_avals])
+        # lowered in the caller's thread (JAX's settings are per thread), compiled in another
+        lowered = fn.trace(*specs).lower()
+        self.compiled = _executor().submit(lowered.compile)
 
     def __call__(self, dynamic):
         if self.lapack:
             _ensure_lapack()
-        # committed arguments, always: jit compiles the exported call once for fresh (uncommitted) arrays and again
-        # for its own outputs (committed), so that a loop feeding a program its outputs would compile it twice
-        return jax.tree_util.tree_unflatten(self.out_tree, self.fn(*jax.device_put(list(dynamic), self.device)))
+        # committed arguments, on the device the program was compiled for
+        out = self.compiled.result()(*jax.device_put(list(dynamic), self.device))
+        return jax.tree_util.tree_unflatten(self.out_tree, out)
+
+
+def _spec(x):
+    return jax.ShapeDtypeStruct(x.shape, x.dtype, weak_type=bool(getattr(x, "weak_type", False)))
 
 
 def _codes_used(before=None) -> int:
@@ -298,7 +336,7 @@ def _exported_fields(exported) -> dict:
     return fields
 
 
-def _load(path: Path, key: str, compiler_options=None):
+def _load(path: Path, key: str, specs, compiler_options=None):
     with open(path, "rb") as f:
         data = _Unpickler(f).load()
     if data[0] != _FORMAT or data[1] != key:
@@ -307,7 +345,7 @@ def _load(path: Path, key: str, compiler_options=None):
     if data[3] is None:  # marked: this program cannot be stored
         return False
     fields, out_tree, lapack = data[3:]
-    return _Entry(jax.export.Exported(**fields), out_tree, lapack, compiler_options)
+    return _Entry(jax.export.Exported(**fields), out_tree, lapack, specs, compiler_options)
 
 
 def _write(path: Path, data) -> None:
@@ -355,12 +393,13 @@ def _export(fun, name, static_leaves, treedef, dynamic, key, path, compiler_opti
         return False
     codes = _codes_used(before)
     out_tree = out_box[-1]
-    lapack = "lapack_" in exported.mlir_module()
+    # the serialized module names the kernels it calls (its text form would cost a parse and print: ~60 ms)
+    lapack = b"lapack_" in exported.mlir_module_serialized
     try:
         _write(path, (_FORMAT, key, codes, _exported_fields(exported), out_tree, lapack))
     except Exception as e:  # noqa: BLE001 - not picklable or not writable: this process still uses it
         _debug(f"{name}: not written: {type(e).__name__}: {e}")
-    return _Entry(exported, out_tree, lapack, compiler_options)
+    return _Entry(exported, out_tree, lapack, [_spec(x) for x in dynamic], compiler_options)
 
 
 class _Dynamic:
@@ -404,6 +443,15 @@ def _resolve(name: str, fun, args: tuple, compiler_options=None):
         return False, None
 
 
+def prepare(name: str, fun, args: tuple, compiler_options=None):
+    """Trace (or load) the stored program of `fun(*args)` and start compiling it in the background: a later
+    `call` with inputs of the same types finds it compiled, or compiling while the caller did other work. An
+    input may be given by its type (`jax.ShapeDtypeStruct`). Returns the types of the program's outputs (as
+    `jax.ShapeDtypeStruct`s in their structure), or None where it cannot be stored. Never raises."""
+    entry = _resolve(name, fun, args, compiler_options)[0]
+    return entry.out_types if isinstance(entry, _Entry) else None
+
+
 def call(name: str, fun, args: tuple, fallback, compiler_options=None):
     """`fun(*args)` through its stored program (see `lookup`); `fallback(*args)` (the traced path, same
     result) where there is none. Call it outside any trace only. `compiler_options`: XLA's, for compiling the
@@ -428,7 +476,7 @@ def _lookup(name, fun, treedef, static_leaves, dynamic, memo_key, compiler_optio
     path = folder / (hashlib.sha256(key.encode()).hexdigest() + ".jaxbelt-program")
     if path.exists():
         try:
-            entry = _load(path, key, compiler_options)
+            entry = _load(path, key, [_spec(x) for x in dynamic], compiler_options)
             if entry is not None:
                 return entry
         except Exception as e:  # noqa: BLE001 - unreadable or from another build: export it again

@@ -97,6 +97,45 @@ def curve2(belt2):
     return jb.response_curve(belt2, MODE2_RANGE, 3, max_points=400)
 
 
+def _monodromy_reference(belt, speed, X, H):
+    """The monodromy matrix of the variational equation about the periodic solution with Fourier coefficients
+    `X` (2N, 2H+1) at `speed`, by scipy's DOP853 at rtol 1e-12 (an independent integrator)."""
+    from scipy.integrate import solve_ivp
+
+    from jaxbelt.models.nonlinear.harmonic import _basis
+
+    sys = belt._modal_v(speed / belt.wave_speed)
+    W, m = float(sys.Omega[0]), X.shape[0]
+
+    @jax.jit
+    def jac(tau):
+        phi = W * tau
+        z = jnp.asarray(X) @ _basis(H, jnp.atleast_1d(phi))[:, 0]
+        return jax.jacfwd(lambda zz: sys.rhs_angles(zz, phi, phi + sys.phase))(z)
+
+    def rhs(t, y):
+        return (np.asarray(jac(t)) @ y.reshape(m, m)).ravel()
+
+    sol = solve_ivp(rhs, (0.0, 2 * np.pi / W), np.eye(m).ravel(), method="DOP853", rtol=1e-12, atol=1e-14)
+    return sol.y[:, -1].reshape(m, m)
+
+
+@pytest.mark.parametrize("which", ["one mode", "two modes"])
+def test_floquet_multipliers_match_an_independent_integration(which, belt, curve, belt2, curve2):
+    # the curve's multipliers (classic RK4, 192 steps per period and mode) against the eigenvalues of a DOP853
+    # monodromy matrix: measured <= 5e-7 of the largest multiplier; on both sides of the folds (stable and not)
+    b, c = (belt, curve) if which == "one mode" else (belt2, curve2)
+    unstable = np.flatnonzero(~np.asarray(c.stable))
+    assert unstable.size > 0
+    picks = np.r_[np.linspace(0, c.speed.shape[0] - 1, 4).astype(int), unstable[[0, unstable.size // 2]]]
+    for i in picks:
+        ref = np.linalg.eigvals(_monodromy_reference(b, float(c.speed[i]), np.asarray(c.coefficients[i]), 3))
+        mu = np.asarray(c.multipliers[i])
+        err = max(np.min(np.abs(ref - m)) for m in mu) + max(np.min(np.abs(mu - r)) for r in ref)
+        assert err < 2e-6 * np.max(np.abs(ref)), (i, mu, ref)
+        assert bool(c.stable[i]) == bool(np.max(np.abs(ref)) < 1.0)
+
+
 def test_default_two_mode_belt_meets_all_four_measured_jump_speeds(belt2, curve2):
     """The identified defaults, two modes: first-mode jumps at 8.5 / 8.9 +- 0.15 m/s and the
     second-mode hysteresis inside the measured band 15.5-16.3 m/s (15.7 / 16.1 +- 0.2; Moon &

@@ -336,3 +336,31 @@ def test_a_new_process_runs_the_stored_fold_speeds_without_the_solver_libraries(
     ref = np.asarray(jb.fold_speeds(jb.NonlinearBelt(n_modes=1), (7.5, 10.5), 1))
     for o in outs:
         np.testing.assert_allclose(np.asarray(o["folds"]), ref, rtol=1e-12)
+
+
+def test_prepared_programs_are_traced_once_and_serve_the_calls(tmp_path, monkeypatch):
+    # response_curve traces its three programs before running any (the last two from the continuation's output
+    # types) and compiles them in the background: each is exported once, the calls run them, and the results are
+    # the traced path's
+    from jaxbelt._guard import prepare
+    from jaxbelt.models.nonlinear import harmonic
+
+    belt = jb.NonlinearBelt(n_modes=1)
+    reference = jb.response_curve(belt, (7.5, 10.5), 1)
+    names = []
+    export = _store._export
+    monkeypatch.setattr(_store, "_export", lambda fun, name, *a, **k: names.append(name) or export(fun, name, *a, **k))
+    assert prepare(harmonic._curve_post_jit, belt, jnp.zeros((4, 7)), jnp.ones(4, bool), 1) is None  # store off
+    with store_in(tmp_path / "xla") as folder:
+        stored = jb.response_curve(belt, (7.5, 10.5), 1)
+        assert sorted(n.rsplit(".", 1)[-1] for n in names) == ["_continue_jit", "_curve_post_jit", "_folds_jit"]
+        assert len(_programs(folder)) == 3
+        # the types `prepare` gives are those of the outputs
+        us, ts, acc = harmonic._trace(belt, 7.5, 10.5, 1, 200, 0.05, 0.25)
+        types = prepare(harmonic._curve_post_jit, belt, us, acc, 1)
+        out = harmonic._curve_post_jit(belt, us, acc, 1)
+        assert len(names) == 3  # nothing exported again
+    assert [(t.shape, t.dtype) for t in jax.tree_util.tree_leaves(types)] == [
+        (o.shape, o.dtype) for o in jax.tree_util.tree_leaves(out)
+    ]
+    _same(stored, reference)

@@ -38,7 +38,7 @@ from .._checks import check_positive, check_range, check_scalar, collecting, is_
 from .._guard import guard
 from ..scene import Scene
 from ..solution import Solution
-from ..solve import simulate
+from ..solve import forward_sensitivities, simulate
 
 _O = "fluctuation index"
 _WINDOW_MSG = f"{_O}: the window [t0, t1] must contain at least two output times"
@@ -350,23 +350,82 @@ def closed_loop_metrics(
     )
     speed, v, ys = sol.outputs["motor_speed"], sol.outputs["voltage"], sol.ys
     assert ys is not None  # `_run_from_rest(..., state=True)`
-    i = ys[:, 2]
+    out = _metrics_from(ts, speed, v, ys[:, 2], t0, t1, temperature, peak_temperature, average, throw)
+    return guard(out, option_checks, throw=throw)[0]
+
+
+def _metrics_from(ts, speed, v, i, t0, t1, temperature, peak_temperature, average, throw):
+    """`closed_loop_metrics`' values from the sampled speed [rad/s], voltage [V] and current [A]."""
 
     def speak(x):
         return peak_temperature * jax.nn.logsumexp(jnp.abs(x) / peak_temperature)
 
-    out = {
+    def peak(x):
+        # the largest |x| taken where it is: its derivative is that sample's. (`jnp.max`'s derivative finds the
+        # maximum again by equality with the samples, which fails, 0/0, where XLA computes the samples twice and
+        # rounds them differently, as it may for samples recomputed from a linearised trajectory.)
+        a = jnp.abs(x)
+        return jnp.take(a, jnp.argmax(a))
+
+    return {
         "chi": chi_from_samples(ts, speed, t0, t1, average=average, throw=throw),
         "chi_smooth": chi_from_samples(
             ts, speed, t0, t1, smooth=True, temperature=temperature, average=average, throw=throw
         ),
-        "v_peak": jnp.max(jnp.abs(v)),
-        "i_peak": jnp.max(jnp.abs(i)),
+        "v_peak": peak(v),
+        "i_peak": peak(i),
         "v_peak_smooth": speak(v),
         "i_peak_smooth": speak(i),
         "mean_speed": _window_mean(ts, speed, t0, t1),
     }
-    return guard(out, option_checks, throw=throw)[0]
+
+
+def linearised_closed_loop_metrics(
+    drive,
+    pid_of,
+    p,
+    t0: ArrayLike = 0.375,
+    t1: ArrayLike = 0.5,
+    *,
+    temperature: ArrayLike = 3e-4,
+    peak_temperature: ArrayLike = 0.5,
+    dt_save: ArrayLike = 5e-4,
+    method="ode",
+    rtol: ArrayLike = 1e-8,
+    atol: ArrayLike = 1e-8,
+    dt: ArrayLike = 1e-3,
+    max_steps=100_000,
+    average="mean",
+):
+    """`q -> closed_loop_metrics(drive, pid_of(q), ...)` to first order about the parameters `p` (a vector).
+
+    One simulation with forward sensitivities (`jaxbelt.solve.forward_sensitivities`) gives the trajectory at
+    `p` and its derivative; the function returned evaluates the metrics on the trajectory extrapolated
+    linearly to `q`, with `pid_of(q)`'s own outputs (the voltage). Its value at `q = p` is
+    `closed_loop_metrics`' (to the solver's tolerance) and its derivative there (`jax.jacfwd`) the derivative
+    of the exact metrics, without differentiating through the solver. A failed run or check makes every
+    value NaN (as `throw=False`). Options as in `closed_loop_metrics`.
+    """
+    _check_average(average)
+    ts = _grid(t1, *((dt, "dt") if method == "rk4" else (dt_save, "dt_save")))
+    with collecting() as option_checks:
+        _check_options(peak_temperature, temperature)
+        _check_window_on_grid(ts, t0, t1)
+    p = jnp.asarray(p, dtype=float)
+    model = Scene(drive, pid_of(p), ts=ts, t0=0.0).model
+    ys, sens, _ = forward_sensitivities(
+        model, pid_of, p, ts, method=method, rtol=rtol, atol=atol, dt=dt, max_steps=max_steps
+    )
+
+    def metrics(q):
+        inp = pid_of(q)
+        y = ys + jnp.einsum("tnk,k->tn", sens, q - p)
+        speed = jax.vmap(lambda t, x: model.output("motor_speed", t, x, inp))(ts, y)
+        v = jax.vmap(lambda t, x: model.output("voltage", t, x, inp))(ts, y)
+        out = _metrics_from(ts, speed, v, y[:, 2], t0, t1, temperature, peak_temperature, average, False)
+        return guard(out, option_checks, throw=False)[0]
+
+    return metrics
 
 
 def _window_mean(ts, speed, t0, t1):

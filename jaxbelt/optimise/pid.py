@@ -21,10 +21,10 @@ import optax
 
 from .._callables import by_value
 from .._checks import check_int, check_penalised_limits, check_positive, check_scalar
-from .._guard import host_checked
+from .._guard import host_checked, prepare
 from .._xla import QUICK_COMPILE
 from ..models.motor import PID, check_pid_nonnegative
-from ..objectives.fluctuation import closed_loop_metrics
+from ..objectives.fluctuation import closed_loop_metrics, linearised_closed_loop_metrics
 
 
 @dataclasses.dataclass(frozen=True)
@@ -87,7 +87,8 @@ def tune_pid(
       the quadratic penalty of weight `penalty` (default `v_max`: none; with a limiter the voltage
       bound holds by construction).
     - `optimizer`: any optax transformation (default `optax.adam(learning_rate)`), updated inside
-      one jitted step.
+      one jitted step. Each step is one simulation with forward sensitivities to the three log-gains
+      (`jaxbelt.solve.forward_sensitivities`): the gradient is the exact solution's, to `rtol`/`atol`.
     - `temperature`: of the smooth χ (relative to the average speed).
     - `method`, `rtol`, `atol`, `dt`: the simulation (see `simulate`).
     - `progress`: tqdm progress bar.
@@ -143,6 +144,11 @@ def tune_pid(
         from tqdm.auto import tqdm
 
         bar = tqdm(range(steps), desc="tune_pid", leave=False)
+    if train_pid is not pid:
+        # the report simulates `pid`'s own limiter, a second program: traced now and compiled while the step's
+        # program compiles and runs (with the program store on: `jb.enable_compilation_cache`)
+        prepare(_tune_step, opt, drive, train_pid, g0, cfg, p, state)
+        prepare(_tune_report_unchecked, drive, pid, g0, cfg, p)
     for k in range(steps) if bar is None else bar:
         p_new, state, loss, m, gains = _tune_step(opt, drive, train_pid, g0, cfg, p, state)
         loss, m, gains = jax.device_get((loss, m, gains))
@@ -174,8 +180,9 @@ def tune_pid(
         p = p_new
     _, p_best, k_best = best
     if train_pid is pid and m_start is not None and m_best is not None and _finite(m_start) and _finite(m_best):
-        # the step simulated `pid` itself at these gains: its metrics are the report's (the same solve, not
-        # differentiated there), and no report program is compiled (a third of a cold first call)
+        # the step simulated `pid` itself at these gains: its metrics are the report's, equal to the report
+        # program's to the solver's tolerance (the step's error control covers the sensitivities too: another
+        # step sequence), and no report program is compiled (a third of a cold first call)
         m0, mb = m_start, m_best
     else:  # the step's regulator had the smooth limiter: the report simulates `pid`'s own
         m0, mb = _report(drive, pid, g0, cfg, np.zeros(3)), _report(drive, pid, g0, cfg, p_best)
@@ -340,8 +347,6 @@ _DEFAULT_OPTIMIZER = "adam"
 
 
 def _metrics(drive, which, g0, cfg: _Config, p, throw: bool = True):
-    # Three parameters: forward-mode derivatives (one JVP per gain, diffrax.ForwardMode) cost about
-    # 5 forward solves, a third of reverse mode through the checkpointed solve, and compile faster.
     return closed_loop_metrics(
         drive,
         which.with_gains(g0 * jnp.exp(p)),
@@ -366,10 +371,24 @@ def _tune_step_impl(opt, drive, train_pid, g0, cfg: _Config, p, state):
     if isinstance(opt, str):
         opt = _default_adam()
 
+    # One simulation with forward sensitivities to the three log-gains: the metrics to first order about `p`,
+    # whose derivative at `p` is the gradient. A failed solve is a NaN loss, refused on the host (`tune_pid`);
+    # the program holds no run-time check, which keeps it in the caches.
+    linear = linearised_closed_loop_metrics(
+        drive,
+        lambda q: train_pid.with_gains(g0 * jnp.exp(q)),
+        p,
+        cfg.t0,
+        cfg.t1,
+        temperature=cfg.temperature,
+        method=cfg.method,
+        rtol=cfg.rtol,
+        atol=cfg.atol,
+        dt=cfg.dt,
+    )
+
     def loss_aux(q):
-        # throw=False: a failed solve is a NaN loss, refused on the host (`tune_pid`); the program then holds no
-        # run-time check, which is both the larger part of its tracing time and what keeps it out of the caches
-        m = _metrics(drive, train_pid, g0, cfg, q, throw=False)
+        m = linear(q)
         # v_max, i_max = inf when unbounded: the penalty terms are then exactly zero
         loss = (
             m["chi_smooth"]

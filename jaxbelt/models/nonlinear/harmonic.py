@@ -29,7 +29,7 @@ $R = 0,\\ R_X\\phi = 0,\\ c\\cdot\\phi = 1$, whose solution is differentiable in
 parameter by the implicit function theorem (`optimistix.ImplicitAdjoint`), so `jax.grad` of a
 jump speed works. Stability: the Floquet multipliers $\\mu$ of each periodic solution, the
 eigenvalues of the monodromy matrix of the variational equation over one forcing period
-(integrated with diffrax); the solution is stable when $\\max|\\mu| < 1$.
+(integrated by classic RK4); the solution is stable when $\\max|\\mu| < 1$.
 """
 
 from __future__ import annotations
@@ -45,14 +45,13 @@ import numpy as np
 from ..._lazy import lazy_module
 
 if TYPE_CHECKING:
-    import diffrax
     import lineax as lx
     import optimistix as optx
 else:  # imported by the first trace only: a process that loads the stored programs never needs them
-    diffrax, lx, optx = lazy_module("diffrax"), lazy_module("lineax"), lazy_module("optimistix")
+    lx, optx = lazy_module("lineax"), lazy_module("optimistix")
 
 from ..._checks import check_int, check_positive, check_real, collecting, is_concrete, record
-from ..._guard import all_ok, guard, stored_jit, traced_checks, validated_inputs
+from ..._guard import all_ok, guard, prepare, stored_jit, traced_checks
 from ..._xla import QUICK_COMPILE
 from .model import ModalSystem, NonlinearBelt, mode_shapes
 
@@ -86,6 +85,12 @@ def _fourier(H: int):
 
 def _scale(belt: NonlinearBelt):
     return (belt.runout[0] + belt.runout[1]) / belt.span + 1e-30
+
+
+def _scale_host(belt):
+    """`_scale(belt)` computed with numpy (as device operations it would compile a small program each)."""
+    r = np.asarray(belt.runout)
+    return (r[0] + r[1]) / np.asarray(belt.span) + 1e-30
 
 
 def _check_equal_radii(belt):
@@ -298,41 +303,39 @@ def _continue(belt, v0, v1, H: int, max_points: int, ds0, ds_max):
     return us, ts, acc
 
 
-_T_STEPS = 96  # RK4-like fixed steps per period for the monodromy matrix (Tsit5)
+_T_STEPS = 192  # classic RK4 steps per period and mode for the monodromy matrix
 
 
 def _floquet(belt, speed, Y, H: int):
-    """Floquet multipliers (2N,) of the HB solution Y at `speed` (variational equation, diffrax)."""
+    """Floquet multipliers (2N,) of the HB solution Y at `speed`: the eigenvalues of the monodromy matrix, the
+    variational equation $\\dot M = J(\\tau) M$, $M(0) = I$, integrated over one forcing period by classic
+    RK4 with `_T_STEPS` steps per mode (a plain loop: a fifth of the tracing and compilation of a diffrax
+    solve, whose generality a fixed-step linear ODE does not need). Non-finite values give NaN multipliers
+    (not stable)."""
     n = belt.n_modes
     sys = belt._modal_v(speed / belt.wave_speed)
     X = _scale(belt) * Y.reshape(2 * n, 2 * H + 1)
     W = sys.Omega[0]
-    T = 2 * jnp.pi / W
+    steps = _T_STEPS * n
+    h = 2 * jnp.pi / W / steps
 
-    def rhs(tau, M, _):
+    def jac(tau):
         phi = W * tau
         z = X @ _basis(H, jnp.atleast_1d(phi))[:, 0]
-        J = jax.jacfwd(lambda zz: sys.rhs_angles(zz, phi, phi + sys.phase))(z)
-        return J @ M
+        return jax.jacfwd(lambda zz: sys.rhs_angles(zz, phi, phi + sys.phase))(z)
 
-    steps = _T_STEPS * n
-    # throw=False: no host callback, so the programs holding this solve can be kept in JAX's persistent
-    # cache; the fixed-step solve only fails on non-finite values, which give NaN multipliers (not stable)
-    with validated_inputs():  # dt0 = T / steps has the sign of T - 0
-        sol = diffrax.diffeqsolve(
-            diffrax.ODETerm(rhs),
-            diffrax.Tsit5(),
-            0.0,
-            T,
-            T / steps,
-            jnp.eye(2 * n),
-            stepsize_controller=diffrax.ConstantStepSize(),
-            max_steps=steps + 1,
-            throw=False,
-        )
-    assert sol.ys is not None  # saved at t1 (diffrax's default)
-    M = sol.ys[-1]
-    ok = (sol.result == diffrax.RESULTS.successful) & jnp.all(jnp.isfinite(M))
+    def step(k, carry):
+        M, J0 = carry  # J0: the Jacobian at the start of the step (the end of the previous one)
+        tau = k * h
+        Jm, J1 = jac(tau + 0.5 * h), jac(tau + h)
+        k1 = J0 @ M
+        k2 = Jm @ (M + 0.5 * h * k1)
+        k3 = Jm @ (M + 0.5 * h * k2)
+        k4 = J1 @ (M + h * k3)
+        return M + (h / 6.0) * (k1 + 2.0 * k2 + 2.0 * k3 + k4), J1
+
+    M, _ = jax.lax.fori_loop(0, steps, step, (jnp.eye(2 * n), jac(0.0 * h)))
+    ok = jnp.all(jnp.isfinite(M))
     return jnp.where(ok, jnp.linalg.eigvals(jnp.where(ok, M, jnp.eye(2 * n))), jnp.nan)
 
 
@@ -347,8 +350,10 @@ def _fold_system(belt, H: int, c):
     return fn
 
 
-def _refine_fold(belt, u, t, H: int):
-    """Newton on the extended fold system from (u, t); differentiable in `belt` (implicit)."""
+def _refine_fold(belt, u, t, H: int, implicit: bool = True):
+    """Newton on the extended fold system from (u, t); differentiable in `belt` (implicit). `implicit=False`:
+    the same values without the implicit-function correction (its Jacobian of the extended system and linear
+    solve), for a caller that never differentiates them (an eager call: a third of the program)."""
     n = u.shape[0] - 1
     phi0 = t[:-1] / (jnp.linalg.norm(t[:-1]) + 1e-300)
     c = jax.lax.stop_gradient(phi0)
@@ -359,6 +364,8 @@ def _refine_fold(belt, u, t, H: int):
     w = jax.lax.stop_gradient(sol.value)
     ok = (sol.result == optx.RESULTS.successful) & jnp.all(jnp.isfinite(w))
     w = jnp.where(ok, w, w0)  # failed (or padding) candidates: a finite stand-in, masked by `ok`
+    if not implicit:
+        return w[:n], w[n], ok
     # implicit function theorem by hand: w(θ) = w* - F_w^{-1} (F(w*, θ) - F(w*, θ0)) has the value
     # w* and the derivative -F_w^{-1} F_θ. Done here rather than by the root finder's implicit
     # adjoint so that a failed candidate (vmapped beside the real folds) can be masked before
@@ -392,33 +399,60 @@ def _continue_jit(belt, v0, v1, H, max_points, ds0, ds_max):
     return _continue(belt, v0, v1, H, max_points, ds0, ds_max)
 
 
-def _trace(belt, v0, v1, H, max_points, ds0, ds_max):
+def _trace(belt, v0, v1, H, max_points, ds0, ds_max, then=(), n_folds: int = 0):
+    """The continuation's `(us, ts, acc)`. `then`: the programs that will read the curve (`"folds"`, `"post"`,
+    `"landing"` with `n_folds` folds): called outside any trace with the program store on, each is traced now and
+    compiled in the background while the continuation compiles and runs (their input types are the
+    continuation's outputs)."""
     b = jax.lax.stop_gradient(belt)
     v0, v1, ds0, ds_max = (jax.lax.stop_gradient(jnp.asarray(x, float)) for x in (v0, v1, ds0, ds_max))
-    return _continue_jit(b, v0, v1, H, max_points, ds0, ds_max)
+    args = (b, v0, v1, H, max_points, ds0, ds_max)
+    if then:
+        types = prepare(_continue_jit, *args)
+        if types is not None:
+            us, ts, acc = types
+            folds = prepare(_folds_jit, belt, us, ts, acc, H, False) if "folds" in then or "landing" in then else None
+            if "landing" in then and folds is not None:
+                Ys, Vs, _ = (jax.ShapeDtypeStruct((n_folds,) + x.shape[1:], x.dtype) for x in folds)
+                prepare(_landing_jit, belt, us, acc, Vs, Ys, H)
+            if "post" in then:
+                prepare(_curve_post_jit, belt, us, acc, H)
+    return _continue_jit(*args)
 
 
 _MAX_FOLDS = 6  # folds located and refined per curve (one compiled refinement for every caller)
 
 
 @stored_jit(compiler_options=QUICK_COMPILE)
-def _folds_jit(belt, us, ts, acc, H):
-    """Up to `_MAX_FOLDS` folds (in arclength order) refined on the extended system; `ok` marks real ones."""
+def _folds_jit(belt, us, ts, acc, H, implicit=True):
+    """Up to `_MAX_FOLDS` folds (in arclength order) refined on the extended system; `ok` marks real ones.
+    `implicit`: differentiable in `belt` (see `_refine_fold`); False where the caller's values are concrete."""
     pick, count = _locate_folds(us, ts, acc, _MAX_FOLDS)
     real = jnp.arange(_MAX_FOLDS) < count
     pick = jnp.where(real, pick, pick[0])  # padding repeats the first fold (converges as fast, masked)
-    Ys, Vs, oks = jax.vmap(lambda u, t: _refine_fold(belt, u, t, H))(us[pick], ts[pick])
+    if implicit:
+        Ys, Vs, oks = jax.vmap(lambda u, t: _refine_fold(belt, u, t, H))(us[pick], ts[pick])
+    else:  # one candidate after the other: half the tracing of the batched Newton loop, ~2 ms longer to run
+        Ys, Vs, oks = jax.lax.map(lambda a: _refine_fold(belt, a[0], a[1], H, False), (us[pick], ts[pick]))
     return Ys, Vs, oks & real
 
 
 def _fold_jit(belt, v0, v1, H, n_folds, max_points, ds0, ds_max):
-    us, ts, acc = _trace(belt, v0, v1, H, max_points, ds0, ds_max)
+    us, ts, acc = _trace(belt, v0, v1, H, max_points, ds0, ds_max, then=("folds",))
     return _folds_from(belt, us, ts, acc, v0, v1, H, n_folds)
 
 
 def _folds_from(belt, us, ts, acc, v0, v1, H, n_folds):
-    acc = acc & (us[:, -1] <= v1 + 1e-9) & (us[:, -1] >= v0 - 1e-9)
-    Ys, Vs, ok = _folds_jit(belt, us, ts, acc, H)
+    """The first `n_folds` refined folds of the curve `(us, ts, acc)` inside [v0, v1]: `(Ys, Vs, ok)`. Called
+    outside any trace, the mask and the results are host (numpy) arrays: as device operations each would compile
+    a small program of its own in a new process."""
+    if is_concrete((belt, us, acc, v0, v1)):  # nothing to differentiate: the folds without the implicit correction
+        V = np.asarray(us)[:, -1]
+        acc = np.asarray(acc) & (V <= float(v1) + 1e-9) & (V >= float(v0) - 1e-9)
+        Ys, Vs, ok = jax.device_get(_folds_jit(belt, us, ts, acc, H, False))
+    else:
+        acc = acc & (us[:, -1] <= v1 + 1e-9) & (us[:, -1] >= v0 - 1e-9)
+        Ys, Vs, ok = _folds_jit(belt, us, ts, acc, H)
     return Ys[:n_folds], Vs[:n_folds], ok[:n_folds]
 
 
@@ -485,6 +519,15 @@ def fold_speeds(
     """
     H, n_folds, max_points, v0, v1 = _fold_options("fold_speeds", belt, speed_range, n_harmonics, n_folds, max_points)
     _, Vs, ok = _fold_jit(belt, v0, v1, H, n_folds, max_points, jnp.asarray(_DS0), jnp.asarray(_DS_MAX))
+    if isinstance(Vs, np.ndarray) and is_concrete(belt.wave_speed):  # eager: on the host, no small device programs
+        if throw and not bool(np.all(ok)):
+            raise ValueError(
+                f"fold_speeds: found {int(np.sum(ok))} of n_folds={n_folds} folds in "
+                f"speed_range {tuple(float(x) for x in (v0, v1))} m/s (no hysteresis there, or "
+                "refinement failed); widen the range or lower `damping`"
+            )
+        Vs = np.where(ok, Vs, np.nan)
+        return jnp.asarray(np.sort(Vs), dtype=jnp.result_type(belt.wave_speed))  # NaN (missing folds) last
     Vs = belt.wave_speed * 0.0 + Vs  # keep the belt's dtype
     if throw:
         if is_concrete(ok):
@@ -544,7 +587,7 @@ def _landing_jit(belt, us, acc, Vs, Ys, H):
 
 
 def _jumps_jit(belt, v0, v1, H, n_folds, max_points, ds0, ds_max):
-    us, ts, acc = _trace(belt, v0, v1, H, max_points, ds0, ds_max)
+    us, ts, acc = _trace(belt, v0, v1, H, max_points, ds0, ds_max, then=("landing",), n_folds=n_folds)
     Ys, Vs, ok = _folds_from(belt, us, ts, acc, v0, v1, H, n_folds)
     pp_b, pp_a, ok_a = _landing_jit(belt, us, acc, Vs, Ys, H)
     return Vs, pp_b, pp_a, ok & ok_a
@@ -654,7 +697,7 @@ def response_curve(
     if not float(step) <= float(max_step):
         raise ValueError(f"{o}: parameter `step` must be <= `max_step`; got step = {step}, max_step = {max_step}")
     v0, v1 = _check_range_speeds(o, belt, speed_range)
-    us, ts, acc = _trace(belt, v0, v1, H, max_points, step, max_step)
+    us, ts, acc = _trace(belt, v0, v1, H, max_points, step, max_step, then=("folds", "post"))
     acc_n = np.asarray(acc)
     us_n = np.asarray(us)
     if not acc_n[0] or not np.any(us_n[acc_n, -1] >= float(v1)):
@@ -665,7 +708,7 @@ def response_curve(
         )
     keep = acc_n & (us_n[:, -1] <= float(v1) + 1e-9)
     pp, amp, mult = _curve_post_jit(belt, us, jnp.asarray(keep), H)
-    _, Vf, okf = _folds_jit(belt, us, ts, jnp.asarray(keep), H)
+    _, Vf, okf = _folds_jit(belt, us, ts, jnp.asarray(keep), H, False)
     Vf, okf = np.asarray(Vf), np.asarray(okf)
     n = belt.n_modes
     mult = np.asarray(mult)[keep]
@@ -675,7 +718,7 @@ def response_curve(
         amplitude=jnp.asarray(np.asarray(amp)[keep]),
         stable=jnp.asarray(np.max(np.abs(mult), axis=1) < 1.0),
         multipliers=jnp.asarray(mult),
-        coefficients=jnp.asarray(_scale(belt) * us_n[keep, :-1].reshape(-1, 2 * n, 2 * H + 1)),
+        coefficients=jnp.asarray(np.asarray(_scale_host(belt)) * us_n[keep, :-1].reshape(-1, 2 * n, 2 * H + 1)),
         folds=jnp.asarray(np.sort(Vf[okf])),
     )
 
