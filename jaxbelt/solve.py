@@ -362,16 +362,16 @@ def forward_sensitivities(
     """The trajectory of `model` driven by `input_of(p)` from rest at t = 0 and its forward sensitivities.
 
     Integrates $\\dot y = f(t, y, u(p))$ together with $\\dot S = \\partial_y f\\,S + \\partial_p f$,
-    $S(0) = 0$ (one column per entry of the vector `p`; $\\partial f$ by JAX's forward mode), with the solver
-    `simulate` uses for `method` ("ode": the model's default solver under `rtol`/`atol`, whose error control
-    covers $S$ too; "rk4": fixed steps `dt` [s], refused as `simulate` refuses them when a step amplifies
-    more than the exact flow), saved at the times `ts` [s] (the last one ends the run).
+    $S(0) = 0$ (one column per entry of the vector `p`; $\\partial f$ by JAX's forward mode, the input's
+    derivative taken once), with the solver `simulate` uses for `method` ("ode": the model's default solver
+    under `rtol`/`atol`, its error control reading $y$ alone, so that the steps and the trajectory are
+    `simulate`'s to rounding; "rk4": fixed steps `dt` [s], refused as `simulate` refuses them when a step
+    amplifies more than the exact flow), saved at the times `ts` [s] (the last one ends the run).
 
-    This is the derivative of the exact solution, integrated to the tolerance; differentiating the solver's
-    loop itself (`adjoint="forward"`) gives the derivative of the discretised solution instead: the two
-    agree to the tolerance, and this form is about half as long to trace and to compile (no JVP or batching
-    of diffrax's loop) and a third faster to run. Returns `(ys, S, success)`: `ys` (N, n), `S` (N, n, P);
-    both NaN where the run failed (`success` False), as `simulate(..., throw=False)` gives them.
+    Differentiating the solver's loop itself (`simulate(..., adjoint="forward")` under `jax.jacfwd`) gives
+    the same derivative to the tolerance; this form is half as long to trace (no JVP or batching of
+    diffrax's loop) and runs faster. Returns `(ys, S, success)`: `ys` (N, n), `S` (N, n, P); both NaN where
+    the run failed (`success` False), as `simulate(..., throw=False)` gives them.
     """
     import diffrax
     import optimistix as optx

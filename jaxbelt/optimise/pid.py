@@ -180,9 +180,8 @@ def tune_pid(
         p = p_new
     _, p_best, k_best = best
     if train_pid is pid and m_start is not None and m_best is not None and _finite(m_start) and _finite(m_best):
-        # the step simulated `pid` itself at these gains: its metrics are the report's, equal to the report
-        # program's to the solver's tolerance (the step's error control covers the sensitivities too: another
-        # step sequence), and no report program is compiled (a third of a cold first call)
+        # the step simulated `pid` itself at these gains, on the report's steps: its metrics are the report's (to
+        # rounding), and no report program is compiled (a third of a cold first call)
         m0, mb = m_start, m_best
     else:  # the step's regulator had the smooth limiter: the report simulates `pid`'s own
         m0, mb = _report(drive, pid, g0, cfg, np.zeros(3)), _report(drive, pid, g0, cfg, p_best)
