@@ -36,6 +36,8 @@ def test_tune_pid_compiles_its_step_once():
     pid = TUNE_PID
     kw = dict(TUNE_WINDOW, steps=2, progress=False)
     first = jb.tune_pid(drive, pid, **kw)
+    # whether the bounds are given is the program's structure (an absent bound's penalty is left out of it)
+    jb.tune_pid(drive, pid, **dict(kw, steps=1), v_max=50.0, i_max=30.0)
     traces = dict(pid_mod.TRACE_COUNT)
     # new values of the same shapes: learning rate, window start, bounds, tolerances, gains
     with count_compiles() as c:
@@ -301,8 +303,9 @@ def test_tune_pid_default_adam_state_is_adams_init():
 
 
 def test_tune_pid_report_with_a_non_finite_value_reruns_the_checked_program(monkeypatch):
-    # the report runs without checks first; a non-finite value (a failed solve or check) reruns the checked
-    # program, which raises what failed, or here (nothing failed) gives the same numbers
+    # the report runs the steps' program first (no checks); a non-finite value (a failed solve or check) runs the
+    # checked report program, which raises what failed, or here (nothing failed) gives the same numbers to the
+    # tolerances (it simulates the clip at the tuning's rtol 1e-7, the steps' program at a hundredth of it)
     kw = dict(TUNE_WINDOW, steps=1, progress=False)
     ref = jb.tune_pid(jb.FourBarDrive(), TUNE_PID, **kw)
     calls = []
@@ -311,12 +314,38 @@ def test_tune_pid_report_with_a_non_finite_value_reruns_the_checked_program(monk
         calls.append(1)
         return {k: jnp.nan for k in ("chi", "chi_smooth", "v_peak", "i_peak", "mean_speed")}
 
-    monkeypatch.setattr(pid_mod, "_tune_report_unchecked", failed)
+    monkeypatch.setattr(pid_mod, "_report_metrics", failed)
     res = jb.tune_pid(jb.FourBarDrive(), TUNE_PID, **kw)
     assert len(calls) == 2
     np.testing.assert_allclose(
-        [res.chi, res.chi_initial, res.v_peak], [ref.chi, ref.chi_initial, ref.v_peak], rtol=1e-12
+        [res.chi, res.chi_initial, res.v_peak], [ref.chi, ref.chi_initial, ref.v_peak], rtol=1e-5
     )
+
+
+def test_tune_pid_reports_a_hard_clip_with_the_steps_program():
+    # a hard clip is reported through the steps' own program (its smooth limit, 1 nV wide, at a hundredth of the
+    # tolerances): no second program, and the clip's metrics within 1e-6 of a rtol-1e-12 solve of the clip itself
+    # (measured <= 1.3e-7 for chi; the tuning's own rtol-1e-7 solve of the clip is off by up to 3e-6)
+    from jaxbelt.objectives.fluctuation import closed_loop_metrics
+
+    drive, pid = jb.FourBarDrive(), jb.PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0, v_limit=25.0)
+    kw = dict(TUNE_WINDOW, steps=2, progress=False)
+    jb.tune_pid(drive, pid, **kw)  # compiles the step
+    traces = dict(pid_mod.TRACE_COUNT)
+    with count_compiles() as c:
+        res = jb.tune_pid(drive, pid, **kw)
+    assert c["n"] == 0 and pid_mod.TRACE_COUNT == traces  # no report program traced or compiled
+    g0 = np.array([80.0, 32.0, 0.015])
+    for gains, chi, v_peak, i_peak in (
+        (g0, res.chi_initial, None, None),
+        (np.array([res.pid.kp, res.pid.ki, res.pid.kd]), res.chi, res.v_peak, res.i_peak),
+    ):
+        ref = closed_loop_metrics(drive, pid.with_gains(gains), rtol=1e-12, atol=1e-12, **TUNE_WINDOW)
+        np.testing.assert_allclose(chi, float(ref["chi"]), rtol=1e-6)
+        if v_peak is not None:
+            # the clip's peak: 25 V; the stand-in's within its width, 1 nV
+            assert abs(v_peak - 25.0) < 1e-8 and float(ref["v_peak"]) == pytest.approx(25.0, rel=1e-12)
+            np.testing.assert_allclose(i_peak, float(ref["i_peak"]), rtol=1e-7)
 
 
 def test_tune_pid_without_a_limiter_reports_the_steps_own_metrics(monkeypatch):
@@ -336,8 +365,10 @@ def test_tune_pid_without_a_limiter_reports_the_steps_own_metrics(monkeypatch):
         t0=np.asarray(0.375), v_max=np.asarray(np.inf), i_max=np.asarray(np.inf), penalty=np.asarray(10.0),
         temperature=np.asarray(3e-4), rtol=np.asarray(1e-7), atol=np.asarray(1e-7), t1=0.5, method="ode", dt=1e-3,
     )  # fmt: skip
-    start = pid_mod._report(drive, pid, g0, cfg, np.zeros(3))
-    best = pid_mod._report(drive, pid, g0, cfg, np.log(np.array([res.pid.kp, res.pid.ki, res.pid.kd]) / g0))
+    start = jax.device_get(pid_mod._tune_report(drive, pid, g0, cfg, np.zeros(3)))
+    best = jax.device_get(
+        pid_mod._tune_report(drive, pid, g0, cfg, np.log(np.array([res.pid.kp, res.pid.ki, res.pid.kd]) / g0))
+    )
     np.testing.assert_allclose(res.chi_initial, start["chi"], rtol=1e-9)
     np.testing.assert_allclose(
         [res.chi, res.v_peak, res.i_peak, res.mean_speed],

@@ -21,7 +21,7 @@ import optax
 
 from .._callables import by_value
 from .._checks import check_int, check_penalised_limits, check_positive, check_scalar
-from .._guard import host_checked, prepare
+from .._guard import host_checked
 from .._xla import QUICK_COMPILE
 from ..models.motor import PID, check_pid_nonnegative
 from ..objectives.fluctuation import closed_loop_metrics, linearised_closed_loop_metrics
@@ -81,8 +81,10 @@ def tune_pid(
 
     $\\ell = \\chi_{smooth} + w\\,[\\max(0, |V|_{max}/V_{max} - 1)^2 + \\max(0, |I|_{max}/I_{max} - 1)^2]$
 
-    - `pid`: starting gains, set point and limiter. If `pid.v_limit` is set, the tuner simulates
-      with the smooth limiter (gradients through saturation) and reports with `pid`'s own limiter.
+    - `pid`: starting gains, set point and limiter. With a hard clip (`limiter="hard"`, the default), the
+      tuner simulates the smooth limiter of `pid.v_smooth` (gradients through saturation) and reports with
+      the clip itself, simulated as the clip's smooth limit (width 1 nV: the same voltage to 1e-9 V) at a
+      hundredth of `rtol`/`atol` in the steps' own compiled program.
     - `v_max` [V], `i_max` [A]: bounds on peak |voltage| and |current| over [0, t1], imposed by
       the quadratic penalty of weight `penalty` (default `v_max`: none; with a limiter the voltage
       bound holds by construction).
@@ -105,7 +107,8 @@ def tune_pid(
             check_scalar(name, value, owner=o)
     check_penalised_limits(o, penalty, (("v_max", v_max, "V"), ("i_max", i_max, "A")))
     _warn_unreachable_set_point(drive, pid, v_max)
-    train_pid = pid.with_limiter("smooth") if pid.v_limit is not None else pid
+    # the regulator the steps simulate: `pid` itself, or a hard clip's smooth counterpart (gradients through saturation)
+    train_pid = pid.with_limiter("smooth") if pid.v_limit is not None and pid.limiter == "hard" else pid
     # host values: the gains and the optimizer's state are the step's inputs, made without compiling small programs
     g0 = np.array([float(pid.kp), float(pid.ki), float(pid.kd)])
     if optimizer is None:
@@ -132,6 +135,8 @@ def tune_pid(
         t1=float(t1),
         method=str(method),
         dt=float(dt) if method == "rk4" else 1e-3,
+        bound_v=v_max is not None,
+        bound_i=i_max is not None,
     )
     p = np.zeros(3)
     hist = {k: [] for k in ("loss", "chi_smooth", "v_peak", "i_peak", "kp", "ki", "kd")}
@@ -144,11 +149,6 @@ def tune_pid(
         from tqdm.auto import tqdm
 
         bar = tqdm(range(steps), desc="tune_pid", leave=False)
-    if train_pid is not pid:
-        # the report simulates `pid`'s own limiter, a second program: traced now and compiled while the step's
-        # program compiles and runs (with the program store on: `jb.enable_compilation_cache`)
-        prepare(_tune_step, opt, drive, train_pid, g0, cfg, p, state)
-        prepare(_tune_report_unchecked, drive, pid, g0, cfg, p)
     for k in range(steps) if bar is None else bar:
         p_new, state, loss, m, gains = _tune_step(opt, drive, train_pid, g0, cfg, p, state)
         loss, m, gains = jax.device_get((loss, m, gains))
@@ -183,8 +183,8 @@ def tune_pid(
         # the step simulated `pid` itself at these gains, on the report's steps: its metrics are the report's (to
         # rounding), and no report program is compiled (a third of a cold first call)
         m0, mb = m_start, m_best
-    else:  # the step's regulator had the smooth limiter: the report simulates `pid`'s own
-        m0, mb = _report(drive, pid, g0, cfg, np.zeros(3)), _report(drive, pid, g0, cfg, p_best)
+    else:  # the steps simulated a hard clip's smooth counterpart: the report simulates the clip itself
+        m0, mb = (_report(opt, drive, pid, g0, cfg, q, state) for q in (np.zeros(3), p_best))
     status, message = _tune_status(pid, mb, m0, v_max, i_max, int(k_best), steps)
     if status != "ok":
         warnings.warn(message, RuntimeWarning, stacklevel=2)
@@ -312,6 +312,10 @@ class _Config(eqx.Module):
     t1: float = eqx.field(static=True)
     method: str = eqx.field(static=True)
     dt: float = eqx.field(static=True)
+    # whether `v_max` / `i_max` were given: an absent bound's penalty is exactly zero, and its derivative (the
+    # voltage's or current's along the trajectory's sensitivities) a third of the step's compilation
+    bound_v: bool = eqx.field(static=True, default=True)
+    bound_i: bool = eqx.field(static=True, default=True)
 
 
 @functools.cache
@@ -388,12 +392,11 @@ def _tune_step_impl(opt, drive, train_pid, g0, cfg: _Config, p, state):
 
     def loss_aux(q):
         m = linear(q)
-        # v_max, i_max = inf when unbounded: the penalty terms are then exactly zero
-        loss = (
-            m["chi_smooth"]
-            + cfg.penalty * jnp.maximum(0.0, m["v_peak"] / cfg.v_max - 1.0) ** 2
-            + cfg.penalty * jnp.maximum(0.0, m["i_peak"] / cfg.i_max - 1.0) ** 2
-        )
+        loss = m["chi_smooth"]
+        if cfg.bound_v:
+            loss = loss + cfg.penalty * jnp.maximum(0.0, m["v_peak"] / cfg.v_max - 1.0) ** 2
+        if cfg.bound_i:
+            loss = loss + cfg.penalty * jnp.maximum(0.0, m["i_peak"] / cfg.i_max - 1.0) ** 2
         return loss, (loss, m)
 
     grad, (loss, m) = jax.jacfwd(loss_aux, has_aux=True)(p)
@@ -407,19 +410,39 @@ def _tune_report_impl(drive, pid, g0, cfg: _Config, p):
     return _metrics(drive, pid, g0, cfg, p)
 
 
-def _tune_report_unchecked_impl(drive, pid, g0, cfg: _Config, p):
-    TRACE_COUNT["report"] += 1
-    return _metrics(drive, pid, g0, cfg, p, throw=False)
-
-
 def _finite(m: dict) -> bool:
     return all(np.isfinite(v) for v in m.values())
 
 
-def _report(drive, pid, g0, cfg: _Config, p) -> dict:
-    """The report's metrics (host values): from the program without checks, the same numbers where every one is
-    finite; else from the checked program, which raises what failed (or gives the same non-finite values)."""
-    m = jax.device_get(_tune_report_unchecked(drive, pid, g0, cfg, p))
+#: the width [V] of the smooth limiter that stands in for a hard clip in the report: the clip is the smooth
+#: limiter's limit as the width goes to 0, the two voltages differ by at most width * log 2
+_CLIP_WIDTH = 1e-9
+#: the report's tolerances, relative to the tuning's (and at least 1e-12): the stand-in's steps differ from the
+#: clip's where the limiter acts, and a tighter solve makes either's error negligible
+_REPORT_TOL = 1e-2
+
+
+def _clip_stand_in(pid: PID) -> PID:
+    """`pid` with its hard clip replaced by the smooth limiter of width `_CLIP_WIDTH` (the same voltage to 1e-9 V):
+    the structure of the regulator the steps simulate, so that the report runs the steps' own compiled program."""
+    return eqx.tree_at(lambda q: q.v_smooth, pid.with_limiter("smooth"), jax.device_put(np.float64(_CLIP_WIDTH)))
+
+
+def _report_metrics(opt, drive, pid, g0, cfg: _Config, p, state) -> dict:
+    """The metrics of `pid` (a hard clip) at the log-gains `p` (host values), from the step's own program: one
+    program for the steps and the report (a second one would be a third of a cold first call)."""
+    tight = eqx.tree_at(
+        lambda c: (c.rtol, c.atol),
+        cfg,
+        tuple(np.asarray(np.maximum(_REPORT_TOL * np.asarray(x), 1e-12), dtype=float) for x in (cfg.rtol, cfg.atol)),
+    )
+    return jax.device_get(_tune_step(opt, drive, _clip_stand_in(pid), g0, tight, p, state)[3])
+
+
+def _report(opt, drive, pid, g0, cfg: _Config, p, state) -> dict:
+    """The report's metrics (host values) for a regulator with a hard clip: from the steps' program where every one
+    is finite; else from the checked report program, which raises what failed (or gives the non-finite values)."""
+    m = _report_metrics(opt, drive, pid, g0, cfg, p, state)
     if _finite(m):
         return m
     return jax.device_get(_tune_report(drive, pid, g0, cfg, p))
@@ -436,6 +459,3 @@ _COMPILE = QUICK_COMPILE
 # compiles them again.
 _tune_step = host_checked(_tune_step_impl, store=True, compiler_options=_COMPILE, checks=False)
 _tune_report = host_checked(_tune_report_impl, store=True, compiler_options=_COMPILE)
-# a failed solve or check makes its values NaN (`throw=False`): what the report runs first, its checks left out (a
-# quarter of its tracing time, and a smaller program)
-_tune_report_unchecked = host_checked(_tune_report_unchecked_impl, store=True, compiler_options=_COMPILE, checks=False)
