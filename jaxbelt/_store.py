@@ -283,21 +283,19 @@ class _Entry:
     background thread (JAX's persistent cache serves that compilation in a later process); the structure of
     its output."""
 
-    __slots__ = ("compiled", "out_tree", "lapack", "device", "out_types")
+    __slots__ = ("compiled", "out_tree", "device", "out_types")
 
     def __init__(self, exported, out_tree, lapack, specs, compiler_options=None):
         fn = jax.jit(exported.call, compiler_options=compiler_options) if compiler_options else jax.jit(exported.call)
         if lapack:
-            _ensure_lapack()
-        self.out_tree, self.lapack, self.device = out_tree, lapack, jax.devices()[0]
+            _ensure_lapack()  # before it is compiled, and so before it runs
+        self.out_tree, self.device = out_tree, jax.devices()[0]
         self.out_types = jax.tree_util.tree_unflatten(out_tree, [_spec(a) for a in exported.out_avals])
         # lowered in the caller's thread (JAX's settings are per thread), compiled in another
         lowered = fn.trace(*specs).lower()
         self.compiled = _executor().submit(lowered.compile)
 
     def __call__(self, dynamic):
-        if self.lapack:
-            _ensure_lapack()
         # committed arguments, on the device the program was compiled for
         out = self.compiled.result()(*jax.device_put(list(dynamic), self.device))
         return jax.tree_util.tree_unflatten(self.out_tree, out)

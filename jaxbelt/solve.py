@@ -36,6 +36,7 @@ from . import _store
 from ._checks import as_float_array, concrete_array_type, is_concrete, positive_checks
 from ._guard import (
     _modules,
+    all_ok,
     eager,
     error_if,
     guard,
@@ -62,6 +63,14 @@ _batched_exponential_scene = eqx.filter_jit(batched_exponential_scene)
 
 #: |R(h lambda)| of RK4 may exceed max(1, |exp(h lambda)|) by this much before the step is called unstable.
 _RK4_GROWTH_TOL = 1e-6
+
+
+def _rk4_stable(model, inp, ts, ys, dt):
+    """`(stable, spectral radius)` of RK4 steps `dt` at the states `ys` at the times `ts` (the run's first and last):
+    stable where no step amplifies more than the exact flow (`rk4_growth`) at any of them."""
+    growth, rho = zip(*(rk4_growth(model, t, y, inp, dt) for t, y in zip(ts, ys)))
+    g = jnp.stack(growth)
+    return jnp.all(jnp.isfinite(g)) & (jnp.max(g) <= _RK4_GROWTH_TOL), jnp.max(jnp.stack(rho))
 
 
 def rk4_growth(model, t, y, inp, dt):
@@ -164,11 +173,8 @@ def _run_impl(scene: Scene, method: str, solver, rtol, atol, dt0, max_steps: int
             "t_final": jax.lax.stop_gradient(_time_reached(sol.ts, t0, scene.final_only or outputs_only)),
         }
         if method == "rk4":
-            g0, rho0 = rk4_growth(model, t0, y0, inp, dt0)
-            g1, rho1 = rk4_growth(model, times[-1], ys[-1], inp, dt0)
-            stable = jnp.isfinite(g0) & jnp.isfinite(g1) & (jnp.maximum(g0, g1) <= _RK4_GROWTH_TOL)
+            stable, stats["spectral_radius"] = _rk4_stable(model, inp, (t0, times[-1]), (y0, ys[-1]), dt0)
             stats["rk4_stable"] = stable
-            stats["spectral_radius"] = jnp.maximum(rho0, rho1)
             success = success & stable
     success = success & jnp.all(jnp.isfinite(ys))
     outputs = dict(integral_vals)
@@ -381,8 +387,7 @@ def forward_sensitivities(
     p = jnp.asarray(p, dtype=float)
     if p.ndim != 1 or p.shape[0] == 0:
         raise ValueError(f"forward_sensitivities: `p` must be a non-empty vector (P,); got shape {p.shape}")
-    if not isinstance(max_steps, (int, np.integer)) or isinstance(max_steps, bool) or max_steps < 1:
-        raise ValueError(f"forward_sensitivities: `max_steps` must be an integer >= 1; got {max_steps!r}")
+    _check_max_steps(max_steps, "forward_sensitivities")
     n_p = p.shape[0]
     inp = input_of(p)
     y0 = model.initial_state(inp)
@@ -436,14 +441,11 @@ def forward_sensitivities(
     ys, s = sol.ys
     success = (sol.result == diffrax.RESULTS.successful) & jnp.all(jnp.isfinite(ys)) & jnp.all(jnp.isfinite(s))
     if method == "rk4":
-        g0, _ = rk4_growth(model, 0.0, y0, inp, dt)
-        g1, _ = rk4_growth(model, ts[-1], ys[-1], inp, dt)
-        success = success & jnp.isfinite(g0) & jnp.isfinite(g1) & (jnp.maximum(g0, g1) <= _RK4_GROWTH_TOL)
+        success = success & _rk4_stable(model, inp, (0.0, ts[-1]), (y0, ys[-1]), dt)[0]
     checks = traced_checks(model, inp)
     if not is_concrete((model, inp)):
         checks = checks + model.input_checks(inp)
-    (ys, s), ok = guard((ys, s), checks, False)
-    success = success & ok
+    success = success & all_ok(checks)  # a failed check makes the run's values NaN, as a failed solve does
     ys, s = nan_where((ys, s), success)
     return ys, s, success
 
@@ -582,9 +584,9 @@ def _check_fixed_step(method: str, solver, dt0) -> None:
         raise ValueError(f"simulate: fixed-step solver {type(solver).__name__} needs `dt0` (step, s)")
 
 
-def _check_max_steps(max_steps) -> None:
+def _check_max_steps(max_steps, owner: str = "simulate") -> None:
     if not isinstance(max_steps, (int, np.integer)) or isinstance(max_steps, bool) or max_steps < 1:
-        raise ValueError(f"simulate: `max_steps` must be an integer >= 1; got {max_steps!r}")
+        raise ValueError(f"{owner}: `max_steps` must be an integer >= 1; got {max_steps!r}")
 
 
 # ------------------------------------------------------------------------------------------------

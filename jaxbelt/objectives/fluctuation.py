@@ -340,11 +340,7 @@ def closed_loop_metrics(
     `throw`: as in `simulate` (False: a failed solve or check gives NaN values, nothing raises; the program
     then holds no host callback). Returns a dict of scalars.
     """
-    _check_average(average)
-    ts = _grid(t1, *((dt, "dt") if method == "rk4" else (dt_save, "dt_save")))
-    with collecting() as option_checks:  # concrete: raise now, before the simulation; traced: attached below
-        _check_options(peak_temperature, temperature)
-        _check_window_on_grid(ts, t0, t1)
+    ts, option_checks = _metrics_grid(t0, t1, temperature, peak_temperature, dt_save, method, dt, average)
     sol = _run_from_rest(
         drive, pid, ts, ("motor_speed", "voltage"), True, method, rtol, atol, dt, max_steps, adjoint, throw
     )
@@ -352,6 +348,17 @@ def closed_loop_metrics(
     assert ys is not None  # `_run_from_rest(..., state=True)`
     out = _metrics_from(ts, speed, v, ys[:, 2], t0, t1, temperature, peak_temperature, average, throw)
     return guard(out, option_checks, throw=throw)[0]
+
+
+def _metrics_grid(t0, t1, temperature, peak_temperature, dt_save, method, dt, average):
+    """The metrics' output grid 0..t1 and their option checks, `(ts, checks)`: concrete options are checked (and
+    raise) now, before anything is simulated; traced ones come back as checks to attach to the values."""
+    _check_average(average)
+    ts = _grid(t1, *((dt, "dt") if method == "rk4" else (dt_save, "dt_save")))
+    with collecting() as option_checks:
+        _check_options(peak_temperature, temperature)
+        _check_window_on_grid(ts, t0, t1)
+    return ts, option_checks
 
 
 def _metrics_from(ts, speed, v, i, t0, t1, temperature, peak_temperature, average, throw):
@@ -406,11 +413,7 @@ def linearised_closed_loop_metrics(
     of the exact metrics, without differentiating through the solver. A failed run or check makes every
     value NaN (as `throw=False`). Options as in `closed_loop_metrics`.
     """
-    _check_average(average)
-    ts = _grid(t1, *((dt, "dt") if method == "rk4" else (dt_save, "dt_save")))
-    with collecting() as option_checks:
-        _check_options(peak_temperature, temperature)
-        _check_window_on_grid(ts, t0, t1)
+    ts, option_checks = _metrics_grid(t0, t1, temperature, peak_temperature, dt_save, method, dt, average)
     p = jnp.asarray(p, dtype=float)
     model = Scene(drive, pid_of(p), ts=ts, t0=0.0).model
     ys, sens, _ = forward_sensitivities(

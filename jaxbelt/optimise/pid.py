@@ -349,19 +349,17 @@ def _with_gains(pid: PID, gains) -> PID:
 _DEFAULT_OPTIMIZER = "adam"
 
 
+def _options(cfg: _Config) -> dict:
+    """The metrics' window, smoothing and simulation options from the tuning's configuration."""
+    return dict(
+        t0=cfg.t0, t1=cfg.t1, temperature=cfg.temperature, method=cfg.method, rtol=cfg.rtol, atol=cfg.atol, dt=cfg.dt
+    )
+
+
 def _metrics(drive, which, g0, cfg: _Config, p, throw: bool = True):
+    # not differentiated: diffrax's plain loop (`adjoint="forward"`), smaller than its checkpointed one
     return closed_loop_metrics(
-        drive,
-        which.with_gains(g0 * jnp.exp(p)),
-        cfg.t0,
-        cfg.t1,
-        temperature=cfg.temperature,
-        method=cfg.method,
-        rtol=cfg.rtol,
-        atol=cfg.atol,
-        dt=cfg.dt,
-        adjoint="forward",
-        throw=throw,
+        drive, which.with_gains(g0 * jnp.exp(p)), adjoint="forward", throw=throw, **_options(cfg)
     )
 
 
@@ -377,18 +375,7 @@ def _tune_step_impl(opt, drive, train_pid, g0, cfg: _Config, p, state):
     # One simulation with forward sensitivities to the three log-gains: the metrics to first order about `p`,
     # whose derivative at `p` is the gradient. A failed solve is a NaN loss, refused on the host (`tune_pid`);
     # the program holds no run-time check, which keeps it in the caches.
-    linear = linearised_closed_loop_metrics(
-        drive,
-        lambda q: train_pid.with_gains(g0 * jnp.exp(q)),
-        p,
-        cfg.t0,
-        cfg.t1,
-        temperature=cfg.temperature,
-        method=cfg.method,
-        rtol=cfg.rtol,
-        atol=cfg.atol,
-        dt=cfg.dt,
-    )
+    linear = linearised_closed_loop_metrics(drive, lambda q: train_pid.with_gains(g0 * jnp.exp(q)), p, **_options(cfg))
 
     def loss_aux(q):
         m = linear(q)
@@ -449,9 +436,8 @@ def _report(opt, drive, pid, g0, cfg: _Config, p, state) -> dict:
 
 
 #: XLA options of the step's and the report's programs (called at top level only: inside a caller's trace they are
-#: the caller's): XLA's classic CPU emitters at LLVM level 0 compile them 2.2x faster (step 3.0 s -> 1.3 s, report
-#: 1.3 s -> 0.6 s on 2 cores); the same HLO, results equal to rounding (~1e-13 relative), each step runs ~6 ms
-#: slower (12 -> 18 ms), which pays back only after some 150 steps
+#: the caller's): XLA's classic CPU emitters at LLVM level 0 compile them 2-3x faster; the same HLO, results equal
+#: to rounding (~1e-13 relative), each step runs a few ms slower
 _COMPILE = QUICK_COMPILE
 
 # Compiled once per structure; their checks come back as values (`host_checked`), so that JAX's persistent cache

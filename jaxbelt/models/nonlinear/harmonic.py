@@ -87,12 +87,6 @@ def _scale(belt: NonlinearBelt):
     return (belt.runout[0] + belt.runout[1]) / belt.span + 1e-30
 
 
-def _scale_host(belt):
-    """`_scale(belt)` computed with numpy (as device operations it would compile a small program each)."""
-    r = np.asarray(belt.runout)
-    return (r[0] + r[1]) / np.asarray(belt.span) + 1e-30
-
-
 def _check_equal_radii(belt):
     if is_concrete(belt.pulley_radii):
         r = np.asarray(belt.pulley_radii)
@@ -519,26 +513,18 @@ def fold_speeds(
     """
     H, n_folds, max_points, v0, v1 = _fold_options("fold_speeds", belt, speed_range, n_harmonics, n_folds, max_points)
     _, Vs, ok = _fold_jit(belt, v0, v1, H, n_folds, max_points, jnp.asarray(_DS0), jnp.asarray(_DS_MAX))
+    if throw and is_concrete(ok) and not bool(np.all(np.asarray(ok))):
+        raise ValueError(
+            f"fold_speeds: found {int(np.sum(np.asarray(ok)))} of n_folds={n_folds} folds in "
+            f"speed_range {tuple(float(x) for x in (v0, v1))} m/s (no hysteresis there, or "
+            "refinement failed); widen the range or lower `damping`"
+        )
     if isinstance(Vs, np.ndarray) and is_concrete(belt.wave_speed):  # eager: on the host, no small device programs
-        if throw and not bool(np.all(ok)):
-            raise ValueError(
-                f"fold_speeds: found {int(np.sum(ok))} of n_folds={n_folds} folds in "
-                f"speed_range {tuple(float(x) for x in (v0, v1))} m/s (no hysteresis there, or "
-                "refinement failed); widen the range or lower `damping`"
-            )
         Vs = np.where(ok, Vs, np.nan)
         return jnp.asarray(np.sort(Vs), dtype=jnp.result_type(belt.wave_speed))  # NaN (missing folds) last
     Vs = belt.wave_speed * 0.0 + Vs  # keep the belt's dtype
-    if throw:
-        if is_concrete(ok):
-            if not bool(np.all(np.asarray(ok))):
-                raise ValueError(
-                    f"fold_speeds: found {int(np.sum(np.asarray(ok)))} of n_folds={n_folds} folds in "
-                    f"speed_range {tuple(float(x) for x in (v0, v1))} m/s (no hysteresis there, or "
-                    "refinement failed); widen the range or lower `damping`"
-                )
-        else:
-            Vs = eqx.error_if(Vs, ~jnp.all(ok), "fold_speeds: fewer folds than n_folds in speed_range")
+    if throw and not is_concrete(ok):
+        Vs = eqx.error_if(Vs, ~jnp.all(ok), "fold_speeds: fewer folds than n_folds in speed_range")
     Vs = jnp.where(ok, Vs, jnp.nan)
     order = jnp.argsort(jnp.where(ok, Vs, jnp.inf))
     return Vs[order]
@@ -718,7 +704,8 @@ def response_curve(
         amplitude=jnp.asarray(np.asarray(amp)[keep]),
         stable=jnp.asarray(np.max(np.abs(mult), axis=1) < 1.0),
         multipliers=jnp.asarray(mult),
-        coefficients=jnp.asarray(np.asarray(_scale_host(belt)) * us_n[keep, :-1].reshape(-1, 2 * n, 2 * H + 1)),
+        # the scale from host values: as device operations each would compile a small program in a new process
+        coefficients=jnp.asarray(_scale(jax.device_get(belt)) * us_n[keep, :-1].reshape(-1, 2 * n, 2 * H + 1)),
         folds=jnp.asarray(np.sort(Vf[okf])),
     )
 
