@@ -17,12 +17,14 @@ and dtypes of its arrays, a fingerprint of jaxbelt's own source and of the versi
 dependencies, and the JAX settings that change a traced program (x64, matmul precision, XLA flags,
 jaxbelt's check contexts). A program is stored only when every node type in its arguments comes
 from jaxbelt, equinox, diffrax or optax and every static value is a plain number, string or tuple of
-them: a user's own model class (whose code jaxbelt cannot fingerprint) always takes the traced
-path. A program JAX cannot export (a host callback) is marked so, and later processes trace it as
-before. Any failure to load or call a stored program falls back to the traced path, which computes
-the same result.
+them, a user's function with a lasting key (`jaxbelt._callables.lasting_key`: its code and the values
+it reads, for `sweep` and `identify`) or a CPU `Mesh`: a user's own model class (whose code jaxbelt
+cannot fingerprint) always takes the traced path. A program JAX cannot export (a host callback) is
+marked so, and later processes trace it as before. Any failure to load or call a stored program falls
+back to the traced path, which computes the same result.
 
-Used only on a single-device CPU backend, and only while `jaxbelt.enable_compilation_cache` is on.
+Used only on a CPU backend (one device, or the devices of the `Mesh` a sharded program takes, its inputs
+sharded as they were when it was stored), and only while `jaxbelt.enable_compilation_cache` is on.
 """
 
 from __future__ import annotations
@@ -39,6 +41,9 @@ from pathlib import Path
 
 import jax
 import numpy as np
+from jax.sharding import Mesh
+
+from ._callables import ByValue
 
 _FORMAT = 1
 _state = {"folder": None, "usable": None, "fingerprint": None, "lapack": False, "generation": 0}
@@ -82,15 +87,18 @@ def folder():
     return _state["folder"]
 
 
-def _usable() -> bool:
+def _usable(mesh: bool = False) -> bool:
+    """The store serves a CPU backend: a program on one device, or one that shards over a `Mesh` it takes (the
+    mesh, its devices included, is part of the key)."""
     if _state["folder"] is None:
         return False
     if _state["usable"] is None:
         try:
-            _state["usable"] = jax.default_backend() == "cpu" and jax.device_count() == 1
+            _state["usable"] = (jax.default_backend() == "cpu", jax.device_count() == 1)
         except Exception:  # noqa: BLE001
-            _state["usable"] = False
-    return _state["usable"]
+            _state["usable"] = (False, False)
+    cpu, single = _state["usable"]
+    return cpu and (single or mesh)
 
 
 def _fingerprint() -> str:
@@ -196,13 +204,46 @@ def storable_function(fun) -> bool:
     )
 
 
+def _static(v):
+    """A static argument as it enters the key (a string), or None where it cannot: a plain value by its repr, a
+    user's function (`jaxbelt._callables.ByValue`) by its lasting key, a CPU `Mesh` by its shape, axis names and
+    device ids."""
+    if _plain(v):
+        return repr(v)
+    if isinstance(v, ByValue):
+        key = v.lasting_key()
+        return None if key is None else f"by_value:{key}"
+    if isinstance(v, Mesh):
+        devices = v.devices.flat
+        if not all(d.platform == "cpu" for d in v.devices.flat):
+            return None
+        return f"mesh:{v.devices.shape}:{v.axis_names!r}:{[d.id for d in devices]}"
+    return None
+
+
 def _is_array(x) -> bool:
     """An input of the program (a `jax.ShapeDtypeStruct` stands for one in `prepare`)."""
     return isinstance(x, (jax.Array, np.ndarray, jax.ShapeDtypeStruct))
 
 
 def aval(x) -> tuple:
-    return (x.shape, str(x.dtype), bool(getattr(x, "weak_type", False)))
+    return (x.shape, str(x.dtype), bool(getattr(x, "weak_type", False))) + _layout(x)
+
+
+def _sharded(x):
+    """`x`'s sharding where it spans several devices (a sharded program's input), else None."""
+    sharding = getattr(x, "sharding", None)
+    try:
+        return sharding if sharding is not None and len(sharding.device_set) > 1 else None
+    except Exception:  # noqa: BLE001 - a type's abstract sharding (no devices): a one-device input
+        return None
+
+
+def _layout(x) -> tuple:
+    sharding = _sharded(x)
+    if sharding is None:
+        return ()
+    return (repr(getattr(sharding, "spec", sharding)), tuple(sorted(d.id for d in sharding.device_set)))
 
 
 try:  # what a checkify error keeps of the Python stack where its check was written
@@ -255,6 +296,21 @@ def _ensure_lapack() -> None:
         _state["lapack"] = True
 
 
+def _lapack_checks_off() -> list:
+    """JAX exports a program for any later JAX and refuses the LAPACK kernels whose interface it does not promise
+    to keep (QR's `ormqr`, `orgqr`...): the store's key holds jaxlib's version, so every LAPACK kernel is allowed."""
+    if "lapack_checks" not in _state:
+        try:
+            import importlib
+
+            # jaxlib's LAPACK module (private, hence looked up by name): only the names of its kernels are read
+            names = sorted(importlib.import_module("jaxlib.lapack")._lapack.registrations())
+            _state["lapack_checks"] = [jax.export.DisabledSafetyCheck.custom_call(n) for n in names]
+        except Exception:  # noqa: BLE001 - another jaxlib layout: such programs are traced, as before
+            _state["lapack_checks"] = []
+    return _state["lapack_checks"]
+
+
 def _executor():
     """The threads that compile stored programs: XLA releases the GIL while it compiles, so a program compiles
     while the caller traces the next one (`prepare`) or runs another."""
@@ -283,13 +339,16 @@ class _Entry:
     background thread (JAX's persistent cache serves that compilation in a later process); the structure of
     its output."""
 
-    __slots__ = ("compiled", "out_tree", "device", "out_types")
+    __slots__ = ("compiled", "out_tree", "placement", "out_types")
 
     def __init__(self, exported, out_tree, lapack, specs, compiler_options=None):
         fn = jax.jit(exported.call, compiler_options=compiler_options) if compiler_options else jax.jit(exported.call)
         if lapack:
             _ensure_lapack()  # before it is compiled, and so before it runs
-        self.out_tree, self.device = out_tree, jax.devices()[0]
+        self.out_tree = out_tree
+        # each input on the first device, or as it is sharded (a sharded program's inputs)
+        device = jax.sharding.SingleDeviceSharding(jax.devices()[0])
+        self.placement = [_sharded(x) or device for x in specs]
         self.out_types = jax.tree_util.tree_unflatten(out_tree, [_spec(a) for a in exported.out_avals])
         # lowered in the caller's thread (JAX's settings are per thread), compiled in another
         lowered = fn.trace(*specs).lower()
@@ -297,12 +356,12 @@ class _Entry:
 
     def __call__(self, dynamic):
         # committed arguments, on the device the program was compiled for
-        out = self.compiled.result()(*jax.device_put(list(dynamic), self.device))
+        out = self.compiled.result()(*jax.device_put(list(dynamic), self.placement))
         return jax.tree_util.tree_unflatten(self.out_tree, out)
 
 
 def _spec(x):
-    return jax.ShapeDtypeStruct(x.shape, x.dtype, weak_type=bool(getattr(x, "weak_type", False)))
+    return jax.ShapeDtypeStruct(x.shape, x.dtype, weak_type=bool(getattr(x, "weak_type", False)), sharding=_sharded(x))
 
 
 def _codes_used(before=None) -> int:
@@ -380,7 +439,7 @@ def _export(fun, name, static_leaves, treedef, dynamic, key, path, compiler_opti
 
     before = _codes_used()
     try:
-        exported = jax.export.export(jax.jit(flat))(*dynamic)
+        exported = jax.export.export(jax.jit(flat), disabled_checks=_lapack_checks_off())(*dynamic)
     except Exception as e:  # noqa: BLE001 - a host callback (a progress bar, an eqx.error_if), or an error the
         # traced path raises as well (it runs next): later processes skip the attempt
         _debug(f"{name}: not exportable: {type(e).__name__}: {e}")
@@ -420,15 +479,16 @@ def lookup(name: str, fun, args: tuple):
 
 def _resolve(name: str, fun, args: tuple, compiler_options=None):
     """`(lookup(name, fun, args), the program's inputs)`: the arguments are flattened once."""
-    if not _usable():
+    if not _usable(mesh=True):
         return False, None
     try:
         leaves, treedef = jax.tree_util.tree_flatten(args)
         dynamic = [v for v in leaves if _is_array(v)]
         static_leaves = [_DYNAMIC if _is_array(v) else v for v in leaves]
-        if not all(_plain(v) for v in static_leaves if v is not _DYNAMIC):
+        statics = tuple(repr(v) if v is _DYNAMIC else _static(v) for v in static_leaves)
+        if None in statics or not _usable(mesh=any(isinstance(v, Mesh) for v in static_leaves)):
             return False, None
-        memo_key = (name, treedef, tuple(map(aval, dynamic)), tuple(map(repr, static_leaves)), settings())
+        memo_key = (name, treedef, tuple(map(aval, dynamic)), statics, settings())
         entry = _MEMO.get(memo_key)
         if entry is None:
             entry = _lookup(name, fun, treedef, static_leaves, dynamic, memo_key, compiler_options)

@@ -132,8 +132,8 @@ def _sharded_impl(fn, params, mesh):
 # The checks `fn` makes (a model's parameter ranges, diffrax's own) come back as values (`host_checked`): the
 # program holds no host callback, so JAX's persistent compilation cache keeps it and a later process (a re-run
 # notebook, a script run again) compiles nothing. Inside a caller's jit, the plain program.
-_vmapped = host_checked(_vmapped_impl)
-_sharded = host_checked(_sharded_impl)
+_vmapped = host_checked(_vmapped_impl, store=True)
+_sharded = host_checked(_sharded_impl, store=True)
 
 
 def cpu_devices(n: int | None = None) -> int:
@@ -183,6 +183,8 @@ def sweep(fn, params, *, devices=None, check: bool = True, name: str | None = No
     values (numbers, arrays, models: compared by value) reuses the compiled sweep, so `sweep(lambda g: ...,
     gains)` in a loop or a re-run notebook cell compiles once; a changed value compiles anew (it is a
     constant of the program, as for `jax.jit`). `params` are data: new values of the same shapes reuse it.
+    With `enable_compilation_cache()` on, a later process runs the stored sweep without tracing `fn` again,
+    under the same key (see `enable_compilation_cache`'s `programs`).
     """
     n = _batch_size(params)
     what = name or getattr(fn, "__name__", "fn")

@@ -59,9 +59,15 @@ def enable_compilation_cache(path=None, *, min_compile_time: float = 0.0, progra
     - `programs`: also keep the compiled programs of `simulate` and of jaxbelt's other eager entry
       points in `path/jaxbelt-programs`, with what is needed to call them without tracing (a
       later process skips tracing as well as compilation: 0.25 s instead of 0.7 s for
-      a four-bar simulation). Used on a single-device CPU backend, for scenes built from jaxbelt's
+      a four-bar simulation). Used on a CPU backend, for scenes built from jaxbelt's
       own classes; keyed by jaxbelt's source, the dependency versions and JAX's settings, so an
-      edited jaxbelt or a new JAX never picks up an old program.
+      edited jaxbelt or a new JAX never picks up an old program. The function given to `sweep` or
+      `identify` is stored too, keyed by its code and the values it closes over, takes as defaults
+      or reads as globals (`jaxbelt._callables.lasting_key`: numbers, arrays by contents, jaxbelt's
+      models, your other functions recursively); one that holds an object, class or module of your
+      own is traced in every process. What such a function reads while it is traced that is none of
+      these (a file it opens, an environment variable, a random draw) is taken as fixed, as
+      `jax.jit` takes it within one process: pass `programs=False` for such a function.
 
     Call it once per process before the first simulation (a notebook: in its first cell);
     calling it again with another folder switches to that folder. Returns the folder used.

@@ -101,7 +101,7 @@ def _traced_once(fun, *args):
 
 # checks inside `predict` (a model's parameter ranges) come back as values (`host_checked`): the program holds no
 # host callback, so the persistent compilation cache stores it and a later process loads it instead of compiling
-@host_checked
+@host_checked(store=True)
 def _fit(predict, names, p0, data, w, is_log, scale, solver_kind, jac_mode, rtol, atol, max_steps):
     # traced once: the solver and the Jacobians below call it several times, each a re-trace otherwise
     predict_once = jax.jit(predict)
@@ -193,7 +193,8 @@ def identify(
       returning an array of the shape of `data` (a time series, or a few scalar features);
       fixed parameters are closed over. Repeated calls (e.g. a Monte-Carlo over noise draws) compile
       once: a function with the same code and equal closed-over values reuses the program, a new lambda
-      included (`data`, `sigma` and `params0` are data: new values of the same shapes reuse it).
+      included (`data`, `sigma` and `params0` are data: new values of the same shapes reuse it). With
+      `enable_compilation_cache()` on, a later process runs the stored fit without tracing `predict`.
     - `params0`: initial values, `{name: float}`; positive ones are fitted in log space.
     - `data`: the measurements, array of any shape.
     - `sigma`: standard deviation of the noise on `data` [data units]: a scalar or an array

@@ -4,9 +4,11 @@ fingerprint."""
 
 import contextlib
 import json
+import math
 import os
 import subprocess
 import sys
+import types
 from pathlib import Path
 
 import equinox as eqx
@@ -364,3 +366,172 @@ def test_prepared_programs_are_traced_once_and_serve_the_calls(tmp_path, monkeyp
         (o.shape, o.dtype) for o in jax.tree_util.tree_leaves(out)
     ]
     _same(stored, reference)
+
+
+# --- a user's function (`jb.sweep`, `jb.identify`): stored under its lasting key ---------------------------------
+
+
+def _belt_speeds(scale):
+    """A user's sweep function: the driven pulley's speed at 21 times for one stiffness, scaled by a closed-over
+    value. `jb.simulate` is looked up on the module when it is traced (the tests count those lookups)."""
+    ts = jnp.linspace(0.0, 0.3, 21)
+
+    def speeds(k):
+        sol = jb.simulate(jb.Scene(jb.BeltStartup(k=k), jb.ExponentialVoltage(24.0, 0.04), ts=ts))
+        return sol["omega2"] * scale
+
+    return speeds
+
+
+@pytest.fixture
+def counted_simulate(monkeypatch):
+    """`jb.simulate`, counting the times a user's function calls it (each trace of that function)."""
+    calls = []
+    original = jb.simulate
+
+    def simulate(*args, **kwargs):
+        calls.append(1)
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(jb, "simulate", simulate)
+    return calls
+
+
+def test_lasting_key_of_a_users_function():
+    from jaxbelt._callables import lasting_key
+
+    k = jnp.array([1.0, 2.0])
+    # the same code and values: the same key, whatever the function object
+    assert lasting_key(_belt_speeds(2.0)) == lasting_key(_belt_speeds(2.0)) is not None
+    assert lasting_key(lambda x: x * k) == lasting_key(lambda x: x * k) is not None  # one line: one code object
+    # another closed-over value (a number, an array's contents), another key
+    assert lasting_key(_belt_speeds(2.0)) != lasting_key(_belt_speeds(3.0))
+    keys = {lasting_key(lambda x, k=k: x * k) for k in (jnp.array([1.0, 2.0]), jnp.array([1.0, 2.5]))}
+    assert len(keys) == 2
+    # what jaxbelt cannot key lastingly: the user's own objects, classes and modules
+
+    class Gain:
+        value = 2.0
+
+    g = Gain()
+    assert lasting_key(lambda x: x * g.value) is None
+    assert lasting_key(lambda x: x * Gain.value) is None
+    own = types.ModuleType("own_models")  # a module of the user's: its code is not in the store's fingerprint
+    own.gain = 2.0
+    assert lasting_key(lambda x: x * own.gain) is None
+    assert lasting_key(lambda x: x * math.pi) is not None  # the standard library's, by name
+
+
+def test_a_users_sweep_function_is_stored_by_its_code_and_values(tmp_path, counted_simulate):
+    ks = jnp.array([1.0e5, 1.2e5, 1.5e5])
+    reference = jb.sweep(_belt_speeds(2.0), ks)  # the traced path (store off)
+    assert len(counted_simulate) == 1
+    with store_in(tmp_path / "xla") as folder:
+        first = jb.sweep(_belt_speeds(2.0), ks)  # traced, exported, written
+        assert len(counted_simulate) == 2 and len(_programs(folder)) == 1
+        _store.forget()  # as in a new process
+        jax.clear_caches()
+        second = jb.sweep(_belt_speeds(2.0), ks * 1.1)  # a new function of the same code and values, new data
+        assert len(counted_simulate) == 2  # not traced: the stored program ran
+        # another closed-over value: another program (a value is a constant of the program, as for jax.jit)
+        third = jb.sweep(_belt_speeds(3.0), ks)
+        assert len(counted_simulate) == 3 and len(_programs(folder)) == 2
+    np.testing.assert_allclose(np.asarray(first), np.asarray(reference), rtol=1e-12, atol=0)
+    np.testing.assert_allclose(np.asarray(third), 1.5 * np.asarray(reference), rtol=1e-12, atol=0)
+    np.testing.assert_allclose(np.asarray(second), np.asarray(jb.sweep(_belt_speeds(2.0), ks * 1.1)), rtol=1e-12)
+
+
+def test_a_function_holding_the_users_own_object_is_traced_not_stored(tmp_path, counted_simulate):
+    class Scale:  # the user's class: its code could change between processes without changing any key
+        def __init__(self, v):
+            self.v = v
+
+    s = Scale(2.0)
+    ts = jnp.linspace(0.0, 0.3, 21)
+
+    def speeds(k):
+        return jb.simulate(jb.Scene(jb.BeltStartup(k=k), jb.ExponentialVoltage(24.0, 0.04), ts=ts))["omega2"] * s.v
+
+    ks = jnp.array([1.0e5, 1.5e5])
+    with store_in(tmp_path / "xla") as folder:
+        out = jb.sweep(speeds, ks)
+        assert _programs(folder) == []
+    np.testing.assert_allclose(np.asarray(out), np.asarray(jb.sweep(_belt_speeds(2.0), ks)), rtol=1e-12, atol=0)
+
+
+def _startup_predict(ts):
+    def predict(p):
+        sol = jb.simulate(jb.Scene(jb.BeltStartup(k=p["k"], c=p["c"]), jb.ExponentialVoltage(24.0, 0.02), ts=ts))
+        return jnp.stack([sol["omega2"], sol["current"]], -1)
+
+    return predict
+
+
+def test_identify_through_the_store(tmp_path, counted_simulate):
+    ts = jnp.linspace(0.0, 0.3, 61)
+    data = np.asarray(_startup_predict(ts)({"k": 1.2e5, "c": 20.0}))
+    p0 = {"k": 0.8e5, "c": 30.0}
+    reference = jb.identify(_startup_predict(ts), p0, data, sigma=1e-3)
+    jax.clear_caches()  # the reference's program is not reused in-process
+    traced = len(counted_simulate)
+    with store_in(tmp_path / "xla") as folder:
+        first = jb.identify(_startup_predict(ts), p0, data, sigma=1e-3)
+        assert len(_programs(folder)) == 1 and len(counted_simulate) == traced + 1  # `predict` traced once
+        _store.forget()
+        jax.clear_caches()
+        second = jb.identify(_startup_predict(ts), p0, data, sigma=1e-3)
+        assert len(counted_simulate) == traced + 1  # not traced
+    for fit in (first, second):
+        for name in p0:
+            np.testing.assert_allclose(fit.params[name], reference.params[name], rtol=1e-12)
+            np.testing.assert_allclose(fit.stderr[name], reference.stderr[name], rtol=1e-10)
+    # noise-free data: the fit recovers the true values
+    np.testing.assert_allclose([second.params["k"], second.params["c"]], [1.2e5, 20.0], rtol=1e-8)
+
+
+def test_a_new_process_runs_the_stored_sharded_sweep(tmp_path):
+    # two CPU devices: the sweep shards over a mesh, which the key holds; the stored program is called with the
+    # inputs sharded as they were when it was exported
+    code = (
+        "import jax, jax.numpy as jnp, numpy as np, jaxbelt as jb\n"
+        "jb.cpu_devices(2)\n"
+        "jax.config.update('jax_enable_x64', True)\n"
+        f"jb.enable_compilation_cache({str(tmp_path / 'xla')!r})\n"
+        "calls = []\n"
+        "original = jb.simulate\n"
+        "def counted(*a, **k):\n"
+        "    calls.append(1)\n"
+        "    return original(*a, **k)\n"
+        "jb.simulate = counted\n"
+        "ts = jnp.linspace(0.0, 0.3, 21)\n"
+        "def speeds(k):\n"
+        "    sol = jb.simulate(jb.Scene(jb.BeltStartup(k=k), jb.ExponentialVoltage(24.0, 0.04), ts=ts))\n"
+        "    return sol['omega2'][-1]\n"
+        "out = jb.sweep(speeds, jnp.array([1.0e5, 1.2e5, 1.5e5]))\n"
+        "print(len(calls), len(out.sharding.device_set), *np.asarray(out).tolist())\n"
+    )
+    outs = [out.split() for out in _two_processes(code)]
+    assert outs[0][:2] == ["1", "2"] and outs[1][:2] == ["0", "2"]  # traced, then loaded; sharded over 2 devices
+    ref = jb.sweep(_belt_speeds(1.0), jnp.array([1.0e5, 1.2e5, 1.5e5]))[:, -1]
+    for o in outs:
+        np.testing.assert_allclose(np.array(o[2:], float), np.asarray(ref), rtol=1e-12)
+
+
+def test_a_users_function_that_fails_raises_its_own_error_through_the_store(tmp_path):
+    def bad(k):  # the wrong shape for `jb.BeltStartup(k=...)`: the model's check names the parameter
+        return jb.simulate(jb.Scene(jb.BeltStartup(k=jnp.stack([k, k])), jb.ExponentialVoltage(24.0, 0.04)))
+
+    def negative(k):  # a check that fails at run time, inside the stored program
+        ts = jnp.linspace(0, 0.1, 5)
+        return jb.simulate(jb.Scene(jb.BeltStartup(k=-k), jb.ExponentialVoltage(24.0, 0.04), ts=ts, uniform=True))
+
+    ks = jnp.array([1.0e5, 1.5e5])
+    with store_in(tmp_path / "xla"):
+        for _ in range(2):  # traced (not exportable: marked on disk), then traced again from the mark
+            with pytest.raises(ValueError, match=r"parameter `k` must be a scalar"):
+                jb.sweep(bad, ks)
+            _store.forget()
+        for _ in range(2):  # exported, then loaded: the check's message travels with the program
+            with pytest.raises(ValueError, match=r"parameter `k` must be finite and > 0 N/m \(in 'negative'\)"):
+                jb.sweep(negative, ks)
+            _store.forget()
