@@ -97,7 +97,39 @@ def as_float_array(x):
     if t is np.ndarray and x.dtype.kind in "fiub":
         # converted on the host and transferred: `jnp.asarray` would run a small program per shape
         return jax.device_put(np.asarray(x, dtype=dtype))
+    if t is list and all(type(e) is float or type(e) is int for e in x):  # `ModalAxis([7.3], ...)`
+        return jax.device_put(np.asarray(x, dtype=dtype))
     return jnp.asarray(x, dtype=float)
+
+
+def xp(x):
+    """The array module of `x`: numpy for host values (a model's `jax.device_get` copy: its derived constants
+    then cost no compiled program), `jax.numpy` otherwise."""
+    return np if isinstance(x, (np.ndarray, np.generic, float, int)) else jnp
+
+
+def atleast_1d(x):
+    """`jnp.atleast_1d(x)`, without a compiled program where `x` is concrete (see `device_array`)."""
+    if isinstance(x, Tracer):
+        return jnp.atleast_1d(x)
+    if isinstance(x, jax.Array) and x.ndim >= 1:
+        return x
+    return device_array(np.atleast_1d(np.asarray(x)))
+
+
+def device_array(x, dtype=None):
+    """`jnp.asarray(x, dtype)` without a compiled program where `x` is concrete: converted on the host and
+    transferred. (`jnp.asarray` of a host value, and any eager `jnp` operation, compiles a small program for
+    each new shape and dtype in a fresh process: 10-20 ms each, a dozen in a first call.) A tracer goes
+    through `jnp.asarray`; a JAX array of that dtype is returned as it is."""
+    if isinstance(x, Tracer):
+        return jnp.asarray(x, dtype=dtype)
+    want = None if dtype is None else jax.dtypes.canonicalize_dtype(dtype)
+    if isinstance(x, jax.Array) and (want is None or x.dtype == want):
+        return x
+    if want is None and type(x) in (bool, int, float, complex):
+        return jax.device_put(x)  # weakly typed, as `jnp.asarray` makes a Python number
+    return jax.device_put(np.asarray(x, dtype=want))
 
 
 #: leaf types known to be concrete arrays (jax's array types are added when first seen)

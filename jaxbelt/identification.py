@@ -35,7 +35,7 @@ import numpy as np
 import optimistix as optx
 
 from ._callables import by_value
-from ._checks import check_int, check_nonnegative, check_positive, require_x64
+from ._checks import check_int, check_nonnegative, check_positive, device_array, require_x64
 from ._guard import host_checked, reraise_checks
 
 __all__ = ["identify", "IdentifyResult"]
@@ -265,11 +265,11 @@ def identify(
     args = (
         by_value(predict),  # keyed by its code and values: a new lambda of the same code reuses the program
         names,
-        jnp.asarray(p0),
-        jnp.asarray(data),
-        jnp.asarray(w),
-        jnp.asarray(is_log),
-        jnp.asarray(scale),
+        device_array(p0),
+        device_array(data),
+        device_array(w),
+        device_array(is_log),
+        device_array(scale),
         solver,
     )
     # a check inside `predict` (a model built from the parameters, ...) fails inside the compiled fit: its

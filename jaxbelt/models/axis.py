@@ -22,9 +22,10 @@ from typing import ClassVar
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
+from jax.core import Tracer
 from jaxtyping import Array, Float
 
-from .._checks import as_float_array, is_concrete, record
+from .._checks import as_float_array, atleast_1d, device_array, is_concrete, record
 from .._model import AbstractModel, observable
 from .._params import converted, document, param
 from ..commands import AbstractMotionCommand
@@ -74,12 +75,15 @@ class ModalAxis(AbstractModel):
 
     def __init__(self, frequencies, damping_ratios, gains=None, *, frequency_std=None, damping_std=None):
         # the declared converters: a value of the wrong type is refused by the parameter's name
-        f = jnp.atleast_1d(converted(ModalAxis, "frequencies", frequencies))
+        f = atleast_1d(converted(ModalAxis, "frequencies", frequencies))
         self.frequencies = f
-        self.damping_ratios = jnp.atleast_1d(converted(ModalAxis, "damping_ratios", damping_ratios))
-        self.gains = jnp.ones_like(f) if gains is None else jnp.atleast_1d(converted(ModalAxis, "gains", gains))
-        self.frequency_std = None if frequency_std is None else jnp.atleast_1d(as_float_array(frequency_std))
-        self.damping_std = None if damping_std is None else jnp.atleast_1d(as_float_array(damping_std))
+        self.damping_ratios = atleast_1d(converted(ModalAxis, "damping_ratios", damping_ratios))
+        if gains is None:
+            self.gains = jnp.ones_like(f) if isinstance(f, Tracer) else device_array(np.ones(f.shape))
+        else:
+            self.gains = atleast_1d(converted(ModalAxis, "gains", gains))
+        self.frequency_std = None if frequency_std is None else atleast_1d(as_float_array(frequency_std))
+        self.damping_std = None if damping_std is None else atleast_1d(as_float_array(damping_std))
 
     def _check_relations(self):
         o = "ModalAxis"

@@ -15,7 +15,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_positive, is_concrete, record
+from .._checks import check_positive, is_concrete, record, xp
 from .._model import AbstractModel, observable
 from .._params import FloatParam, document, param, recheck
 from ..commands import AbstractMotionCommand
@@ -75,7 +75,7 @@ class BeltPlatform(AbstractModel):
         )
         if is_concrete(self):
             with jax.ensure_compile_time_eval():  # host values even when built inside a trace
-                xi = np.asarray(self.damping_ratio)
+                xi = np.asarray(jax.device_get(self).damping_ratio)  # on the host: no compiled program
             if not np.all(xi < 1.0):
                 raise ValueError(f"{msg}; got xi = {xi.tolist()}")
         else:
@@ -100,7 +100,8 @@ class BeltPlatform(AbstractModel):
     @property
     def omega_n(self):
         """Natural angular frequency $\\omega_n = \\sqrt{k_t/J}$ [rad/s]."""
-        return jnp.sqrt(self.k_t / self.J)
+        x = self.k_t / self.J
+        return xp(x).sqrt(x)
 
     @property
     def damping_ratio(self):

@@ -45,6 +45,7 @@ from .._checks import (
     check_positive,
     check_range,
     collecting,
+    device_array,
     is_concrete,
     record,
 )
@@ -422,7 +423,12 @@ def _crossing_root(n_pi_over_L, vt, slope):
     gradients by the implicit function theorem.
     """
     shape = jnp.broadcast_shapes(jnp.shape(slope), jnp.shape(n_pi_over_L), jnp.shape(vt))
-    args = [jnp.ravel(jnp.broadcast_to(jnp.asarray(a, dtype=float), shape)) for a in (n_pi_over_L, vt, slope)]
+    if is_concrete((n_pi_over_L, vt, slope)):  # on the host: eager broadcasts would compile small programs
+        args = [
+            device_array(np.ravel(np.broadcast_to(np.asarray(a, dtype=float), shape))) for a in (n_pi_over_L, vt, slope)
+        ]
+    else:
+        args = [jnp.ravel(jnp.broadcast_to(jnp.asarray(a, dtype=float), shape)) for a in (n_pi_over_L, vt, slope)]
     return _roots(*args).reshape(shape)
 
 

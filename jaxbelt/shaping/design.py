@@ -43,7 +43,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import as_float_array, is_concrete
+from .._checks import as_float_array, device_array, is_concrete
 from .._guard import host_checked
 from .._xla import QUICK_COMPILE
 from ..models.axis import ModalAxis
@@ -233,7 +233,7 @@ def _solve_round_impl(problem: MinimaxProblem, opts: DesignOptions, tau, tol, ce
     stop = jax.lax.stop_gradient
     prob_s = jax.tree_util.tree_map(lambda v: stop(v) if eqx.is_inexact_array(v) else v, problem)
     tau = stop(jnp.asarray(tau, dtype=float))
-    certify = jnp.asarray(certify)
+    certify = device_array(certify)
 
     def attempt(state):
         k, tau, _, _ = state
@@ -280,7 +280,7 @@ def _solve_round(problem, opts, tau, tol, certify=True):
     # XLA options apply to top-level programs only: inside a caller's trace (grad, jit) the plain program.
     # `certify` as an array: one compiled program for the exchange's rounds and the final one (a Python bool is a
     # static argument of filter_jit: a second compilation of the whole interior point method)
-    certify = jnp.asarray(certify)
+    certify = device_array(certify)
     if is_concrete((problem, tau, tol)):
         return _solve_round_top(problem, opts, tau, tol, certify)
     return _solve_round_nested(problem, opts, tau, tol, certify)
@@ -323,7 +323,11 @@ class MinimaxDesign(eqx.Module):
     @property
     def gap(self):
         """Certified relative optimality gap of the final LP: (worst - lower_bound) / worst."""
-        return (self.worst - self.lower_bound) / jnp.maximum(self.worst, 1e-300)
+        worst, lower = self.worst, self.lower_bound
+        if is_concrete((worst, lower)):  # on the host: three eager operations would compile three programs
+            worst, lower = np.asarray(worst), np.asarray(lower)
+            return device_array((worst - lower) / np.maximum(worst, 1e-300))
+        return (worst - lower) / jnp.maximum(worst, 1e-300)
 
     @property
     def converged(self) -> bool:
@@ -358,12 +362,12 @@ def minimax_design(problem: MinimaxProblem, opts: DesignOptions, tol=1e-9, per_r
     n_modes = problem.axis.n_modes
     u = float(problem.uncertainty)
     factors, mask = _initial_grid(opts, n_modes, u)
-    tol_a = jnp.asarray(tol, dtype=float)
-    tol_round = jnp.asarray(max(float(tol), ROUND_TOL), dtype=float)
-    tau = jnp.asarray(-1.0)
+    tol_a = device_array(tol, dtype=float)
+    tol_round = device_array(max(float(tol), ROUND_TOL), dtype=float)
+    tau = device_array(-1.0)
     rounds = 0
     while True:
-        problem = eqx.tree_at(lambda p: (p.factors, p.mask), problem, (jnp.asarray(factors), jnp.asarray(mask)))
+        problem = eqx.tree_at(lambda p: (p.factors, p.mask), problem, (device_array(factors), device_array(mask)))
         res, tau, (coef, worst_a, lower_a) = _solve_round(problem, opts, tau, tol_round, False)
         worst = float(worst_a)
         if opts.n_rounds == 0 or u == 0.0:
@@ -386,9 +390,9 @@ def minimax_design(problem: MinimaxProblem, opts: DesignOptions, tol=1e-9, per_r
         if added == 0:
             break
         rounds += 1
-        tau = jnp.asarray(worst)
+        tau = device_array(worst)
     if not (bool(res.vertex) or certified(worst_a, lower_a)):  # the final LP to `tol`, certified where it can be
-        res, tau, (coef, worst_a, lower_a) = _solve_round(problem, opts, jnp.asarray(worst), tol_a, True)
+        res, tau, (coef, worst_a, lower_a) = _solve_round(problem, opts, device_array(worst), tol_a, True)
         if opts.n_rounds > 0 and u > 0.0:
             fine_worst = float(np.asarray(_fine_ratios(problem, opts, coef)[1]).max())
     return MinimaxDesign(

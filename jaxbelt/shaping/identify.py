@@ -42,7 +42,7 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 
-from .._checks import check_int
+from .._checks import check_int, device_array
 
 __all__ = ["identify_axis", "load_record"]
 
@@ -420,10 +420,10 @@ def identify_axis(
     tau = dt * np.arange(N)
     yn = (y - mean) / spread
     u, r, sv, vt, code, steps = _fit(
-        jnp.asarray(tau),
-        jnp.asarray(yn),
-        jnp.asarray(theta0),
-        jnp.asarray(scale),
+        device_array(tau),
+        device_array(yn),
+        device_array(theta0),
+        device_array(scale),
         n=n,
         offset=offset,
         rtol=rtol,

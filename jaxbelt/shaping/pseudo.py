@@ -77,7 +77,7 @@ import optax
 from numpy.typing import ArrayLike
 
 from .. import _store
-from .._checks import check_positive, check_range
+from .._checks import check_positive, check_range, device_array
 from .._guard import eager
 from ..commands import PseudoPolynomial, _safe_pow
 from ..models.axis import ModalAxis
@@ -587,7 +587,7 @@ def _check(axis, distance, move_time, v_max, a_max, j_max, uncertainty, referenc
 
 
 def _f(x):
-    return jnp.asarray(x, dtype=float)  # strong float64 leaves: one program for every value
+    return device_array(x, dtype=float)  # strong float64 leaves: one program for every value
 
 
 def make_shared(kern, n_nodes, band_w, nom_w, guard, distance, move_time, limits, max_step=MAX_STEP, margin=MARGIN,
@@ -623,7 +623,7 @@ def make_runs(
     B = np.asarray(active).shape[0]
 
     def col(x, dtype: Any = float):
-        return jnp.asarray(np.broadcast_to(np.asarray(x, dtype=dtype), (B,)))
+        return device_array(np.broadcast_to(np.asarray(x, dtype=dtype), (B,)))
 
     return Run(
         active=_f(active),

@@ -20,7 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
 
-from .._checks import check_range
+from .._checks import atleast_1d, check_range, device_array
 from .._xla import quick_jit
 from ..commands import AbstractMotionCommand, PseudoPolynomial, ShapedCommand, falling_factorial
 from ..models.axis import ModalAxis
@@ -79,7 +79,7 @@ def _has_closed_form(cmd) -> bool:
 
 def _poles(axis: ModalAxis, factors):
     """`(s, omega_d)` of every mode at every frequency factor: shapes (n_modes, K)."""
-    r = jnp.atleast_1d(jnp.asarray(factors, dtype=float))
+    r = atleast_1d(device_array(factors, dtype=float))
     w = axis.omega[:, None] * r[None, :]
     z = axis.damping_ratios[:, None]
     wd = w * jnp.sqrt(1.0 - z**2)
@@ -98,7 +98,7 @@ def residual_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors: ArrayLi
         raise TypeError(f"residual_curve: `axis` must be a ModalAxis; got {type(axis).__name__}")
     if not isinstance(cmd, AbstractMotionCommand):
         raise TypeError(f"residual_curve: `cmd` must be a motion command; got {type(cmd).__name__}")
-    r = jnp.atleast_1d(jnp.asarray(factors, dtype=float))
+    r = atleast_1d(device_array(factors, dtype=float))
     if r.ndim != 1:
         raise ValueError(f"residual_curve: parameter `factors` must be a scalar or a 1-D array; got shape {r.shape}")
     check_range("factors", r, lo=0.0, lo_open=True, owner="residual_curve")

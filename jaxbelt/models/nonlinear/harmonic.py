@@ -50,7 +50,7 @@ if TYPE_CHECKING:
 else:  # imported by the first trace only: a process that loads the stored programs never needs them
     lx, optx = lazy_module("lineax"), lazy_module("optimistix")
 
-from ..._checks import check_int, check_positive, check_real, collecting, is_concrete, record
+from ..._checks import check_int, check_positive, check_real, collecting, device_array, is_concrete, record
 from ..._guard import all_ok, guard, prepare, stored_jit, traced_checks
 from ..._xla import QUICK_COMPILE
 from .model import ModalSystem, NonlinearBelt, mode_shapes
@@ -399,7 +399,7 @@ def _trace(belt, v0, v1, H, max_points, ds0, ds_max, then=(), n_folds: int = 0):
     compiled in the background while the continuation compiles and runs (their input types are the
     continuation's outputs)."""
     b = jax.lax.stop_gradient(belt)
-    v0, v1, ds0, ds_max = (jax.lax.stop_gradient(jnp.asarray(x, float)) for x in (v0, v1, ds0, ds_max))
+    v0, v1, ds0, ds_max = (jax.lax.stop_gradient(device_array(x, float)) for x in (v0, v1, ds0, ds_max))
     args = (b, v0, v1, H, max_points, ds0, ds_max)
     if then:
         types = prepare(_continue_jit, *args)
@@ -481,7 +481,7 @@ def _check_range_speeds(owner, belt, speed_range):
             jnp.all(jnp.isfinite(s)) & (s[0] > 0) & (s[0] < s[1]) & (s[1] < jnp.min(belt.wave_speed)),
             f"{owner}: parameter `speed_range` {what}",
         )
-    return jnp.asarray(v0, float), jnp.asarray(v1, float)
+    return device_array(v0, float), device_array(v1, float)
 
 
 def _fold_options(owner, belt, speed_range, n_harmonics, n_folds, max_points):
@@ -512,7 +512,7 @@ def fold_speeds(
     `throw=False` returns NaN for the missing ones.
     """
     H, n_folds, max_points, v0, v1 = _fold_options("fold_speeds", belt, speed_range, n_harmonics, n_folds, max_points)
-    _, Vs, ok = _fold_jit(belt, v0, v1, H, n_folds, max_points, jnp.asarray(_DS0), jnp.asarray(_DS_MAX))
+    _, Vs, ok = _fold_jit(belt, v0, v1, H, n_folds, max_points, device_array(_DS0), device_array(_DS_MAX))
     if throw and is_concrete(ok) and not bool(np.all(np.asarray(ok))):
         raise ValueError(
             f"fold_speeds: found {int(np.sum(np.asarray(ok)))} of n_folds={n_folds} folds in "
@@ -590,7 +590,7 @@ def jumps(
 ) -> Jumps:
     """Fold speeds and the peak-to-peak before and after each jump (see `Jumps`); differentiable."""
     H, n_folds, max_points, v0, v1 = _fold_options("jumps", belt, speed_range, n_harmonics, n_folds, max_points)
-    Vs, ppb, ppa, ok = _jumps_jit(belt, v0, v1, H, n_folds, max_points, jnp.asarray(_DS0), jnp.asarray(_DS_MAX))
+    Vs, ppb, ppa, ok = _jumps_jit(belt, v0, v1, H, n_folds, max_points, device_array(_DS0), device_array(_DS_MAX))
     if throw:
         if is_concrete(ok):
             if not bool(np.all(np.asarray(ok))):
@@ -693,20 +693,21 @@ def response_curve(
             "points); raise max_points or max_step"
         )
     keep = acc_n & (us_n[:, -1] <= float(v1) + 1e-9)
-    pp, amp, mult = _curve_post_jit(belt, us, jnp.asarray(keep), H)
-    _, Vf, okf = _folds_jit(belt, us, ts, jnp.asarray(keep), H, False)
+    keep_d = device_array(keep)
+    pp, amp, mult = _curve_post_jit(belt, us, keep_d, H)
+    _, Vf, okf = _folds_jit(belt, us, ts, keep_d, H, False)
     Vf, okf = np.asarray(Vf), np.asarray(okf)
     n = belt.n_modes
     mult = np.asarray(mult)[keep]
     return ResponseCurve(
-        speed=jnp.asarray(us_n[keep, -1]),
-        pp=jnp.asarray(np.asarray(pp)[keep]),
-        amplitude=jnp.asarray(np.asarray(amp)[keep]),
-        stable=jnp.asarray(np.max(np.abs(mult), axis=1) < 1.0),
-        multipliers=jnp.asarray(mult),
+        speed=device_array(us_n[keep, -1]),
+        pp=device_array(np.asarray(pp)[keep]),
+        amplitude=device_array(np.asarray(amp)[keep]),
+        stable=device_array(np.max(np.abs(mult), axis=1) < 1.0),
+        multipliers=device_array(mult),
         # the scale from host values: as device operations each would compile a small program in a new process
-        coefficients=jnp.asarray(_scale(jax.device_get(belt)) * us_n[keep, :-1].reshape(-1, 2 * n, 2 * H + 1)),
-        folds=jnp.asarray(np.sort(Vf[okf])),
+        coefficients=device_array(_scale(jax.device_get(belt)) * us_n[keep, :-1].reshape(-1, 2 * n, 2 * H + 1)),
+        folds=device_array(np.sort(Vf[okf])),
     )
 
 
