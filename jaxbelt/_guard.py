@@ -207,7 +207,7 @@ def host_checked(
     plain = jit(fun, **jit_kwargs)
     if isinstance(_host_checks, _Off):
         return plain
-    checkified = checkify.checkify(fun, errors=checkify.user_checks) if checks else fun
+    checkified = _lean(checkify.checkify(fun, errors=checkify.user_checks)) if checks else fun
     top_kwargs = dict(jit_kwargs, compiler_options=compiler_options) if compiler_options else jit_kwargs
     checked = jit(checkified, **top_kwargs)
     name = f"{getattr(fun, '__module__', '?')}.{getattr(fun, '__qualname__', '?')}"
@@ -302,6 +302,86 @@ def stored_jit(fun: Any = None, *, compiler_options: dict | None = None) -> Any:
 def _as_check(pred, message: str) -> None:
     """A checkify check that fails where any element of `pred` is True (inside a `host_checked` program)."""
     checkify.check(~jnp.any(jnp.asarray(pred)), message.replace("{", "{{").replace("}", "}}"))
+
+
+#: per checkify pass: whether a (sub-)jaxpr holds a check anywhere, by the jaxpr's id (the jaxpr is kept beside
+#: its answer, so an id is never reused while its entry lives; cleared after each pass)
+_HOLDS_CHECK: dict = {}
+_state: dict = {"lean": None}
+
+
+def _sub_jaxprs(params):
+    for param in params.values():
+        for sub in param if isinstance(param, (list, tuple)) else (param,):
+            if isinstance(sub, jax.extend.core.ClosedJaxpr):
+                yield sub.jaxpr
+            elif isinstance(sub, jax.extend.core.Jaxpr):
+                yield sub
+
+
+def _holds_check(jaxpr, check_p) -> bool:
+    hit = _HOLDS_CHECK.get(id(jaxpr))
+    if hit is not None and hit[0] is jaxpr:
+        return hit[1]
+    found = any(
+        eqn.primitive is check_p or any(_holds_check(sub, check_p) for sub in _sub_jaxprs(eqn.params))
+        for eqn in jaxpr.eqns
+    )
+    _HOLDS_CHECK[id(jaxpr)] = (jaxpr, found)
+    return found
+
+
+def _lean(checkified):
+    """`checkified` (a `checkify.checkify` function) traced with `_lean_checkify`'s rules."""
+
+    @functools.wraps(checkified)
+    def traced(*args, **kwargs):
+        _lean_checkify()
+        try:
+            return checkified(*args, **kwargs)
+        finally:
+            _HOLDS_CHECK.clear()
+
+    return traced
+
+
+def _lean_checkify() -> bool:
+    """Make checkify's pass for user checks (`checkify.user_checks`, the only errors `host_checked` asks for)
+    step over every loop, branch, call and custom derivative whose body holds no check: it binds that equation
+    as it is instead of rebuilding its body (twice, for a while loop). A diffrax solve's loop holds none of
+    jaxbelt's checks (they are made on the parameters, outside it), and its rebuild was a third of the tracing
+    of a checked simulation. The result is the same program; other error sets (NaN, index checks), which any
+    equation may raise, take checkify's own rules. Installed once; False where JAX's layout is another (the
+    pass is then checkify's own)."""
+    if _state.get("lean") is not None:
+        return _state["lean"]
+    try:
+        from jax._src import ad_checkpoint, custom_derivatives, pjit
+        from jax._src import checkify as _checkify
+        from jax._src.lax import control_flow
+
+        rules, check_p, user = _checkify.error_checks, _checkify.check_p, checkify.user_checks
+        prims = [control_flow.while_p, control_flow.cond_p, control_flow.scan_p, pjit.jit_p, ad_checkpoint.remat_p]
+        prims += [custom_derivatives.custom_jvp_call_p, custom_derivatives.custom_vjp_call_p]
+    except Exception:  # noqa: BLE001 - another JAX layout
+        _state["lean"] = False
+        return False
+
+    def lean(prim, rule):
+        def rule_or_bind(error, enabled_errors, *invals, **params):
+            if enabled_errors <= user and not any(_holds_check(sub, check_p) for sub in _sub_jaxprs(params)):
+                return error, prim.bind(*invals, **prim.get_bind_params(params))  # as `jax.core.eval_jaxpr` does
+            return rule(error, enabled_errors, *invals, **params)
+
+        rule_or_bind._jaxbelt_lean = True  # pyright: ignore[reportFunctionMemberAccess]
+        return rule_or_bind
+
+    for prim in prims:
+        rule = rules.get(prim)
+        if rule is not None and not getattr(rule, "_jaxbelt_lean", False):
+            rules[prim] = lean(prim, rule)
+    _state["lean"] = True
+    return True
 
 
 def _equinox_errors_as_checks() -> None:

@@ -164,6 +164,48 @@ def test_host_checked_programs_raise_on_the_host():
         jax.block_until_ready(jax.jit(lambda x: eqx.error_if(x, x > 1, "x must be <= 1"))(2.0))
 
 
+def test_checks_inside_loops_branches_and_custom_derivatives_still_raise():
+    # checkify's pass steps over the loops, branches, calls and custom derivatives that hold no check
+    # (`_lean_checkify`); one that holds a check keeps it, however deep
+    from jax._src import checkify as jax_checkify
+
+    from jaxbelt import _guard
+    from jaxbelt._guard import error_if, host_checked
+
+    def loop(x):  # a check in a while loop's body, at its third step, under a jit and a custom derivative
+        @jax.custom_jvp
+        def step(c):
+            i, v = c
+            return i + 1, error_if(v * 2.0, (i == 2) & (v > 10.0), "the loop's value must stay <= 10")
+
+        step.defjvp(lambda p, t: (step(p[0]), t[0]))
+        body = jax.jit(lambda c: step(c))
+        plain = jax.lax.fori_loop(0, 5, lambda i, v: v + 1.0, x)  # a loop without a check beside it
+        return jax.lax.while_loop(lambda c: c[0] < 4, body, (0, plain))[1]
+
+    def branch(x):  # a check in one branch of a cond inside a scan
+        def f(c, _):
+            c = jax.lax.cond(
+                c > 0, lambda v: error_if(v, v > 100.0, "the branch's value must stay <= 100"), jnp.negative, c
+            )
+            return c * 3.0, c
+
+        return jax.lax.scan(f, x, None, length=4)[0]
+
+    for fun, good, bad, message in ((loop, -3.0, 1.0, "loop's value"), (branch, 1.0, 5.0, "branch's value")):
+        checked = host_checked(fun)
+        np.testing.assert_allclose(float(checked(good)), float(jax.jit(fun)(good)), rtol=0)  # the same program
+        with pytest.raises(ValueError, match=message):
+            checked(bad)
+    assert _guard._lean_checkify()  # the lean rules are installed (this JAX's layout)
+    # the rules step over nothing for other error sets: checkify's NaN checks still see inside a check-free loop
+    nan_in_loop = jax_checkify.checkify(
+        lambda x: jax.lax.fori_loop(0, 2, lambda i, v: jnp.log(v), x), errors=jax_checkify.nan_checks
+    )
+    err, _ = jax.jit(nan_in_loop)(-1.0)
+    assert err.get() is not None and "nan" in err.get().lower()
+
+
 _ONE_PROGRAM = r"""
 import jax, jax.numpy as jnp, numpy as np
 import jaxbelt as jb
