@@ -327,6 +327,8 @@ def _holds_check(jaxpr, check_p) -> bool:
         eqn.primitive is check_p or any(_holds_check(sub, check_p) for sub in _sub_jaxprs(eqn.params))
         for eqn in jaxpr.eqns
     )
+    if len(_HOLDS_CHECK) >= 100_000:  # a caller's own checkify passes (the rules serve them too) are not cleared
+        _HOLDS_CHECK.clear()
     _HOLDS_CHECK[id(jaxpr)] = (jaxpr, found)
     return found
 

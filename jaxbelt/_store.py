@@ -214,8 +214,8 @@ def _static(v):
         key = v.lasting_key()
         return None if key is None else f"by_value:{key}"
     if isinstance(v, Mesh):
-        devices = v.devices.flat
-        if not all(d.platform == "cpu" for d in v.devices.flat):
+        devices = list(v.devices.flat)
+        if not all(d.platform == "cpu" for d in devices):
             return None
         return f"mesh:{v.devices.shape}:{v.axis_names!r}:{[d.id for d in devices]}"
     return None
