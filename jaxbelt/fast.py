@@ -308,13 +308,20 @@ def output_components(model, names, inp, t) -> tuple[int, ...]:
     return tuple(sorted(needed))
 
 
+def _all_finite(x):
+    """Whether each element of the batch `x` (leading axis) is finite everywhere, in one read of `x`: a sum of
+    `x * 0` is 0 where every value is finite and NaN otherwise, and XLA fuses the product into the sum (`isfinite`
+    then `all` writes a boolean array of the size of `x` and reads it back)."""
+    return jnp.isfinite(jnp.sum(x * 0.0, axis=tuple(range(1, x.ndim))))
+
+
 def batched_exponential_scene(scene):
     """Solve a start-up scene whose command carries a *batch* of time constants, or return None.
 
     `Scene(model, ExponentialVoltage(v_max, gammas), ts=ts)` with `gammas` of shape (B,) (a scalar
     `v_max`, scalar model parameters) is B start-up runs sharing A: they are solved together by
     `startup_gamma_batch`. The result is a `Solution` with `ys` (B, N, n) and each observed output
-    (B, N); `success` (B,) is False where a trajectory is not finite. Anything else returns None
+    (B, N); `success` (B,) is False where a trajectory is not finite (its state; without the state, its outputs). Anything else returns None
     (the caller solves the scene as usual).
     """
     from ._model import AbstractLinearModel
@@ -357,12 +364,12 @@ def batched_exponential_scene(scene):
             return jax.vmap(lambda t, y: model.output(name, t, state(y), cmd))(scene.ts, yb)
 
         outputs[name] = jax.vmap(one)(inp.gamma, ys)
-    if part is None:
-        success = jnp.all(jnp.isfinite(ys), axis=(1, 2))
-    else:  # what was computed: the components the outputs read, and the outputs
-        success = jnp.all(jnp.isfinite(ys), axis=(1, 2))
+    if scene.state or not outputs:
+        success = _all_finite(ys)
+    else:  # what is returned: the outputs (a pass over the components they read would be one more read of them)
+        success = jnp.ones(ys.shape[:1], dtype=bool)
         for v in outputs.values():
-            success = success & jnp.all(jnp.isfinite(v), axis=1)
+            success = success & _all_finite(v)
     return Solution(
         ts=scene.ts,
         ys=ys if scene.state else None,

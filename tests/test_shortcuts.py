@@ -138,6 +138,25 @@ def test_batch_without_state_equals_the_full_state_run(model):
         np.testing.assert_allclose(one.outputs[name], ref, rtol=1e-13, atol=1e-13 * np.max(np.abs(ref)))
 
 
+def test_batch_success_is_false_where_what_is_returned_is_not_finite():
+    # the batched closed form itself (no parameter checks: those come with simulate): a NaN time constant gives a
+    # NaN trajectory; without the state, `success` reads the outputs it returns
+    from jaxbelt.fast import batched_exponential_scene
+
+    gammas = jnp.array([0.02, jnp.nan, 0.05])
+
+    def run(observe, state):
+        return jax.jit(
+            lambda g: batched_exponential_scene(
+                jb.Scene(jb.BeltStartup(), jb.ExponentialVoltage(V, g), ts=TS, observe=observe, state=state)
+            )
+        )(gammas)
+
+    for observe, state in (((), True), (("electric_power",), False), (("current", "omega2"), False)):
+        sol = run(observe, state)
+        np.testing.assert_array_equal(np.asarray(sol.success), [True, False, True])
+
+
 def test_batch_without_state_computes_only_the_components_read():
     from jaxbelt.fast import batched_exponential_scene
 
