@@ -71,11 +71,16 @@ class _Unkeyable(Exception):
     """A value the key cannot be made of (a tracer): the function keeps its identity."""
 
 
-def _library(module) -> bool:
+def _rooted(module, roots) -> bool:
+    """Whether `module` (a name) belongs to one of the packages `roots` or to the standard library."""
     if not isinstance(module, str) or not module:
         return False
     root = module.partition(".")[0]
-    return root in _LIBRARY_ROOTS or root in getattr(sys, "stdlib_module_names", ())
+    return root in roots or root in getattr(sys, "stdlib_module_names", ())
+
+
+def _library(module) -> bool:
+    return _rooted(module, _LIBRARY_ROOTS)
 
 
 def _global_names(code: types.CodeType) -> set:
@@ -173,7 +178,7 @@ class _Keyer:
         library = _library(module)
         closure = fn.__closure__ or ()
         if library and not closure and not fn.__defaults__ and not fn.__kwdefaults__:
-            return ("id", fn)  # a library's module-level function: its identity is its meaning
+            return self.library_function(fn)  # a library's module-level function: its identity is its meaning
         cells = []
         for cell in closure:
             try:
@@ -190,18 +195,14 @@ class _Keyer:
         else:
             used = tuple((n, self.value(glob[n], depth + 1)) for n in sorted(_global_names(fn.__code__)) if n in glob)
         attrs = tuple(sorted((k, self.value(a, depth + 1)) for k, a in vars(fn).items()))
-        return (
-            "function",
-            fn.__code__,
-            id(glob),
-            module,
-            fn.__qualname__,
-            tuple(cells),
-            defaults,
-            kwdefaults,
-            used,
-            attrs,
-        )
+        return ("function", *self.code(fn), module, fn.__qualname__, tuple(cells), defaults, kwdefaults, used, attrs)
+
+    def library_function(self, fn) -> tuple:
+        return ("id", fn)
+
+    def code(self, fn) -> tuple:
+        """The function's code, and where its globals live."""
+        return (fn.__code__, id(fn.__globals__))
 
 
 #: libraries whose versions the program store's fingerprint holds (`jaxbelt._store`): their functions, classes
@@ -212,10 +213,7 @@ _VERSIONED_ROOTS = frozenset(
 
 
 def _versioned(module) -> bool:
-    if not isinstance(module, str) or not module:
-        return False
-    root = module.partition(".")[0]
-    return root in _VERSIONED_ROOTS or root in getattr(sys, "stdlib_module_names", ())
+    return _rooted(module, _VERSIONED_ROOTS)
 
 
 def _code(code: types.CodeType) -> tuple:
@@ -339,39 +337,15 @@ class _Lasting(_Keyer):
 
     def plain(self, fn: types.FunctionType, depth: int):
         module = getattr(fn, "__module__", None)
-        closure = fn.__closure__ or ()
-        if _library(module):
-            if not _versioned(module):
-                raise _Unkeyable
-            if not closure and not fn.__defaults__ and not fn.__kwdefaults__:
-                return ("libfn", self.named(fn))
-        cells = []
-        for cell in closure:
-            try:
-                contents = cell.cell_contents
-            except ValueError:
-                cells.append(("empty",))
-                continue
-            cells.append(self.value(contents, depth + 1))
-        defaults = tuple(self.value(d, depth + 1) for d in fn.__defaults__ or ())
-        kwdefaults = tuple(sorted((k, self.value(d, depth + 1)) for k, d in (fn.__kwdefaults__ or {}).items()))
-        glob = fn.__globals__
-        if _library(module):
-            used = ()
-        else:
-            used = tuple((n, self.value(glob[n], depth + 1)) for n in sorted(_global_names(fn.__code__)) if n in glob)
-        attrs = tuple(sorted((k, self.value(a, depth + 1)) for k, a in vars(fn).items()))
-        return (
-            "function",
-            _code(fn.__code__),
-            str(module),
-            fn.__qualname__,
-            tuple(cells),
-            defaults,
-            kwdefaults,
-            used,
-            attrs,
-        )
+        if _library(module) and not _versioned(module):  # another library's function: its code could change
+            raise _Unkeyable
+        return super().plain(fn, depth)
+
+    def library_function(self, fn) -> tuple:
+        return ("libfn", self.named(fn))
+
+    def code(self, fn) -> tuple:
+        return (_code(fn.__code__),)  # by value; its module's globals are keyed where it reads them
 
 
 class ByValue:
