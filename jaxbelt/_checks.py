@@ -94,10 +94,10 @@ def as_float_array(x):
             _SCALARS[key] = hit
             _HOST[id(hit)] = (hit, host)
         return hit
-    if t is np.ndarray and x.dtype.kind in "fiub":
+    if (t is np.ndarray and x.dtype.kind in "fiub") or (
+        t is list and all(type(e) is float or type(e) is int for e in x)  # `ModalAxis([7.3], ...)`
+    ):
         # converted on the host and transferred: `jnp.asarray` would run a small program per shape
-        return jax.device_put(np.asarray(x, dtype=dtype))
-    if t is list and all(type(e) is float or type(e) is int for e in x):  # `ModalAxis([7.3], ...)`
         return jax.device_put(np.asarray(x, dtype=dtype))
     return jnp.asarray(x, dtype=float)
 

@@ -423,12 +423,11 @@ def _crossing_root(n_pi_over_L, vt, slope):
     gradients by the implicit function theorem.
     """
     shape = jnp.broadcast_shapes(jnp.shape(slope), jnp.shape(n_pi_over_L), jnp.shape(vt))
-    if is_concrete((n_pi_over_L, vt, slope)):  # on the host: eager broadcasts would compile small programs
-        args = [
-            device_array(np.ravel(np.broadcast_to(np.asarray(a, dtype=float), shape))) for a in (n_pi_over_L, vt, slope)
-        ]
-    else:
-        args = [jnp.ravel(jnp.broadcast_to(jnp.asarray(a, dtype=float), shape)) for a in (n_pi_over_L, vt, slope)]
+    host = is_concrete((n_pi_over_L, vt, slope))  # on the host: eager broadcasts would compile small programs
+    m = np if host else jnp
+    args = [m.ravel(m.broadcast_to(m.asarray(a, dtype=float), shape)) for a in (n_pi_over_L, vt, slope)]
+    if host:
+        args = [device_array(a) for a in args]
     return _roots(*args).reshape(shape)
 
 

@@ -233,7 +233,7 @@ def _solve_round_impl(problem: MinimaxProblem, opts: DesignOptions, tau, tol, ce
     stop = jax.lax.stop_gradient
     prob_s = jax.tree_util.tree_map(lambda v: stop(v) if eqx.is_inexact_array(v) else v, problem)
     tau = stop(jnp.asarray(tau, dtype=float))
-    certify = device_array(certify)
+    certify = jnp.asarray(certify)
 
     def attempt(state):
         k, tau, _, _ = state
