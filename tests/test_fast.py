@@ -168,3 +168,113 @@ def test_simulate_routes_a_batch_of_gammas_to_the_fast_path():
         )
     with pytest.raises(ValueError, match="jax.vmap over scalar commands"):
         jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, gammas), ts=TS), method="ode")
+
+
+def test_expm1_from_exp_is_as_accurate_as_expm1():
+    # e^x - 1 from the exponential the batch's pass computes anyway: against numpy's expm1 (an independent
+    # implementation), relative error no larger than XLA's own expm1 on the same points (2.9e-16 and 6.2e-16
+    # measured over negative x; the pass sees x = -(t - t0)/gamma <= 0)
+    from jaxbelt.fast import expm1_from_exp
+
+    ours = jax.jit(lambda x: expm1_from_exp(x, jnp.exp(x)))
+    for x in (-np.logspace(-14, 2.5, 200_001), np.logspace(-14, 0.5, 50_001)):
+        ref = np.expm1(x)
+        err = np.max(np.abs(np.asarray(ours(x)) - ref) / np.abs(ref))
+        xla = np.max(np.abs(np.asarray(jax.jit(jnp.expm1)(x)) - ref) / np.abs(ref))
+        assert err <= max(xla, 2.3e-16) and err < 4e-16, (err, xla)
+    # the polynomial never sees a large argument: finite values and derivatives everywhere
+    x = jnp.array([0.0, -0.3, -0.5, -1e3, -1e300])
+    np.testing.assert_array_equal(np.isfinite(jax.vmap(jax.grad(lambda x: expm1_from_exp(x, jnp.exp(x))))(x)), True)
+
+
+def _power_reference(model, ts, gamma, t0=0.0, v_max=24.0):
+    """Electric power V I of a start-up from rest at t0 under V = V_max (1 - e^{-t/gamma}) (absolute t), from the
+    matrix exponential reference and numpy's expm1."""
+    A, B = (np.asarray(a, dtype=float) for a in model.matrices())
+    const = B[:, 0] * float(model.tau_r0) + v_max * B[:, 1]
+    F = np.stack([const, -v_max * np.exp(-t0 / gamma) * B[:, 1]], axis=1)
+    xs = expm_reference(A, F, np.array([0.0, -1.0 / gamma]), np.zeros(A.shape[0]), ts - t0)
+    return -v_max * np.expm1(-ts / gamma) * xs[:, -1]
+
+
+@pytest.mark.parametrize("t0", [0.0, 0.05])
+def test_one_output_in_the_pass_matches_the_reference_at_resonance_and_by_chunks(monkeypatch, t0):
+    # without the state, the output is computed in the pass (its voltage from the pass's exponential): each element
+    # against the independent reference, an element at resonance (corrected, computed again) and a start at t0 > 0
+    # included; the same numbers when the batch is written by chunks
+    from jaxbelt import fast
+
+    model = jb.BeltStartup()
+    lam = np.linalg.eigvals(np.asarray(model.matrices()[0]))
+    g_res = -1.0 / sorted(lam[(np.imag(lam) == 0) & (np.real(lam) < -1)].real)[-1]
+    gammas = jnp.asarray(np.r_[np.linspace(0.005, 0.1, 36), g_res])
+    ts = TS + t0
+
+    def power(g):
+        scene = jb.Scene(model, jb.ExponentialVoltage(24.0, g), ts=ts, observe=("electric_power",), state=False)
+        return fast.batched_exponential_scene(scene)["electric_power"]
+
+    one_pass = np.asarray(jax.jit(power)(gammas))
+    for i in (0, 17, 35, 36):
+        ref = _power_reference(model, np.asarray(ts), float(gammas[i]), t0)
+        np.testing.assert_allclose(one_pass[i], ref, rtol=0, atol=1e-10 * np.max(np.abs(ref)))
+    monkeypatch.setattr(fast, "_PASS_ELEMENTS", 10 * TS.shape[0])  # 4 chunks of 10: the last overlaps by 3
+    chunked = np.asarray(jax.jit(power)(gammas))
+    np.testing.assert_allclose(chunked, one_pass, rtol=0, atol=1e-13 * np.max(np.abs(one_pass)))
+
+
+def test_one_output_gradient_matches_finite_differences():
+    model = jb.BeltStartup()
+
+    @jax.jit
+    def f(gs):
+        scene = jb.Scene(model, jb.ExponentialVoltage(24.0, gs), ts=TS, observe=("electric_power",), state=False)
+        return jnp.sum(jb.simulate(scene)["electric_power"][:, 10])
+
+    gs = jnp.array([0.02, 0.03])
+    g = jax.grad(f)(gs)
+    h = 1e-6
+    for i in range(2):
+        e = jnp.zeros(2).at[i].set(h)
+        fd = (f(gs + e) - f(gs - e)) / (2 * h)
+        assert abs(g[i] - fd) < 1e-6 * abs(fd)
+
+
+@pytest.mark.parametrize(
+    "A, s_var",
+    [
+        (np.array([[-10.0, 0.0], [0.0, -10.02]]), np.array([-10.01, -3.0])),  # two modes near one rate: exact form
+        (np.array([[-5.0, 1.0], [0.0, -5.0]]), np.array([-5.0, -1.0])),  # defective A (Jordan block): expm form
+    ],
+)
+def test_fallbacks_apply_post_to_their_states(A, s_var):
+    # `post` receives the states and the input's e^{s tau} - 1 in every form, the fall-backs included
+    F, s, f, x0 = np.array([[1.0], [0.5]]), np.array([0.0]), np.array([0.3, -1.0]), np.array([0.2, 0.1])
+    ts = np.linspace(0.0, 1.0, 21)
+    args = [jnp.asarray(a) for a in (A, F, s, x0)] + [0.0, jnp.asarray(ts), jnp.asarray(f), jnp.asarray(s_var)]
+    got = exp_input_batch(
+        *args, post=lambda xs, a, em1: {"y": xs[..., 1] * a[:, None], "em1": em1}, post_args=2 * s_var
+    )
+    for i, sv in enumerate(s_var):
+        ref = expm_reference(A, np.concatenate([F, f[:, None]], axis=1), np.array([0.0, sv]), x0, ts)
+        np.testing.assert_allclose(got["y"][i], 2 * sv * ref[:, 1], rtol=0, atol=1e-10 * np.max(np.abs(ref)))
+        np.testing.assert_allclose(got["em1"][i], np.expm1(sv * ts), rtol=4e-16, atol=0)
+
+
+def test_an_output_that_reads_more_of_its_command_than_its_value():
+    # an output that reads a command's parameter (not only its value) is computed with the command itself
+    from jaxbelt._model import observable
+
+    class Drive(jb.BeltStartup):
+        @observable("voltage_over_gamma")
+        def _out_voltage_over_gamma(self, t, y, inp):
+            return inp(t) / inp.gamma * y[-1]
+
+    model, gammas = Drive(), jnp.array([0.02, 0.05])
+    one = jb.simulate(
+        jb.Scene(model, jb.ExponentialVoltage(24.0, gammas), ts=TS, observe=("voltage_over_gamma",), state=False)
+    )
+    full = jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, gammas), ts=TS, observe=("electric_power",)))
+    np.testing.assert_allclose(
+        one["voltage_over_gamma"], full["electric_power"] / gammas[:, None], rtol=1e-13, atol=1e-13 * 24 * 100
+    )
