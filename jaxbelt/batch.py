@@ -141,7 +141,7 @@ def cpu_devices(n: int | None = None) -> int:
     `sweep` runs its slices in parallel. Returns the number of CPU devices.
 
     JAX starts with one CPU device, whose programs use about one core for the small element-wise
-    work of a batched ODE solve; `sweep` over `n` devices runs `n` slices at once (measured: 2.4x
+    work of a batched ODE solve; `sweep` over `n` devices runs `n` slices at once (measured: 2.2x
     on 2 cores for the four-bar gain sweep, benchmarks/coldstart.py). It must be called before
     JAX creates its CPU backend (before the first array is made); afterwards it cannot change the
     count and raises `RuntimeError`. Nothing else changes: unsharded programs still run on the
