@@ -167,7 +167,8 @@ def _loaded_after(code: str) -> set:
 
 def test_import_and_the_startup_closed_form_load_only_what_they_use():
     # `import jaxbelt` imports no heavy library; the start-up closed form adds equinox, never an ODE solver,
-    # an optimiser or a plotting library; the first name of another scene loads that scene's libraries
+    # an optimiser or a plotting library; the first name of an optimiser loads its optimisation library, the
+    # first ODE solve diffrax
     assert _loaded_after("import jaxbelt") == set()
     assert (
         _loaded_after(
@@ -177,7 +178,19 @@ def test_import_and_the_startup_closed_form_load_only_what_they_use():
         )
         == set()
     )
-    assert {"diffrax", "optax"} <= _loaded_after("import jaxbelt as jb; jb.tune_pid")
+    assert "optax" in _loaded_after("import jaxbelt as jb; jb.tune_pid")
+    assert "diffrax" in _loaded_after(
+        "import jax, jaxbelt as jb; jax.config.update('jax_enable_x64', True); "
+        "jb.simulate(jb.Scene(jb.FourBarDrive(), jb.PID(), ts=jax.numpy.linspace(0.0, 0.01, 3)))"
+    )
+    # the residual energy by its default quadrature, and an optimisation of it, need no ODE solver (0.26 s of
+    # their first call); its `method="ode"` loads diffrax when called
+    shaping = (
+        "import jax, jaxbelt as jb; jax.config.update('jax_enable_x64', True); "
+        "plat, cmd = jb.BeltPlatform(), jb.PseudoPolynomial(jax.numpy.array([3.0, 4.0, 5.0])); "
+    )
+    assert "diffrax" not in _loaded_after(shaping + "jb.optimise_command(plat, cmd, progress=False)")
+    assert "diffrax" in _loaded_after(shaping + "jb.residual_energy(plat, cmd, method='ode')")
 
 
 def _lazy_packages():

@@ -34,7 +34,6 @@ being $T + t_{last}$.
 
 from __future__ import annotations
 
-import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -171,6 +170,8 @@ def convolution_integrals(plat, cmd, n_nodes: int = 128):
 
 
 def _end_state_ode(plat, cmd, rtol, atol, max_steps):
+    import diffrax  # only this path needs it: the default quadrature's first call does not import it (0.26 s)
+
     term = diffrax.ODETerm(lambda t, y, args: plat.deflection_vector_field(t, y, args))
     sol = diffrax.diffeqsolve(
         term,
