@@ -394,7 +394,10 @@ def _equinox_errors_as_checks() -> None:
     their checks: traced, each is a host callback, and a program holding one is never stored by the
     persistent compilation cache. Installed once, the wrapper leaves every call outside those two
     contexts (another thread, the caller's own jit) to equinox unchanged: the contexts are
-    thread-local and part of JAX's jit cache keys.
+    thread-local and part of JAX's jit cache keys. A check whose condition is a concrete value (not part
+    of the program: e.g. optimistix checking a solver's options at its import, which a first call may
+    trigger while tracing) is decided at once: nothing where it is False, the `ValueError` of a failed check
+    where it is True.
     """
     if getattr(eqx.error_if, "_jaxbelt_checks", False):
         return
@@ -408,6 +411,13 @@ def _equinox_errors_as_checks() -> None:
             if _validated.value and (msg in _VALIDATED_BY_JAXBELT or str(msg).startswith(_VALIDATED_PREFIX)):
                 return x
             if _host_checks.value:
+                if is_concrete(pred):
+                    # a value known now, not a check of the program (another library's eager check: optimistix
+                    # checks its solvers' options as its modules are imported, which a first call may do while
+                    # tracing): decided now, with the error a failed check of the program raises
+                    if np.any(np.asarray(pred)):
+                        raise ValueError(str(msg))
+                    return x
                 _as_check(pred, msg)
                 return x
         return original(x, pred, msg, on_error=on_error)

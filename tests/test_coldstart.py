@@ -417,3 +417,43 @@ def test_tune_pid_without_a_limiter_reports_the_steps_own_metrics(monkeypatch):
         [best["chi"], best["v_peak"], best["i_peak"], best["mean_speed"]],
         rtol=1e-9,
     )
+
+
+def test_tune_pid_first_call_in_a_fresh_process_imports_its_solvers_while_tracing():
+    # without the cache, the first ODE solve of the process is traced inside the tuning step's checked program:
+    # diffrax, optimistix and lineax are imported there, and optimistix checks its solvers' options with
+    # `eqx.error_if` on concrete values as it is imported (decided at once, not made a check of the program)
+    code = (
+        "import sys, jax; jax.config.update('jax_enable_x64', True)\n"
+        "import jaxbelt as jb\n"
+        "pid = jb.PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0, v_limit=60.0)\n"
+        "before = 'optimistix' in sys.modules\n"
+        "res = jb.tune_pid(jb.FourBarDrive(), pid, steps=1, progress=False)\n"
+        "print(before, 'optimistix' in sys.modules, bool(0 < res.chi < 1))\n"
+    )
+    assert _subprocess(code).split() == ["False", "True", "True"]
+
+
+def test_a_concrete_equinox_check_inside_a_checked_program_is_decided_at_once():
+    import equinox as eqx
+
+    from jaxbelt._guard import host_checked
+
+    def f(x):
+        eqx.error_if(0.0, False, "never")  # concrete and False: nothing recorded, nothing raised
+        return eqx.error_if(x, x < 0, "x must be >= 0")  # traced: a check of the program
+
+    checked = host_checked(f)
+    assert float(checked(jnp.asarray(2.0))) == 2.0
+    with pytest.raises(Exception, match="x must be >= 0"):
+        checked(jnp.asarray(-1.0))
+    # a program compiled without jaxbelt's checks (`checks=False`, as the tuning step) takes the concrete check too
+    assert float(host_checked(lambda x: eqx.error_if(x, False, "never") * 2.0, checks=False)(jnp.asarray(2.0))) == 4.0
+
+    def g(x):
+        return eqx.error_if(x, True, "concrete and true")  # the error of a failed check of the program
+
+    with pytest.raises(ValueError, match="concrete and true"):
+        host_checked(g)(jnp.asarray(1.0))
+    with pytest.raises(ValueError, match="concrete and true"):
+        host_checked(g, checks=False)(jnp.asarray(1.0))
