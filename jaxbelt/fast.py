@@ -93,6 +93,12 @@ def expm1_from_exp(x, e):
     return jnp.where(small, p * xs, e - 1.0)
 
 
+def _input_em1(s, tau):
+    """$e^{s_b\\tau_t} - 1$ of each element b and time t, (B, N), for rates `s` (B,) and times `tau` (N,)."""
+    x = s[:, None] * tau[None, :]
+    return expm1_from_exp(x, jnp.exp(x))
+
+
 #: exponentials e^{s_b tau_t} one pass of the batched closed form keeps (2^23: 64 MiB): a batch with more is
 #: written by chunks
 _PASS_ELEMENTS = 1 << 23
@@ -261,8 +267,7 @@ def exp_input_batch(
     if post is not None:  # the other forms compute the states, then `post`
 
         def then_post(form):
-            rate_time = s_var[:, None] * tau[None, :]
-            return post(form(), post_args, expm1_from_exp(rate_time, jnp.exp(rate_time)))
+            return post(form(), post_args, _input_em1(s_var, tau))
 
         forms[1:] = [lambda f=f: then_post(f) for f in forms[1:]]
     ok = jnp.isfinite(cond) & (cond < MODAL_COND_LIMIT)
@@ -383,16 +388,14 @@ def _all_finite(x):
 
 class _InputAt(eqx.Module):
     """The command of one batch element at one time, its value there known (computed in the batch's pass):
-    an output reads `value` instead of evaluating the command again."""
+    an output reads `value` instead of evaluating the command again. An output that needs anything else of its
+    command takes the command itself (`batched_exponential_scene`)."""
 
     value: jax.Array
     command: Any  # the batch element's `ExponentialVoltage`
 
     def __call__(self, t):
         return self.value
-
-    def exp_terms(self):
-        return self.command.exp_terms()
 
 
 def batched_exponential_scene(scene):
@@ -428,7 +431,7 @@ def batched_exponential_scene(scene):
         comps = output_components(model, scene.observe, one_cmd, scene.ts[0])
     part = None if comps == tuple(range(n)) else comps
     where = {c: k for k, c in enumerate(comps)}
-    t0 = scene.ts[0] if scene.start_time is None else jnp.asarray(scene.start_time, dtype=float)
+    t0 = jnp.asarray(scene.start_time, dtype=float)  # `t0`, or `ts[0]` when not given
 
     def state(yk):  # the full state vector of one time, zeros where a component was not computed
         zero = jnp.zeros((), yk.dtype)
@@ -462,10 +465,6 @@ def batched_exponential_scene(scene):
             got[name] = jax.vmap(each)(gammas, u, ys)
         return got
 
-    def em1_of_batch():  # the inputs' e^{-(t - t0)/gamma} - 1, (B, N)
-        x = (-1.0 / inp.gamma)[:, None] * (scene.ts - t0)[None, :]
-        return expm1_from_exp(x, jnp.exp(x))
-
     def batch(**kw):
         return startup_gamma_batch(
             model, inp.gamma, scene.ts, v_max=inp.v_max, y0=scene.y0, t0=scene.start_time, components=part, **kw
@@ -475,11 +474,12 @@ def batched_exponential_scene(scene):
         # the outputs (if any) from the stored states: one pass that returns both would compute the input's
         # exponential in each of XLA's two loops, and run slower
         ys = batch()
-        outputs = post(ys, inp.gamma, em1_of_batch()) if scene.observe else {}
+        outputs = post(ys, inp.gamma, _input_em1(-1.0 / inp.gamma, scene.ts - t0)) if scene.observe else {}
     elif comps:  # without the state, the outputs in the pass that computes the components they read
         ys, outputs = None, batch(post=post, post_args=inp.gamma)
     else:  # the outputs read no state at all
-        ys, outputs = None, post(jnp.zeros((inp.gamma.shape[0], scene.ts.shape[0], 0)), inp.gamma, em1_of_batch())
+        nothing = jnp.zeros((inp.gamma.shape[0], scene.ts.shape[0], 0))
+        ys, outputs = None, post(nothing, inp.gamma, _input_em1(-1.0 / inp.gamma, scene.ts - t0))
     if scene.state or not outputs:
         success = _all_finite(ys)
     else:  # what is returned: the outputs (a pass over the components they read would be one more read of them)
