@@ -35,8 +35,11 @@ import jax.numpy as jnp
 import numpy as np
 from jax.experimental import checkify
 
-from . import _store
+from . import _lapack, _store
 from ._checks import collecting, is_concrete
+
+# jaxbelt's first use: scipy's LAPACK tables for jaxlib's kernels, without the scipy.linalg package (`jaxbelt._lapack`)
+_lapack.bind_tables()
 
 
 def _modules(tree):

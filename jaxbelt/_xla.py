@@ -11,10 +11,6 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
-from collections.abc import Callable
-from typing import Any, TypeVar, cast
-
-F = TypeVar("F", bound=Callable[..., Any])
 
 FAST_COMPILE_FLAGS = (
     "--xla_cpu_use_fusion_emitters=false",
@@ -43,10 +39,3 @@ def fast_compile_xla_flags(caller: str = "") -> str | None:
 #: (an optimiser's step, an evaluation on a grid): the classic CPU emitters at LLVM optimisation level 0 compile it
 #: 2-3x faster; the same HLO, results equal to rounding.
 QUICK_COMPILE = {"xla_backend_optimization_level": 0, "xla_cpu_use_fusion_emitters": False}
-
-
-def quick_jit(fun: F) -> F:
-    """`eqx.filter_jit(fun)` compiled with `QUICK_COMPILE`."""
-    import equinox as eqx
-
-    return cast(F, eqx.filter_jit(fun, compiler_options=QUICK_COMPILE))  # pyright: ignore[reportCallIssue]

@@ -393,11 +393,12 @@ def test_matplotlib_keeps_its_property_lists_outside_the_cli_process():
     assert "antialiased" in matplotlib.lines.Line2D.set.__doc__
 
 
-def test_cli_lapack_tables_fall_back_to_the_usual_import(monkeypatch):
-    # another scipy layout (here: the second table cannot be loaded) leaves nothing behind in sys.modules
+def test_lapack_tables_fall_back_to_the_usual_import(monkeypatch):
+    # another scipy layout (here: the second table cannot be loaded) leaves nothing behind in sys.modules, and no
+    # import hook
     import importlib.util
 
-    import jaxbelt.cli as cli
+    from jaxbelt import _lapack
 
     real = importlib.util.spec_from_file_location
 
@@ -411,8 +412,39 @@ def test_cli_lapack_tables_fall_back_to_the_usual_import(monkeypatch):
     for k in before:
         monkeypatch.delitem(sys.modules, k)
     monkeypatch.setattr(importlib.util, "spec_from_file_location", refuse_lapack)
-    cli._bind_lapack_tables()
+    monkeypatch.setattr(sys, "meta_path", [f for f in sys.meta_path if f is not _lapack._HOOK])
+    _lapack.bind_tables()
     assert not {k for k in sys.modules if k.startswith("scipy.linalg.cython_")}
+    assert _lapack._HOOK not in sys.meta_path
+
+
+def test_a_users_process_binds_lapack_without_scipy_linalg_and_imports_it_later_as_usual():
+    # jaxbelt's first use loads scipy's LAPACK tables on their own (not the 0.1-0.2 s scipy.linalg package); JAX's
+    # kernels give numpy's results; a later `import scipy.linalg` is the usual package, its two table modules
+    # reachable as attributes (as the usual import leaves them), with its own loader, and the hook is gone
+    code = (
+        "import sys, numpy as np, jax, jax.numpy as jnp\n"
+        "jax.config.update('jax_enable_x64', True)\n"
+        "import jaxbelt as jb\n"
+        "jb.ModalAxis([7.3], [0.01])\n"
+        "a = np.array([[0.0, 1.0, 0.3], [-4.0, -0.5, 0.0], [0.2, 0.0, -2.0]])\n"
+        "w = np.sort_complex(np.asarray(jnp.linalg.eigvals(jnp.asarray(a))))\n"
+        "x = np.asarray(jnp.linalg.solve(jnp.asarray(a), jnp.ones(3)))\n"
+        "print(float(np.max(np.abs(w - np.sort_complex(np.linalg.eigvals(a))))), float(np.max(np.abs(a @ x - 1))),\n"
+        "      'scipy.linalg' in sys.modules, 'scipy.linalg.cython_lapack' in sys.modules)\n"
+        "import scipy.linalg.cython_lapack\n"
+        "from scipy.linalg import cython_blas\n"
+        "import scipy.linalg as sl\n"
+        "lu, piv = sl.lu_factor(a)\n"
+        "print(sl.cython_lapack is sys.modules['scipy.linalg.cython_lapack'], sl.cython_blas is cython_blas,\n"
+        "      type(sl.__loader__).__name__ == type(sl.__spec__.loader).__name__ == 'SourceFileLoader',\n"
+        "      float(np.max(np.abs(sl.lu_solve((lu, piv), np.ones(3)) - x))) < 1e-12,\n"
+        "      any(type(f).__name__ == '_LinkOnImport' for f in sys.meta_path))\n"
+    )
+    eig_err, solve_err, linalg_pkg, tables, *later = _printed_by(code)
+    assert float(eig_err) < 1e-12 and float(solve_err) < 1e-12
+    assert (linalg_pkg, tables) == ("False", "True")
+    assert later == ["True", "True", "True", "True", "False"]
 
 
 def test_no_tracer_leaks_between_programs():

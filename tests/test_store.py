@@ -368,6 +368,62 @@ def test_prepared_programs_are_traced_once_and_serve_the_calls(tmp_path, monkeyp
     _same(stored, reference)
 
 
+def _exports(monkeypatch):
+    """The names of the programs the store exports from now on (each export is a trace and a lowering)."""
+    names = []
+    export = _store._export
+    monkeypatch.setattr(_store, "_export", lambda fun, name, *a, **k: names.append(name) or export(fun, name, *a, **k))
+    return names
+
+
+def test_design_move_prepares_its_programs_once_with_the_calls_types(tmp_path, monkeypatch):
+    # at a given move time, design_move starts the minimax LP's compilation first, then traces the fine-grid check
+    # and the programs that measure the designed command (from the LP's output types) while it compiles: each
+    # program is exported once (a prepared type that differed from the call's would export it twice), and the
+    # design is the traced path's
+    axis = jb.ModalAxis([6.0], [0.02])
+
+    def run():
+        plan = jb.design_move(axis, 0.1, 0.8, v_max=0.3, a_max=1.2, include=("minimax",))
+        row = plan.candidate("minimax")
+        return plan.minimax.command.coefficients, plan.minimax.worst, row.worst_percent, row.peak_a, row.band_hz
+
+    reference = run()
+    names = _exports(monkeypatch)
+    with store_in(tmp_path / "xla") as folder:
+        stored = run()
+        assert len(_programs(folder)) == len(names)
+    assert sorted(n.rsplit(".", 1)[-1] for n in names) == [
+        "_closed_form_curve",  # the reference (time-optimal) move's residual
+        "_closed_form_curve",  # the design's residual on the band
+        "_closed_form_curve",  # and on the wide range
+        "_fine_ratios",
+        "_peaks",
+        "_solve_round_impl",
+    ]
+    for a, b in zip(jax.tree_util.tree_leaves(stored), jax.tree_util.tree_leaves(reference)):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-9, atol=0)
+
+
+def test_optimise_command_prepares_its_step_while_the_start_compiles(tmp_path, monkeypatch):
+    # the step program is traced from the start program's output types before the start runs: both are exported
+    # once, and the optimisation is the traced path's
+    plat, cmd = jb.BeltPlatform(), jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]))
+
+    def run():
+        res = jb.optimise_command(plat, cmd, max_steps=20, progress=False)
+        return res.gammas, res.value, res.n_steps
+
+    reference = run()
+    names = _exports(monkeypatch)
+    with store_in(tmp_path / "xla"):
+        stored = run()
+    assert sorted(n.rsplit(".", 1)[-1] for n in names) == ["_start_impl", "_step_impl"]
+    np.testing.assert_allclose(np.asarray(stored[0]), np.asarray(reference[0]), rtol=1e-12, atol=0)
+    np.testing.assert_allclose(float(stored[1]), float(reference[1]), rtol=1e-12, atol=0)
+    assert stored[2] == reference[2]
+
+
 # --- a user's function (`jb.sweep`, `jb.identify`): stored under its lasting key ---------------------------------
 
 

@@ -19,6 +19,8 @@ import os
 import sys
 import warnings
 
+from .._lapack import bind_tables
+
 SUBCOMMANDS = ("startup", "shaping", "fourbar", "string", "nonlinear", "bench")
 
 #: set by `entry`: the command runs in a process of its own (no user code), see `_prepare_figures`
@@ -129,50 +131,6 @@ class _OneLineWarnings(contextlib.ContextDecorator):
         return False
 
 
-def _bind_lapack_tables() -> None:
-    """Load scipy's BLAS and LAPACK pointer tables without the rest of `scipy.linalg`.
-
-    jaxlib binds its CPU linear-algebra kernels (eig, LU, ...) to the LAPACK that scipy ships, by
-    importing `scipy.linalg.cython_blas` and `scipy.linalg.cython_lapack`. Importing them the usual
-    way first runs `scipy.linalg`'s package initialisation (~0.2 s: its array-API layer imports
-    numpy.f2py and a hundred other modules), which jaxbelt's commands never use. The two extension
-    modules are loaded here on their own, under their own names, so that jaxlib finds them in
-    `sys.modules`. Only for the command's own process (where no user code runs); on any failure
-    nothing is left behind and jaxlib imports them the usual way.
-
-    Measured saving (whole process, warm `jaxbelt startup --out s.png`, 20 runs with and without,
-    paired, 2 CPU cores shared with other work): without it the command takes 1.087x the time
-    (median of the pairs; spread 0.82-1.79x), 1.083x the CPU time (0.96-1.14x) and 13 MiB more
-    memory, i.e. about 0.1 s of 1.5 s. Safe: the modules loaded are the very files the usual import
-    loads, under the names it gives them; the results match numpy's LAPACK (tests/test_guarantees.py).
-    """
-    if "scipy.linalg" in sys.modules:
-        return
-    added = []
-    try:
-        import importlib.machinery
-        import importlib.util
-
-        spec = importlib.util.find_spec("scipy")
-        if spec is None or spec.origin is None:
-            return  # no scipy: jaxlib's own import fails or falls back, as without this function
-        folder = os.path.join(os.path.dirname(spec.origin), "linalg")
-        for name in ("cython_blas", "cython_lapack"):
-            full = f"scipy.linalg.{name}"
-            paths = [os.path.join(folder, name + s) for s in importlib.machinery.EXTENSION_SUFFIXES]
-            path = next(p for p in paths if os.path.isfile(p))
-            mod_spec = importlib.util.spec_from_file_location(full, path)
-            if mod_spec is None or mod_spec.loader is None:
-                raise ImportError(full)
-            module = importlib.util.module_from_spec(mod_spec)
-            mod_spec.loader.exec_module(module)
-            sys.modules[full] = module
-            added.append(full)
-    except Exception:  # noqa: BLE001 - another scipy layout: the usual import, 0.1 s slower
-        for full in added:
-            sys.modules.pop(full, None)
-
-
 def _no_property_list(artist) -> str:
     return "Properties: see matplotlib's documentation (this list is not built in the jaxbelt command's process)."
 
@@ -189,7 +147,7 @@ def _prepare_figures() -> None:
     (`entry`), and only while no figure module is loaded (afterwards it would change nothing); on any
     failure matplotlib is imported the usual way.
 
-    Measured saving (as for `_bind_lapack_tables`): without it a warm `jaxbelt startup` takes 1.051x
+    Measured saving (as for the LAPACK tables, `entry`): without it a warm `jaxbelt startup` takes 1.051x
     the time (median of 20 pairs; spread 0.86-1.51x) and 1.061x the CPU time, about 0.07 s. Safe: only
     the text of the `set` docstrings changes, in a process that never shows one (tested).
     """
@@ -219,7 +177,8 @@ def entry() -> None:
       process that ends when the command does: reference counting still frees almost everything; the
       peak memory of the longest command grows by 2-6 % (`nonlinear` 877 -> 897 MB), the start-up's not
       at all (270 MiB either way).
-    - scipy's LAPACK tables are loaded without `scipy.linalg` (`_bind_lapack_tables`): 1.087x, 0.1 s.
+    - scipy's LAPACK tables are loaded without `scipy.linalg` (`jaxbelt._lapack.bind_tables`, which the library
+      also does at its first use): 1.087x, 0.1 s.
     - matplotlib's artists are defined without their docstrings' property lists (`_prepare_figures`):
       1.051x, 0.07 s.
     - Once the command has written its outputs and the exit handlers have run, the process ends
@@ -242,7 +201,7 @@ def entry() -> None:
     # here that is the command itself, so 64-bit mode goes on before anything (argument checks too) makes an array
     jax.config.update("jax_enable_x64", True)
     gc.disable()
-    _bind_lapack_tables()
+    bind_tables()
     code = main()
     atexit._run_exitfuncs()
     sys.stdout.flush()

@@ -37,7 +37,7 @@ import numpy as np
 import optax
 
 from .._checks import check_int, check_penalised_limits, check_positive, check_range
-from .._guard import host_checked
+from .._guard import host_checked, prepare
 from .._xla import QUICK_COMPILE
 from ..commands import MIN_EXPONENT_GAP, PseudoPolynomial, ShapedCommand
 from ..models.platform import BeltPlatform
@@ -213,6 +213,17 @@ _start = host_checked(_start_impl, store=True, compiler_options=_COMPILE)
 _step = host_checked(_step_impl, store=True, compiler_options=_COMPILE)
 
 
+def _prepare_programs(problem, cmd, optimizer, learning_rate, use_state_value: bool, max_steps: int) -> None:
+    """While the program store is on: trace the start program and start compiling it, then trace the step program
+    from the start's output types while the start compiles (XLA releases the GIL: on two cores the two overlap).
+    Nothing otherwise; the calls that follow find the programs compiled or compiling."""
+    types = prepare(_start, optimizer, learning_rate, problem, cmd)
+    if types is None or max_steps == 0:
+        return
+    theta, h0, state = types[:3]
+    prepare(_step, optimizer, learning_rate, eqx.tree_at(lambda p: p.scale, problem, h0), theta, state, use_state_value)
+
+
 def _run(problem: ShapingProblem, cmd, optimizer, learning_rate, max_steps, tol, gtol, progress, desc):
     if isinstance(optimizer, str):
         use_state_value = optimizer == "lbfgs"
@@ -221,6 +232,7 @@ def _run(problem: ShapingProblem, cmd, optimizer, learning_rate, max_steps, tol,
         use_state_value = False
     if max_steps < 0:
         raise ValueError(f"`max_steps` must be >= 0; got {max_steps}")
+    _prepare_programs(problem, cmd, optimizer, learning_rate, use_state_value, max_steps)
     theta, h0, state, f0, g0, start = _start(optimizer, learning_rate, problem, cmd)
     problem = eqx.tree_at(lambda p: p.scale, problem, h0)
     hist = [float(f0)]

@@ -44,7 +44,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import as_float_array, device_array, is_concrete
-from .._guard import host_checked
+from .._guard import host_checked, prepare, stored_jit
 from .._xla import QUICK_COMPILE
 from ..models.axis import ModalAxis
 from .lp import LPResult, RowGroups, lp_value, solve_lp, solve_lp_data
@@ -286,7 +286,7 @@ def _solve_round(problem, opts, tau, tol, certify=True):
     return _solve_round_nested(problem, opts, tau, tol, certify)
 
 
-@eqx.filter_jit  # called in the exchange loop: XLA's default options
+@stored_jit  # called in the exchange loop: XLA's default options
 def _fine_ratios(problem: MinimaxProblem, opts: DesignOptions, coef):
     """Residual over reference of every mode on the fine grid: (fine factors (F,), ratios (n_modes, F))."""
     u = problem.uncertainty
@@ -363,11 +363,11 @@ def minimax_design(problem: MinimaxProblem, opts: DesignOptions, tol=1e-9, per_r
     u = float(problem.uncertainty)
     factors, mask = _initial_grid(opts, n_modes, u)
     tol_a = device_array(tol, dtype=float)
-    tol_round = device_array(max(float(tol), ROUND_TOL), dtype=float)
+    tol_round = _round_tol(tol)
     tau = device_array(-1.0)
     rounds = 0
     while True:
-        problem = eqx.tree_at(lambda p: (p.factors, p.mask), problem, (device_array(factors), device_array(mask)))
+        problem = _on_grid(problem, factors, mask)
         res, tau, (coef, worst_a, lower_a) = _solve_round(problem, opts, tau, tol_round, False)
         worst = float(worst_a)
         if opts.n_rounds == 0 or u == 0.0:
@@ -405,6 +405,30 @@ def minimax_design(problem: MinimaxProblem, opts: DesignOptions, tol=1e-9, per_r
         rounds=rounds,
         options=opts,
     )
+
+
+def _round_tol(tol):
+    return device_array(max(float(tol), ROUND_TOL), dtype=float)
+
+
+def _on_grid(problem: MinimaxProblem, factors, mask) -> MinimaxProblem:
+    return eqx.tree_at(lambda p: (p.factors, p.mask), problem, (device_array(factors), device_array(mask)))
+
+
+def prepare_design(problem: MinimaxProblem, opts: DesignOptions, tol=1e-9):
+    """While the program store is on: trace the exchange's LP program (`minimax_design(problem, opts, tol)`'s) and
+    start compiling it, then trace and start compiling the fine-grid check while it compiles (XLA releases the GIL:
+    on two cores they overlap). Returns the type of the design's B-spline coefficients (`jax.ShapeDtypeStruct`),
+    for the caller to prepare the programs that measure the command; None (and nothing started) otherwise."""
+    factors, mask = _initial_grid(opts, problem.axis.n_modes, float(problem.uncertainty))
+    problem = _on_grid(problem, factors, mask)
+    types = prepare(_solve_round_top, problem, opts, device_array(-1.0), _round_tol(tol), device_array(False))
+    if types is None:
+        return None
+    coef = types[2][0]
+    if opts.n_rounds > 0 and float(problem.uncertainty) > 0.0:
+        prepare(_fine_ratios, problem, opts, coef)
+    return coef
 
 
 def minimax_value(problem: MinimaxProblem, opts: DesignOptions, tau=None):

@@ -34,6 +34,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._checks import as_float_array, check_positive, check_scalar
+from .._guard import prepare, stored_jit
 from ..commands import AbstractMotionCommand
 
 # --------------------------------------------------------------------------------------------
@@ -389,7 +390,7 @@ def shape_move(base: PiecewiseMove, amplitudes, delays) -> PiecewiseMove:
     return PiecewiseMove(times, steps, ramps, base.duration + tau[-1])
 
 
-@eqx.filter_jit  # its run time counts in a warm design (20001 samples): XLA's default options
+@stored_jit  # its run time counts in a warm design (20001 samples): XLA's default options
 def _peaks(cmd, n: int):
     ts = jnp.linspace(0.0, cmd.end_time, n)
     if isinstance(cmd, PiecewiseMove):
@@ -404,6 +405,12 @@ def peaks(cmd: AbstractMotionCommand, n: int = 20001):
     """`(peak |v|, peak |a|, peak |jerk|)` of a move over its duration, on `n` equally spaced times plus the
     breakpoints of a `PiecewiseMove` (one compiled program per command structure and shape)."""
     return tuple(float(x) for x in np.asarray(_peaks(cmd, int(n))))
+
+
+def prepare_peaks(cmd: AbstractMotionCommand, n: int = 20001) -> None:
+    """Start compiling the program of `peaks(cmd, n)` in the background while the program store is on
+    (`jaxbelt._guard.prepare`); else nothing. `cmd` stands for commands of its structure and shapes."""
+    prepare(_peaks, cmd, int(n))
 
 
 def padded(move: PiecewiseMove, size: int) -> PiecewiseMove:

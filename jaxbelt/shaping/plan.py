@@ -31,7 +31,7 @@ from typing import Any
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_positive, check_range
+from .._checks import check_positive, check_range, device_array
 from ..commands import AbstractMotionCommand
 from ..models.axis import ModalAxis
 from . import design as _design
@@ -44,10 +44,11 @@ from .moves import (
     fastest_time,
     padded,
     peaks,
+    prepare_peaks,
     shape_move,
     trapezoid_move,
 )
-from .residual import residual_curve, tolerance_band
+from .residual import prepare_curve, residual_curve, tolerance_band
 from .shapers import SHAPERS, shaper_for_axis
 
 #: move time, relative to the time-optimal move's, above which the smooth design is feasible (measured: it needs
@@ -250,12 +251,16 @@ def _check_inputs(axis, distance, move_time, v_max, a_max, j_max, uncertainty, i
     return d, t_min
 
 
+def _measure_grids(u: float):
+    """The frequency factors `_measure` evaluates a command's residual on: the band ±u, and the wide range."""
+    return (np.linspace(1 - u, 1 + u, _N_BAND) if u > 0 else np.ones(1)), np.linspace(*_WIDE, _N_WIDE)
+
+
 def _measure(axis, cmd, ref, u, limits) -> tuple[dict[str, Any], bool]:
     """The table's numbers for one command."""
-    band = np.linspace(1 - u, 1 + u, _N_BAND) if u > 0 else np.ones(1)
+    band, wide = _measure_grids(u)
     res = np.asarray(residual_curve(axis, cmd, band))  # (modes, K)
     ratio = res / ref[:, None]
-    wide = np.linspace(*_WIDE, _N_WIDE)
     wr = np.asarray(residual_curve(axis, cmd, wide)) / ref[:, None]
     f = np.asarray(axis.frequencies)
     bands = []
@@ -308,6 +313,12 @@ def _shaped(axis, name, distance, T, v_max, a_max, j_max):
     return shape_move(base, A, tau), t_short
 
 
+def _minimax_options(axis, T_guess: float, u: float, j_max, fixed_time: bool):
+    """The minimax design's options: 6 knots per cycle of the highest mode at a given move time, 12 when the
+    shortest time is searched."""
+    return _design.default_options(axis.frequencies, T_guess, u, j_max is not None, 6.0 if fixed_time else 12.0)
+
+
 class _Minimax:
     """The convex design at a move time, with its feasibility (one problem structure per axis size)."""
 
@@ -336,6 +347,20 @@ class _Minimax:
 
     def design(self, T):
         return _design.minimax_design(self.problem(T), self.opts)
+
+    def prepare(self, T) -> None:
+        """While the program store is on: start compiling, in the background, the programs a design at T runs and
+        those `_measure` runs on its command, each traced while the ones before compile (on two cores the LP's
+        compilation, the longest, overlaps the others' tracing and compiling). Nothing otherwise."""
+        problem = self.problem(T)
+        coef = _design.prepare_design(problem, self.opts)
+        if coef is None:
+            return
+        axis, u = self.args[0], self.args[5]
+        cmd = SplineMove(device_array(np.zeros(coef.shape, coef.dtype)), problem.move_time)  # its types only
+        for factors in _measure_grids(u):
+            prepare_curve(axis, cmd, factors)
+        prepare_peaks(cmd)
 
 
 def design_move(
@@ -372,6 +397,13 @@ def design_move(
     v_max, a_max = float(v_max), float(a_max)
     j_max = None if j_max is None else float(j_max)
     limits = (v_max, a_max, j_max)
+    t_fixed = None if move_time is None else float(move_time)
+    clearly = t_fixed is not None and t_fixed >= _SURELY_FEASIBLE * t_min
+    if "minimax" in include and t_fixed is not None and clearly:
+        # the minimax design's programs start compiling now, in the background, while the reference and the other
+        # candidates are computed (their types only: a stand-in reference of the right shape)
+        opts = _minimax_options(axis, t_fixed, u, j_max, fixed_time=True)
+        _Minimax(axis, d, v_max, a_max, j_max, u, np.ones(axis.n_modes), opts).prepare(t_fixed)
     ref_cmd = fastest_move(d, v_max, a_max, j_max)
     band = np.linspace(1 - u, 1 + u, _N_BAND) if u > 0 else np.ones(1)
     ref = np.max(np.asarray(residual_curve(axis, ref_cmd, band)), axis=1)
@@ -401,14 +433,12 @@ def design_move(
         T_guess = (
             float(move_time) if move_time is not None else (min(r.move_time for r in classic) if classic else 2 * t_min)
         )
-        per_cycle = 6.0 if move_time is not None else 12.0
-        opts = _design.default_options(axis.frequencies, T_guess, u, j_max is not None, per_cycle)
+        opts = _minimax_options(axis, T_guess, u, j_max, fixed_time=move_time is not None)
         solver = _Minimax(axis, d, v_max, a_max, j_max, u, ref, opts)
         if move_time is not None:
             T = float(move_time)
-            # a smooth (B-spline) move needs a little more time than the time-optimal one: well above that, skip
-            # the feasibility LP (its program costs a compile) unless the design then fails to converge
-            clearly = T >= _SURELY_FEASIBLE * t_min
+            # a smooth (B-spline) move needs a little more time than the time-optimal one: well above that (`clearly`),
+            # skip the feasibility LP (its program costs a compile) unless the design then fails to converge
             mm = solver.design(T) if clearly else None
             if (mm is None or not mm.converged) and not solver.feasible(T):
                 mm = None

@@ -21,7 +21,8 @@ import numpy as np
 from jax.typing import ArrayLike
 
 from .._checks import atleast_1d, check_range, device_array
-from .._xla import quick_jit
+from .._guard import prepare, stored_jit
+from .._xla import QUICK_COMPILE
 from ..commands import AbstractMotionCommand, PseudoPolynomial, ShapedCommand, falling_factorial
 from ..models.axis import ModalAxis
 from .moves import PiecewiseMove, SplineMove, fastest_move
@@ -108,7 +109,17 @@ def residual_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors: ArrayLi
     return _closed_form_curve(axis, cmd, r, n_nodes)
 
 
-@quick_jit
+def prepare_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors) -> None:
+    """Start compiling the program of `residual_curve(axis, cmd, factors)` in the background, for a command with
+    a closed-form residual other than a pseudo-polynomial, while the program store is on (`jaxbelt._guard.prepare`);
+    else nothing. `cmd` stands for commands of its structure and shapes (its values are not read)."""
+    if isinstance(cmd, (PseudoPolynomial, ShapedCommand)) or not _has_closed_form(cmd):
+        return
+    prepare(_closed_form_curve, axis, cmd, atleast_1d(device_array(factors, dtype=float)), 0)
+
+
+# kept by the program store while the compilation cache is on; XLA's quicker options: its run time is small
+@stored_jit(compiler_options=QUICK_COMPILE)
 def _closed_form_curve(axis, cmd, r, n_nodes: int):
     s, wd = _poles(axis, r)
     if isinstance(cmd, PseudoPolynomial):
