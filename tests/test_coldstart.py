@@ -325,9 +325,10 @@ print(first, n["compiles"] - first)
 
 
 def test_tune_pid_first_call_compiles_each_program_once(tmp_path):
-    # A fresh process, an empty cache folder (the README's cold first call): the step's program and the report's
-    # are compiled once each (not again for the committed arrays the step feeds itself), no small eager programs
-    # around the loop; two tiny programs inside diffrax's set-up remain. It was 15 compilations.
+    # A fresh process, an empty cache folder (the README's cold first call): the step's two programs (the run with
+    # its sensitivities, the update) are compiled once each (not again for the committed arrays the step feeds
+    # itself), the report takes the step's, no small eager programs around the loop; two tiny programs inside
+    # diffrax's set-up remain. It was 15 compilations.
     first, second = map(int, _subprocess(_FIRST_TUNE, JAXBELT_CACHE_DIR=str(tmp_path)).split())
     assert first <= 4, first
     assert second == 0

@@ -424,6 +424,24 @@ def test_optimise_command_prepares_its_step_while_the_start_compiles(tmp_path, m
     assert stored[2] == reference[2]
 
 
+def test_tune_pid_prepares_its_update_while_its_run_compiles(tmp_path, monkeypatch):
+    # the step is two programs, the update traced from the run's output types before either runs: both are
+    # exported once, and the tuning is the traced path's
+    drive, pid = jb.FourBarDrive(), jb.PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0)
+
+    def run():
+        res = jb.tune_pid(drive, pid, steps=2, progress=False)
+        return res.history["loss"], res.chi, res.pid.kp
+
+    reference = run()
+    names = _exports(monkeypatch)
+    with store_in(tmp_path / "xla"):
+        stored = run()
+    assert sorted(n.rsplit(".", 1)[-1] for n in names) == ["_tune_run_impl", "_tune_update_impl"]
+    for a, b in zip(stored, reference):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-12, atol=0)
+
+
 # --- a user's function (`jb.sweep`, `jb.identify`): stored under its lasting key ---------------------------------
 
 

@@ -413,12 +413,72 @@ def linearised_closed_loop_metrics(
     of the exact metrics, without differentiating through the solver. A failed run or check makes every
     value NaN (as `throw=False`). Options as in `closed_loop_metrics`.
     """
-    ts, option_checks = _metrics_grid(t0, t1, temperature, peak_temperature, dt_save, method, dt, average)
+    ys, sens = linearisation_run(
+        drive, pid_of, p, t1, dt_save=dt_save, method=method, rtol=rtol, atol=atol, dt=dt, max_steps=max_steps
+    )
+    return linearised_metrics(
+        drive,
+        pid_of,
+        p,
+        ys,
+        sens,
+        t0,
+        t1,
+        temperature=temperature,
+        peak_temperature=peak_temperature,
+        dt_save=dt_save,
+        method=method,
+        dt=dt,
+        average=average,
+    )
+
+
+def linearisation_run(
+    drive,
+    pid_of,
+    p,
+    t1: ArrayLike = 0.5,
+    *,
+    dt_save: ArrayLike = 5e-4,
+    method="ode",
+    rtol: ArrayLike = 1e-8,
+    atol: ArrayLike = 1e-8,
+    dt: ArrayLike = 1e-3,
+    max_steps=100_000,
+):
+    """The simulation `linearised_closed_loop_metrics` linearises about: `(ys, sens)`, the trajectory of `drive` under
+    `pid_of(p)` on the metrics' output grid over [0, t1] [s] (N, n) and its sensitivities to `p` (N, n, P), NaN where
+    the run failed. Split from the metrics (`linearised_metrics`) so that a caller can compile the two apart."""
+    ts = _grid(t1, *((dt, "dt") if method == "rk4" else (dt_save, "dt_save")))
     p = jnp.asarray(p, dtype=float)
     model = Scene(drive, pid_of(p), ts=ts, t0=0.0).model
     ys, sens, _ = forward_sensitivities(
         model, pid_of, p, ts, method=method, rtol=rtol, atol=atol, dt=dt, max_steps=max_steps
     )
+    return ys, sens
+
+
+def linearised_metrics(
+    drive,
+    pid_of,
+    p,
+    ys,
+    sens,
+    t0: ArrayLike = 0.375,
+    t1: ArrayLike = 0.5,
+    *,
+    temperature: ArrayLike = 3e-4,
+    peak_temperature: ArrayLike = 0.5,
+    dt_save: ArrayLike = 5e-4,
+    method="ode",
+    dt: ArrayLike = 1e-3,
+    average="mean",
+):
+    """`linearised_closed_loop_metrics` from its simulation `(ys, sens)` (`linearisation_run` with the same `p`, `t1`,
+    `dt_save`, `method` and `dt`)."""
+    ts, option_checks = _metrics_grid(t0, t1, temperature, peak_temperature, dt_save, method, dt, average)
+    p = jnp.asarray(p, dtype=float)
+    model = Scene(drive, pid_of(p), ts=ts, t0=0.0).model
 
     def metrics(q):
         inp = pid_of(q)
