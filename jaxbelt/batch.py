@@ -66,6 +66,7 @@ import numpy as np
 
 from ._callables import by_value
 from ._guard import host_checked, reraise_checks
+from ._xla import QUICK_COMPILE
 from .solution import SolveError
 
 _MAX_LISTED = 10
@@ -135,6 +136,14 @@ def _sharded_impl(fn, params, mesh):
 _vmapped = host_checked(_vmapped_impl, store=True)
 _sharded = host_checked(_sharded_impl, store=True)
 
+#: A sweep of at most this many elements per device compiles with XLA's quick options (`jaxbelt._xla`): its run
+#: time is small beside its compilation. For 16 four-bar gain sets on 2 devices (2 cores) the first call takes about
+#: 0.5 s less, and each run 12 ms instead of 6-10 ms; the same program at 1000 gain sets would run 2.6x longer (0.41
+#: s against 0.16 s), which is why a larger sweep keeps XLA's defaults. Results equal to rounding (1.5e-13 relative, that sweep).
+QUICK_PER_DEVICE = 32
+_vmapped_quick = host_checked(_vmapped_impl, store=True, compiler_options=QUICK_COMPILE)
+_sharded_quick = host_checked(_sharded_impl, store=True, compiler_options=QUICK_COMPILE)
+
 
 def cpu_devices(n: int | None = None) -> int:
     """Split the CPU into `n` JAX devices (default: one per core this process may use) so that
@@ -184,7 +193,9 @@ def sweep(fn, params, *, devices=None, check: bool = True, name: str | None = No
     gains)` in a loop or a re-run notebook cell compiles once; a changed value compiles anew (it is a
     constant of the program, as for `jax.jit`). `params` are data: new values of the same shapes reuse it.
     With `enable_compilation_cache()` on, a later process runs the stored sweep without tracing `fn` again,
-    under the same key (see `enable_compilation_cache`'s `programs`).
+    under the same key (see `enable_compilation_cache`'s `programs`). A sweep of at most `QUICK_PER_DEVICE` (32)
+    elements per device compiles with XLA's quicker options (a first call about 0.5 s shorter; runs up to 2.6x
+    longer, which a small batch does not feel); a larger one with XLA's defaults.
     """
     n = _batch_size(params)
     what = name or getattr(fn, "__name__", "fn")
@@ -198,8 +209,9 @@ def sweep(fn, params, *, devices=None, check: bool = True, name: str | None = No
         padded = _pad(params, n_pad)
         sharding = NamedSharding(Mesh(np.asarray(devices), ("batch",)), PartitionSpec("batch"))
         padded = jax.device_put(padded, sharding)
+        program = _sharded_quick if (n + n_pad) // n_dev <= QUICK_PER_DEVICE else _sharded
         with reraise_checks("sweep", f"in {what!r}"):
-            out = _sharded(fn, padded, sharding.mesh)
+            out = program(fn, padded, sharding.mesh)
         if not all(getattr(x, "is_fully_addressable", True) for x in jax.tree_util.tree_leaves(out)):
             from jax.experimental import multihost_utils
 
@@ -207,8 +219,9 @@ def sweep(fn, params, *, devices=None, check: bool = True, name: str | None = No
         if n_pad:
             out = jax.tree_util.tree_map(lambda x: x[:n] if np.ndim(x) else x, out)
     else:
+        program = _vmapped_quick if n <= QUICK_PER_DEVICE else _vmapped
         with reraise_checks("sweep", f"in {what!r}"):
-            out = _vmapped(fn, params)
+            out = program(fn, params)
     if check:
         ok = _success(out)
         if ok is not None:

@@ -8,6 +8,7 @@ import textwrap
 from pathlib import Path
 
 import diffrax
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -65,6 +66,33 @@ def test_sharded_sweep_over_4_cpu_devices_equals_unsharded():
     for g, y in zip(np.linspace(0.01, 0.08, 10), out["ys"]):
         ref = jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, g), ts=ts), method="modal").ys[-1]
         np.testing.assert_allclose(y, np.asarray(ref), rtol=1e-6, atol=1e-9)
+
+
+def test_a_small_sweep_compiles_quick_and_a_large_one_with_xlas_defaults(monkeypatch):
+    # at most QUICK_PER_DEVICE elements per device: XLA's quick options (the first call's compilation dominates);
+    # more: XLA's defaults (the run dominates). The two programs give the same values to rounding, and both the
+    # exact closed form's to the solver's tolerance
+    from jaxbelt import batch
+
+    used = []
+    for name in ("_vmapped", "_vmapped_quick"):
+        program = getattr(batch, name)
+        monkeypatch.setattr(batch, name, lambda *a, _p=program, _n=name: used.append(_n) or _p(*a))
+    model, ts = jb.BeltStartup(), jnp.linspace(0.0, 0.3, 31)
+
+    def run(g):
+        scene = jb.Scene(model, jb.ExponentialVoltage(24.0, g), ts=ts)
+        return jb.simulate(scene, method="ode", rtol=1e-10, atol=1e-12, solver=diffrax.Tsit5(), throw=False).ys[-1]
+
+    n = batch.QUICK_PER_DEVICE
+    large = np.linspace(0.01, 0.08, n + 1)
+    small_out = np.asarray(jb.sweep(run, jnp.asarray(large[:n]), devices=[jax.devices()[0]]))
+    large_out = np.asarray(jb.sweep(run, jnp.asarray(large), devices=[jax.devices()[0]]))
+    assert used == ["_vmapped_quick", "_vmapped"]
+    np.testing.assert_allclose(small_out, large_out[:n], rtol=1e-12, atol=1e-12 * np.max(np.abs(large_out)))
+    for g, y in zip(large[:: n // 4], large_out[:: n // 4]):
+        ref = jb.simulate(jb.Scene(model, jb.ExponentialVoltage(24.0, g), ts=ts), method="modal").ys[-1]
+        np.testing.assert_allclose(y, np.asarray(ref), rtol=1e-7, atol=1e-9)
 
 
 def test_sweep_reports_failing_elements():
