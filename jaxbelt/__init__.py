@@ -20,7 +20,9 @@ costs one line and no digit (docs: Errors and guarantees, Precision).
 
 **Imports.** `import jaxbelt` imports nothing heavy (not even JAX); each public name imports its module on first use
 (`jaxbelt.simulate`, `jaxbelt.tune_pid`, ...), so a session that only solves the start-up in closed
-form never loads diffrax, optax or matplotlib.
+form never loads diffrax, optax or matplotlib. At its first use jaxbelt loads scipy's BLAS and LAPACK tables, which
+JAX's CPU kernels run on, without the `scipy.linalg` package (0.1-0.2 s saved); a later `import scipy.linalg` is the
+usual package (`jaxbelt._lapack`; import `scipy.linalg` first to keep the usual order).
 """
 
 import typing as _typing
