@@ -259,7 +259,7 @@ def coldstart_table(results_dir: Path = RESULTS) -> str:
         "compilations in brackets (`+ n loaded`: programs read from the cache), the modules the call imports "
         "included, `import jax, jaxbelt` not"
         + (f" (about {imp:.1f} s)" if imp else "")
-        + f"; one run of `python benchmarks/coldstart.py --entry-points` on {machine}, {repeats}"
+        + f"; one run of `python benchmarks/coldstart.py` (its entry-point part, also run alone by `--entry-points`) on {machine}, {repeats}"
         + (f" (fewer for the slowest: {', '.join(fewer)})" if fewer else "")
         + f"; {spread}.",
         "",
