@@ -202,6 +202,7 @@ def sweep(fn, params, *, devices=None, check: bool = True, name: str | None = No
     fn = by_value(fn)
     devices = list(jax.local_devices() if devices is None else devices)
     n_dev = len(devices)
+    quick = -(-n // n_dev) <= QUICK_PER_DEVICE  # elements per device, the batch padded to a multiple of n_dev
     if n_dev > 1:
         from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
@@ -209,7 +210,7 @@ def sweep(fn, params, *, devices=None, check: bool = True, name: str | None = No
         padded = _pad(params, n_pad)
         sharding = NamedSharding(Mesh(np.asarray(devices), ("batch",)), PartitionSpec("batch"))
         padded = jax.device_put(padded, sharding)
-        program = _sharded_quick if (n + n_pad) // n_dev <= QUICK_PER_DEVICE else _sharded
+        program = _sharded_quick if quick else _sharded
         with reraise_checks("sweep", f"in {what!r}"):
             out = program(fn, padded, sharding.mesh)
         if not all(getattr(x, "is_fully_addressable", True) for x in jax.tree_util.tree_leaves(out)):
@@ -219,7 +220,7 @@ def sweep(fn, params, *, devices=None, check: bool = True, name: str | None = No
         if n_pad:
             out = jax.tree_util.tree_map(lambda x: x[:n] if np.ndim(x) else x, out)
     else:
-        program = _vmapped_quick if n <= QUICK_PER_DEVICE else _vmapped
+        program = _vmapped_quick if quick else _vmapped
         with reraise_checks("sweep", f"in {what!r}"):
             out = program(fn, params)
     if check:

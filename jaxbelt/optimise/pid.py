@@ -350,18 +350,29 @@ def _with_gains(pid: PID, gains) -> PID:
 _DEFAULT_OPTIMIZER = "adam"
 
 
+def _run_options(cfg: _Config) -> dict:
+    """The simulation's options from the tuning's configuration (its output grid ends at t1)."""
+    return dict(t1=cfg.t1, method=cfg.method, rtol=cfg.rtol, atol=cfg.atol, dt=cfg.dt)
+
+
+def _metric_options(cfg: _Config) -> dict:
+    """The metrics' window and smoothing, and what fixes their output grid, from the tuning's configuration."""
+    return dict(t0=cfg.t0, t1=cfg.t1, temperature=cfg.temperature, method=cfg.method, dt=cfg.dt)
+
+
 def _options(cfg: _Config) -> dict:
     """The metrics' window, smoothing and simulation options from the tuning's configuration."""
-    return dict(
-        t0=cfg.t0, t1=cfg.t1, temperature=cfg.temperature, method=cfg.method, rtol=cfg.rtol, atol=cfg.atol, dt=cfg.dt
-    )
+    return _run_options(cfg) | _metric_options(cfg)
+
+
+def _regulator(pid: PID, g0):
+    """The map from the log-gains `q` to `pid` with the gains `g0 * exp(q)`."""
+    return lambda q: pid.with_gains(g0 * jnp.exp(q))
 
 
 def _metrics(drive, which, g0, cfg: _Config, p, throw: bool = True):
     # not differentiated: diffrax's plain loop (`adjoint="forward"`), smaller than its checkpointed one
-    return closed_loop_metrics(
-        drive, which.with_gains(g0 * jnp.exp(p)), adjoint="forward", throw=throw, **_options(cfg)
-    )
+    return closed_loop_metrics(drive, _regulator(which, g0)(p), adjoint="forward", throw=throw, **_options(cfg))
 
 
 #: Number of times the tuning step's programs have been traced (tests check that repeated calls reuse them).
@@ -372,16 +383,7 @@ def _tune_run_impl(drive, train_pid, g0, cfg: _Config, p):
     TRACE_COUNT["run"] += 1
     # One simulation with forward sensitivities to the three log-gains, at `p`. A failed solve gives NaN, which
     # `tune_pid` refuses on the host as a NaN loss; the program holds no run-time check, which keeps it in the caches.
-    return linearisation_run(
-        drive,
-        lambda q: train_pid.with_gains(g0 * jnp.exp(q)),
-        p,
-        cfg.t1,
-        method=cfg.method,
-        rtol=cfg.rtol,
-        atol=cfg.atol,
-        dt=cfg.dt,
-    )
+    return linearisation_run(drive, _regulator(train_pid, g0), p, **_run_options(cfg))
 
 
 def _tune_update_impl(opt, drive, train_pid, g0, cfg: _Config, p, state, ys, sens):
@@ -390,8 +392,7 @@ def _tune_update_impl(opt, drive, train_pid, g0, cfg: _Config, p, state, ys, sen
         opt = _default_adam()
 
     # the metrics to first order about `p` from the run `(ys, sens)`: their derivative at `p` is the gradient
-    options = {k: v for k, v in _options(cfg).items() if k not in ("rtol", "atol")}
-    linear = linearised_metrics(drive, lambda q: train_pid.with_gains(g0 * jnp.exp(q)), p, ys, sens, **options)
+    linear = linearised_metrics(drive, _regulator(train_pid, g0), p, ys, sens, **_metric_options(cfg))
 
     def loss_aux(q):
         m = linear(q)

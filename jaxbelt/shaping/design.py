@@ -370,7 +370,7 @@ def minimax_design(problem: MinimaxProblem, opts: DesignOptions, tol=1e-9, per_r
         problem = _on_grid(problem, factors, mask)
         res, tau, (coef, worst_a, lower_a) = _solve_round(problem, opts, tau, tol_round, False)
         worst = float(worst_a)
-        if opts.n_rounds == 0 or u == 0.0:
+        if not _exchanges(opts, u):
             fine_worst = worst
             break
         fine, ratios = (np.asarray(x) for x in _fine_ratios(problem, opts, coef))
@@ -393,7 +393,7 @@ def minimax_design(problem: MinimaxProblem, opts: DesignOptions, tol=1e-9, per_r
         tau = device_array(worst)
     if not (bool(res.vertex) or certified(worst_a, lower_a)):  # the final LP to `tol`, certified where it can be
         res, tau, (coef, worst_a, lower_a) = _solve_round(problem, opts, device_array(worst), tol_a, True)
-        if opts.n_rounds > 0 and u > 0.0:
+        if _exchanges(opts, u):
             fine_worst = float(np.asarray(_fine_ratios(problem, opts, coef)[1]).max())
     return MinimaxDesign(
         command=SplineMove(coef, problem.move_time),
@@ -405,6 +405,11 @@ def minimax_design(problem: MinimaxProblem, opts: DesignOptions, tol=1e-9, per_r
         rounds=rounds,
         options=opts,
     )
+
+
+def _exchanges(opts: DesignOptions, u: float) -> bool:
+    """Whether the design exchanges frequencies (checks its command on the fine grid): rounds allowed, a band."""
+    return opts.n_rounds > 0 and u > 0.0
 
 
 def _round_tol(tol):
@@ -426,7 +431,7 @@ def prepare_design(problem: MinimaxProblem, opts: DesignOptions, tol=1e-9):
     if types is None:
         return None
     coef = types[2][0]
-    if opts.n_rounds > 0 and float(problem.uncertainty) > 0.0:
+    if _exchanges(opts, float(problem.uncertainty)):
         prepare(_fine_ratios, problem, opts, coef)
     return coef
 

@@ -405,7 +405,7 @@ def design_move(
         opts = _minimax_options(axis, t_fixed, u, j_max, fixed_time=True)
         _Minimax(axis, d, v_max, a_max, j_max, u, np.ones(axis.n_modes), opts).prepare(t_fixed)
     ref_cmd = fastest_move(d, v_max, a_max, j_max)
-    band = np.linspace(1 - u, 1 + u, _N_BAND) if u > 0 else np.ones(1)
+    band = _measure_grids(u)[0]
     ref = np.max(np.asarray(residual_curve(axis, ref_cmd, band)), axis=1)
     rows = []
     # --- classic shapers
