@@ -37,13 +37,13 @@ import jax
 import numpy as np
 from jax.core import Tracer
 
+from . import _compat
+
 __all__ = ["by_value", "ByValue", "lasting_key"]
 
-_MISSING = None
-try:  # equinox marks absent fields of a module's flattened form with a private singleton
-    from equinox._module._flatten import MISSING as _MISSING
-except Exception:  # noqa: BLE001 - another equinox layout: such a field is not keyed
-    pass
+#: equinox's private marker of absent fields in a module's flattened form (None on another equinox layout: such
+#: a field is not keyed)
+_MISSING = _compat.equinox_missing()
 
 #: top-level packages whose functions are library code: their module globals are taken as fixed
 _LIBRARY_ROOTS = frozenset(

@@ -35,7 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.experimental import checkify
 
-from . import _lapack, _store
+from . import _compat, _lapack, _store, _xla
 from ._checks import collecting, is_concrete
 
 # jaxbelt's first use: scipy's LAPACK tables for jaxlib's kernels, without the scipy.linalg package (`jaxbelt._lapack`)
@@ -211,8 +211,8 @@ def host_checked(
     if isinstance(_host_checks, _Off):
         return plain
     checkified = _lean(checkify.checkify(fun, errors=checkify.user_checks)) if checks else fun
-    top_kwargs = dict(jit_kwargs, compiler_options=compiler_options) if compiler_options else jit_kwargs
-    checked = jit(checkified, **top_kwargs)
+    # XLA's options as far as the running backend knows them, found at the first call (`jaxbelt._xla`)
+    checked = _xla.LazyJit(jit, checkified, compiler_options, **jit_kwargs)
     name = f"{getattr(fun, '__module__', '?')}.{getattr(fun, '__qualname__', '?')}"
     # the store's static/dynamic split is filter_jit's; only jaxbelt's own module-level functions are stored
     storable = store and jit is eqx.filter_jit and _store.storable_function(fun)
@@ -224,7 +224,7 @@ def host_checked(
         _equinox_errors_as_checks()
         with _host_checks(True):
             if storable and not kwargs and _store.folder() is not None:
-                result = _store.call(name, checkified, args, checked, compiler_options)
+                result = _store.call(name, checkified, args, checked, checked.options())
             else:
                 result = checked(*args, **kwargs)
         if not checks:
@@ -244,7 +244,7 @@ def host_checked(
             return None
         _equinox_errors_as_checks()
         with _host_checks(True):
-            types = _store.prepare(name, checkified, args, compiler_options)
+            types = _store.prepare(name, checkified, args, checked.options())
         return types[1] if checks and types is not None else types  # without checkify's error
 
     call.prepare = prepare  # pyright: ignore[reportAttributeAccessIssue]
@@ -275,11 +275,7 @@ def stored_jit(fun: Any = None, *, compiler_options: dict | None = None) -> Any:
     if fun is None:
         return functools.partial(stored_jit, compiler_options=compiler_options)
     plain = eqx.filter_jit(fun)
-    top = (
-        eqx.filter_jit(fun, compiler_options=compiler_options)  # pyright: ignore[reportCallIssue]
-        if compiler_options
-        else plain
-    )
+    top = _xla.LazyJit(eqx.filter_jit, fun, compiler_options)  # the options the running backend knows
     name = f"{fun.__module__}.{fun.__qualname__}"
     storable = _store.storable_function(fun)
 
@@ -289,14 +285,14 @@ def stored_jit(fun: Any = None, *, compiler_options: dict | None = None) -> Any:
             return plain(*args, **kwargs)
         if kwargs or not storable or _store.folder() is None:
             return top(*args, **kwargs)
-        return _store.call(name, fun, args, top, compiler_options)
+        return _store.call(name, fun, args, top, top.options())
 
     def prepare(*args):
         """Start compiling the program `wrapper(*args)` will run and return its output's types (see
         `jaxbelt._store.prepare`): while the program store is on, outside any trace; else None."""
         if not (storable and _store.folder() is not None and eager()):
             return None
-        return _store.prepare(name, fun, args, compiler_options)
+        return _store.prepare(name, fun, args, top.options())
 
     wrapper.prepare = prepare  # pyright: ignore[reportAttributeAccessIssue]
     return wrapper
@@ -356,21 +352,17 @@ def _lean_checkify() -> bool:
     as it is instead of rebuilding its body (twice, for a while loop). A diffrax solve's loop holds none of
     jaxbelt's checks (they are made on the parameters, outside it), and its rebuild was a third of the tracing
     of a checked simulation. The result is the same program; other error sets (NaN, index checks), which any
-    equation may raise, take checkify's own rules. Installed once; False where JAX's layout is another (the
-    pass is then checkify's own)."""
+    equation may raise, take checkify's own rules. Installed once; False where `jaxbelt._compat` withholds
+    checkify's private table (another JAX release: the pass is then checkify's own, the same program traced
+    more slowly)."""
     if _state.get("lean") is not None:
         return _state["lean"]
-    try:
-        from jax._src import ad_checkpoint, custom_derivatives, pjit
-        from jax._src import checkify as _checkify
-        from jax._src.lax import control_flow
-
-        rules, check_p, user = _checkify.error_checks, _checkify.check_p, checkify.user_checks
-        prims = [control_flow.while_p, control_flow.cond_p, control_flow.scan_p, pjit.jit_p, ad_checkpoint.remat_p]
-        prims += [custom_derivatives.custom_jvp_call_p, custom_derivatives.custom_vjp_call_p]
-    except Exception:  # noqa: BLE001 - another JAX layout
+    found = _compat.checkify_rules()  # a private table: None on a JAX layout it was not written for
+    if found is None:
         _state["lean"] = False
         return False
+    rules, check_p, prims = found
+    user = checkify.user_checks
 
     def lean(prim, rule):
         def rule_or_bind(error, enabled_errors, *invals, **params):
@@ -393,7 +385,7 @@ def _equinox_errors_as_checks() -> None:
     """Inside a `host_checked` program, `eqx.error_if` records a checkify check as well; inside
     `validated_inputs`, diffrax's repeat of jaxbelt's own checks is left out.
 
-    diffrax, optimistix and the models call `eqx.error_if` (diffrax as `equinox.internal.error_if`) for
+    diffrax, optimistix and the models call `eqx.error_if` (diffrax through equinox's internal namespace) for
     their checks: traced, each is a host callback, and a program holding one is never stored by the
     persistent compilation cache. Installed once, the wrapper leaves every call outside those two
     contexts (another thread, the caller's own jit) to equinox unchanged: the contexts are
@@ -404,8 +396,7 @@ def _equinox_errors_as_checks() -> None:
     """
     if getattr(eqx.error_if, "_jaxbelt_checks", False):
         return
-    import equinox.internal as eqxi
-
+    eqxi = _compat.equinox_internal()  # None on an equinox it was not written for: diffrax's checks stay callbacks
     original = eqx.error_if
 
     @functools.wraps(original)
@@ -427,7 +418,7 @@ def _equinox_errors_as_checks() -> None:
 
     setattr(error_if, "_jaxbelt_checks", True)  # noqa: B010 - a mark on a function object
     eqx.error_if = error_if
-    if getattr(eqxi, "error_if", None) is original:
+    if eqxi is not None and getattr(eqxi, "error_if", None) is original:
         eqxi.error_if = error_if
 
 

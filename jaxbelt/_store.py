@@ -43,6 +43,7 @@ import jax
 import numpy as np
 from jax.sharding import Mesh
 
+from . import _compat
 from ._callables import ByValue
 
 _FORMAT = 1
@@ -52,11 +53,9 @@ _MEMO_MAX = 1024
 
 _TRUSTED_PREFIXES = ("jaxbelt.", "equinox.", "diffrax.", "optax.")
 _PLAIN_TYPES = (str, int, float, bool, complex, type(None))
-_MISSING = None
-try:  # equinox marks absent fields of a module's flattened form with a private singleton
-    from equinox._module._flatten import MISSING as _MISSING
-except Exception:  # noqa: BLE001 - another equinox layout: programs taking modules are then never stored
-    pass
+#: equinox's marker of absent fields of a module's flattened form (None on another equinox layout: programs taking
+#: such modules are then never stored)
+_MISSING = _compat.equinox_missing()
 
 
 def enable(folder) -> None:
@@ -131,15 +130,12 @@ def settings() -> tuple:
     """JAX's settings that change a traced program (its trace context: x64, dtype and rank promotion,
     jaxbelt's own check contexts...), XLA's flags and equinox's error mode."""
     c = jax.config
-    try:
-        from jax._src import config as _config
-
+    context = _compat.trace_context()
+    if context is not None:
         # its plain values and enums; an object without a value repr (the axis environment, empty
         # outside a trace, where the store is used) by its type
-        trace = tuple(
-            v if _plain(v) or isinstance(v, enum.Enum) else type(v).__qualname__ for v in _config.trace_context()
-        )
-    except Exception:  # noqa: BLE001 - another JAX layout: the settings jaxbelt knows of
+        trace = tuple(v if _plain(v) or isinstance(v, enum.Enum) else type(v).__qualname__ for v in context)
+    else:  # another JAX layout: the settings jaxbelt knows of
         names = (
             "jax_enable_x64",
             "jax_default_matmul_precision",
@@ -246,13 +242,9 @@ def _layout(x) -> tuple:
     return (repr(getattr(sharding, "spec", sharding)), tuple(sorted(d.id for d in sharding.device_set)))
 
 
-try:  # what a checkify error keeps of the Python stack where its check was written
-    import importlib
-
-    # jaxlib's extension module (private, hence looked up by name): only its Traceback type is used
-    _TRACEBACK = importlib.import_module("jax._src.lib")._jax.Traceback
-except Exception:  # noqa: BLE001 - another jaxlib layout: such outputs are not written, only used in-process
-    _TRACEBACK = None
+#: what a checkify error keeps of the Python stack where its check was written (None on another jaxlib layout:
+#: such outputs are not written, only used in-process)
+_TRACEBACK = _compat.traceback_type()
 
 
 class _Pickler(pickle.Pickler):
@@ -301,10 +293,10 @@ def _lapack_checks_off() -> list:
     to keep (QR's `ormqr`, `orgqr`...): the store's key holds jaxlib's version, so every LAPACK kernel is allowed."""
     if "lapack_checks" not in _state:
         try:
-            import importlib
+            from jaxlib import lapack
 
-            # jaxlib's LAPACK module (private, hence looked up by name): only the names of its kernels are read
-            names = sorted(importlib.import_module("jaxlib.lapack")._lapack.registrations())
+            # only the names of jaxlib's LAPACK kernels are read (each platform's list of (name, kernel, api))
+            names = sorted({entry[0] for entries in lapack.registrations().values() for entry in entries})
             _state["lapack_checks"] = [jax.export.DisabledSafetyCheck.custom_call(n) for n in names]
         except Exception:  # noqa: BLE001 - another jaxlib layout: such programs are traced, as before
             _state["lapack_checks"] = []
@@ -368,23 +360,18 @@ def _codes_used(before=None) -> int:
     """checkify numbers the checks it traces from one process-wide counter, so the program traced
     after a stored one would differ (and miss JAX's persistent cache) if loading the stored one
     skipped its numbers: read the counter (`before=None`), or how many numbers were used since."""
-    try:
-        from jax._src import checkify as _checkify
-
-        now = _checkify.next_code()
-    except Exception:  # noqa: BLE001 - another JAX layout: at worst one more compilation, once
+    next_code = _compat.checkify_counter()
+    if next_code is None:  # another JAX layout: at worst one more compilation, once
         return 0
+    now = next_code()
     return now if before is None else now - before + 1
 
 
 def _skip_codes(n: int) -> None:
-    try:
-        from jax._src import checkify as _checkify
-
+    next_code = _compat.checkify_counter()
+    if next_code is not None:
         for _ in range(n):
-            _checkify.next_code()
-    except Exception:  # noqa: BLE001
-        pass
+            next_code()
 
 
 def _exported_fields(exported) -> dict:

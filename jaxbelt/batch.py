@@ -66,6 +66,7 @@ import numpy as np
 
 from ._callables import by_value
 from ._guard import host_checked, reraise_checks
+from ._threads import blas_limited
 from ._xla import QUICK_COMPILE
 from .solution import SolveError
 
@@ -176,6 +177,7 @@ def cpu_devices(n: int | None = None) -> int:
     return have
 
 
+@blas_limited
 def sweep(fn, params, *, devices=None, check: bool = True, name: str | None = None):
     """Evaluate `fn` on every element of the batch `params` (leading axis), sharded over devices.
 

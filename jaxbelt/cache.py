@@ -72,8 +72,6 @@ def enable_compilation_cache(path=None, *, min_compile_time: float = 0.0, progra
     Call it once per process before the first simulation (a notebook: in its first cell);
     calling it again with another folder switches to that folder. Returns the folder used.
     """
-    from jax._src import compilation_cache as _cc  # reset when the folder changes (below)
-
     folder = Path(path).expanduser() if path is not None else default_cache_dir()
     folder.mkdir(parents=True, exist_ok=True)
     previous = jax.config.values["jax_compilation_cache_dir"]
@@ -81,8 +79,8 @@ def enable_compilation_cache(path=None, *, min_compile_time: float = 0.0, progra
     jax.config.update("jax_compilation_cache_dir", str(folder))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_time))
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)  # no size floor: small programs count too
-    if previous not in (None, str(folder)) and _cc.is_initialized():
-        _cc.reset_cache()  # JAX opens the cache once; make it reopen at the new folder
+    if previous not in (None, str(folder)):
+        _reset_cache()  # JAX opens the cache once; make it reopen at the new folder
     if programs:
         _store.enable(folder / "jaxbelt-programs")
     else:
@@ -92,12 +90,16 @@ def enable_compilation_cache(path=None, *, min_compile_time: float = 0.0, progra
 
 def disable_compilation_cache() -> None:
     """Stop reading and writing the persistent cache (and the stored programs) in this process."""
-    from jax._src import compilation_cache as _cc
-
     _store.disable()
     jax.config.update("jax_enable_compilation_cache", False)
-    if _cc.is_initialized():
-        _cc.reset_cache()
+    _reset_cache()
+
+
+def _reset_cache() -> None:
+    """Make JAX open its persistent cache again at its next use (a no-op where it was never opened)."""
+    from jax.experimental.compilation_cache import compilation_cache
+
+    compilation_cache.reset_cache()
 
 
 def compilation_cache_dir():

@@ -37,6 +37,7 @@ import optimistix as optx
 from ._callables import by_value
 from ._checks import check_int, check_nonnegative, check_positive, device_array, require_x64
 from ._guard import host_checked, reraise_checks
+from ._threads import blas_limited
 from ._xla import QUICK_COMPILE
 
 __all__ = ["identify", "IdentifyResult"]
@@ -178,6 +179,7 @@ def _real_array(name: str, value) -> np.ndarray:
     return arr.astype(float)
 
 
+@blas_limited
 def identify(
     predict,
     params0: dict,

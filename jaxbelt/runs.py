@@ -13,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._checks import check_int, check_positive, check_scalar
+from ._threads import blas_limited
 from .commands import ConstantVoltage, ExponentialVoltage
 from .models.fourbar import FourBarDrive
 from .models.motor import PID
@@ -33,6 +34,7 @@ STARTUP_OUTPUTS = (
 )
 
 
+@blas_limited
 def startup_curves(model=None, gammas=(0.02, 0.04, 0.06), v_max=24.0, t_end=0.5, n_points=501, method="auto"):
     """The eight time histories of Incerti (2014), Fig. 3, for each voltage time constant, as numpy arrays.
 
@@ -65,6 +67,7 @@ def startup_curves(model=None, gammas=(0.02, 0.04, 0.06), v_max=24.0, t_end=0.5,
 FIG4_OUTPUTS = ("motor_speed", "voltage", "mechanical_power", "electric_power")
 
 
+@blas_limited
 def simulate_fig4(drive=None, pid=None, *, voltage: float = 25.0, t1: float = 1.0, n: int = 2001, **kw):
     """The two runs of Incerti (2012), Fig. 4: open loop at constant `voltage` [V] and closed loop with `pid`.
 
@@ -90,6 +93,7 @@ def simulate_fig4(drive=None, pid=None, *, voltage: float = 25.0, t1: float = 1.
 PLATFORM_OUTPUTS = ("acceleration", "kinetic_energy", "elastic_energy", "command_velocity", "command_acceleration")
 
 
+@blas_limited
 def platform_response(platform, command, t_end: float | None = None, n: int = 901, *, rtol=1e-10, atol=1e-12):
     """The platform's motion under `command` over $[0, t_{end}]$ (Incerti, pseudo-polynomial commands, Fig. 3).
 

@@ -48,6 +48,7 @@ from ._guard import (
 )
 from ._model import AbstractLinearModel
 from ._params import declared
+from ._threads import blas_limited
 from .commands import AbstractExponentialVoltage
 from .fast import batched_exponential_scene
 from .modal import expm_solve, modal_solve
@@ -450,6 +451,7 @@ def forward_sensitivities(
     return ys, s, success
 
 
+@blas_limited
 def simulate(
     scene: Scene,
     method: str = "auto",

@@ -51,6 +51,7 @@ from .._checks import (
 )
 from .._guard import all_ok, checked, error_if, guard, host_checked, stored_jit, traced_checks
 from .._params import FloatParam, Parametrised, document, param
+from .._threads import blas_limited
 
 __all__ = [
     "MovingString",
@@ -289,6 +290,7 @@ def _first_order(M, G, K):
 
 
 # --- exciting speeds and crossings ---------------------------------------------------------------
+@blas_limited
 def exciting_speeds(span: MovingString, pulley_radius, n=1, m=1):
     """Pulley angular speeds [rad/s] at which harmonic `m` of its rotation excites mode `n` (eq. 55).
 
@@ -479,6 +481,7 @@ def _harmonics(harmonics, owner):
     return ks
 
 
+@blas_limited
 def crossing_speeds(rig: RunoutRig, n_modes: int = 2, harmonics=1):
     """Belt speeds [m/s] where the pulley load lines cross the natural-frequency loci (Moon & Wickert, 1997, Fig. 5).
 
@@ -514,6 +517,7 @@ def crossing_speeds(rig: RunoutRig, n_modes: int = 2, harmonics=1):
     return guard(out, checks, throw=True)[0]
 
 
+@blas_limited
 def crossing_diagram(rig: RunoutRig, speed, n_modes: int = 2, harmonics=1):
     """Loci of the crossing diagram at belt speeds `speed` [m/s] (Moon & Wickert, 1997, Fig. 5a).
 
@@ -589,6 +593,7 @@ def _check_response_inputs(o, rig: RunoutRig, speed):
     return _check_subcritical(speed, rig.wave_speed, o)
 
 
+@blas_limited
 def runout_phasors(rig: RunoutRig, speed, n_modes: int = 64):
     """Complex amplitudes [m] of the steady response at the rig's `position` to each pulley's run-out.
 
@@ -632,6 +637,7 @@ def _phasors(speed, L, vt, radii, runouts, phase, zeta, position, nm):
     return W0.reshape(speed.shape), W1.reshape(speed.shape)
 
 
+@blas_limited
 def linear_runout_response(rig: RunoutRig, speed, n_modes: int = 64):
     """Steady peak-to-peak transverse displacement [m] of the linear span driven by eccentric pulleys.
 
@@ -761,6 +767,7 @@ def galerkin_runout_system(rig: RunoutRig, speed, n_basis: int = 24):
     return A, forcing, shift
 
 
+@blas_limited
 def simulate_runout_response(
     rig: RunoutRig,
     speed,

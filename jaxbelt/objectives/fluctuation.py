@@ -36,6 +36,7 @@ from jax.typing import ArrayLike
 
 from .._checks import check_positive, check_range, check_scalar, collecting, is_concrete, record
 from .._guard import guard
+from .._threads import blas_limited
 from ..scene import Scene
 from ..solution import Solution
 from ..solve import forward_sensitivities, simulate
@@ -240,6 +241,7 @@ def _speed(sol):
     )
 
 
+@blas_limited
 def fluctuation_index(sol, t0=None, t1=None, *, smooth: bool = False, temperature=3e-4, average="mean"):
     """Fluctuation index χ (eq. 22) of the motor speed in a `Solution`, over [t0, t1] [s].
 
@@ -497,6 +499,7 @@ def _window_mean(ts, speed, t0, t1):
     return jnp.sum(w * speed, axis=-1) / jnp.sum(w)
 
 
+@blas_limited
 def fluctuation_objective(
     drive,
     pid,

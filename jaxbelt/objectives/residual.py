@@ -41,6 +41,7 @@ import numpy as np
 
 from .._checks import check_int, is_concrete, positive_checks
 from .._guard import all_ok, error_if, guard, host_checked, traced_checks
+from .._threads import blas_limited
 from ..commands import MIN_EXPONENT_GAP, AbstractMotionCommand, PseudoPolynomial, ShapedCommand, falling_factorial
 from ..models.platform import BeltPlatform
 
@@ -189,6 +190,7 @@ def _end_state_ode(plat, cmd, rtol, atol, max_steps):
     return sol.ys[-1]
 
 
+@blas_limited
 def residual_energy(
     plat, cmd, *, method: str = "quadrature", n_nodes: int = 128, rtol=1e-12, atol=1e-15, max_steps: int = 100_000
 ):
@@ -261,6 +263,7 @@ def _end(cmd):
     return cmd.base.end_time if isinstance(cmd, ShapedCommand) else cmd.end_time
 
 
+@blas_limited
 def residual_energy_joules(plat, cmd, **kwargs):
     """Mechanical energy left at the end of the move, $E_{tot}(T) = h\\,\\mathcal H$ [J] (eq. 31)."""
     return plat.energy_factor * residual_energy(plat, cmd, **kwargs)

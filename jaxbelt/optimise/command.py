@@ -38,6 +38,7 @@ import optax
 
 from .._checks import check_int, check_penalised_limits, check_positive, check_range
 from .._guard import host_checked, prepare
+from .._threads import blas_limited
 from .._xla import QUICK_COMPILE
 from ..commands import MIN_EXPONENT_GAP, PseudoPolynomial, ShapedCommand
 from ..models.platform import BeltPlatform
@@ -327,6 +328,7 @@ def _bounds(cmd: PseudoPolynomial, margin, gap, max_step):
     return lower, margin, gap
 
 
+@blas_limited
 def optimise_command(
     plat,
     cmd: PseudoPolynomial,
@@ -382,6 +384,7 @@ def optimise_command(
     return _run(problem, cmd, optimizer, learning_rate, max_steps, tol, gtol, progress, "optimise_command")
 
 
+@blas_limited
 def optimise_robust(
     plat,
     cmd: PseudoPolynomial,
@@ -578,6 +581,7 @@ def _adam(learning_rate):
 # --------------------------------------------------------------------------------------------
 # Sensitivity to the natural frequency, and input-shaper comparison
 # --------------------------------------------------------------------------------------------
+@blas_limited
 def shaped_commands(plat, base: PseudoPolynomial, *, equal_time: bool = True) -> dict:
     """ZV and ZVD shapers (Singer and Seering, 1990) of `base`, tuned to the platform's $(\\omega_n, \\xi)$.
 
@@ -604,6 +608,7 @@ def shaped_commands(plat, base: PseudoPolynomial, *, equal_time: bool = True) ->
     return out
 
 
+@blas_limited
 def sensitivity_curve(plat, commands: dict, *, rel: float = 0.3, n: int = 121, n_nodes: int = 128, measure="amplitude"):
     """The residual vibration of each command against the actual natural frequency.
 
@@ -638,6 +643,7 @@ def _band_amplitude(plat, cmd, omegas, n_nodes):
     return jax.vmap(one)(omegas)
 
 
+@blas_limited
 def tolerance_band(omegas, values, reference, omega0, level: float = 0.05):
     """Width of the frequency band around `omega0` where `values / reference < level`: with residual amplitudes
     (`sensitivity_curve`'s default) and the unshaped command's amplitude as `reference`, the "5 % band" of

@@ -17,6 +17,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._threads import blas_limited
 from ..models.axis import ModalAxis
 from .design import MinimaxDesign, minimax_value
 
@@ -26,6 +27,7 @@ def _problem(design: MinimaxDesign, axis, move_time):
     return eqx.tree_at(lambda q: (q.axis, q.move_time), p, (axis, jnp.asarray(move_time, dtype=float)))
 
 
+@blas_limited
 def best_residual(axis: ModalAxis, move_time, design: MinimaxDesign):
     """The least worst-case residual (fraction of the references) any smooth move of the design's distance and
     limits can leave on `axis` in `move_time` [s], on the frequency grid of `design`. Differentiable in the axis'
@@ -62,6 +64,7 @@ def _root_time(axis, target, design, t_lo, t_hi, iters=60):
     return T
 
 
+@blas_limited
 def shortest_move_time(axis: ModalAxis, target, design: MinimaxDesign, *, bracket=None):
     """The least move time [s] at which the minimax design on `axis` reaches the worst residual `target` (a
     fraction of the references; e.g. `design.worst`), on the frequency grid of `design`.

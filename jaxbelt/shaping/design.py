@@ -45,7 +45,7 @@ import numpy as np
 
 from .._checks import as_float_array, device_array, is_concrete
 from .._guard import host_checked, prepare, stored_jit
-from .._xla import QUICK_COMPILE
+from .._xla import QUICK_COMPILE, LazyJit
 from ..models.axis import ModalAxis
 from .lp import LPResult, RowGroups, lp_value, solve_lp, solve_lp_data
 from .moves import SplineMove, peaks, phi1
@@ -457,7 +457,7 @@ def _max_distance_impl(problem: MinimaxProblem, opts: DesignOptions):
     return -solve_lp(c, G, hv, A, b, tol=1e-9, max_iter=100).value
 
 
-_max_distance_top = eqx.filter_jit(_max_distance_impl, compiler_options=_LP_COMPILE)  # pyright: ignore[reportCallIssue]
+_max_distance_top = LazyJit(eqx.filter_jit, _max_distance_impl, _LP_COMPILE)
 
 
 def _max_distance(problem, opts):

@@ -43,6 +43,7 @@ import numpy as np
 import optimistix as optx
 
 from .._checks import check_int, device_array
+from .._threads import blas_limited
 
 __all__ = ["identify_axis", "load_record"]
 
@@ -339,6 +340,7 @@ def _fmt(v) -> str:
     return "[" + ", ".join(f"{x:.6g}" for x in np.atleast_1d(v)) + "]"
 
 
+@blas_limited
 def identify_axis(
     t,
     y,

@@ -35,6 +35,7 @@ from jaxtyping import Array, Float
 
 from .._checks import as_float_array, check_positive, check_scalar
 from .._guard import prepare, stored_jit
+from .._threads import blas_limited
 from ..commands import AbstractMotionCommand
 
 # --------------------------------------------------------------------------------------------
@@ -299,6 +300,7 @@ def _scurve(distance: float, duration: float, v_max: float, j_max: float | None)
     return a_best, a_best / j_max, ta
 
 
+@blas_limited
 def trapezoid_move(distance, duration, v_max, a_max, j_max=None) -> PiecewiseMove | None:
     """The gentlest symmetric rest-to-rest move of `distance` [m] in exactly `duration` [s] within the limits.
 
@@ -368,6 +370,7 @@ def _fastest_time(distance, v_max, a_max, j_max) -> float:
     return 2 * t_acc(lo)
 
 
+@blas_limited
 def fastest_move(distance, v_max, a_max, j_max=None) -> PiecewiseMove:
     """The time-optimal rest-to-rest move within the limits (`fastest_time`): the unshaped move a planner runs."""
     check_move_limits("fastest_move", distance, v_max, a_max, j_max)
@@ -379,6 +382,7 @@ def fastest_move(distance, v_max, a_max, j_max=None) -> PiecewiseMove:
     raise RuntimeError("fastest_move: the time-optimal profile could not be built (report this)")
 
 
+@blas_limited
 def shape_move(base: PiecewiseMove, amplitudes, delays) -> PiecewiseMove:
     """The move `base` convolved with an impulse sequence (`amplitudes` summing to 1 at `delays` [s], the first
     at 0): $a_s(t) = \\sum_i A_i\\,a(t - \\tau_i)$. The move lasts $T + \\tau_{last}$."""

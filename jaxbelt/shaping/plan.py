@@ -32,6 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import check_positive, check_range, device_array
+from .._threads import blas_limited
 from ..commands import AbstractMotionCommand
 from ..models.axis import ModalAxis
 from . import design as _design
@@ -363,6 +364,7 @@ class _Minimax:
         prepare_peaks(cmd)
 
 
+@blas_limited
 def design_move(
     axis: ModalAxis,
     distance,

@@ -79,6 +79,7 @@ from numpy.typing import ArrayLike
 from .. import _store
 from .._checks import check_positive, check_range, device_array
 from .._guard import eager
+from .._xla import LazyJit, quick_compile
 from ..commands import PseudoPolynomial, _safe_pow
 from ..models.axis import ModalAxis
 
@@ -366,23 +367,8 @@ COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 
 
 def _jit(fun, static_argnums=()):
-    """`jax.jit(fun)` with `COMPILER_OPTIONS`, falling back to plain `jax.jit` where XLA refuses them."""
-    fast = jax.jit(fun, static_argnums=static_argnums, compiler_options=COMPILER_OPTIONS)
-    plain = jax.jit(fun, static_argnums=static_argnums)
-    ok = [True]
-
-    @functools.wraps(fun)
-    def call(*args):
-        if ok[0]:
-            try:
-                return fast(*args)
-            except Exception as e:  # an XLA without the option: "No such compile option"
-                if "compile option" not in str(e):
-                    raise
-                ok[0] = False
-        return plain(*args)
-
-    return call
+    """`jax.jit(fun)` with `COMPILER_OPTIONS` as far as the running backend knows them (`jaxbelt._xla`)."""
+    return LazyJit(jax.jit, fun, COMPILER_OPTIONS, static_argnums=static_argnums)
 
 
 # --------------------------------------------------------------------------------------------
@@ -526,7 +512,7 @@ def run_stage(opt, shared: Shared, runs: Run, thetas, *, n_hist: int = 8, linese
             _run_stage_lbfgs,
             args,
             lambda *a: _run_stage_jit(LBFGS, *a),
-            COMPILER_OPTIONS,
+            quick_compile(COMPILER_OPTIONS),
         )
     return _run_stage_jit(opt, shared, runs, thetas, n_hist, linesearch)
 

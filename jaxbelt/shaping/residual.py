@@ -22,6 +22,7 @@ from jax.typing import ArrayLike
 
 from .._checks import atleast_1d, check_range, device_array
 from .._guard import prepare, stored_jit
+from .._threads import blas_limited
 from .._xla import QUICK_COMPILE
 from ..commands import AbstractMotionCommand, PseudoPolynomial, ShapedCommand, falling_factorial
 from ..models.axis import ModalAxis
@@ -87,6 +88,7 @@ def _poles(axis: ModalAxis, factors):
     return -z * w + 1j * wd, wd
 
 
+@blas_limited
 def residual_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors: ArrayLike = 1.0, *, rtol=1e-10, atol=1e-14):
     """Residual amplitudes [m] (units of the command's position) of every mode after the move `cmd`, at the mode
     frequencies scaled by each of `factors` (damping ratios and gains kept): shape (n_modes, len(factors)).
@@ -135,6 +137,7 @@ def _closed_form_curve(axis, cmd, r, n_nodes: int):
     return jnp.abs(axis.gains)[:, None] / wd * jnp.abs(W)
 
 
+@blas_limited
 def residual_amplitudes(axis: ModalAxis, cmd: AbstractMotionCommand, **kw):
     """Residual amplitude [m] of each mode of `axis` after the move `cmd` (nominal frequencies): shape (n_modes,)."""
     return residual_curve(axis, cmd, 1.0, **kw)[:, 0]

@@ -21,6 +21,7 @@ import optimistix as optx
 
 from ..._checks import check_int, is_concrete
 from ..._guard import reraise_checks
+from ..._threads import blas_limited
 from .harmonic import fold_speeds, jumps
 from .model import NonlinearBelt
 
@@ -172,6 +173,7 @@ def _log_problem(free: tuple, shapes: tuple, n_harmonics: int, amplitudes: bool)
     return build, residuals
 
 
+@blas_limited
 def calibrate(
     belt: NonlinearBelt | None = None,
     *,

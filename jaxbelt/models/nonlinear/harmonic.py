@@ -52,6 +52,7 @@ else:  # imported by the first trace only: a process that loads the stored progr
 
 from ..._checks import check_int, check_positive, check_real, collecting, device_array, is_concrete, record
 from ..._guard import all_ok, guard, prepare, stored_jit, traced_checks
+from ..._threads import blas_limited
 from ..._xla import QUICK_COMPILE
 from .model import ModalSystem, NonlinearBelt, mode_shapes
 
@@ -157,6 +158,7 @@ def _hb_point(belt, speed, Y0, H: int, max_steps: int):
     return sol.value, pp, amp, ok
 
 
+@blas_limited
 def harmonic_balance(
     belt: NonlinearBelt, speed, n_harmonics: int = 3, guess=None, *, max_steps: int = 50, throw: bool = True
 ) -> HarmonicSolution:
@@ -494,6 +496,7 @@ def _fold_options(owner, belt, speed_range, n_harmonics, n_folds, max_points):
     return H, n_folds, max_points, v0, v1
 
 
+@blas_limited
 def fold_speeds(
     belt: NonlinearBelt,
     speed_range=(7.5, 10.5),
@@ -579,6 +582,7 @@ def _jumps_jit(belt, v0, v1, H, n_folds, max_points, ds0, ds_max):
     return Vs, pp_b, pp_a, ok & ok_a
 
 
+@blas_limited
 def jumps(
     belt: NonlinearBelt,
     speed_range=(7.5, 10.5),
@@ -659,6 +663,7 @@ def _curve_post_jit(belt, us, acc, H):
     return jax.lax.map(one, (us, acc))
 
 
+@blas_limited
 def response_curve(
     belt: NonlinearBelt,
     speed_range=(7.5, 10.5),

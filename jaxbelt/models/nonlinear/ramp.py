@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._checks import check_int, check_positive, check_scalar, is_concrete
+from ..._threads import blas_limited
 from ...scene import Scene
 from ...solve import simulate
 from .harmonic import _basis, harmonic_balance
@@ -41,6 +42,7 @@ def ramp_initial_state(belt: NonlinearBelt, speed, n_harmonics: int = 5):
     return hb.coefficients @ _basis(n_harmonics, jnp.zeros(1))[:, 0]
 
 
+@blas_limited
 def speed_ramp(
     belt: NonlinearBelt,
     v_start,

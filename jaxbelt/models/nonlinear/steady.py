@@ -42,6 +42,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._checks import check_int, check_real, check_scalar, is_concrete
+from ..._threads import blas_limited
 from .model import ModalSystem, NonlinearBelt, _gauss, mode_shapes
 
 
@@ -287,6 +288,7 @@ def _steady_jit(belt, speed, z0, theta0, xm, rtol, atol, *, min_periods, max_per
     return _steady_core(belt, sys, z0, theta0, xm, rtol, atol, min_periods, max_periods, min_steps, periods_per_chunk)
 
 
+@blas_limited
 def nonlinear_steady_state(
     belt: NonlinearBelt,
     speed,
@@ -348,6 +350,7 @@ def _sweep_jit(belt, speeds, z0, theta0, xm, rtol, atol, *, min_periods, max_per
     return _sweep_core(belt, speeds, z0, theta0, xm, rtol, atol, min_periods, max_periods, min_steps, periods_per_chunk)
 
 
+@blas_limited
 def nonlinear_sweep(
     belt: NonlinearBelt,
     speeds,
@@ -431,6 +434,7 @@ def check_converged(result: SweepResult | SteadyState, speeds=None, max_periods=
     )
 
 
+@blas_limited
 def speed_sweep(
     belt: NonlinearBelt,
     speeds,
@@ -478,6 +482,7 @@ def speed_sweep(
     return pp
 
 
+@blas_limited
 def nonlinear_basins(
     belt: NonlinearBelt,
     speed,
@@ -528,6 +533,7 @@ def _trajectory_jit(belt, speed, z0, *, periods, steps_per_period):
     return taus * belt.span / belt.wave_speed, jnp.concatenate([z0[None], zs]), sys
 
 
+@blas_limited
 def nonlinear_trajectory(belt: NonlinearBelt, speed, z0=None, periods: int = 200, steps_per_period: int = 64):
     """Modal state history from `z0` at a fixed speed: `(t [s], zs (periods*steps+1, 2N))`,
     for phase-plane plots ($\\zeta^R_1$ against $\\zeta^I_1$, Fig. 6). diffrax (Tsit5, tight
