@@ -8,7 +8,8 @@ Every benchmark writes `benchmarks/results/<scene>.json` with this schema:
      "headline": [{"what": str, "value": float, "unit": str, "target": str | None}]}
 
 `rows` are the work-precision points (error against a tight reference, median run time after
-compilation); `headline` holds the few numbers the README table shows.
+compilation); `headline` holds the few numbers the README table shows. Every file is written
+atomically (a temporary file beside it, then renamed): a run that fails leaves the previous results whole.
 """
 
 from __future__ import annotations
@@ -21,6 +22,9 @@ from pathlib import Path
 
 import jax
 import numpy as np
+
+from jaxbelt._io import save_figure as save_figure  # every figure written atomically
+from jaxbelt._io import write_text
 
 COMMITTED = Path(__file__).resolve().parent / "results"
 #: Scratch folder of `run_all.py --quick` (git-ignored): quick figures never overwrite the committed ones.
@@ -100,7 +104,7 @@ def write_results(scene: str, rows: list, headline: list, quick: bool, extra: di
     if extra:
         data.update(extra)
     path = out / f"{scene}.json"
-    path.write_text(json.dumps(data, indent=2, default=float))
+    write_text(path, json.dumps(data, indent=2, default=float))  # atomically: a failed run keeps the last results
     return path
 
 

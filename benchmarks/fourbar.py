@@ -29,7 +29,7 @@ import jax  # noqa: E402
 jax.config.update("jax_enable_x64", True)  # jaxbelt computes in float64 (it leaves the setting to its caller)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-from _common import RESULTS, rel_error, time_jax, time_py, write_results  # noqa: E402
+from _common import RESULTS, rel_error, save_figure, time_jax, time_py, write_results  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 
 import jaxbelt as jb  # noqa: E402
@@ -339,7 +339,7 @@ def plot(rows):
     ax.set_title("four-bar drive, closed loop (PID) 0.5 s: work-precision")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
-    fig.savefig(RESULTS / "fourbar.png", dpi=120)
+    save_figure(fig, RESULTS / "fourbar.png", dpi=120)
 
 
 if __name__ == "__main__":

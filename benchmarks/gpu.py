@@ -30,8 +30,6 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 sys.path.insert(0, str(HERE))
@@ -58,7 +56,9 @@ def result(out):
     print("RESULT " + json.dumps(out))
 """
 
-BATCH = PRELUDE + r"""
+BATCH = (
+    PRELUDE
+    + r"""
 from jaxbelt.fast import startup_gamma_batch
 n, one_output, repeats = int(sys.argv[1]), sys.argv[2] == "1", int(sys.argv[3])
 model = jb.BeltStartup()
@@ -89,8 +89,11 @@ result(dict(n=n, one_output=one_output, output_bytes=out_bytes, median_s=run[0],
             xla_output_bytes=int(getattr(ma, "output_size_in_bytes", 0) or 0),
             xla_temp_bytes=int(getattr(ma, "temp_size_in_bytes", 0) or 0), rel_error=max(check)))
 """
+)
 
-SWEEP = PRELUDE + r"""
+SWEEP = (
+    PRELUDE
+    + r"""
 n, repeats = int(sys.argv[1]), int(sys.argv[2])
 drive = jb.FourBarDrive()
 base = jb.PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0)
@@ -104,8 +107,11 @@ ref = [float(jb.fluctuation_objective(drive, base.with_gains(gains[k]), 0.375, 0
 err = max(abs(float(first[0]) - ref[0]), abs(float(first[-1]) - ref[1]))
 result(dict(n=n, first_s=first_s, median_s=run[0], min_s=run[1], max_s=run[2], chi_abs_error=err))
 """
+)
 
-CALLS = PRELUDE + r"""
+CALLS = (
+    PRELUDE
+    + r"""
 task, repeats = sys.argv[1], int(sys.argv[2])
 if task == "design_move":
     axis = jb.ModalAxis(frequencies=[7.3, 18.0], damping_ratios=[0.015, 0.01])
@@ -120,6 +126,7 @@ for _ in range(repeats):
 result(dict(task=task, first_s=first, warm_s=float(np.median(samples)), warm_min_s=float(np.min(samples)),
             warm_max_s=float(np.max(samples))))
 """
+)
 
 
 def _run(code: str, *args, platform: str | None = None) -> dict:
@@ -133,8 +140,10 @@ def _run(code: str, *args, platform: str | None = None) -> dict:
 
 
 def _backend_info(platform: str | None) -> dict:
-    code = PRELUDE + "d = jax.devices()[0]; result(dict(backend=jax.default_backend(), device=d.device_kind, " \
+    code = (
+        PRELUDE + "d = jax.devices()[0]; result(dict(backend=jax.default_backend(), device=d.device_kind, "
         "count=jax.device_count(), jax=jax.__version__))"
+    )
     return _run(code, platform=platform)
 
 
@@ -190,10 +199,23 @@ def main() -> None:
         if large:
             b = large[-1]
             peak = b["peak_bytes"] if b.get("peak_bytes") else b["xla_output_bytes"] + b["xla_temp_bytes"]
-            targets.append(dict(backend=name, what=f"peak memory / output, batch {b['n']}", value=peak / b["output_bytes"],
-                                target="<= 1.3", source="device" if b.get("peak_bytes") else "XLA memory_analysis"))
-            targets.append(dict(backend=name, what=f"write rate / copy rate, batch {b['n']}",
-                                value=b["write_rate"] / b["copy_rate"], target=">= 0.3"))
+            targets.append(
+                dict(
+                    backend=name,
+                    what=f"peak memory / output, batch {b['n']}",
+                    value=peak / b["output_bytes"],
+                    target="<= 1.3",
+                    source="device" if b.get("peak_bytes") else "XLA memory_analysis",
+                )
+            )
+            targets.append(
+                dict(
+                    backend=name,
+                    what=f"write rate / copy rate, batch {b['n']}",
+                    value=b["write_rate"] / b["copy_rate"],
+                    target=">= 0.3",
+                )
+            )
     result = dict(scene="gpu", quick=args.quick, sections=sections, targets=targets, when=time.strftime("%Y-%m-%d"))
     out_dir = results_dir(args.quick)
     out_dir.mkdir(parents=True, exist_ok=True)

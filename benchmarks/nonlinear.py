@@ -28,7 +28,7 @@ import jax  # noqa: E402
 jax.config.update("jax_enable_x64", True)  # jaxbelt computes in float64 (it leaves the setting to its caller)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-from _common import RESULTS, time_jax, time_py, write_results  # noqa: E402
+from _common import RESULTS, save_figure, time_jax, time_py, write_results  # noqa: E402
 
 import jaxbelt as jb  # noqa: E402
 
@@ -273,7 +273,7 @@ def plot(rows, speeds, sweeps):
     a2.legend(fontsize=7)
     fig.tight_layout()
     RESULTS.mkdir(parents=True, exist_ok=True)
-    fig.savefig(RESULTS / "nonlinear.png", dpi=110)
+    save_figure(fig, RESULTS / "nonlinear.png", dpi=110)
 
 
 if __name__ == "__main__":

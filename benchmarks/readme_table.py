@@ -20,6 +20,8 @@ import json
 import sys
 from pathlib import Path
 
+from jaxbelt._io import write_text
+
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results"
 README = HERE.parent / "README.md"
@@ -207,7 +209,7 @@ def _replace_block(path: Path, table: str, start: str = START, end: str = END) -
     b = text.index(end)
     new = text[:a] + "\n" + table + "\n" + text[b:]
     if new != text:
-        path.write_text(new)
+        write_text(path, new)  # atomically: a failed write keeps the README whole
     return True
 
 

@@ -24,9 +24,8 @@ import sys
 import time
 from pathlib import Path
 
-# one OpenBLAS thread (jaxlib's LAPACK kernels): its pool spins against XLA's threads on 2 cores; set before
-# scipy loads, inherited by the fresh processes this benchmark starts
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# No thread variable is set: the figures are those of a user's environment (jaxbelt limits BLAS threads around
+# its own calls, `jaxbelt._threads`).
 
 HERE = Path(__file__).resolve().parent
 HELPERS = {"run_all", "readme_table", "shortcuts", "coldstart"}  # coldstart: minutes of cold CLI runs, run alone

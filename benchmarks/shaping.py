@@ -25,7 +25,7 @@ import jax  # noqa: E402
 jax.config.update("jax_enable_x64", True)  # jaxbelt computes in float64 (it leaves the setting to its caller)
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-from _common import RESULTS, rel_error, time_jax, time_py, write_results  # noqa: E402
+from _common import RESULTS, rel_error, save_figure, time_jax, time_py, write_results  # noqa: E402
 from scipy.integrate import quad  # noqa: E402
 from scipy.optimize import minimize  # noqa: E402
 
@@ -245,7 +245,7 @@ def main(argv=None):
     ax.legend(fontsize=8)
     fig.tight_layout()
     png = RESULTS / "shaping.png"
-    fig.savefig(png, dpi=110)
+    save_figure(fig, png, dpi=110)
     print(f"wrote {png}")
 
 

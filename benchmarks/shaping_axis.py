@@ -27,9 +27,8 @@ import sys
 import time
 from pathlib import Path
 
-# one OpenBLAS thread (jaxlib's LAPACK kernels): its pool spins against XLA's threads on 2 cores; set before
-# scipy loads, inherited by the fresh processes this benchmark starts
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+# No thread variable is set: the figures are those of a user's environment (jaxbelt limits BLAS threads around
+# its own calls, `jaxbelt._threads`).
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
@@ -39,7 +38,7 @@ import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)  # jaxbelt computes in float64 (it leaves the setting to its caller)
 import numpy as np  # noqa: E402
-from _common import machine_info, results_dir, write_results  # noqa: E402
+from _common import machine_info, results_dir, save_figure, write_results  # noqa: E402
 from readme_table import update_shaping_blocks  # noqa: E402
 from scipy.integrate import solve_ivp  # noqa: E402
 
@@ -197,7 +196,7 @@ def figure(cases, path):
     a2.set_xlabel("axis (number of modes)")
     a2.legend(fontsize=8)
     a2.grid(alpha=0.3)
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
 
 

@@ -25,7 +25,7 @@ import numpy as np  # noqa: E402
 from scipy.optimize import brentq  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _common import RESULTS, time_jax, time_py, write_results  # noqa: E402
+from _common import RESULTS, save_figure, time_jax, time_py, write_results  # noqa: E402
 
 import jaxbelt as jb  # noqa: E402
 
@@ -268,7 +268,7 @@ def _plot(wp, t_np_modal, err_np, t_exact, t_jax, t_np, n_speeds, n_sweep):
     ax.set_title(f"Crossing diagram, {n_speeds} speeds x {N_MODES} modes")
     fig.tight_layout()
     RESULTS.mkdir(parents=True, exist_ok=True)
-    fig.savefig(RESULTS / "spans.png", dpi=110)
+    save_figure(fig, RESULTS / "spans.png", dpi=110)
 
 
 if __name__ == "__main__":

@@ -39,7 +39,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import scipy.integrate as si  # noqa: E402
 import scipy.linalg as sl  # noqa: E402
-from _common import RESULTS, rel_error, time_jax, time_py, write_results  # noqa: E402
+from _common import RESULTS, rel_error, save_figure, time_jax, time_py, write_results  # noqa: E402
 
 import jaxbelt as jb  # noqa: E402
 from jaxbelt.fast import startup_gamma_batch  # noqa: E402
@@ -498,7 +498,7 @@ def plot(rows, path):
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0))
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path, dpi=120)
     plt.close(fig)
 
 

@@ -116,7 +116,9 @@ def main() -> None:
                     repeats=len(s),
                 )
                 rows.append(row)
-                print(f"{task:12s} {row['cores']:4s} {setting:24s} {row['median_s']:.3f} s ({row['min_s']:.3f}-{row['max_s']:.3f})")
+                print(
+                    f"{task:12s} {row['cores']:4s} {setting:24s} {row['median_s']:.3f} s ({row['min_s']:.3f}-{row['max_s']:.3f})"
+                )
 
     def med(task, setting, cores):
         return next(r["median_s"] for r in rows if (r["task"], r["setting"], r["cores"]) == (task, setting, cores))
@@ -128,9 +130,21 @@ def main() -> None:
             before = med(task, "limit off", cores) / med(task, "OPENBLAS_NUM_THREADS=1", cores)
             target = "<= 2" if (task, cores) == ("design_move", "busy") else None
             headline.append(
-                dict(what=f"{task} warm, cores {cores}: user / OPENBLAS_NUM_THREADS=1", value=ratio, unit="x", target=target)
+                dict(
+                    what=f"{task} warm, cores {cores}: user / OPENBLAS_NUM_THREADS=1",
+                    value=ratio,
+                    unit="x",
+                    target=target,
+                )
             )
-            headline.append(dict(what=f"{task} warm, cores {cores}: limit off / OPENBLAS_NUM_THREADS=1", value=before, unit="x", target=None))
+            headline.append(
+                dict(
+                    what=f"{task} warm, cores {cores}: limit off / OPENBLAS_NUM_THREADS=1",
+                    value=before,
+                    unit="x",
+                    target=None,
+                )
+            )
     out_dir = results_dir()
     out_dir.mkdir(parents=True, exist_ok=True)
     result = dict(scene="threads", machine=machine_info(), quick=False, rows=rows, headline=headline)
@@ -153,7 +167,9 @@ def _plot(rows, path: Path) -> None:
                 r = next(r for r in rows if (r["task"], r["setting"], r["cores"]) == (task, setting, cores))
                 x = k * (len(SETTINGS) + 1) + j
                 ax.bar(x, r["median_s"], color=f"C{j}", label=setting if k == 0 else None)
-                ax.errorbar(x, r["median_s"], yerr=[[r["median_s"] - r["min_s"]], [r["max_s"] - r["median_s"]]], color="k")
+                ax.errorbar(
+                    x, r["median_s"], yerr=[[r["median_s"] - r["min_s"]], [r["max_s"] - r["median_s"]]], color="k"
+                )
         ax.set_xticks([1, len(SETTINGS) + 2], ["cores idle", "cores busy"])
         ax.set_ylabel("warm call [s]")
         ax.set_title(f"{task} (median, min-max)")

@@ -45,7 +45,7 @@ jax.config.update("jax_enable_x64", True)
 
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-from _common import RESULTS, time_jax, write_results  # noqa: E402
+from _common import RESULTS, save_figure, time_jax, write_results  # noqa: E402
 
 import jaxbelt as jb  # noqa: E402
 from jaxbelt.objectives.fluctuation import closed_loop_metrics  # noqa: E402
@@ -484,7 +484,7 @@ def plot(rows, scenes):
     ax.set_title(f"jaxbelt: throughput of batched sweeps ({jax.default_backend()})")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2)
-    fig.savefig(RESULTS / "throughput.png", dpi=120)
+    save_figure(fig, RESULTS / "throughput.png", dpi=120)
 
 
 if __name__ == "__main__":

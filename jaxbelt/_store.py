@@ -36,14 +36,13 @@ import io
 import os
 import pickle
 import sys
-import tempfile
 from pathlib import Path
 
 import jax
 import numpy as np
 from jax.sharding import Mesh
 
-from . import _compat
+from . import _compat, _io
 from ._callables import ByValue
 
 _FORMAT = 1
@@ -393,15 +392,7 @@ def _load(path: Path, key: str, specs, compiler_options=None):
 
 
 def _write(path: Path, data) -> None:
-    blob = _dumps(data)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".tmp-")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(blob)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    _io.write_bytes(path, _dumps(data))
 
 
 def _debug(message: str) -> None:

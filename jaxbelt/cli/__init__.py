@@ -34,8 +34,21 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see --help)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = _Parser(
+class _ArgumentError(Exception):
+    def __init__(self, prog: str, message: str):
+        super().__init__(message)
+        self.prog, self.message = prog, message
+
+
+class _EarlyParser(_Parser):
+    """The parser of the early pass (`_refuse_early`): a bad argument is raised, to be reported by the caller."""
+
+    def error(self, message):
+        raise _ArgumentError(self.prog, message)
+
+
+def build_parser(parser_class=_Parser) -> argparse.ArgumentParser:
+    parser = parser_class(
         prog="jaxbelt",
         description="Differentiable simulation of belt drives and DC-motor mechanisms (figures from the papers).",
     )
@@ -60,11 +73,24 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     """Run the command line `argv` (default: `sys.argv[1:]`); returns the exit status. JAX's 64-bit mode
     must be on, as for every jaxbelt call (`entry`, the command's own process, turns it on)."""
-    args = build_parser().parse_args(argv)
-    check = getattr(args, "check", None)  # what argparse cannot see: relations between arguments
+    return _run(build_parser().parse_args(argv))
+
+
+def _refused(args, stage: str) -> bool:
+    """Run the sub-command's checks of `stage` ("early_check": relations between arguments, output paths and
+    unused options, with the standard library only; "check": those that build a model); print the problem in one
+    line and return True when they refuse the command."""
+    check = getattr(args, stage, None)  # what argparse cannot see: relations between arguments
     problem = check(args) if check is not None else None
     if problem:
         print(f"jaxbelt {args.command}: error: {problem} (see --help)", file=sys.stderr)
+        return True
+    return False
+
+
+def _run(args) -> int:
+    """Check and run the parsed command line `args`."""
+    if _refused(args, "early_check") or _refused(args, "check"):
         return 2
     if args.command != "bench":  # the figure commands (bench runs the benchmarks in processes of their own)
         if _OWN_PROCESS:
@@ -86,6 +112,24 @@ def main(argv=None) -> int:
         message, code = found
         print(f"jaxbelt {args.command}: error: {message}", file=sys.stderr)
         return code
+
+
+def _refuse_early() -> None:
+    """In the command's own process, before JAX is imported (about 1 s): parse the command line and run the
+    sub-command's early checks (values, output paths, rates, unused options: the standard library only); a bad
+    one ends the process at once with its one line and status 2, before anything is loaded or compiled. A command
+    line without a command is left to `main`, which reports it the same way."""
+    try:
+        args = build_parser(_EarlyParser).parse_args(sys.argv[1:])
+    except _ArgumentError as e:
+        if e.prog == "jaxbelt" and "required" in e.message:  # no command: `main` says so (or runs what replaced it)
+            return
+        print(f"{e.prog}: error: {e.message} (see --help)", file=sys.stderr)
+        sys.stderr.flush()
+        os._exit(2)
+    if _refused(args, "early_check"):
+        sys.stderr.flush()
+        os._exit(2)
 
 
 def _failure(error: BaseException) -> tuple[str, int] | None:
@@ -190,11 +234,8 @@ def entry() -> None:
     """
     global _OWN_PROCESS
     _OWN_PROCESS = True
-    # jaxlib's LAPACK kernels (Cholesky, solves) run on scipy's OpenBLAS: its thread pool, started for matrices
-    # of a few hundred rows, spins against XLA's own threads; a 157 x 157 factor and solve of the shaping LP took
-    # 376 ms with OpenBLAS's default threads on 2 loaded cores and 10 ms with one. Read when OpenBLAS loads, so
-    # set before anything loads scipy; a caller's own setting wins.
-    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    _refuse_early()
+    # (BLAS threads: the library limits them around its own calls, `jaxbelt._threads`; nothing to set here)
     import jax
 
     # jaxbelt computes in float64 and leaves JAX's configuration to whoever runs it (the `jaxbelt` docstring):

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 from pathlib import Path
 
 _IMAGE_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg")
@@ -114,15 +113,49 @@ def image_path(text: str) -> Path:
     A name without a suffix gets `.png` (so the printed name is the written one).
     """
     p = Path(text).expanduser()
-    if p.suffix == "":
+    if p.suffix == "" and not p.is_dir():
         p = p.with_suffix(".png")
-    if p.suffix.lower() not in _IMAGE_SUFFIXES:
-        raise argparse.ArgumentTypeError(f"image format {p.suffix!r} is not one of {', '.join(_IMAGE_SUFFIXES)}")
-    folder = p.parent if str(p.parent) else Path(".")
-    if not folder.is_dir():
-        raise argparse.ArgumentTypeError(f"folder {str(folder)!r} does not exist")
-    if not os.access(folder, os.W_OK):
-        raise argparse.ArgumentTypeError(f"folder {str(folder)!r} is not writable")
-    if p.exists() and p.is_dir():
-        raise argparse.ArgumentTypeError(f"{text!r} is a folder, not a file")
+    return _writable(p, _IMAGE_SUFFIXES, "image format")
+
+
+def csv_or_image_path(text: str) -> Path:
+    """An output path for a command (`.csv`) or a figure (an image format), whose folder exists and is writable."""
+    p = Path(text).expanduser()
+    if p.suffix.lower() == ".csv":
+        return _writable(p, (".csv",), "format")
+    return image_path(text)
+
+
+def _writable(p: Path, formats, what: str) -> Path:
+    from .._io import output_path_problem
+
+    if p.is_dir():
+        raise argparse.ArgumentTypeError(f"{str(p)!r} is a folder, not a file")
+    if p.suffix.lower() not in formats:
+        raise argparse.ArgumentTypeError(f"{what} {p.suffix!r} is not one of {', '.join(formats)}")
+    problem = output_path_problem(p)
+    if problem is not None:
+        raise argparse.ArgumentTypeError(problem)
     return p
+
+
+def given(args, name: str) -> bool:
+    """Whether the option `name` (its `dest`) was given on the command line: the options whose use depends on
+    another one default to None, and the command fills in their defaults once it has refused the unused ones."""
+    return getattr(args, name, None) is not None
+
+
+def refuse_unused(args, names, why: str) -> str | None:
+    """The one-line error for the first option of `names` (dests) that was given although `why` says it is not
+    used, or None."""
+    for name in names:
+        if given(args, name):
+            return f"argument --{name.replace('_', '-')}: not used {why}"
+    return None
+
+
+def fill_defaults(args, defaults: dict) -> None:
+    """Set each option of `defaults` that was not given to its default."""
+    for name, value in defaults.items():
+        if getattr(args, name, None) is None:
+            setattr(args, name, value)

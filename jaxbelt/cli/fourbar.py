@@ -5,7 +5,7 @@ from __future__ import annotations
 import warnings
 from pathlib import Path
 
-from ._args import float_in, image_path, nonnegative_float
+from ._args import fill_defaults, float_in, image_path, nonnegative_float, refuse_unused
 
 #: the longest run [s]: the ramped gain Kp t grows with time and the closed loop stiffens with it (about 2300
 #: solver steps per simulated second at 10 s); 20 s stays well inside `simulate`'s budget of 100000 steps
@@ -33,8 +33,8 @@ def register(subparsers) -> None:
     p.add_argument(
         "--kp-constant",
         type=nonnegative_float,
-        default=35.0,
-        help="Kp [V s/rad] of the constant-gain PID in --regulators (default 35: Kp t at t = 0.44 s)",
+        default=None,
+        help="Kp [V s/rad] of the constant-gain PID in --regulators, only with it (default 35: Kp t at t = 0.44 s)",
     )
     p.add_argument(
         "--voltage", type=float_in(-1e4, 1e4), default=25.0, help="open-loop voltage [V], |V| <= 1e4 (paper: 25)"
@@ -60,7 +60,17 @@ def register(subparsers) -> None:
         default=1.0,
         help=f"simulated time [s], in (0.5, {MAX_T1:g}] (the closed-loop index is taken over 0.375-0.5 s; default 1)",
     )
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, early_check=check)
+
+
+def check(args) -> str | None:
+    """--kp-constant sets the comparison of --regulators: refused without it (never ignored)."""
+    if args.regulators is None:
+        unused = refuse_unused(args, ("kp_constant",), "without --regulators (it sets that comparison)")
+        if unused:
+            return unused
+    fill_defaults(args, {"kp_constant": 35.0})
+    return None
 
 
 def summary(open_, closed, voltage: float, t1: float, omega_ref: float) -> tuple[list[str], list[str]]:
@@ -98,6 +108,7 @@ def run(args) -> int:
 
     matplotlib.use("Agg")
     import jaxbelt as jb
+    from jaxbelt._io import save_figure
     from jaxbelt.plots.fourbar import fourbar_figure, linkage_strip
     from jaxbelt.runs import FIG4_OUTPUTS, simulate_fig4
 
@@ -117,7 +128,7 @@ def run(args) -> int:
     for w in warns:
         warnings.warn(w, RuntimeWarning, stacklevel=1)
     fig = fourbar_figure(open_, closed, omega_ref=args.omega_ref, voltage=args.voltage)
-    fig.savefig(Path(args.out), dpi=120)
+    save_figure(fig, Path(args.out), dpi=120)
     print(f"wrote {args.out}")
     if args.regulators:
         import matplotlib.pyplot as plt
@@ -138,9 +149,9 @@ def run(args) -> int:
             omega_ref=args.omega_ref,
             ax=ax,
         )
-        fig.savefig(Path(args.regulators), dpi=120)
+        save_figure(fig, Path(args.regulators), dpi=120)
         print(f"wrote {args.regulators}")
     if args.strip:
-        linkage_strip(drive).savefig(Path(args.strip), dpi=120)
+        save_figure(linkage_strip(drive), Path(args.strip), dpi=120)
         print(f"wrote {args.strip}")
     return 0

@@ -141,6 +141,7 @@ def run(args) -> int:
     matplotlib.use("Agg")
     import numpy as np
 
+    from .._io import save_figure
     from ..models.nonlinear import MEASUREMENTS, jumps, response_curve, speed_ramp
     from ..models.nonlinear.calibration import two_mode
     from ..plots.nonlinear import response_figure
@@ -164,7 +165,7 @@ def run(args) -> int:
     m = {x.quantity: x.value for x in MEASUREMENTS}
     text = "\n".join(summary(belt, f, j, f2, m, rng))
     fig = response_figure(curve, up, down, MEASUREMENTS, text, jumps=j, curve2=curve2)
-    fig.savefig(args.out, dpi=110)
+    save_figure(fig, args.out, dpi=110)
     print(text)
     print(f"wrote {args.out}")
     return 0

@@ -9,7 +9,25 @@ comparison with shapers.
 
 from __future__ import annotations
 
-from ._args import finite_float, float_in, image_path, positive_float
+from ._args import csv_or_image_path, fill_defaults, finite_float, float_in, positive_float, refuse_unused
+
+#: the options of the paper's figure (without an axis) and their defaults (None on the parser: an option given
+#: where it is not used is refused)
+PAPER_DEFAULTS = {
+    "figure": "overview",
+    "gammas": [3.0, 4.0, 5.0],
+    "duration": 1.0,
+    "revolutions": 15.0,
+    "robust_order": [4],
+    "robust_mode": "mean",
+    "band": [0.8, 1.2],
+    "spread": 0.3,
+}
+#: the options of the overview figure only (the profiles figure is the paper's Fig. 2, fixed)
+OVERVIEW_ONLY = ("gammas", "duration", "revolutions", "robust_order", "robust_mode", "band", "spread")
+#: the options of a design on the user's axis and their defaults
+AXIS_DEFAULTS = {"uncertainty": 0.2, "rate": 1000.0}
+AXIS_ONLY = ("distance", "move_time", "v_max", "a_max", "j_max", "n_modes", "uncertainty", "rate")
 
 
 def register(subparsers):
@@ -23,7 +41,7 @@ def register(subparsers):
     )
     p.add_argument(
         "--out",
-        type=_out_path,
+        type=csv_or_image_path,
         nargs="+",
         default=None,
         help="with an axis: the command as CSV (.csv; the figure goes beside it as .png) and/or the figure (an image "
@@ -53,14 +71,19 @@ def register(subparsers):
     axis.add_argument(
         "--uncertainty",
         type=float_in(0.0, 0.9, hi_open=True),
-        default=0.2,
+        default=None,
         help="frequency error every residual is judged over, +- (default 0.2)",
     )
-    axis.add_argument("--rate", type=positive_float, default=1000.0, help="CSV sample rate [Hz] (default 1000)")
+    axis.add_argument(
+        "--rate",
+        type=positive_float,
+        default=None,
+        help="CSV sample rate [Hz], above twice the band's highest frequency (default 1000)",
+    )
     p.add_argument(
         "--figure",
         choices=["overview", "profiles"],
-        default="overview",
+        default=None,
         help="overview: optimisation, Fig. 3 and sensitivity (default); profiles: the paper's Fig. 2, "
         "3-4-5 polynomial vs 4.5-6.2-8.4 pseudo-polynomial (T = 1 s, Phi = 1 rad), with C_i printed",
     )
@@ -68,22 +91,22 @@ def register(subparsers):
         "--gammas",
         type=float_in(2.0, 100.0, lo_open=True),
         nargs="+",
-        default=[3.0, 4.0, 5.0],
+        default=None,
         help="start exponents (default 3 4 5)",
     )
-    p.add_argument("--duration", type=positive_float, default=1.0, help="motion time T [s] (default 1)")
-    p.add_argument("--revolutions", type=positive_float, default=15.0, help="motor displacement [rev] (default 15)")
+    p.add_argument("--duration", type=positive_float, default=None, help="motion time T [s] (default 1)")
+    p.add_argument("--revolutions", type=positive_float, default=None, help="motor displacement [rev] (default 15)")
     p.add_argument(
         "--robust-order",
         type=int,
         nargs="*",
-        default=[4],
+        default=None,
         choices=[2, 3, 4, 5],
         help="orders n of band-robust commands to add (none: --robust-order with no value; default 4)",
     )
     p.add_argument(
         "--robust-mode",
-        default="mean",
+        default=None,
         choices=["mean", "max"],
         help="robust objective over the band: mean or smooth worst case (default mean)",
     )
@@ -91,31 +114,17 @@ def register(subparsers):
         "--band",
         type=float_in(0.0, 10.0, lo_open=True),
         nargs=2,
-        default=[0.8, 1.2],
+        default=None,
         help="robust band as fractions of omega_n (default 0.8 1.2)",
     )
     p.add_argument(
         "--spread",
         type=float_in(0.0, 1.0, lo_open=True, hi_open=True),
-        default=0.3,
+        default=None,
         help="sensitivity sweep +-spread around omega_n (default 0.3)",
     )
     p.add_argument("--no-progress", action="store_true", help="hide progress bars")
-    p.set_defaults(func=run, check=check)
-
-
-def _out_path(text: str):
-    """A .csv path (the command) or an image path (the figure); the folder must exist and be writable."""
-    import argparse
-    from pathlib import Path
-
-    p = Path(text).expanduser()
-    if p.suffix.lower() == ".csv":
-        folder = p.parent if str(p.parent) else Path(".")
-        if not folder.is_dir():
-            raise argparse.ArgumentTypeError(f"folder {str(folder)!r} does not exist")
-        return p
-    return image_path(text)
+    p.set_defaults(func=run, early_check=check, check=check_exponents)
 
 
 def _mode(text: str):
@@ -164,10 +173,19 @@ def _positive_int(text: str) -> int:
 
 
 def check(args) -> str | None:
-    """The relations between arguments that argparse does not check (run before anything is computed)."""
+    """The relations between arguments that argparse does not check (run before anything is computed): what each
+    mode needs, the options it does not use (refused, never ignored), the CSV rate against the band's Nyquist
+    rate, and the default output paths. Fills in the defaults of the options the mode uses."""
+    from pathlib import Path
+
+    from .._io import output_path_problem
+
     if args.mode or args.measured:
         if args.mode and args.measured:
             return "argument --measured: give the axis either by --mode or by --measured, not both"
+        unused = refuse_unused(args, PAPER_DEFAULTS, "with an axis (--mode or --measured): it sets the paper's figure")
+        if unused:
+            return unused
         for name in ("distance", "v_max", "a_max"):
             if getattr(args, name) is None:
                 return f"argument --{name.replace('_', '-')}: required with an axis (--mode or --measured)"
@@ -175,8 +193,23 @@ def check(args) -> str | None:
             return "argument --distance: must be non-zero"
         if args.n_modes is not None and not args.measured:
             return "argument --n-modes: only with --measured"
+        outs = list(args.out or [Path("move.csv")])
+        if args.rate is not None and not any(str(o).lower().endswith(".csv") for o in outs):
+            return "argument --rate: not used without a .csv in --out (the rate is the CSV's sample rate)"
+        fill_defaults(args, AXIS_DEFAULTS)
+        if args.mode:
+            nyquist = 2.0 * max(f for f, _, _ in args.mode) * (1.0 + args.uncertainty)
+            if not args.rate > nyquist:
+                return (
+                    f"argument --rate: must exceed twice the highest frequency of the band (Nyquist: > {nyquist:g} Hz "
+                    f"with --uncertainty {args.uncertainty:g}), got {args.rate:g}"
+                )
+        if args.out is None:
+            problem = output_path_problem("move.csv")
+            if problem:
+                return f"argument --out: the default move.csv cannot be written: {problem}"
         return None
-    for name in ("distance", "move_time", "v_max", "a_max", "j_max", "n_modes"):
+    for name in AXIS_ONLY:
         if getattr(args, name) is not None:
             return f"argument --{name.replace('_', '-')}: only with an axis (--mode or --measured)"
     outs = args.out or []
@@ -184,13 +217,29 @@ def check(args) -> str | None:
         return "argument --out: a .csv command is written only with an axis (--mode or --measured)"
     if len(outs) > 1:
         return "argument --out: one figure file without an axis"
-    from ..commands import MIN_EXPONENT_GAP, exponents_apart
-
+    if args.figure == "profiles":
+        unused = refuse_unused(args, OVERVIEW_ONLY, "with --figure profiles (the paper's Fig. 2 is fixed)")
+        if unused:
+            return unused
+    fill_defaults(args, PAPER_DEFAULTS)
+    if args.out is None:
+        problem = output_path_problem("shaping.png")
+        if problem:
+            return f"argument --out: the default shaping.png cannot be written: {problem}"
     low, high = args.band
     if not low < high:
         return f"argument --band: LOW must be < HIGH, got {low:g} {high:g}"
     if len(args.gammas) < 2:
         return f"argument --gammas: give at least 2 exponents, got {len(args.gammas)}"
+    return None
+
+
+def check_exponents(args) -> str | None:
+    """The paper's start exponents must be pairwise apart (checked with the command's own rule, after `check`)."""
+    if args.mode or args.measured or args.figure == "profiles":
+        return None
+    from ..commands import MIN_EXPONENT_GAP, exponents_apart
+
     if not exponents_apart(args.gammas):
         return (
             f"argument --gammas: the exponents must differ pairwise by at least {MIN_EXPONENT_GAP:g}, "
@@ -214,7 +263,9 @@ def _axis_run(args) -> int:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    import numpy as np
 
+    from .._io import save_figure
     from ..models.axis import ModalAxis
     from ..shaping.plan import design_move
     from ..solution import SolveError
@@ -230,6 +281,13 @@ def _axis_run(args) -> int:
             sf = float(axis.frequency_std[i]) if axis.frequency_std is not None else float("nan")
             sz = float(axis.damping_std[i]) if axis.damping_std is not None else float("nan")
             print(f"  mode {i + 1}: {f:.4f} +- {sf:.2g} Hz, damping ratio {z:.4f} +- {sz:.2g}")
+        nyquist = 2.0 * float(np.max(np.asarray(axis.frequencies))) * (1.0 + args.uncertainty)
+        writes_csv = any(str(o).lower().endswith(".csv") for o in (args.out or ["move.csv"]))
+        if writes_csv and not args.rate > nyquist:  # known once the modes are: before the design
+            raise ValueError(
+                f"argument --rate: must exceed twice the highest frequency of the identified band (Nyquist: > "
+                f"{nyquist:g} Hz with --uncertainty {args.uncertainty:g}), got {args.rate:g}"
+            )
     else:
         f, z, g = zip(*args.mode)
         axis = ModalAxis(list(f), list(z), list(g))
@@ -259,13 +317,19 @@ def _axis_run(args) -> int:
     figures = [o for o in outs if not str(o).lower().endswith(".csv")]
     for o in outs:
         if str(o).lower().endswith(".csv"):
-            plan.to_csv(o, args.rate)
-            print(f"wrote {o} ({args.rate:g} Hz, columns t,x,v,a)")
+            pv, pa, pj = plan.to_csv(o, args.rate)
+            limits = f"v_max {args.v_max:g}, a_max {args.a_max:g}" + (
+                f", j_max {args.j_max:g}" if args.j_max is not None else ""
+            )
+            print(
+                f"wrote {o} ({args.rate:g} Hz, columns t,x,v,a; sampled peaks |v| {pv:.6g} m/s, |a| {pa:.6g} m/s^2, "
+                f"|j| {pj:.6g} m/s^3; limits {limits})"
+            )
             if not figures:
                 figures.append(o.with_suffix(".png"))
     fig = plan.plot()
     for o in figures:
-        fig.savefig(o, dpi=120)
+        save_figure(fig, o, dpi=120)
         print(f"wrote {o}")
     plt.close(fig)
     return 0
@@ -282,6 +346,7 @@ def _paper_run(args) -> int:
     import matplotlib.pyplot as plt
     import numpy as np
 
+    from .._io import save_figure
     from ..commands import PseudoPolynomial
     from ..models.platform import BeltPlatform
     from ..objectives.residual import residual_energy
@@ -362,7 +427,7 @@ def _paper_run(args) -> int:
         band=band,
         move_times=(float(cmd0.end_time), float(res.command.end_time)),
     )
-    fig.savefig(args.out, dpi=120)
+    save_figure(fig, args.out, dpi=120)
     plt.close(fig)
     print(f"wrote {args.out}")
     return 0
@@ -373,6 +438,7 @@ def _profiles(args) -> int:
     import matplotlib.pyplot as plt
     import numpy as np
 
+    from .._io import save_figure
     from ..commands import PseudoPolynomial
     from ..plots.shaping import plot_profiles
 
@@ -385,6 +451,6 @@ def _profiles(args) -> int:
         print(f"gammas {label}: C = {np.round(np.asarray(cmd.coefficients), 3).tolist()}")
     fig, axes = plt.subplots(1, 3, figsize=(13, 3.4), constrained_layout=True)
     plot_profiles(t, profiles, axes=axes)
-    fig.savefig(args.out, dpi=110)
+    save_figure(fig, args.out, dpi=110)
     print(f"wrote {args.out}")
     return 0

@@ -43,7 +43,7 @@ def register(sub):
         help="solution method (default: closed form)",
     )
     p.add_argument("--out", type=image_path, default="startup.png", help="output image (default startup.png)")
-    p.set_defaults(func=run, check=check)
+    p.set_defaults(func=run, early_check=check)
 
 
 def check(args) -> str | None:
@@ -75,6 +75,7 @@ def run(args) -> int:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
+    from .._io import save_figure
     from ..models.startup import BeltStartup
     from ..plots.startup import draw_startup
     from ..runs import startup_curves
@@ -92,6 +93,6 @@ def run(args) -> int:
     FigureCanvasAgg(fig)
     fig.subplots_adjust(left=0.07, right=0.985, bottom=0.045, top=0.945, hspace=0.32, wspace=0.2)
     draw_startup(ts, c, args.gamma, args.v_max, fig=fig)
-    fig.savefig(args.out, dpi=110)
+    save_figure(fig, args.out, dpi=110)
     print(f"wrote {args.out}")
     return 0

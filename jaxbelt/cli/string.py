@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
-from ._args import float_in, image_path
+from ._args import fill_defaults, float_in, image_path, refuse_unused
+
+#: the options of each figure and their defaults (None on the parser: an option of the other figure is refused)
+OVERVIEW_DEFAULTS = {"contact_radius": 0.025}
+MODES_DEFAULTS = {"belt_speed": 20.0, "pulley_radius": 0.1166}
 
 
 def register(subparsers):
@@ -22,23 +26,37 @@ def register(subparsers):
     p.add_argument(
         "--contact-radius",
         type=float_in(1e-3, 10.0),
-        default=0.025,
-        help="motor pulley radius [m] for the pressure plot, in [0.001, 10] (not in the belt-vibration report; "
-        "default 0.025)",
+        default=None,
+        help="motor pulley radius [m] for the pressure plot of the overview, in [0.001, 10] (not in the "
+        "belt-vibration report; default 0.025)",
     )
     p.add_argument(
         "--belt-speed",
         type=float_in(0.0, 52.9),
-        default=20.0,
-        help="belt speed V [m/s] of the mode-shape snapshots, below sqrt(T/rho) = 52.9 m/s (default 20)",
+        default=None,
+        help="belt speed V [m/s] of the mode-shape snapshots (--figure modes), below sqrt(T/rho) = 52.9 m/s "
+        "(default 20)",
     )
     p.add_argument(
         "--pulley-radius",
         type=float_in(1e-3, 10.0),
-        default=0.1166,
-        help="driven pulley radius R_U [m] for omega_CR, in [0.001, 10] (fitted to Table 2; default 0.1166)",
+        default=None,
+        help="driven pulley radius R_U [m] for omega_CR (--figure modes), in [0.001, 10] (fitted to Table 2; "
+        "default 0.1166)",
     )
-    p.set_defaults(func=run)
+    p.set_defaults(func=run, early_check=check)
+
+
+def check(args) -> str | None:
+    """Each figure's own options: one of the other figure is refused (never ignored); the defaults filled in."""
+    if args.figure == "modes":
+        unused = refuse_unused(args, OVERVIEW_DEFAULTS, "with --figure modes (it sets the overview's pressure plot)")
+    else:
+        unused = refuse_unused(args, MODES_DEFAULTS, "with --figure overview (it sets the modes figure)")
+    if unused:
+        return unused
+    fill_defaults(args, OVERVIEW_DEFAULTS if args.figure != "modes" else MODES_DEFAULTS)
+    return None
 
 
 def run(args) -> int:
@@ -50,6 +68,7 @@ def run(args) -> int:
 
     import jaxbelt as jb
 
+    from .._io import save_figure
     from ..plots.string import string_figure
 
     span = jb.MovingString(tension=140.0, density=0.05, length=0.2621)
@@ -80,7 +99,7 @@ def run(args) -> int:
         galerkin=dict(n_basis=n_basis, errors=errors, speed=20.0),
         contact=jb.BeltPulleyContact(radius=args.contact_radius),
     )
-    fig.savefig(args.out, dpi=110)
+    save_figure(fig, args.out, dpi=110)
     print("\n".join(summary(span, crossings)))
     print(f"wrote {args.out}")
     return 0
@@ -108,6 +127,7 @@ def _modes(args, span) -> int:
     import jax.numpy as jnp
     import numpy as np
 
+    from .._io import save_figure
     from ..plots.string import RPM, modes_figure
 
     x = np.linspace(0.0, float(span.length), 201)
@@ -124,7 +144,7 @@ def _modes(args, span) -> int:
     fig = modes_figure(
         x, times[0], np.stack(shapes), rotor * RPM, freqs, w_cr * RPM, title=f"moving span, V = {args.belt_speed:g} m/s"
     )
-    fig.savefig(args.out, dpi=110)
+    save_figure(fig, args.out, dpi=110)
     print(modes_summary(w_cr, args.pulley_radius))
     print(f"wrote {args.out}")
     return 0

@@ -455,7 +455,95 @@ def _integrate_linear(a, h):
     return v, np.concatenate([[0.0], np.cumsum(dx)])
 
 
-def executable_samples(cmd: SplineMove, rate_hz: float, axis, reference, uncertainty: float, n_freq: int = 61):
+#: relative margin below each limit the corrected samples are held to (the guarantee is 1e-9; the margin covers
+#: the rounding of the quadratic programme's solution and of the integration)
+_LIMIT_MARGIN = 1e-11
+#: relative tolerance of the sampled peaks against the stated limits
+LIMIT_RTOL = 1e-9
+
+
+def sampled_peaks(t, v, a) -> tuple[float, float, float]:
+    """`(peak |v|, peak |a|, peak |jerk|)` of samples `v` [m/s], `a` [m/s²] at uniform times `t` [s]: the jerk a
+    drive executes is the slope of the acceleration between samples, `diff(a) / h` [m/s³]."""
+    t, v, a = (np.asarray(q, dtype=float) for q in (t, v, a))
+    h = float(t[1] - t[0]) if t.size > 1 else 1.0
+    pj = float(np.max(np.abs(np.diff(a)))) / h if a.size > 1 else 0.0
+    return float(np.max(np.abs(v))), float(np.max(np.abs(a))), pj
+
+
+def _limit_rows(n: int, hs: float, limits):
+    """`[(matrix M, limit)]`: the executed samples' v = M_v a, a = a, jerk = M_j a (linear in the samples `a`)."""
+    v_max, a_max, j_max = limits
+    L = np.tril(np.full((n, n), hs / 2)) + np.tril(np.full((n, n), hs / 2), -1)
+    L[:, 0] -= hs / 2
+    L[0, :] = 0.0  # v_k = h sum_{i<k} (a_i + a_{i+1}) / 2
+    rows = [(L, v_max), (np.eye(n), a_max)]
+    if j_max is not None:
+        rows.append(((np.eye(n, k=1) - np.eye(n))[:-1] / hs, j_max))
+    return rows
+
+
+def _qp_step(K, G, s_, z, r_d, r_i, r_e, r_c):
+    """One Newton step of `_qp_interior_point` for the complementarity target `r_c`: `(dx, ds, dz, dy)`."""
+    n = K.shape[0] - r_e.shape[0]
+    sol = np.linalg.solve(K, np.concatenate([-r_d - G.T @ ((r_c + z * r_i) / s_), -r_e]))
+    dx = sol[:n]
+    ds = -r_i - G @ dx
+    return dx, ds, (r_c - z * ds) / s_, sol[n:]
+
+
+def _qp_interior_point(H, q, G, h, E, e, tol: float = 1e-13, max_iter: int = 100):
+    """`argmin 0.5 x^T H x + q^T x` subject to `G x <= h`, `E x = e` (H positive definite, a few dozen unknowns,
+    thousands of rows): Mehrotra's predictor-corrector primal-dual interior point method (Nocedal & Wright, 2006,
+    Numerical Optimization, Algorithm 16.4), dense, in numpy: each iteration solves the reduced KKT system of
+    $H + G^T (Z/S) G$ with the equality rows. Returns `(x, converged)`; `x` is strictly inside the inequalities once
+    the primal residual has vanished."""
+    n, m, p = H.shape[0], G.shape[0], E.shape[0]
+    x = np.zeros(n)
+    s_ = np.maximum(h - G @ x, 1.0)
+    z = np.ones(m)
+    y = np.zeros(p)
+    scale = 1.0 + max(float(np.max(np.abs(q))), float(np.max(np.abs(h))), float(np.max(np.abs(e), initial=0.0)))
+    for _ in range(max_iter):
+        r_d = H @ x + q + G.T @ z + E.T @ y
+        r_i = G @ x + s_ - h
+        r_e = E @ x - e
+        mu = float(s_ @ z) / m
+        if max(np.max(np.abs(r_d)), np.max(np.abs(r_i)), np.max(np.abs(r_e), initial=0.0)) < tol * scale and mu < tol:
+            return x, True
+        w = z / s_
+        K = np.block([[H + G.T @ (w[:, None] * G), E.T], [E, np.zeros((p, p))]])
+
+        def longest(v, dv):
+            neg = dv < 0
+            return min(1.0, float(np.min(-v[neg] / dv[neg]))) if np.any(neg) else 1.0
+
+        dx, ds, dz, dy = _qp_step(K, G, s_, z, r_d, r_i, r_e, -s_ * z)  # predictor (affine scaling)
+        a_aff = min(longest(s_, ds), longest(z, dz))
+        sigma = (float((s_ + a_aff * ds) @ (z + a_aff * dz)) / m / mu) ** 3 if mu > 0 else 0.0
+        dx, ds, dz, dy = _qp_step(K, G, s_, z, r_d, r_i, r_e, -s_ * z - ds * dz + sigma * mu)  # corrector
+        alpha = 0.995 * min(longest(s_, ds), longest(z, dz))
+        x, s_, z, y = x + alpha * dx, s_ + alpha * ds, z + alpha * dz, y + alpha * dy
+    return x, False
+
+
+def _constrained_correction(A, r, E, e, a0, basis, rows, d_free):
+    """The least `||A d - r||` subject to `E d = e` and every limit row `|M (a0 + basis d)| <= limit (1 - margin)`,
+    a convex quadratic programme (`_qp_interior_point`); `d_free`, the solution without the limits, where the
+    programme does not converge (it then fails the limits' check that follows)."""
+    G_all, g_all = [], []
+    for M, lim in rows:
+        MB, Ma0 = M @ basis, M @ a0
+        cap = lim * (1 - _LIMIT_MARGIN)
+        G_all += [MB / lim, -MB / lim]
+        g_all += [(cap - Ma0) / lim, (cap + Ma0) / lim]
+    d, converged = _qp_interior_point(A.T @ A, -(A.T @ r), np.vstack(G_all), np.concatenate(g_all), E, e)
+    return d if converged else d_free
+
+
+def executable_samples(
+    cmd: SplineMove, rate_hz: float, axis, reference, uncertainty: float, n_freq: int = 61, limits=None
+):
     """`(t, x, v, a)` samples of a `SplineMove` at `rate_hz` [Hz], corrected so that a drive that executes the
     acceleration linearly between samples leaves the residual of the continuous command over the band.
 
@@ -464,7 +552,14 @@ def executable_samples(cmd: SplineMove, rate_hz: float, axis, reference, uncerta
     design. The correction is the least-squares change of the B-spline coefficients, applied at the samples
     only, that restores the residual integral of every mode at `n_freq` frequencies of its band (weighted by
     `reference`, the same measure as the table) and keeps the distance and rest to rest exactly;
-    `x` and `v` are the exact integrals of the executed (linear) acceleration."""
+    `x` and `v` are the exact integrals of the executed (linear) acceleration.
+
+    `limits` = `(v_max [m/s], a_max [m/s²], j_max [m/s³] or None)`: the correction is then the least change
+    subject to the samples respecting them, |v_k| <= v_max, |a_k| <= a_max and |a_k+1 - a_k| / h <= j_max at
+    every sample (a convex quadratic programme). A correction without them could push a sample past a limit
+    the design reaches (|a| = 1.00016 a_max seen); scaling the samples down afterwards would change the
+    distance, and stretching them in time the sample rate, so the limits are part of the correction itself:
+    the distance, the rest at both ends and the rate stay exact."""
     check_positive("rate_hz", rate_hz, "Hz", "executable_samples")
     T = float(cmd.duration)
     n = int(math.ceil(T * float(rate_hz) - 1e-9))
@@ -472,7 +567,8 @@ def executable_samples(cmd: SplineMove, rate_hz: float, axis, reference, uncerta
     hs = 1.0 / float(rate_hz)
     N = cmd.n_intervals
     h = T / N
-    basis = np.asarray(bspline_basis(jnp.asarray(t[:, None] / h - np.arange(N - 3)[None, :]), 0))  # (n+1, J)
+    basis = np.array(bspline_basis(jnp.asarray(t[:, None] / h - np.arange(N - 3)[None, :]), 0))  # (n+1, J)
+    basis[0] = basis[-1] = 0.0  # the move starts and ends at rest (the B-splines vanish there)
     a0 = basis @ np.asarray(cmd.coefficients)
     u = float(uncertainty)
     r = np.linspace(1 - u, 1 + u, n_freq) if u > 0 else np.ones(1)
@@ -498,13 +594,47 @@ def executable_samples(cmd: SplineMove, rate_hz: float, axis, reference, uncerta
 
     d0 = jnp.zeros(N - 3)
     f0 = np.asarray(mismatch(d0))
-    Jm = np.asarray(jax.jacfwd(mismatch)(d0))
+    Jm = np.asarray(jax.jacfwd(mismatch)(d0))  # the mismatch is linear in d: f0 + Jm d exactly
     # Tikhonov-regularised: the least change of the acceleration (in units of its own peak) that restores the
     # residual, not the exact fit of every equation (which would buy the last digits with a large correction)
     lam = _EXEC_REG / max(float(np.max(np.abs(a0))), 1e-300)
     A_ = np.vstack([Jm, lam * np.eye(Jm.shape[1])])
-    d = np.linalg.lstsq(A_, np.concatenate([-f0, np.zeros(Jm.shape[1])]), rcond=None)[0]
+    rhs = np.concatenate([-f0, np.zeros(Jm.shape[1])])
+    d = np.linalg.lstsq(A_, rhs, rcond=None)[0]
+    if limits is not None:
+        rows = _limit_rows(n + 1, hs, limits)
+        a_free = a0 + basis @ d
+        if any(np.max(np.abs(M @ a_free)) > lim * (1 - _LIMIT_MARGIN) for M, lim in rows):
+            keep = np.ones(A_.shape[0], bool)
+            keep[Jm.shape[0] - 2 : Jm.shape[0]] = False  # distance and rest at the end: exact, as constraints
+            d = _constrained_correction(A_[keep], rhs[keep], Jm[-2:], -f0[-2:], a0, basis, rows, d_free=d)
     a = a0 + basis @ d
-    a[0] = a[-1] = 0.0  # the move starts and ends at rest (the B-splines vanish there)
     v, x = _integrate_linear(a, hs)
+    return t, x, v, a
+
+
+def limited_samples(cmd: AbstractMotionCommand, rate_hz: float, limits, max_rounds: int = 8):
+    """`(t, x, v, a)` of `cmd` sampled at `rate_hz` [Hz] (`cmd.sample`), within `limits` = `(v_max [m/s],
+    a_max [m/s²], j_max [m/s³] or None)` at every sample to a relative `LIMIT_RTOL` (the jerk: the slope of the
+    acceleration between samples).
+
+    The exact samples of a command within its limits already are; a command that exceeds them by a rounding
+    (its limits are checked to 1e-6 on a fine grid) is stretched in time by the least factor s >= 1 that brings
+    its peaks within them: $x_s(t) = x(t/s)$, so $v$ scales by 1/s, $a$ by $1/s^2$, the jerk by $1/s^3$, the
+    distance and the rest at both ends are kept exactly and the samples stay `1 / rate_hz` apart; the move
+    lasts s times longer (s - 1 of the order of the excess, ~1e-7)."""
+    t, x, v, a = cmd.sample(rate_hz)
+    v_max, a_max, j_max = limits
+    stretch = 1.0
+    for _ in range(max_rounds):
+        pv, pa, pj = sampled_peaks(t, v, a)
+        ratio = max(pv / v_max, math.sqrt(pa / a_max), (pj / j_max) ** (1 / 3) if j_max is not None else 0.0)
+        if ratio <= 1.0 + LIMIT_RTOL / 10:
+            return t, x, v, a
+        stretch *= ratio * (1 + 1e-12)
+        T = float(cmd.end_time) * stretch
+        n = int(math.ceil(T * float(rate_hz) - 1e-9))
+        t = np.arange(n + 1) / float(rate_hz)
+        tau = jnp.asarray(np.minimum(t / stretch, float(cmd.end_time)))
+        x, v, a = (np.asarray(jax.device_get(cmd.derivative(tau, k))) / stretch**k for k in (0, 1, 2))
     return t, x, v, a

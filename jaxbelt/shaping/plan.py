@@ -32,6 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import check_positive, check_range, device_array
+from .._io import IMAGE_FORMATS, atomic_open, check_output_path, save_figure
 from .._threads import blas_limited
 from ..commands import AbstractMotionCommand
 from ..models.axis import ModalAxis
@@ -43,9 +44,11 @@ from .moves import (
     executable_samples,
     fastest_move,
     fastest_time,
+    limited_samples,
     padded,
     peaks,
     prepare_peaks,
+    sampled_peaks,
     shape_move,
     trapezoid_move,
 )
@@ -143,35 +146,54 @@ class MovePlan:
             )
         return "\n".join(lines)
 
-    def to_csv(self, path, rate_hz: float, candidate: str | None = None) -> None:
+    def to_csv(self, path, rate_hz: float, candidate: str | None = None) -> tuple[float, float, float]:
         """Write the recommended command (or the candidate named `candidate`) sampled at `rate_hz` [Hz] as CSV
         columns `t,x,v,a` (s, m, m/s, m/s²) with that header line. A drive that executes the acceleration
-        linearly between samples reproduces the table's residual (the design's acceleration is continuous).
-        `rate_hz` must exceed twice the highest frequency of the band (the samples must carry the modes)."""
+        linearly between samples reproduces the table's residual (the design's acceleration is continuous), and
+        the samples respect the plan's limits (see `samples`).
+
+        `path`: a `.csv` file in an existing, writable folder; `rate_hz` must exceed twice the highest frequency
+        of the band (the samples must carry the modes). Both are checked before anything is computed. The file
+        is written atomically: to a temporary file in the same folder, then renamed over `path`, so a failed
+        write leaves the previous file as it was. Returns the written samples' `(peak |v| [m/s], peak |a|
+        [m/s²], peak |jerk| [m/s³])` (the jerk: the slope of the acceleration between samples)."""
+        path = check_output_path(path, "path", "MovePlan.to_csv", formats=(".csv",))
+        self._check_rate(rate_hz, "MovePlan.to_csv")
         c = self._chosen(candidate, "MovePlan.to_csv")
-        check_positive("rate_hz", rate_hz, "Hz", "MovePlan.to_csv")
-        fmax = float(np.max(np.asarray(self.axis.frequencies))) * (1 + self.uncertainty)
-        if not float(rate_hz) > 2 * fmax:
-            raise ValueError(
-                f"MovePlan.to_csv: parameter `rate_hz` must exceed twice the highest frequency of the band "
-                f"(Nyquist: > {2 * fmax:g} Hz); got {rate_hz}"
-            )
         t, x, v, a = self.samples(rate_hz, c.name)
-        with open(path, "w", newline="") as fh:
+        with atomic_open(path, "w", newline="") as fh:
             w = csv.writer(fh)
             w.writerow(["t", "x", "v", "a"])
             for row in zip(t, x, v, a):
                 w.writerow([repr(float(q)) for q in row])
+        return sampled_peaks(t, v, a)
+
+    def nyquist_hz(self) -> float:
+        """Twice the highest frequency of the band [Hz]: the sample rate a CSV export must exceed."""
+        return nyquist_hz(self.axis.frequencies, self.uncertainty)
+
+    def _check_rate(self, rate_hz, owner: str) -> None:
+        check_positive("rate_hz", rate_hz, "Hz", owner)
+        check_rate(rate_hz, self.nyquist_hz(), owner)
 
     def samples(self, rate_hz: float, candidate: str | None = None):
         """`(t, x, v, a)` of the recommended command (or `candidate`) sampled at `rate_hz` [Hz], as `to_csv` writes
         them: for the smooth minimax design, corrected so that a drive that executes the acceleration linearly
         between samples leaves the residual the table states (`jaxbelt.shaping.moves.executable_samples`); for
-        the others, the exact samples."""
+        the others, the exact samples.
+
+        Every sample respects the plan's limits to a relative 1e-9: |v| <= v_max [m/s], |a| <= a_max [m/s²] and,
+        with j_max, |a_k+1 - a_k| rate_hz <= j_max [m/s³]. The design's correction includes them as constraints
+        (the least change of the acceleration that restores the residual and keeps them; a scaled-down copy
+        would change the distance); another command that exceeds them by a rounding is stretched in time by the
+        least factor that brings it within them (same distance, same rate; `jaxbelt.shaping.moves.limited_samples`)."""
         c = self._chosen(candidate, "MovePlan.samples")
-        if isinstance(c.command, SplineMove):
-            return executable_samples(c.command, rate_hz, self.axis, self.reference_m, self.uncertainty)
-        return c.sample(rate_hz)
+        limits = (self.v_max, self.a_max, self.j_max)
+        cmd = c.command
+        assert cmd is not None  # `_chosen` refuses a candidate without a command
+        if isinstance(cmd, SplineMove):
+            return executable_samples(cmd, rate_hz, self.axis, self.reference_m, self.uncertainty, limits=limits)
+        return limited_samples(cmd, rate_hz, limits)
 
     def _chosen(self, name: str | None, owner: str) -> Candidate:
         if name is not None:
@@ -206,13 +228,30 @@ class MovePlan:
     def plot(self, path=None):
         """The figure a firmware calibration prints: residual % against frequency for every candidate (one panel
         per mode, the band shaded), and the commands' velocity and acceleration. Returns the figure; saved to
-        `path` when given."""
+        `path` when given (an image: .png, .pdf, .svg, .jpg; its folder must exist and be writable, checked before
+        the figure is computed; written atomically, so a failed save leaves the previous file)."""
         from ..plots.plan import plan_figure
 
+        if path is not None:  # before the figure's curves are computed
+            path = check_output_path(path, "path", "MovePlan.plot", formats=IMAGE_FORMATS)
         fig = plan_figure(self)
         if path is not None:
-            fig.savefig(path, dpi=120)
+            save_figure(fig, path, dpi=120)  # atomically: a failed save leaves the previous file
         return fig
+
+
+def nyquist_hz(frequencies, uncertainty: float) -> float:
+    """Twice the highest frequency of the band [Hz]: `2 max(f_i) (1 + uncertainty)`, `frequencies` [Hz]."""
+    return 2.0 * float(np.max(np.asarray(frequencies, dtype=float))) * (1.0 + float(uncertainty))
+
+
+def check_rate(rate_hz, nyquist: float, owner: str) -> None:
+    """A `ValueError` naming `rate_hz` unless it exceeds `nyquist` [Hz] (the samples must carry the modes)."""
+    if not float(rate_hz) > nyquist:
+        raise ValueError(
+            f"{owner}: parameter `rate_hz` must exceed twice the highest frequency of the band "
+            f"(Nyquist: > {nyquist:g} Hz); got {rate_hz}"
+        )
 
 
 def _check_inputs(axis, distance, move_time, v_max, a_max, j_max, uncertainty, include):
