@@ -29,9 +29,9 @@ import re
 
 #: distribution -> (oldest, newest) (major, minor) the private uses below were written and tested for
 WRITTEN_FOR = {
-    "jax": ((0, 6), (0, 10)),
-    "jaxlib": ((0, 6), (0, 10)),
-    "equinox": ((0, 12), (0, 13)),
+    "jax": ((0, 10), (0, 10)),
+    "jaxlib": ((0, 10), (0, 10)),
+    "equinox": ((0, 13), (0, 13)),
 }
 
 _state: dict = {}

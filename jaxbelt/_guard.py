@@ -519,3 +519,29 @@ def nan_where(value, ok):
         return jnp.where(o, x, jnp.nan)
 
     return jax.tree_util.tree_map(one, value)
+
+
+def reraising(owner: str):
+    """Decorator of a public entry point: a check that fails at run time inside a program it runs (under the
+    caller's `vmap`/`grad` without `jit`, the program runs inside the call) is re-raised as `ValueError` whose
+    first line is the check's message (the parameter and its range), prefixed with `owner` unless it already
+    names it, instead of JAX's stack banner (see `reraise_checks`). Inside a caller's `jit` the program runs
+    at the caller's call, not here: nothing to catch."""
+
+    def decorate(fun):
+        @functools.wraps(fun)
+        def call(*args, **kwargs):
+            batched = not eager()
+            try:
+                return fun(*args, **kwargs)
+            except (eqx.EquinoxRuntimeError, jax.errors.JaxRuntimeError, checkify.JaxRuntimeError) as e:
+                message = runtime_message(e)
+                if message is None:
+                    raise
+                lead = message if message.startswith(f"{owner}:") else f"{owner}: {message}"
+                where = " (checked at run time inside vmap/grad: under vmap, in at least one element of the batch)"
+                raise ValueError(lead + (where if batched else "")) from e
+
+        return call
+
+    return decorate

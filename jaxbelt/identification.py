@@ -80,6 +80,58 @@ class IdentifyResult:
         return {n: (self.params[n] - k * self.stderr[n], self.params[n] + k * self.stderr[n]) for n in self.names}
 
 
+class PredictError(ValueError, RuntimeError):
+    """`predict` returned NaN or inf at the start values: a `ValueError` (the input, `predict` or `params0`,
+    is at fault), and a `RuntimeError` as well, what `identify` raised for it before."""
+
+
+#: (predict's key, names, start values) already checked by `_check_start` in this process (a Monte-Carlo over
+#: noise draws starts every fit at the same values: checked once)
+_STARTS_CHECKED: dict = {}
+_STARTS_MAX = 256
+
+
+def _check_start(predict, names: tuple, p0: np.ndarray, data_shape: tuple) -> None:
+    """Run `predict` at the concrete start values, abstractly (`jax.eval_shape`: traced, nothing compiled or
+    computed), before the fit is compiled: a model that `predict` builds from the start values then runs its
+    parameter checks on concrete values and raises at once (a negative stiffness, ...), and a prediction of the
+    wrong shape is refused, instead of either failing inside the compiled fit after its compilation (seconds).
+
+    The start values are 0-d float64 JAX arrays, as in the fit (`.shape`, `.astype` and JAX operations work on
+    them). Only a `ValueError` (a parameter check, a shape) is reported here; any other error of the abstract
+    run is left to the fit, which reports it as before. A check on a value that `predict` computes from a start
+    value (`BeltStartup(k=1e3 * p["k"])`) is traced, not concrete: it still fails in the fit, with its
+    message first."""
+    try:
+        key = (by_value(predict), names, p0.tobytes(), data_shape)
+        hash(key)
+    except TypeError:
+        key = None
+    if key is not None and key in _STARTS_CHECKED:
+        return
+    start = {n: jax.device_put(np.float64(v)) for n, v in zip(names, p0)}
+    values = dict(zip(names, p0.tolist()))
+    try:
+        out = jax.eval_shape(lambda: predict(start))
+    except ValueError as e:
+        first, _, rest = str(e).partition("\n")
+        raise ValueError(
+            f"identify: {first} (inside `predict`, at the start values {values}: refused before the fit was "
+            f"compiled; give start values `params0` inside the model's ranges){chr(10) + rest if rest else ''}"
+        ) from e
+    except Exception:  # noqa: BLE001 - not a parameter check: the fit runs `predict` and reports it
+        return
+    if isinstance(out, jax.ShapeDtypeStruct) and tuple(out.shape) != tuple(data_shape):
+        raise ValueError(
+            f"identify: `predict(params)` must return an array of the shape of `data` {tuple(data_shape)}; got "
+            f"shape {tuple(out.shape)} (at the start values params0 = {values})"
+        )
+    if key is not None:
+        if len(_STARTS_CHECKED) >= _STARTS_MAX:
+            _STARTS_CHECKED.clear()
+        _STARTS_CHECKED[key] = True
+
+
 def _transform(p0: np.ndarray):
     """(is_log, scale) per parameter: log for positive initial values, relative otherwise."""
     is_log = p0 > 0
@@ -162,7 +214,10 @@ def _fit(predict, names, p0, data, w, is_log, scale, solver_kind, jac_mode, rtol
         jac, r = jac_and_resid(u, *consts)
     else:
         jac, r = jax.jacrev(lambda v: (resid(v, None),) * 2, has_aux=True)(u)
-    return u, r, jac, sol.result == optx.RESULTS.successful, sol.stats["num_steps"], sol.result
+    # the residuals at the start values (one more evaluation of the prediction): NaN there is the user's
+    # `predict` (or its start values), not the solver, and is reported as such
+    r0 = resid(jnp.zeros_like(p0), None)
+    return u, r, jac, sol.result == optx.RESULTS.successful, sol.stats["num_steps"], sol.result, r0
 
 
 def _real_array(name: str, value) -> np.ndarray:
@@ -211,8 +266,12 @@ def identify(
       `rtol`, `atol`: its step tolerances (in the scaled coordinates); `max_steps`: its budget.
 
     Returns an `IdentifyResult` (`params`, `stderr`, `covariance`, `residuals`, ...). Raises
-    `ValueError` on bad input and `RuntimeError` when the solver does not converge or the
-    prediction is not finite at the optimum.
+    `ValueError` on bad input before anything is compiled: the arguments, and the start values as `predict`
+    uses them (`predict` is run abstractly at `params0` first, so a model it builds from an invalid start
+    value, e.g. a negative stiffness, is refused at the call, naming the parameter, its value and its range;
+    so is a prediction of the wrong shape). Raises `ValueError` (also a `RuntimeError`) when `predict`
+    returns NaN or inf at the start values, naming the first bad point; `RuntimeError` when the solver does
+    not converge or the prediction is not finite at a later step or at the optimum.
     """
     require_x64("identify")
     if not callable(predict):
@@ -266,6 +325,8 @@ def identify(
         if not np.all(np.isfinite(sig)) or np.any(sig <= 0):
             raise ValueError("identify: `sigma` (noise standard deviation, data units) must be finite and > 0")
         w = 1.0 / sig
+    # a model that `predict` builds from invalid start values is refused now, before the fit is compiled
+    _check_start(predict, names, p0, data.shape)
     is_log, scale = _transform(p0)
     args = (
         by_value(predict),  # keyed by its code and values: a new lambda of the same code reuses the program
@@ -286,7 +347,7 @@ def identify(
     )
     with reraise_checks("identify", context):
         try:
-            u, r, jmat, ok, steps, result = _fit(*args, jac, rtol, atol, int(max_steps))
+            u, r, jmat, ok, steps, result, r0 = _fit(*args, jac, rtol, atol, int(max_steps))
         except TypeError as e:
             if jac != "fwd" or "custom_vjp" not in str(e):
                 raise
@@ -297,19 +358,24 @@ def identify(
                 "Jacobian.",
                 stacklevel=2,
             )
-            u, r, jmat, ok, steps, result = _fit(*args, "bwd", rtol, atol, int(max_steps))
-    u, r, jmat = np.asarray(u), np.asarray(r), np.asarray(jmat)
+            u, r, jmat, ok, steps, result, r0 = _fit(*args, "bwd", rtol, atol, int(max_steps))
+    u, r, jmat, r0 = np.asarray(u), np.asarray(r), np.asarray(jmat), np.asarray(r0)
     p = np.where(is_log, p0 * np.exp(u), p0 + scale * u)  # `_to_params` on the host: no eager device ops
     at = dict(zip(names, p.tolist()))
-    if not np.all(np.isfinite(r)):
-        where = "at the start values" if not np.any(u) else "at a step of the fit"
-        bad = np.flatnonzero(~np.isfinite(r))
-        raise RuntimeError(
-            f"identify: `predict` returned non-finite values (NaN or inf at {bad.size} of {r.size} points, the "
-            f"first at flat index {int(bad[0])}) {where}, parameters {at}: NaN in the model, not a convergence "
-            "problem. Check `predict` at these values (a parameter outside the model's range, a failed "
-            "simulation inside it: simulate(..., throw=False) returns NaN for it), or start elsewhere"
-        )
+    for residuals, where, values, error in (
+        (r0, "at the start values", dict(zip(names, p0.tolist())), PredictError),
+        (r, "at a step of the fit", at, RuntimeError),
+    ):
+        if not np.all(np.isfinite(residuals)):
+            bad = np.flatnonzero(~np.isfinite(residuals))
+            point = np.unravel_index(int(bad[0]), data.shape)
+            raise error(
+                f"identify: `predict` returned non-finite values (NaN or inf at {bad.size} of {residuals.size} "
+                f"points, the first at flat index {int(bad[0])}, data index {tuple(int(i) for i in point)}) "
+                f"{where}, parameters {values}: NaN in the model, not a convergence problem. Check `predict` at "
+                "these values (a parameter outside the model's range, a failed simulation inside it: "
+                "simulate(..., throw=False) returns NaN for it), or start elsewhere"
+            )
     if not bool(ok):
         reason = optx.RESULTS[result]
         steps = int(steps)

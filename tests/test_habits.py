@@ -67,3 +67,26 @@ def test_ci_lints_formats_and_type_checks_before_the_readme_test_command():
     assert install < order[0] and order == sorted(order)
     assert lines[-1] == "python -m pytest -n 2 -q"  # the README's test command (tests/test_docs.py)
     assert PYPROJECT["tool"]["pyright"]["typeCheckingMode"] in ("basic", "standard", "strict")
+
+
+def test_ci_tests_exactly_the_declared_lower_bounds():
+    """`.ci/lowest.txt` pins every core dependency at its declared lower bound (and nothing else), and `.ci/run`
+    installs it in an environment of its own before the README's test command."""
+    bounds = {}
+    for requirement in PYPROJECT["project"]["dependencies"]:
+        found = re.fullmatch(r"([A-Za-z0-9_.-]+)>=([0-9.]+)(,.*)?", requirement.split(";")[0].strip())
+        assert found, f"{requirement!r}: a core dependency needs a lower bound"
+        bounds[found.group(1).lower()] = found.group(2)
+    pins = {}
+    for line in (ROOT / ".ci" / "lowest.txt").read_text().splitlines():
+        line = line.split("#")[0].strip()
+        if line:
+            name, version = line.split("==")
+            pins[name.lower()] = version
+    assert pins.keys() == bounds.keys()
+    for name, version in bounds.items():
+        # a bound like numpy>=2.0 is pinned as 2.0.0
+        assert pins[name].split(".")[: len(version.split("."))] == version.split("."), (name, pins[name], version)
+    run = (ROOT / ".ci" / "run").read_text()
+    assert "-c .ci/lowest.txt" in run
+    assert run.index("-c .ci/lowest.txt") < run.index("\npython -m pytest -n 2 -q")

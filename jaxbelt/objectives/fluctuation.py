@@ -35,7 +35,7 @@ import numpy as np
 from jax.typing import ArrayLike
 
 from .._checks import check_positive, check_range, check_scalar, collecting, is_concrete, record
-from .._guard import guard
+from .._guard import guard, reraising
 from .._threads import blas_limited
 from ..scene import Scene
 from ..solution import Solution
@@ -136,6 +136,77 @@ def _check_temperature(temperature) -> None:
     check_range("temperature", temperature, lo=0.0, hi=MAX_TEMPERATURE, lo_open=True, owner=_O)
 
 
+#: χ divides by the average speed: refused where |average| <= STILL_RTOL x the largest |speed| in the window
+#: (the drive stands, or swings about rest) or where that largest |speed| is <= STILL_SPEED [rad/s] (it never
+#: moves: its samples are rounding noise about 0)
+STILL_RTOL = 1e-3
+STILL_SPEED = 1e-9
+
+_STILL_MSG = (
+    f"{_O}: the average motor speed over the window [t0, t1] is ~0 (|average| <= {STILL_RTOL:g} x the largest "
+    f"|speed| in the window, or the speed never exceeds {STILL_SPEED:g} rad/s): the drive stands in the window, "
+    "and χ = (max - min)/|average| would divide by ~0. Choose a window where the drive runs (a set point "
+    "omega_ref != 0, a larger voltage, a later window)"
+)
+
+
+def _check_running(speed, inside, w, average) -> None:
+    """The average speed χ divides by must not be ~0 (see `STILL_RTOL`, `STILL_SPEED`): concrete values raise
+    `ValueError` naming the first bad element; traced ones are recorded (a run-time error, or NaN with
+    `throw=False`)."""
+    if is_concrete((speed, inside, w)):
+        v, m, wt = np.asarray(speed, dtype=float), np.asarray(inside, dtype=bool), np.asarray(w, dtype=float)
+        if v.size == 0 or not m.any() or not np.all(np.isfinite(v[..., m])):
+            return  # no window (reported by the window's check) or NaN speeds (a failed run: NaN χ)
+        sel = v[..., m]
+        peak = np.max(np.abs(sel), axis=-1)
+        avg = np.sum(wt * v, axis=-1) / np.sum(wt) if average == "mean" else 0.5 * (sel.max(-1) + sel.min(-1))
+        still = (np.abs(avg) <= STILL_RTOL * peak) | (peak <= STILL_SPEED)
+        if np.any(still):
+            k = int(np.argmax(np.ravel(still)))
+            where = (
+                ""
+                if np.ndim(still) == 0
+                else f" (element {tuple(int(i) for i in np.unravel_index(k, still.shape))} of the batch)"
+            )
+            raise ValueError(
+                f"{_O}: the {average} motor speed over the window [t0, t1] is {float(np.ravel(avg)[k]):.4g} rad/s"
+                f"{where}, ~0 beside the largest |speed| {float(np.ravel(peak)[k]):.4g} rad/s in it (it must exceed "
+                f"{STILL_RTOL:g} x that, and the speed {STILL_SPEED:g} rad/s): the drive stands in the window, and "
+                "χ = (max - min)/|average| would divide by ~0. Choose a window where the drive runs (a set point "
+                "omega_ref != 0, a larger voltage, a later window)"
+            )
+        return
+    sel = jnp.where(inside, speed, 0.0)
+    peak = jnp.max(jnp.abs(sel), axis=-1)
+    if average == "mean":
+        avg = jnp.sum(w * speed, axis=-1) / jnp.sum(w)
+    else:
+        avg = 0.5 * (
+            jnp.max(jnp.where(inside, speed, -jnp.inf), axis=-1) + jnp.min(jnp.where(inside, speed, jnp.inf), axis=-1)
+        )
+    # NaN speeds (a failed run, flagged by the solve) are not "standing": NaN χ follows from them
+    record(~((jnp.abs(avg) <= STILL_RTOL * peak) | (peak <= STILL_SPEED)), _STILL_MSG)
+
+
+def _check_set_point(pid) -> None:
+    """A controller's set point `omega_ref` [rad/s] must be != 0 for χ: at 0 the drive is held at rest, its speed
+    creeps about 0 and χ divides by it (concrete: `ValueError` now, before the simulation; traced: recorded)."""
+    w0 = getattr(pid, "omega_ref", None)
+    if w0 is None:
+        return
+    msg = (
+        f"{_O}: parameter `omega_ref` (the controller's set point) must be != 0 rad/s for χ, which divides by "
+        "the mean speed: at 0 the drive is held at rest"
+    )
+    if is_concrete(w0):
+        v = np.asarray(w0, dtype=float)
+        if np.any(v == 0):
+            raise ValueError(f"{msg}; got {v.tolist()}")
+    else:
+        record(w0 != 0, msg)
+
+
 def _warn_if_not_running(speed, inside) -> None:
     """Warn when the motor speed changes sign inside the window, or its mean is 0 (concrete values only): χ
     compares the fluctuation with the mean speed of a drive that runs one way, and a speed through zero makes
@@ -164,6 +235,7 @@ def _warn_if_not_running(speed, inside) -> None:
         )
 
 
+@reraising(_O)
 def chi_from_samples(
     ts,
     speed,
@@ -183,7 +255,8 @@ def chi_from_samples(
     average by the trapezoid rule; its magnitude, so that a drive running backwards has the χ of the
     same motion forwards). `t0`, `t1` must lie within the sampled times. `smooth=True`: log-mean-exp max and min at temperature
     `temperature` × average speed (dimensionless, default 3e-4). `throw=False`: a traced check that fails
-    makes the value NaN instead of raising (see `simulate`).
+    makes the value NaN instead of raising (see `simulate`). An average speed ~0 over the window is refused
+    (see `fluctuation_index`).
     """
     _check_average(average)
     _check_smooth(smooth)
@@ -198,6 +271,7 @@ def chi_from_samples(
             _check_temperature(temperature)
         inside, w = _node_weights(ts, t0, t1)
         _check_window(inside, w)
+        _check_running(speed, inside, w, average)
     _warn_if_not_running(speed, inside)
     if not checks and is_concrete((speed, temperature)):  # eager: one compiled program, not one per operation
         return _chi_program(speed, inside, w, jnp.asarray(temperature, dtype=float), bool(smooth), average)
@@ -241,6 +315,7 @@ def _speed(sol):
     )
 
 
+@reraising(_O)
 @blas_limited
 def fluctuation_index(sol, t0=None, t1=None, *, smooth: bool = False, temperature=3e-4, average="mean"):
     """Fluctuation index χ (eq. 22) of the motor speed in a `Solution`, over [t0, t1] [s].
@@ -250,7 +325,10 @@ def fluctuation_index(sol, t0=None, t1=None, *, smooth: bool = False, temperatur
     `average` is `"mean"` (time mean, default) or `"midrange"` (see module docstring).
     Returns a dimensionless scalar (0.543 means 54.3 %). Called eagerly, it warns (`RuntimeWarning`) when the
     motor speed passes through zero inside the window: the drive stops or reverses there, and χ is no
-    measure of its fluctuation.
+    measure of its fluctuation. Where the average speed over the window is ~0 (|average| <= `STILL_RTOL` =
+    1e-3 x the largest |speed| there, or no speed above `STILL_SPEED` = 1e-9 rad/s: the drive stands) it
+    raises `ValueError` with the reason; traced (jit/vmap/grad), a run-time error with the same message (NaN
+    with `chi_from_samples(..., throw=False)`).
     """
     if not isinstance(sol, Solution):
         raise TypeError(f"{_O}: parameter `sol` must be a jaxbelt Solution (from `simulate`); got {type(sol).__name__}")
@@ -343,6 +421,9 @@ def closed_loop_metrics(
     then holds no host callback). Returns a dict of scalars.
     """
     ts, option_checks = _metrics_grid(t0, t1, temperature, peak_temperature, dt_save, method, dt, average)
+    with collecting() as set_point:  # concrete: raise now, before the simulation
+        _check_set_point(pid)
+    option_checks = option_checks + set_point
     sol = _run_from_rest(
         drive, pid, ts, ("motor_speed", "voltage"), True, method, rtol, atol, dt, max_steps, adjoint, throw
     )
@@ -499,6 +580,7 @@ def _window_mean(ts, speed, t0, t1):
     return jnp.sum(w * speed, axis=-1) / jnp.sum(w)
 
 
+@reraising(_O)
 @blas_limited
 def fluctuation_objective(
     drive,
@@ -551,6 +633,7 @@ def fluctuation_objective(
     ts = _grid(t1, *((dt, "dt") if method == "rk4" else (dt_save, "dt_save")))
     with collecting() as option_checks:  # concrete: raise now, before the simulation; traced: attached below
         _check_options(peak_temperature, temperature, smooth)
+        _check_set_point(pid)
     _check_window_on_grid(ts, t0, t1)
     keep = ts >= float(t0) - _WINDOW_RTOL * max(abs(float(ts[-1])), 1.0)  # as `_node_weights` decides
     window = ts[keep] if keep.sum() >= 2 else ts  # fewer than two: chi_from_samples names the error

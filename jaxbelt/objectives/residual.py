@@ -40,7 +40,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import check_int, is_concrete, positive_checks
-from .._guard import all_ok, error_if, guard, host_checked, traced_checks
+from .._guard import all_ok, error_if, guard, host_checked, reraising, traced_checks
 from .._threads import blas_limited
 from ..commands import MIN_EXPONENT_GAP, AbstractMotionCommand, PseudoPolynomial, ShapedCommand, falling_factorial
 from ..models.platform import BeltPlatform
@@ -190,6 +190,7 @@ def _end_state_ode(plat, cmd, rtol, atol, max_steps):
     return sol.ys[-1]
 
 
+@reraising("residual_energy")
 @blas_limited
 def residual_energy(
     plat, cmd, *, method: str = "quadrature", n_nodes: int = 128, rtol=1e-12, atol=1e-15, max_steps: int = 100_000

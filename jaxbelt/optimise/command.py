@@ -28,6 +28,7 @@ at the same total move time.
 from __future__ import annotations
 
 import functools
+import warnings
 from typing import cast
 
 import equinox as eqx
@@ -312,9 +313,39 @@ def _check_options(owner, margin, gap, max_speed, max_accel, penalty, learning_r
         check_positive("learning_rate", learning_rate, owner=owner)
 
 
-def _bounds(cmd: PseudoPolynomial, margin, gap, max_step):
+def _warn_at_bounds(owner: str, g: np.ndarray, lower: float, margin: float) -> None:
+    """`UserWarning` where the start exponents `g` (sorted) lie a hair from the bounds `PseudoPolynomial` sets:
+    the lowest closer than `margin` to max(n, 2), or two closer than 2 x `MIN_EXPONENT_GAP`. The start is
+    valid, but the optimiser's box then reaches (nearly) to the bound, where the command's acceleration at
+    t = T (γ -> 2) or its coefficients (γ_i -> γ_j, growing as 1/gap) are unbounded and the objective and its
+    gradient lose their accuracy; an iterate may also fall below the least gap, which fails at run time."""
+    d0 = float(g[0] - lower)
+    if d0 < margin:
+        warnings.warn(
+            f"{owner}: the lowest start exponent gammas[0] = {float(g[0])!r} is {d0:.3g} above its lower bound "
+            f"max(n, 2) = {lower:g}, less than `margin` = {margin:g}: the optimiser's box reaches to within "
+            f"{0.5 * d0:.3g} of the bound, where the acceleration at t = T grows without bound. Start from "
+            f"gammas[0] >= {lower + margin:g} (e.g. {lower + 1.0:g}), or pass a smaller `margin`",
+            UserWarning,
+            stacklevel=5,
+        )
+    diffs = np.diff(g)
+    k = int(np.argmin(diffs))
+    if diffs[k] < 2 * MIN_EXPONENT_GAP:
+        warnings.warn(
+            f"{owner}: the start exponents gammas = {float(g[k])!r} and {float(g[k + 1])!r} differ by {float(diffs[k]):.3g}, "
+            f"less than twice the least gap {MIN_EXPONENT_GAP:g} that PseudoPolynomial accepts: the optimiser's "
+            "box reaches to the bound, where the coefficients grow as 1/gap (an iterate below the least gap fails "
+            f"at run time). Spread the start exponents at least {2 * MIN_EXPONENT_GAP:g} apart (e.g. one apart)",
+            UserWarning,
+            stacklevel=5,
+        )
+
+
+def _bounds(cmd: PseudoPolynomial, margin, gap, max_step, owner: str = "optimise_command"):
     g = np.sort(np.asarray(cmd.gammas, dtype=float))
     lower = float(max(cmd.order, 2))
+    _warn_at_bounds(owner, g, lower, float(margin))
     margin = min(float(margin), 0.5 * (g[0] - lower))
     gap = min(float(gap), 0.5 * float(np.min(np.diff(g))))
     if not float(max_step) > 0:
@@ -455,7 +486,7 @@ def optimise_robust(
     check_positive("gtol", gtol, owner=o)
     # the reference's exponents (the 3-4-5 polynomial by default: no command built, no program run)
     g_ref = np.array([3.0, 4.0, 5.0]) if reference is None else np.sort(np.asarray(reference.gammas, dtype=float))
-    lower, margin, gap = _bounds(cmd, margin, gap, max_step)
+    lower, margin, gap = _bounds(cmd, margin, gap, max_step, o)
     # the band as modes of one axis: frequency omega_k, damping ratio xi * omega_n / omega_k (c kept), gain lambda;
     # the last mode is the nominal platform (the design frequency)
     wn, xi, lam = (float(x) for x in _platform_scalars(plat))

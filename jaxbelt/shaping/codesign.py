@@ -13,13 +13,75 @@ Both functions take the grid, references and discretisation of a solved design (
 discretised optimum, which the tests check against central finite differences.
 """
 
+import math
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
+from .._checks import is_concrete
+from .._guard import checked, reraising
 from .._threads import blas_limited
 from ..models.axis import ModalAxis
-from .design import MinimaxDesign, minimax_value
+from .design import MinimaxDesign, max_distance, minimax_value
+from .moves import fastest_time
+
+
+def _check_design(owner: str, design) -> None:
+    if not isinstance(design, MinimaxDesign):
+        raise ValueError(
+            f"{owner}: parameter `design` must be a solved minimax design (a MinimaxDesign: `plan.minimax` of a "
+            f"`jaxbelt.design_move(..., include=('minimax', ...))` plan, or `minimax_design(...)`); got "
+            f"{type(design).__name__}"
+        )
+
+
+def _fastest(design: MinimaxDesign) -> float:
+    """The shortest rest-to-rest time [s] of the design's distance within its limits (|v|, |a|, and |jerk| where
+    the design has a jerk limit): the time-optimal move, a lower bound of every command's move time. NaN where
+    the design's data are traced."""
+    p = design.problem
+    data = (p.distance, p.v_max, p.a_max, p.j_max)
+    if not is_concrete(data):
+        return math.nan
+    D, v, a, j = (float(np.asarray(x)) for x in data)
+    return fastest_time(D, v, a, j if design.options.jerk else None)
+
+
+def _check_move_time(owner: str, name: str, move_time, design: MinimaxDesign, what: str = "move time"):
+    """`move_time` [s] finite, > 0 and not below the shortest feasible move of the design's distance and limits:
+    concrete, a `ValueError` now; traced, `[(ok, message)]` to attach to the result."""
+    t_min = _fastest(design)
+    shortest = (
+        f"the shortest feasible move under the design's limits takes {t_min:.6g} s" if math.isfinite(t_min) else ""
+    )
+    if is_concrete(move_time):
+        T = np.asarray(move_time, dtype=float)
+        if T.ndim != 0:
+            raise ValueError(f"{owner}: parameter `{name}` must be a scalar {what} [s]; got shape {T.shape}")
+        T = float(T)
+        if not (math.isfinite(T) and T > 0):
+            raise ValueError(
+                f"{owner}: parameter `{name}` ({what}) must be finite and > 0 s; got {T}{'; ' + shortest if shortest else ''}"
+            )
+        if math.isfinite(t_min) and T < t_min * (1 - 1e-9):
+            raise ValueError(
+                f"{owner}: parameter `{name}` ({what}) = {T:.6g} s is shorter than any move can be: {shortest} "
+                f"(distance {float(np.asarray(design.problem.distance)):g}, v_max {float(np.asarray(design.problem.v_max)):g}, "
+                f"a_max {float(np.asarray(design.problem.a_max)):g}); give `{name}` >= {t_min:.6g} s or relax the limits"
+            )
+        return []
+    T = jnp.asarray(move_time, dtype=float)
+    ok = jnp.isfinite(T) & (T > 0)
+    if math.isfinite(t_min):
+        ok = ok & (T >= t_min * (1 - 1e-9))
+    return [
+        (
+            ok,
+            f"{owner}: parameter `{name}` ({what}) must be finite, > 0 and at least the shortest feasible move under the design's limits ({t_min:.6g} s)",
+        )
+    ]
 
 
 def _problem(design: MinimaxDesign, axis, move_time):
@@ -27,16 +89,50 @@ def _problem(design: MinimaxDesign, axis, move_time):
     return eqx.tree_at(lambda q: (q.axis, q.move_time), p, (axis, jnp.asarray(move_time, dtype=float)))
 
 
+#: below this multiple of the time-optimal move time, `best_residual` checks that the design's spline covers the
+#: distance within the limits (an LP, ~30 ms once compiled): the spline's own shortest move is a few % longer
+SPLINE_CHECK_BELOW = 1.5
+
+
+def _check_spline_reaches(owner: str, axis, move_time, design: MinimaxDesign) -> None:
+    """`ValueError` where `move_time` [s] (concrete, near the time-optimal move) is too short for the design's
+    spline command to cover the distance within the limits: the minimax LP is infeasible there, and its value is
+    a large meaningless number."""
+    T, t_min = float(move_time), _fastest(design)
+    if not (math.isfinite(t_min) and T < SPLINE_CHECK_BELOW * t_min):
+        return
+    reach = float(max_distance(_problem(design, axis, move_time), design.options))
+    if not reach >= 1.0:
+        raise ValueError(
+            f"{owner}: parameter `move_time` = {T:.6g} s is too short for the design's command: a spline of "
+            f"{design.options.n_knots} knot intervals moves at most {100 * reach:.4g} % of the distance in that time "
+            f"within the limits (the time-optimal move, which no smooth command reaches, takes {t_min:.6g} s); give a "
+            "longer `move_time`"
+        )
+
+
+@reraising("best_residual")
 @blas_limited
 def best_residual(axis: ModalAxis, move_time, design: MinimaxDesign):
     """The least worst-case residual (fraction of the references) any smooth move of the design's distance and
     limits can leave on `axis` in `move_time` [s], on the frequency grid of `design`. Differentiable in the axis'
-    arrays and `move_time` (`jax.grad`, forward mode too); the references are held fixed."""
+    arrays and `move_time` (`jax.grad`, forward mode too); the references are held fixed.
+
+    Raises `ValueError` at the call, before any solve, for a `design` that is not a `MinimaxDesign` and for a
+    `move_time` that is not finite and > 0 or is shorter than the shortest feasible move of the design's
+    distance within its limits (the time-optimal move, `fastest_time`): no command meets it, and the LP's value
+    there means nothing. A traced `move_time` (under `jax.grad`) is checked at run time."""
+    o = "best_residual"
+    _check_design(o, design)
     if not isinstance(axis, ModalAxis) or axis.n_modes != design.problem.axis.n_modes:
         raise ValueError(
             f"best_residual: `axis` must be a ModalAxis with {design.problem.axis.n_modes} modes, like the design's"
         )
-    return minimax_value(_problem(design, axis, move_time), design.options, tau=jax.lax.stop_gradient(design.worst))
+    checks = _check_move_time(o, "move_time", move_time, design)
+    if not checks and is_concrete((axis, design.problem)):
+        _check_spline_reaches(o, axis, move_time, design)
+    value = minimax_value(_problem(design, axis, move_time), design.options, tau=jax.lax.stop_gradient(design.worst))
+    return checked(value, checks=checks) if checks else value
 
 
 def _root_time(axis, target, design, t_lo, t_hi, iters=60):
@@ -72,9 +168,32 @@ def shortest_move_time(axis: ModalAxis, target, design: MinimaxDesign, *, bracke
     Differentiable with respect to the axis by the implicit function theorem (`jax.grad`, `jax.jvp` called
     eagerly: the root is found by bisection on concrete values, so not inside `jax.jit`). `bracket`: the search
     interval [s] (default: 0.9 to 1.5 times the design's move time; it must hold the root, and only feasible
-    move times: the limits must allow the distance at its lower end)."""
+    move times: the limits must allow the distance at its lower end).
+
+    Raises `ValueError` at the call for a `design` that is not a `MinimaxDesign`, a `target` that is not finite
+    and > 0, and a `bracket` that is not `(lo, hi)` with 0 < lo < hi or whose lower end is shorter than the
+    shortest feasible move (the default bracket starts there instead)."""
+    o = "shortest_move_time"
+    _check_design(o, design)
+    if not (is_concrete(target) and np.ndim(target) == 0 and math.isfinite(float(target)) and float(target) > 0):
+        raise ValueError(
+            f"{o}: parameter `target` (a worst residual, as a fraction of the references) must be a finite scalar "
+            f"> 0; got {target!r}"
+        )
     T0 = float(design.command.duration)
-    lo, hi = bracket if bracket is not None else (0.9 * T0, 1.5 * T0)
+    t_min = _fastest(design)
+    if bracket is None:
+        lo, hi = 0.9 * T0, 1.5 * T0
+        if math.isfinite(t_min):
+            lo = max(lo, t_min)
+    else:
+        try:
+            lo, hi = (float(x) for x in bracket)
+        except (TypeError, ValueError):
+            raise ValueError(f"{o}: parameter `bracket` must be two move times (lo, hi) [s]; got {bracket!r}") from None
+        if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo < hi):
+            raise ValueError(f"{o}: parameter `bracket` must be (lo, hi) with 0 < lo < hi [s]; got {bracket!r}")
+        _check_move_time(o, "bracket", lo, design, "lower end of the bracket")
     leaves, treedef = jax.tree_util.tree_flatten(axis)
     return _shortest(tuple(leaves), float(target), treedef, design, float(lo), float(hi))
 

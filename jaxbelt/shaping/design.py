@@ -36,6 +36,7 @@ the move time by the envelope theorem (`solve_lp`), with the references $R_i$ an
 """
 
 import math
+import warnings
 from typing import NamedTuple
 
 import equinox as eqx
@@ -472,7 +473,39 @@ def max_distance(problem: MinimaxProblem, opts: DesignOptions) -> float:
     return float(_max_distance(problem, opts))
 
 
+#: a mode whose reference residual (the unshaped move's) is below this fraction of the largest mode's lies far
+#: outside the move's bandwidth: a smooth move leaves it (next to) nothing, and the minimax LP, whose tolerances are
+#: relative (1e-9), cannot weigh it; `make_problem` warns (a 1 MHz mode beside a 7.3 Hz one: 5e-11)
+NEGLIGIBLE_MODE = 1e-10
+
+
+def _warn_negligible_modes(axis, move_time, reference) -> None:
+    """`UserWarning` naming the modes of `axis` whose reference residual is below `NEGLIGIBLE_MODE` x the largest
+    (concrete values only), and what to change."""
+    if not is_concrete((axis.frequencies, move_time, reference)):
+        return
+    ref = np.atleast_1d(np.asarray(reference, dtype=float))
+    if ref.size < 2 or not np.all(np.isfinite(ref)) or not np.max(ref) > 0:
+        return
+    low = np.flatnonzero(ref < NEGLIGIBLE_MODE * np.max(ref))
+    if not low.size:
+        return
+    freqs = np.asarray(axis.frequencies, dtype=float)
+    T = float(np.asarray(move_time))
+    names = ", ".join(f"mode {i + 1} ({freqs[i]:.6g} Hz, {freqs[i] * T:.3g} cycles in the move)" for i in low)
+    keep = [float(freqs[i]) for i in range(freqs.size) if i not in set(low.tolist())]
+    warnings.warn(
+        f"minimax design: {names} lies far outside the move's bandwidth: the unshaped move leaves it "
+        f"{float(np.min(ref[low]) / np.max(ref)):.1e} of the largest mode's residual, below what the design's LP "
+        f"can weigh ({NEGLIGIBLE_MODE:g}), so the design may not converge (gap NaN). Drop the mode from the axis "
+        f"(a smooth move does not excite it: e.g. ModalAxis({keep}, ...)), or check its frequency's unit (Hz)",
+        UserWarning,
+        stacklevel=3,
+    )
+
+
 def make_problem(axis, distance, move_time, v_max, a_max, j_max, uncertainty, reference, opts) -> MinimaxProblem:
+    _warn_negligible_modes(axis, move_time, reference)
     f = as_float_array
     factors, mask = _initial_grid(opts, axis.n_modes, float(uncertainty))
     return MinimaxProblem(

@@ -42,6 +42,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._checks import check_int, check_real, check_scalar, is_concrete
+from ..._guard import guard, reraising, traced_checks
 from ..._threads import blas_limited
 from .model import ModalSystem, NonlinearBelt, _gauss, mode_shapes
 
@@ -434,6 +435,7 @@ def check_converged(result: SweepResult | SteadyState, speeds=None, max_periods=
     )
 
 
+@reraising("speed_sweep")
 @blas_limited
 def speed_sweep(
     belt: NonlinearBelt,
@@ -454,7 +456,17 @@ def speed_sweep(
 
     Raises `SteadyStateError` naming the speeds where the steady state was not reached
     (`throw=False` returns the amplitudes anyway; under `jit`/`vmap` an `eqx.error_if` fires).
+
+    A belt whose traced parameters (a `vmap` over damping ratios, ...) break their ranges raises `ValueError`
+    whose first line names the parameter and its range, before the sweep runs (under the caller's `jit`:
+    JAX's run-time error, the same message after its stack); `throw=False` gives NaN for that element.
     """
+    if throw:
+        checks = traced_checks(belt)  # empty for a concrete belt (checked when it was built)
+        if checks:
+            # attached to a sweep input, so they run before the sweep and lead: a bad parameter is reported
+            # as such, not as the missing steady state it causes
+            rtol = guard(jnp.asarray(rtol, dtype=float), checks, throw=True)[0]
     res = _nonlinear_sweep(
         "speed_sweep",
         belt,
