@@ -93,6 +93,10 @@ _COST = {
     "tests/test_sweep.py": 6,
     "tests/test_shortcuts.py": 5,
     "tests/test_docs.py": 5,
+    "tests/test_compat.py": 60,
+    "tests/test_outputs.py": 60,
+    "tests/test_reliability4.py": 20,
+    "tests/test_gpu_bench.py": 13,
 }
 
 

@@ -171,3 +171,18 @@ def test_bad_blas_thread_setting_is_named(monkeypatch):
         jb.residual_energy(jb.BeltPlatform(), jb.PseudoPolynomial(gammas=jnp.array([3.0, 4.0, 5.0])))
     monkeypatch.setenv("JAXBELT_BLAS_THREADS", "0")
     assert _threads.blas_thread_limit() is None
+
+
+def test_quick_options_are_probed_only_on_a_release_not_known(monkeypatch):
+    """On the jaxlib release the suite runs on, the quick CPU options are known (no probe compilation in a user's
+    first call); on any other release they are probed once, and this XLA accepts both."""
+    probes = []
+    real = _xla._accepts
+    monkeypatch.setattr(_xla, "_accepts", lambda options: probes.append(dict(options)) or real(options))
+    monkeypatch.setattr(_xla, "_ACCEPTED", {})
+    assert _xla.quick_compile() == _xla.QUICK_COMPILE
+    assert probes == []
+    monkeypatch.setattr(_xla, "_ACCEPTED", {})
+    monkeypatch.setattr(_xla, "_KNOWN", {})
+    assert _xla.quick_compile() == _xla.QUICK_COMPILE
+    assert probes == [_xla.QUICK_COMPILE]
