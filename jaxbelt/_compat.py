@@ -1,4 +1,4 @@
-"""The one place where jaxbelt reads the private internals of JAX, jaxlib and equinox.
+"""The one place where jaxbelt reads the private internals of JAX, jaxlib, equinox and scipy.
 
 Everything here saves time (tracing, compiling, a later process's start), never correctness: each function
 returns what a private module holds *only* on the versions it was written and tested for (`WRITTEN_FOR`), and
@@ -14,6 +14,7 @@ results, only slower:
 | `checkify_counter` | a later process's programs hit JAX's persistent cache | one more compilation, once |
 | `checkify_rules` | checkify's pass steps over loops without checks (a third of a checked solve's tracing) | checkify's own pass |
 | `equinox_internal` | diffrax's own checks become values, so programs stay cacheable | those programs are not stored |
+| `private_apis("scipy")` | scipy's LAPACK tables load without `scipy.linalg` (`jaxbelt._lapack`) | the usual import |
 
 `tests/test_compat.py` runs jaxbelt's entry points both ways and compares the results. When a new release of
 JAX or equinox comes out, the fast paths switch themselves off until `WRITTEN_FOR` is widened after the suite
@@ -32,6 +33,7 @@ WRITTEN_FOR = {
     "jax": ((0, 10), (0, 10)),
     "jaxlib": ((0, 10), (0, 10)),
     "equinox": ((0, 13), (0, 13)),
+    "scipy": ((1, 17), (1, 17)),  # its LAPACK tables' extension modules, loaded by file (`jaxbelt._lapack`)
 }
 
 _state: dict = {}

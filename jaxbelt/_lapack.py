@@ -21,6 +21,8 @@ import importlib.util
 import os
 import sys
 
+from . import _compat
+
 _PACKAGE = "scipy.linalg"
 _TABLES = ("cython_blas", "cython_lapack")
 
@@ -81,6 +83,8 @@ def bind_tables() -> None:
     the `scipy.linalg` package (see the module docstring); nothing where the package or the tables are loaded, where
     scipy is missing, or where its layout differs (jaxlib then imports them the usual way)."""
     if _PACKAGE in sys.modules or all(f"{_PACKAGE}.{name}" in sys.modules for name in _TABLES):
+        return
+    if not _compat.private_apis("scipy"):  # a scipy whose layout this was not written for: the usual import
         return
     added = []
     try:
