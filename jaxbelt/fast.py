@@ -412,7 +412,7 @@ def batched_exponential_scene(scene):
     """
     from ._model import AbstractLinearModel
     from .commands import ExponentialVoltage
-    from .solution import Solution
+    from .solution import BatchAxis, Solution
 
     model, inp = scene.model, scene.input
     if scene.ts is None or not isinstance(inp, ExponentialVoltage) or not isinstance(model, AbstractLinearModel):
@@ -494,4 +494,6 @@ def batched_exponential_scene(scene):
         stats={},
         state_names=tuple(model.state_names),
         method="fast",
+        model=type(model).__name__,
+        batch=BatchAxis(inp.gamma, name="gamma", unit="s"),
     )

@@ -25,6 +25,7 @@ uncertainties: reliable when the noise is small compared with the curvature scal
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass, field
 
@@ -36,6 +37,7 @@ import optimistix as optx
 
 from ._callables import by_value
 from ._checks import check_int, check_nonnegative, check_positive, device_array, require_x64
+from ._display import Display, Table, with_unit
 from ._guard import host_checked, reraise_checks
 from ._threads import blas_limited
 from ._xla import QUICK_COMPILE
@@ -57,6 +59,9 @@ class IdentifyResult:
     - `sigma`: the noise level used: the given one, or the estimate $\\sqrt{S/(N-n)}$ in data units;
     - `cost`: $S$ at the optimum (weighted sum of squares; with `sigma=None` the unweighted one);
     - `dof`: $N - n$; `n_steps`: solver steps; `names`: parameter names in covariance order.
+
+    In a notebook the result shows as an HTML table of the estimates with their standard errors; `str()` is the
+    same as text.
     """
 
     params: dict
@@ -78,6 +83,28 @@ class IdentifyResult:
     def interval(self, k: float = 2.0) -> dict:
         """`{name: (p - k·stderr, p + k·stderr)}` (k = 2: about 95 % for Gaussian noise)."""
         return {n: (self.params[n] - k * self.stderr[n], self.params[n] + k * self.stderr[n]) for n in self.names}
+
+    def _display(self) -> Display:
+        rows = []
+        for n in self.names or tuple(self.params):
+            p, s = float(np.asarray(self.params[n])), float(np.asarray(self.stderr[n]))
+            rows.append((n, p, s, 100.0 * abs(s / p) if p != 0 else math.nan))
+        sigma = np.asarray(self.sigma, dtype=float)
+        fields = (
+            ("noise level σ", float(sigma) if sigma.ndim == 0 else f"array of shape {sigma.shape}", "data units"),
+            ("cost S", self.cost, ""),
+            ("degrees of freedom", self.dof, ""),
+            ("solver steps", self.n_steps, ""),
+        )
+        headers = ("parameter", "estimate", "standard error", with_unit("relative error", "%"))
+        table = Table(headers, tuple(rows), caption="estimates (units of params0)")
+        return Display("jaxbelt IdentifyResult", fields, (table,))
+
+    def _repr_html_(self) -> str:
+        return self._display().html()
+
+    def __str__(self) -> str:
+        return self._display().text()
 
 
 class PredictError(ValueError, RuntimeError):

@@ -194,6 +194,7 @@ def _run_impl(scene: Scene, method: str, solver, rtol, atol, dt0, max_steps: int
         stats=stats,
         state_names=tuple(model.state_names),
         method=method,
+        model=type(model).__name__,
     )
 
 

@@ -26,6 +26,7 @@ from jax.core import Tracer
 from jaxtyping import Array, Float
 
 from .._checks import as_float_array, atleast_1d, device_array, is_concrete, record
+from .._display import Display, Table, with_unit
 from .._model import AbstractModel, observable
 from .._params import converted, document, param
 from ..commands import AbstractMotionCommand
@@ -129,6 +130,29 @@ class ModalAxis(AbstractModel):
         """The axis with every frequency multiplied by `factor` (damping ratios and gains kept): the model of a
         frequency error (`factor` = 1 ± uncertainty)."""
         return ModalAxis(self.frequencies * factor, self.damping_ratios, self.gains)
+
+    # --- display ------------------------------------------------------------------------------------------------
+    def _display(self) -> Display:
+        f, z, g = (np.asarray(a, dtype=float) for a in (self.frequencies, self.damping_ratios, self.gains))
+        nan = np.full(f.shape, np.nan)
+        fs = nan if self.frequency_std is None else np.asarray(self.frequency_std, dtype=float)
+        zs = nan if self.damping_std is None else np.asarray(self.damping_std, dtype=float)
+        rows = tuple((i + 1, f[i], fs[i], z[i], zs[i], g[i]) for i in range(f.shape[0]))
+        headers = (
+            "mode",
+            with_unit("frequency", "Hz"),
+            with_unit("± std. error", "Hz"),
+            "damping ratio",
+            "± std. error",
+            "gain",
+        )
+        identified = self.frequency_std is not None or self.damping_std is not None
+        caption = "modes (identified: estimates and standard errors)" if identified else "modes"
+        return Display("jaxbelt ModalAxis", (("modes", self.n_modes, ""),), (Table(headers, rows, caption=caption),))
+
+    def _repr_html_(self):
+        """A table of the modes (with the standard errors of an identified axis, `jaxbelt.identify_axis`)."""
+        return self._display().html() if is_concrete(self) else None
 
     # --- the model protocol ---------------------------------------------------------------------
     @property

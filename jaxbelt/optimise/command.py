@@ -37,7 +37,8 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from .._checks import check_int, check_penalised_limits, check_positive, check_range
+from .._checks import check_int, check_penalised_limits, check_positive, check_range, is_concrete
+from .._display import Display, Table
 from .._guard import host_checked, prepare
 from .._threads import blas_limited
 from .._xla import QUICK_COMPILE
@@ -125,7 +126,11 @@ class CommandOptimResult(eqx.Module):
       the result is the best iterate (lowest objective), normally the last;
     - `n_steps`, `converged` (a stopping test met: gradient or objective below its tolerance, or, for
       `optimise_robust`, no descent left at the objective's rounding level); `message`: why the run stopped;
-    - `peak_speed` [rad/s], `peak_accel` [rad/s²] of the final motor command.
+    - `peak_speed` [rad/s], `peak_accel` [rad/s²] of the final motor command;
+    - `objective`, `objective_unit`: what `value` is, and its unit (for the displays).
+
+    In a notebook the result shows as an HTML table (objective and exponents, start and final); `str()` is the
+    same as text.
     """
 
     gammas: jnp.ndarray
@@ -139,11 +144,41 @@ class CommandOptimResult(eqx.Module):
     peak_speed: jnp.ndarray | None = None
     peak_accel: jnp.ndarray | None = None
     message: str = eqx.field(static=True, default="")
+    objective: str = eqx.field(static=True, default="objective")
+    objective_unit: str = eqx.field(static=True, default="")
 
     @property
     def relative(self):
         """`value / initial_value`."""
         return self.value / self.initial_value
+
+    def _display(self) -> Display:
+        g0 = (
+            np.asarray(self.gammas_history)[0]
+            if np.ndim(self.gammas_history) == 2
+            else np.full(np.shape(self.gammas), np.nan)
+        )
+        rows = [(self.objective, float(self.initial_value), float(self.value), self.objective_unit)]
+        rows += [(f"γ{i + 1}", float(a), float(b), "–") for i, (a, b) in enumerate(zip(g0, np.asarray(self.gammas)))]
+        fields = [
+            ("objective / start", float(self.relative), ""),
+            ("steps", self.n_steps, ""),
+            ("converged", self.converged, ""),
+        ]
+        if self.message:
+            fields.append(("message", self.message, ""))
+        if self.peak_speed is not None:
+            fields.append(("peak motor speed", float(self.peak_speed), "rad/s"))
+        if self.peak_accel is not None:
+            fields.append(("peak motor acceleration", float(self.peak_accel), "rad/s²"))
+        table = Table(("quantity", "start", "final", "unit"), tuple(rows), caption="objective and exponents")
+        return Display("jaxbelt CommandOptimResult", tuple(fields), (table,))
+
+    def _repr_html_(self):
+        return self._display().html() if is_concrete(self) else None
+
+    def __str__(self) -> str:
+        return self._display().text() if is_concrete(self) else repr(self)
 
 
 @functools.cache
@@ -290,6 +325,8 @@ def _run(problem: ShapingProblem, cmd, optimizer, learning_rate, max_steps, tol,
         peak_speed=vmax,
         peak_accel=amax,
         message=message,
+        objective="residual energy H",
+        objective_unit="rad²/s⁴",
     )
 
 
@@ -581,6 +618,8 @@ def optimise_robust(
         peak_speed=vmax,
         peak_accel=amax,
         message=message,
+        objective="band measure (ratio to the reference)",
+        objective_unit="–",
     )
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import inspect
+import math
 import warnings
 from typing import Any, cast
 
@@ -21,7 +22,9 @@ import optax
 
 from .._callables import by_value
 from .._checks import check_int, check_penalised_limits, check_positive, check_scalar
+from .._display import Display, Table
 from .._guard import host_checked, prepare
+from .._params import declared
 from .._xla import QUICK_COMPILE
 from ..models.motor import PID, check_pid_nonnegative
 from ..objectives.fluctuation import closed_loop_metrics, linearisation_run, linearised_metrics
@@ -42,6 +45,9 @@ class PIDTuneResult:
     - `status`: `"ok"`, or what the request could not get (`"v_max not met"`, `"i_max not met"`,
       `"set point not held"`, `"no improvement"`; several joined by `"; "`), each also warned about
       (`RuntimeWarning`) with `message` saying why and what to do.
+
+    In a notebook the result shows as an HTML table (gains and χ, start and tuned, with units); `str()` is the
+    same as text.
     """
 
     pid: PID
@@ -54,6 +60,35 @@ class PIDTuneResult:
     mean_speed: float = float("nan")
     status: str = "ok"
     message: str = ""
+
+    def _display(self) -> Display:
+        units = {name: p.unit for name, (p, _) in declared(PID).items()}
+        if self.pid.gain == "constant":
+            units["kp"] = "V s/rad"  # the declared unit is the ramped gain's (it multiplies t)
+        h = self.history
+        rows = []
+        for name in ("kp", "ki", "kd"):
+            start = float(h[name][0]) if len(h.get(name, ())) else math.nan
+            rows.append((name, start, float(getattr(self.pid, name)), units.get(name, "")))
+        rows.append(("χ (exact)", self.chi_initial, self.chi, "–"))
+        fields = [
+            ("status", self.status, ""),
+            ("steps", len(h.get("loss", ())), ""),
+            ("best step", self.best_step, ""),
+            ("peak |voltage|", self.v_peak, "V"),
+            ("peak |current|", self.i_peak, "A"),
+            ("mean motor speed", self.mean_speed, "rad/s"),
+        ]
+        if self.message:
+            fields.append(("message", self.message, ""))
+        table = Table(("quantity", "start", "tuned", "unit"), tuple(rows), caption="gains and fluctuation index")
+        return Display("jaxbelt PIDTuneResult", tuple(fields), (table,))
+
+    def _repr_html_(self) -> str:
+        return self._display().html()
+
+    def __str__(self) -> str:
+        return self._display().text()
 
 
 def tune_pid(

@@ -32,6 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import check_positive, check_range, device_array
+from .._display import Display, Table, fmt, fmt_list, require, with_unit
 from .._io import IMAGE_FORMATS, atomic_open, check_output_path, save_figure
 from .._threads import blas_limited
 from ..commands import AbstractMotionCommand
@@ -63,6 +64,9 @@ _SURELY_FEASIBLE = 1.15
 _N_BAND = 401
 _WIDE = (0.5, 1.5)
 _N_WIDE = 501
+
+#: units of the sampled move (`MovePlan.samples_to_pandas`)
+_SAMPLE_UNITS = {"t": "s", "x": "m", "v": "m/s", "a": "m/s²"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -238,6 +242,139 @@ class MovePlan:
         if path is not None:
             save_figure(fig, path, dpi=120)  # atomically: a failed save leaves the previous file
         return fig
+
+    # --- display and labelled data ----------------------------------------------------------------------------
+    def _display(self) -> Display:
+        axis = self.axis
+        limits = f"|v| ≤ {fmt(self.v_max)} m/s, |a| ≤ {fmt(self.a_max)} m/s²"
+        if self.j_max is not None:
+            limits += f", |j| ≤ {fmt(self.j_max)} m/s³"
+        fields = (
+            (
+                "axis",
+                f"{axis.n_modes} mode(s): f = {fmt_list(axis.frequencies, '.4g')} Hz, "
+                f"ζ = {fmt_list(axis.damping_ratios, '.3g')}",
+                "",
+            ),
+            ("distance", self.distance, "m"),
+            ("move time", self.move_time, "s"),
+            ("limits", limits, ""),
+            ("band", f"±{100 * self.uncertainty:g} % of each frequency", ""),
+            ("recommended", self.best.name if self.best is not None else "none (see the notes)", ""),
+        )
+        n = axis.n_modes
+        headers = (
+            "candidate",
+            with_unit("T", "s"),
+            with_unit("worst", "%"),
+            with_unit("mean", "%"),
+            with_unit("worst", "m"),
+            with_unit("outside band", "%"),
+            *(with_unit(f"5 % band, mode {i + 1}", "Hz") for i in range(n)),
+            with_unit("peak v", "m/s"),
+            with_unit("peak a", "m/s²"),
+            "ok",
+            "note",
+        )
+        rows = []
+        for c in self.table:
+            bands = tuple(f"{lo:.3f} – {hi:.3f}" if np.isfinite(lo) else None for lo, hi in c.band_hz)
+            rows.append(
+                (c.name, c.move_time, c.worst_percent, c.mean_percent, c.worst_m, c.outside_percent)
+                + bands
+                + (c.peak_v, c.peak_a, c.ok, c.note)
+            )
+        marked = next((i for i, c in enumerate(self.table) if c is self.best), None)
+        table = Table(headers, tuple(rows), caption="candidates, best first", marked=marked, mark="recommended")
+        return Display("jaxbelt MovePlan", fields, (table,))
+
+    def _repr_html_(self) -> str:
+        return self._display().html()
+
+    def to_pandas(self):
+        """The ranked table as a `pandas.DataFrame`, one row per candidate (index `candidate`, best first):
+        `rank`, `best` (the recommendation), `ok`, `move_time` [s], `worst_percent`, `mean_percent`,
+        `outside_percent` [%], `worst_m` [m], `band5_low_mode{i}`, `band5_high_mode{i}` [Hz] (the 5 % band of
+        mode i, NaN where there is none), `peak_v` [m/s], `peak_a` [m/s²], `peak_j` [m/s³], `note`; the units in
+        `df.attrs["units"]`. Needs pandas (`pip install "jaxbelt[notebook]"`)."""
+        pd = require("pandas")
+        columns, units = self._columns()
+        df = pd.DataFrame(columns, index=pd.Index([c.name for c in self.table], name="candidate"))
+        df.attrs["units"] = units
+        return df
+
+    def to_xarray(self):
+        """The ranked table as an `xarray.Dataset` over the dimensions `candidate` (best first; the names as the
+        coordinate) and `mode` (1..n): the columns of `to_pandas`, the 5 % bands as `band5_low`, `band5_high`
+        (candidate, mode) [Hz] and the unshaped reference `reference_m` (mode) [m]; units in each variable's
+        `attrs["units"]`, the move's data (distance, move time, limits, uncertainty, recommendation) in the
+        dataset's `attrs`. Needs xarray (`pip install "jaxbelt[notebook]"`)."""
+        xr = require("xarray")
+        columns, units = self._columns(bands=False)
+        data: dict[str, tuple] = {
+            k: ("candidate", np.asarray(v), {"units": units[k]} if units.get(k) else {}) for k, v in columns.items()
+        }
+        for side, k in (("low", 0), ("high", 1)):
+            vals = np.array([[b[k] for b in c.band_hz] for c in self.table], dtype=float).reshape(len(self.table), -1)
+            data[f"band5_{side}"] = (("candidate", "mode"), vals, {"units": "Hz"})
+        data["reference_m"] = ("mode", np.asarray(self.reference_m, dtype=float), {"units": "m"})
+        coords = {"candidate": [c.name for c in self.table], "mode": np.arange(1, self.axis.n_modes + 1)}
+        attrs = dict(
+            distance=self.distance,
+            move_time=self.move_time,
+            v_max=self.v_max,
+            a_max=self.a_max,
+            j_max=math.nan if self.j_max is None else self.j_max,
+            uncertainty=self.uncertainty,
+            best="" if self.best is None else self.best.name,
+        )
+        return xr.Dataset(data, coords=coords, attrs=attrs)
+
+    def _columns(self, bands: bool = True):
+        t = self.table
+        cols: dict = {
+            "rank": np.arange(1, len(t) + 1),
+            "best": np.array([c is self.best for c in t], dtype=bool),
+            "ok": np.array([c.ok for c in t], dtype=bool),
+        }
+        units = {"move_time": "s", "worst_percent": "%", "mean_percent": "%", "outside_percent": "%", "worst_m": "m"}
+        for k in units:
+            cols[k] = np.array([getattr(c, k) for c in t], dtype=float)
+        if bands:
+            for i in range(self.axis.n_modes):
+                cols[f"band5_low_mode{i + 1}"] = np.array([c.band_hz[i][0] for c in t], dtype=float)
+                cols[f"band5_high_mode{i + 1}"] = np.array([c.band_hz[i][1] for c in t], dtype=float)
+                units[f"band5_low_mode{i + 1}"] = units[f"band5_high_mode{i + 1}"] = "Hz"
+        for k, unit in (("peak_v", "m/s"), ("peak_a", "m/s²"), ("peak_j", "m/s³")):
+            cols[k] = np.array([getattr(c, k) for c in t], dtype=float)
+            units[k] = unit
+        cols["note"] = np.array([c.note for c in t], dtype=object)
+        return cols, units
+
+    def samples_to_pandas(self, rate_hz: float, candidate: str | None = None):
+        """The sampled move of the recommended command (or `candidate`) at `rate_hz` [Hz], what `samples` and
+        `to_csv` give, as a `pandas.DataFrame` indexed by `t` [s] with the columns `x` [m], `v` [m/s] and `a`
+        [m/s²]; units, candidate and rate in `df.attrs`. Needs pandas (`pip install "jaxbelt[notebook]"`)."""
+        pd = require("pandas")
+        name, (t, x, v, a) = self._sampled(rate_hz, candidate, "MovePlan.samples_to_pandas")
+        df = pd.DataFrame({"x": x, "v": v, "a": a}, index=pd.Index(t, name="t"))
+        df.attrs.update(units=dict(_SAMPLE_UNITS), candidate=name, rate_hz=float(rate_hz))
+        return df
+
+    def samples_to_xarray(self, rate_hz: float, candidate: str | None = None):
+        """`samples_to_pandas` as an `xarray.Dataset`: `x`, `v`, `a` over the coordinate `t` [s], units in each
+        variable's `attrs["units"]`. Needs xarray (`pip install "jaxbelt[notebook]"`)."""
+        xr = require("xarray")
+        name, (t, x, v, a) = self._sampled(rate_hz, candidate, "MovePlan.samples_to_xarray")
+        u = _SAMPLE_UNITS
+        data = {k: ("t", np.asarray(val), {"units": u[k]}) for k, val in (("x", x), ("v", v), ("a", a))}
+        coords = {"t": ("t", np.asarray(t), {"units": "s"})}
+        return xr.Dataset(data, coords=coords, attrs={"candidate": name, "rate_hz": float(rate_hz)})
+
+    def _sampled(self, rate_hz, candidate, owner: str):
+        self._check_rate(rate_hz, owner)
+        c = self._chosen(candidate, owner)
+        return c.name, tuple(np.asarray(q, dtype=float) for q in self.samples(rate_hz, c.name))
 
 
 def nyquist_hz(frequencies, uncertainty: float) -> float:

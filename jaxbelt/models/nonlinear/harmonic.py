@@ -51,6 +51,7 @@ else:  # imported by the first trace only: a process that loads the stored progr
     lx, optx = lazy_module("lineax"), lazy_module("optimistix")
 
 from ..._checks import check_int, check_positive, check_real, collecting, device_array, is_concrete, record
+from ..._display import Display, Table, fmt, fmt_list, require, with_unit
 from ..._guard import all_ok, guard, prepare, stored_jit, traced_checks
 from ..._threads import blas_limited
 from ..._xla import QUICK_COMPILE
@@ -617,6 +618,9 @@ class ResponseCurve(eqx.Module):
     - `amplitude` (M, N) modal amplitudes $\\max_\\varphi|\\zeta_n|$ (dimensionless);
     - `stable` (M,) bool ($\\max|\\mu| < 1$); `multipliers` (M, 2N) Floquet multipliers;
     - `coefficients` (M, 2N, 2H+1) Fourier coefficients; `folds` (K,) fold speeds [m/s], ascending.
+
+    In a notebook the curve shows as an HTML summary (folds, the runs of stable and unstable points); `str()` is
+    the same as text. `to_pandas()` / `to_xarray()`: the curve as labelled data (the extra `jaxbelt[notebook]`).
     """
 
     speed: jnp.ndarray
@@ -640,6 +644,95 @@ class ResponseCurve(eqx.Module):
         else:
             keep = st & (s <= np.minimum.accumulate(s[::-1])[::-1] + 1e-12)
         return s[keep], p[keep]
+
+    # --- display and labelled data ------------------------------------------------------------------------------
+    def _segments(self):
+        """`[(first index, last index, stable)]`: the runs of stable and unstable points along the curve."""
+        st = np.asarray(self.stable, dtype=bool)
+        runs, start = [], 0
+        for i in range(1, st.size + 1):
+            if i == st.size or st[i] != st[start]:
+                runs.append((start, i - 1, bool(st[start])))
+                start = i
+        return runs
+
+    def _display(self) -> Display:
+        s, pp, st = (np.asarray(a) for a in (self.speed, self.pp, self.stable))
+        folds = np.asarray(self.folds)
+        coef = np.shape(self.coefficients)
+        fields = (
+            ("speed range", f"{fmt(s.min())} – {fmt(s.max())}" if s.size else "–", "m/s"),
+            ("points", int(s.size), ""),
+            ("modes", int(np.shape(self.amplitude)[-1]), ""),
+            ("harmonics", (coef[-1] - 1) // 2 if len(coef) == 3 else "–", ""),
+            ("stable points", f"{int(st.sum())} of {st.size}", ""),
+            ("folds", fmt_list(folds, ".6g") if folds.size else "none", "m/s" if folds.size else ""),
+            ("largest peak-to-peak", float(np.nanmax(pp)) if pp.size else np.nan, "m"),
+        )
+        rows = tuple(
+            (float(s[a]), float(s[b]), stable, b - a + 1, float(np.nanmax(pp[a : b + 1])))
+            for a, b, stable in self._segments()
+        )
+        headers = (
+            with_unit("from speed", "m/s"),
+            with_unit("to speed", "m/s"),
+            "stable",
+            "points",
+            with_unit("largest peak-to-peak", "m"),
+        )
+        table = Table(headers, rows, caption="stability along the curve (arclength order)")
+        return Display("jaxbelt ResponseCurve", fields, (table,))
+
+    def _repr_html_(self):
+        return self._display().html() if is_concrete(self) else None
+
+    def __str__(self) -> str:
+        return self._display().text() if is_concrete(self) else repr(self)
+
+    def to_pandas(self):
+        """The curve as a `pandas.DataFrame` indexed by `speed` [m/s] (in arclength order: past a fold a speed
+        comes back), with the columns `pp` [m], `stable` and `amplitude1`..`amplitudeN` (modal amplitudes,
+        dimensionless); units in `df.attrs["units"]`, the fold speeds [m/s] in `df.attrs["folds"]`. Needs pandas
+        (`pip install "jaxbelt[notebook]"`)."""
+        pd = require("pandas")
+        amp = np.asarray(self.amplitude)
+        cols = {"pp": np.asarray(self.pp), "stable": np.asarray(self.stable, dtype=bool)}
+        cols.update({f"amplitude{i + 1}": amp[:, i] for i in range(amp.shape[1])})
+        df = pd.DataFrame(cols, index=pd.Index(np.asarray(self.speed), name="speed"))
+        units = {"speed": "m/s", "pp": "m", **{f"amplitude{i + 1}": "–" for i in range(amp.shape[1])}}
+        df.attrs.update(units=units, folds=np.asarray(self.folds).tolist())
+        return df
+
+    def to_xarray(self):
+        """The curve as an `xarray.Dataset` over the dimension `point` (arclength order) with the coordinate
+        `speed` [m/s] along it (not a dimension: past a fold a speed comes back): `pp` [m], `stable`,
+        `amplitude` (point, `mode`), `multipliers` (point, `multiplier`; complex Floquet multipliers),
+        `coefficients` (point, `state`, `basis`; the Fourier coefficients of the modal state $(\\zeta^R, \\zeta^I)$
+        over $(1, \\cos k\\varphi, \\sin k\\varphi)$, dimensionless) and `folds`
+        (`fold`) [m/s]; units in each variable's `attrs["units"]`. Needs xarray (`pip install "jaxbelt[notebook]"`)."""
+        xr = require("xarray")
+        amp, coef = np.asarray(self.amplitude), np.asarray(self.coefficients)
+        n, h = amp.shape[1], (coef.shape[-1] - 1) // 2
+        data = {
+            "pp": (
+                "point",
+                np.asarray(self.pp),
+                {"units": "m", "long_name": "peak-to-peak 1 cm from the sensor pulley"},
+            ),
+            "stable": ("point", np.asarray(self.stable, dtype=bool), {}),
+            "amplitude": (("point", "mode"), amp, {"units": "–"}),
+            "multipliers": (("point", "multiplier"), np.asarray(self.multipliers), {"units": "–"}),
+            "coefficients": (("point", "state", "basis"), coef, {"units": "–"}),
+            "folds": ("fold", np.asarray(self.folds), {"units": "m/s"}),
+        }
+        coords = {
+            "speed": ("point", np.asarray(self.speed), {"units": "m/s"}),
+            "point": np.arange(amp.shape[0]),
+            "mode": np.arange(1, n + 1),
+            "state": [f"zeta_r{i + 1}" for i in range(n)] + [f"zeta_i{i + 1}" for i in range(n)],
+            "basis": ["1"] + [f"cos{k}" for k in range(1, h + 1)] + [f"sin{k}" for k in range(1, h + 1)],
+        }
+        return xr.Dataset(data, coords=coords)
 
 
 @stored_jit(compiler_options=QUICK_COMPILE)
