@@ -21,7 +21,7 @@ import importlib.util
 import os
 import sys
 
-from . import _compat
+from ._compat import private_apis
 
 _PACKAGE = "scipy.linalg"
 _TABLES = ("cython_blas", "cython_lapack")
@@ -84,7 +84,7 @@ def bind_tables() -> None:
     scipy is missing, or where its layout differs (jaxlib then imports them the usual way)."""
     if _PACKAGE in sys.modules or all(f"{_PACKAGE}.{name}" in sys.modules for name in _TABLES):
         return
-    if not _compat.private_apis("scipy"):  # a scipy whose layout this was not written for: the usual import
+    if not private_apis("scipy"):  # a scipy whose layout this was not written for: the usual import
         return
     added = []
     try:

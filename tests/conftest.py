@@ -97,6 +97,7 @@ _COST = {
     "tests/test_outputs.py": 60,
     "tests/test_reliability4.py": 20,
     "tests/test_gpu_bench.py": 13,
+    "tests/test_display.py": 32,
 }
 
 
