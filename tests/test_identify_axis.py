@@ -284,6 +284,45 @@ def test_load_record_round_trip(tmp_path):
     np.testing.assert_array_equal(y3, y)
 
 
+def test_load_record_reads_one_channel_of_a_firmware_accelerometer_file(tmp_path):
+    """Klipper's raw accelerometer file: a commented header `#time,accel_x,accel_y,accel_z`, three channels. The
+    channel is chosen by name (any case) or index; the record identifies as the two-column file does."""
+    t, y = decay(*AXIS_A, seed=5)
+    other = 0.5 * y[::-1]
+    path = tmp_path / "raw_data_x.csv"
+    rows = "".join(f"{float(ti)!r},{float(a)!r},{float(b)!r},{float(c)!r}\n" for ti, a, b, c in zip(t, other, y, -y))
+    path.write_text("#time,accel_x,accel_y,accel_z\n" + rows)
+    for channel in ("accel_y", "ACCEL_Y", 2):
+        t2, y2 = jb.load_record(path, channel=channel)
+        np.testing.assert_array_equal(t2, t)
+        np.testing.assert_array_equal(y2, y)
+    np.testing.assert_array_equal(jb.load_record(path, channel="accel_x")[1], other)
+    with pytest.raises(ValueError, match=r"no column 'accel_q'; the channels are \['accel_x', 'accel_y', 'accel_z'\]"):
+        jb.load_record(path, channel="accel_q")
+    with pytest.raises(ValueError, match=r"`channel` 4 is out of range: the file has 4 columns.*\(1-3\)"):
+        jb.load_record(path, channel=4)
+    with pytest.raises(ValueError, match=r"`channel` must be >= 1 \(column 0 holds the time\)"):
+        jb.load_record(path, channel=0)
+    with pytest.raises(ValueError, match=r"got 4 in .*choose one with `channel`"):
+        jb.load_record(path)
+    a, b = jb.identify_axis(t, y, 2), jb.identify_axis(*jb.load_record(path, channel="accel_y"), 2)
+    np.testing.assert_array_equal(np.asarray(a.frequencies), np.asarray(b.frequencies))
+
+
+def test_load_record_refuses_a_spectrum(tmp_path):
+    """The power spectral density of a firmware's resonance test (`freq,psd_x,psd_y,psd_z,psd_xyz`) is not a time
+    record: read as one, its columns gave a 0.0175 Hz "mode" without a word."""
+    path = tmp_path / "calibration_data_x.csv"
+    f = np.linspace(5.0, 200.0, 40)
+    path.write_text("freq,psd_x,psd_y,psd_z,psd_xyz\n" + "".join(f"{v},1e-3,2e-3,3e-3,6e-3\n" for v in f))
+    for channel in (None, "psd_x"):
+        with pytest.raises(ValueError, match=r":1: the first column is 'freq': a spectrum .*not a time record"):
+            jb.load_record(path, channel=channel)
+    path.write_text("freq,psd_x\n" + "".join(f"{v},1e-3\n" for v in f))
+    with pytest.raises(ValueError, match=r"a spectrum"):
+        jb.load_record(path)
+
+
 def test_load_record_errors(tmp_path):
     with pytest.raises(FileNotFoundError, match=r"no file '.*missing.csv'"):
         jb.load_record(tmp_path / "missing.csv")

@@ -502,48 +502,114 @@ def identify_axis(
 # --------------------------------------------------------------------------------------------
 # reading a record
 # --------------------------------------------------------------------------------------------
-def load_record(path):
-    """Read a measured record `(t, y)` (two float numpy arrays) from a CSV file with the columns `t,y`.
+#: first column names that mark a spectrum, not a time record (Klipper's resonance test writes
+#: `freq,psd_x,psd_y,psd_z,psd_xyz`)
+_SPECTRUM_NAMES = ("freq", "frequency", "f", "hz", "freq_hz", "frequency_hz")
 
-    - comma-separated, one sample per line: the time [s] and the measured value (any unit);
-    - an optional header line (any names, e.g. `t,y` or `time_s,accel`) as the first non-empty line;
-    - blank lines and lines starting with `#` are skipped; spaces around the values are allowed;
-    - **exactly two columns**: a third column is an error rather than silently ignored (a file
-      `t,ax,ay,az` would otherwise be read as its first channel): write the one channel to identify.
+
+def load_record(path, channel: int | str | None = None):
+    """Read a measured record `(t, y)` (two float numpy arrays) from a CSV file: the time [s] in the first column
+    and the measured value (any unit) in the second, or in the column `channel`.
+
+    - comma-separated, one sample per line;
+    - an optional header line (any names, e.g. `t,y` or `time_s,accel`) as the first non-empty line, written
+      plainly or as a comment: `#time,accel_x,accel_y,accel_z` (the header of Klipper's raw accelerometer files)
+      names the columns too;
+    - blank lines and other lines starting with `#` are skipped; spaces around the values are allowed;
+    - two columns, or more with `channel`: the column to read, by its header name (`"accel_x"`, any case) or by
+      its index (1 = the first column after the time). A file of more than two columns without `channel` is an
+      error rather than silently read as its first channel.
+    - a spectrum is refused: a file whose first column is named like a frequency (`freq,psd_x,...`, the power
+      spectral density of Klipper's resonance test) is not a time record, and identifying modes from its columns
+      as if they were one would give a meaningless "mode".
 
     Raises `FileNotFoundError` (`OSError`) for a missing or unreadable path and `ValueError`, naming the file
-    and the line, for anything else (not text, wrong number of columns, a value that is not a number, fewer
-    than two samples). The times are not checked here: `identify_axis` checks them.
+    and the line, for anything else (not text, wrong number of columns, an unknown `channel`, a spectrum, a value
+    that is not a number, fewer than two samples). The times are not checked here: `identify_axis` checks them.
     """
     path = os.fspath(path)
     if not os.path.exists(path):
         raise FileNotFoundError(f"load_record: no file {path!r} (a CSV file with the columns t,y)")
     if os.path.isdir(path):
         raise IsADirectoryError(f"load_record: {path!r} is a folder, not a CSV file with the columns t,y")
+    if (channel is not None and not isinstance(channel, (int, str))) or isinstance(channel, bool):
+        raise ValueError(f"load_record: `channel` must be a column name or index (int >= 1), got {channel!r}")
+    if isinstance(channel, int) and channel < 1:
+        raise ValueError(f"load_record: `channel` must be >= 1 (column 0 holds the time), got {channel}")
     try:
         with open(path, encoding="utf-8-sig") as fh:  # utf-8-sig: a spreadsheet's byte-order mark is skipped
             lines = fh.read().splitlines()
     except UnicodeDecodeError as e:
         raise ValueError(f"load_record: {path!r} is not a text (CSV) file ({e.reason} at byte {e.start})") from None
-    rows = []
-    header_seen = False
+    rows: list = []
+    names: list[str] | None = None
+    column = 1
+    n_columns = None
     for lineno, line in enumerate(lines, start=1):
         text = line.strip()
-        if not text or text.startswith("#"):
+        if text.startswith("#"):
+            # a comment; with `channel`, the first line may be a commented header (Klipper's `#time,accel_x,...`)
+            if channel is None or rows or names is not None:
+                continue
+            text = text.lstrip("#").strip()
+            if "," not in text:
+                continue
+        if not text:
             continue
-        fields = [s.strip() for s in text.split(",")]
-        if len(fields) != 2:
+        fields = [f.strip() for f in text.split(",")]
+        if not rows and names is None and fields[0].lower() in _SPECTRUM_NAMES:
+            raise ValueError(
+                f"load_record: {path}:{lineno}: the first column is {fields[0]!r}: a spectrum (e.g. the power "
+                "spectral density of a firmware's resonance test), not a time record; identify_axis needs the "
+                "time record itself (e.g. the raw accelerometer file #time,accel_x,accel_y,accel_z)"
+            )
+        if channel is None and len(fields) != 2:
             raise ValueError(
                 f"load_record: {path}:{lineno}: expected 2 comma-separated columns t,y; got {len(fields)} in "
-                f"{line!r}" + (" (one channel per file: drop the other columns)" if len(fields) > 2 else "")
+                f"{line!r}"
+                + (
+                    " (one channel per file: drop the other columns, or choose one with `channel`)"
+                    if len(fields) > 2
+                    else ""
+                )
             )
         try:
-            rows.append((float(fields[0]), float(fields[1])))
+            values = [float(f) for f in fields]
         except ValueError:
-            if rows or header_seen:
-                raise ValueError(f"load_record: {path}:{lineno}: the values must be numbers; got {line!r}") from None
-            header_seen = True  # the first non-empty line: a header
+            values = None
+        if values is None:
+            if rows or names is not None:
+                raise ValueError(f"load_record: {path}:{lineno}: the values must be numbers; got {line!r}")
+            names = fields  # the first non-empty line: a header
+            continue
+        if n_columns is None:
+            n_columns = len(fields)
+            if channel is not None:
+                column = _channel_column(path, channel, names, n_columns)
+        elif len(fields) != n_columns:
+            raise ValueError(
+                f"load_record: {path}:{lineno}: expected {n_columns} comma-separated columns as in the first line; "
+                f"got {len(fields)} in {line!r}"
+            )
+        rows.append((values[0], values[column]))
     if len(rows) < 2:
         raise ValueError(f"load_record: {path!r} holds {len(rows)} sample(s); a record needs at least 2 lines t,y")
     data = np.asarray(rows, dtype=float)
     return data[:, 0].copy(), data[:, 1].copy()
+
+
+def _channel_column(path, channel, names, n_columns) -> int:
+    """The column index of `channel` (a header name, any case, or an index >= 1) in a file of `n_columns`."""
+    if isinstance(channel, int):
+        if channel >= n_columns:
+            raise ValueError(
+                f"load_record: {path}: `channel` {channel} is out of range: the file has {n_columns} columns, the "
+                f"time and {n_columns - 1} channel(s) (1-{n_columns - 1})"
+            )
+        return channel
+    if names is None or len(names) != n_columns:
+        raise ValueError(f"load_record: {path}: `channel` {channel!r} names a column, but the file has no header line")
+    lowered = [n.lower() for n in names]
+    if channel.lower() not in lowered[1:]:
+        raise ValueError(f"load_record: {path}: no column {channel!r}; the channels are {names[1:]}")
+    return lowered.index(channel.lower(), 1)
