@@ -7,7 +7,6 @@ import os
 import subprocess
 import sys
 import textwrap
-import time
 from pathlib import Path
 
 import numpy as np
@@ -258,13 +257,12 @@ def test_cli_figure_failing_mid_way_keeps_the_previous_file(argv, out, tmp_path,
 # Paths and rates refused before any work
 # --------------------------------------------------------------------------------------------
 def _refused_fast(fn, match):
+    # before any work: nothing traced or compiled (what makes the refusal immediate; its time is a benchmark's
+    # business, not a test's)
     with count_compiles() as box:
-        t = time.perf_counter()
         with pytest.raises(ValueError, match=match):
             fn()
-        elapsed = time.perf_counter() - t
     assert box["n"] == 0 and box["traces"] == 0
-    assert elapsed < 1.0
 
 
 @pytest.mark.parametrize(
@@ -321,13 +319,11 @@ def test_cli_refuses_bad_paths_and_rates_at_once(argv, needle, tmp_path, capsys)
 
     argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
     with count_compiles() as box:
-        t = time.perf_counter()
         try:
             code = main(["--no-cache", *argv])
         except SystemExit as e:
             code = e.code
-        elapsed = time.perf_counter() - t
-    assert code == 2 and box["n"] == 0 and elapsed < 1.0
+    assert code == 2 and box["n"] == 0 and box["traces"] == 0
     out, err = capsys.readouterr()
     lines = err.strip().splitlines()
     assert out == "" and len(lines) == 1 and needle.replace("{tmp}", str(tmp_path)) in lines[0], err
@@ -452,10 +448,8 @@ def test_cli_refuses_options_its_mode_does_not_use(argv, needle, tmp_path, capsy
 
     argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
     with count_compiles() as box:
-        t = time.perf_counter()
         code = main(["--no-cache", *argv])
-        elapsed = time.perf_counter() - t
-    assert code == 2 and box["n"] == 0 and elapsed < 1.0
+    assert code == 2 and box["n"] == 0 and box["traces"] == 0
     out, err = capsys.readouterr()
     lines = err.strip().splitlines()
     assert out == "" and len(lines) == 1 and needle in lines[0], err
