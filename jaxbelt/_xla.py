@@ -127,10 +127,13 @@ class LazyJit:
         self._make = functools.partial(jit, fun, **kwargs)
         self._wanted = wanted
         self._built = None
+        self._options: tuple | None = None  # (options,) once found: the backend does not change after its start
         functools.update_wrapper(self, fun)
 
     def options(self) -> dict | None:
-        return quick_compile(self._wanted) if self._wanted else None
+        if self._options is None:
+            self._options = (quick_compile(self._wanted) if self._wanted else None,)
+        return self._options[0]
 
     def _get(self):
         if self._built is None:
