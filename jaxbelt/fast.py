@@ -99,8 +99,8 @@ def _input_em1(s, tau):
     return expm1_from_exp(x, jnp.exp(x))
 
 
-#: exponentials e^{s_b tau_t} one pass of the batched closed form keeps (2^23: 64 MiB): a batch with more is
-#: written by chunks
+#: exponentials e^{s_b tau_t} one pass of the batched closed form keeps on a CPU (2^23: 64 MiB): a batch with more
+#: is written by chunks (on a GPU they are never stored: one pass)
 _PASS_ELEMENTS = 1 << 23
 
 
@@ -209,7 +209,10 @@ def exp_input_batch(
         # a time); a smaller one in one pass, which is faster (the chunks' loop writes the output twice). The last
         # chunk starts at B - size, overlapping its predecessor when `size` does not divide B: the overlap is
         # recomputed from the same inputs.
-        n_chunks = -(-nb * tau.shape[0] // _PASS_ELEMENTS)
+        # On a GPU, XLA fuses the exponential into the loop (recomputing it per component costs nothing there): one
+        # pass, which wrote 10^6 x 501 outputs 1.24x faster than equal chunks on an H100 (447 against 360 GB/s),
+        # with 1.08x the output's memory at its peak
+        n_chunks = -(-nb * tau.shape[0] // _PASS_ELEMENTS) if jax.default_backend() == "cpu" else 1
         size = -(-nb // n_chunks)
         if n_chunks == 1:
             xs = rows(s_var, v, W, post_args)
@@ -247,8 +250,10 @@ def exp_input_batch(
             fixed = rows(*jax.tree.map(lambda a: a[idx], (s_var, v, W, post_args)), fix=correction(idx))
             return jax.tree.map(lambda o, f: o.at[idx].set(f), xs, fixed)
 
-        # most batches have none: then the pass's output is returned as it is (in place either way)
-        return jax.lax.cond(jnp.any(has), corrected, lambda xs: xs, xs)
+        # always, in place: the correction of an element that is not near resonance is zero. A `cond` that returned
+        # the pass's output unchanged when none is near made XLA copy it on a GPU (a batch's peak device memory
+        # was 2.0x its output on an H100, 1.04x without the `cond`; the same on a CPU, where it was not copied)
+        return corrected(xs)
 
     def exact():
         return shared[None] + jax.lax.map(lambda a: _exact_one(lam, X, a[0], a[1], tau), (q, s_var))

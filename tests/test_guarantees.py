@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 
 import jaxbelt as jb
+from jaxbelt import _compat
 from jaxbelt.solve import _run_traced
 
 TS = jnp.linspace(0.0, 0.5, 101)
@@ -358,7 +359,8 @@ def test_cli_process_binds_lapack_without_scipy_linalg_and_runs_without_cyclic_g
     )
     eig_err, solve_err, linalg_pkg, tables, gc_on = _printed_by(code)
     assert float(eig_err) < 1e-12 and float(solve_err) < 1e-12
-    assert (linalg_pkg, tables, gc_on) == ("False", "True", "False")
+    # on a scipy whose layout `jaxbelt._lapack` was not written for (`jaxbelt._compat`), the usual import
+    assert (linalg_pkg, tables, gc_on) == (str(not _compat.private_apis("scipy")), "True", "False")
 
 
 def test_cli_process_defines_matplotlibs_artists_without_their_property_lists():
@@ -443,7 +445,8 @@ def test_a_users_process_binds_lapack_without_scipy_linalg_and_imports_it_later_
     )
     eig_err, solve_err, linalg_pkg, tables, *later = _printed_by(code)
     assert float(eig_err) < 1e-12 and float(solve_err) < 1e-12
-    assert (linalg_pkg, tables) == ("False", "True")
+    # on a scipy whose layout `jaxbelt._lapack` was not written for (`jaxbelt._compat`), the usual import
+    assert (linalg_pkg, tables) == (str(not _compat.private_apis("scipy")), "True")
     assert later == ["True", "True", "True", "True", "False"]
 
 

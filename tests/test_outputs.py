@@ -18,7 +18,7 @@ from jaxbelt import _io
 from jaxbelt.shaping.moves import LIMIT_RTOL, sampled_peaks
 
 LIMITS = dict(v_max=0.3, a_max=1.2)
-CLASSIC = ("ZV", "MZV", "ZVD", "EI", "2-hump EI")
+CLASSIC = ("ZV", "MZV", "ZVD", "EI", "2-hump EI", "3-hump EI")
 PREVIOUS = b"previous contents\n" * 100
 
 

@@ -24,7 +24,7 @@ from jaxbelt.shaping.shapers import shaper_for_axis, shaper_impulses, shaper_res
 
 AXIS2 = dict(frequencies=[7.3, 18.0], damping_ratios=[0.015, 0.01])
 LIMITS = dict(v_max=0.3, a_max=1.2)
-CLASSIC = ("ZV", "MZV", "ZVD", "EI", "2-hump EI")
+CLASSIC = ("ZV", "MZV", "ZVD", "EI", "2-hump EI", "3-hump EI")
 
 
 def _jitted(cmd):
@@ -145,11 +145,11 @@ def test_shapers_against_their_closed_forms():
     for name in ("ZV", "ZVD", "MZV"):
         A, t = shaper_impulses(name, f, 0.02)
         assert shaper_response(A, t, f, 0.02) < 1e-12
-    A, t = shaper_impulses("EI", f, z)
+    A, t = shaper_impulses("EI", f, z, form="textbook")
     assert shaper_response(A, t, f, z) == pytest.approx(0.05, abs=1e-12)
     fine = np.linspace(0.5 * f, 1.5 * f, 4001)
     r_ei = shaper_response(A, t, fine, z)
-    A2, t2 = shaper_impulses("2-hump EI", f, z)
+    A2, t2 = shaper_impulses("2-hump EI", f, z, form="textbook")
     r_2h = shaper_response(A2, t2, fine, z)
     width = lambda r: np.ptp(fine[r <= 0.05 + 1e-9]) / f  # noqa: E731
     assert 0.38 < width(r_ei) < 0.42  # Singhose et al. (1994): I(5 %) = 0.40

@@ -12,6 +12,7 @@ _STYLE = {
     "ZVD": dict(color="C2", lw=1.0),
     "EI": dict(color="C4", lw=1.0),
     "2-hump EI": dict(color="C5", lw=1.0),
+    "3-hump EI": dict(color="C8", lw=1.0),
 }
 
 

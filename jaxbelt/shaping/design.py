@@ -49,7 +49,7 @@ from .._guard import host_checked, prepare, stored_jit
 from .._xla import QUICK_COMPILE, LazyJit
 from ..models.axis import ModalAxis
 from .lp import LPResult, RowGroups, lp_value, solve_lp, solve_lp_data
-from .moves import SplineMove, peaks, phi1
+from .moves import PiecewiseMove, SplineMove, peaks, phi1
 
 #: XLA options of the programs that hold the interior point method: its loop is compiled 3-4x faster at LLVM level
 #: 0 with the classic emitters (8 s -> 2.4 s on a 2-core machine), and the solve itself, dominated by the
@@ -58,6 +58,8 @@ _LP_COMPILE = QUICK_COMPILE
 
 #: knot counts the design chooses from (one compiled program per count and axis size)
 KNOT_COUNTS = (32, 48, 64, 96, 128, 160, 192, 256)
+#: interval counts of the steps basis the continuous certificate refines through
+STEP_COUNTS = (128, 256, 512)
 #: the largest certified relative optimality gap (rigorous dual bound) a design is accepted with
 CERTIFIED_GAP = 1e-2
 #: or the largest certified absolute gap, in units of the references (the unshaped move's worst residual, mode by
@@ -87,7 +89,12 @@ class DesignOptions(NamedTuple):
     - `n_extra`: reserved rows per mode for the frequencies the exchange adds;
     - `n_rounds`: exchange rounds at most; `n_fine`: points per mode of the fine grid it checks;
     - `n_angles`: P, cuts of the modulus constraint;
-    - `jerk`: whether a jerk limit is imposed.
+    - `jerk`: whether a jerk limit is imposed (the spline basis only);
+    - `basis`: the command space. `"spline"`: the acceleration is a cubic B-spline on N knot intervals (continuous
+      acceleration and jerk; limits through the spline's coefficients, a little conservative); `"steps"`: the
+      acceleration is constant on each of N equal intervals and may jump between them, as a shaped trapezoid's
+      does (a `PiecewiseMove`; its limits are exact: |a| at its N values, |v| at the interval ends, where a
+      piecewise linear velocity peaks).
     """
 
     n_knots: int
@@ -97,9 +104,28 @@ class DesignOptions(NamedTuple):
     n_fine: int = 401
     n_angles: int = 16
     jerk: bool = False
+    basis: str = "spline"
 
 
-def default_options(axis_freqs, move_time, uncertainty, jerk: bool, knots_per_cycle: float = 6.0) -> DesignOptions:
+def n_coefficients(opts: DesignOptions) -> int:
+    """The LP's command variables: N - 3 B-spline coefficients, or N interval accelerations."""
+    return opts.n_knots - 3 if opts.basis == "spline" else opts.n_knots
+
+
+def design_command(coef, move_time, opts: DesignOptions):
+    """The command of the design's variables `coef` [m/s²]: a `SplineMove`, or (steps) a `PiecewiseMove` whose
+    acceleration is coef[k] on the k-th of N equal intervals of [0, T]."""
+    if opts.basis == "spline":
+        return SplineMove(coef, move_time)
+    N = opts.n_knots
+    times = jnp.arange(N) * (move_time / N)
+    steps = jnp.diff(coef, prepend=jnp.zeros((1,), coef.dtype))
+    return PiecewiseMove(times, steps, jnp.zeros_like(steps), move_time)
+
+
+def default_options(
+    axis_freqs, move_time, uncertainty, jerk: bool, knots_per_cycle: float = 6.0, basis: str = "spline"
+) -> DesignOptions:
     """Knots and frequency points that resolve the band (host decision from concrete values): `knots_per_cycle`
     knots per period of the highest frequency of the band over the move (at least 48); a starting grid of about
     one point per radian of $2u\\omega T$ (the residual's own scale in frequency is $1/T$), 9 to 41 points.
@@ -110,11 +136,13 @@ def default_options(axis_freqs, move_time, uncertainty, jerk: bool, knots_per_cy
     cycles = fmax * float(move_time)
     need = max(48, int(math.ceil(knots_per_cycle * cycles)))
     n_knots = next((n for n in KNOT_COUNTS if n >= need), KNOT_COUNTS[-1])
+    if basis == "steps":  # the intervals' accelerations only approach a bang-bang optimum's switching times
+        n_knots = max(n_knots, STEP_COUNTS[0])
     if float(uncertainty) == 0.0:
-        return DesignOptions(n_knots=n_knots, n_freq=1, n_extra=0, n_rounds=0, n_fine=1, jerk=jerk)
+        return DesignOptions(n_knots=n_knots, n_freq=1, n_extra=0, n_rounds=0, n_fine=1, jerk=jerk, basis=basis)
     span = 2.0 * float(uncertainty) * 2.0 * math.pi * fmax * float(move_time)
     n_freq = int(min(41, max(9, 2 * (int(math.ceil(span)) // 2) + 1)))
-    return DesignOptions(n_knots=n_knots, n_freq=n_freq, jerk=jerk)
+    return DesignOptions(n_knots=n_knots, n_freq=n_freq, jerk=jerk, basis=basis)
 
 
 class MinimaxProblem(eqx.Module):
@@ -144,7 +172,7 @@ def lp_data_grouped(problem: MinimaxProblem, opts: DesignOptions, scale_t: float
     """`lp_data` and the `RowGroups` of G (each frequency's P cuts span 3 columns; each limit is a pair of rows
     $\\pm g$), for the interior point method's factorisation."""
     ax = problem.axis
-    N, J = opts.n_knots, opts.n_knots - 3
+    N, J = opts.n_knots, n_coefficients(opts)
     T, D = problem.move_time, problem.distance
     h = T / N
     aref = D / T**2
@@ -155,7 +183,10 @@ def lp_data_grouped(problem: MinimaxProblem, opts: DesignOptions, scale_t: float
     wd = w * jnp.sqrt(1.0 - z**2)
     s = -z * w + 1j * wd  # (modes, K)
     tj = jnp.arange(J) * h
-    kern = h * jnp.exp(s[..., None] * (T - tj)) * phi1(-s * h)[..., None] ** 4  # (modes, K, J)
+    # the integral of e^{s(T - t)} over the j-th basis function: a cubic B-spline (on [t_j, t_j + 4h]), or the
+    # indicator of [t_j, t_j + h]
+    power = 4 if opts.basis == "spline" else 1
+    kern = h * jnp.exp(s[..., None] * (T - tj)) * phi1(-s * h)[..., None] ** power  # (modes, K, J)
     weight = problem.mask * jnp.abs(ax.gains)[:, None] / (wd * jax.lax.stop_gradient(problem.reference)[:, None])
     kern = kern * (weight * aref)[..., None]
     theta = 2.0 * jnp.pi * jnp.arange(opts.n_angles) / opts.n_angles
@@ -169,7 +200,7 @@ def lp_data_grouped(problem: MinimaxProblem, opts: DesignOptions, scale_t: float
     # coefficients h * (partial sums of c), the jerk the quadratic spline with coefficients (c_j - c_{j-1}) / h
     eye = jnp.eye(J)
     blocks = [(eye * aref, problem.a_max), (jnp.tril(jnp.ones((J - 1, J))) * h * aref, problem.v_max)]
-    if opts.jerk:
+    if opts.jerk and opts.basis == "spline":
         diff = jnp.eye(J + 1, J) - jnp.eye(J + 1, J, k=-1)
         blocks.append((diff * aref / h, problem.j_max))
     lim_rows, lim_rhs = [], []
@@ -179,10 +210,12 @@ def lp_data_grouped(problem: MinimaxProblem, opts: DesignOptions, scale_t: float
         lim_rhs += [jnp.full((mat.shape[0],), 1.0) * lim] * 2
     G = jnp.concatenate([res_rows, *lim_rows], axis=0)
     hv = jnp.concatenate([res_rhs, *lim_rhs])
-    # --- rest to rest and the distance (x(T) = h^2 aref sum c_j (N - 2 - j) = D, i.e. sum c_j (N-2-j) / N^2 = 1)
+    # --- rest to rest and the distance (x(T) = h^2 aref sum c_j (N - 2 - j) = D, i.e. sum c_j (N-2-j) / N^2 = 1;
+    # steps: x(T) = h^2 aref sum c_j (N - j - 1/2))
     j = jnp.arange(J, dtype=G.dtype)
+    lever = N - 2 - j if opts.basis == "spline" else N - j - 0.5
     A = jnp.stack(
-        [jnp.concatenate([jnp.ones((J,)), jnp.zeros((1,))]), jnp.concatenate([(N - 2 - j) / N**2, jnp.zeros((1,))])]
+        [jnp.concatenate([jnp.ones((J,)), jnp.zeros((1,))]), jnp.concatenate([lever / N**2, jnp.zeros((1,))])]
     )
     b = jnp.array([0.0, 1.0])
     c = jnp.zeros((J + 1,)).at[-1].set(1.0)
@@ -207,7 +240,7 @@ def lp_data_grouped(problem: MinimaxProblem, opts: DesignOptions, scale_t: float
 
 def _x_bound(problem: MinimaxProblem, opts: DesignOptions, tau):
     """Bounds on the LP variables at the optimum: |c_j| <= a_max / aref (its own constraints), 0 <= t <= 1."""
-    J = opts.n_knots - 3
+    J = n_coefficients(opts)
     aref = problem.distance / problem.move_time**2
     return jnp.concatenate([jnp.full((J,), problem.a_max / jnp.abs(aref)), jnp.full((1,), 1.0 / tau)])
 
@@ -292,7 +325,7 @@ def _fine_ratios(problem: MinimaxProblem, opts: DesignOptions, coef):
     """Residual over reference of every mode on the fine grid: (fine factors (F,), ratios (n_modes, F))."""
     u = problem.uncertainty
     fine = 1.0 + u * jnp.linspace(-1.0, 1.0, opts.n_fine)
-    move = SplineMove(coef, problem.move_time)
+    move = design_command(coef, problem.move_time, opts)
     ax = problem.axis
     w = ax.omega[:, None] * fine[None, :]
     z = ax.damping_ratios[:, None]
@@ -304,7 +337,7 @@ def _fine_ratios(problem: MinimaxProblem, opts: DesignOptions, coef):
 class MinimaxDesign(eqx.Module):
     """A solved minimax design.
 
-    - `command`: the `SplineMove` [m, s];
+    - `command`: the `SplineMove` (basis "spline") or `PiecewiseMove` (basis "steps") [m, s];
     - `worst`: the LP's optimal value: the worst residual over the final frequency grid as a fraction of each
       mode's reference (the unshaped move's worst residual); `fine_worst`: the same on the fine grid;
     - `lower_bound`: a certified lower bound of the LP's optimum (equal to `worst` at a certified vertex);
@@ -312,7 +345,7 @@ class MinimaxDesign(eqx.Module):
     - `lp`: the `LPResult`; `rounds`: exchange rounds used; `options`, `problem`: the discretisation and data.
     """
 
-    command: SplineMove
+    command: SplineMove | PiecewiseMove
     worst: jax.Array
     fine_worst: jax.Array | np.ndarray
     lower_bound: jax.Array
@@ -397,7 +430,7 @@ def minimax_design(problem: MinimaxProblem, opts: DesignOptions, tol=1e-9, per_r
         if _exchanges(opts, u):
             fine_worst = float(np.asarray(_fine_ratios(problem, opts, coef)[1]).max())
     return MinimaxDesign(
-        command=SplineMove(coef, problem.move_time),
+        command=design_command(coef, problem.move_time, opts),
         worst=worst_a,
         fine_worst=np.asarray(fine_worst),
         lower_bound=lower_a,

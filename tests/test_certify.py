@@ -1,0 +1,115 @@
+"""The certificate of the continuous problem (`jaxbelt.shaping.certify`) and the minimax design whose acceleration
+may jump (`design_move(..., smooth=False)`), against an independent LP solved by scipy's HiGHS."""
+
+import numpy as np
+import pytest
+from scipy.optimize import linprog
+
+import jaxbelt as jb
+from jaxbelt.shaping.certify import continuous_lower_bound
+
+
+def highs_steps_lp(design, cells: int) -> float:
+    """The least worst residual over `design`'s own frequencies and cuts of a piecewise-constant acceleration on
+    `cells` equal intervals, within the design's |a| and |v| limits (exact: |v| at the interval ends), distance and
+    rest to rest: an LP written here from the definitions and solved by HiGHS. Every such command is a command of
+    the continuous problem, so the value bounds its optimum (on these frequencies) from above."""
+    p, o = design.problem, design.options
+    T, D, A, V = (float(np.asarray(x)) for x in (p.move_time, p.distance, p.a_max, p.v_max))
+    mask = np.asarray(p.mask) > 0
+    w = np.asarray(p.axis.omega)[:, None] * np.asarray(p.factors)
+    z = np.asarray(p.axis.damping_ratios)[:, None] * np.ones_like(w)
+    wd = w * np.sqrt(1 - z**2)
+    s = (-z * w + 1j * wd)[mask]
+    gains = np.abs(np.asarray(p.axis.gains))[:, None] * np.ones_like(w)
+    weight = (gains / (wd * np.asarray(p.reference)[:, None]))[mask]
+    d = T / cells
+    u = np.arange(cells) * d
+    # int over [u, u + d] of e^{s (T - t)} dt, weighted
+    k = np.exp(np.multiply.outer(s, T - u - d)) * ((np.exp(s * d) - 1.0) / s)[:, None] * weight[:, None]
+    theta = 2 * np.pi * np.arange(o.n_angles) / o.n_angles
+    cuts = np.real(np.exp(-1j * theta)[:, None, None] * k[None]).reshape(-1, cells)
+    vel = np.tril(np.ones((cells, cells))) * d
+    G = np.vstack(
+        [
+            np.hstack([cuts, -np.ones((cuts.shape[0], 1))]),
+            np.hstack([vel, np.zeros((cells, 1))]),
+            np.hstack([-vel, np.zeros((cells, 1))]),
+        ]
+    )
+    h = np.r_[np.zeros(cuts.shape[0]), np.full(2 * cells, V)]
+    A_eq = np.array([np.r_[np.full(cells, d), 0.0], np.r_[d * (T - u - d / 2), 0.0]])
+    r = linprog(
+        np.r_[np.zeros(cells), 1.0],
+        A_ub=G,
+        b_ub=h,
+        A_eq=A_eq,
+        b_eq=[0.0, D],
+        bounds=[(-A, A)] * cells + [(0, None)],
+        method="highs",
+    )
+    assert r.status == 0, r.message
+    return float(r.fun)
+
+
+@pytest.fixture(scope="module")
+def plan_55():
+    """A 5.5 Hz axis, damping 0.02, at ZV's shortest time under v 0.3 m/s, a 1.2 m/s^2, band +-20 %."""
+    return jb.design_move(
+        jb.ModalAxis([5.5], [0.02]), 0.1, 0.6743, v_max=0.3, a_max=1.2, uncertainty=0.2, smooth=False,
+        include=("minimax", "ZV"),
+    )  # fmt: skip
+
+
+def test_continuous_bound_brackets_the_optimum_of_an_independent_finer_lp(plan_55):
+    """HiGHS at 4x the design's intervals (a finer command space that holds the design's): the rigorous lower bound
+    is below it (tolerance 1e-9, HiGHS's own), the design's LP value above it, and all three within 5 %."""
+    mm = plan_55.minimax
+    fine = highs_steps_lp(mm, 4 * mm.options.n_knots)
+    lower = continuous_lower_bound(mm)
+    assert lower == pytest.approx(plan_55.continuous_bound, rel=1e-12)
+    assert lower <= fine + 1e-9
+    assert float(mm.worst) >= fine - 1e-9
+    assert float(mm.worst) <= 1.05 * fine and lower >= 0.95 * fine
+    # the table's worst (the command on the fine frequency grid) is at least the bound, and within 5 % of HiGHS's
+    row = plan_55.candidate("minimax")
+    assert lower <= row.worst_percent / 100 <= 1.05 * fine * (1 + 0.03)  # 3 %: the exchange's own tolerance
+    assert "continuous bound" in row.note
+
+
+def test_steps_design_respects_its_limits_exactly_and_moves_the_distance(plan_55):
+    """Its acceleration is constant on each interval: |a| at those values, |v| at the interval ends (where a
+    piecewise linear velocity peaks) are the exact peaks; checked on a grid 64x finer than the intervals."""
+    cmd = plan_55.minimax.command
+    t = np.linspace(0.0, float(cmd.duration), 64 * plan_55.minimax.options.n_knots + 1)
+    v = np.asarray(cmd.derivative(t, 1))
+    a = np.asarray(cmd.derivative(t, 2))
+    assert np.max(np.abs(v)) <= 0.3 * (1 + 1e-9) and np.max(np.abs(a)) <= 1.2 * (1 + 1e-9)
+    assert float(cmd.derivative(np.asarray(float(cmd.duration) + 1.0), 0)) == pytest.approx(0.1, rel=1e-12)
+    assert abs(float(cmd.derivative(np.asarray(float(cmd.duration)), 1))) < 1e-12
+
+
+def test_jumps_beat_zv_at_its_own_time_and_peaks_on_a_lightly_damped_high_mode():
+    """A 40 Hz, damping 0.003 axis (where the smooth design left more than ZV): at ZV's own shortest time and
+    peak velocity and acceleration as the limits, one plan, one reference, the design with jumps leaves less than
+    ZV, and its continuous bound is below its worst."""
+    axis = jb.ModalAxis([40.0], [0.003])
+    first = jb.design_move(axis, 0.1, None, v_max=0.3, a_max=1.2, uncertainty=0.2, include=("ZV",))
+    zv = first.candidate("ZV")
+    plan = jb.design_move(
+        axis, 0.1, zv.move_time * (1 + 1e-9), v_max=zv.peak_v, a_max=zv.peak_a, uncertainty=0.2, smooth=False,
+        include=("minimax", "ZV"),
+    )  # fmt: skip
+    mm, zv_eq = plan.candidate("minimax"), plan.candidate("ZV")
+    assert zv_eq.ok and mm.ok, (zv_eq.note, mm.note)
+    assert mm.worst_percent < 0.2 * zv_eq.worst_percent
+    assert 0.0 < plan.continuous_bound <= mm.worst_percent / 100
+
+
+@pytest.mark.parametrize(
+    "kw, message",
+    [(dict(smooth="no"), "`smooth` must be True or False"), (dict(smooth=False, j_max=5.0), "cannot respect a jerk")],
+)
+def test_bad_smooth_is_refused_before_any_work(kw, message):
+    with pytest.raises(ValueError, match=message):
+        jb.design_move(jb.ModalAxis([5.5], [0.02]), 0.1, 1.0, v_max=0.3, a_max=1.2, **kw)
