@@ -130,6 +130,8 @@ if _typing.TYPE_CHECKING:
     from .scene import TracedGridWarning as TracedGridWarning
     from .shaping.codesign import best_residual as best_residual
     from .shaping.codesign import shortest_move_time as shortest_move_time
+    from .shaping.firmware_shaper import FirmwareShaper as FirmwareShaper
+    from .shaping.firmware_shaper import design_shaper as design_shaper
 
     # --- command shaping on the user's axis ---------------------------------------------------------
     from .shaping.identify import identify_axis as identify_axis
