@@ -59,6 +59,10 @@ if _typing.TYPE_CHECKING:
     from .commands import PseudoPolynomial as PseudoPolynomial
     from .commands import ShapedCommand as ShapedCommand
 
+    # --- live exploration in a notebook (the extra jaxbelt[notebook]: ipywidgets) ---------------------------
+    from .explorer import Explorer as Explorer
+    from .explorer import explore as explore
+
     # --- parameter identification (weighted least squares, optimistix) -------------------------------
     from .identification import IdentifyResult as IdentifyResult
     from .identification import identify as identify
