@@ -36,14 +36,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from .design import n_coefficients
+
 
 def _phi_parts(design):
     """The terms of $\\varphi$ (see the module docstring) from the design's LP multipliers, in the units of the
     design's worst residual, or None where the multipliers say nothing (no positive cut multiplier)."""
     p, o = design.problem, design.options
-    N = o.n_knots
-    spline = getattr(o, "basis", "spline") == "spline"
-    J = N - 3 if spline else N
+    N, J = o.n_knots, n_coefficients(o)
     T, D = float(p.move_time), float(p.distance)
     h = T / N
     aref = D / T**2
@@ -73,7 +73,7 @@ def _phi_parts(design):
     off = P * MK + 2 * J
     zv_p, zv_m = z[off : off + J - 1] / S, z[off + J - 1 : off + 2 * (J - 1)] / S
     mu = zv_p - zv_m
-    first = 2 if spline else 1  # velocity row j bounds v(tau_j), tau_j = (j + first) h
+    first = 2 if o.basis == "spline" else 1  # velocity row j bounds v(tau_j), tau_j = (j + first) h
     # equalities: sum c / (h aref) ... the first is sum c_hat = int a / (h aref), the second x(T) / D
     y1 = y[0] / (S * h * aref)
     y2 = y[1] / S

@@ -58,8 +58,9 @@ _LP_COMPILE = QUICK_COMPILE
 
 #: knot counts the design chooses from (one compiled program per count and axis size)
 KNOT_COUNTS = (32, 48, 64, 96, 128, 160, 192, 256)
-#: interval counts of the steps basis the continuous certificate refines through
-STEP_COUNTS = (128, 256, 512)
+#: the least interval count of the steps basis: its accelerations only approach a bang-bang optimum's switching
+#: times, so it needs more intervals than the spline needs knots
+MIN_STEPS = 128
 #: the largest certified relative optimality gap (rigorous dual bound) a design is accepted with
 CERTIFIED_GAP = 1e-2
 #: or the largest certified absolute gap, in units of the references (the unshaped move's worst residual, mode by
@@ -136,8 +137,8 @@ def default_options(
     cycles = fmax * float(move_time)
     need = max(48, int(math.ceil(knots_per_cycle * cycles)))
     n_knots = next((n for n in KNOT_COUNTS if n >= need), KNOT_COUNTS[-1])
-    if basis == "steps":  # the intervals' accelerations only approach a bang-bang optimum's switching times
-        n_knots = max(n_knots, STEP_COUNTS[0])
+    if basis == "steps":
+        n_knots = max(n_knots, MIN_STEPS)
     if float(uncertainty) == 0.0:
         return DesignOptions(n_knots=n_knots, n_freq=1, n_extra=0, n_rounds=0, n_fine=1, jerk=jerk, basis=basis)
     span = 2.0 * float(uncertainty) * 2.0 * math.pi * fmax * float(move_time)

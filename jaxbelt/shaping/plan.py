@@ -595,6 +595,7 @@ def design_move(
     d, t_min = _check_inputs(axis, distance, move_time, v_max, a_max, j_max, uncertainty, include)
     if not isinstance(smooth, bool | np.bool_):
         raise ValueError(f"design_move: parameter `smooth` must be True or False; got {smooth!r}")
+    smooth = bool(smooth)
     if not smooth and j_max is not None:
         raise ValueError(
             "design_move: `smooth=False` (acceleration steps, unbounded jerk) cannot respect a jerk limit; give "
@@ -609,7 +610,7 @@ def design_move(
     if "minimax" in include and t_fixed is not None and clearly:
         # the minimax design's programs start compiling now, in the background, while the reference and the other
         # candidates are computed (their types only: a stand-in reference of the right shape)
-        opts = _minimax_options(axis, t_fixed, u, j_max, fixed_time=True, smooth=bool(smooth))
+        opts = _minimax_options(axis, t_fixed, u, j_max, fixed_time=True, smooth=smooth)
         _Minimax(axis, d, v_max, a_max, j_max, u, np.ones(axis.n_modes), opts).prepare(t_fixed)
     ref_cmd = fastest_move(d, v_max, a_max, j_max)
     band = _measure_grids(u)[0]
@@ -644,7 +645,7 @@ def design_move(
         T_guess = (
             float(move_time) if move_time is not None else (min(r.move_time for r in classic) if classic else 2 * t_min)
         )
-        opts = _minimax_options(axis, T_guess, u, j_max, fixed_time=move_time is not None, smooth=bool(smooth))
+        opts = _minimax_options(axis, T_guess, u, j_max, fixed_time=move_time is not None, smooth=smooth)
         solver = _Minimax(axis, d, v_max, a_max, j_max, u, ref, opts)
         if move_time is not None:
             T = float(move_time)
