@@ -139,7 +139,9 @@ if _typing.TYPE_CHECKING:
 
     # --- command shaping on the user's axis ---------------------------------------------------------
     from .shaping.identify import identify_axis as identify_axis
+    from .shaping.identify import identify_axis_from_psd as identify_axis_from_psd
     from .shaping.identify import load_record as load_record
+    from .shaping.identify import load_spectrum as load_spectrum
     from .shaping.moves import PiecewiseMove as PiecewiseMove
     from .shaping.moves import SplineMove as SplineMove
     from .shaping.moves import fastest_move as fastest_move

@@ -316,7 +316,10 @@ def test_load_record_refuses_a_spectrum(tmp_path):
     f = np.linspace(5.0, 200.0, 40)
     path.write_text("freq,psd_x,psd_y,psd_z,psd_xyz\n" + "".join(f"{v},1e-3,2e-3,3e-3,6e-3\n" for v in f))
     for channel in (None, "psd_x"):
-        with pytest.raises(ValueError, match=r":1: the first column is 'freq': a spectrum .*not a time record"):
+        with pytest.raises(
+            ValueError,
+            match=r":1: the first column is 'freq': a spectrum .*not a time record: read it with load_spectrum",
+        ):
             jb.load_record(path, channel=channel)
     path.write_text("freq,psd_x\n" + "".join(f"{v},1e-3\n" for v in f))
     with pytest.raises(ValueError, match=r"a spectrum"):

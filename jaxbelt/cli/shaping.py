@@ -1,10 +1,11 @@
 """`jaxbelt shaping`: command shaping on the user's axis, or the paper's platform (Incerti, pseudo-polynomial commands).
 
-With `--mode F:Z` (one per mode) or `--measured record.csv`, every design for that axis under the same limits
-and move time (`jaxbelt.design_move`): the ranked table is printed, the recommended command written as CSV
-(`--out move.csv`, columns t,x,v,a) and the figure beside it (or to an image `--out`). Without an axis, the
-paper's figure: the optimised pseudo-polynomial command of the belt-driven platform, its Fig. 3, and the
-comparison with shapers.
+With `--mode F:Z` (one per mode) or `--measured FILE` (a free decay t,y, `jaxbelt.identify_axis`, or a power
+spectral density such as a firmware's resonance test writes, `jaxbelt.identify_axis_from_psd`; `--column` picks
+the file's column), every design for that axis under the same limits and move time (`jaxbelt.design_move`): the
+ranked table is printed, the recommended command written as CSV (`--out move.csv`, columns t,x,v,a) and the
+figure beside it (or to an image `--out`). Without an axis, the paper's figure: the optimised pseudo-polynomial
+command of the belt-driven platform, its Fig. 3, and the comparison with shapers.
 """
 
 from __future__ import annotations
@@ -56,10 +57,22 @@ def register(subparsers):
         help="a mode of the axis: frequency F [Hz], damping ratio Z (and gain G, default 1); repeat for each mode",
     )
     axis.add_argument(
-        "--measured", type=_record_path, metavar="FILE", help="identify the modes from a measured record (CSV t,y)"
+        "--measured",
+        type=_record_path,
+        metavar="FILE",
+        help="identify the modes from a measured record (CSV t,y: a free decay) or a power spectral density (CSV whose "
+        "first column is the frequency, e.g. Klipper's freq,psd_x,psd_y,psd_z,psd_xyz)",
     )
     axis.add_argument(
         "--n-modes", type=_positive_int, default=None, help="modes to identify from --measured (default 1)"
+    )
+    axis.add_argument(
+        "--column",
+        type=_column,
+        default=None,
+        metavar="NAME|INDEX",
+        help="the column of --measured to read, by header name (any case) or index (1 = the first after the time or "
+        "frequency); default: the only one, or psd_xyz in a spectrum",
     )
     axis.add_argument("--distance", type=finite_float, help="move distance [m] (or rad), non-zero")
     axis.add_argument(
@@ -160,6 +173,22 @@ def _record_path(text: str):
     return p
 
 
+def _column(text: str) -> int | str:
+    """A column by its header name, or by its index >= 1 (digits)."""
+    import argparse
+
+    text = text.strip()
+    if not text:
+        raise argparse.ArgumentTypeError("expected a column name or an index >= 1, got ''")
+    if text.isdigit():
+        if int(text) < 1:
+            raise argparse.ArgumentTypeError(
+                f"an index must be >= 1 (column 0 holds the time or frequency), got {text}"
+            )
+        return int(text)
+    return text
+
+
 def _positive_int(text: str) -> int:
     import argparse
 
@@ -180,6 +209,8 @@ def check(args) -> str | None:
 
     from .._io import output_path_problem
 
+    if args.column is not None and not args.measured:
+        return "argument --column: only with --measured (the column of the measured file)"
     if args.mode or args.measured:
         if args.mode and args.measured:
             return "argument --measured: give the axis either by --mode or by --measured, not both"
@@ -271,11 +302,18 @@ def _axis_run(args) -> int:
     from ..solution import SolveError
 
     if args.measured:
-        from ..shaping.identify import identify_axis, load_record
+        from ..shaping import identify
 
-        t, y = load_record(args.measured)
-        axis = identify_axis(t, y, args.n_modes or 1)
-        print(f"identified from {args.measured}:")
+        if identify.is_spectrum_file(args.measured):  # a header whose first column is a frequency
+            f, psd = identify.load_spectrum(args.measured, args.column)
+            axis = identify.identify_axis_from_psd(f, psd, args.n_modes or 1)
+            what = "power spectral density"
+        else:
+            t, y = identify.load_record(args.measured, args.column)
+            axis = identify.identify_axis(t, y, args.n_modes or 1)
+            what = "free decay"
+        column = f", column {args.column}" if args.column is not None else ""
+        print(f"identified from {args.measured} ({what}{column}):")
         for i in range(axis.n_modes):
             f, z = float(axis.frequencies[i]), float(axis.damping_ratios[i])
             sf = float(axis.frequency_std[i]) if axis.frequency_std is not None else float("nan")
