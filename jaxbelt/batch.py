@@ -84,7 +84,9 @@ def _batch_size(params) -> int:
         raise ValueError(f"sweep: the leaves of `params` have different batch sizes {sorted(sizes)}")
     n = sizes.pop()
     if n < 1:
-        raise ValueError("sweep: the batch is empty")
+        raise ValueError(
+            "sweep: parameter `params` must hold at least one element along its leading (batch) axis; got 0"
+        )
     return n
 
 
@@ -199,6 +201,8 @@ def sweep(fn, params, *, devices=None, check: bool = True, name: str | None = No
     elements per device compiles with XLA's quicker options (a first call about 0.5 s shorter; runs up to 2.6x
     longer, which a small batch does not feel); a larger one with XLA's defaults.
     """
+    if not callable(fn):
+        raise TypeError(f"sweep: parameter `fn` must be a function of one batch element; got {type(fn).__name__}")
     n = _batch_size(params)
     what = name or getattr(fn, "__name__", "fn")
     fn = by_value(fn)

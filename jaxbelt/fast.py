@@ -38,7 +38,15 @@ import jax
 import jax.numpy as jnp
 from jax.typing import ArrayLike
 
-from .modal import MODAL_COND_LIMIT, exp_convolution, expm_solve, modal_decomposition, phi1
+from .modal import (
+    CLOSED_FORM_TOL,
+    MODAL_COND_LIMIT,
+    closed_form_error,
+    exp_convolution,
+    expm_solve,
+    modal_decomposition,
+    phi1,
+)
 
 RESONANCE_REL = 1e-2
 
@@ -491,6 +499,8 @@ def batched_exponential_scene(scene):
         success = jnp.ones(inp.gamma.shape, dtype=bool)
         for v in outputs.values():
             success = success & _all_finite(v)
+    # the span within the closed form's accuracy (`jaxbelt.modal.closed_form_error`), as `simulate` requires
+    success = success & (closed_form_error(model.linear_system()[0], t0, scene.ts) <= CLOSED_FORM_TOL)
     return Solution(
         ts=scene.ts,
         ys=ys if scene.state else None,

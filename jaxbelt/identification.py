@@ -328,7 +328,10 @@ def identify(
         raise ValueError(f"identify: the initial values `params0` must be real numbers; got {params0!r}") from None
     if not np.all(np.isfinite(p0)):
         bad = [n for n, v in zip(names, p0) if not np.isfinite(v)]
-        raise ValueError(f"identify: initial values must be finite; got non-finite {bad}")
+        raise ValueError(
+            f"identify: parameter `params0[{bad[0]!r}]` must be finite (the initial values must be finite); got "
+            f"{params0[bad[0]]!r} (non-finite: {bad})"
+        )
     data = _real_array("data", data)
     if data.size == 0 or not np.all(np.isfinite(data)):
         raise ValueError("identify: parameter `data` must be a non-empty array of finite values")

@@ -51,7 +51,7 @@ from ._params import declared
 from ._threads import blas_limited
 from .commands import AbstractExponentialVoltage
 from .fast import batched_exponential_scene
-from .modal import expm_solve, modal_solve
+from .modal import CLOSED_FORM_TOL, closed_form_error, expm_solve, modal_solve
 from .scene import Scene
 from .solution import Solution, SolveError
 
@@ -96,6 +96,11 @@ def _closed(model, inp, y0, t0, times, method, uniform):
     return solve(A, F, s, y0, t0, times, uniform)
 
 
+def _closed_form_ok(model, inp, t0, times):
+    """Whether the output times lie within the closed form's accuracy (`jaxbelt.modal.closed_form_error`)."""
+    return closed_form_error(model.exponential_form(inp)[0], t0, times) <= CLOSED_FORM_TOL
+
+
 def _run_impl(scene: Scene, method: str, solver, rtol, atol, dt0, max_steps: int, progress: bool, adjoint):
     model, inp = scene.model, scene.input
     integrals = tuple(n for n in scene.observe if n in type(model).integral_names())
@@ -109,6 +114,7 @@ def _run_impl(scene: Scene, method: str, solver, rtol, atol, dt0, max_steps: int
     saved_outputs = None
     if method in _CLOSED:
         ys = _closed(model, inp, y0, t0, times, method, scene.uniform)
+        success = _closed_form_ok(model, inp, t0, times)
     else:
         if integrals:
 
@@ -258,12 +264,41 @@ def _time_reached(ts, t0, final_saved: bool):
     return jnp.max(jnp.where(jnp.isfinite(ts), ts, t0))
 
 
+def _closed_form_span(scene) -> str | None:
+    """The reason of a closed-form failure where the time span is beyond its accuracy (concrete values), or None."""
+    if scene is None or not is_concrete(scene):
+        return None
+    try:
+        A = np.asarray(scene.model.exponential_form(scene.input)[0], dtype=float)
+    except Exception:  # noqa: BLE001 - a model without an exponential form: not this cause
+        return None
+    t0 = float(np.asarray(scene.start_time))
+    times = np.asarray(scene.times, dtype=float)
+    err = float(closed_form_error(A, t0, times))
+    if not err > CLOSED_FORM_TOL:
+        return None
+    span = float(np.max(np.abs(times - t0)))
+    norm = float(np.max(np.sum(np.abs(A), axis=0)))
+    return (
+        f"The closed form is not accurate over the output times: eps * ||A||_1 * (t_last - t0) = {err:.2g} > "
+        f"{CLOSED_FORM_TOL:g}, with ||A||_1 = {norm:.3g} 1/s (the model's fastest rates) and a span of {span:.4g} s "
+        "(the rounding of the system's eigenvalues grows with both). Check the parameters, or give `ts` spanning at "
+        f"most {CLOSED_FORM_TOL / (err / span):.4g} s (a transient settles long before)."
+    )
+
+
 def _failure_hint(method: str, sol: Solution | None = None, *, scene=None, max_steps=None, dt=None) -> str:
     """Why a solve failed and what to do. Without a concrete solution (under a transformation, where the
     message is fixed when the program is traced) the possible causes; with one (eager), the cause diffrax
     reports (`stats["result"]`), where it stopped (`stats["t_final"]`) and the way out."""
     if method in _CLOSED:
-        return "The closed form produced non-finite values (check the parameters)."
+        span = _closed_form_span(scene)
+        if span is not None:
+            return span
+        return (
+            "The closed form produced non-finite values (check the parameters), or its time span is beyond its "
+            f"accuracy (eps * ||A||_1 * (t_last - t0) > {CLOSED_FORM_TOL:g})."
+        )
     known = sol is not None and scene is not None and "result" in sol.stats and is_concrete(sol.stats)
     if sol is None or scene is None or not known or np.ndim(sol.success) != 0:
         if method == "rk4":
@@ -501,7 +536,10 @@ def simulate(
     if method not in _METHODS:
         raise ValueError(f"simulate: `method` must be one of {_METHODS}; got {method!r}")
     if not isinstance(scene, Scene):
-        raise TypeError(f"simulate expects a jaxbelt.Scene; got {type(scene).__name__}")
+        raise TypeError(f"simulate: parameter `scene` must be a jaxbelt.Scene; got {type(scene).__name__}")
+    for name, flag in (("throw", throw), ("progress", progress)):
+        if not isinstance(flag, bool | np.bool_):
+            raise TypeError(f"simulate: parameter `{name}` must be True or False; got {flag!r}")
     sol = _simulate_concrete(scene, method, solver, rtol, atol, dt0, dt, max_steps, progress, adjoint)
     if sol is not None:
         if throw and not isinstance(sol.success, Tracer) and bool(np.all(np.asarray(sol.success))):

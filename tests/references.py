@@ -31,3 +31,98 @@ def startup_reference(model, ts, v_max=24.0, gamma=None, x0=None):
         return expm_reference(A, const[:, None], np.array([0.0]), x0, ts)
     F = np.stack([const, -float(v_max) * B[:, 1]], axis=1)
     return expm_reference(A, F, np.array([0.0, -1.0 / float(gamma)]), x0, ts)
+
+
+def modal_residual_reference(frequencies, damping_ratios, gains, accel, breaks, T, factors=(1.0,), nodes=12):
+    """Residual amplitude [m] of each mode of $q'' + 2\\zeta\\omega q' + \\omega^2 q = -g\\,a(t)$ after a move of
+    acceleration `accel` (a vectorised callable of numpy times) that ends at `T`, from rest, at the mode
+    frequencies scaled by each of `factors`: shape (n_modes, len(factors)).
+
+    Duhamel's integral of the impulse response $h(t) = e^{-\\sigma t}\\sin(\\omega_d t)/\\omega_d$ gives $q(T)$ and
+    $q'(T)$; the amplitude is the envelope $\\sqrt{q^2 + ((q' + \\sigma q)/\\omega_d)^2}$. The integrals are taken by
+    Gauss-Legendre on panels between the command's `breaks` (where the acceleration or its derivatives jump), each
+    panel at most 0.5 rad of the fastest oscillation long: the integrand is smooth on a panel, so the rule is exact
+    to rounding for the piecewise-polynomial moves."""
+    f = np.asarray(frequencies, float)
+    z = np.asarray(damping_ratios, float)
+    g = np.asarray(gains, float)
+    r = np.atleast_1d(np.asarray(factors, float))
+    T = float(T)
+    edges = np.unique(np.clip(np.r_[0.0, np.asarray(breaks, float).ravel(), T], 0.0, T))
+    w_max = 2 * np.pi * f.max() * r.max()
+    panels = []
+    for a, b in zip(edges[:-1], edges[1:]):
+        if b - a <= 0 or not np.any(np.asarray(accel(np.linspace(a, b, 7)[1:-1]), float)):
+            continue  # a piece of a piecewise-cubic acceleration that is 0 at 5 points is 0 (a cruise)
+        k = max(1, int(np.ceil(w_max * (b - a) / 0.5)))
+        panels.append(np.linspace(a, b, k + 1))
+    if not panels:
+        return np.zeros((f.size, r.size))
+    lo = np.concatenate([p[:-1] for p in panels])
+    hi = np.concatenate([p[1:] for p in panels])
+    x, wq = np.polynomial.legendre.leggauss(nodes)
+    tau = (0.5 * (hi - lo)[:, None] * (x + 1) + lo[:, None]).ravel()
+    weight = (0.5 * (hi - lo)[:, None] * wq).ravel()
+    wa = weight * np.asarray(accel(tau), float)
+    u = T - tau
+    out = np.empty((f.size, r.size))
+    chunk = max(1, int(2e6 // tau.size))  # factors at a time: arrays of at most ~2e6 entries
+    for i in range(f.size):
+        for j in range(0, r.size, chunk):
+            w = 2 * np.pi * f[i] * r[j : j + chunk, None]
+            sigma, wd = z[i] * w, w * np.sqrt(1 - z[i] ** 2)
+            env = np.exp(-sigma * u)
+            s, c = np.sin(wd * u), np.cos(wd * u)
+            q = -g[i] * np.sum(env * s / wd * wa, axis=-1)
+            qd = -g[i] * np.sum(env * (c - sigma / wd * s) * wa, axis=-1)
+            out[i, j : j + chunk] = np.sqrt(q**2 + ((qd + sigma[:, 0] * q) / wd[:, 0]) ** 2)
+    return out
+
+
+def spline_move_reference(coefficients, duration):
+    """`(acceleration, velocity, position, breaks)` of a move whose acceleration is $\\sum_j c_j B_j(t)$, $B_j$ the
+    cubic B-spline on the knots $jh .. (j+4)h$, $h = T/N$, N = len(c) + 3 (scipy's `BSpline`; the acceleration and
+    velocity zero outside [0, T], the position held after T)."""
+    from scipy.interpolate import BSpline
+
+    c = np.asarray(coefficients, float)
+    T = float(duration)
+    n = c.size + 3
+    h = T / n
+    acc = BSpline(h * np.arange(-3, n + 4), np.r_[0.0, 0.0, 0.0, c, 0.0, 0.0, 0.0], 3, extrapolate=False)
+    vel = acc.antiderivative()
+    pos = vel.antiderivative()
+
+    def inside(f, hold=False):
+        def at(t):
+            t = np.asarray(t, float)
+            v = np.nan_to_num(f(np.clip(t, 0.0, T)))
+            return np.where(t < 0, 0.0, v if hold else np.where(t <= T, v, 0.0))
+
+        return at
+
+    return inside(acc), inside(vel), inside(pos, hold=True), h * np.arange(n + 1)
+
+
+def piecewise_move_reference(times, steps, ramps, duration):
+    """`(acceleration, velocity, position, breaks)` of $a(t) = \\sum_k \\alpha_k H(t - t_k) + \\beta_k (t - t_k)_+$
+    on [0, T] (at rest after T)."""
+    tk, st, rp = (np.asarray(x, float) for x in (times, steps, ramps))
+    T = float(duration)
+
+    def acc(t):
+        t = np.asarray(t, float)
+        d = np.maximum(t[..., None] - tk, 0.0)
+        return np.where((t >= 0) & (t <= T), np.sum(st * (t[..., None] >= tk) + rp * d, axis=-1), 0.0)
+
+    def vel(t):
+        t = np.asarray(t, float)
+        d = np.maximum(np.minimum(t, T)[..., None] - tk, 0.0)
+        return np.where((t >= 0) & (t <= T), np.sum(st * d + rp * d**2 / 2, axis=-1), 0.0)
+
+    def pos(t):
+        t = np.asarray(t, float)
+        d = np.maximum(np.minimum(t, T)[..., None] - tk, 0.0)
+        return np.sum(st * d**2 / 2 + rp * d**3 / 6, axis=-1)
+
+    return acc, vel, pos, tk

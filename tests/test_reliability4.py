@@ -218,3 +218,119 @@ def test_minimax_problem_warns_of_a_mode_far_outside_the_bandwidth():
         near = jb.ModalAxis([7.3, 300.0], [0.015, 0.01])
         ref, _ = reference_residuals(near, 0.1, 0.3, 1.2, None, 0.2)
         dsg.make_problem(near, 0.1, 0.8, 0.3, 1.2, None, 0.2, ref, opts)
+
+
+# --- 7. the hostile probe's findings (benchmarks/hostile_probe.py), one test each -------------------------------
+def test_simulate_names_a_scene_of_the_wrong_type_and_refuses_non_bool_switches():
+    scene = jb.Scene(jb.BeltStartup(), jb.ExponentialVoltage(), ts=TS)
+    with count_compiles() as box:
+        with pytest.raises(TypeError, match=r"simulate: parameter `scene` must be a jaxbelt.Scene; got str"):
+            jb.simulate("scene")
+        for name in ("throw", "progress"):  # "no" was read as True
+            with pytest.raises(TypeError, match=rf"simulate: parameter `{name}` must be True or False; got 'no'"):
+                jb.simulate(scene, **{name: "no"})
+    assert box["n"] == 0
+
+
+def test_closed_form_refuses_a_span_beyond_its_accuracy():
+    # the start-up's current at t = 1e12 s was 17.7 A instead of its steady 14.93 A (the rounding of the rigid-body
+    # eigenvalue 0 grows as e^(1e-12 t)), and -347 A at 1e14 s, without a flag
+    from references import startup_reference
+
+    long = jb.Scene(jb.BeltStartup(), jb.ExponentialVoltage(), ts=jnp.linspace(0.0, 1e12, 31))
+    with pytest.raises(
+        jb.SolveError, match=r"eps \* \|\|A\|\|_1 \* \(t_last - t0\) = 12 > 1e-06.*`ts` spanning at most"
+    ):
+        jb.simulate(long)
+    assert not bool(jb.simulate(long, throw=False).success)
+    batch = jb.Scene(
+        jb.BeltStartup(), jb.ExponentialVoltage(24.0, jnp.array([0.02, 0.04])), ts=jnp.linspace(0.0, 1e12, 31)
+    )
+    assert not np.any(np.asarray(jb.simulate(batch, throw=False).success))  # the batched closed form too
+    # within the span: the steady state of the independent reference (scipy's expm at 10 s)
+    ok = jb.simulate(jb.Scene(jb.BeltStartup(), jb.ExponentialVoltage(), ts=jnp.linspace(0.0, 1e4, 31)))
+    ref = startup_reference(jb.BeltStartup(), [0.0, 10.0], 24.0, 0.02)[-1]
+    np.testing.assert_allclose(np.asarray(ok.ys[-1, 2:]), ref[2:], rtol=1e-6)
+
+
+def test_sweep_names_a_function_that_is_not_callable_and_an_empty_batch():
+    with pytest.raises(TypeError, match=r"sweep: parameter `fn` must be a function"):
+        jb.sweep("f", {"k": jnp.ones(2)})
+    with pytest.raises(ValueError, match=r"sweep: parameter `params` must hold at least one element"):
+        jb.sweep(lambda p: p["k"], {"k": jnp.ones(0)})
+
+
+def test_optimise_command_refuses_its_loop_options_by_name_before_working(monkeypatch):
+    import jaxbelt.optimise.command as oc
+
+    monkeypatch.setattr(oc, "_run", _fail)
+    plat, cmd = jb.BeltPlatform(), jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]))
+    cases = [
+        (dict(optimizer="sgd!"), ValueError, "optimizer"),  # was: "optimiser name must be ..." (no argument named)
+        (dict(optimizer=3), TypeError, "optimizer"),
+        (dict(tol=float("nan")), ValueError, "tol"),  # was: run to max_steps, converged=False
+        (dict(gtol=-1.0), ValueError, "gtol"),
+        (dict(max_steps=2.5), ValueError, "max_steps"),
+        (dict(progress="yes"), TypeError, "progress"),
+    ]
+    with count_compiles() as box:
+        for kw, error, name in cases:
+            for call in (jb.optimise_command, jb.optimise_robust):
+                with pytest.raises(error, match=rf"{call.__name__}: parameter `{name}`"):
+                    call(plat, cmd, **({"progress": False} | kw))
+    assert box["n"] == 0
+
+
+def test_identify_names_the_non_finite_start_value():
+    with pytest.raises(
+        ValueError,
+        match=r"identify: parameter `params0\['a'\]` must be finite \(the initial values must be finite\); got nan",
+    ):
+        jb.identify(lambda p: p["a"] * jnp.arange(1.0, 4.0), {"a": float("nan")}, np.ones(3), 1.0)
+
+
+def test_fluctuation_index_of_a_successful_solution_with_nan_speeds_is_refused():
+    # was: NaN, no error, no flag
+    ts = np.linspace(0.0, 1.0, 101)
+    speed = 30.0 + np.sin(20.0 * ts)
+    speed[50] = np.nan
+
+    def sol(success):
+        return jb.Solution(
+            ts=jnp.asarray(ts),
+            ys=None,
+            outputs={"motor_speed": jnp.asarray(speed)},
+            success=jnp.array(success),
+            stats={},
+        )
+
+    with pytest.raises(ValueError, match=r"parameter `sol` holds a non-finite motor speed .* t = 0.5 s, sample 50"):
+        jb.fluctuation_index(sol(True))
+    assert np.isnan(float(jb.fluctuation_index(sol(False))))  # a failed run: NaN, its flag says why
+    # a NaN outside the window is not read (it was: the time mean's zero weight times NaN)
+    ok = speed[60:]
+    expected = (ok.max() - ok.min()) / (np.trapezoid(ok, ts[60:]) / 0.4)
+    assert float(jb.fluctuation_index(sol(True), 0.6, 1.0)) == pytest.approx(expected, rel=1e-12)
+
+
+def test_residual_energy_refuses_a_move_no_rule_of_its_nodes_resolves_before_its_program(monkeypatch):
+    import jaxbelt.objectives.residual as res
+
+    monkeypatch.setattr(res, "_residual_energy_jit", _fail)  # was: refused after compiling and running the rule
+    move = jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]), duration=1e3)  # omega_d T = 31166 rad
+    with pytest.raises(ValueError, match=r"more half periods than the rule's 128 nodes\); pass `method='ode'`"):
+        jb.residual_energy(jb.BeltPlatform(), move)
+
+
+def test_steady_state_options_refused_by_name_before_compiling():
+    belt = jb.NonlinearBelt()
+    with pytest.raises(ValueError, match=r"`min_periods` must be <= `max_periods`.*min_periods=10, max_periods=5"):
+        jb.speed_sweep(belt, [8.0], min_periods=10, max_periods=5)  # was: SteadyStateError after the sweep
+    with count_compiles() as box:
+        with pytest.raises(ValueError, match=r"`min_periods` must be <= `max_periods`"):
+            jb.nonlinear_steady_state(belt, 8.0, min_periods=10, max_periods=5)
+        with pytest.raises(ValueError, match=r"parameter `rtol` must be finite and >= 0"):
+            jb.nonlinear_steady_state(belt, 8.0, rtol=-1e-4)
+        with pytest.raises(ValueError, match=r"`rtol` and `atol` must not both be 0"):
+            jb.speed_sweep(belt, [8.0], rtol=0.0, atol=0.0)
+    assert box["n"] == 0

@@ -10,6 +10,9 @@ from ._args import float_in, image_path, int_in, positive_float, signed_peak
 MAX_POINTS = 1_000_000
 #: RK4's fixed step [s] and step budget (`simulate`'s defaults): the longest start-up it can run
 RK4_STEP, RK4_MAX_STEPS = 1e-4, 100_000
+#: longest simulated time [s]: the closed form's accuracy bounds the span (`jaxbelt.modal.closed_form_error`: about
+#: 8e4 s for the paper's drive), and the start-up has settled within a second
+MAX_T_END = 1e4
 
 
 def register(sub):
@@ -29,7 +32,12 @@ def register(sub):
     p.add_argument(
         "--v-max", type=float_in(-1e4, 1e4), default=24.0, help="final voltage Vmax [V], |Vmax| <= 1e4 (default 24)"
     )
-    p.add_argument("--t-end", type=positive_float, default=0.5, help="simulated time [s] (default 0.5)")
+    p.add_argument(
+        "--t-end",
+        type=_t_end,
+        default=0.5,
+        help=f"simulated time [s], in (0, {MAX_T_END:g}] (default 0.5)",
+    )
     p.add_argument(
         "--points",
         type=int_in(2, MAX_POINTS, "the curves are held in memory"),
@@ -44,6 +52,19 @@ def register(sub):
     )
     p.add_argument("--out", type=image_path, default="startup.png", help="output image (default startup.png)")
     p.set_defaults(func=run, early_check=check)
+
+
+def _t_end(text: str) -> float:
+    """A finite number > 0 and at most `MAX_T_END` [s]."""
+    import argparse
+
+    v = positive_float(text)
+    if v > MAX_T_END:
+        raise argparse.ArgumentTypeError(
+            f"must be <= {MAX_T_END:g} s (the start-up settles within a second; the closed form's accuracy bounds "
+            f"the span), got {text}"
+        )
+    return v
 
 
 def check(args) -> str | None:

@@ -160,7 +160,11 @@ def _check_running(speed, inside, w, average) -> None:
             return  # no window (reported by the window's check) or NaN speeds (a failed run: NaN χ)
         sel = v[..., m]
         peak = np.max(np.abs(sel), axis=-1)
-        avg = np.sum(wt * v, axis=-1) / np.sum(wt) if average == "mean" else 0.5 * (sel.max(-1) + sel.min(-1))
+        avg = (
+            np.sum(np.where(wt > 0, wt * v, 0.0), axis=-1) / np.sum(wt)
+            if average == "mean"
+            else 0.5 * (sel.max(-1) + sel.min(-1))
+        )
         still = (np.abs(avg) <= STILL_RTOL * peak) | (peak <= STILL_SPEED)
         if np.any(still):
             k = int(np.argmax(np.ravel(still)))
@@ -180,7 +184,7 @@ def _check_running(speed, inside, w, average) -> None:
     sel = jnp.where(inside, speed, 0.0)
     peak = jnp.max(jnp.abs(sel), axis=-1)
     if average == "mean":
-        avg = jnp.sum(w * speed, axis=-1) / jnp.sum(w)
+        avg = jnp.sum(jnp.where(w > 0, w * speed, 0.0), axis=-1) / jnp.sum(w)
     else:
         avg = 0.5 * (
             jnp.max(jnp.where(inside, speed, -jnp.inf), axis=-1) + jnp.min(jnp.where(inside, speed, jnp.inf), axis=-1)
@@ -285,7 +289,7 @@ def _chi_program(speed, inside, w, temperature, smooth, average):
 
 def _chi(speed, inside, w, smooth, temperature, average):
     wsum = jnp.sum(w)
-    avg = jnp.sum(w * speed, axis=-1) / wsum
+    avg = jnp.sum(jnp.where(w > 0, w * speed, 0.0), axis=-1) / wsum  # samples outside the window: not read
     if not smooth:
         vmax = jnp.max(jnp.where(inside, speed, -jnp.inf), axis=-1)
         vmin = jnp.min(jnp.where(inside, speed, jnp.inf), axis=-1)
@@ -328,11 +332,30 @@ def fluctuation_index(sol, t0=None, t1=None, *, smooth: bool = False, temperatur
     measure of its fluctuation. Where the average speed over the window is ~0 (|average| <= `STILL_RTOL` =
     1e-3 x the largest |speed| there, or no speed above `STILL_SPEED` = 1e-9 rad/s: the drive stands) it
     raises `ValueError` with the reason; traced (jit/vmap/grad), a run-time error with the same message (NaN
-    with `chi_from_samples(..., throw=False)`).
+    with `chi_from_samples(..., throw=False)`). A NaN or infinite speed in the window of a solution whose `success`
+    flag is True raises `ValueError` naming `sol` (a failed run, `success` False, gives NaN: the flag says why).
     """
     if not isinstance(sol, Solution):
         raise TypeError(f"{_O}: parameter `sol` must be a jaxbelt Solution (from `simulate`); got {type(sol).__name__}")
-    return chi_from_samples(sol.ts, _speed(sol), t0, t1, smooth=smooth, temperature=temperature, average=average)
+    speed = _speed(sol)
+    chi = chi_from_samples(sol.ts, speed, t0, t1, smooth=smooth, temperature=temperature, average=average)
+    if is_concrete((chi, sol.success)) and bool(np.all(np.asarray(sol.success))):
+        if not np.all(np.isfinite(np.asarray(chi))):
+            _refuse_nonfinite_speed(np.asarray(sol.ts, dtype=float), np.asarray(speed, dtype=float), t0, t1)
+    return chi
+
+
+def _refuse_nonfinite_speed(ts, v, t0, t1) -> None:
+    """`ValueError` naming `sol` and the first non-finite speed sample in the window [t0, t1] (host values)."""
+    lo = ts[0] if t0 is None else float(t0)
+    hi = ts[-1] if t1 is None else float(t1)
+    bad = ~np.all(np.isfinite(v.reshape(-1, v.shape[-1])), axis=0) & (ts >= lo - 1e-9) & (ts <= hi + 1e-9)
+    k = int(np.argmax(bad))
+    raise ValueError(
+        f"{_O}: parameter `sol` holds a non-finite motor speed in the window [t0, t1] (first at t = {ts[k]:.6g} s, "
+        f"sample {k}) although its `success` flag is True: χ would be NaN. Check how the solution was made (its "
+        "outputs should be finite where `success` is True)"
+    )
 
 
 def _grid(t1, step, step_name):

@@ -230,6 +230,11 @@ def residual_energy(
             tol_ok = all_ok(tol_checks)
             rtol, atol = jnp.where(tol_ok, rtol, 1e-12), jnp.where(tol_ok, atol, 1e-15)
         checks = traced_checks(plat, cmd) + tol_checks
+    if method == "quadrature" and not checks and is_concrete((plat, cmd)):
+        # more half periods of the vibration than nodes: no rule of n_nodes resolves it, refused before compiling
+        wT = float(np.asarray(plat.omega_d)) * float(np.asarray(_end(cmd)))
+        if wT > np.pi * n_nodes:
+            raise ValueError(_unresolved(n_nodes, wT, f"more half periods than the rule's {n_nodes} nodes"))
     params_ok = all_ok(checks)
     H, err = _residual_energy_jit(plat, cmd, rtol, atol, method=method, n_nodes=int(n_nodes), max_steps=int(max_steps))
     # the parameter checks first: an invalid parameter is reported as such, not as a quadrature failure
@@ -237,18 +242,15 @@ def residual_energy(
     if is_concrete(err):
         if not float(err) <= QUADRATURE_TOL:
             wT = float(plat.omega_d * _end(cmd))
-            need = int(2.5 * wT) + 32
-            way = f"pass n_nodes >= {need} or method='ode'" if need <= _MAX_NODES else "pass method='ode'"
             raise ValueError(
-                f"residual_energy: the {n_nodes}-node quadrature does not resolve the vibration during the move "
-                f"(omega_d*T = {wT:.0f} rad, estimated relative error {float(err):.1e} > {QUADRATURE_TOL:g}); {way}"
+                _unresolved(n_nodes, wT, f"estimated relative error {float(err):.1e} > {QUADRATURE_TOL:g}")
             )
     else:
         H = error_if(
             H,
             ~(err <= QUADRATURE_TOL) & params_ok,
             f"residual_energy: the {n_nodes}-node quadrature does not resolve the vibration during the move "
-            "(estimated relative error above 1e-8): pass a larger n_nodes (about 2.5*omega_d*T + 32) or method='ode'",
+            "(estimated relative error above 1e-8): pass a larger `n_nodes` (about 2.5*omega_d*T + 32) or `method='ode'`",
         )
     return H
 
@@ -257,6 +259,16 @@ def residual_energy(
 _MIN_NODES = 8
 #: Most nodes: the rule's nodes come from an n x n eigenproblem (2048: 32 MiB, a fraction of a second)
 _MAX_NODES = 2048
+
+
+def _unresolved(n_nodes: int, wT: float, why: str) -> str:
+    """The message of a quadrature that does not resolve the vibration of a move of `wT` = omega_d*T [rad]."""
+    need = int(2.5 * wT) + 32
+    way = f"pass `n_nodes` >= {need} or `method='ode'`" if need <= _MAX_NODES else "pass `method='ode'`"
+    return (
+        f"residual_energy: the {n_nodes}-node quadrature does not resolve the vibration during the move "
+        f"(omega_d*T = {wT:.0f} rad, {why}); {way}"
+    )
 
 
 def _end(cmd):

@@ -37,7 +37,7 @@ import jax.numpy as jnp
 import numpy as np
 import optax
 
-from .._checks import check_int, check_penalised_limits, check_positive, check_range, is_concrete
+from .._checks import check_int, check_nonnegative, check_penalised_limits, check_positive, check_range, is_concrete
 from .._display import Display, Table
 from .._guard import host_checked, prepare
 from .._threads import blas_limited
@@ -181,6 +181,34 @@ class CommandOptimResult(eqx.Module):
         return self._display().text() if is_concrete(self) else repr(self)
 
 
+def _check_run_options(owner: str, optimizer, max_steps, tol, gtol, progress) -> int:
+    """The loop's options, before anything is built: `optimizer` (see `_check_optimizer`), `max_steps` an integer
+    >= 0 (0: the start), `tol` and `gtol` finite and >= 0 (NaN would never stop the loop by them), `progress` a
+    bool. Returns `max_steps`."""
+    _check_optimizer(owner, optimizer)
+    max_steps = check_int(owner, "max_steps", max_steps, 0)
+    check_nonnegative("tol", tol, owner=owner)
+    check_nonnegative("gtol", gtol, owner=owner)
+    if not isinstance(progress, bool | np.bool_):
+        raise TypeError(f"{owner}: parameter `progress` must be True or False; got {progress!r}")
+    return max_steps
+
+
+def _check_optimizer(owner: str, optimizer) -> None:
+    """`optimizer`: "lbfgs", "adam" or an optax `GradientTransformation` (anything with `init` and `update`)."""
+    if isinstance(optimizer, str):
+        if optimizer not in ("lbfgs", "adam"):
+            raise ValueError(
+                f"{owner}: parameter `optimizer` must be 'lbfgs' or 'adam' (or an optax transformation); got "
+                f"{optimizer!r}"
+            )
+    elif not (callable(getattr(optimizer, "init", None)) and callable(getattr(optimizer, "update", None))):
+        raise TypeError(
+            f"{owner}: parameter `optimizer` must be 'lbfgs', 'adam' or an optax GradientTransformation; got "
+            f"{type(optimizer).__name__}"
+        )
+
+
 @functools.cache
 def _named_optimizer(name: str, learning_rate):
     # cached so that repeated runs reuse the same transformation object (and the compiled step)
@@ -262,13 +290,12 @@ def _prepare_programs(problem, cmd, optimizer, learning_rate, use_state_value: b
 
 
 def _run(problem: ShapingProblem, cmd, optimizer, learning_rate, max_steps, tol, gtol, progress, desc):
+    max_steps = _check_run_options(desc, optimizer, max_steps, tol, gtol, progress)
     if isinstance(optimizer, str):
         use_state_value = optimizer == "lbfgs"
-        _named_optimizer(optimizer, learning_rate)  # an unknown name raises here
+        _named_optimizer(optimizer, learning_rate)
     else:
         use_state_value = False
-    if max_steps < 0:
-        raise ValueError(f"`max_steps` must be >= 0; got {max_steps}")
     _prepare_programs(problem, cmd, optimizer, learning_rate, use_state_value, max_steps)
     theta, h0, state, f0, g0, start = _start(optimizer, learning_rate, problem, cmd)
     problem = eqx.tree_at(lambda p: p.scale, problem, h0)
@@ -434,6 +461,7 @@ def optimise_command(
     if not isinstance(cmd, PseudoPolynomial):
         raise ValueError(f"optimise_command: `cmd` must be a PseudoPolynomial; got {type(cmd).__name__}")
     _check_options("optimise_command", margin, gap, max_speed, max_accel, penalty, learning_rate)
+    _check_run_options("optimise_command", optimizer, max_steps, tol, gtol, progress)
     lower, margin, gap = _bounds(cmd, margin, gap, max_step)
     problem = ShapingProblem(
         plat=plat,
@@ -519,7 +547,7 @@ def optimise_robust(
     _check_options(o, margin, gap, max_speed, max_accel, penalty, learning_rate)
     n_freq = check_int(o, "n_freq", n_freq, 2)
     n_nodes = check_int(o, "n_nodes", n_nodes, 8)
-    max_steps = check_int(o, "max_steps", max_steps, 0)
+    max_steps = _check_run_options(o, optimizer, max_steps, tol, gtol, progress)
     check_positive("gtol", gtol, owner=o)
     # the reference's exponents (the 3-4-5 polynomial by default: no command built, no program run)
     g_ref = np.array([3.0, 4.0, 5.0]) if reference is None else np.sort(np.asarray(reference.gammas, dtype=float))
@@ -556,10 +584,6 @@ def optimise_robust(
     )  # fmt: skip
     theta = _device(_pp._params_np(g0_pad, lower, margin, gap, float(max_step))[None])
     if isinstance(optimizer, str):
-        if optimizer not in ("lbfgs", "adam"):
-            raise ValueError(
-                f"optimiser name must be 'lbfgs' or 'adam' (or pass an optax transformation); got {optimizer!r}"
-            )
         opt = _pp.LBFGS if optimizer == "lbfgs" else _adam(learning_rate)
         linesearch = optimizer == "lbfgs"
     else:

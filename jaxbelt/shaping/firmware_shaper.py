@@ -24,7 +24,7 @@ import math
 
 import numpy as np
 
-from .._checks import is_concrete
+from .._checks import check_real, is_concrete
 from .._io import atomic_open, check_output_path
 from .._threads import blas_limited
 from ..models.axis import ModalAxis
@@ -86,13 +86,18 @@ def _check(axis, duration, uncertainty, n_impulses, n_freq):
         raise ValueError(f"{o}: parameter `axis` must be a ModalAxis (jb.ModalAxis([f...], [zeta...])); got {axis!r}")
     if not is_concrete(axis.frequencies):
         raise ValueError(f"{o}: parameter `axis` must hold concrete values (the design is solved on the host)")
+    check_real("duration", duration, "s", o)  # a string, a bool or None is refused, not converted
     try:
         tau = float(duration)
     except (TypeError, ValueError):
         raise ValueError(f"{o}: parameter `duration` must be a number of seconds > 0; got {duration!r}") from None
     if not (math.isfinite(tau) and tau > 0):
         raise ValueError(f"{o}: parameter `duration` must be finite and > 0 s; got {duration!r}")
-    u = float(uncertainty)
+    check_real("uncertainty", uncertainty, "", o)
+    try:
+        u = float(uncertainty)
+    except (TypeError, ValueError):
+        raise ValueError(f"{o}: parameter `uncertainty` must be a number in [0, 0.9); got {uncertainty!r}") from None
     if not (math.isfinite(u) and 0.0 <= u < 0.9):
         raise ValueError(f"{o}: parameter `uncertainty` must lie in [0, 0.9); got {uncertainty!r}")
     for name, v, lo, hi in (("n_impulses", n_impulses, 2, 257), ("n_freq", n_freq, 1, 401)):

@@ -109,6 +109,9 @@ def _check_record(t, y, n_modes, offset):
     n = check_int(_OWNER, "n_modes", n_modes, lo=1)
     if not isinstance(offset, (bool, np.bool_)):
         raise ValueError(f"{_OWNER}: parameter `offset` must be True or False; got {offset!r}")
+    for name, x in (("t", t), ("y", y)):
+        if np.iscomplexobj(x):
+            raise TypeError(f"{_OWNER}: parameter `{name}` must be real; got complex values (take .real or abs first)")
     try:
         t = np.asarray(t, dtype=float)
     except (TypeError, ValueError) as e:
@@ -422,6 +425,13 @@ def identify_axis(
     nyquist = 0.5 / dt
 
     f0, z0, a0, b0, c0 = _pencil(y, dt, n, offset)
+    if duration * float(np.min(f0)) < 0.5 * MIN_PERIODS:  # far too short already by the start values: before the fit
+        f_low = float(np.min(f0))
+        raise ValueError(
+            f"{_OWNER}: the record (`t`) lasts {duration:.6g} s, about {duration * f_low:.3g} periods of the lowest "
+            f"mode (about {f_low:.6g} Hz, the matrix-pencil estimate); at least {MIN_PERIODS:g} periods are needed, "
+            f"i.e. a record of at least {MIN_PERIODS / f_low:.6g} s"
+        )
     # coordinates: amplitudes and offset in units of the record's spread, about its mean
     mean = float(np.mean(y)) if offset else 0.0  # without an offset the model has no constant to take the mean
     spread = float(np.max(np.abs(y - mean)))
@@ -897,6 +907,23 @@ def identify_axis_from_psd(
 _SPECTRUM_NAMES = ("freq", "frequency", "f", "hz", "freq_hz", "frequency_hz")
 
 
+def _path_and_channel(owner: str, path, channel, first: str):
+    """`(path as str, channel)`: a path of the wrong type is a `TypeError` naming `path`; a numpy integer channel
+    is an index like a Python int; anything else but a name or an index >= 1 is a `ValueError` naming `channel`."""
+    if not isinstance(path, str | bytes | os.PathLike):
+        raise TypeError(
+            f"{owner}: parameter `path` must be a file path (str or os.PathLike); got {type(path).__name__}"
+        )
+    path = os.fsdecode(os.fspath(path))
+    if isinstance(channel, np.integer):
+        channel = int(channel)
+    if (channel is not None and not isinstance(channel, (int, str))) or isinstance(channel, bool):
+        raise ValueError(f"{owner}: parameter `channel` must be a column name or index (int >= 1), got {channel!r}")
+    if isinstance(channel, int) and channel < 1:
+        raise ValueError(f"{owner}: parameter `channel` must be >= 1 (column 0 holds the {first}), got {channel}")
+    return path, channel
+
+
 def load_record(path, channel: int | str | None = None):
     """Read a measured record `(t, y)` (two float numpy arrays) from a CSV file: the time [s] in the first column
     and the measured value (any unit) in the second, or in the column `channel`.
@@ -918,15 +945,11 @@ def load_record(path, channel: int | str | None = None):
     and the line, for anything else (not text, wrong number of columns, an unknown `channel`, a spectrum, a value
     that is not a number, fewer than two samples). The times are not checked here: `identify_axis` checks them.
     """
-    path = os.fspath(path)
+    path, channel = _path_and_channel("load_record", path, channel, "time")
     if not os.path.exists(path):
         raise FileNotFoundError(f"load_record: no file {path!r} (a CSV file with the columns t,y)")
     if os.path.isdir(path):
         raise IsADirectoryError(f"load_record: {path!r} is a folder, not a CSV file with the columns t,y")
-    if (channel is not None and not isinstance(channel, (int, str))) or isinstance(channel, bool):
-        raise ValueError(f"load_record: `channel` must be a column name or index (int >= 1), got {channel!r}")
-    if isinstance(channel, int) and channel < 1:
-        raise ValueError(f"load_record: `channel` must be >= 1 (column 0 holds the time), got {channel}")
     try:
         with open(path, encoding="utf-8-sig") as fh:  # utf-8-sig: a spreadsheet's byte-order mark is skipped
             lines = fh.read().splitlines()
@@ -1005,7 +1028,7 @@ def _channel_column(path, channel, names, n_columns, owner: str = "load_record",
         raise ValueError(f"{owner}: {path}: `channel` {channel!r} names a column, but the file has no header line")
     lowered = [n.lower() for n in names]
     if channel.lower() not in lowered[1:]:
-        raise ValueError(f"{owner}: {path}: no column {channel!r}; the channels are {names[1:]}")
+        raise ValueError(f"{owner}: {path}: parameter `channel`: no column {channel!r}; the channels are {names[1:]}")
     return lowered.index(channel.lower(), 1)
 
 
@@ -1068,15 +1091,11 @@ def load_spectrum(path, channel: int | str | None = None):
     negative PSD, frequencies not strictly increasing, fewer than two lines of data.
     """
     owner = "load_spectrum"
-    path = os.fspath(path)
+    path, channel = _path_and_channel(owner, path, channel, "frequency")
     if not os.path.exists(path):
         raise FileNotFoundError(f"{owner}: no file {path!r} (a CSV file with the columns freq,psd)")
     if os.path.isdir(path):
         raise IsADirectoryError(f"{owner}: {path!r} is a folder, not a CSV file with the columns freq,psd")
-    if (channel is not None and not isinstance(channel, (int, str))) or isinstance(channel, bool):
-        raise ValueError(f"{owner}: `channel` must be a column name or index (int >= 1), got {channel!r}")
-    if isinstance(channel, int) and channel < 1:
-        raise ValueError(f"{owner}: `channel` must be >= 1 (column 0 holds the frequency), got {channel}")
     try:
         with open(path, encoding="utf-8-sig") as fh:
             lines = fh.read().splitlines()

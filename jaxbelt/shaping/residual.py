@@ -20,8 +20,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.typing import ArrayLike
 
-from .._checks import atleast_1d, check_range, device_array
-from .._guard import prepare, stored_jit
+from .._checks import atleast_1d, check_range, collecting, device_array
+from .._guard import checked, prepare, reraising, stored_jit
 from .._threads import blas_limited
 from .._xla import QUICK_COMPILE
 from ..commands import AbstractMotionCommand, PseudoPolynomial, ShapedCommand, falling_factorial
@@ -88,6 +88,7 @@ def _poles(axis: ModalAxis, factors):
     return -z * w + 1j * wd, wd
 
 
+@reraising("residual_curve")
 @blas_limited
 def residual_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors: ArrayLike = 1.0, *, rtol=1e-10, atol=1e-14):
     """Residual amplitudes [m] (units of the command's position) of every mode after the move `cmd`, at the mode
@@ -96,6 +97,10 @@ def residual_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors: ArrayLi
     `factors` > 0 (1.0: the nominal axis; `np.linspace(0.8, 1.2, 41)`: a ±20 % frequency error).
     Closed form or quadrature where the command allows (see the module docstring); otherwise an ODE solve
     of every mode at every factor with `rtol`, `atol`.
+
+    Under `jit`/`vmap`/`grad` the axis' and the command's parameter checks (frequencies > 0, damping ratios in
+    [0, 1), ...) and the factors' run on the traced values and are attached to the result: an invalid element of a
+    batch raises naming the parameter (never a number: a negative frequency gave a negative "amplitude").
     """
     if not isinstance(axis, ModalAxis):
         raise TypeError(f"residual_curve: `axis` must be a ModalAxis; got {type(axis).__name__}")
@@ -104,11 +109,12 @@ def residual_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors: ArrayLi
     r = atleast_1d(device_array(factors, dtype=float))
     if r.ndim != 1:
         raise ValueError(f"residual_curve: parameter `factors` must be a scalar or a 1-D array; got shape {r.shape}")
-    check_range("factors", r, lo=0.0, lo_open=True, owner="residual_curve")
+    with collecting() as found:  # traced factors: recorded, attached below with the traced modules' checks
+        check_range("factors", r, lo=0.0, lo_open=True, owner="residual_curve")
     if not _has_closed_form(cmd):
-        return _residual_ode(axis, cmd, r, rtol, atol)
+        return checked(_residual_ode(axis, cmd, r, rtol, atol), axis, cmd, checks=found)
     n_nodes = _nodes_for(cmd, _poles(axis, r)[0]) if isinstance(cmd, PseudoPolynomial) else 0
-    return _closed_form_curve(axis, cmd, r, n_nodes)
+    return checked(_closed_form_curve(axis, cmd, r, n_nodes), axis, cmd, checks=found)
 
 
 def prepare_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors) -> None:

@@ -41,7 +41,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..._checks import check_int, check_real, check_scalar, is_concrete
+from ..._checks import check_int, check_nonnegative, check_real, check_scalar, is_concrete
 from ..._guard import guard, reraising, traced_checks
 from ..._threads import blas_limited
 from .model import ModalSystem, NonlinearBelt, _gauss, mode_shapes
@@ -274,13 +274,29 @@ def _z0(owner, belt, z0, name="z0", batch=False):
 
 
 def _options(owner, min_periods, max_periods, steps_per_period, periods_per_chunk=1):
-    """The integer options of the steady-state solves, checked (a float or bool is refused, not truncated)."""
-    return (
+    """The integer options of the steady-state solves, checked (a float or bool is refused, not truncated;
+    `min_periods` <= `max_periods`, else no solve could end converged)."""
+    out = (
         check_int(owner, "min_periods", min_periods),
         check_int(owner, "max_periods", max_periods),
         check_int(owner, "steps_per_period", steps_per_period),
         check_int(owner, "periods_per_chunk", periods_per_chunk),
     )
+    if out[0] > out[1]:
+        raise ValueError(
+            f"{owner}: parameter `min_periods` must be <= `max_periods` (a steady state is accepted after at least "
+            f"min_periods forcing periods, within max_periods); got min_periods={out[0]}, max_periods={out[1]}"
+        )
+    return out
+
+
+def _tolerances(owner, rtol, atol) -> None:
+    """`rtol`, `atol` of the convergence test: finite, >= 0 and not both 0 (concrete values; a negative or NaN
+    tolerance never lets the test pass, and the solve would run to `max_periods` for nothing)."""
+    check_nonnegative("rtol", rtol, owner=owner)
+    check_nonnegative("atol", atol, owner=owner)
+    if is_concrete((rtol, atol)) and float(np.max(np.asarray(rtol))) == 0.0 and float(np.max(np.asarray(atol))) == 0:
+        raise ValueError(f"{owner}: parameters `rtol` and `atol` must not both be 0 (no test of convergence passes)")
 
 
 @functools.partial(jax.jit, static_argnames=("min_periods", "max_periods", "min_steps", "periods_per_chunk"))
@@ -316,6 +332,7 @@ def nonlinear_steady_state(
     min_periods, max_periods, steps_per_period, periods_per_chunk = _options(
         o, min_periods, max_periods, steps_per_period, periods_per_chunk
     )
+    _tolerances(o, rtol, atol)
     check_scalar("theta0", theta0, "rad", o)
     return _steady_jit(
         belt,
@@ -400,6 +417,7 @@ def _nonlinear_sweep(
     min_periods, max_periods, steps_per_period, periods_per_chunk = _options(
         o, min_periods, max_periods, steps_per_period, periods_per_chunk
     )
+    _tolerances(o, rtol, atol)
     check_scalar("theta0", theta0, "rad", o)
     return _sweep_jit(
         belt,
@@ -516,6 +534,7 @@ def nonlinear_basins(
         raise TypeError(f"{o}: parameter `z0s` (initial modal states, shape (K, {2 * belt.n_modes})) is required")
     z0s = _z0(o, belt, z0s, "z0s", batch=True)
     min_periods, max_periods, steps_per_period, _ = _options(o, min_periods, max_periods, steps_per_period)
+    _tolerances(o, rtol, atol)
 
     def f(z):
         return _steady_jit(

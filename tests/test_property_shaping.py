@@ -1,0 +1,541 @@
+"""Property-based contract of the shaping entry points and the command line (hypothesis; reliability round 4).
+
+The property of every entry point: a hostile draw (NaN, inf, zero, negative, huge or tiny values, wrong types and
+shapes, malformed files, a batch with one invalid element) is either refused by a `ValueError`/`TypeError` whose
+message names the argument, before anything is compiled (counted: `tests/compiles.py`), or gives a result that
+agrees with an independent reference (`tests/references.py`: Duhamel's integral by Gauss-Legendre on the command's
+own pieces, scipy's B-splines, the numbers written to the file), or a flagged one. Never a plain wrong number.
+
+- `design_move`: every argument; valid draws (one axis size, one move time: one compilation) against the
+  reference residual over the band and the limits;
+- `best_residual`, `shortest_move_time`: move times, targets, brackets, axes, designs; the value at the design's
+  own time against the reference residual of its command on the design's grid;
+- `identify_axis`: records with NaN/inf, non-uniform or decreasing times, wrong shapes, too short, bad `n_modes`;
+  a valid record against the modes that made it;
+- `load_record`: malformed files (not text, bad numbers, ragged rows, empty, header only, bad `channel`); valid
+  files read back exactly (spectrum files: tests/test_psd.py);
+- `design_shaper`: its arguments (its valid results are checked in tests/test_firmware_shaper.py: a first design
+  compiles ~100 small programs, 15-25 s, beyond this file's budget);
+- the command line: every numeric option of every sub-command with NaN/inf/text, and values outside the documented
+  ranges: exit status 2, one line naming the option, nothing compiled;
+- `residual_curve`/`residual_amplitudes` under `vmap` with one invalid axis in the batch: a `ValueError` that leads
+  with the parameter. The element's index is not in the message: the check is one `equinox.error_if` over the
+  whole batch (its predicate is reduced inside the program, where no index reaches the host), so the message says
+  "in at least one element of the batch".
+
+Budget: under a minute on 2 cores (a derandomized profile, a handful of examples per test; the valid draws share
+one compiled design).
+"""
+
+import argparse
+import contextlib
+import io
+import math
+import re
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from compiles import count_compiles
+from hypothesis import given
+from hypothesis import strategies as st
+from hypothesis_profile import NONFINITE, examples, inf, nan
+from references import modal_residual_reference, piecewise_move_reference, spline_move_reference
+
+import jaxbelt as jb
+from jaxbelt.shaping.moves import SplineMove, fastest_time
+
+AX = jb.ModalAxis([7.3, 18.0], [0.015, 0.01])
+LIMITS = dict(v_max=0.3, a_max=1.2)
+T_MIN = fastest_time(0.1, 0.3, 1.2)  # 0.5833 s
+WRONG_TYPE = st.sampled_from(["0.1", b"1", None, 1 + 1j, {"a": 1.0}])
+
+
+def named(*names):
+    return "|".join(re.escape(f"`{n}`") for n in names)
+
+
+def refused(call, names, errors=(ValueError, TypeError)):
+    """`call()` raises one of `errors` naming one of `names` (in backticks) before anything is compiled."""
+    with count_compiles() as box, pytest.raises(errors, match=named(*names)) as e:
+        call()
+    assert box["n"] == 0, (box, str(e.value))
+    return e
+
+
+def move_reference(cmd):
+    if isinstance(cmd, SplineMove):
+        return spline_move_reference(cmd.coefficients, cmd.duration)
+    return piecewise_move_reference(cmd.times, cmd.steps, cmd.ramps, cmd.duration)
+
+
+def reference_residual(axis, cmd, factors):
+    acc, _, _, breaks = move_reference(cmd)
+    return modal_residual_reference(
+        axis.frequencies, axis.damping_ratios, axis.gains, acc, breaks, float(cmd.duration), factors
+    )
+
+
+# =====================================================================================
+# design_move
+# =====================================================================================
+BELOW_T_MIN = st.floats(0.01 * T_MIN, 0.999 * T_MIN)
+DESIGN_MOVE_BAD = {
+    "axis": st.sampled_from([jb.BeltPlatform(), None, [7.3, 18.0], "axis"]),
+    "distance": st.one_of(NONFINITE, st.just(0.0), WRONG_TYPE, st.just(np.array([0.1, 0.2]))),
+    "move_time": st.one_of(NONFINITE, st.just(0.0), st.floats(-1e6, -1e-9), BELOW_T_MIN, WRONG_TYPE, st.just(True)),
+    "v_max": st.one_of(NONFINITE, st.just(0.0), st.floats(-1e6, -1e-300), WRONG_TYPE),
+    "a_max": st.one_of(NONFINITE, st.just(0.0), st.floats(-1e6, -1e-300), WRONG_TYPE),
+    "j_max": st.one_of(NONFINITE, st.just(0.0), st.floats(-1e6, -1e-300), WRONG_TYPE.filter(lambda v: v is not None)),
+    "uncertainty": st.one_of(NONFINITE, st.floats(-1.0, -1e-12), st.floats(0.9, 1e6), WRONG_TYPE),
+    "include": st.sampled_from([(), ("foo",), "ZV", (1,), ("ZV", "spline")]),
+    "smooth": st.sampled_from(["yes", 1, None, np.ones(2)]),
+    "progress": st.sampled_from(["yes", 1, None]),
+}
+
+
+@examples(40)
+@given(data=st.data())
+def test_design_move_refuses_every_bad_argument_by_name_before_compiling(data):
+    name = data.draw(st.sampled_from(sorted(DESIGN_MOVE_BAD)), label="argument")
+    value = data.draw(DESIGN_MOVE_BAD[name], label=name)
+    args = dict(axis=AX, distance=0.1, move_time=0.8, include=("minimax", "ZV", "unshaped"), **LIMITS)
+    args[name] = value
+    e = refused(lambda: jb.design_move(**args), (name,))
+    assert "must" in str(e.value) or "shorter than" in str(e.value)
+
+
+#: the valid draws keep the highest frequency, the band and the move time (the design's knots and grid: one
+#: compiled program) and move everything else, the move within 1/1.15 of the time (no feasibility LP)
+VALID_MOVES = st.fixed_dictionaries(
+    dict(
+        f1=st.floats(5.0, 12.0),
+        zeta=st.tuples(st.floats(0.002, 0.05), st.floats(0.002, 0.05)),
+        gain=st.floats(0.5, 2.0),
+        distance=st.sampled_from([-1.0, 1.0]).flatmap(lambda s: st.floats(0.05, 0.12).map(lambda d: s * d)),
+        v_max=st.floats(0.3, 0.4),
+        a_max=st.floats(1.5, 2.5),
+    )
+)
+
+
+@examples(3)
+@given(draw=VALID_MOVES)
+def test_design_move_valid_draw_keeps_its_limits_and_states_the_reference_residual(draw):
+    axis = jb.ModalAxis([draw["f1"], 18.0], list(draw["zeta"]), [draw["gain"], 1.0])
+    plan = jb.design_move(
+        axis, draw["distance"], 0.8, v_max=draw["v_max"], a_max=draw["a_max"], include=("minimax", "ZV", "unshaped")
+    )
+    assert plan.best is not None and plan.best.ok
+    band = np.linspace(0.8, 1.2, 401)  # the plan's band grid (uncertainty 0.2)
+    fast = jb.fastest_move(draw["distance"], draw["v_max"], draw["a_max"])
+    ref = reference_residual(axis, fast, band).max(axis=1)  # the unshaped time-optimal move, per mode
+    np.testing.assert_allclose(plan.reference_m, ref, rtol=1e-9)
+    for c in plan.table:
+        assert c.command is not None, c
+        res = reference_residual(axis, c.command, band)
+        # the stated worst residual, in metres and in % of the references: Duhamel's integral agrees to 1e-6
+        assert c.worst_m == pytest.approx(res.max(), rel=1e-6), c.name
+        assert c.worst_percent == pytest.approx(100 * (res / ref[:, None]).max(), rel=1e-6), c.name
+        # within the limits, the distance moved and at rest at the end (numpy's evaluation of the command's pieces)
+        acc, vel, pos, _ = move_reference(c.command)
+        T = float(c.command.duration)
+        assert T == pytest.approx(0.8, rel=1e-12)
+        t = np.linspace(0.0, T, 40001)
+        assert np.abs(vel(t)).max() <= draw["v_max"] * (1 + 1e-9), c.name
+        assert np.abs(acc(t)).max() <= draw["a_max"] * (1 + 1e-9), c.name
+        assert float(pos(T)) == pytest.approx(draw["distance"], rel=1e-9), c.name
+        assert abs(float(vel(T))) <= 1e-9 * draw["v_max"], c.name
+        assert c.peak_v <= draw["v_max"] * (1 + 1e-9) and c.peak_a <= draw["a_max"] * (1 + 1e-9), c.name
+    rows = {c.name: c for c in plan.table}
+    assert rows["minimax"].worst_percent <= rows["ZV"].worst_percent  # the global optimum of a larger space
+
+
+# =====================================================================================
+# best_residual, shortest_move_time
+# =====================================================================================
+@pytest.fixture(scope="module")
+def solved():
+    """A minimax design (distance 0.1 m, 0.8 s, v_max 0.3, a_max 1.2) on AX: the knots and grid of the valid
+    draws above (the same compiled programs)."""
+    return jb.design_move(AX, 0.1, 0.8, include=("minimax",), **LIMITS)
+
+
+MOVE_TIME_BAD = st.one_of(
+    NONFINITE,
+    st.just(0.0),
+    st.floats(-1e6, -1e-9),
+    BELOW_T_MIN,
+    st.sampled_from(["0.8", True, None, np.array([0.8, 0.9]), 1 + 1j]),
+)
+
+
+@examples(12)
+@given(data=st.data())
+def test_best_residual_and_shortest_move_time_refuse_bad_arguments_by_name(solved, data):
+    design = solved.minimax
+    which = data.draw(st.sampled_from(["move_time", "axis", "design", "target", "bracket"]), label="argument")
+    if which == "move_time":
+        T = data.draw(MOVE_TIME_BAD, label="move_time")
+        refused(lambda: jb.best_residual(AX, T, design), ("move_time",))
+    elif which == "axis":
+        axis = data.draw(st.sampled_from([None, jb.BeltPlatform(), jb.ModalAxis([7.0], [0.01]), "AX"]), label="axis")
+        call = data.draw(st.sampled_from([jb.best_residual, jb.shortest_move_time]), label="entry")
+        refused(lambda: call(axis, 0.8 if call is jb.best_residual else 0.01, design), ("axis",))
+    elif which == "design":
+        bad = data.draw(st.sampled_from([None, solved, "design", 3.0]), label="design")
+        call = data.draw(st.sampled_from([jb.best_residual, jb.shortest_move_time]), label="entry")
+        refused(lambda: call(AX, 0.8 if call is jb.best_residual else 0.01, bad), ("design",))
+    elif which == "target":
+        target = data.draw(
+            st.one_of(NONFINITE, st.just(0.0), st.floats(-1e6, -1e-300), st.sampled_from(["0.01", None, True])),
+            label="target",
+        )
+        refused(lambda: jb.shortest_move_time(AX, target, design), ("target",))
+    else:
+        bracket = data.draw(
+            st.sampled_from([(0.1, 0.2), (1.0, 0.7), ("a", "b"), (0.7, inf), (nan, 1.0), 3.0, (0.7,), (-1.0, 1.0)]),
+            label="bracket",
+        )
+        refused(lambda: jb.shortest_move_time(AX, 0.01, design, bracket=bracket), ("bracket",))
+
+
+def test_best_residual_at_the_designs_time_is_its_commands_residual_on_its_grid(solved):
+    design = solved.minimax
+    value = float(jb.best_residual(AX, 0.8, design))
+    assert value == pytest.approx(float(design.worst), rel=1e-6)
+    # consistent with the plan: the LP's grid is a subset of the plan's 401-point band
+    assert 0.0 <= value <= solved.candidate("minimax").worst_percent / 100 * (1 + 1e-9)
+    # independent: the design's command, its residual by Duhamel's integral on the design's frequency grid, in
+    # units of the design's references; the LP measures the modulus by 16 cut angles (a polygon inscribed in the
+    # circle), so its value lies within cos(pi/16) of the true worst modulus
+    p = design.problem
+    factors, mask = np.asarray(p.factors), np.asarray(p.mask) > 0
+    worst = 0.0
+    for i in range(AX.n_modes):
+        one = jb.ModalAxis(AX.frequencies[i : i + 1], AX.damping_ratios[i : i + 1], AX.gains[i : i + 1])
+        res = reference_residual(one, design.command, factors[i][mask[i]])[0] / float(p.reference[i])
+        worst = max(worst, float(res.max()))
+    assert worst * math.cos(math.pi / design.options.n_angles) * (1 - 1e-6) <= value <= worst * (1 + 1e-6)
+    # a move time far beyond the design's: refused by name, never a NaN "residual" (was NaN at 1e5 s)
+    with pytest.raises(ValueError, match=r"`move_time` = 1e\+06 s returned a non-finite value"):
+        jb.best_residual(AX, 1e6, design)
+
+
+# =====================================================================================
+# identify_axis
+# =====================================================================================
+T_REC = np.arange(600) / 300.0
+Y_REC = np.exp(-0.02 * 2 * np.pi * 7.0 * T_REC) * np.cos(2 * np.pi * 7.0 * np.sqrt(1 - 0.02**2) * T_REC)
+Y_REC += 0.5 * np.exp(-0.01 * 2 * np.pi * 19.0 * T_REC) * np.cos(2 * np.pi * 19.0 * np.sqrt(1 - 0.01**2) * T_REC)
+
+
+def _with(x, k, v):
+    x = np.array(x, dtype=float)
+    x[k] = v
+    return x
+
+
+@st.composite
+def bad_records(draw):
+    """`(t, y, n_modes, offset, the argument the message must name)`."""
+    t, y = T_REC, Y_REC
+    k = draw(st.integers(0, t.size - 1), label="index")
+    kind = draw(
+        st.sampled_from(
+            [
+                "t-nonfinite",
+                "y-nonfinite",
+                "nonuniform",
+                "decreasing",
+                "t-2d",
+                "y-shape",
+                "short",
+                "n_modes",
+                "constant",
+                "offset",
+                "t-text",
+            ]  # fmt: skip
+        ),
+        label="kind",
+    )
+    if kind == "t-nonfinite":
+        return _with(t, k, draw(NONFINITE)), y, 2, True, "t"
+    if kind == "y-nonfinite":
+        return t, _with(y, k, draw(NONFINITE)), 2, True, "y"
+    if kind == "nonuniform":
+        jitter = draw(st.floats(0.01, 0.4)) * (t[1] - t[0])
+        return _with(t, max(k, 1), t[max(k, 1)] + jitter), y, 2, True, "t"
+    if kind == "decreasing":
+        return t[::-1].copy(), y, 2, True, "t"
+    if kind == "t-2d":
+        return t.reshape(2, -1), y.reshape(2, -1), 2, True, "t"
+    if kind == "y-shape":
+        return t, y[: draw(st.integers(1, y.size - 1))], 2, True, "y"
+    if kind == "short":
+        n = draw(st.integers(2, 89))  # 2 modes and an offset: 9 parameters, 90 samples
+        return t[:n], y[:n], 2, True, "t"
+    if kind == "n_modes":
+        return t, y, draw(st.sampled_from([0, -1, 1.5, True, "2", None, 2.0])), True, "n_modes"
+    if kind == "constant":
+        return t, np.full(t.size, draw(st.floats(-1e6, 1e6))), 1, True, "y"
+    if kind == "offset":
+        return t, y, 2, draw(st.sampled_from(["yes", 1, None])), "offset"
+    return "t", y, 2, True, "t"
+
+
+@examples(25)
+@given(record=bad_records())
+def test_identify_axis_refuses_a_bad_record_by_name_before_compiling(record):
+    t, y, n_modes, offset, name = record
+    refused(lambda: jb.identify_axis(t, y, n_modes, offset=offset), (name,) + (("y",) if name == "t" else ()))
+
+
+@pytest.mark.parametrize("which", ["t", "y"])
+def test_identify_axis_refuses_complex_samples_by_name(which):
+    t, y = (T_REC + 1j, Y_REC) if which == "t" else (T_REC, Y_REC + 1j)
+    with pytest.raises((ValueError, TypeError), match=named(which)):
+        jb.identify_axis(t, y, 2)
+
+
+@examples(1)
+@given(f2=st.just(19.0))
+def test_identify_axis_valid_record_gives_the_modes_that_made_it(f2):
+    axis = jb.identify_axis(T_REC, Y_REC, 2, offset=False)
+    np.testing.assert_allclose(np.asarray(axis.frequencies), [7.0, f2], rtol=1e-8)
+    np.testing.assert_allclose(np.asarray(axis.damping_ratios), [0.02, 0.01], rtol=1e-6)
+
+
+# =====================================================================================
+# load_record (time records only: spectrum files are changing elsewhere)
+# =====================================================================================
+MALFORMED = st.sampled_from(
+    [
+        ("binary", bytes(range(256)) * 2, None),
+        ("empty", "", None),
+        ("blank-lines", "\n\n  \n", None),
+        ("header-only", "t,y\n", None),
+        ("one-sample", "t,y\n0.0,1.0\n", None),
+        ("bad-number", "t,y\n0.0,1.0\n0.001,abc\n", 3),
+        ("ragged", "0.0,1.0\n0.001,2.0,3.0\n", 2),
+        ("semicolons", "0.0;1.0\n0.001;2.0\n", 1),
+        ("three-columns", "0.0,1.0,2.0\n0.001,1.5,2.5\n", 1),
+        ("second-header", "t,y\nx,z\n0.0,1.0\n", 2),
+        ("utf16", "t,y\n0.0,1.0\n0.1,2.0\n".encode("utf-16"), None),
+    ]
+)
+BAD_CHANNELS = st.sampled_from([0, -1, True, 1.5, 5, None])
+
+
+@examples(15)
+@given(data=st.data())
+def test_load_record_refuses_a_malformed_file_naming_it(tmp_path, data):
+    if data.draw(st.booleans(), label="bad channel"):
+        path = tmp_path / "three.csv"
+        path.write_text("#time,ax,ay\n0.0,1.0,2.0\n0.01,1.5,2.5\n")
+        channel = data.draw(BAD_CHANNELS.filter(lambda c: c is not None), label="channel")
+        refused(lambda: jb.load_record(path, channel=channel), ("channel",))
+        return
+    kind, content, line = data.draw(MALFORMED, label="file")
+    path = tmp_path / f"{kind}.csv"
+    if isinstance(content, bytes):
+        path.write_bytes(content)
+    else:
+        path.write_text(content)
+    where = re.escape(f"{path}:{line}:" if line is not None else str(path))
+    with count_compiles() as box, pytest.raises(ValueError, match=where):
+        jb.load_record(path)
+    assert box["n"] == 0
+
+
+@examples(4)
+@given(
+    rows=st.lists(
+        st.tuples(st.floats(allow_nan=False, allow_infinity=False), st.floats(allow_nan=False, allow_infinity=False)),
+        min_size=2,
+        max_size=30,
+    ),
+    header=st.booleans(),
+)
+def test_load_record_reads_a_valid_file_back_exactly(tmp_path, rows, header):
+    path = tmp_path / "rec.csv"
+    path.write_text(("time,accel\n" if header else "") + "".join(f"{a!r},{b!r}\n" for a, b in rows))
+    t, y = jb.load_record(path)
+    np.testing.assert_array_equal(np.stack([t, y], axis=1), np.asarray(rows, dtype=float))
+
+
+def test_load_record_unknown_channel_name_names_the_argument(tmp_path):
+    path = tmp_path / "three.csv"
+    path.write_text("#time,ax,ay\n0.0,1.0,2.0\n0.01,1.5,2.5\n")
+    with pytest.raises(ValueError, match=named("channel")):
+        jb.load_record(path, channel="az")
+    # a numpy integer is an index like a Python int
+    np.testing.assert_array_equal(jb.load_record(path, channel=np.int64(2))[1], [2.0, 2.5])
+
+
+@pytest.mark.parametrize("path", [3, None])
+def test_load_record_path_of_the_wrong_type_names_the_argument(path):
+    with pytest.raises(TypeError, match=named("path")):
+        jb.load_record(path)
+
+
+# =====================================================================================
+# design_shaper
+# =====================================================================================
+SHAPER_BAD = {
+    "axis": st.sampled_from([None, [40.0], jb.BeltPlatform()]),
+    "duration": st.one_of(NONFINITE, st.just(0.0), st.floats(-1e6, -1e-300), st.sampled_from(["x", True, None])),
+    "uncertainty": st.one_of(NONFINITE, st.floats(-1.0, -1e-12), st.floats(0.9, 1e6), st.sampled_from(["x", None])),
+    "n_impulses": st.sampled_from([1, 0, 258, 2.5, True, "17"]),
+    "n_freq": st.sampled_from([0, 402, 1.5, False]),
+}
+
+
+@examples(15)
+@given(data=st.data())
+def test_design_shaper_refuses_bad_arguments_by_name(data):
+    name = data.draw(st.sampled_from(sorted(SHAPER_BAD)), label="argument")
+    args = dict(axis=AX, duration=0.1) | {name: data.draw(SHAPER_BAD[name], label=name)}
+    refused(lambda: jb.design_shaper(args.pop("axis"), args.pop("duration"), **args), (name,))
+
+
+# =====================================================================================
+# residual_curve under vmap: one invalid axis in the batch
+# =====================================================================================
+MOVE = jb.fastest_move(0.1, 0.3, 1.2)
+
+
+def _amplitudes(f1, z1):
+    return jb.residual_amplitudes(jb.ModalAxis(jnp.stack([f1, 18.0]), jnp.stack([z1, 0.01])), MOVE)
+
+
+@examples(4)
+@given(
+    bad=st.one_of(
+        st.tuples(st.just("frequencies"), st.one_of(NONFINITE, st.just(0.0), st.floats(-1e3, -1e-6))),
+        st.tuples(st.just("damping_ratios"), st.one_of(NONFINITE, st.floats(1.0, 1e3), st.floats(-1.0, -1e-9))),
+    ),
+    j=st.integers(0, 2),
+)
+def test_vmapped_residual_with_one_invalid_axis_names_the_parameter(bad, j):
+    name, value = bad
+    f1, z1 = np.array([7.3, 9.0, 11.0]), np.array([0.015, 0.02, 0.03])
+    if name == "frequencies":
+        f1[j] = value
+    else:
+        z1[j] = value
+    with pytest.raises(ValueError) as e:
+        jax.vmap(_amplitudes)(jnp.asarray(f1), jnp.asarray(z1))
+    first = str(e.value).splitlines()[0]
+    assert first.startswith(f"residual_curve: ModalAxis: parameter `{name}` must"), first
+    assert "in at least one element of the batch" in first  # no index: see the module docstring
+    # was: a finite "amplitude" (negative for a negative frequency) for the invalid element, no error
+    good = jax.vmap(_amplitudes)(jnp.array([7.3, 9.0, 11.0]), jnp.array([0.015, 0.02, 0.03]))
+    for k, (f, z) in enumerate(zip([7.3, 9.0, 11.0], [0.015, 0.02, 0.03])):
+        ref = reference_residual(jb.ModalAxis([f, 18.0], [z, 0.01]), MOVE, [1.0])[:, 0]
+        np.testing.assert_allclose(np.asarray(good[k]), ref, rtol=1e-9)
+
+
+# =====================================================================================
+# the command line
+# =====================================================================================
+def _numeric_options():
+    """`(sub-command, option, nargs)` of every option with a value type (paths and files excepted)."""
+    from jaxbelt.cli import build_parser
+
+    parser = build_parser()
+    subs = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    out = []
+    for name, sub in subs.choices.items():
+        for action in sub._actions:
+            kind = getattr(action.type, "__name__", "")
+            if action.type is None or not action.option_strings or kind in ("image_path", "csv_or_image_path"):
+                continue
+            if kind == "_record_path":
+                continue
+            out.append((name, action.option_strings[0], action.nargs))
+    return out
+
+
+NUMERIC = _numeric_options()
+#: values outside the documented ranges (docs: each option's help), one per option that has a bound
+OUT_OF_RANGE = [
+    ("startup", "--gamma", "0"),
+    ("startup", "--gamma", "2e6"),
+    ("startup", "--v-max", "1e5"),
+    ("startup", "--t-end", "-1"),
+    ("startup", "--t-end", "1e300"),  # was: a SolveError after the computation (the closed form overflowed)
+    ("startup", "--points", "1"),
+    ("startup", "--points", "2.5"),
+    ("fourbar", "--voltage", "2e4"),
+    ("fourbar", "--kp", "-1"),
+    ("string", "--belt-speed", "60"),
+    ("string", "--contact-radius", "0"),
+    ("nonlinear", "--harmonics", "0"),
+    ("shaping", "--uncertainty", "0.9"),
+    ("shaping", "--gammas", "2"),
+    ("shaping", "--spread", "1"),
+    ("shaping", "--mode", "5:1"),
+    ("shaping", "--mode", "0:0.01"),
+    ("shaping", "--n-modes", "0"),
+    ("shaping", "--rate", "-5"),
+]
+
+
+def _cli(argv):
+    from jaxbelt.cli import main
+
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()), count_compiles() as box:
+        try:
+            code = main(["--no-cache", *argv])
+        except SystemExit as e:
+            code = e.code
+    return code, [ln for ln in err.getvalue().splitlines() if ln.strip()], box["n"]
+
+
+def test_every_numeric_option_is_drawn():
+    assert len(NUMERIC) >= 25
+    assert {
+        ("startup", "--gamma"),
+        ("shaping", "--move-time"),
+        ("shaping", "--mode"),
+        ("nonlinear", "--harmonics"),
+    } <= {(s, o) for s, o, _ in NUMERIC}
+
+
+@examples(30)
+@given(
+    option=st.sampled_from(NUMERIC), value=st.sampled_from(["nan", "inf", "-inf", "abc", "1e999", "", "0x10", "1,5"])
+)
+def test_cli_refuses_a_bad_number_in_one_line_naming_the_option(option, value):
+    sub, opt, nargs = option
+    values = [value] * (nargs if isinstance(nargs, int) else 1)
+    code, lines, compiled = _cli([sub, opt, *values])
+    assert code == 2 and len(lines) == 1, (code, lines)
+    assert f"argument {opt}" in lines[0], lines
+    assert compiled == 0
+
+
+@examples(12)
+@given(case=st.sampled_from(OUT_OF_RANGE))
+def test_cli_refuses_a_value_outside_the_options_range(case):
+    sub, opt, value = case
+    code, lines, compiled = _cli([sub, opt, value])
+    assert code == 2 and len(lines) == 1 and f"argument {opt}" in lines[0], (code, lines)
+    assert compiled == 0
+
+
+# =====================================================================================
+# the fixes of the probe (benchmarks/hostile_probe.py) in the shaping entry points
+# =====================================================================================
+def test_shape_move_refuses_negative_or_unsorted_delays_and_amplitudes_not_summing_to_one():
+    base = jb.fastest_move(0.1, 1.0, 10.0)
+    refused(lambda: jb.shape_move(base, [0.5, 0.5], [0.0, -0.1]), ("delays",))
+    refused(lambda: jb.shape_move(base, [0.5, 0.5], [0.1, 0.0]), ("delays",))
+    refused(lambda: jb.shape_move(base, [0.7, 0.7], [0.0, 0.1]), ("amplitudes",))
+    refused(lambda: jb.shape_move(base, [0.5, nan], [0.0, 0.1]), ("amplitudes",))
+    refused(lambda: jb.shape_move(base, "ab", [0.0, 0.1]), ("amplitudes",))
+    move = jb.shape_move(base, [0.5, 0.5], [0.0, 0.1])  # valid: unchanged
+    assert float(move.duration) == pytest.approx(float(base.duration) + 0.1, rel=1e-12)
