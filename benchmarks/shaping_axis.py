@@ -45,7 +45,8 @@ from scipy.integrate import solve_ivp  # noqa: E402
 import jaxbelt as jb  # noqa: E402
 
 D, V_MAX, A_MAX, U = 0.1, 0.3, 1.2, 0.2
-CLASSIC = ("ZV", "MZV", "ZVD", "EI", "2-hump EI")
+FIXED_TIME = 1.5  # [s] the move time of the many-mode designs (`scale`)
+CLASSIC = ("ZV", "MZV", "ZVD", "EI", "2-hump EI", "3-hump EI")
 
 
 def draw_axes(n: int, seed: int = 2026):
@@ -82,40 +83,92 @@ def replay(axis, plan, rate=1000.0):
     return amp / np.exp(-sigma * (float(t[-1]) - float(cmd.end_time)))
 
 
-def compare(f, z):
+#: held-out axes beside the drawn ones (issue "shaping at the bench"): (label, frequencies [Hz], damping ratios,
+#: distance [m]); the 2 Hz axis moves 0.3 m so that the unshaped time-optimal move lasts 1.25 s, 2.5 cycles
+NAMED_AXES = (
+    ("2 Hz, ζ 0.08, 2.5 cycles", [2.0], [0.08], 0.3),
+    ("40 Hz, ζ 0.003", [40.0], [0.003], D),
+    ("6 modes, 3-60 Hz", list(np.geomspace(3.0, 60.0, 6)), [0.02] * 6, D),
+    ("10 modes, 3-60 Hz", list(np.geomspace(3.0, 60.0, 10)), [0.02] * 10, D),
+)
+
+
+def worst_against(axis, cmd, reference):
+    """Worst residual over the ±U band of every mode, in % of `reference` (per mode) [m]: the one measure every
+    row of an axis uses (the unshaped time-optimal move at the user's limits)."""
+    res = np.asarray(jb.residual_curve(axis, cmd, np.linspace(1 - U, 1 + U, 401)))
+    return 100.0 * float(np.max(res / np.asarray(reference)[:, None]))
+
+
+def compare(f, z, d=D, label=None):
     axis = jb.ModalAxis(f, z)
     t0 = time.perf_counter()
-    own = jb.design_move(axis, D, None, v_max=V_MAX, a_max=A_MAX, uncertainty=U, include=("minimax", *CLASSIC))
+    own = jb.design_move(axis, d, None, v_max=V_MAX, a_max=A_MAX, uncertainty=U, include=("minimax", *CLASSIC))
     t_plan = time.perf_counter() - t0
+    ref = own.reference_m  # the unshaped time-optimal move at the user's limits: every row's reference
     rows = {c.name: c for c in own.table}
     shapers = [rows[n] for n in CLASSIC if rows[n].ok]
-    anchor = min(shapers, key=lambda r: r.worst_percent)
-    mm_short = rows["minimax"]
-    # equal time, the anchor's own peaks as limits
-    eq = jb.design_move(
-        axis, D, anchor.move_time, v_max=anchor.peak_v, a_max=anchor.peak_a, uncertainty=U, include=("minimax",)
-    )
-    mm_eq = eq.candidate("minimax")
-    stated = np.asarray(jb.residual_amplitudes(axis, mm_eq.command))
-    replayed = replay(axis, eq)
-    return dict(
+    base = dict(
+        label=label,
+        distance=d,
         frequencies=[float(x) for x in f],
         damping=[float(x) for x in z],
+        not_built={n: rows[n].note for n in CLASSIC if not rows[n].ok},
+        plan_s=t_plan,
+    )
+    if not shapers:  # no classic shaper can be built on this axis (too many modes): the minimax design alone, at the
+        # move time of the scale test (no shaper's residual to reach, so no shortest time to search)
+        mm = jb.design_move(
+            axis, d, FIXED_TIME, v_max=V_MAX, a_max=A_MAX, uncertainty=U, include=("minimax",)
+        ).candidate("minimax")
+        return dict(
+            base,
+            anchor=None,
+            shortest_time=mm.move_time,
+            shortest_worst=worst_against(axis, mm.command, ref) if mm.command is not None else float("nan"),
+        )
+    anchor = min(shapers, key=lambda r: r.worst_percent)
+    mm_short = rows["minimax"]
+    # equal time, the anchor's own peaks as limits; each design is measured against the same reference as the rows
+    # above (the design itself weighs its modes by the unshaped move under the anchor's peaks: the same optimum for
+    # one mode, a slightly different weighting for several)
+    eq = jb.design_move(
+        axis, d, anchor.move_time, v_max=anchor.peak_v, a_max=anchor.peak_a, uncertainty=U, include=("minimax",)
+    )
+    mm_eq = eq.candidate("minimax")
+    steps = jb.design_move(
+        axis,
+        d,
+        anchor.move_time,
+        v_max=anchor.peak_v,
+        a_max=anchor.peak_a,
+        uncertainty=U,
+        include=("minimax",),
+        smooth=False,
+    ).candidate("minimax")
+    stated = np.asarray(jb.residual_amplitudes(axis, mm_eq.command))
+    replayed = replay(axis, eq)
+    eq_worst = worst_against(axis, mm_eq.command, ref)
+    steps_worst = worst_against(axis, steps.command, ref) if steps.command is not None else float("nan")
+    return dict(
+        base,
         anchor=anchor.name,
         anchor_time=anchor.move_time,
         anchor_worst=anchor.worst_percent,
         anchor_peak_v=anchor.peak_v,
         anchor_peak_a=anchor.peak_a,
         shapers={r.name: dict(time=r.move_time, worst=r.worst_percent) for r in shapers},
-        equal_time_worst=mm_eq.worst_percent,
-        equal_time_ratio=mm_eq.worst_percent / anchor.worst_percent,
+        equal_time_worst=eq_worst,
+        equal_time_ratio=eq_worst / anchor.worst_percent,
         equal_time_ok=bool(mm_eq.ok),
         equal_time_peaks=(mm_eq.peak_v, mm_eq.peak_a),
+        steps_worst=steps_worst,
+        steps_ratio=steps_worst / anchor.worst_percent,
+        steps_ok=bool(steps.ok),
         shortest_time=mm_short.move_time,
         shortest_worst=mm_short.worst_percent,
         time_ratio=mm_short.move_time / anchor.move_time,
         replay_rel=float(np.max(np.abs(replayed - stated) / stated)),
-        plan_s=t_plan,
     )
 
 
@@ -157,6 +210,36 @@ def speed(repeats: int):
     return out
 
 
+def scale(mode_counts, repeats: int = 3):
+    """`design_move` (every candidate, fixed move time) on axes of many modes, each in a fresh process: warm time
+    (median of `repeats` after the first call) and the process's peak memory (resident set) [MB]."""
+    out = {}
+    for m in mode_counts:
+        code = (
+            "import resource, time; import numpy as np; import jax; jax.config.update('jax_enable_x64', True); "
+            "import jaxbelt as jb; "
+            f"ax = jb.ModalAxis(np.geomspace(3.0, 60.0, {m}), [0.02] * {m}); "
+            f"run = lambda: jb.design_move(ax, {D}, {FIXED_TIME}, v_max={V_MAX}, a_max={A_MAX}, uncertainty={U}); "
+            "t0 = time.perf_counter(); run(); first = time.perf_counter() - t0; ts = []\n"
+            f"for _ in range({repeats}):\n"
+            "    t0 = time.perf_counter(); run(); ts.append(time.perf_counter() - t0)\n"
+            "print(first, *ts, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024)"
+        )
+        env = dict(os.environ, PYTHONPATH=str(HERE.parent))
+        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=1800)
+        vals = [float(x) for x in r.stdout.split()[-(repeats + 2) :]]
+        ts = vals[1:-1]
+        out[m] = dict(
+            first_s=vals[0],
+            warm_median_s=float(np.median(ts)),
+            warm_min_s=float(np.min(ts)),
+            warm_max_s=float(np.max(ts)),
+            peak_mb=vals[-1],
+        )
+        print(f"{m} modes: first {vals[0]:.1f} s, warm {np.median(ts):.1f} s, peak {vals[-1]:.0f} MB", flush=True)
+    return out
+
+
 def identification(seeds):
     errs_f, errs_z = [], []
     for s in seeds:
@@ -179,11 +262,13 @@ def figure(cases, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    cases = [c for c in cases if c["anchor"] is not None]
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(11, 4.2), constrained_layout=True)
     n = np.arange(len(cases))
     modes = [len(c["frequencies"]) for c in cases]
     a1.semilogy(n, [c["anchor_worst"] for c in cases], "o", label="best classic shaper (its own time)")
     a1.semilogy(n, [c["equal_time_worst"] for c in cases], "s", color="C3", label="minimax, same time, its peaks")
+    a1.semilogy(n, [c["steps_worst"] for c in cases], "^", color="C2", label="minimax with steps (smooth=False)")
     a1.set_xticks(n, [f"{m}m" for m in modes])
     a1.set_ylabel("worst residual over ±20 % [% of unshaped]")
     a1.set_xlabel("axis (number of modes)")
@@ -210,20 +295,29 @@ def main(argv=None):
         return
     n_axes = 3 if args.quick else 12
     cases = []
-    for k, (f, z) in enumerate(draw_axes(n_axes)):
-        c = compare(f, z)
+    todo = [(f"axis {k}", f, z, D) for k, (f, z) in enumerate(draw_axes(n_axes))]
+    todo += [(label, np.array(f), np.array(z), d) for label, f, z, d in NAMED_AXES[: 1 if args.quick else None]]
+    for k, (label, f, z, d) in enumerate(todo):
+        c = compare(f, z, d, label=label if k >= n_axes else None)
         cases.append(c)
+        if c["anchor"] is None:
+            print(f"{label}: no classic shaper ({c['not_built']}); minimax {c['shortest_worst']:.3g} %", flush=True)
+            continue
         print(
-            f"axis {k}: f={np.round(f, 2).tolist()} z={np.round(z, 3).tolist()}: anchor {c['anchor']} "
+            f"{label}: f={np.round(f, 2).tolist()} z={np.round(z, 3).tolist()}: anchor {c['anchor']} "
             f"{c['anchor_worst']:.3g} % at {c['anchor_time']:.3f} s; minimax same time {c['equal_time_worst']:.3g} % "
-            f"(x{c['equal_time_ratio']:.3f}); same residual in x{c['time_ratio']:.3f} time; replay {c['replay_rel']:.1e}",
+            f"(x{c['equal_time_ratio']:.3f}), steps {c['steps_worst']:.3g} % (x{c['steps_ratio']:.3f}); same residual "
+            f"in x{c['time_ratio']:.3f} time; replay {c['replay_rel']:.1e}",
             flush=True,
         )
+    big = scale((6, 10) if not args.quick else (6,))
     sp = speed(3 if args.quick else 9)
     ident = identification(range(3 if args.quick else 10))
-    ratios = np.array([c["equal_time_ratio"] for c in cases])
-    tratios = np.array([c["time_ratio"] for c in cases])
-    replays = np.array([c["replay_rel"] for c in cases])
+    compared = [c for c in cases if c["anchor"] is not None]
+    ratios = np.array([c["equal_time_ratio"] for c in compared])
+    sratios = np.array([c["steps_ratio"] for c in compared])
+    tratios = np.array([c["time_ratio"] for c in compared])
+    replays = np.array([c["replay_rel"] for c in compared])
     headline = [
         dict(
             what="worst residual ratio minimax / best shaper, equal time and peaks (max over axes)",
@@ -232,6 +326,12 @@ def main(argv=None):
             target="<= 0.1",
         ),
         dict(what="median of that ratio", value=float(np.median(ratios)), unit="x", target=None),
+        dict(
+            what="worst residual ratio minimax with steps (smooth=False) / best shaper, equal time and peaks (max)",
+            value=float(sratios.max()),
+            unit="x",
+            target="<= 1",
+        ),
         dict(
             what="move time at the best shaper's residual / its move time (max over axes)",
             value=float(tratios.max()),
@@ -269,9 +369,16 @@ def main(argv=None):
                 target="<= 5",
             )
         )
+    for m, b in big.items():
+        headline.append(
+            dict(what=f"design_move warm, {m} modes, median", value=b["warm_median_s"], unit="s", target="<= 30")
+        )
+        headline.append(
+            dict(what=f"design_move, {m} modes, peak memory", value=b["peak_mb"], unit="MB", target="<= 2000")
+        )
     rows = [
         dict(
-            name=f"axis {k}",
+            name=c["label"] or f"axis {k}",
             method="design_move",
             error=None,
             median_s=c["plan_s"],
@@ -282,7 +389,9 @@ def main(argv=None):
         for k, c in enumerate(cases)
     ]
     out = results_dir(args.quick)
-    write_results("shaping_axis", rows, headline, quick=args.quick, extra=dict(speed=sp, identification=ident))
+    write_results(
+        "shaping_axis", rows, headline, quick=args.quick, extra=dict(speed=sp, identification=ident, scale=big)
+    )
     figure(cases, out / "shaping_axis.png")
     if not args.quick:
         update_shaping_blocks()

@@ -113,3 +113,34 @@ def test_jumps_beat_zv_at_its_own_time_and_peaks_on_a_lightly_damped_high_mode()
 def test_bad_smooth_is_refused_before_any_work(kw, message):
     with pytest.raises(ValueError, match=message):
         jb.design_move(jb.ModalAxis([5.5], [0.02]), 0.1, 1.0, v_max=0.3, a_max=1.2, **kw)
+
+
+def test_certify_rtol_refines_until_the_continuous_bound_is_within_the_tolerance():
+    """`certify_rtol=0.01`: the design is proved within 1 % of the least worst residual any command can leave
+    (the table's worst against the rigorous bound), and an independent HiGHS LP on 4x the design's intervals, with
+    the design's own cuts and frequencies, lies between the bound and the design's LP value."""
+    plan = jb.design_move(
+        jb.ModalAxis([5.5], [0.02]), 0.1, 0.6743, v_max=0.3, a_max=1.2, uncertainty=0.2, smooth=False,
+        include=("minimax",), certify_rtol=0.01,
+    )  # fmt: skip
+    row, mm, bound = plan.candidate("minimax"), plan.minimax, plan.continuous_bound
+    assert row.ok and "of the least any command can leave" in row.note and "not within" not in row.note
+    worst = row.worst_percent / 100
+    assert bound <= worst and worst - bound <= 0.01 * worst
+    fine = highs_steps_lp(mm, 4 * mm.options.n_knots)
+    assert bound <= fine + 1e-9 and float(mm.worst) >= fine - 1e-9
+    # the default design (16 cuts) is not within 1 %: the refinement did something
+    assert mm.options.n_angles > 16
+
+
+@pytest.mark.parametrize(
+    "kw, message",
+    [
+        (dict(certify_rtol=0.01), "`certify_rtol` needs `smooth=False`"),
+        (dict(smooth=False, certify_rtol=0.0), r"`certify_rtol` must lie in \(0, 1\); got 0.0"),
+        (dict(smooth=False, certify_rtol="1%"), r"`certify_rtol` must be a number in \(0, 1\)"),
+    ],
+)
+def test_bad_certify_rtol_is_refused_by_name(kw, message):
+    with pytest.raises(ValueError, match=message):
+        jb.design_move(jb.ModalAxis([5.5], [0.02]), 0.1, 1.0, v_max=0.3, a_max=1.2, **kw)

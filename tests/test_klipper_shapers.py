@@ -354,3 +354,42 @@ def test_design_move_and_the_cli_compare_with_the_3_hump_ei():
     assert not rows["3-hump EI"].ok and rows["3-hump EI"].command is None
     assert "damping ratios <= 0.2" in rows["3-hump EI"].note
     assert plan.table[-1].name == "3-hump EI"
+
+
+# --------------------------------------------------------------------------------------------
+# Many modes: a shaper's size grows as k**modes
+# --------------------------------------------------------------------------------------------
+def test_a_shaper_convolved_beyond_max_impulses_is_refused_and_listed_not_built():
+    from jaxbelt.shaping.shapers import MAX_IMPULSES
+
+    f, z = np.geomspace(3.0, 60.0, 4), np.full(4, 0.02)
+    A, t = shaper_for_axis("ZV", f, z)  # 2**4 = 16 impulses: built
+    assert A.shape == (16,) and A.sum() == pytest.approx(1.0, abs=1e-14)
+    with pytest.raises(
+        ShaperRangeError,
+        match=rf"3-hump EI convolved over 4 modes has 5\*\*4 = 625 impulses, more than MAX_IMPULSES = {MAX_IMPULSES}",
+    ):
+        shaper_for_axis("3-hump EI", f, z)
+    # 3-hump EI over 10 modes (9.8 million impulses) is refused at once, without building the convolution
+    with pytest.raises(ShaperRangeError, match="9765625 impulses"):
+        shaper_for_axis("3-hump EI", np.geomspace(3.0, 60.0, 10), np.full(10, 0.02))
+    plan = jb.design_move(jb.ModalAxis(f, z), 0.1, 1.5, v_max=0.3, a_max=1.2, include=("ZV", "3-hump EI", "unshaped"))
+    rows = {c.name: c for c in plan.table}
+    assert rows["ZV"].ok and rows["ZV"].worst_percent < rows["unshaped"].worst_percent
+    assert not rows["3-hump EI"].ok and rows["3-hump EI"].note == "not built: 625 impulses over 4 modes (more than 256)"
+    assert np.isfinite(rows["ZV"].peak_v) and rows["ZV"].peak_v <= 0.3 * (1 + 1e-9)
+
+
+@pytest.mark.parametrize("j_max", [None, 20.0])
+def test_exact_peaks_of_a_shaped_move_agree_with_a_fine_sampling(j_max):
+    from jaxbelt.shaping.moves import _peaks, piecewise_peaks, shape_move, trapezoid_move
+
+    base = trapezoid_move(0.1, 1.0, 0.3, 1.2, j_max)
+    for name in ("ZV", "3-hump EI"):
+        A, t = shaper_for_axis(name, [5.0, 13.0], [0.02, 0.05])
+        move = shape_move(base, A, t)
+        exact = np.array(piecewise_peaks(move))
+        sampled = np.asarray(_peaks(move, 400001))  # 400 001 times plus every breakpoint and its neighbours
+        # the sampling can only miss a peak between samples (by O(h^2) of the velocity's curvature): exact >= sampled
+        assert np.all(exact >= sampled * (1 - 1e-12))
+        np.testing.assert_allclose(exact, sampled, rtol=1e-9, atol=1e-15)

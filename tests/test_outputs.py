@@ -420,6 +420,195 @@ def test_limited_samples_stretch_a_command_past_its_limit():
 
 
 # --------------------------------------------------------------------------------------------
+# Exported samples at a high rate: small memory, the same samples
+# --------------------------------------------------------------------------------------------
+def _band_s(axis, uncertainty: float, n_freq: int = 61):
+    r = np.linspace(1 - uncertainty, 1 + uncertainty, n_freq) if uncertainty > 0 else np.ones(1)
+    w = np.asarray(axis.omega)[:, None] * r
+    z = np.asarray(axis.damping_ratios)[:, None]
+    wd = w * np.sqrt(1 - z**2)
+    return -z * w + 1j * wd, wd
+
+
+def test_executed_residual_integral_is_the_linear_executed_one():
+    import jax.numpy as jnp
+
+    from jaxbelt.shaping.moves import executed_residual_integral, linear_executed
+
+    rng = np.random.default_rng(7)
+    s, _ = _band_s(jb.ModalAxis([7.3, 18.0], [0.015, 0.01]), 0.2, 5)
+    # over several blocks of samples; and a rate so low that |s h| >= 1 (the closed forms, not the series)
+    for n, rate in [(5000, 5000.0), (700, 1000.0), (7, 10.0)]:
+        t = np.arange(n + 1) / rate
+        smooth = sum(rng.standard_normal() * np.sin(np.pi * k * t / t[-1]) for k in range(1, 8))
+        for a, rtol in [(smooth, 1e-12), (rng.standard_normal(n + 1), 1e-9)]:
+            ref = np.asarray(linear_executed(t, a).residual_integral(jnp.asarray(s)))
+            got = executed_residual_integral(t, a, s)
+            # relative to the largest: the reference sums steps and ramps (second differences / h) that cancel, to
+            # ~1e-10 of random samples (the closed form per sample has no such cancellation)
+            assert np.max(np.abs(got - ref)) <= rtol * np.max(np.abs(ref)), (n, rate)
+
+
+def _executed_band_residual(axis, reference, uncertainty, t, a, command=None):
+    """Per mode, the worst over the band of the residual a drive leaves from samples `a` at `t` (or, with `command`,
+    the continuous command's, propagated to the last sample), in units of `reference` (as the table)."""
+    from jaxbelt.shaping.moves import executed_residual_integral
+
+    s, wd = _band_s(axis, uncertainty)
+    if command is None:
+        W = executed_residual_integral(t, a, s)
+    else:
+        W = np.asarray(command.residual_integral(s)) * np.exp(s * (t[-1] - float(command.duration)))
+    weight = np.abs(np.asarray(axis.gains))[:, None] / (wd * np.asarray(reference)[:, None])
+    return np.max(np.abs(W) * weight, axis=1)
+
+
+def test_a_long_minimax_move_exports_at_40_khz_in_little_memory(plan, tmp_path):
+    import tracemalloc
+
+    # a 2 s move at 40 kHz: 80001 samples of 253 B-splines. The dense correction asked XLA for 39.5 GB
+    long = jb.design_move(plan.axis, 0.05, 2.0, **LIMITS, include=("minimax",))
+    path = tmp_path / "long.csv"
+    tracemalloc.start()
+    try:
+        peaks = long.to_csv(path, 40000.0)
+        peak_bytes = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak_bytes < 100e6, f"{peak_bytes / 1e6:.0f} MB"
+    t, x, v, a = np.loadtxt(path, delimiter=",", skiprows=1, unpack=True)
+    assert t.size == 80001 and sampled_peaks(t, v, a) == pytest.approx(peaks, rel=1e-12)
+    assert peaks[0] <= LIMITS["v_max"] * (1 + LIMIT_RTOL) and peaks[1] <= LIMITS["a_max"] * (1 + LIMIT_RTOL)
+    assert x[-1] == pytest.approx(0.05, rel=1e-12) and abs(v[-1]) < 1e-12
+    # the drive's residual over the band is the continuous command's, as at 1 kHz
+    args = (long.axis, long.reference_m, long.uncertainty)
+    cmd = long.best.command
+    t_1k, _, _, a_1k = long.samples(1000.0)
+    for tt, aa in [(t, a), (t_1k, a_1k)]:
+        executed = _executed_band_residual(*args, tt, aa)
+        np.testing.assert_allclose(executed, _executed_band_residual(*args, tt, aa, command=cmd), rtol=0.01)
+
+
+def _reference_executable_samples(cmd, rate_hz, axis, reference, uncertainty, n_freq=61, limits=None):
+    """`executable_samples` as it was, dense (the (n+1, J) basis, `jax.jacfwd` of the mismatch, (n+1)^2 limit rows and
+    every row in the programme): memory O(n^2 + modes n_freq n J). One change: the programme is scaled as in
+    `_constrained_correction` (unscaled, it stopped up to 1e-3 of a limit short of its optimum, at a point that
+    depended on how many rows it had)."""
+    import math
+
+    import jax
+    import jax.numpy as jnp
+
+    from jaxbelt.shaping.moves import (
+        _EXEC_REG,
+        _LIMIT_MARGIN,
+        _QP_WEIGHTS,
+        _integrate_linear,
+        _qp_interior_point,
+        bspline_basis,
+        linear_executed,
+    )
+
+    T = float(cmd.duration)
+    n = int(math.ceil(T * float(rate_hz) - 1e-9))
+    t = np.arange(n + 1) / float(rate_hz)
+    hs = 1.0 / float(rate_hz)
+    N = cmd.n_intervals
+    h = T / N
+    basis = np.array(bspline_basis(jnp.asarray(t[:, None] / h - np.arange(N - 3)[None, :]), 0))
+    basis[0] = basis[-1] = 0.0
+    a0 = basis @ np.asarray(cmd.coefficients)
+    s, wd = _band_s(axis, float(uncertainty), n_freq)
+    s = jnp.asarray(s)
+    target = np.asarray(cmd.residual_integral(s)) * np.exp(np.asarray(s) * (t[-1] - T))
+    weight = np.abs(np.asarray(axis.gains))[:, None] / (wd * np.asarray(reference)[:, None])
+
+    def mismatch(d):
+        a = jnp.asarray(a0) + jnp.asarray(basis) @ d
+        e = (linear_executed(t, a).residual_integral(s) - target) * weight
+        v_end = jnp.sum(hs * (a[:-1] + a[1:]) / 2)
+        v = jnp.concatenate([jnp.zeros(1), jnp.cumsum(hs * (a[:-1] + a[1:]) / 2)])
+        x_end = jnp.sum(hs * v[:-1] + hs * hs * (2 * a[:-1] + a[1:]) / 6)
+        scale = 1e3 / max(abs(float(cmd.distance)), 1e-300)
+        return jnp.concatenate(
+            [e.real.ravel(), e.imag.ravel(), jnp.stack([scale * (x_end - cmd.distance), scale * T * v_end])]
+        )
+
+    d0 = jnp.zeros(N - 3)
+    f0 = np.asarray(mismatch(d0))
+    Jm = np.asarray(jax.jacfwd(mismatch)(d0))
+    lam = _EXEC_REG / max(float(np.max(np.abs(a0))), 1e-300)
+    A_ = np.vstack([Jm, lam * np.eye(Jm.shape[1])])
+    rhs = np.concatenate([-f0, np.zeros(Jm.shape[1])])
+    d = np.linalg.lstsq(A_, rhs, rcond=None)[0]
+    if limits is not None:
+        v_max, a_max, _ = limits  # (no jerk limit in these plans)
+        m = n + 1
+        L = np.tril(np.full((m, m), hs / 2)) + np.tril(np.full((m, m), hs / 2), -1)
+        L[:, 0] -= hs / 2
+        L[0, :] = 0.0
+        rows = [(L, v_max), (np.eye(m), a_max)]
+        a_free = a0 + basis @ d
+        if any(np.max(np.abs(M @ a_free)) > lim * (1 - _LIMIT_MARGIN) for M, lim in rows):
+            keep = np.ones(A_.shape[0], bool)
+            keep[Jm.shape[0] - 2 : Jm.shape[0]] = False
+            A, r, E, e = A_[keep], rhs[keep], Jm[-2:], -f0[-2:]
+            size = float(np.max(np.abs(d)))
+            H = size * size * (A.T @ A)
+            curvature = float(np.max(np.abs(H)))
+            H, q = H / curvature, -(size / curvature) * (A.T @ r)
+            G_all, g_all = [], []
+            for M, lim in rows:
+                MB, Ma0 = M @ basis, M @ a0
+                cap = lim * (1 - _LIMIT_MARGIN)
+                G_all += [size * MB / lim, -size * MB / lim]
+                g_all += [(cap - Ma0) / lim, (cap + Ma0) / lim]
+            for wgt in _QP_WEIGHTS:
+                y, converged = _qp_interior_point(
+                    wgt * H, wgt * q, np.vstack(G_all), np.concatenate(g_all), size * E, e
+                )
+                if converged:
+                    d = size * y
+                    break
+    a = a0 + basis @ d
+    v, x = _integrate_linear(a, hs)
+    return t, x, v, a
+
+
+def test_executable_samples_are_the_dense_reference_ones(plan):
+    from jaxbelt.shaping.moves import executable_samples
+
+    cmd = plan.candidate("minimax").command
+    args = (cmd, 1000.0, plan.axis, plan.reference_m, plan.uncertainty)
+    limits = (plan.v_max, plan.a_max, plan.j_max)
+    # without the limits; and with them, which this design reaches (the correction is then the programme's)
+    for lim in (None, limits):
+        ref = _reference_executable_samples(*args, limits=lim)
+        got = executable_samples(*args, limits=lim)
+        for r, g in zip(ref, got):
+            assert np.max(np.abs(g - r)) <= 1e-9 * np.max(np.abs(r)), lim
+    assert sampled_peaks(ref[0], ref[2], ref[3])[1] == pytest.approx(plan.a_max, rel=1e-9)  # it binds
+    free = executable_samples(*args)
+    assert sampled_peaks(free[0], free[2], free[3])[1] > plan.a_max * (1 + 1e-9)
+
+
+def test_sampling_in_blocks_gives_the_samples_of_one_call(monkeypatch):
+    import jax.numpy as jnp
+
+    from jaxbelt.shaping import moves
+
+    base = moves.trapezoid_move(0.1, 1.0, 0.3, 1.2)
+    shaped = moves.shape_move(base, [0.25, 0.5, 0.25], [0.0, 0.05, 0.1])
+    t = np.arange(1101) / 1000.0
+    whole = [np.asarray(shaped.derivative(jnp.asarray(t), k)) for k in (0, 1, 2)]
+    monkeypatch.setattr(moves, "_SAMPLE_ELEMENTS", 256 * int(shaped.times.shape[0]))  # blocks of 256 times
+    t_s, *blocks = shaped.sample(1000.0)
+    np.testing.assert_array_equal(t_s, t)
+    for w, b in zip(whole, blocks):
+        np.testing.assert_allclose(b, w, rtol=1e-14, atol=1e-16)
+
+
+# --------------------------------------------------------------------------------------------
 # No option silently ignored
 # --------------------------------------------------------------------------------------------
 @pytest.mark.parametrize(

@@ -320,6 +320,19 @@ def test_shortest_move_time_gradient_of_the_platform_stiffness():
     np.testing.assert_allclose(g, fd, rtol=1e-2)
     T = float(S(k0))
     assert float(jb.best_residual(plat.to_axis(), T, des)) == pytest.approx(target, rel=1e-5)
+    # the bracket finds itself, from the design's time down to the shortest feasible move or up to many times it,
+    # and a new target or move time compiles nothing: the knots and grid are the design's, the time an argument
+    from compiles import count_compiles
+
+    with count_compiles() as c:
+        for factor in (2.0, 0.05):
+            t_star = float(jb.shortest_move_time(plat.to_axis(), factor * float(des.worst), des))
+            v = float(jb.best_residual(plat.to_axis(), t_star, des))
+            assert v == pytest.approx(factor * float(des.worst), rel=1e-7)
+            # the least such time: a shorter one leaves more
+            assert float(jb.best_residual(plat.to_axis(), t_star * (1 - 1e-3), des)) > v
+            assert (t_star < 1.0) == (factor > 1.0)
+    assert c["n"] == 0
 
 
 # --------------------------------------------------------------------------------------------

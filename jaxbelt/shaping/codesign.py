@@ -20,12 +20,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import is_concrete
+from .._checks import check_real, is_concrete
 from .._guard import checked, reraising
 from .._threads import blas_limited
 from ..models.axis import ModalAxis
 from .design import MinimaxDesign, max_distance, minimax_value
 from .moves import fastest_time
+
+
+def _check_axis(owner: str, axis, design) -> None:
+    n = design.problem.axis.n_modes
+    if not isinstance(axis, ModalAxis) or axis.n_modes != n:
+        got = f"a ModalAxis with {axis.n_modes} modes" if isinstance(axis, ModalAxis) else type(axis).__name__
+        raise ValueError(f"{owner}: parameter `axis` must be a ModalAxis with {n} modes, like the design's; got {got}")
 
 
 def _check_design(owner: str, design) -> None:
@@ -52,6 +59,7 @@ def _fastest(design: MinimaxDesign) -> float:
 def _check_move_time(owner: str, name: str, move_time, design: MinimaxDesign, what: str = "move time"):
     """`move_time` [s] finite, > 0 and not below the shortest feasible move of the design's distance and limits:
     concrete, a `ValueError` now; traced, `[(ok, message)]` to attach to the result."""
+    check_real(name, move_time, "s", owner)  # a string, a bool or None is refused, not converted
     t_min = _fastest(design)
     shortest = (
         f"the shortest feasible move under the design's limits takes {t_min:.6g} s" if math.isfinite(t_min) else ""
@@ -124,39 +132,81 @@ def best_residual(axis: ModalAxis, move_time, design: MinimaxDesign):
     there means nothing. A traced `move_time` (under `jax.grad`) is checked at run time."""
     o = "best_residual"
     _check_design(o, design)
-    if not isinstance(axis, ModalAxis) or axis.n_modes != design.problem.axis.n_modes:
-        raise ValueError(
-            f"best_residual: `axis` must be a ModalAxis with {design.problem.axis.n_modes} modes, like the design's"
-        )
+    _check_axis(o, axis, design)
     checks = _check_move_time(o, "move_time", move_time, design)
     if not checks and is_concrete((axis, design.problem)):
         _check_spline_reaches(o, axis, move_time, design)
     value = minimax_value(_problem(design, axis, move_time), design.options, tau=jax.lax.stop_gradient(design.worst))
-    return checked(value, checks=checks) if checks else value
+    # a move time far beyond the design's (1e5 s for a 0.8 s design) leaves a residual far below the LP's tolerance,
+    # and its solve can end in NaN: an error naming the move time, never a NaN "residual"
+    T0 = float(design.command.duration) if is_concrete(design.command.duration) else math.nan
+    lost = (
+        f"{o}: the minimax LP at this `move_time` returned a non-finite value: a move this much longer than the "
+        f"design's ({T0:.6g} s) leaves a residual below what the LP resolves (~0); give a `move_time` closer to the "
+        "design's"
+    )
+    if is_concrete(value) and not checks:
+        if not np.isfinite(float(value)):
+            raise ValueError(lost.replace("at this `move_time`", f"at `move_time` = {float(move_time):.6g} s"))
+        return value
+    return checked(value, checks=[*checks, (jnp.isfinite(value), lost)])
 
 
-def _root_time(axis, target, design, t_lo, t_hi, iters=60):
-    """Host root of V(axis, T) = target on [t_lo, t_hi] (V decreasing in T): Newton steps on T with the exact
-    derivative dV/dT, kept inside a shrinking bisection bracket."""
-    value_and_slope = jax.value_and_grad(lambda T: best_residual(axis, T, design))
-    lo, hi = float(t_lo), float(t_hi)
-    v_lo, v_hi = float(best_residual(axis, lo, design)), float(best_residual(axis, hi, design))
-    if not (v_lo >= target >= v_hi):
-        raise ValueError(
-            f"shortest_move_time: the target {target:g} is not reached within the bracket [{lo:g}, {hi:g}] s "
-            f"(worst residual {v_lo:.4g} .. {v_hi:.4g}); pass a wider `bracket`"
-        )
-    T = 0.5 * (lo + hi)
+#: relative tolerance of `shortest_move_time`'s root on the residual (the LP's own value is solved to 1e-9)
+ROOT_RTOL = 1e-8
+#: how far `shortest_move_time` looks for the target without a bracket: up to this multiple of the design's time
+MAX_EXPANSION = 64.0
+
+
+def _root_time(axis, target, design, lo, hi, start, *, user_bracket: bool, iters: int = 60):
+    """Host root of V(axis, T) = target (V decreasing in T): Newton steps on T with the exact derivative dV/dT (the
+    LP's envelope), kept inside a bracket that shrinks as the signs of V - target are learnt; `hi` may be inf (the
+    bracket then grows by steps of 1.5 up to `MAX_EXPANSION` times `start`). A move time too short for the design's
+    spline (the LP infeasible there) counts as above the target. Stops at |V - target| <= `ROOT_RTOL` target: 3-6
+    LP solves from the design's own time, each with its derivative."""
+
+    def value(T_):
+        return minimax_value(_problem(design, axis, T_), design.options, tau=jax.lax.stop_gradient(design.worst))
+
+    value_and_slope = jax.value_and_grad(value)
+    feasible_from = float(design.command.duration)  # the design exists there: feasible at and above it
+    T = float(start)
     for _ in range(iters):
+        if T < feasible_from:
+            try:
+                _check_spline_reaches("shortest_move_time", axis, T, design)
+            except ValueError:
+                lo = T  # too short for the spline: above any target
+                T = 0.5 * (lo + hi) if math.isfinite(hi) else 0.5 * (lo + feasible_from)
+                continue
+            feasible_from = T
         v, dv = (float(q) for q in value_and_slope(T))
+        if abs(v - target) <= ROOT_RTOL * target:
+            return T
         if v > target:
             lo = T
         else:
             hi = T
-        if abs(v - target) <= 1e-12 * max(abs(target), 1e-300) or hi - lo <= 1e-12 * hi:
-            return T
-        step = T - (v - target) / dv if dv < 0 else None
-        T = step if step is not None and lo < step < hi else 0.5 * (lo + hi)
+        if math.isfinite(hi) and hi - lo <= 1e-12 * hi:
+            break
+        step = T - (v - target) / dv if (math.isfinite(dv) and dv < 0) else math.nan
+        if math.isfinite(step) and lo < step < hi:
+            T = step
+        elif math.isfinite(hi):
+            T = 0.5 * (lo + hi)
+        elif T * 1.5 <= MAX_EXPANSION * float(start):
+            T = T * 1.5
+        else:
+            raise ValueError(
+                f"shortest_move_time: the target {target:g} is not reached within {MAX_EXPANSION:g} times the design's "
+                f"move time ({MAX_EXPANSION * float(start):.4g} s: worst residual {v:.4g} there); give a larger "
+                "`target`"
+            )
+    if not math.isfinite(hi) or (user_bracket and (lo == hi or abs(v - target) > 1e-3 * target)):
+        raise ValueError(
+            f"shortest_move_time: the target {target:g} is not reached within the bracket; the worst residual is "
+            f"{v:.4g} at {T:.6g} s; pass a wider `bracket`, or none (it then finds itself)"
+        )
     return T
 
 
@@ -167,14 +217,19 @@ def shortest_move_time(axis: ModalAxis, target, design: MinimaxDesign, *, bracke
 
     Differentiable with respect to the axis by the implicit function theorem (`jax.grad`, `jax.jvp` called
     eagerly: the root is found by bisection on concrete values, so not inside `jax.jit`). `bracket`: the search
-    interval [s] (default: 0.9 to 1.5 times the design's move time; it must hold the root, and only feasible
-    move times: the limits must allow the distance at its lower end).
+    interval [s] (default: none: the search starts at the design's own move time and finds its bracket, from the
+    shortest feasible move up to `MAX_EXPANSION` = 64 times the design's time); a `bracket` must hold the root, and
+    only feasible move times (the limits must allow the distance at its lower end). The root is solved to a
+    relative `ROOT_RTOL` = 1e-8 on the residual, by Newton steps with the LP's exact derivative (3-6 LP solves from
+    the design's time; no recompilation: the design's knots and grid are kept, and the move time is an argument).
 
     Raises `ValueError` at the call for a `design` that is not a `MinimaxDesign`, a `target` that is not finite
     and > 0, and a `bracket` that is not `(lo, hi)` with 0 < lo < hi or whose lower end is shorter than the
     shortest feasible move (the default bracket starts there instead)."""
     o = "shortest_move_time"
     _check_design(o, design)
+    _check_axis(o, axis, design)
+    check_real("target", target, "", o)
     if not (is_concrete(target) and np.ndim(target) == 0 and math.isfinite(float(target)) and float(target) > 0):
         raise ValueError(
             f"{o}: parameter `target` (a worst residual, as a fraction of the references) must be a finite scalar "
@@ -183,10 +238,9 @@ def shortest_move_time(axis: ModalAxis, target, design: MinimaxDesign, *, bracke
     T0 = float(design.command.duration)
     t_min = _fastest(design)
     if bracket is None:
-        lo, hi = 0.9 * T0, 1.5 * T0
-        if math.isfinite(t_min):
-            lo = max(lo, t_min)
+        lo, hi = (t_min if math.isfinite(t_min) else 0.0), math.inf
     else:
+        check_real("bracket", bracket, "s", o)
         try:
             lo, hi = (float(x) for x in bracket)
         except (TypeError, ValueError):
@@ -194,15 +248,16 @@ def shortest_move_time(axis: ModalAxis, target, design: MinimaxDesign, *, bracke
         if not (math.isfinite(lo) and math.isfinite(hi) and 0 < lo < hi):
             raise ValueError(f"{o}: parameter `bracket` must be (lo, hi) with 0 < lo < hi [s]; got {bracket!r}")
         _check_move_time(o, "bracket", lo, design, "lower end of the bracket")
+    start = T0 if (lo < T0 < hi) else 0.5 * (lo + hi)
     leaves, treedef = jax.tree_util.tree_flatten(axis)
-    return _shortest(tuple(leaves), float(target), treedef, design, float(lo), float(hi))
+    return _shortest(tuple(leaves), float(target), treedef, design, float(lo), float(hi), start, bracket is not None)
 
 
-def _shortest(leaves, target, treedef, design, lo, hi):
+def _shortest(leaves, target, treedef, design, lo, hi, start, user_bracket):
     @jax.custom_jvp
     def f(leaves):
         axis = jax.tree_util.tree_unflatten(treedef, leaves)
-        return jnp.asarray(_root_time(axis, target, design, lo, hi))
+        return jnp.asarray(_root_time(axis, target, design, lo, hi, start, user_bracket=user_bracket))
 
     @f.defjvp
     def f_jvp(primals, tangents):

@@ -91,6 +91,8 @@ class DesignOptions(NamedTuple):
     - `n_rounds`: exchange rounds at most; `n_fine`: points per mode of the fine grid it checks;
     - `n_angles`: P, cuts of the modulus constraint;
     - `jerk`: whether a jerk limit is imposed (the spline basis only);
+    - `exchange_tol`: the exchange stops when the worst ratio on the fine grid is within this fraction of the LP's
+      (`EXCHANGE_TOL` = 3 % by default; the certified designs of `design_move(..., certify_rtol=...)` use less);
     - `basis`: the command space. `"spline"`: the acceleration is a cubic B-spline on N knot intervals (continuous
       acceleration and jerk; limits through the spline's coefficients, a little conservative); `"steps"`: the
       acceleration is constant on each of N equal intervals and may jump between them, as a shaped trapezoid's
@@ -106,6 +108,7 @@ class DesignOptions(NamedTuple):
     n_angles: int = 16
     jerk: bool = False
     basis: str = "spline"
+    exchange_tol: float = EXCHANGE_TOL
 
 
 def n_coefficients(opts: DesignOptions) -> int:
@@ -410,13 +413,13 @@ def minimax_design(problem: MinimaxProblem, opts: DesignOptions, tol=1e-9, per_r
             break
         fine, ratios = (np.asarray(x) for x in _fine_ratios(problem, opts, coef))
         fine_worst = float(ratios.max())
-        if fine_worst <= worst * (1 + EXCHANGE_TOL) or rounds >= opts.n_rounds:
+        if fine_worst <= worst * (1 + opts.exchange_tol) or rounds >= opts.n_rounds:
             break
         added = 0
         for i in range(n_modes):
             free = np.where(mask[i] == 0)[0]
             peaks_i = _local_maxima(fine, ratios[i])
-            peaks_i = peaks_i[ratios[i, peaks_i] > worst * (1 + EXCHANGE_TOL)]
+            peaks_i = peaks_i[ratios[i, peaks_i] > worst * (1 + opts.exchange_tol)]
             peaks_i = peaks_i[np.argsort(-ratios[i, peaks_i])][: min(per_round, len(free))]
             for slot, k in zip(free, peaks_i):
                 factors[i, slot] = fine[k]

@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from .._checks import as_float_array, check_positive, check_scalar
+from .._checks import as_float_array, check_positive, check_real, check_scalar, is_concrete
 from .._guard import prepare, stored_jit
 from .._threads import blas_limited
 from ..commands import AbstractMotionCommand
@@ -183,6 +183,11 @@ class SplineMove(AbstractMotionCommand):
         kern = h * jnp.exp(s[..., None] * (T - tj)) * phi1(-s * h)[..., None] ** 4
         return jnp.sum(kern * self.coefficients, axis=-1)
 
+    def sample(self, rate_hz: float):
+        """`(t, x, v, a)` numpy arrays sampled every `1 / rate_hz` seconds (`AbstractMotionCommand.sample`),
+        evaluated over blocks of times (`derivatives_at`)."""
+        return _sample(self, rate_hz)
+
 
 # --------------------------------------------------------------------------------------------
 # PiecewiseMove
@@ -245,6 +250,11 @@ class PiecewiseMove(AbstractMotionCommand):
         s = jnp.asarray(s)[..., None]
         L = jnp.maximum(self.duration - self.times, 0.0)
         return jnp.sum(self.steps * L * phi1(s * L) + self.ramps * L**2 * phi2(s * L), axis=-1)
+
+    def sample(self, rate_hz: float):
+        """`(t, x, v, a)` numpy arrays sampled every `1 / rate_hz` seconds (`AbstractMotionCommand.sample`),
+        evaluated over blocks of times (`derivatives_at`)."""
+        return _sample(self, rate_hz)
 
 
 # --------------------------------------------------------------------------------------------
@@ -383,9 +393,32 @@ def fastest_move(distance, v_max, a_max, j_max=None) -> PiecewiseMove:
 
 
 @blas_limited
+def _check_impulses(owner: str, amplitudes, delays) -> None:
+    """`ValueError`/`TypeError` naming `amplitudes` or `delays` unless they are an impulse sequence (see
+    `shape_move`); traced values pass unchecked."""
+    check_real("amplitudes", amplitudes, "", owner)
+    check_real("delays", delays, "s", owner)
+    if not is_concrete((amplitudes, delays)):
+        return
+    A, tau = np.asarray(amplitudes, dtype=float), np.asarray(delays, dtype=float)
+    if tau.ndim != 1 or tau.size < 1 or not np.all(np.isfinite(tau)) or tau[0] < 0 or np.any(np.diff(tau) < 0):
+        raise ValueError(
+            f"{owner}: parameter `delays` must be a 1-D array of finite, non-negative, non-decreasing times [s]; "
+            f"got {tau.tolist()}"
+        )
+    if A.shape != tau.shape or not np.all(np.isfinite(A)) or abs(float(A.sum()) - 1.0) > 1e-9:
+        raise ValueError(
+            f"{owner}: parameter `amplitudes` must be finite, one per delay {tau.shape}, and sum to 1; got {A.tolist()}"
+        )
+
+
 def shape_move(base: PiecewiseMove, amplitudes, delays) -> PiecewiseMove:
     """The move `base` convolved with an impulse sequence (`amplitudes` summing to 1 at `delays` [s], the first
-    at 0): $a_s(t) = \\sum_i A_i\\,a(t - \\tau_i)$. The move lasts $T + \\tau_{last}$."""
+    at 0): $a_s(t) = \\sum_i A_i\\,a(t - \\tau_i)$. The move lasts $T + \\tau_{last}$.
+
+    Concrete values are checked (`ValueError` naming them): `delays` finite, >= 0 and non-decreasing, `amplitudes`
+    finite, of the same length, summing to 1 (to 1e-9: another sum changes the distance)."""
+    _check_impulses("shape_move", amplitudes, delays)
     A = jnp.asarray(amplitudes, dtype=float)
     tau = jnp.asarray(delays, dtype=float)
     times = (base.times[None, :] + tau[:, None]).ravel()
@@ -405,16 +438,49 @@ def _peaks(cmd, n: int):
     return jnp.stack([jnp.max(jnp.abs(cmd.derivative(ts, k))) for k in (1, 2, 3)])
 
 
+def piecewise_peaks(move: PiecewiseMove) -> tuple[float, float, float]:
+    """`(peak |v|, peak |a|, peak |jerk|)` of a `PiecewiseMove`, exactly, in O(K log K) for its K terms (numpy):
+    between consecutive breakpoints the acceleration is linear, so its peak is at a breakpoint, and the velocity's
+    at a breakpoint or where the acceleration crosses zero; the jerk is the ramps' running sum (the steps' Dirac
+    parts left out, as in `PiecewiseMove.derivative`)."""
+    t, al, be = (np.asarray(x, dtype=float) for x in (move.times, move.steps, move.ramps))
+    T = float(move.duration)
+    order = np.argsort(t, kind="stable")
+    t, al, be = t[order], al[order], be[order]
+    knots = np.unique(np.concatenate([np.clip(t, 0.0, T), [0.0, T]]))
+    active = np.searchsorted(t, knots, side="right")  # the terms switched on at each knot (t_k <= knot)
+
+    def running(x):
+        return np.concatenate([[0.0], np.cumsum(x)])[active]
+
+    jerk = running(be)[:-1]  # on each interval [knot_j, knot_j+1]
+    a0 = (running(al) + running(be) * knots - running(be * t))[:-1]  # acceleration just after each knot
+    h = np.diff(knots)
+    a1 = a0 + jerk * h
+    v = np.concatenate([[0.0], np.cumsum(a0 * h + jerk * h * h / 2)])
+    safe = np.where(jerk != 0.0, jerk, 1.0)
+    tau = np.where(jerk != 0.0, -a0 / safe, -1.0)  # where the acceleration crosses zero inside an interval
+    inside = (tau > 0.0) & (tau < h)
+    v_in = np.where(inside, v[:-1] + a0 * tau + jerk * tau * tau / 2, 0.0)
+    pv = max(float(np.max(np.abs(v))), float(np.max(np.abs(v_in), initial=0.0)))
+    pa = float(np.max(np.maximum(np.abs(a0), np.abs(a1)), initial=0.0))
+    pj = float(np.max(np.abs(jerk[h > 0]), initial=0.0))
+    return pv, pa, pj
+
+
 def peaks(cmd: AbstractMotionCommand, n: int = 20001):
-    """`(peak |v|, peak |a|, peak |jerk|)` of a move over its duration, on `n` equally spaced times plus the
-    breakpoints of a `PiecewiseMove` (one compiled program per command structure and shape)."""
+    """`(peak |v|, peak |a|, peak |jerk|)` of a move over its duration: exactly for a `PiecewiseMove`
+    (`piecewise_peaks`), else on `n` equally spaced times (one compiled program per command structure and shape)."""
+    if isinstance(cmd, PiecewiseMove):
+        return piecewise_peaks(cmd)
     return tuple(float(x) for x in np.asarray(_peaks(cmd, int(n))))
 
 
 def prepare_peaks(cmd: AbstractMotionCommand, n: int = 20001) -> None:
     """Start compiling the program of `peaks(cmd, n)` in the background while the program store is on
     (`jaxbelt._guard.prepare`); else nothing. `cmd` stands for commands of its structure and shapes."""
-    prepare(_peaks, cmd, int(n))
+    if not isinstance(cmd, PiecewiseMove):
+        prepare(_peaks, cmd, int(n))
 
 
 def padded(move: PiecewiseMove, size: int) -> PiecewiseMove:
@@ -471,16 +537,26 @@ def sampled_peaks(t, v, a) -> tuple[float, float, float]:
     return float(np.max(np.abs(v))), float(np.max(np.abs(a))), pj
 
 
-def _limit_rows(n: int, hs: float, limits):
-    """`[(matrix M, limit)]`: the executed samples' v = M_v a, a = a, jerk = M_j a (linear in the samples `a`)."""
+def _limit_rows(a, hs: float, limits):
+    """`[(values, limit)]`: the executed samples' velocity $v_k = h\\sum_{i<k}(a_i + a_{i+1})/2$ (as
+    `_integrate_linear`), acceleration $a_k$ and, with j_max, jerk $(a_{k+1} - a_k)/h$, at every sample of `a`
+    (each linear in the samples)."""
     v_max, a_max, j_max = limits
-    L = np.tril(np.full((n, n), hs / 2)) + np.tril(np.full((n, n), hs / 2), -1)
-    L[:, 0] -= hs / 2
-    L[0, :] = 0.0  # v_k = h sum_{i<k} (a_i + a_{i+1}) / 2
-    rows = [(L, v_max), (np.eye(n), a_max)]
+    rows = [(_integrate_linear(a, hs)[0], v_max), (a, a_max)]
     if j_max is not None:
-        rows.append(((np.eye(n, k=1) - np.eye(n))[:-1] / hs, j_max))
+        rows.append((np.diff(a) / hs, j_max))
     return rows
+
+
+def _limit_matrix(basis: "_SampledBasis", hs: float, kind: int, idx):
+    """Rows `idx` of the limit `kind` of `_limit_rows` (0 velocity, 1 acceleration, 2 jerk) as linear maps of the
+    B-spline coefficients: a (len(idx), J) array (the velocity's: $h(P_k - B_k/2 - B_0/2)$, $P_k$ the prefix sums
+    of the basis rows; $B_0 = 0$)."""
+    if kind == 0:
+        return hs * (basis.prefix_rows(idx) - basis.rows(idx) / 2)
+    if kind == 1:
+        return basis.rows(idx)
+    return (basis.rows(idx + 1) - basis.rows(idx)) / hs
 
 
 def _qp_step(K, G, s_, z, r_d, r_i, r_e, r_c):
@@ -527,20 +603,203 @@ def _qp_interior_point(H, q, G, h, E, e, tol: float = 1e-13, max_iter: int = 100
     return x, False
 
 
-def _constrained_correction(A, r, E, e, a0, basis, rows, d_free):
-    """The least `||A d - r||` subject to `E d = e` and every limit row `|M (a0 + basis d)| <= limit (1 - margin)`,
-    a convex quadratic programme (`_qp_interior_point`); `d_free`, the solution without the limits, where the
-    programme does not converge (it then fails the limits' check that follows)."""
-    G_all, g_all = [], []
-    for M, lim in rows:
-        MB, Ma0 = M @ basis, M @ a0
-        cap = lim * (1 - _LIMIT_MARGIN)
-        G_all += [MB / lim, -MB / lim]
-        g_all += [(cap - Ma0) / lim, (cap + Ma0) / lim]
-    d, converged = _qp_interior_point(A.T @ A, -(A.T @ r), np.vstack(G_all), np.concatenate(g_all), E, e)
-    return d if converged else d_free
+#: the widest margin below a limit within which the rows near it join the quadratic programme in the late rounds of
+#: its active set (a fraction of the limit; `_constrained_correction`)
+_NEAR = 1e-3
+#: rounds of `_constrained_correction`'s active set (each adds the rows the last solution exceeded; the second half,
+#: with the rows near their limit)
+_ACTIVE_ROUNDS = 10
+#: weights of the scaled objective in `_constrained_correction`, tried in turn until the programme converges: the
+#: heavier one stops it closer to the optimum (the samples of all rows' and of the active set's programmes agree to
+#: 1e-12 .. 5e-10 in the designs tried), the unit one converges where that one does not (seen at 1e4 with thousands
+#: of rows; agreement ~1e-8)
+_QP_WEIGHTS = (1e2, 1.0)
 
 
+def _constrained_correction(A, r, E, e, a0, basis: "_SampledBasis", hs: float, limits, d_free):
+    """The least `||A d - r||` subject to `E d = e` and every limit row `|M (a0 + B d)| <= limit (1 - margin)`
+    (`_limit_rows`, B the sampled basis), a convex quadratic programme (`_qp_interior_point`); `d_free`, the
+    solution without the limits, where the programme does not converge (it then fails the limits' check that
+    follows).
+
+    Only the rows at their limit enter the programme (an active set): first those the free solution exceeds, on
+    the side it exceeds; the programme's solution is then checked at every sample and the rows it exceeds are
+    added, until none is (two or three rounds seen; from the middle of `_ACTIVE_ROUNDS` on, with the rows within
+    a margin of their limit: four times the largest change the correction makes to the quantity, at most `_NEAR`
+    of the limit). The solution is the programme's with every row: the rows left out hold at it. Memory
+    O(n + rows at a limit x J): a design that reaches a limit over a long stretch (a coast at v_max) brings
+    every sample of it."""
+    # scaled (its minimiser unchanged): the correction in units of the free one's size, the objective in units of its
+    # curvature, times a weight (`_QP_WEIGHTS`). The programme's stopping rule (complementarity below 1e-13,
+    # absolute) then holds the binding rows at their limits; unscaled (a correction ~1e-5, a gradient ~1e-7), it
+    # stopped up to 1e-3 of a limit short of the optimum, at a correction up to 20x the least, and at a point that
+    # depended on how many rows the programme had.
+    size = float(np.max(np.abs(d_free))) or 1.0
+    H = size * size * (A.T @ A)
+    curvature = float(np.max(np.abs(H))) or 1.0
+    H, q = H / curvature, -(size / curvature) * (A.T @ r)
+    E = size * E
+    base_rows = _limit_rows(a0, hs, limits)
+    base = [vals for vals, _ in base_rows]  # M a0, every sample
+    lims = [lim for _, lim in base_rows]
+
+    def above(d, near: bool):  # per limit: (samples above its cap, samples below minus it); near: less a margin
+        rows = _limit_rows(a0 + basis.dot(d), hs, limits)
+        # the margin: a few times the largest change the correction d makes, at most _NEAR of the limit
+        change = [np.max(np.abs(v)) for v, _ in _limit_rows(basis.dot(d), hs, limits)] if near else [0.0] * len(lims)
+        thr = [lim * (1 - _LIMIT_MARGIN) - min(_NEAR * lim, 4 * c) for lim, c in zip(lims, change)]
+        return [(np.flatnonzero(v > c), np.flatnonzero(-v > c)) for (v, _), c in zip(rows, thr)]
+
+    sel = above(d_free, False)
+    for round_ in range(_ACTIVE_ROUNDS):
+        G_all, g_all = [], []
+        for kind, ((pos, neg), Ma0, lim) in enumerate(zip(sel, base, lims)):
+            cap = lim * (1 - _LIMIT_MARGIN)
+            for sign, idx in ((1.0, pos), (-1.0, neg)):
+                if idx.size:
+                    G_all.append(sign * (size / lim) * _limit_matrix(basis, hs, kind, idx))
+                    g_all.append((cap - sign * Ma0[idx]) / lim)
+        G, g = np.vstack(G_all), np.concatenate(g_all)
+        for weight in _QP_WEIGHTS:
+            y, converged = _qp_interior_point(weight * H, weight * q, G, g, E, e)
+            if converged:
+                break
+        else:
+            return d_free
+        d = size * y
+        over = above(d, False)
+        # the rows in the programme hold (to its rounding, as when every row is in it); any other one exceeded?
+        if not any(np.setdiff1d(o, s).size for os_, ss in zip(over, sel) for o, s in zip(os_, ss)):
+            return d
+        near = above(d, True) if round_ >= _ACTIVE_ROUNDS // 2 else over  # late rounds: with the rows near them
+        sel = [
+            tuple(np.union1d(np.union1d(s, o), m) for s, o, m in zip(ss, os_, ms))
+            for ss, os_, ms in zip(sel, over, near)
+        ]
+    return d_free
+
+
+#: samples per block when the residual weights or the B-spline basis at the samples are formed (memory O(block))
+_BLOCK = 2048
+
+
+def _phi2_np(x):
+    """`phi2` in numpy: $\\varphi_2(x) = (e^x - 1 - x)/x^2$ for complex `x` (Taylor series for |x| < 1)."""
+    x = np.asarray(x, dtype=complex)
+    small = np.abs(x) < 1.0
+    xs = np.where(small, x, 0.0)
+    series = sum(xs**k / math.factorial(k + 2) for k in range(_SERIES))
+    xb = np.where(small, 1.0, x)
+    return np.where(small, series, (np.expm1(xb) - xb) / xb**2)
+
+
+def _weight_blocks(s, t):
+    """Yield `(k0, k1, C)` over blocks of `_BLOCK` samples: `C` the `(len(s), k1 - k0)` complex weights $c_k(s)$
+    of the samples k0 .. k1 - 1 in the residual integral $W(s) = \\sum_k c_k(s) a_k$ of an acceleration linear
+    between samples $a_k$ at the uniform times `t` (`linear_executed`), over $[0, t_e]$, $t_e$ = `t[-1]`.
+
+    On $[t_k, t_{k+1}]$ (spacing h, $x = sh$) the acceleration contributes
+    $h e^{s(t_e - t_k)}(a_k (I_0 - I_1) + a_{k+1} I_1)$ with $I_0 = (1 - e^{-x})/x$,
+    $I_1 = (1 - e^{-x}(1 + x))/x^2 = e^{-x}\\varphi_2(x)$ and $I_0 - I_1 = \\varphi_2(-x)$ (no cancellation at
+    small x: `_phi2_np`)."""
+    s = np.asarray(s, dtype=complex).ravel()
+    n = t.size - 1
+    h = float(t[1] - t[0])
+    x = s * h
+    first, last = h * _phi2_np(-x), h * np.exp(-x) * _phi2_np(x)  # weight of an interval's first and last sample
+    steps = np.exp(s[:, None] * (h * np.arange(min(_BLOCK, n + 1) + 1)))  # e^{s m h}: one block of exponentials
+    for k0 in range(0, n + 1, _BLOCK):
+        k1 = min(k0 + _BLOCK, n + 1)
+        lo = max(k0 - 1, 0)
+        # e^{s (t_e - t_k)} = e^{s (t_e - t_k1-1)} e^{s (k1 - 1 - k) h}, k = lo .. k1 - 1 (each factor decays)
+        E = np.exp(s * (t[-1] - t[k1 - 1]))[:, None] * steps[:, k1 - 1 - lo :: -1]
+        c = np.zeros((s.size, k1 - k0), dtype=complex)
+        end = min(k1, n)  # the samples k0 .. end - 1 start an interval
+        c[:, : end - k0] += first[:, None] * E[:, k0 - lo : end - lo]
+        start = max(k0, 1)  # the samples start .. k1 - 1 end one
+        c[:, start - k0 :] += last[:, None] * E[:, start - 1 - lo : k1 - 1 - lo]
+        yield k0, k1, c
+
+
+def executed_residual_integral(times, accel, s):
+    """The residual integral $W(s) = \\int_0^{t_e} a(\\tau) e^{s(t_e - \\tau)}d\\tau$ of the move a drive executes
+    from acceleration samples `accel` at uniform `times` (`linear_executed(times, accel).residual_integral(s)`),
+    in closed form per sample (`_weight_blocks`), in numpy, memory O(len(times) + len(s) x block) for complex
+    `s` of any shape."""
+    t = np.asarray(times, dtype=float)
+    a = np.asarray(accel, dtype=float)
+    s = np.asarray(s, dtype=complex)
+    W = np.zeros(s.size, dtype=complex)
+    for k0, k1, C in _weight_blocks(s, t):
+        W += C @ a[k0:k1]
+    return W.reshape(s.shape)
+
+
+class _SampledBasis:
+    """The B-splines of a `SplineMove` (J of them, knot spacing h) at the uniform sample times `t`, banded: sample
+    k has the four B-splines `cols[k]` = i - 3 .. i ($i = \\lfloor t_k/h \\rfloor$) with the values `vals[k]`
+    (as `bspline_basis`; 0 for the columns outside 0 .. J - 1, and at the first and the last sample, where the
+    move starts and ends at rest). Never formed dense at full length: memory O(len(t))."""
+
+    def __init__(self, t, h: float, J: int):
+        q = t / h
+        self.J = J
+        self.cols = np.floor(q).astype(np.int64)[:, None] + np.arange(-3, 1)  # (n+1, 4)
+        u = q[:, None] - self.cols  # in [0, 4): the column c (B-spline i - 3 + c) is on its piece 3 - c
+        co = _PIECES[0][::-1]
+        vals = np.zeros_like(u)
+        for m in range(co.shape[1]):
+            vals = vals * u + co[:, m]
+        vals = np.where((self.cols >= 0) & (self.cols < J), vals, 0.0)
+        vals[0] = vals[-1] = 0.0  # the move starts and ends at rest (the B-splines vanish there)
+        self.vals = vals
+        self.safe = np.clip(self.cols, 0, J - 1)  # the columns as indices (their values are 0 where clipped)
+
+    def dot(self, coef):
+        """B @ coef: the samples of the acceleration of the coefficients `coef`."""
+        return np.sum(self.vals * np.asarray(coef)[self.safe], axis=1)
+
+    def tdot(self, w):
+        """w @ B for weights `w` of the samples: a (J,) array."""
+        return np.bincount(self.safe.ravel(), weights=(np.asarray(w)[:, None] * self.vals).ravel(), minlength=self.J)
+
+    def rows(self, idx):
+        """B[idx]: a dense (len(idx), J) array."""
+        out = np.zeros((len(idx), self.J))
+        np.add.at(out, (np.arange(len(idx))[:, None], self.safe[idx]), self.vals[idx])
+        return out
+
+    def block(self, k0: int, k1: int):
+        """`(c0, B[k0:k1, c0:c0 + width])`: the samples k0 .. k1 - 1 on the columns they touch."""
+        cols = self.cols[k0:k1]
+        first, last = int(cols[0, 0]), int(cols[-1, -1])
+        dense = np.zeros((k1 - k0, last - first + 1))
+        dense[np.arange(k1 - k0)[:, None], cols - first] = self.vals[k0:k1]
+        c0, c1 = max(first, 0), max(min(last, self.J - 1) + 1, max(first, 0))
+        return c0, dense[:, c0 - first : c1 - first]
+
+    def prefix_rows(self, idx):
+        """$P_k = \\sum_{i \\le k} B_i$ at the sorted samples `idx`: a dense (len(idx), J) array, by blocks."""
+        idx = np.asarray(idx)
+        out = np.zeros((idx.size, self.J))
+        run = np.zeros(self.J)
+        n1 = self.cols.shape[0]
+        for k0 in range(0, n1, _BLOCK):
+            if idx.size == 0 or k0 > idx[-1]:
+                break
+            k1 = min(k0 + _BLOCK, n1)
+            c0, dense = self.block(k0, k1)
+            cs = np.cumsum(dense, axis=0)
+            i0, i1 = np.searchsorted(idx, [k0, k1])
+            if i1 > i0:
+                out[i0:i1] = run
+                out[i0:i1, c0 : c0 + cs.shape[1]] += cs[idx[i0:i1] - k0]
+            if cs.shape[0] and cs.shape[1]:
+                run[c0 : c0 + cs.shape[1]] += cs[-1]
+        return out
+
+
+@blas_limited
 def executable_samples(
     cmd: SplineMove, rate_hz: float, axis, reference, uncertainty: float, n_freq: int = 61, limits=None
 ):
@@ -559,57 +818,103 @@ def executable_samples(
     every sample (a convex quadratic programme). A correction without them could push a sample past a limit
     the design reaches (|a| = 1.00016 a_max seen); scaling the samples down afterwards would change the
     distance, and stretching them in time the sample rate, so the limits are part of the correction itself:
-    the distance, the rest at both ends and the rate stay exact."""
+    the distance, the rest at both ends and the rate stay exact.
+
+    Memory O(n + (modes n_freq + samples near a limit) J) for n samples and J B-splines: the mismatch is linear
+    in the correction, its matrix is formed in closed form (`_weight_blocks`) over blocks of samples of the
+    banded basis (`_SampledBasis`), and only the samples near a limit enter the programme."""
     check_positive("rate_hz", rate_hz, "Hz", "executable_samples")
     T = float(cmd.duration)
     n = int(math.ceil(T * float(rate_hz) - 1e-9))
     t = np.arange(n + 1) / float(rate_hz)
     hs = 1.0 / float(rate_hz)
     N = cmd.n_intervals
-    h = T / N
-    basis = np.array(bspline_basis(jnp.asarray(t[:, None] / h - np.arange(N - 3)[None, :]), 0))  # (n+1, J)
-    basis[0] = basis[-1] = 0.0  # the move starts and ends at rest (the B-splines vanish there)
-    a0 = basis @ np.asarray(cmd.coefficients)
+    J = N - 3
+    basis = _SampledBasis(t, T / N, J)
+    a0 = basis.dot(np.asarray(cmd.coefficients))
     u = float(uncertainty)
     r = np.linspace(1 - u, 1 + u, n_freq) if u > 0 else np.ones(1)
     w = np.asarray(axis.omega)[:, None] * r
     z = np.asarray(axis.damping_ratios)[:, None]
     wd = w * np.sqrt(1 - z**2)
-    s = jnp.asarray(-z * w + 1j * wd)
-    target = np.asarray(cmd.residual_integral(s)) * np.exp(np.asarray(s) * (t[-1] - T))
+    s = -z * w + 1j * wd
+    target = np.asarray(cmd.residual_integral(jnp.asarray(s))) * np.exp(s * (t[-1] - T))
     weight = np.abs(np.asarray(axis.gains))[:, None] / (wd * np.asarray(reference)[:, None])
-
-    def mismatch(d):
-        a = jnp.asarray(a0) + jnp.asarray(basis) @ d
-        W = linear_executed(t, a).residual_integral(s)
-        e = (W - target) * weight
-        v_end = jnp.sum(hs * (a[:-1] + a[1:]) / 2)
-        # distance: sum over steps of h v_k + h^2 (2 a_k + a_k+1) / 6, with v_k the running velocity
-        v = jnp.concatenate([jnp.zeros(1), jnp.cumsum(hs * (a[:-1] + a[1:]) / 2)])
-        x_end = jnp.sum(hs * v[:-1] + hs * hs * (2 * a[:-1] + a[1:]) / 6)
-        scale = 1e3 / max(abs(float(cmd.distance)), 1e-300)
-        return jnp.concatenate(
-            [e.real.ravel(), e.imag.ravel(), jnp.stack([scale * (x_end - cmd.distance), scale * T * v_end])]
-        )
-
-    d0 = jnp.zeros(N - 3)
-    f0 = np.asarray(mismatch(d0))
-    Jm = np.asarray(jax.jacfwd(mismatch)(d0))  # the mismatch is linear in d: f0 + Jm d exactly
+    # the mismatch is linear in the correction d of the coefficients (the executed acceleration a0 + B d):
+    # f0 + Jm d, with W(a) = sum_k c_k(s) a_k (`_weight_blocks`), accumulated over blocks of samples
+    W0 = np.zeros(s.size, dtype=complex)
+    CB = np.zeros((s.size, J), dtype=complex)
+    for k0, k1, C in _weight_blocks(s, t):
+        W0 += C @ a0[k0:k1]
+        c0, dense = basis.block(k0, k1)
+        CB[:, c0 : c0 + dense.shape[1]] += C @ dense
+    e0 = (W0.reshape(s.shape) - target) * weight
+    eB = CB.reshape(s.shape + (J,)) * weight[..., None]
+    # the end velocity and the distance, exact integrals of the linear acceleration: linear in the samples
+    v_w = np.full(n + 1, hs)
+    v_w[0] = v_w[-1] = hs / 2
+    x_w = hs * (t[-1] - t)  # sum over steps of h v_k + h^2 (2 a_k + a_k+1) / 6, v_k the running velocity
+    x_w[0], x_w[-1] = hs / 2 * (t[-1] - hs / 3), hs * hs / 6
+    distance = float(cmd.distance)
+    scale = 1e3 / max(abs(distance), 1e-300)
+    f0 = np.concatenate([e0.real.ravel(), e0.imag.ravel(), [scale * (x_w @ a0 - distance), scale * T * (v_w @ a0)]])
+    Jm = np.vstack(
+        [eB.real.reshape(-1, J), eB.imag.reshape(-1, J), scale * basis.tdot(x_w), scale * T * basis.tdot(v_w)]
+    )
     # Tikhonov-regularised: the least change of the acceleration (in units of its own peak) that restores the
     # residual, not the exact fit of every equation (which would buy the last digits with a large correction)
     lam = _EXEC_REG / max(float(np.max(np.abs(a0))), 1e-300)
-    A_ = np.vstack([Jm, lam * np.eye(Jm.shape[1])])
-    rhs = np.concatenate([-f0, np.zeros(Jm.shape[1])])
+    A_ = np.vstack([Jm, lam * np.eye(J)])
+    rhs = np.concatenate([-f0, np.zeros(J)])
     d = np.linalg.lstsq(A_, rhs, rcond=None)[0]
     if limits is not None:
-        rows = _limit_rows(n + 1, hs, limits)
-        a_free = a0 + basis @ d
-        if any(np.max(np.abs(M @ a_free)) > lim * (1 - _LIMIT_MARGIN) for M, lim in rows):
+        a_free = a0 + basis.dot(d)
+        if any(np.max(np.abs(vals)) > lim * (1 - _LIMIT_MARGIN) for vals, lim in _limit_rows(a_free, hs, limits)):
             keep = np.ones(A_.shape[0], bool)
             keep[Jm.shape[0] - 2 : Jm.shape[0]] = False  # distance and rest at the end: exact, as constraints
-            d = _constrained_correction(A_[keep], rhs[keep], Jm[-2:], -f0[-2:], a0, basis, rows, d_free=d)
-    a = a0 + basis @ d
+            d = _constrained_correction(A_[keep], rhs[keep], Jm[-2:], -f0[-2:], a0, basis, hs, limits, d_free=d)
+    a = a0 + basis.dot(d)
     v, x = _integrate_linear(a, hs)
+    return t, x, v, a
+
+
+#: elements of the (times x terms) arrays a command's `derivative` builds at once when it is sampled (8 MB each)
+_SAMPLE_ELEMENTS = 1 << 20
+
+
+def derivatives_at(cmd: AbstractMotionCommand, times, orders=(0, 1, 2)) -> list:
+    """`[cmd.derivative(times, k) for k in orders]` as numpy arrays, evaluated over blocks of `times` so that the
+    (times x terms) arrays of a `PiecewiseMove` or a `SplineMove` stay within `_SAMPLE_ELEMENTS` elements (a
+    shaped move at 40 kHz: 80001 x 500); every block is padded to one size (one compiled program per operation).
+    The values are those of one call on all the times."""
+    t = np.asarray(times, dtype=float)
+    if isinstance(cmd, PiecewiseMove):
+        terms = int(cmd.times.shape[0])
+    elif isinstance(cmd, SplineMove):
+        terms = 6 * int(cmd.coefficients.shape[0])  # `bspline_basis` gathers 6 coefficients per B-spline
+    else:
+        terms = 1
+    block = 1 << max((_SAMPLE_ELEMENTS // max(terms, 1)).bit_length() - 1, 8)  # a power of two >= 256
+    if t.size <= block:
+        tj = jnp.asarray(t)
+        return [np.asarray(jax.device_get(cmd.derivative(tj, k))) for k in orders]
+    n_blocks = -(-t.size // block)
+    padded_t = np.concatenate([t, np.full(n_blocks * block - t.size, t[-1])])
+    out = [np.empty(t.size) for _ in orders]
+    for b in range(n_blocks):
+        lo, hi = b * block, min((b + 1) * block, t.size)
+        tj = jnp.asarray(padded_t[b * block : (b + 1) * block])
+        for o, k in zip(out, orders):
+            o[lo:hi] = np.asarray(jax.device_get(cmd.derivative(tj, k)))[: hi - lo]
+    return out
+
+
+def _sample(cmd: AbstractMotionCommand, rate_hz: float):
+    """`AbstractMotionCommand.sample`, over blocks of times (`derivatives_at`)."""
+    check_positive("rate_hz", rate_hz, "Hz", f"{type(cmd).__name__}.sample")
+    n = int(math.ceil(float(cmd.end_time) * float(rate_hz) - 1e-9))
+    t = np.arange(n + 1) / float(rate_hz)
+    x, v, a = derivatives_at(cmd, t, (0, 1, 2))
     return t, x, v, a
 
 
@@ -635,6 +940,6 @@ def limited_samples(cmd: AbstractMotionCommand, rate_hz: float, limits, max_roun
         T = float(cmd.end_time) * stretch
         n = int(math.ceil(T * float(rate_hz) - 1e-9))
         t = np.arange(n + 1) / float(rate_hz)
-        tau = jnp.asarray(np.minimum(t / stretch, float(cmd.end_time)))
-        x, v, a = (np.asarray(jax.device_get(cmd.derivative(tau, k))) / stretch**k for k in (0, 1, 2))
+        tau = np.minimum(t / stretch, float(cmd.end_time))
+        x, v, a = (q / stretch**k for k, q in enumerate(derivatives_at(cmd, tau, (0, 1, 2))))
     return t, x, v, a

@@ -233,15 +233,32 @@ def convolve(sequences):
     return A[order], t[order]
 
 
+#: the most impulses a shaper convolved over an axis' modes may have (ZV over 8 modes, ZVD or EI over 5, 3-hump EI
+#: over 3): the convolution of a k-impulse shaper over n modes has k**n impulses (3-hump EI over 10 modes: 9.8
+#: million), and a move shaped by it as many terms to evaluate; such a shaper also lasts the sum of its modes' shapers
+MAX_IMPULSES = 256
+
+
 def shaper_for_axis(name: str, frequencies, damping_ratios, tolerance: float = 0.05, *, form: str = "firmware"):
     """The shaper `name` for every mode of an axis (`frequencies` [Hz], `damping_ratios`), convolved:
-    `(amplitudes, times [s])`; `tolerance` and `form` as in `shaper_impulses`."""
-    return convolve(
-        [
-            shaper_impulses(name, float(f), float(z), tolerance, form=form)
-            for f, z in zip(np.asarray(frequencies), np.asarray(damping_ratios))
-        ]
-    )
+    `(amplitudes, times [s])`; `tolerance` and `form` as in `shaper_impulses`.
+
+    Raises `ShaperRangeError` (a `ValueError`) when the convolution would have more than `MAX_IMPULSES` = 256
+    impulses (a k-impulse shaper over n modes has k**n); `design_move` then lists the shaper as not built."""
+    each = [
+        shaper_impulses(name, float(f), float(z), tolerance, form=form)
+        for f, z in zip(np.asarray(frequencies), np.asarray(damping_ratios))
+    ]
+    size = math.prod(len(a) for a, _ in each)
+    if size > MAX_IMPULSES:
+        k = len(each[0][0])
+        raise ShaperRangeError(
+            f"shaper_for_axis: {name} convolved over {len(each)} modes has {k}**{len(each)} = {size} impulses, more "
+            f"than MAX_IMPULSES = {MAX_IMPULSES}; shape fewer modes with it (the ones that ring), or use the minimax "
+            "design (`design_move`) or `design_shaper`, whose size does not grow with the number of modes",
+            note=f"not built: {size} impulses over {len(each)} modes (more than {MAX_IMPULSES})",
+        )
+    return convolve(each)
 
 
 def shaper_response(amplitudes, times, freq, zeta):
