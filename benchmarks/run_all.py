@@ -28,7 +28,13 @@ from pathlib import Path
 # its own calls, `jaxbelt._threads`).
 
 HERE = Path(__file__).resolve().parent
-HELPERS = {"run_all", "readme_table", "shortcuts", "coldstart"}  # coldstart: minutes of cold CLI runs, run alone
+HELPERS = {
+    "run_all",
+    "readme_table",
+    "shortcuts",
+    "coldstart",
+    "hostile_probe",
+}  # coldstart: minutes of cold CLI runs, run alone; hostile_probe: not a scene
 
 
 def discover() -> list[str]:

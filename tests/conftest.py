@@ -98,6 +98,11 @@ _COST = {
     "tests/test_reliability4.py": 20,
     "tests/test_gpu_bench.py": 13,
     "tests/test_display.py": 32,
+    "tests/test_klipper_shapers.py": 33,
+    "tests/test_certify.py": 30,
+    "tests/test_property_shaping.py": 28,
+    "tests/test_explore.py": 22,
+    "tests/test_psd.py": 15,
 }
 
 
