@@ -11,6 +11,8 @@
 - a minimax design on an axis with a mode far outside the move's bandwidth warns what to change.
 """
 
+import re
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -334,3 +336,19 @@ def test_steady_state_options_refused_by_name_before_compiling():
         with pytest.raises(ValueError, match=r"`rtol` and `atol` must not both be 0"):
             jb.speed_sweep(belt, [8.0], rtol=0.0, atol=0.0)
     assert box["n"] == 0
+
+
+def test_a_minimax_design_that_does_not_converge_says_which_solver_stopped_and_what_to_try(monkeypatch):
+    """The note of a non-converged minimax row names the LP solver, its iterations and residuals, and the arguments
+    to change (the solver's own outcome, made to fail here by declaring no design converged)."""
+    from jaxbelt.shaping import design as dsg
+
+    monkeypatch.setattr(dsg.MinimaxDesign, "converged", property(lambda self: False))
+    plan = jb.design_move(jb.ModalAxis([5.5], [0.02]), 0.1, 1.0, v_max=0.3, a_max=1.2, include=("minimax", "ZV"))
+    row = plan.candidate("minimax")
+    assert not row.ok and plan.best.name == "ZV"
+    assert re.match(
+        r"not converged \(gap .*; the LP's interior-point solver stopped after \d+ iterations, primal residual .*, "
+        r"dual .*\): leave out modes far above the move's bandwidth, or try a longer `move_time` or `smooth=False`",
+        row.note,
+    ), row.note

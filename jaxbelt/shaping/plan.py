@@ -704,7 +704,13 @@ def design_move(
                 note = f"certified within {100 * float(mm.worst - mm.lower_bound):.1e} % of the optimum"
             ok = mm.converged
             if not ok:
-                note = f"not converged (gap {float(mm.gap):.1e})"
+                lp = mm.lp
+                note = (
+                    f"not converged (gap {float(mm.gap):.1e}; the LP's interior-point solver stopped after "
+                    f"{int(np.asarray(lp.iterations))} iterations, primal residual {float(np.asarray(lp.primal_residual)):.1e}, "
+                    f"dual {float(np.asarray(lp.dual_residual)):.1e}): leave out modes far above the move's bandwidth, "
+                    "or try a longer `move_time` or `smooth=False`"
+                )
             elif mm.options.basis == "steps":  # the spline's multipliers bound next to nothing: steps only
                 bound = continuous_lower_bound(mm)
                 if certify_rtol is not None:
