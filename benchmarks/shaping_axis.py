@@ -101,6 +101,14 @@ def worst_against(axis, cmd, reference):
     return 100.0 * float(np.max(res / np.asarray(reference)[:, None]))
 
 
+def on_shaper_terms(axis, d, row, smooth: bool):
+    """The minimax plan on a classic shaper's own terms: at the time of its table `row`, with its peak velocity and
+    acceleration as the limits; the smooth design or the one with steps."""
+    return jb.design_move(
+        axis, d, row.move_time, v_max=row.peak_v, a_max=row.peak_a, uncertainty=U, include=("minimax",), smooth=smooth
+    )
+
+
 def compare(f, z, d=D, label=None):
     axis = jb.ModalAxis(f, z)
     t0 = time.perf_counter()
@@ -133,20 +141,9 @@ def compare(f, z, d=D, label=None):
     # equal time, the anchor's own peaks as limits; each design is measured against the same reference as the rows
     # above (the design itself weighs its modes by the unshaped move under the anchor's peaks: the same optimum for
     # one mode, a slightly different weighting for several)
-    eq = jb.design_move(
-        axis, d, anchor.move_time, v_max=anchor.peak_v, a_max=anchor.peak_a, uncertainty=U, include=("minimax",)
-    )
+    eq = on_shaper_terms(axis, d, anchor, smooth=True)
     mm_eq = eq.candidate("minimax")
-    steps = jb.design_move(
-        axis,
-        d,
-        anchor.move_time,
-        v_max=anchor.peak_v,
-        a_max=anchor.peak_a,
-        uncertainty=U,
-        include=("minimax",),
-        smooth=False,
-    ).candidate("minimax")
+    steps = on_shaper_terms(axis, d, anchor, smooth=False).candidate("minimax")
     stated = np.asarray(jb.residual_amplitudes(axis, mm_eq.command))
     replayed = replay(axis, eq)
     eq_worst = worst_against(axis, mm_eq.command, ref)

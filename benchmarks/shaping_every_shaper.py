@@ -27,7 +27,7 @@ import jax  # noqa: E402
 jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 from _common import write_results  # noqa: E402
-from shaping_axis import A_MAX, CLASSIC, NAMED_AXES, V_MAX, U, worst_against  # noqa: E402
+from shaping_axis import A_MAX, CLASSIC, NAMED_AXES, V_MAX, U, on_shaper_terms, worst_against  # noqa: E402
 
 import jaxbelt as jb  # noqa: E402
 
@@ -42,16 +42,7 @@ def every_shaper(label, f, z, d, shapers=CLASSIC):
             continue
         cells = dict(axis=label, shaper=row.name, time=row.move_time, shaper_worst=row.worst_percent)
         for smooth in (True, False):
-            plan = jb.design_move(
-                axis,
-                d,
-                row.move_time,
-                v_max=row.peak_v,
-                a_max=row.peak_a,
-                uncertainty=U,
-                include=("minimax",),
-                smooth=smooth,
-            )
+            plan = on_shaper_terms(axis, d, row, smooth)
             mm = plan.candidate("minimax")
             key = "smooth" if smooth else "steps"
             cells[key + "_worst"] = worst_against(axis, mm.command, ref) if mm.command is not None else float("nan")

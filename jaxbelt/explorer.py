@@ -122,6 +122,17 @@ def _bounds_of(p) -> tuple[float, float, bool]:
     return -math.inf, math.inf, False
 
 
+def _time_grid(owner: str, t_end: float, n_points, least: int = 2):
+    """The view's output times `(ts on the device, t on the host)`: `n_points` (an integer >= `least`) equally
+    spaced from 0 to `t_end` [s] (checked by the caller)."""
+    if isinstance(n_points, bool) or not isinstance(n_points, int | np.integer) or n_points < least:
+        raise ValueError(f"{owner}: option `n_points` must be an integer >= {least}; got {n_points!r}")
+    import jax
+
+    ts = jax.device_put(np.linspace(0.0, t_end, int(n_points)))
+    return ts, np.asarray(ts)
+
+
 def _declared_knob(
     cls,
     field: str,
@@ -358,13 +369,10 @@ class _Startup(_Scene):
         t_end = float(t_end)
         if not (math.isfinite(t_end) and t_end > 0):
             raise ValueError(f"{o}: option `t_end` (s) must be > 0; got {t_end}")
-        if isinstance(n_points, bool) or not isinstance(n_points, int | np.integer) or n_points < 2:
-            raise ValueError(f"{o}: option `n_points` must be an integer >= 2; got {n_points!r}")
+        self.ts, self.t = _time_grid(o, t_end, n_points)
         self.model, self.cmd = model, cmd
         import jax
 
-        self.ts = jax.device_put(np.linspace(0.0, t_end, int(n_points)))
-        self.t = np.asarray(self.ts)
         m = jax.device_get(model)
         knobs = [
             _declared_knob(BeltStartup, "k", m.k, "k", factors=(0.1, 10.0), log=True),
@@ -458,16 +466,12 @@ class _FourBar(_Scene):
         t_end = t1 if t_end is None else float(t_end)
         if not t_end >= t1:
             raise ValueError(f"{o}: option `t_end` must be >= the window's end {t1:g} s; got {t_end}")
-        n = int(round(t_end / 5e-4)) + 1 if n_points is None else n_points
-        if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < 3:
-            raise ValueError(f"{o}: option `n_points` must be an integer >= 3; got {n_points!r}")
+        self.ts, self.t = _time_grid(o, t_end, int(round(t_end / 5e-4)) + 1 if n_points is None else n_points, 3)
         if isinstance(tune_steps, bool) or not isinstance(tune_steps, int | np.integer) or tune_steps < 1:
             raise ValueError(f"{o}: option `tune_steps` must be an integer >= 1; got {tune_steps!r}")
         import jax
 
         self.drive, self.pid, self.window, self.tune_steps = drive, pid, (t0, t1), int(tune_steps)
-        self.ts = jax.device_put(np.linspace(0.0, t_end, int(n)))
-        self.t = np.asarray(self.ts)
         p = jax.device_get(pid)
         knobs = [
             _declared_knob(PID, "kp", p.kp, "Kp", lo=0.0, hi=3.0 * abs(float(p.kp)) or 240.0),
@@ -582,13 +586,10 @@ class _Shaping(_Scene):
         c = jax.device_get(cmd)
         T = float(c.duration)
         t_end = 1.5 * T if t_end is None else float(t_end)
-        if not t_end > 0:
+        if not (math.isfinite(t_end) and t_end > 0):
             raise ValueError(f"{o}: option `t_end` (s) must be > 0; got {t_end}")
-        if isinstance(n_points, bool) or not isinstance(n_points, int | np.integer) or n_points < 2:
-            raise ValueError(f"{o}: option `n_points` must be an integer >= 2; got {n_points!r}")
+        self.ts, self.t = _time_grid(o, t_end, n_points)
         self.plat, self.cmd = plat, cmd
-        self.ts = jax.device_put(np.linspace(0.0, t_end, int(n_points)))
-        self.t = np.asarray(self.ts)
         self.T = T
         g = np.asarray(c.gammas, dtype=float)
         self.n_exp = g.size

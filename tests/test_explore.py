@@ -236,3 +236,18 @@ def test_axis_design_move_is_the_librarys():
     assert ex.values["recommended"] == plan.best.name
     assert ex.values["worst_percent"] == pytest.approx(plan.best.worst_percent, rel=1e-9)
     assert ex.stats["dropped"] == 0 and not ex.error
+
+
+@pytest.mark.parametrize(
+    "scene, kw, message",
+    [
+        ("startup", dict(t_end=float("inf")), r"option `t_end` \(s\) must be > 0; got inf"),
+        ("shaping", dict(t_end=float("inf")), r"option `t_end` \(s\) must be > 0; got inf"),
+        ("startup", dict(n_points=1), r"option `n_points` must be an integer >= 2; got 1"),
+        ("shaping", dict(n_points=2.5), r"option `n_points` must be an integer >= 2; got 2.5"),
+        ("fourbar", dict(n_points=2), r"option `n_points` must be an integer >= 3; got 2"),
+    ],
+)
+def test_bad_time_grid_is_refused_by_name(scene, kw, message):
+    with pytest.raises(ValueError, match=message):
+        jb.explore(scene, **kw)

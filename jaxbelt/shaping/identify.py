@@ -354,6 +354,20 @@ def _covariance(r, sv, vt, scale, p: int, n_obs: int) -> np.ndarray:
     return cov_u * np.outer(scale, scale)
 
 
+def _fit_outcome(out, theta0, scale, n: int):
+    """The solver's outputs `(u, r, sv, vt, code, steps)` on the host, and what both fits read from them:
+    `(r, sv, vt, code, steps, finite, theta, f [Hz], zeta)` with $\theta = \theta_0 + $ `scale` $u$ in
+    (ln f, logit zeta, ...)."""
+    u, r, sv, vt, code, steps = jax.device_get(out)
+    finite = bool(
+        np.all(np.isfinite(r)) and np.all(np.isfinite(sv)) and np.all(np.isfinite(vt)) and np.all(np.isfinite(u))
+    )
+    theta = theta0 + scale * u
+    f = np.exp(theta[:n])
+    zeta = 1.0 / (1.0 + np.exp(-theta[n : 2 * n]))
+    return r, sv, vt, int(code), int(steps), finite, theta, f, zeta
+
+
 def _fmt(v) -> str:
     return "[" + ", ".join(f"{x:.6g}" for x in np.atleast_1d(v)) + "]"
 
@@ -446,7 +460,7 @@ def identify_axis(
     scale = np.concatenate([1.0 / (w0 * ring), np.ones(n), np.ones(2 * n)] + ([np.ones(1)] if offset else []))
     tau = dt * np.arange(N)
     yn = (y - mean) / spread
-    u, r, sv, vt, code, steps = _fit(
+    out = _fit(
         device_array(tau),
         device_array(yn),
         device_array(theta0),
@@ -457,15 +471,8 @@ def identify_axis(
         atol=atol,
         max_steps=max_steps,
     )
-    u, r, sv, vt, code, steps = jax.device_get((u, r, sv, vt, code, steps))
-    code, steps = int(code), int(steps)
+    r, sv, vt, code, steps, finite, theta, f, zeta = _fit_outcome(out, theta0, scale, n)
     start = f"started from the matrix-pencil estimate f = {_fmt(f0)} Hz, zeta = {_fmt(z0)}"
-    finite = bool(
-        np.all(np.isfinite(r)) and np.all(np.isfinite(sv)) and np.all(np.isfinite(vt)) and np.all(np.isfinite(u))
-    )
-    theta = theta0 + scale * u
-    f = np.exp(theta[:n])
-    zeta = 1.0 / (1.0 + np.exp(-theta[n : 2 * n]))
     if finite:
         f_std, z_std, significance = _standard_errors(theta, r, sv, vt, scale, n, p)
     if code != 0:
@@ -808,7 +815,7 @@ def identify_axis_from_psd(
     fp = np.concatenate([fs, np.full(pad, fs[-1])])
     lp = np.concatenate([logp, np.full(pad, logp[-1])])
     weight = np.concatenate([np.ones(N), np.zeros(pad)])
-    u, r, sv, vt, code, steps = _fit_psd(
+    out = _fit_psd(
         device_array(fp),
         device_array(lp),
         device_array(weight),
@@ -820,15 +827,8 @@ def identify_axis_from_psd(
         atol=atol,
         max_steps=max_steps,
     )
-    u, r, sv, vt, code, steps = jax.device_get((u, r, sv, vt, code, steps))
-    code, steps = int(code), int(steps)
+    r, sv, vt, code, steps, finite, theta, fi, zeta = _fit_outcome(out, theta0, scale, n)
     start = f"started from the half-power estimate f = {_fmt(f0)} Hz, zeta = {_fmt(z0)}"
-    finite = bool(
-        np.all(np.isfinite(r)) and np.all(np.isfinite(sv)) and np.all(np.isfinite(vt)) and np.all(np.isfinite(u))
-    )
-    theta = theta0 + scale * u
-    fi = np.exp(theta[:n])
-    zeta = 1.0 / (1.0 + np.exp(-theta[n : 2 * n]))
     if finite:
         var = np.diag(_covariance(r, sv, vt, scale, p, N))  # N points: the padding's residuals are 0
         f_std = fi * np.sqrt(var[:n])
