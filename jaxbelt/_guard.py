@@ -7,7 +7,7 @@ modules inside them) and collects each check as `(ok, message)`, `ok` a boolean 
 
 - `throw=True`: `eqx.error_if(value, ~ok, message)` — the program raises at run time, naming the
   parameter and its range, whatever part of the result the caller keeps (under `vmap`, if any
-  element is bad);
+  element is bad, naming the first bad element's index);
 - `throw=False`: the bad elements are set to NaN and reported through the returned flag.
 
 `eqx.error_if` raises through a host callback, and JAX's persistent compilation cache never stores
@@ -79,9 +79,38 @@ def traced_checks(*trees) -> list:
     return found
 
 
+#: the batch elements an error under `vmap` names one by one (one message each in the program); beyond, the error
+#: says "element >= BATCH_INDEX_CAP"
+BATCH_INDEX_CAP = 1024
+
+
+def _error_naming_element(x, pred, message: str):
+    """`eqx.error_if(x, pred, message)`, and under `jax.vmap` the message names the first invalid element of the
+    batch: "... (element 3 of the batch)" (a `custom_vmap` rule sees the batch axis that the function inside
+    cannot; nested vmaps: the innermost axis' index)."""
+
+    @jax.custom_batching.custom_vmap
+    def check(x, pred):
+        return eqx.error_if(x, pred, message)
+
+    @check.def_vmap
+    def rule(axis_size, in_batched, x, pred):
+        x_batched, pred_batched = in_batched
+        if not pred_batched:
+            return eqx.error_if(x, pred, message), x_batched
+        bad = jnp.reshape(pred, (axis_size, -1)).any(axis=1)
+        named = min(axis_size, BATCH_INDEX_CAP)
+        msgs = [f"{message} (element {i} of the batch)" for i in range(named)]
+        if axis_size > named:
+            msgs.append(f"{message} (element >= {named} of the batch)")
+        return eqx.branched_error_if(x, jnp.any(bad), jnp.minimum(jnp.argmax(bad), named), msgs), x_batched
+
+    return check(x, pred)
+
+
 @functools.partial(jax.custom_jvp, nondiff_argnums=(2,))
 def _checked(x, pred, message):
-    return eqx.error_if(x, pred, message)
+    return _error_naming_element(x, pred, message)
 
 
 @_checked.defjvp
@@ -91,8 +120,8 @@ def _checked_jvp(message, primals, tangents):
     # The tangent is scaled by a guarded 1: the backward pass of `grad` needs that factor, so the
     # check runs even when the caller keeps only the gradient (a check on the primal output alone
     # would be removed as dead code in `jit(grad(f))`).
-    one = eqx.error_if(jnp.ones((), dtype=x.dtype), pred, message)
-    return eqx.error_if(x, pred, message), tx * one
+    one = _error_naming_element(jnp.ones((), dtype=x.dtype), pred, message)
+    return _error_naming_element(x, pred, message), tx * one
 
 
 class _Off:
@@ -539,7 +568,11 @@ def reraising(owner: str):
                 if message is None:
                     raise
                 lead = message if message.startswith(f"{owner}:") else f"{owner}: {message}"
-                where = " (checked at run time inside vmap/grad: under vmap, in at least one element of the batch)"
+                where = (
+                    " (checked at run time inside vmap/grad)"
+                    if "of the batch)" in message
+                    else " (checked at run time inside vmap/grad: under vmap, in at least one element of the batch)"
+                )
                 raise ValueError(lead + (where if batched else "")) from e
 
         return call
