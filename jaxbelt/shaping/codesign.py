@@ -24,7 +24,7 @@ from .._checks import check_real, is_concrete
 from .._guard import checked, reraising
 from .._threads import blas_limited
 from ..models.axis import ModalAxis
-from .design import MinimaxDesign, max_distance, minimax_value
+from .design import MinimaxDesign, max_distance, minimax_design, minimax_value
 from .moves import fastest_time
 
 
@@ -152,44 +152,69 @@ def best_residual(axis: ModalAxis, move_time, design: MinimaxDesign):
     return checked(value, checks=[*checks, (jnp.isfinite(value), lost)])
 
 
-#: relative tolerance of `shortest_move_time`'s root on the residual (the LP's own value is solved to 1e-9)
+#: relative tolerance of `shortest_move_time`'s root on the design's grid (`refine=False`; the LP's own value is
+#: solved to 1e-9)
 ROOT_RTOL = 1e-8
+#: relative tolerance of `shortest_move_time`'s answer re-designed (`refine=True`): a design at the returned time,
+#: with the given design's discretisation, leaves a worst residual (fine grid) within this fraction of the target
+REDESIGN_RTOL = 5e-3
 #: how far `shortest_move_time` looks for the target without a bracket: up to this multiple of the design's time
 MAX_EXPANSION = 64.0
 
 
-def _root_time(axis, target, design, lo, hi, start, *, user_bracket: bool, iters: int = 60):
-    """Host root of V(axis, T) = target (V decreasing in T): Newton steps on T with the exact derivative dV/dT (the
-    LP's envelope), kept inside a bracket that shrinks as the signs of V - target are learnt; `hi` may be inf (the
-    bracket then grows by steps of 1.5 up to `MAX_EXPANSION` times `start`). A move time too short for the design's
-    spline (the LP infeasible there) counts as above the target. Stops at |V - target| <= `ROOT_RTOL` target: 3-6
-    LP solves from the design's own time, each with its derivative."""
+def _root_time(value, target, lo, hi, start, feasible, known, *, rtol: float, owner: str, iters: int = 60):
+    """Host root of `value(T) = target` (`value` decreasing in T, > 0): secant steps on log(value) against T, kept
+    inside a bracket [lo, hi] that shrinks as the signs of value - target are learnt; `hi` may be inf (the bracket
+    then grows by steps of 1.5 up to `MAX_EXPANSION` times `start`). `feasible(T)` False (a move time too short
+    for the design's command) counts as above the target. `known`: the `(T, value)` pairs evaluated so far (the
+    bracket and the first secant start from them; each evaluation is appended). Stops at |value - target| <= rtol
+    target. Returns `(T, value(T))`. Forward solves only: no derivative program is compiled."""
 
-    def value(T_):
-        return minimax_value(_problem(design, axis, T_), design.options, tau=jax.lax.stop_gradient(design.worst))
+    def g(v_):
+        return math.log(v_ / target)
 
-    value_and_slope = jax.value_and_grad(value)
-    feasible_from = float(design.command.duration)  # the design exists there: feasible at and above it
+    for T_k, v_k in known:
+        if v_k > target:
+            lo = max(lo, T_k)
+        else:
+            hi = min(hi, T_k)
+    pts = [(T_k, g(v_k)) for T_k, v_k in known[-2:]]  # (T, log(v / target)) of the last two evaluations
     T = float(start)
+    if len(pts) == 2 and pts[0][1] != pts[1][1]:
+        (t0, g0), (t1, g1) = pts
+        step = t1 - g1 * (t1 - t0) / (g1 - g0)
+        T = step if lo < step < hi else T
+    best = None
+    v = math.nan
     for _ in range(iters):
-        if T < feasible_from:
-            try:
-                _check_spline_reaches("shortest_move_time", axis, T, design)
-            except ValueError:
-                lo = T  # too short for the spline: above any target
-                T = 0.5 * (lo + hi) if math.isfinite(hi) else 0.5 * (lo + feasible_from)
-                continue
-            feasible_from = T
-        v, dv = (float(q) for q in value_and_slope(T))
-        if abs(v - target) <= ROOT_RTOL * target:
-            return T
+        if not feasible(T):
+            lo = T  # too short for the design's command: above any target
+            T = 0.5 * (lo + hi) if math.isfinite(hi) else 0.5 * (lo + float(start))
+            continue
+        v = float(value(T))
+        if not (math.isfinite(v) and v > 0):
+            raise ValueError(
+                f"{owner}: the minimax LP at move time {T:.6g} s returned the residual {v!r}; give a target closer "
+                "to the design's worst residual"
+            )
+        known.append((T, v))
+        if best is None or abs(g(v)) < abs(g(best[1])):
+            best = (T, v)
+        if abs(v - target) <= rtol * target:
+            return T, v
         if v > target:
             lo = T
         else:
             hi = T
         if math.isfinite(hi) and hi - lo <= 1e-12 * hi:
             break
-        step = T - (v - target) / dv if (math.isfinite(dv) and dv < 0) else math.nan
+        pts = [*pts[-1:], (T, g(v))]
+        step = math.nan
+        if len(pts) == 2 and pts[0][1] != pts[1][1]:
+            (t0, g0), (t1, g1) = pts
+            step = t1 - g1 * (t1 - t0) / (g1 - g0)
+        if len(pts) == 1:  # no slope yet: a 1 % step towards the target
+            step = T * (1.01 if v > target else 0.99)
         if math.isfinite(step) and lo < step < hi:
             T = step
         elif math.isfinite(hi):
@@ -198,30 +223,104 @@ def _root_time(axis, target, design, lo, hi, start, *, user_bracket: bool, iters
             T = T * 1.5
         else:
             raise ValueError(
-                f"shortest_move_time: the target {target:g} is not reached within {MAX_EXPANSION:g} times the design's "
-                f"move time ({MAX_EXPANSION * float(start):.4g} s: worst residual {v:.4g} there); give a larger "
-                "`target`"
+                f"{owner}: the target {target:g} is not reached within {MAX_EXPANSION:g} times the design's move "
+                f"time ({MAX_EXPANSION * float(start):.4g} s: worst residual {v:.4g} there); give a larger `target`"
             )
-    if not math.isfinite(hi) or (user_bracket and (lo == hi or abs(v - target) > 1e-3 * target)):
+    if best is None or not math.isfinite(hi):
         raise ValueError(
-            f"shortest_move_time: the target {target:g} is not reached within the bracket; the worst residual is "
-            f"{v:.4g} at {T:.6g} s; pass a wider `bracket`, or none (it then finds itself)"
+            f"{owner}: the target {target:g} is not reached within the bracket; the worst residual is {v:.4g} at "
+            f"{T:.6g} s; pass a wider `bracket`, or none (it then finds itself)"
         )
-    return T
+    return best
+
+
+def _redesign(axis, design: MinimaxDesign, T: float) -> MinimaxDesign:
+    """A fresh design at move time `T` [s] with `design`'s discretisation and references (the same compiled
+    programs: no new compilation): its own frequency grid, exchanged from the start."""
+    return minimax_design(_problem(design, axis, T), design.options)
+
+
+def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, refine: bool) -> float:
+    """The shortest move time: the root of the LP's value on `design`'s grid, `V(T) = c target` (to `ROOT_RTOL`).
+
+    `refine=False`: c = 1. `refine=True`: c is calibrated so that a fresh design at the root (`_redesign`: its own
+    frequency exchange) leaves a fine-grid worst within `REDESIGN_RTOL` of the target: c <- c target / (fresh
+    design's fine worst), from c = LP value / fine worst of `design` itself (usually 1-2 fresh designs). The answer
+    stays a root on `design`'s grid at a fixed level, so its derivative is the implicit one on that grid."""
+    o = "shortest_move_time"
+    feasible_from = [float(design.command.duration)]  # the design exists there: feasible at and above it
+
+    def feasible(T):
+        if T >= feasible_from[0]:
+            return True
+        try:
+            _check_spline_reaches(o, axis, T, design)
+        except ValueError:
+            return False
+        feasible_from[0] = T
+        return True
+
+    tau = jax.lax.stop_gradient(design.worst)
+    known: list[tuple[float, float]] = []  # the LP's values on the design's grid evaluated so far
+
+    def on_grid(T_):
+        return minimax_value(_problem(design, axis, T_), design.options, tau=tau)
+
+    def root(goal, start_, rtol):
+        # the pairs known are values of the same function: re-used for the bracket and the secant at a new level
+        T_, v_ = _root_time(on_grid, goal, lo, hi, start_, feasible, known, rtol=rtol, owner=o)
+        if user_bracket and abs(v_ - goal) > 1e-3 * goal:
+            raise ValueError(
+                f"{o}: the target {target:g} is not reached within the bracket; the worst residual is {v_:.4g} at "
+                f"{T_:.6g} s; pass a wider `bracket`, or none (it then finds itself)"
+            )
+        return T_
+
+    if not refine:
+        return root(target, start, ROOT_RTOL)
+    c = float(design.worst) / float(design.fine_worst)
+    T, best = start, (start, math.inf, c)
+    for _ in range(6):
+        T = root(c * target, T, 1e-5)  # to 1e-5 while the level is calibrated; the answer to ROOT_RTOL
+        d = _redesign(axis, design, T)
+        if not d.converged:
+            raise ValueError(
+                f"{o}: the design re-made at move time {T:.6g} s did not converge (gap {float(d.gap):.1e}); pass "
+                "`refine=False` for the root on the design's own grid"
+            )
+        f = float(d.fine_worst)
+        if abs(f - target) < abs(best[1] - target):
+            best = (T, f, c)
+        if abs(f - target) <= REDESIGN_RTOL * target:
+            break
+        c *= target / f
+    return root(best[2] * target, best[0], ROOT_RTOL)
 
 
 @blas_limited
-def shortest_move_time(axis: ModalAxis, target, design: MinimaxDesign, *, bracket=None):
+def shortest_move_time(axis: ModalAxis, target, design: MinimaxDesign, *, bracket=None, refine: bool = True):
     """The least move time [s] at which the minimax design on `axis` reaches the worst residual `target` (a
-    fraction of the references; e.g. `design.worst`), on the frequency grid of `design`.
+    fraction of the references; e.g. `design.fine_worst`, the worst on the fine grid, which `design_move`'s table
+    reports as a percentage).
+
+    - `refine=True` (default): the time at which a design *re-made there* with `design`'s discretisation (its
+      knots, cuts and grid sizes: `minimax_design(problem at T, design.options)`, which is what `design_move`
+      runs when it picks the same options) leaves a worst residual on its fine grid within `REDESIGN_RTOL` =
+      0.5 % of `target` (where the re-made designs cannot get that close, the closest found). It is the root of
+      the LP's value on `design`'s grid at a level c `target`, c calibrated by 1-3 re-made designs.
+    - `refine=False`: the root on `design`'s own frequency grid at the level `target` itself, to a relative
+      `ROOT_RTOL` = 1e-8 of the LP's value (`best_residual(axis, T, design) = target`). Exact for that grid; a
+      design re-made at that time exchanges its own grid and lands 1-4 % above the target.
 
     Differentiable with respect to the axis by the implicit function theorem (`jax.grad`, `jax.jvp` called
-    eagerly: the root is found by bisection on concrete values, so not inside `jax.jit`). `bracket`: the search
-    interval [s] (default: none: the search starts at the design's own move time and finds its bracket, from the
-    shortest feasible move up to `MAX_EXPANSION` = 64 times the design's time); a `bracket` must hold the root, and
-    only feasible move times (the limits must allow the distance at its lower end). The root is solved to a
-    relative `ROOT_RTOL` = 1e-8 on the residual, by Newton steps with the LP's exact derivative (3-6 LP solves from
-    the design's time; no recompilation: the design's knots and grid are kept, and the move time is an argument).
+    eagerly: the root is found on concrete values, so not inside `jax.jit`): the derivative of the root on
+    `design`'s grid, at the level found (with `refine`, the calibration held fixed; finite differences of the
+    refined answer also see the calibration move within its 0.5 %: compare with `refine=False`). `bracket`: the
+    search interval [s] (default: none: the search starts at the design's own move time and finds its bracket,
+    from the shortest feasible move up to `MAX_EXPANSION` = 64 times the design's time); a `bracket` must hold
+    the root, and only feasible move times (the limits must allow the distance at its lower end). Forward LP
+    solves only (secant steps; no derivative program is compiled until you differentiate) and no recompilation:
+    the design's discretisation is kept, and the move time is an argument.
 
     Raises `ValueError` at the call for a `design` that is not a `MinimaxDesign`, a `target` that is not finite
     and > 0, and a `bracket` that is not `(lo, hi)` with 0 < lo < hi or whose lower end is shorter than the
@@ -235,6 +334,8 @@ def shortest_move_time(axis: ModalAxis, target, design: MinimaxDesign, *, bracke
             f"{o}: parameter `target` (a worst residual, as a fraction of the references) must be a finite scalar "
             f"> 0; got {target!r}"
         )
+    if not isinstance(refine, bool | np.bool_):
+        raise ValueError(f"{o}: parameter `refine` must be True or False; got {refine!r}")
     T0 = float(design.command.duration)
     t_min = _fastest(design)
     if bracket is None:
@@ -250,14 +351,17 @@ def shortest_move_time(axis: ModalAxis, target, design: MinimaxDesign, *, bracke
         _check_move_time(o, "bracket", lo, design, "lower end of the bracket")
     start = T0 if (lo < T0 < hi) else 0.5 * (lo + hi)
     leaves, treedef = jax.tree_util.tree_flatten(axis)
-    return _shortest(tuple(leaves), float(target), treedef, design, float(lo), float(hi), start, bracket is not None)
+    args = (float(target), treedef, design, float(lo), float(hi), start, bracket is not None, bool(refine))
+    return _shortest(tuple(leaves), *args)
 
 
-def _shortest(leaves, target, treedef, design, lo, hi, start, user_bracket):
+def _shortest(leaves, target, treedef, design, lo, hi, start, user_bracket, refine):
     @jax.custom_jvp
     def f(leaves):
         axis = jax.tree_util.tree_unflatten(treedef, leaves)
-        return jnp.asarray(_root_time(axis, target, design, lo, hi, start, user_bracket=user_bracket))
+        return jnp.asarray(
+            _shortest_time(axis, target, design, lo, hi, start, user_bracket=user_bracket, refine=refine)
+        )
 
     @f.defjvp
     def f_jvp(primals, tangents):
