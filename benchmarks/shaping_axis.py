@@ -101,11 +101,20 @@ def worst_against(axis, cmd, reference):
     return 100.0 * float(np.max(res / np.asarray(reference)[:, None]))
 
 
-def on_shaper_terms(axis, d, row, smooth: bool):
+def on_shaper_terms(axis, d, row, smooth: bool, jerk: bool = False):
     """The minimax plan on a classic shaper's own terms: at the time of its table `row`, with its peak velocity and
-    acceleration as the limits; the smooth design or the one with steps."""
+    acceleration (and, with `jerk`, its peak jerk) as the limits; the smooth design or the one with steps (with a
+    jerk limit: ramps, a jerk that may jump)."""
     return jb.design_move(
-        axis, d, row.move_time, v_max=row.peak_v, a_max=row.peak_a, uncertainty=U, include=("minimax",), smooth=smooth
+        axis,
+        d,
+        row.move_time,
+        v_max=row.peak_v,
+        a_max=row.peak_a,
+        j_max=row.peak_j if jerk else None,
+        uncertainty=U,
+        include=("minimax",),
+        smooth=smooth,
     )
 
 

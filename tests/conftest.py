@@ -96,6 +96,7 @@ _COST = {
     "tests/test_compat.py": 60,
     "tests/test_outputs.py": 60,
     "tests/test_reliability4.py": 20,
+    "tests/test_far_modes.py": 30,
     "tests/test_gpu_bench.py": 13,
     "tests/test_display.py": 32,
     "tests/test_klipper_shapers.py": 33,
@@ -103,6 +104,7 @@ _COST = {
     "tests/test_property_shaping.py": 28,
     "tests/test_explore.py": 22,
     "tests/test_psd.py": 15,
+    "tests/test_ramps_design.py": 25,
 }
 
 

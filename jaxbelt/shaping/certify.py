@@ -30,6 +30,13 @@ $|\\varphi'|$), else at most $\\delta|\\varphi(m)| + L\\delta^2/4$ on cells refi
 
 The bound is as good as the multipliers: at a design whose spline is near the continuous optimum it is near that
 optimum; at a coarse design it can be far below it (then more knots make both the design and the bound better).
+
+**A jerk limit** (the spline or the ramps basis with `j_max`): the bound stays rigorous (the multipliers are any,
+the relaxation drops the jerk limit, which only raises the least residual), but it bounds the problem without the
+jerk limit, and the LP's jerk multipliers are left out: where the jerk limit binds, the bound can lie far below the
+design. `design_move` computes it for the steps basis only (no jerk limit); for the ramps basis (its velocity row j
+is the middle Bernstein coefficient of $v$ on $[(j + 1)h, (j + 2)h]$, not a value of $v$) $\tau_j = (j + 1)h$ is
+taken, which any multiplier allows.
 """
 
 from __future__ import annotations
@@ -73,7 +80,8 @@ def _phi_parts(design):
     off = P * MK + 2 * J
     zv_p, zv_m = z[off : off + J - 1] / S, z[off + J - 1 : off + 2 * (J - 1)] / S
     mu = zv_p - zv_m
-    first = 2 if o.basis == "spline" else 1  # velocity row j bounds v(tau_j), tau_j = (j + first) h
+    # velocity row j bounds v(tau_j), tau_j = (j + first) h (ramps: rigorous for any tau_j, see the module docstring)
+    first = 2 if o.basis == "spline" else 1
     # equalities: sum c / (h aref) ... the first is sum c_hat = int a / (h aref), the second x(T) / D
     y1 = y[0] / (S * h * aref)
     y2 = y[1] / S
@@ -141,7 +149,8 @@ def _abs_integral(parts, cells_per_knot: int = 32, refine: int = 64) -> float:
 def continuous_lower_bound(design) -> float:
     """A rigorous lower bound, in the units of the design's `worst` (a fraction of the unshaped move's worst residual,
     mode by mode), on the least worst residual that any command within the same limits, distance and time can
-    leave over the design's band: smooth or not, of any basis (see the module docstring). `design`: a solved
+    leave over the design's band: smooth or not, of any basis (see the module docstring; a jerk limit is dropped, so
+    for a jerk-limited design it may lie far below the least residual). `design`: a solved
     `MinimaxDesign` (`plan.minimax`). The bound is 0 where the design's multipliers give nothing better (it is never
     negative: a residual is not)."""
     parts = _phi_parts(design)

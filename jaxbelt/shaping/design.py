@@ -22,6 +22,14 @@ grid points exceeds $t$ by at most $1/\\cos(\\pi/P) - 1$, 1.9 % for P = 16). $R_
 (the unshaped move's worst residual over the band, `reference_residuals`), so $t$ is the worst residual as a
 fraction of the unshaped move's.
 
+**Three command spaces** (`DesignOptions.basis`), each the B-splines of degree d on N uniform intervals that lie
+inside $[0, T]$ (N - d of them), with the same identities ($\\varphi_1(-sh)^{d+1}$ in the residual, $x(T) =
+h^2\\sum_j c_j(N - j - (d+1)/2)$): `"spline"` (cubic, d = 3, above); `"steps"` (d = 0: the acceleration is constant
+on each interval and jumps between them, no jerk limit; |a| and |v| limits exact); `"ramps"` (d = 1, hat functions:
+the acceleration is continuous and linear on each interval, the jerk constant on each and jumping between them, as
+a classic shaper's S-curve's; |a| and |jerk| exact, |v| through the velocity's coefficients, conservative by at
+most $j_{max}h^2/8$).
+
 **The frequency grid by exchange.** Between grid points the residual of the optimum can rise well above $t$
 (the optimum presses the grid points down). The design starts from a uniform grid of `n_freq` factors per
 mode, evaluates the residual on a fine grid, adds the worst new frequencies (local maxima above
@@ -58,9 +66,12 @@ _LP_COMPILE = QUICK_COMPILE
 
 #: knot counts the design chooses from (one compiled program per count and axis size)
 KNOT_COUNTS = (32, 48, 64, 96, 128, 160, 192, 256)
-#: the least interval count of the steps basis: its accelerations only approach a bang-bang optimum's switching
-#: times, so it needs more intervals than the spline needs knots
+#: the least interval count of the steps and ramps bases: their accelerations only approach a bang-bang (or, with a
+#: jerk limit, bang-bang in jerk) optimum's switching times, so they need more intervals than the spline needs knots
 MIN_STEPS = 128
+#: the command spaces (`DesignOptions.basis`) and the degree d of their acceleration's B-splines on uniform knots:
+#: N - d of them lie inside [0, T]; each integrates against $e^{s(T-t)}$ as $h e^{s(T-t_j)}\\varphi_1(-sh)^{d+1}$
+_DEGREE = {"spline": 3, "steps": 0, "ramps": 1}
 #: the largest certified relative optimality gap (rigorous dual bound) a design is accepted with
 CERTIFIED_GAP = 1e-2
 #: or the largest certified absolute gap, in units of the references (the unshaped move's worst residual, mode by
@@ -84,20 +95,25 @@ def certified(worst, lower_bound) -> bool:
 class DesignOptions(NamedTuple):
     """The discretisation of the minimax LP (all static: each combination is one compiled program).
 
-    - `n_knots`: N, knot intervals of the B-spline acceleration (N - 3 coefficients);
+    - `n_knots`: N, knot intervals of the acceleration (N - 3 coefficients of the spline, N steps, N - 1 ramp
+      nodes);
     - `n_freq`: frequency factors per mode of the starting grid on $[1 - u, 1 + u]$ (odd: the nominal
       frequency is one of them);
     - `n_extra`: reserved rows per mode for the frequencies the exchange adds;
     - `n_rounds`: exchange rounds at most; `n_fine`: points per mode of the fine grid it checks;
     - `n_angles`: P, cuts of the modulus constraint;
-    - `jerk`: whether a jerk limit is imposed (the spline basis only);
+    - `jerk`: whether a jerk limit is imposed (the spline and ramps bases; the steps basis has none);
     - `exchange_tol`: the exchange stops when the worst ratio on the fine grid is within this fraction of the LP's
       (`EXCHANGE_TOL` = 3 % by default; the certified designs of `design_move(..., certify_rtol=...)` use less);
     - `basis`: the command space. `"spline"`: the acceleration is a cubic B-spline on N knot intervals (continuous
       acceleration and jerk; limits through the spline's coefficients, a little conservative); `"steps"`: the
       acceleration is constant on each of N equal intervals and may jump between them, as a shaped trapezoid's
       does (a `PiecewiseMove`; its limits are exact: |a| at its N values, |v| at the interval ends, where a
-      piecewise linear velocity peaks).
+      piecewise linear velocity peaks); `"ramps"`: the acceleration is continuous and linear on each of N equal
+      intervals (nodes $a_k$ at $t_k = kh$, $a_0 = a_N = 0$: N - 1 hat functions), so the jerk is constant on each
+      interval and may jump between them, as a shaped S-curve's does (a `PiecewiseMove`; |a| and |jerk| limits
+      exact, |v| through the velocity's B-spline coefficients: guaranteed everywhere, conservative by at most
+      $j_{max}h^2/8$ [m/s]).
     """
 
     n_knots: int
@@ -112,17 +128,27 @@ class DesignOptions(NamedTuple):
 
 
 def n_coefficients(opts: DesignOptions) -> int:
-    """The LP's command variables: N - 3 B-spline coefficients, or N interval accelerations."""
-    return opts.n_knots - 3 if opts.basis == "spline" else opts.n_knots
+    """The LP's command variables: N - 3 B-spline coefficients (spline), N interval accelerations (steps) or N - 1
+    node accelerations (ramps)."""
+    if opts.basis not in _DEGREE:
+        raise ValueError(f"DesignOptions: `basis` must be one of {tuple(_DEGREE)}; got {opts.basis!r}")
+    return opts.n_knots - _DEGREE[opts.basis]
 
 
 def design_command(coef, move_time, opts: DesignOptions):
-    """The command of the design's variables `coef` [m/s²]: a `SplineMove`, or (steps) a `PiecewiseMove` whose
-    acceleration is coef[k] on the k-th of N equal intervals of [0, T]."""
+    """The command of the design's variables `coef` [m/s²] over `move_time` T [s]: a `SplineMove`, or a
+    `PiecewiseMove` whose acceleration is coef[k] on the k-th of N equal intervals of [0, T] (steps), or is linear
+    between the nodes $a(kh) = $ coef[k - 1], $a(0) = a(T) = 0$, $h = T/N$ (ramps: its `ramps` are the jumps of the
+    jerk at $t_k = kh$, its `steps` zero)."""
     if opts.basis == "spline":
         return SplineMove(coef, move_time)
     N = opts.n_knots
     times = jnp.arange(N) * (move_time / N)
+    if opts.basis == "ramps":
+        zero = jnp.zeros((1,), coef.dtype)
+        jerk = jnp.diff(jnp.concatenate([zero, coef, zero])) / (move_time / N)  # (N,): on [t_k, t_k + h]
+        ramps = jnp.diff(jerk, prepend=zero)
+        return PiecewiseMove(times, jnp.zeros_like(ramps), ramps, move_time)
     steps = jnp.diff(coef, prepend=jnp.zeros((1,), coef.dtype))
     return PiecewiseMove(times, steps, jnp.zeros_like(steps), move_time)
 
@@ -131,7 +157,8 @@ def default_options(
     axis_freqs, move_time, uncertainty, jerk: bool, knots_per_cycle: float = 6.0, basis: str = "spline"
 ) -> DesignOptions:
     """Knots and frequency points that resolve the band (host decision from concrete values): `knots_per_cycle`
-    knots per period of the highest frequency of the band over the move (at least 48); a starting grid of about
+    knots per period of the highest frequency of the band over the move (at least 48; the steps and ramps bases at
+    least `MIN_STEPS` intervals); `basis`: "spline", "steps" or "ramps" (`DesignOptions`); a starting grid of about
     one point per radian of $2u\\omega T$ (the residual's own scale in frequency is $1/T$), 9 to 41 points.
 
     Near the shortest feasible time more knots pay: a finer spline comes closer to the time-optimal
@@ -140,7 +167,7 @@ def default_options(
     cycles = fmax * float(move_time)
     need = max(48, int(math.ceil(knots_per_cycle * cycles)))
     n_knots = next((n for n in KNOT_COUNTS if n >= need), KNOT_COUNTS[-1])
-    if basis == "steps":
+    if basis in ("steps", "ramps"):
         n_knots = max(n_knots, MIN_STEPS)
     if float(uncertainty) == 0.0:
         return DesignOptions(n_knots=n_knots, n_freq=1, n_extra=0, n_rounds=0, n_fine=1, jerk=jerk, basis=basis)
@@ -187,10 +214,13 @@ def lp_data_grouped(problem: MinimaxProblem, opts: DesignOptions, scale_t: float
     wd = w * jnp.sqrt(1.0 - z**2)
     s = -z * w + 1j * wd  # (modes, K)
     tj = jnp.arange(J) * h
-    # the integral of e^{s(T - t)} over the j-th basis function: a cubic B-spline (on [t_j, t_j + 4h]), or the
-    # indicator of [t_j, t_j + h]
-    power = 4 if opts.basis == "spline" else 1
-    kern = h * jnp.exp(s[..., None] * (T - tj)) * phi1(-s * h)[..., None] ** power  # (modes, K, J)
+    # the integral of e^{s(T - t)} over the j-th basis function, the degree-d B-spline on [t_j, t_j + (d + 1)h]:
+    # a cubic B-spline (d = 3), the indicator of [t_j, t_j + h] (steps, d = 0), or the hat on [t_j, t_j + 2h]
+    # (ramps, d = 1); the cardinal B-spline of degree d is d + 1 boxes convolved: phi1(-sh)^(d + 1)
+    power = _DEGREE[opts.basis] + 1
+    # written as e^{s(T - t_j - power h)} phi1(sh)^power (phi1(-z) = e^{-z} phi1(z)): the exponent's real part is
+    # <= 0 on the basis' support, so a heavily damped mode underflows to 0 instead of overflowing (inf * 0 = NaN)
+    kern = h * jnp.exp(s[..., None] * (T - tj - power * h)) * phi1(s * h)[..., None] ** power  # (modes, K, J)
     weight = problem.mask * jnp.abs(ax.gains)[:, None] / (wd * jax.lax.stop_gradient(problem.reference)[:, None])
     kern = kern * (weight * aref)[..., None]
     theta = 2.0 * jnp.pi * jnp.arange(opts.n_angles) / opts.n_angles
@@ -201,10 +231,14 @@ def lp_data_grouped(problem: MinimaxProblem, opts: DesignOptions, scale_t: float
     res_rhs = 1.0 - used  # an unused row reads 0 <= 1: never active
     # --- limits through the B-spline coefficients (convex hull: never exceeded anywhere, not only at check times):
     # a = sum c_j B_j with B_j >= 0 summing to <= 1, so |a| <= max |c_j|; the velocity is the quartic spline with
-    # coefficients h * (partial sums of c), the jerk the quadratic spline with coefficients (c_j - c_{j-1}) / h
+    # coefficients h * (partial sums of c), the jerk the quadratic spline with coefficients (c_j - c_{j-1}) / h.
+    # Steps: the coefficients are the N accelerations and the velocity at the interval ends (exact); ramps: the
+    # node accelerations (exact), the velocity's quadratic B-spline coefficients (the middle Bernstein coefficient
+    # of each interval: above the velocity's peak there by at most |jerk| h^2 / 8) and the N interval jerks
+    # (c_j - c_{j-1}) / h, c_{-1} = c_{N-1} = 0 (exact)
     eye = jnp.eye(J)
     blocks = [(eye * aref, problem.a_max), (jnp.tril(jnp.ones((J - 1, J))) * h * aref, problem.v_max)]
-    if opts.jerk and opts.basis == "spline":
+    if opts.jerk and opts.basis != "steps":
         diff = jnp.eye(J + 1, J) - jnp.eye(J + 1, J, k=-1)
         blocks.append((diff * aref / h, problem.j_max))
     lim_rows, lim_rhs = [], []
@@ -215,9 +249,10 @@ def lp_data_grouped(problem: MinimaxProblem, opts: DesignOptions, scale_t: float
     G = jnp.concatenate([res_rows, *lim_rows], axis=0)
     hv = jnp.concatenate([res_rhs, *lim_rhs])
     # --- rest to rest and the distance (x(T) = h^2 aref sum c_j (N - 2 - j) = D, i.e. sum c_j (N-2-j) / N^2 = 1;
-    # steps: x(T) = h^2 aref sum c_j (N - j - 1/2))
+    # in general x(T) = int (T - t) a = h^2 aref sum c_j (N - j - (d + 1)/2), the B-spline's centroid at
+    # t_j + (d + 1)h/2: steps N - j - 1/2, ramps N - j - 1)
     j = jnp.arange(J, dtype=G.dtype)
-    lever = N - 2 - j if opts.basis == "spline" else N - j - 0.5
+    lever = N - j - 0.5 * (_DEGREE[opts.basis] + 1)
     A = jnp.stack(
         [jnp.concatenate([jnp.ones((J,)), jnp.zeros((1,))]), jnp.concatenate([lever / N**2, jnp.zeros((1,))])]
     )
@@ -341,7 +376,7 @@ def _fine_ratios(problem: MinimaxProblem, opts: DesignOptions, coef):
 class MinimaxDesign(eqx.Module):
     """A solved minimax design.
 
-    - `command`: the `SplineMove` (basis "spline") or `PiecewiseMove` (basis "steps") [m, s];
+    - `command`: the `SplineMove` (basis "spline") or `PiecewiseMove` (basis "steps" or "ramps") [m, s];
     - `worst`: the LP's optimal value: the worst residual over the final frequency grid as a fraction of each
       mode's reference (the unshaped move's worst residual); `fine_worst`: the same on the fine grid;
     - `lower_bound`: a certified lower bound of the LP's optimum (equal to `worst` at a certified vertex);

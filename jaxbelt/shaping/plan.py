@@ -4,7 +4,8 @@ The candidates (all rest to rest over the same distance, all within the same |v|
 
 - **minimax** — the convex design (`jaxbelt.shaping.design`): the least worst-case residual over the band that
   a move of its space can leave (a cubic B-spline acceleration; with `smooth=False`, an acceleration that may
-  jump between N equal intervals), solved to a certified optimum; with `smooth=False` also a rigorous lower bound
+  jump between N equal intervals, or, with `j_max`, a continuous piecewise linear acceleration whose jerk may jump
+  between them), solved to a certified optimum; with `smooth=False` and no jerk limit also a rigorous lower bound
   on what any command can leave (`jaxbelt.shaping.certify`);
 - **ZV, MZV, ZVD, EI, 2-hump EI, 3-hump EI** — the classic input shapers as Klipper's shaper definitions give
   them (`jaxbelt.shaping.shapers`; an EI fit outside its damping range is listed, not built), one per mode and
@@ -124,7 +125,7 @@ class MovePlan:
     band [m]) and the minimax design's details (`minimax`: a `MinimaxDesign` or None); `continuous_bound`: a rigorous
     lower bound on the least worst residual any command within the plan's limits, distance and time can leave over
     the band, as a fraction of the references (the minimax row's worst % is at least 100x this; NaN without a
-    converged `smooth=False` minimax design; `jaxbelt.shaping.certify`)."""
+    converged `smooth=False` minimax design without a jerk limit; `jaxbelt.shaping.certify`)."""
 
     axis: ModalAxis
     distance: float
@@ -504,10 +505,10 @@ def _shaped(axis, name, distance, T, v_max, a_max, j_max):
 
 def _minimax_options(axis, T_guess: float, u: float, j_max, fixed_time: bool, smooth: bool = True):
     """The minimax design's options: 6 knots per cycle of the highest mode at a given move time, 12 when the
-    shortest time is searched; the spline basis (`smooth`) or acceleration steps."""
-    return _design.default_options(
-        axis.frequencies, T_guess, u, j_max is not None, 6.0 if fixed_time else 12.0, "spline" if smooth else "steps"
-    )
+    shortest time is searched; the spline basis (`smooth`), else acceleration ramps (piecewise-constant jerk) with a
+    jerk limit `j_max`, acceleration steps without one."""
+    basis = "spline" if smooth else ("steps" if j_max is None else "ramps")
+    return _design.default_options(axis.frequencies, T_guess, u, j_max is not None, 6.0 if fixed_time else 12.0, basis)
 
 
 class _Minimax:
@@ -554,6 +555,115 @@ class _Minimax:
         prepare_peaks(cmd)
 
 
+#: the largest real exponent (zeta omega (1 + u) h, times 4 for the spline) at which the minimax LP's kernel of a mode
+#: is representable in float64 (e^709 overflows; the LP's kernel holds e^{-sh}): beyond it a mode's rows are NaN
+_LP_EXPONENT = 600.0
+
+
+@dataclasses.dataclass(frozen=True)
+class _FarModes:
+    """How the minimax design treats the modes of an axis at a move time (`_far_modes`).
+
+    - `kept`: indices of the modes the LP weighs; `far`: of the modes far above the finest knot grid's Nyquist
+      frequency; `left_out`: those of `far` the LP does not weigh (all of them for the spline basis; for the
+      steps, only those whose LP rows cannot be represented), each with its reason;
+    - `nyquist_hz`: `KNOT_COUNTS[-1] / (2 T)` [Hz], the Nyquist frequency of the finest grid."""
+
+    kept: tuple[int, ...]
+    far: tuple[int, ...]
+    left_out: tuple[tuple[int, str], ...]
+    nyquist_hz: float
+
+
+def _sub_axis(axis: ModalAxis, idx) -> ModalAxis:
+    """The `ModalAxis` of the modes `idx` of `axis` (frequencies, damping ratios and gains kept)."""
+    idx = np.asarray(idx, dtype=int)
+    return ModalAxis(
+        np.asarray(axis.frequencies)[idx], np.asarray(axis.damping_ratios)[idx], np.asarray(axis.gains)[idx]
+    )
+
+
+def _far_modes(axis: ModalAxis, T: float, u: float, j_max, fixed_time: bool, smooth: bool) -> _FarModes:
+    """Split the modes of `axis` for the minimax design at the move time `T` [s] (band ±`u`).
+
+    A mode is *far* when its whole band lies above the Nyquist frequency of the finest knot grid the design has,
+    $f_i(1 - u) > N_{max}/(2T)$, $N_{max}$ = `KNOT_COUNTS[-1]`: no basis of the design resolves it (a 1 MHz or a
+    2 kHz mode in a 0.8 s move: 160 Hz), and it does not set the knots (the other modes do).
+
+    - spline basis (`smooth`): the acceleration and its jerk are continuous, so a far mode sees only the spline's
+      smoothed ends: its residual falls like $(\\omega h)^{-3}$ of the unshaped move's (1e-15 at 1 MHz beside
+      7.3 Hz), and its LP rows hold $\\varphi_1(-sh)^4$, which overflows (NaN) for a damped 1 MHz mode. Every far
+      mode is left out of the LP; `design_move` computes its residual exactly for the command and says so.
+    - steps (or any basis whose acceleration jumps): each jump excites a far mode as the trapezoid's do (the last
+      one is not damped away before the end), so the LP keeps it wherever its rows are representable
+      ($\\zeta\\omega(1 + u)\\,h$ below `_LP_EXPONENT`); only the others are left out, with their exact residual.
+    """
+    f = np.asarray(axis.frequencies, dtype=float)
+    z = np.asarray(axis.damping_ratios, dtype=float)
+    nyq = _design.KNOT_COUNTS[-1] / (2.0 * T)
+    far = tuple(int(i) for i in np.flatnonzero(f * (1.0 - u) > nyq))
+    resolved = [i for i in range(f.size) if i not in far]
+    if smooth:
+        why = (
+            f"its band {{lo:.4g}}-{{hi:.4g}} Hz lies above {nyq:.4g} Hz, the Nyquist frequency of the finest knot grid"
+        )
+        left = tuple((i, why.format(lo=f[i] * (1 - u), hi=f[i] * (1 + u))) for i in far)
+        return _FarModes(tuple(resolved), far, left, nyq)
+    # the steps' intervals: those the resolved modes set (the least count without them)
+    sub = _sub_axis(axis, resolved) if resolved else axis
+    opts = _minimax_options(sub, T, u, j_max, fixed_time, smooth)
+    h = T / opts.n_knots
+    power = 4.0 if opts.basis == "spline" else (1.0 if opts.basis == "steps" else 2.0)
+    expo = power * z * 2.0 * np.pi * f * (1.0 + u) * h
+    left = tuple(
+        (
+            i,
+            f"its damping time 1/(zeta omega) = {1.0 / (z[i] * 2 * np.pi * f[i]):.3g} s is far below one of the "
+            f"{opts.n_knots} steps ({h:.3g} s): the LP cannot represent it (only the last step excites it)",
+        )
+        for i in far
+        if expo[i] > _LP_EXPONENT
+    )
+    out = {i for i, _ in left}
+    return _FarModes(tuple(i for i in range(f.size) if i not in out), far, left, nyq)
+
+
+def _knots_axis(axis: ModalAxis, far: _FarModes) -> ModalAxis:
+    """The modes that set the minimax design's discretisation (knots, grid): those the knots resolve, when there are
+    any (a far mode the steps keep in their LP does not force the finest grid, which resolves it no better)."""
+    resolved = [i for i in range(axis.n_modes) if i not in far.far]
+    return _sub_axis(axis, resolved) if far.far and resolved else axis
+
+
+def _refuse_all_far(axis: ModalAxis, T: float, u: float, far: _FarModes) -> None:
+    """The `ValueError` of `design_move` when the minimax LP would weigh no mode of `axis`."""
+    if far.kept:
+        return
+    freqs = ", ".join(f"{float(x):.6g}" for x in np.asarray(axis.frequencies))
+    raise ValueError(
+        f"design_move: every mode of parameter `axis` ({freqs} Hz) lies far above what the minimax design resolves "
+        f"in a {T:.4g} s move (band ±{u:g}; Nyquist frequency of its finest grid {far.nyquist_hz:.4g} Hz): "
+        + "; ".join(f"mode {i + 1}: {why}" for i, why in far.left_out)
+        + ". Leave 'minimax' out of `include` (the classic shapers still apply), give a longer `move_time`, or "
+        "check the frequencies' unit (Hz)"
+    )
+
+
+def _far_note(axis: ModalAxis, cmd, ref, u: float, far: _FarModes) -> str:
+    """The minimax row's words on the modes left out of its LP: which, why, and the worst residual the command leaves
+    them over their band, computed exactly (closed form) on the full axis, in % of the unshaped move's."""
+    if not far.left_out:
+        return ""
+    band = _measure_grids(u)[0]
+    ratio = np.asarray(residual_curve(axis, cmd, band)) / np.asarray(ref)[:, None]
+    f = np.asarray(axis.frequencies, dtype=float)
+    parts = [
+        f"mode {i + 1} ({f[i]:.6g} Hz; {why}): {100.0 * float(np.max(ratio[i])):.2g} % (exact)"
+        for i, why in far.left_out
+    ]
+    return "left out of the LP, their residual computed for this command: " + "; ".join(parts)
+
+
 @blas_limited
 def design_move(
     axis: ModalAxis,
@@ -585,16 +695,20 @@ def design_move(
       continuous jerk). False: an acceleration that is constant on each of N equal intervals and jumps between
       them, as a shaped trapezoid's does; its limits are exact rather than a little conservative, so it can come
       closer to the least residual any command can leave (a 40 Hz, damping 0.003 axis at ZV's own time and
-      peaks: 2.3 % against 32 % for the smooth design and 22 % for ZV). Without a jerk limit only.
+      peaks: 2.3 % against 32 % for the smooth design and 22 % for ZV). With `j_max` [m/s³], False gives an
+      acceleration that is continuous and linear on each of N equal intervals (piecewise-constant jerk that jumps
+      between them, as a shaped S-curve's does): |a| and |jerk| limits exact, |v| guaranteed everywhere through the
+      velocity's B-spline coefficients (conservative by at most j_max h²/8 [m/s], h = move time / N).
 
     The minimax row's note states its certificate: the LP's own gap (its command is the least residual of its
-    command space: splines of its knots, or steps of its intervals) and, with `smooth=False`, a rigorous lower bound
-    on the least worst residual *any* command within the same limits, distance and time can leave over the band
+    command space: splines of its knots, or steps or ramps of its intervals) and, with `smooth=False` and no jerk
+    limit, a rigorous lower bound on the least worst residual *any* command within the same limits, distance and
+    time can leave over the band
     (`jaxbelt.shaping.certify`; also `plan.continuous_bound`): the design is then proved within (worst - bound) of
     the best any command can do, smooth or not, classic shapers included.
 
-    `certify_rtol` (with `smooth=False` only; default None: one design): refine until the design is certified
-    within this fraction of its own worst residual, (worst - bound) <= certify_rtol * worst: first the modulus
+    `certify_rtol` (with `smooth=False` and `j_max=None` only; default None: one design): refine until the design is
+    certified within this fraction of its own worst residual, (worst - bound) <= certify_rtol * worst: first the modulus
     cuts and the frequency grid are refined (16 cuts let a residual exceed the LP's value by 2 %), then the number
     of steps doubles (up to 1024, `CERTIFY_MAX_STEPS`); the best bound met is kept. The row's note gives both
     numbers, and says so when the limit is reached first. Each refinement costs one more compiled LP (about 10 s
@@ -622,22 +736,28 @@ def design_move(
         if not (math.isfinite(float(certify_rtol)) and 0.0 < float(certify_rtol) < 1.0):
             raise ValueError(f"design_move: parameter `certify_rtol` must lie in (0, 1); got {certify_rtol!r}")
         certify_rtol = float(certify_rtol)
-    if not smooth and j_max is not None:
-        raise ValueError(
-            "design_move: `smooth=False` (acceleration steps, unbounded jerk) cannot respect a jerk limit; give "
-            f"`j_max=None` or `smooth=True` (got j_max={j_max})"
-        )
+        if j_max is not None:
+            raise ValueError(
+                "design_move: `certify_rtol` needs `j_max=None` (the continuous certificate bounds the steps design, "
+                f"whose jerk is unbounded; with a jerk limit the design has ramps); got certify_rtol={certify_rtol!r} "
+                f"with j_max={j_max!r}"
+            )
     u = float(uncertainty)
     v_max, a_max = float(v_max), float(a_max)
     j_max = None if j_max is None else float(j_max)
     limits = (v_max, a_max, j_max)
     t_fixed = None if move_time is None else float(move_time)
     clearly = t_fixed is not None and t_fixed >= _SURELY_FEASIBLE * t_min
-    if "minimax" in include and t_fixed is not None and clearly:
+    far = None  # the modes the minimax LP leaves out (`_far_modes`): at a given time, known (and refused) at once
+    if "minimax" in include and t_fixed is not None:
+        far = _far_modes(axis, t_fixed, u, j_max, True, smooth)
+        _refuse_all_far(axis, t_fixed, u, far)
+    if "minimax" in include and t_fixed is not None and clearly and far is not None:
         # the minimax design's programs start compiling now, in the background, while the reference and the other
         # candidates are computed (their types only: a stand-in reference of the right shape)
-        opts = _minimax_options(axis, t_fixed, u, j_max, fixed_time=True, smooth=smooth)
-        _Minimax(axis, d, v_max, a_max, j_max, u, np.ones(axis.n_modes), opts).prepare(t_fixed)
+        lp_axis = _sub_axis(axis, far.kept) if far.left_out else axis
+        opts = _minimax_options(_knots_axis(axis, far), t_fixed, u, j_max, fixed_time=True, smooth=smooth)
+        _Minimax(lp_axis, d, v_max, a_max, j_max, u, np.ones(lp_axis.n_modes), opts).prepare(t_fixed)
     ref_cmd = fastest_move(d, v_max, a_max, j_max)
     band = _measure_grids(u)[0]
     ref = np.max(np.asarray(residual_curve(axis, ref_cmd, band)), axis=1)
@@ -671,8 +791,16 @@ def design_move(
         T_guess = (
             float(move_time) if move_time is not None else (min(r.move_time for r in classic) if classic else 2 * t_min)
         )
-        opts = _minimax_options(axis, T_guess, u, j_max, fixed_time=move_time is not None, smooth=smooth)
-        solver = _Minimax(axis, d, v_max, a_max, j_max, u, ref, opts)
+        if far is None:
+            far = _far_modes(axis, T_guess, u, j_max, False, smooth)
+            _refuse_all_far(axis, T_guess, u, far)
+        # modes far above the knots' reach are left out of the LP (`_far_modes`); every row is measured on `axis`
+        lp_axis = _sub_axis(axis, far.kept) if far.left_out else axis
+        kept = np.asarray(far.kept, dtype=int)
+        opts = _minimax_options(
+            _knots_axis(axis, far), T_guess, u, j_max, fixed_time=move_time is not None, smooth=smooth
+        )
+        solver = _Minimax(lp_axis, d, v_max, a_max, j_max, u, ref[kept], opts)
         if move_time is not None:
             T = float(move_time)
             # a smooth (B-spline) move needs a little more time than the time-optimal one: well above that (`clearly`),
@@ -708,15 +836,17 @@ def design_move(
                 note = (
                     f"not converged (gap {float(mm.gap):.1e}; the LP's interior-point solver stopped after "
                     f"{int(np.asarray(lp.iterations))} iterations, primal residual {float(np.asarray(lp.primal_residual)):.1e}, "
-                    f"dual {float(np.asarray(lp.dual_residual)):.1e}): leave out modes far above the move's bandwidth, "
-                    "or try a longer `move_time` or `smooth=False`"
+                    f"dual {float(np.asarray(lp.dual_residual)):.1e}): try a longer `move_time` or `smooth=False`"
                 )
             elif mm.options.basis == "steps":  # the spline's multipliers bound next to nothing: steps only
                 bound = continuous_lower_bound(mm)
                 if certify_rtol is not None:
                     mm, bound, note = _certify(solver, mm, bound, certify_rtol, progress)
                 note += f"; any command leaves >= {100 * bound:.3g} % (continuous bound)"
-            rows.append(_row("minimax", axis, mm.command, float(mm.command.duration), ref, u, limits, note=note, ok=ok))
+            row = _row("minimax", axis, mm.command, float(mm.command.duration), ref, u, limits, note=note, ok=ok)
+            if far.left_out:  # the left-out modes' residual, exact for this command (the program `_row` ran)
+                row = dataclasses.replace(row, note=row.note + "; " + _far_note(axis, row.command, ref, u, far))
+            rows.append(row)
     # --- Incerti's pseudo-polynomial commands
     T_common = (
         float(move_time)
@@ -762,20 +892,33 @@ def _pseudo_rows(axis, d, T, v_max, a_max, j_max, u, ref, limits, progress):
     except ImportError:  # pragma: no cover - the module is part of the package
         return []
     out = []
+    # a pseudo-polynomial is smooth: its exponents are optimised on the modes within the knots' reach (as the smooth
+    # minimax design's), the far ones measured with the others (their quadrature needs ~2.5 omega T nodes: a 1 MHz
+    # mode would cap it, and slow it, for nothing)
+    far = _far_modes(axis, T, u, j_max, True, True)
+    kept = np.asarray(far.kept if far.kept else range(axis.n_modes), dtype=int)
     designs = pseudo_polynomial_designs(
-        axis,
+        _sub_axis(axis, kept) if far.kept and far.far else axis,
         d,
         T,
         v_max=v_max,
         a_max=a_max,
         j_max=j_max,
         uncertainty=u,
-        reference=jnp.asarray(ref),
+        reference=jnp.asarray(ref[kept]),
         progress=progress,
     )
     for name, pd in designs.items():
         ok = bool(pd.converged) and bool(pd.within_limits)
-        out.append(_row(name, axis, pd.command, T, ref, u, limits, note="" if ok else pd.message, ok=ok))
+        note = "" if ok else pd.message
+        if far.kept and far.far:
+            note = "; ".join(
+                [
+                    *([note] if note else []),
+                    f"exponents optimised without mode(s) {', '.join(str(i + 1) for i in far.far)}",
+                ]
+            )
+        out.append(_row(name, axis, pd.command, T, ref, u, limits, note=note, ok=ok))
     return out
 
 
