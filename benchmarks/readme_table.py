@@ -372,12 +372,39 @@ def shaping_table(results_dir: Path = RESULTS) -> str:
             for n, b in data.get("scale", {}).items()
         )
         + " (targets 30 s and 2 GB). "
-        f"`identify_axis` (2 modes, 5 % noise, {ident.get('seeds', '?')} records): "
+        + _far_and_inverse(data)
+        + f"`identify_axis` (2 modes, 5 % noise, {ident.get('seeds', '?')} records): "
         f"frequencies within {100 * ident.get('max_freq_err', float('nan')):.2g} %, damping ratios within "
         f"{100 * ident.get('max_damping_err', float('nan')):.2g} %. One run of `python benchmarks/shaping_axis.py` "
         f"({m.get('cpu_count', '?')} CPU cores, jax {m.get('jax', '?')}); figure: `benchmarks/results/shaping_axis.png`.",
     ]
     return "\n".join(lines)
+
+
+def _far_and_inverse(data) -> str:
+    """The shaping paragraph's sentences on the far-mode and `shortest_move_time` runs (`--far`, `--inverse`), when
+    the results hold them."""
+    out = ""
+    far = data.get("far")
+    if far:
+        one, alone = far["7.3 Hz + 1 MHz, smooth, minimax only"], far["7.3 Hz alone, smooth, minimax only"]
+        two, lone = far["7.3 Hz + 2 kHz, smooth, every candidate"], far["2 kHz alone, smooth (refused)"]
+        out += (
+            f"A mode far above the move's bandwidth (0.8 s move; `--far`, {data.get('far_run', '?')[:10]}): 7.3 Hz "
+            f"beside 1 MHz {one['warm_median_s']:.2f} s warm, minimax only, against {alone['warm_median_s']:.2f} s "
+            f"for 7.3 Hz alone (target: the far mode adds ≤ 1 s); 7.3 Hz beside 2 kHz, every candidate, "
+            f"{two['warm_median_s']:.1f} s (target 10 s); a lone 2 kHz mode refused in "
+            f"{lone['warm_median_s']:.2f} s. "
+        )
+    inv = data.get("inverse")
+    if inv:
+        out += (
+            f"`shortest_move_time` (`--inverse`, {data.get('inverse_run', '?')[:10]}), warm medians: "
+            + ", ".join(f"{k} {v['warm_median_s']:.2f} s (max {v['warm_max_s']:.2f})" for k, v in inv.items())
+            + " (target 5 s); `design_move` at its answer reports the target within "
+            f"{100 * max(v['max_miss'] for v in inv.values()):.2g} % (target 1 %). "
+        )
+    return out
 
 
 def update_shaping_blocks(readme: Path | None = README, page: Path | None = SHAPING_PAGE, results_dir: Path = RESULTS):

@@ -21,6 +21,7 @@ Writes `benchmarks/results/shaping_axis.json` and `.png`. Run: `python benchmark
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import subprocess
 import sys
@@ -268,6 +269,150 @@ def rerun_scale():
     update_shaping_blocks()
 
 
+#: the far-mode cases (`far`): label, frequencies [Hz], damping ratios, smooth, candidates
+FAR_CASES = (
+    ("7.3 Hz + 1 MHz, smooth, every candidate", [7.3, 1e6], [0.05, 0.02], True, None),
+    ("7.3 Hz + 1 MHz, smooth, minimax only", [7.3, 1e6], [0.05, 0.02], True, ("minimax",)),
+    ("7.3 Hz alone, smooth, minimax only", [7.3], [0.05], True, ("minimax",)),
+    ("7.3 Hz + 2 kHz, smooth, every candidate", [7.3, 2e3], [0.05, 0.02], True, None),
+    ("7.3 Hz + 2 kHz, steps, minimax only", [7.3, 2e3], [0.05, 0.02], False, ("minimax",)),
+    ("2 kHz alone, smooth (refused)", [2e3], [0.02], True, None),
+)
+#: their move time [s]: 160 Hz is the finest knot grid's Nyquist frequency
+FAR_TIME = 0.8
+
+
+def far(repeats: int = 3):
+    """`design_move` at `FAR_TIME` on axes with a mode far above the move's bandwidth (`FAR_CASES`), each case in a
+    fresh process: the first call and the warm median of `repeats` [s] (a refusal: the time until its ValueError),
+    the minimax row's worst residual [%] and whether it converged."""
+    out = {}
+    for label, f, z, smooth, include in FAR_CASES:
+        inc = "" if include is None else f", include={include!r}"
+        code = (
+            "import time, json, warnings; import jax; jax.config.update('jax_enable_x64', True); "
+            "import jaxbelt as jb; warnings.simplefilter('ignore'); "
+            f"ax = jb.ModalAxis({f!r}, {z!r})\n"
+            "def run():\n"
+            "    try:\n"
+            f"        p = jb.design_move(ax, {D}, {FAR_TIME}, v_max={V_MAX}, a_max={A_MAX}, uncertainty={U}, "
+            f"smooth={smooth}{inc})\n"
+            "        m = p.candidate('minimax'); return dict(worst=m.worst_percent, ok=bool(m.ok), note=m.note)\n"
+            "    except ValueError as e:\n"
+            "        return dict(refused=str(e).splitlines()[0][:200])\n"
+            "t0 = time.perf_counter(); r = run(); first = time.perf_counter() - t0; ts = []\n"
+            f"for _ in range({repeats}):\n"
+            "    t0 = time.perf_counter(); run(); ts.append(time.perf_counter() - t0)\n"
+            "print('RESULT', json.dumps(dict(r, first_s=first, warm_s=ts)))"
+        )
+        env = dict(os.environ, PYTHONPATH=str(HERE.parent))
+        res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=1800)
+        line = next(ln for ln in res.stdout.splitlines() if ln.startswith("RESULT "))
+        r = json.loads(line[len("RESULT ") :])
+        ts = r.pop("warm_s")
+        out[label] = dict(
+            r, warm_median_s=float(np.median(ts)), warm_min_s=float(np.min(ts)), warm_max_s=float(np.max(ts))
+        )
+        print(f"{label}: first {r['first_s']:.2f} s, warm {np.median(ts):.2f} s; {r}", flush=True)
+    return out
+
+
+def rerun_far():
+    """Run `far` alone and write it into the committed results (`far`, `far_run`: when), with its headline rows."""
+    import datetime
+
+    path = results_dir(False) / "shaping_axis.json"
+    data = json.loads(path.read_text())
+    data["far"] = far()
+    data["far_run"] = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+    head = [h for h in data["headline"] if not h["what"].startswith("far mode")]
+    data["headline"] = head + _far_headline(data["far"])
+    write_text(path, json.dumps(data, indent=2, default=float))
+
+
+def _far_headline(res):
+    one = (
+        res["7.3 Hz + 1 MHz, smooth, minimax only"]["warm_median_s"]
+        - res["7.3 Hz alone, smooth, minimax only"]["warm_median_s"]
+    )
+    return [
+        dict(what="far mode: 1 MHz beside 7.3 Hz, added to a warm minimax-only design_move", value=one, unit="s",
+             target="<= 1"),
+        dict(what="far mode: 7.3 Hz + 2 kHz, design_move warm (every candidate)",
+             value=res["7.3 Hz + 2 kHz, smooth, every candidate"]["warm_median_s"], unit="s", target="<= 10"),
+        dict(what="far mode: a lone 2 kHz mode in 0.8 s, refused (warm)",
+             value=res["2 kHz alone, smooth (refused)"]["warm_median_s"], unit="s", target="<= 1"),
+    ]  # fmt: skip
+
+
+#: the inverse's axes (`inverse`): label, frequencies [Hz], damping ratios
+INVERSE_AXES = (
+    ("1 mode", [7.3], [0.015]),
+    ("2 modes", [7.3, 18.0], [0.015, 0.01]),
+    ("3 modes", [5.0, 12.0, 27.0], [0.02, 0.015, 0.01]),
+)
+#: the targets, as multiples of the design's fine-grid worst at 0.8 s (shorter and longer moves)
+INVERSE_FACTORS = (0.5, 0.8, 1.5, 0.3)
+
+
+def inverse():
+    """`shortest_move_time` (default `refine=True`) on `INVERSE_AXES`, each in a fresh process, from a design at
+    0.8 s: the time of each call after a first one (the first may compile the programme that checks a short move's
+    reach), and the worst residual `design_move` reports at the answer against the target (its table's number)."""
+    out = {}
+    for label, f, z in INVERSE_AXES:
+        code = (
+            "import time, json, warnings; import jax; jax.config.update('jax_enable_x64', True); "
+            "import jaxbelt as jb; warnings.simplefilter('ignore'); "
+            f"ax = jb.ModalAxis({f!r}, {z!r}); lim = dict(v_max={V_MAX}, a_max={A_MAX}, uncertainty={U})\n"
+            f"des = jb.design_move(ax, {D}, 0.8, include=('minimax',), **lim).minimax\n"
+            "rows = []\n"
+            f"for k in {INVERSE_FACTORS!r}:\n"
+            "    goal = k * float(des.fine_worst)\n"
+            "    t0 = time.perf_counter(); T = float(jb.shortest_move_time(ax, goal, des)); dt = time.perf_counter() - t0\n"
+            f"    again = jb.design_move(ax, {D}, T, include=('minimax',), **lim)\n"
+            "    rows.append(dict(factor=k, time_s=dt, move_time=T, table_over_target=again.table[0].worst_percent / 100 / goal,"
+            " same_options=again.minimax.options == des.options))\n"
+            "print('RESULT', json.dumps(rows))"
+        )
+        env = dict(os.environ, PYTHONPATH=str(HERE.parent))
+        res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=1800)
+        line = next(ln for ln in res.stdout.splitlines() if ln.startswith("RESULT "))
+        rows = json.loads(line[len("RESULT ") :])
+        warm = [r["time_s"] for r in rows[1:]]
+        miss = [abs(r["table_over_target"] - 1.0) for r in rows]
+        out[label] = dict(
+            rows=rows, warm_median_s=float(np.median(warm)), warm_max_s=float(np.max(warm)), max_miss=float(max(miss))
+        )
+        print(f"{label}: warm {np.median(warm):.2f} s (max {np.max(warm):.2f}); miss max {max(miss):.2%}", flush=True)
+    return out
+
+
+def rerun_inverse():
+    """Run `inverse` alone and write it into the committed results (`inverse`, `inverse_run`), with headline rows."""
+    import datetime
+
+    path = results_dir(False) / "shaping_axis.json"
+    data = json.loads(path.read_text())
+    data["inverse"] = res = inverse()
+    data["inverse_run"] = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+    head = [h for h in data["headline"] if not h["what"].startswith("shortest_move_time")]
+    head += [
+        dict(what=f"shortest_move_time warm, {k}, median", value=v["warm_median_s"], unit="s", target="<= 5")
+        for k, v in res.items()
+    ]
+    head.append(
+        dict(
+            what="shortest_move_time: design_move at the answer against the target (max relative miss)",
+            value=max(v["max_miss"] for v in res.values()),
+            unit="",
+            target="<= 0.01",
+        )
+    )
+    data["headline"] = head
+    write_text(path, json.dumps(data, indent=2, default=float))
+
+
 def _scale_headline(big):
     out = []
     for m, b in big.items():
@@ -330,12 +475,20 @@ def main(argv=None):
     ap.add_argument(
         "--scale", action="store_true", help="only rerun the many-mode scale test into the last results (noted there)"
     )
+    ap.add_argument("--far", action="store_true", help="only run the far-mode timings into the last results")
+    ap.add_argument("--inverse", action="store_true", help="only run shortest_move_time's timings into the results")
     args = ap.parse_args(argv)
     if args.table:
         print("\n".join(map(str, update_shaping_blocks())))
         return
     if args.scale:
         rerun_scale()
+        return
+    if args.far:
+        rerun_far()
+        return
+    if args.inverse:
+        rerun_inverse()
         return
     n_axes = 3 if args.quick else 12
     cases = []

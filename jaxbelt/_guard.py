@@ -84,28 +84,36 @@ def traced_checks(*trees) -> list:
 BATCH_INDEX_CAP = 1024
 
 
+@functools.lru_cache(maxsize=4096)
+def _element_messages(message: str) -> tuple[str, ...]:
+    """`message` as `_error_naming_element` raises it: unbatched (index 0), naming element i of a batch (i + 1), and
+    beyond `BATCH_INDEX_CAP`."""
+    named = tuple(f"{message} (element {i} of the batch)" for i in range(BATCH_INDEX_CAP))
+    return (message, *named, f"{message} (element >= {BATCH_INDEX_CAP} of the batch)")
+
+
+@jax.custom_batching.custom_vmap
+def _first_bad(pred):
+    """0 outside `vmap`; under `vmap`, 1 + the index of the first element whose `pred` holds anywhere (capped at
+    `BATCH_INDEX_CAP`), 0 when none: a `custom_vmap` rule sees the batch axis the function inside cannot. Its
+    output is never batched, and it takes only the predicate (no value that derivatives flow through)."""
+    return jnp.zeros((), jnp.int32)
+
+
+@_first_bad.def_vmap
+def _first_bad_rule(axis_size, in_batched, pred):
+    (batched,) = in_batched
+    if not batched:
+        return _first_bad(pred), False
+    bad = jnp.reshape(pred, (axis_size, -1)).any(axis=1)
+    first = jnp.minimum(jnp.argmax(bad), BATCH_INDEX_CAP) + 1
+    return jnp.where(bad.any(), first, 0).astype(jnp.int32), False
+
+
 def _error_naming_element(x, pred, message: str):
     """`eqx.error_if(x, pred, message)`, and under `jax.vmap` the message names the first invalid element of the
-    batch: "... (element 3 of the batch)" (a `custom_vmap` rule sees the batch axis that the function inside
-    cannot; nested vmaps: the innermost axis' index)."""
-
-    @jax.custom_batching.custom_vmap
-    def check(x, pred):
-        return eqx.error_if(x, pred, message)
-
-    @check.def_vmap
-    def rule(axis_size, in_batched, x, pred):
-        x_batched, pred_batched = in_batched
-        if not pred_batched:
-            return eqx.error_if(x, pred, message), x_batched
-        bad = jnp.reshape(pred, (axis_size, -1)).any(axis=1)
-        named = min(axis_size, BATCH_INDEX_CAP)
-        msgs = [f"{message} (element {i} of the batch)" for i in range(named)]
-        if axis_size > named:
-            msgs.append(f"{message} (element >= {named} of the batch)")
-        return eqx.branched_error_if(x, jnp.any(bad), jnp.minimum(jnp.argmax(bad), named), msgs), x_batched
-
-    return check(x, pred)
+    batch: "... (element 3 of the batch)" (nested vmaps: the index along the innermost axis)."""
+    return eqx.branched_error_if(x, pred, _first_bad(pred), _element_messages(message))
 
 
 @functools.partial(jax.custom_jvp, nondiff_argnums=(2,))

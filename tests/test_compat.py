@@ -67,7 +67,7 @@ res = jb.optimise_command(jb.BeltPlatform(), jb.PseudoPolynomial(gammas=jnp.arra
 out["optimise_command"] = [float(g) for g in res.command.gammas]
 out["lean"] = _guard._state["lean"]
 plan = jb.design_move(jb.ModalAxis(frequencies=[7.3], damping_ratios=[0.015]), distance=0.1, move_time=0.8,
-                      v_max=0.3, a_max=1.2, uncertainty=0.2)
+                      v_max=0.3, a_max=1.2, uncertainty=0.2, include=("minimax", "ZV"))
 out["design_move"] = float(plan.best.worst_m)
 drive, pid = jb.FourBarDrive(), jb.PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0, v_limit=60.0)
 tuned = jb.tune_pid(drive, pid, t0=0.375, t1=0.5, steps=2, progress=False)
@@ -146,7 +146,7 @@ with _threads.limited_blas():
     model_vector_field_probe(0)
 model_vector_field_probe(0)
 plan = jb.design_move(jb.ModalAxis(frequencies=[7.3], damping_ratios=[0.015]), distance=0.1, move_time=0.8,
-                      v_max=0.3, a_max=1.2, uncertainty=0.2)
+                      v_max=0.3, a_max=1.2, uncertainty=0.2, include=("minimax", "ZV"))
 model_vector_field_probe(0)
 print("RESULT " + json.dumps(seen))
 """
