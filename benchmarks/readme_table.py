@@ -381,6 +381,12 @@ def shaping_table(results_dir: Path = RESULTS) -> str:
     return "\n".join(lines)
 
 
+def _nanmax(results: dict, key: str) -> float:
+    vals = [v.get(key, float("nan")) for v in results.values()]
+    vals = [x for x in vals if x == x]
+    return max(vals) if vals else float("nan")
+
+
 def _far_and_inverse(data) -> str:
     """The shaping paragraph's sentences on the far-mode and `shortest_move_time` runs (`--far`, `--inverse`), when
     the results hold them."""
@@ -394,15 +400,18 @@ def _far_and_inverse(data) -> str:
             f"beside 1 MHz {one['warm_median_s']:.2f} s warm, minimax only, against {alone['warm_median_s']:.2f} s "
             f"for 7.3 Hz alone (target: the far mode adds ≤ 1 s); 7.3 Hz beside 2 kHz, every candidate, "
             f"{two['warm_median_s']:.1f} s (target 10 s); a lone 2 kHz mode refused in "
-            f"{lone['warm_median_s']:.2f} s. "
+            f"{lone['warm_median_s']:.2g} s. "
         )
     inv = data.get("inverse")
     if inv:
         out += (
             f"`shortest_move_time` (`--inverse`, {data.get('inverse_run', '?')[:10]}), warm medians: "
             + ", ".join(f"{k} {v['warm_median_s']:.2f} s (max {v['warm_max_s']:.2f})" for k, v in inv.items())
-            + " (target 5 s); `design_move` at its answer reports the target within "
-            f"{100 * max(v['max_miss'] for v in inv.values()):.2g} % (target 1 %). "
+            + " (target 5 s); a design re-made at its answer with the same discretisation leaves the target within "
+            f"{100 * max(v['max_miss'] for v in inv.values()):.2g} % (target 1 %); `design_move` at the answer, where "
+            f"it picks the same knots and grid, within {100 * _nanmax(inv, 'max_miss_design_move_same_options'):.2g} %, "
+            f"where it picks others (a knot count crossed), within "
+            f"{100 * _nanmax(inv, 'max_miss_design_move_other_options'):.2g} %. "
         )
     return out
 

@@ -243,10 +243,11 @@ def _redesign(axis, design: MinimaxDesign, T: float) -> MinimaxDesign:
 def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, refine: bool) -> float:
     """The shortest move time: the root of the LP's value on `design`'s grid, `V(T) = c target` (to `ROOT_RTOL`).
 
-    `refine=False`: c = 1. `refine=True`: c is calibrated so that a fresh design at the root (`_redesign`: its own
-    frequency exchange) leaves a fine-grid worst within `REDESIGN_RTOL` of the target: c <- c target / (fresh
-    design's fine worst), from c = LP value / fine worst of `design` itself (usually 1-2 fresh designs). The answer
-    stays a root on `design`'s grid at a fixed level, so its derivative is the implicit one on that grid."""
+    `refine=False`: c = 1, to `ROOT_RTOL`. `refine=True`: c is calibrated so that a fresh design at the root
+    (`_redesign`: its own frequency exchange) leaves a fine-grid worst within `REDESIGN_RTOL` of the target: c <- c
+    target / (fresh design's fine worst), from c = LP value / fine worst of `design` itself (usually 1-2 fresh
+    designs), each root to 1e-5. The answer stays a root on `design`'s grid at a fixed level, so its derivative is
+    the implicit one on that grid."""
     o = "shortest_move_time"
     feasible_from = [float(design.command.duration)]  # the design exists there: feasible at and above it
 
@@ -292,9 +293,9 @@ def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, r
         if abs(f - target) < abs(best[1] - target):
             best = (T, f, c)
         if abs(f - target) <= REDESIGN_RTOL * target:
-            break
+            return T  # a root to 1e-5 of the calibrated level: the re-made design there meets the target
         c *= target / f
-    return root(best[2] * target, best[0], ROOT_RTOL)
+    return root(best[2] * target, best[0], 1e-5)
 
 
 @blas_limited
