@@ -255,7 +255,6 @@ def rerun_scale():
     """Rerun `scale` alone and write it into the committed results, with the time of that run recorded beside it
     (`scale_rerun`), then rewrite the pages' table."""
     import datetime
-    import json
 
     path = results_dir(False) / "shaping_axis.json"
     data = json.loads(path.read_text())
@@ -282,6 +281,15 @@ FAR_CASES = (
 FAR_TIME = 0.8
 
 
+def _fresh_process_result(code: str):
+    """Run `code` in a fresh Python process (this checkout's jaxbelt first on the path) and return the JSON it
+    prints after `RESULT `."""
+    env = dict(os.environ, PYTHONPATH=str(HERE.parent))
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=1800)
+    line = next(ln for ln in res.stdout.splitlines() if ln.startswith("RESULT "))
+    return json.loads(line[len("RESULT ") :])
+
+
 def far(repeats: int = 3):
     """`design_move` at `FAR_TIME` on axes with a mode far above the move's bandwidth (`FAR_CASES`), each case in a
     fresh process: the first call and the warm median of `repeats` [s] (a refusal: the time until its ValueError),
@@ -305,10 +313,7 @@ def far(repeats: int = 3):
             "    t0 = time.perf_counter(); run(); ts.append(time.perf_counter() - t0)\n"
             "print('RESULT', json.dumps(dict(r, first_s=first, warm_s=ts)))"
         )
-        env = dict(os.environ, PYTHONPATH=str(HERE.parent))
-        res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=1800)
-        line = next(ln for ln in res.stdout.splitlines() if ln.startswith("RESULT "))
-        r = json.loads(line[len("RESULT ") :])
+        r = _fresh_process_result(code)
         ts = r.pop("warm_s")
         out[label] = dict(
             r, warm_median_s=float(np.median(ts)), warm_min_s=float(np.min(ts)), warm_max_s=float(np.max(ts))
@@ -379,10 +384,7 @@ def inverse():
             " same_options=again.minimax.options == des.options))\n"
             "print('RESULT', json.dumps(rows))"
         )
-        env = dict(os.environ, PYTHONPATH=str(HERE.parent))
-        res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=1800)
-        line = next(ln for ln in res.stdout.splitlines() if ln.startswith("RESULT "))
-        rows = json.loads(line[len("RESULT ") :])
+        rows = _fresh_process_result(code)
         warm = [r["time_s"] for r in rows[1:]]
         miss = [abs(r["remade_over_target"] - 1.0) for r in rows]
         same = [abs(r["table_over_target"] - 1.0) for r in rows if r["same_options"]]
