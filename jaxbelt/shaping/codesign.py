@@ -227,11 +227,16 @@ def _root_time(value, target, lo, hi, start, feasible, known, *, rtol: float, ow
                 f"time ({MAX_EXPANSION * float(start):.4g} s: worst residual {v:.4g} there); give a larger `target`"
             )
     if best is None or not math.isfinite(hi):
-        raise ValueError(
-            f"{owner}: the target {target:g} is not reached within the bracket; the worst residual is {v:.4g} at "
-            f"{T:.6g} s; pass a wider `bracket`, or none (it then finds itself)"
-        )
+        raise _not_in_bracket(owner, target, v, T)
     return best
+
+
+def _not_in_bracket(owner: str, target: float, v: float, T: float) -> ValueError:
+    """The error of a search that ends with the worst residual `v` at `T` [s], not at `target`."""
+    return ValueError(
+        f"{owner}: the target {target:g} is not reached within the bracket; the worst residual is {v:.4g} at "
+        f"{T:.6g} s; pass a wider `bracket`, or none (it then finds itself)"
+    )
 
 
 def _redesign(axis, design: MinimaxDesign, T: float) -> MinimaxDesign:
@@ -271,10 +276,7 @@ def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, r
         # the pairs known are values of the same function: re-used for the bracket and the secant at a new level
         T_, v_ = _root_time(on_grid, goal, lo, hi, start_, feasible, known, rtol=rtol, owner=o)
         if user_bracket and abs(v_ - goal) > 1e-3 * goal:
-            raise ValueError(
-                f"{o}: the target {target:g} is not reached within the bracket; the worst residual is {v_:.4g} at "
-                f"{T_:.6g} s; pass a wider `bracket`, or none (it then finds itself)"
-            )
+            raise _not_in_bracket(o, target, v_, T_)
         return T_
 
     if not refine:

@@ -555,8 +555,10 @@ class _Minimax:
         prepare_peaks(cmd)
 
 
-#: the largest real exponent (zeta omega (1 + u) h, times 4 for the spline) at which the minimax LP's kernel of a mode
-#: is representable in float64 (e^709 overflows; the LP's kernel holds e^{-sh}): beyond it a mode's rows are NaN
+#: the damping exponent (zeta omega (1 + u) h, times d + 1 for a basis of degree d) beyond which the steps leave a far
+#: mode out of their LP: it is damped within one interval, so only the last one excites it. Set when the LP's kernel
+#: held e^{-sh} and overflowed there; the kernel is now written without overflow (`design.lp_data_grouped`), so this
+#: is a choice (the mode's residual is computed exactly instead), no longer a limit of the LP
 _LP_EXPONENT = 600.0
 
 
@@ -592,11 +594,12 @@ def _far_modes(axis: ModalAxis, T: float, u: float, j_max, fixed_time: bool, smo
 
     - spline basis (`smooth`): the acceleration and its jerk are continuous, so a far mode sees only the spline's
       smoothed ends: its residual falls like $(\\omega h)^{-3}$ of the unshaped move's (1e-15 at 1 MHz beside
-      7.3 Hz), and its LP rows hold $\\varphi_1(-sh)^4$, which overflows (NaN) for a damped 1 MHz mode. Every far
-      mode is left out of the LP; `design_move` computes its residual exactly for the command and says so.
+      7.3 Hz), so it would only weigh on the LP with rows near zero. Every far mode is left out of the LP;
+      `design_move` computes its residual exactly for the command and says so.
     - steps (or any basis whose acceleration jumps): each jump excites a far mode as the trapezoid's do (the last
-      one is not damped away before the end), so the LP keeps it wherever its rows are representable
-      ($\\zeta\\omega(1 + u)\\,h$ below `_LP_EXPONENT`); only the others are left out, with their exact residual.
+      one is not damped away before the end), so the LP keeps it unless it is damped within one interval
+      ($\\zeta\\omega(1 + u)\\,h$ above `_LP_EXPONENT`: only the last interval excites it); those are left out,
+      with their exact residual.
     """
     f = np.asarray(axis.frequencies, dtype=float)
     z = np.asarray(axis.damping_ratios, dtype=float)
@@ -613,13 +616,13 @@ def _far_modes(axis: ModalAxis, T: float, u: float, j_max, fixed_time: bool, smo
     sub = _sub_axis(axis, resolved) if resolved else axis
     opts = _minimax_options(sub, T, u, j_max, fixed_time, smooth)
     h = T / opts.n_knots
-    power = 4.0 if opts.basis == "spline" else (1.0 if opts.basis == "steps" else 2.0)
+    power = _design._DEGREE[opts.basis] + 1.0  # the kernel's phi1 power (`design.lp_data_grouped`)
     expo = power * z * 2.0 * np.pi * f * (1.0 + u) * h
     left = tuple(
         (
             i,
             f"its damping time 1/(zeta omega) = {1.0 / (z[i] * 2 * np.pi * f[i]):.3g} s is far below one of the "
-            f"{opts.n_knots} steps ({h:.3g} s): the LP cannot represent it (only the last step excites it)",
+            f"{opts.n_knots} steps ({h:.3g} s): only the last step excites it",
         )
         for i in far
         if expo[i] > _LP_EXPONENT
