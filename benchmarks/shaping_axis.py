@@ -218,6 +218,15 @@ def speed(repeats: int):
     return out
 
 
+def _fresh_process_result(code: str):
+    """Run `code` in a fresh Python process (this checkout's jaxbelt first on the path) and return the JSON it
+    prints after `RESULT `."""
+    env = dict(os.environ, PYTHONPATH=str(HERE.parent))
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=1800)
+    line = next(ln for ln in res.stdout.splitlines() if ln.startswith("RESULT "))
+    return json.loads(line[len("RESULT ") :])
+
+
 def scale(mode_counts, repeats: int = 3):
     """`design_move` (every candidate, fixed move time) on axes of many modes, each in a fresh process: warm time
     (median of `repeats` after the first call) and the process's peak memory (resident set, VmHWM) [MB]."""
@@ -234,11 +243,9 @@ def scale(mode_counts, repeats: int = 3):
             # the peak resident set of this process: VmHWM (ru_maxrss would include the parent's, which Linux
             # carries over fork and exec)
             "hwm = next(ln for ln in open('/proc/self/status') if ln.startswith('VmHWM'))\n"
-            "print(first, *ts, int(hwm.split()[1]) / 1024)"
+            "import json; print('RESULT', json.dumps([first, *ts, int(hwm.split()[1]) / 1024]))"
         )
-        env = dict(os.environ, PYTHONPATH=str(HERE.parent))
-        r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=1800)
-        vals = [float(x) for x in r.stdout.split()[-(repeats + 2) :]]
+        vals = _fresh_process_result(code)
         ts = vals[1:-1]
         out[m] = dict(
             first_s=vals[0],
@@ -251,20 +258,29 @@ def scale(mode_counts, repeats: int = 3):
     return out
 
 
-def rerun_scale():
-    """Rerun `scale` alone and write it into the committed results, with the time of that run recorded beside it
-    (`scale_rerun`), then rewrite the pages' table."""
+def _merge_into_results(key: str, value, stamp: str, keep, headline: list) -> None:
+    """Write a partial rerun into the committed results: `value` under `key`, the time of the run under `stamp`, the
+    headline rows `keep` accepts followed by `headline`."""
     import datetime
 
     path = results_dir(False) / "shaping_axis.json"
     data = json.loads(path.read_text())
-    big = scale((6, 10))
-    data["scale"] = big
-    data["scale_rerun"] = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
-    head = [h for h in data["headline"] if not h["what"].startswith(("design_move warm, 6", "design_move warm, 10"))]
-    head = [h for h in head if "peak memory" not in h["what"]]
-    data["headline"] = head + _scale_headline(big)
+    data[key] = value
+    data[stamp] = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
+    data["headline"] = [h for h in data["headline"] if keep(h)] + headline
     write_text(path, json.dumps(data, indent=2, default=float))
+
+
+def rerun_scale():
+    """Rerun `scale` alone and write it into the committed results, with the time of that run recorded beside it
+    (`scale_rerun`), then rewrite the pages' table."""
+    big = scale((6, 10))
+
+    def keep(h):
+        what = h["what"]
+        return not what.startswith(("design_move warm, 6", "design_move warm, 10")) and "peak memory" not in what
+
+    _merge_into_results("scale", big, "scale_rerun", keep, _scale_headline(big))
     update_shaping_blocks()
 
 
@@ -279,15 +295,6 @@ FAR_CASES = (
 )
 #: their move time [s]: 160 Hz is the finest knot grid's Nyquist frequency
 FAR_TIME = 0.8
-
-
-def _fresh_process_result(code: str):
-    """Run `code` in a fresh Python process (this checkout's jaxbelt first on the path) and return the JSON it
-    prints after `RESULT `."""
-    env = dict(os.environ, PYTHONPATH=str(HERE.parent))
-    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=1800)
-    line = next(ln for ln in res.stdout.splitlines() if ln.startswith("RESULT "))
-    return json.loads(line[len("RESULT ") :])
 
 
 def far(repeats: int = 3):
@@ -324,15 +331,8 @@ def far(repeats: int = 3):
 
 def rerun_far():
     """Run `far` alone and write it into the committed results (`far`, `far_run`: when), with its headline rows."""
-    import datetime
-
-    path = results_dir(False) / "shaping_axis.json"
-    data = json.loads(path.read_text())
-    data["far"] = far()
-    data["far_run"] = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
-    head = [h for h in data["headline"] if not h["what"].startswith("far mode")]
-    data["headline"] = head + _far_headline(data["far"])
-    write_text(path, json.dumps(data, indent=2, default=float))
+    res = far()
+    _merge_into_results("far", res, "far_run", lambda h: not h["what"].startswith("far mode"), _far_headline(res))
 
 
 def _far_headline(res):
@@ -403,14 +403,8 @@ def inverse():
 
 def rerun_inverse():
     """Run `inverse` alone and write it into the committed results (`inverse`, `inverse_run`), with headline rows."""
-    import datetime
-
-    path = results_dir(False) / "shaping_axis.json"
-    data = json.loads(path.read_text())
-    data["inverse"] = res = inverse()
-    data["inverse_run"] = datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds")
-    head = [h for h in data["headline"] if not h["what"].startswith("shortest_move_time")]
-    head += [
+    res = inverse()
+    head = [
         dict(what=f"shortest_move_time warm, {k}, median", value=v["warm_median_s"], unit="s", target="<= 5")
         for k, v in res.items()
     ]
@@ -422,8 +416,7 @@ def rerun_inverse():
             target="<= 0.01",
         )
     )
-    data["headline"] = head
-    write_text(path, json.dumps(data, indent=2, default=float))
+    _merge_into_results("inverse", res, "inverse_run", lambda h: not h["what"].startswith("shortest_move_time"), head)
 
 
 def _scale_headline(big):
