@@ -12,8 +12,17 @@ With `--jerk J` [m/s³] the same on the single-mode named axes under a jerk limi
 |jerk| <= J, and the minimax designs with each shaper's own peak jerk as a limit too, the design "with steps" then
 being the ramps (a jerk constant on each interval that may jump, as a shaped S-curve's does).
 
-Writes `benchmarks/results/shaping_every_shaper.json` (with `--jerk`: `shaping_every_shaper_jerk.json`). Run:
-`python benchmarks/shaping_every_shaper.py [--jerk 20]`.
+With `--damping` the damping ratio is unknown, as Klipper assumes by default: each of Klipper's six shapers is
+designed at damping ratio 0.1 (Klipper's default `damping_ratio`) at its own shortest time, and the minimax design
+`design_move(..., damping="unknown")` at that time with the shaper's own peaks as its limits (smooth and steps, as
+above); all are judged on
+the band ±20 % times 25 damping ratios (geometric) of [0.01, 0.1], each against the unshaped time-optimal move
+at that damping (`jb.residual_curve` on that dense grid, not the design's 5 samples). Records the ratio
+minimax / shaper and the wall time of each `design_move` call (the first on an axis includes its compilation).
+
+Writes `benchmarks/results/shaping_every_shaper.json` (with `--jerk`: `shaping_every_shaper_jerk.json`; with
+`--damping`: `shaping_every_shaper_damping.json`). Run: `python benchmarks/shaping_every_shaper.py [--jerk 20 |
+--damping]`.
 """
 
 from __future__ import annotations
@@ -65,6 +74,90 @@ def every_shaper(label, f, z, d, shapers=CLASSIC, j_max=None):
     return out
 
 
+#: the damping range of `--damping` (`design_move(..., damping="unknown")`), the shapers' damping ratio, and the
+#: dense grid of damping ratios the residuals are judged on
+DAMPING_RANGE = (0.01, 0.1)
+SHAPER_DAMPING = 0.1
+DENSE_DAMPING = np.geomspace(*DAMPING_RANGE, 25)
+
+
+def _dense_axis(f):
+    """Each mode of frequencies `f` once per damping ratio of `DENSE_DAMPING` (unit gains)."""
+    n = DENSE_DAMPING.size
+    return jb.ModalAxis(np.repeat(f, n), np.tile(DENSE_DAMPING, len(f)), np.ones(n * len(f)))
+
+
+def unknown_damping(label, f, d, shapers=CLASSIC):
+    """`--damping`: the minimax design for an unknown damping ratio against Klipper's shapers designed at 0.1."""
+    f = np.asarray(f, dtype=float)
+    dense = _dense_axis(f)
+    unshaped = jb.fastest_move(d, V_MAX, A_MAX)
+    ref = np.max(np.asarray(jb.residual_curve(dense, unshaped, np.linspace(1 - U, 1 + U, 401))), axis=1)
+    at_klipper = jb.ModalAxis(f, np.full(f.size, SHAPER_DAMPING))
+    own = jb.design_move(at_klipper, d, None, v_max=V_MAX, a_max=A_MAX, uncertainty=U, include=shapers)
+    out = []
+    for row in own.table:
+        if not row.ok:
+            continue
+        shaper = worst_against(dense, row.command, ref)
+        cells = dict(axis=label, shaper=row.name, time=row.move_time, shaper_worst=shaper)
+        for smooth in (True, False):  # the smooth design and the one with steps, as the default mode
+            t0 = time.perf_counter()
+            plan = jb.design_move(
+                at_klipper,
+                d,
+                row.move_time,
+                v_max=row.peak_v,
+                a_max=row.peak_a,
+                uncertainty=U,
+                include=("minimax",),
+                smooth=smooth,
+                damping="unknown",
+            )
+            key = "smooth" if smooth else "steps"
+            cells[key + "_design_move_s"] = time.perf_counter() - t0
+            mm = plan.candidate("minimax")
+            cells[key + "_worst"] = worst_against(dense, mm.command, ref) if mm.command is not None else float("nan")
+            cells[key + "_stated"] = mm.worst_percent  # over the 5 samples, against the plan's own references
+            cells[key + "_ok"] = bool(mm.ok)
+            cells[key + "_ratio"] = cells[key + "_worst"] / shaper
+        out.append(cells)
+        print(
+            f"{label:28s} {row.name:10s} {row.move_time:.3f} s: shaper (zeta 0.1) {shaper:.3g} %, smooth "
+            f"{cells['smooth_worst']:.3g} % (x{cells['smooth_ratio']:.3g}, {cells['smooth_design_move_s']:.2f} s), "
+            f"steps {cells['steps_worst']:.3g} % (x{cells['steps_ratio']:.3g}, {cells['steps_design_move_s']:.2f} s)",
+            flush=True,
+        )
+    return out
+
+
+def damping_headline(rows):
+    steps = np.array([r["steps_ratio"] for r in rows])
+    smooth = np.array([r["smooth_ratio"] for r in rows])
+    best = {}
+    for r in rows:  # per axis: the best shaper over the range, and the minimax designs at that shaper's terms
+        if r["axis"] not in best or r["shaper_worst"] < best[r["axis"]]["shaper_worst"]:
+            best[r["axis"]] = r
+    walls = np.array([r[k + "_design_move_s"] for r in rows for k in ("smooth", "steps")])
+    return [
+        dict(what="steps design (damping='unknown') / Klipper shaper at zeta 0.1, equal time and peaks, worst over "
+             "band x damping 0.01-0.1 (max over axes and shapers)", value=float(np.nanmax(steps)), unit="x",
+             target="<= 1"),
+        dict(what="smooth design (damping='unknown') / Klipper shaper at zeta 0.1 (max over the pairs where it is "
+             "feasible)", value=float(np.nanmax(smooth)), unit="x", target=None),
+        dict(what="pairs where the smooth design leaves more than the shaper", value=int(np.sum(smooth > 1)), unit="",
+             target=None),
+        dict(what="pairs where the smooth design cannot move the distance within the shaper's time and peaks",
+             value=int(np.sum(~np.isfinite(smooth))), unit="", target=None),
+        *(dict(what=f"{a}: best shaper over the range ({r['shaper']}, {r['shaper_worst']:.3g} %) against the smooth "
+               f"minimax at its terms ({r['smooth_worst']:.3g} %): ratio", value=r["smooth_ratio"], unit="x",
+               target=None) for a, r in best.items()),
+        dict(what="design_move(damping='unknown') wall time, median over the calls", value=float(np.median(walls)),
+             unit="s", target=None),
+        dict(what="pairs (axis, shaper) compared", value=len(rows), unit="", target=None),
+    ]  # fmt: skip
+
+
 def headline_of(rows):
     """The headline numbers of a run's rows (a smooth design that cannot move the distance within the shaper's
     time and peaks is counted, not compared)."""
@@ -88,8 +181,13 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="one axis, two shapers (CI size)")
     ap.add_argument("--headline", action="store_true", help="only recompute the headline from the last run's rows")
     ap.add_argument("--jerk", type=float, default=None, help="a jerk limit [m/s^3]: the single-mode axes, S-curves")
+    ap.add_argument("--damping", action="store_true", help="unknown damping: shapers at 0.1, judged over 0.01-0.1")
     args = ap.parse_args(argv)
+    if args.damping and args.jerk is not None:
+        ap.error("--damping and --jerk are separate modes")
     name = "shaping_every_shaper" if args.jerk is None else "shaping_every_shaper_jerk"
+    name = "shaping_every_shaper_damping" if args.damping else name
+    heads = damping_headline if args.damping else headline_of
     if args.headline:
         import json
 
@@ -99,7 +197,7 @@ def main(argv=None):
 
         path = results_dir(False) / f"{name}.json"
         data = json.loads(path.read_text())
-        data["headline"] = headline_of(data["rows"])
+        data["headline"] = heads(data["rows"])
         write_text(path, json.dumps(data, indent=2, default=float))
         return
     t0 = time.perf_counter()
@@ -109,9 +207,15 @@ def main(argv=None):
         axes = [a for a in axes if len(a[1]) == 1]
     for label, f, z, d in axes:
         shapers = ("ZV", "EI") if args.quick else CLASSIC
-        rows += every_shaper(label, np.asarray(f), np.asarray(z), d, shapers, j_max=args.jerk)
-    headline = headline_of(rows)
-    write_results(name, rows, headline, quick=args.quick, extra=dict(wall_s=time.perf_counter() - t0, j_max=args.jerk))
+        if args.damping:
+            rows += unknown_damping(label, f, d, shapers)
+        else:
+            rows += every_shaper(label, np.asarray(f), np.asarray(z), d, shapers, j_max=args.jerk)
+    headline = heads(rows)
+    extra = dict(wall_s=time.perf_counter() - t0, j_max=args.jerk)
+    if args.damping:
+        extra.update(damping_range=DAMPING_RANGE, shaper_damping=SHAPER_DAMPING, dense_damping=DENSE_DAMPING.tolist())
+    write_results(name, rows, headline, quick=args.quick, extra=extra)
     for h in headline:
         print(f"{h['what']}: {h['value']:.4g} {h['unit']} (target {h['target']})")
 

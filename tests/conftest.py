@@ -105,6 +105,7 @@ _COST = {
     "tests/test_explore.py": 22,
     "tests/test_psd.py": 15,
     "tests/test_ramps_design.py": 25,
+    "tests/test_damping_range.py": 22,
 }
 
 

@@ -247,6 +247,10 @@ def test_nearly_equal_exponents_are_refused_and_gradients_are_right_at_the_limit
         jax.block_until_ready(jax.jit(H)(jnp.array([3.0, 4.0, 4.0 + 1e-6])))
 
 
+#: `jaxbelt shaping` with an axis and its required arguments
+_SHAPING_AXIS = ["shaping", "--mode", "7.3:0.02", "--distance", "0.1", "--v-max", "0.3", "--a-max", "1.2"]
+
+
 @pytest.mark.parametrize(
     "argv, needle",
     [
@@ -282,6 +286,15 @@ def test_nearly_equal_exponents_are_refused_and_gradients_are_right_at_the_limit
             "argument --gammas: the exponents must differ pairwise by at least 0.001",
         ),
         (["nonlinear", "--damping", "0.1", "0.2", "0.3"], "argument --damping: give 1 ratio (all modes) or 2"),
+        (
+            [*_SHAPING_AXIS, "--damping", "0.2", "0.1"],
+            "argument --damping: give LO HI with 0 <= LO <= HI < 1 (damping ratios), or 'unknown'; got 0.2 0.1",
+        ),
+        (
+            [*_SHAPING_AXIS, "--damping", "low"],
+            "argument --damping: give LO HI with 0 <= LO <= HI < 1 (damping ratios), or 'unknown'; got low",
+        ),
+        (["shaping", "--damping", "unknown"], "argument --damping: only with an axis (--mode or --measured)"),
     ],
 )
 def test_cli_refuses_bad_arguments_before_computing(argv, needle, capsys):

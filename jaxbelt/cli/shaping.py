@@ -28,7 +28,7 @@ PAPER_DEFAULTS = {
 OVERVIEW_ONLY = ("gammas", "duration", "revolutions", "robust_order", "robust_mode", "band", "spread")
 #: the options of a design on the user's axis and their defaults
 AXIS_DEFAULTS = {"uncertainty": 0.2, "rate": 1000.0}
-AXIS_ONLY = ("distance", "move_time", "v_max", "a_max", "j_max", "n_modes", "uncertainty", "rate")
+AXIS_ONLY = ("distance", "move_time", "v_max", "a_max", "j_max", "n_modes", "uncertainty", "damping", "rate")
 
 
 def register(subparsers):
@@ -86,6 +86,15 @@ def register(subparsers):
         type=float_in(0.0, 0.9, hi_open=True),
         default=None,
         help="frequency error every residual is judged over, +- (default 0.2)",
+    )
+    axis.add_argument(
+        "--damping",
+        nargs="+",
+        default=None,
+        metavar="LO HI | unknown",
+        help="damping ratios every residual is judged over, as well as the band: a range LO HI (0 <= LO <= HI < 1), "
+        "or 'unknown' for 0.01-0.1 with the classic shapers designed at 0.1 (Klipper's default); default: each "
+        "mode's own damping ratio",
     )
     axis.add_argument(
         "--rate",
@@ -201,6 +210,26 @@ def _positive_int(text: str) -> int:
     return v
 
 
+def _damping(values: list[str]):
+    """`--damping`'s words as `design_move`'s `damping` ("unknown" or (lo, hi)), or the error message."""
+    import math
+
+    if values == ["unknown"]:
+        return "unknown"
+    why = (
+        f"argument --damping: give LO HI with 0 <= LO <= HI < 1 (damping ratios), or 'unknown'; got {' '.join(values)}"
+    )
+    if len(values) != 2:
+        return why
+    try:
+        lo, hi = (float(v) for v in values)
+    except ValueError:
+        return why
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo <= hi < 1.0):
+        return why
+    return lo, hi
+
+
 def check(args) -> str | None:
     """The relations between arguments that argparse does not check (run before anything is computed): what each
     mode needs, the options it does not use (refused, never ignored), the CSV rate against the band's Nyquist
@@ -224,6 +253,11 @@ def check(args) -> str | None:
             return "argument --distance: must be non-zero"
         if args.n_modes is not None and not args.measured:
             return "argument --n-modes: only with --measured"
+        if args.damping is not None:
+            damping = _damping(args.damping)
+            if isinstance(damping, str) and damping != "unknown":
+                return damping
+            args.damping = damping
         outs = list(args.out or [Path("move.csv")])
         if args.rate is not None and not any(str(o).lower().endswith(".csv") for o in outs):
             return "argument --rate: not used without a .csv in --out (the rate is the CSV's sample rate)"
@@ -338,6 +372,7 @@ def _axis_run(args) -> int:
         j_max=args.j_max,
         uncertainty=args.uncertainty,
         progress=not args.no_progress,
+        damping=args.damping,
     )
     print(plan.format_table())
     best = plan.best

@@ -45,7 +45,12 @@ def plan_figure(plan):
         ax.axvline(freqs[i], color="0.4", lw=0.6)
         ax.set_xlabel("mode frequency [Hz]")
         ax.set_ylabel("residual [% of unshaped]")
-        ax.set_title(f"mode {i + 1}: {freqs[i]:.3g} Hz, ζ = {float(plan.axis.damping_ratios[i]):.3g}")
+        zeta = (
+            f"ζ = {float(plan.axis.damping_ratios[i]):.3g}"
+            if plan.damping is None
+            else f"ζ in [{plan.damping[0]:.3g}, {plan.damping[1]:.3g}] (worst)"
+        )
+        ax.set_title(f"mode {i + 1}: {freqs[i]:.3g} Hz, {zeta}")
         ax.set_ylim(1e-4, 300)
         ax.grid(alpha=0.3, which="both")
     for i in range(n, axes.shape[1]):

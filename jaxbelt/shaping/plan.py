@@ -21,6 +21,10 @@ unshaped move: of the worst residual over the band that the *time-optimal unshap
 without shaping, `fastest_move`) leaves on that mode. The 5 % band of a mode is the contiguous frequency range
 around its nominal value where the residual stays within 5 % of that reference.
 
+With `damping=(lo, hi)` (or `"unknown"`), every mode's damping ratio may also be anywhere in [lo, hi]: each residual
+is judged on the band times `N_DAMPING` damping samples of the range (`damping_samples`), each sample against the
+unshaped move's residual at that damping, and the minimax design minimises the worst of them all.
+
 With `move_time=None`, each classic shaper runs at its own shortest time (time-optimal base + shaper length),
 the best of them (least worst residual) sets the target, and the minimax design is placed at the shortest move
 time at which it reaches that target (bisection on the time).
@@ -73,6 +77,15 @@ _N_WIDE = 501
 #: units of the sampled move (`MovePlan.samples_to_pandas`)
 _SAMPLE_UNITS = {"t": "s", "x": "m", "v": "m/s", "a": "m/s²"}
 
+#: damping samples per mode with `design_move(..., damping=(lo, hi))`: the worst residual of a design over the damping
+#: range lies within 2 % of the worst over these samples (1.9 % measured on a 25-sample grid of (0.01, 0.1) for a
+#: 7.3 Hz minimax design, whose residual the LP equalises over the samples; tests/test_damping_range.py)
+N_DAMPING = 5
+#: the damping range `damping="unknown"` stands for, and the damping ratio the classic shapers are then designed at
+#: (Klipper's default for an axis whose damping is not measured)
+UNKNOWN_DAMPING = (0.01, 0.1)
+UNKNOWN_SHAPER_DAMPING = 0.1
+
 
 @dataclasses.dataclass(frozen=True)
 class Candidate:
@@ -82,7 +95,9 @@ class Candidate:
     - `move_time` [s];
     - `worst_percent`, `mean_percent`: worst and mean residual over every mode's band, in % of the unshaped
       move's worst residual on that mode; `worst_m`: the worst residual amplitude in length units [m];
-    - `band_hz`: per mode, `(low, high)` [Hz] of the 5 % band (NaN when the nominal residual is above 5 %);
+    - `band_hz`: per mode, `(low, high)` [Hz] of the 5 % band (NaN when the nominal residual is above 5 %); with a
+      damping range, the band within which the residual stays within 5 % at every damping sample (the
+      intersection of the samples' bands);
     - `peak_v` [m/s], `peak_a` [m/s²], `peak_j` [m/s³];
     - `ok`: feasible, converged and within the limits; `note`: why not, or what to know;
     - `outside_percent`: the worst residual outside the band, between 0.5 and 1.5 times each mode's frequency,
@@ -125,7 +140,13 @@ class MovePlan:
     band [m]) and the minimax design's details (`minimax`: a `MinimaxDesign` or None); `continuous_bound`: a rigorous
     lower bound on the least worst residual any command within the plan's limits, distance and time can leave over
     the band, as a fraction of the references (the minimax row's worst % is at least 100x this; NaN without a
-    converged `smooth=False` minimax design without a jerk limit; `jaxbelt.shaping.certify`)."""
+    converged `smooth=False` minimax design without a jerk limit; `jaxbelt.shaping.certify`).
+
+    `damping`: the damping range `(lo, hi)` every residual was judged over (`design_move(..., damping=...)`), or
+    None (the axis' own damping ratios). With a range, `axis` is the user's axis, `reference_m` per mode the largest
+    of its damping samples' references, and `measure_axis`, `measure_reference_m` the expanded axis (each mode once
+    per damping sample, `damping_samples`) and its references, on which every residual of the table, the curves and
+    the exported samples' correction are computed."""
 
     axis: ModalAxis
     distance: float
@@ -139,6 +160,15 @@ class MovePlan:
     best: Candidate | None
     minimax: object = None
     continuous_bound: float = math.nan
+    damping: tuple[float, float] | None = None
+    measure_axis: ModalAxis | None = None
+    measure_reference_m: np.ndarray | None = None
+
+    def _measured(self) -> tuple[ModalAxis, np.ndarray, int]:
+        """The axis every residual is computed on, its references [m], and its copies per mode of `axis`."""
+        if self.measure_axis is None or self.measure_reference_m is None:
+            return self.axis, np.asarray(self.reference_m), 1
+        return self.measure_axis, np.asarray(self.measure_reference_m), self.measure_axis.n_modes // self.axis.n_modes
 
     def __str__(self) -> str:
         return self.format_table()
@@ -205,7 +235,8 @@ class MovePlan:
         cmd = c.command
         assert cmd is not None  # `_chosen` refuses a candidate without a command
         if isinstance(cmd, SplineMove):
-            return executable_samples(cmd, rate_hz, self.axis, self.reference_m, self.uncertainty, limits=limits)
+            axis, ref, _ = self._measured()  # the residual the table states: over the band (and damping range)
+            return executable_samples(cmd, rate_hz, axis, ref, self.uncertainty, limits=limits)
         return limited_samples(cmd, rate_hz, limits)
 
     def _chosen(self, name: str | None, owner: str) -> Candidate:
@@ -229,13 +260,15 @@ class MovePlan:
         raise ValueError(f"MovePlan: no candidate named {name!r}; candidates: {[c.name for c in self.table]}")
 
     def curves(self, factors=None):
-        """`(factors, {name: residual % of shape (n_modes, len(factors))})` for every candidate with a command."""
+        """`(factors, {name: residual % of shape (n_modes, len(factors))})` for every candidate with a command; with
+        a damping range, per mode the worst over its damping samples."""
         f = np.linspace(*_WIDE, _N_WIDE) if factors is None else np.asarray(factors, dtype=float)
-        ref = self.reference_m[:, None]
+        axis, ref, per = self._measured()
         out = {}
         for c in self.table:
             if c.command is not None:
-                out[c.name] = 100.0 * np.asarray(residual_curve(self.axis, c.command, f)) / ref
+                pct = 100.0 * np.asarray(residual_curve(axis, c.command, f)) / ref[:, None]
+                out[c.name] = pct.reshape(self.axis.n_modes, per, -1).max(axis=1)
         return f, out
 
     def plot(self, path=None):
@@ -268,7 +301,7 @@ class MovePlan:
             ("distance", self.distance, "m"),
             ("move time", self.move_time, "s"),
             ("limits", limits, ""),
-            ("band", f"±{100 * self.uncertainty:g} % of each frequency", ""),
+            ("band", f"±{100 * self.uncertainty:g} % of each frequency" + self._damping_words(), ""),
             ("recommended", self.best.name if self.best is not None else "none (see the notes)", ""),
         )
         n = axis.n_modes
@@ -296,6 +329,12 @@ class MovePlan:
         marked = next((i for i, c in enumerate(self.table) if c is self.best), None)
         table = Table(headers, tuple(rows), caption="candidates, best first", marked=marked, mark="recommended")
         return Display("jaxbelt MovePlan", fields, (table,))
+
+    def _damping_words(self) -> str:
+        if self.damping is None:
+            return ""
+        n = self._measured()[2]
+        return f", × damping ratio {self.damping[0]:g} – {self.damping[1]:g} ({n} samples)"
 
     def _repr_html_(self) -> str:
         return self._display().html()
@@ -337,6 +376,8 @@ class MovePlan:
             uncertainty=self.uncertainty,
             best="" if self.best is None else self.best.name,
         )
+        if self.damping is not None:
+            attrs.update(damping_low=self.damping[0], damping_high=self.damping[1])
         return xr.Dataset(data, coords=coords, attrs=attrs)
 
     def _columns(self, bands: bool = True):
@@ -437,22 +478,73 @@ def _check_inputs(axis, distance, move_time, v_max, a_max, j_max, uncertainty, i
     return d, t_min
 
 
+def _check_damping(damping) -> tuple[float, float] | None:
+    """`design_move`'s `damping` as `(lo, hi)`, or None; a `ValueError` naming it otherwise."""
+    if damping is None:
+        return None
+    if isinstance(damping, str) and damping == "unknown":
+        return UNKNOWN_DAMPING
+    msg = (
+        "design_move: parameter `damping` must be None, 'unknown' or (lo, hi) with 0 <= lo <= hi < 1 (damping "
+        f"ratios); got {damping!r}"
+    )
+    if isinstance(damping, str | bytes) or not hasattr(damping, "__len__") or len(damping) != 2:
+        raise ValueError(msg)
+    try:
+        lo, hi = (float(x) for x in damping)
+    except (TypeError, ValueError):
+        raise ValueError(msg) from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo <= hi < 1.0):
+        raise ValueError(msg)
+    return lo, hi
+
+
+def damping_samples(lo: float, hi: float, n: int = N_DAMPING) -> np.ndarray:
+    """The damping ratios a range [lo, hi] is judged at: `n` samples including both ends, spaced geometrically when
+    lo > 0 (the residual of a lightly damped mode changes with log zeta), evenly from 0; one when lo == hi."""
+    if hi == lo:
+        return np.array([lo])
+    return np.geomspace(lo, hi, n) if lo > 0 else np.linspace(lo, hi, n)
+
+
+def _damping_axis(axis: ModalAxis, zetas) -> ModalAxis:
+    """Each mode of `axis` once per damping ratio of `zetas` (frequency and gain kept), mode by mode: the copies
+    of mode i are i * len(zetas) ... (i + 1) * len(zetas) - 1."""
+    z = np.asarray(zetas, dtype=float)
+    n = z.size
+    return ModalAxis(
+        np.repeat(np.asarray(axis.frequencies, dtype=float), n),
+        np.tile(z, axis.n_modes),
+        np.repeat(np.asarray(axis.gains, dtype=float), n),
+    )
+
+
+def _mode_label(axis: ModalAxis, i: int, per: int) -> str:
+    """Mode `i` of an axis with `per` damping copies per mode of the user's, as the user numbers it."""
+    if per == 1:
+        return f"mode {i + 1}"
+    return f"mode {i // per + 1} at ζ = {float(np.asarray(axis.damping_ratios)[i]):.3g}"
+
+
 def _measure_grids(u: float):
     """The frequency factors `_measure` evaluates a command's residual on: the band ±u, and the wide range."""
     return (np.linspace(1 - u, 1 + u, _N_BAND) if u > 0 else np.ones(1)), np.linspace(*_WIDE, _N_WIDE)
 
 
-def _measure(axis, cmd, ref, u, limits) -> tuple[dict[str, Any], bool]:
-    """The table's numbers for one command."""
+def _measure(axis, cmd, ref, u, limits, per: int = 1) -> tuple[dict[str, Any], bool]:
+    """The table's numbers for one command (`per`: damping copies of each user mode in `axis`)."""
     band, wide = _measure_grids(u)
     res = np.asarray(residual_curve(axis, cmd, band))  # (modes, K)
     ratio = res / ref[:, None]
     wr = np.asarray(residual_curve(axis, cmd, wide)) / ref[:, None]
     f = np.asarray(axis.frequencies)
     bands = []
-    for i in range(axis.n_modes):
-        lo, hi = tolerance_band(wide, wr[i], 0.05)
-        bands.append((lo * f[i], hi * f[i]))
+    for i in range(0, axis.n_modes, per):
+        # with damping copies: the band within which every copy stays within 5 % (each contains the nominal
+        # frequency, so the intersection is empty only when one of them is, NaN)
+        sides = np.array([tolerance_band(wide, wr[k], 0.05) for k in range(i, i + per)], dtype=float)
+        lo, hi = float(np.max(sides[:, 0])), float(np.min(sides[:, 1]))  # NaN propagates
+        bands.append((lo * f[i], hi * f[i]) if per == 1 or lo <= hi else (math.nan, math.nan))
     pv, pa, pj = peaks(cmd)
     v_max, a_max, j_max = limits
     within = pv <= v_max * (1 + 1e-6) and pa <= a_max * (1 + 1e-6) and (j_max is None or pj <= j_max * (1 + 1e-6))
@@ -469,24 +561,26 @@ def _measure(axis, cmd, ref, u, limits) -> tuple[dict[str, Any], bool]:
     ), within
 
 
-def _pad_size(axis, jerk: bool, terms: int) -> int:
+def _pad_size(n_modes: int, jerk: bool, terms: int) -> int:
     """One padded size for the piecewise moves of a plan, so that they share their compiled programs: up to 3
     modes the longest shaped move's (3-hump EI, 5 impulses per mode, 4 terms per impulse without a jerk limit, 8
     with one); beyond, `terms` rounded up to a power of two (the sizes grow as 5**modes)."""
-    if axis.n_modes <= 3:
-        return (8 if jerk else 4) * 5**axis.n_modes
+    if n_modes <= 3:
+        return (8 if jerk else 4) * 5**n_modes
     return 1 << max(int(terms) - 1, 1).bit_length()
 
 
-def _row(name, axis, cmd, T, ref, u, limits, note="", ok=True):
-    if isinstance(cmd, PiecewiseMove):
-        cmd = padded(cmd, _pad_size(axis, limits[2] is not None, cmd.times.shape[0]))
+def _row(name, axis, cmd, T, ref, u, limits, note="", ok=True, per: int = 1):
+    """One candidate measured on `axis` (with `per` damping copies of each of the user's modes)."""
+    n_user = axis.n_modes // per
+    if isinstance(cmd, PiecewiseMove):  # shaped on the user's modes: padded to their size
+        cmd = padded(cmd, _pad_size(n_user, limits[2] is not None, cmd.times.shape[0]))
     if cmd is None:
         nan = math.nan
         return Candidate(
-            name, None, T, nan, nan, nan, tuple((nan, nan) for _ in range(axis.n_modes)), nan, nan, nan, False, note
+            name, None, T, nan, nan, nan, tuple((nan, nan) for _ in range(n_user)), nan, nan, nan, False, note
         )
-    m, within = _measure(axis, cmd, ref, u, limits)
+    m, within = _measure(axis, cmd, ref, u, limits, per)
     if not within:
         ok = False
         note = (note + "; " if note else "") + "exceeds the limits"
@@ -638,21 +732,21 @@ def _knots_axis(axis: ModalAxis, far: _FarModes) -> ModalAxis:
     return _sub_axis(axis, resolved) if far.far and resolved else axis
 
 
-def _refuse_all_far(axis: ModalAxis, T: float, u: float, far: _FarModes) -> None:
+def _refuse_all_far(axis: ModalAxis, T: float, u: float, far: _FarModes, per: int = 1) -> None:
     """The `ValueError` of `design_move` when the minimax LP would weigh no mode of `axis`."""
     if far.kept:
         return
-    freqs = ", ".join(f"{float(x):.6g}" for x in np.asarray(axis.frequencies))
+    freqs = ", ".join(f"{float(x):.6g}" for x in np.asarray(axis.frequencies)[::per])
     raise ValueError(
         f"design_move: every mode of parameter `axis` ({freqs} Hz) lies far above what the minimax design resolves "
         f"in a {T:.4g} s move (band ±{u:g}; Nyquist frequency of its finest grid {far.nyquist_hz:.4g} Hz): "
-        + "; ".join(f"mode {i + 1}: {why}" for i, why in far.left_out)
+        + "; ".join(f"{_mode_label(axis, i, per)}: {why}" for i, why in far.left_out)
         + ". Leave 'minimax' out of `include` (the classic shapers still apply), give a longer `move_time`, or "
         "check the frequencies' unit (Hz)"
     )
 
 
-def _far_note(axis: ModalAxis, cmd, ref, u: float, far: _FarModes) -> str:
+def _far_note(axis: ModalAxis, cmd, ref, u: float, far: _FarModes, per: int = 1) -> str:
     """The minimax row's words on the modes left out of its LP: which, why, and the worst residual the command leaves
     them over their band, computed exactly (closed form) on the full axis, in % of the unshaped move's."""
     if not far.left_out:
@@ -661,7 +755,7 @@ def _far_note(axis: ModalAxis, cmd, ref, u: float, far: _FarModes) -> str:
     ratio = np.asarray(residual_curve(axis, cmd, band)) / np.asarray(ref)[:, None]
     f = np.asarray(axis.frequencies, dtype=float)
     parts = [
-        f"mode {i + 1} ({f[i]:.6g} Hz; {why}): {100.0 * float(np.max(ratio[i])):.2g} % (exact)"
+        f"{_mode_label(axis, i, per)} ({f[i]:.6g} Hz; {why}): {100.0 * float(np.max(ratio[i])):.2g} % (exact)"
         for i, why in far.left_out
     ]
     return "left out of the LP, their residual computed for this command: " + "; ".join(parts)
@@ -681,6 +775,7 @@ def design_move(
     progress: bool = False,
     smooth: bool = True,
     certify_rtol: float | None = None,
+    damping=None,
 ) -> MovePlan:
     """Design the move of `distance` [m] on `axis` every way jaxbelt knows, under the same limits and move time,
     and rank them (see the module docstring).
@@ -694,6 +789,17 @@ def design_move(
     - `v_max` [m/s], `a_max` [m/s²], `j_max` [m/s³] (optional): limits every candidate respects;
     - `uncertainty` u in [0, 0.9): the band $f_i(1 \\pm u)$ every residual is judged on (damping ratio kept);
     - `include`: which candidates to build;
+    - `damping`: None (default): every mode at its own damping ratio. `(lo, hi)` (damping ratios, 0 <= lo <= hi
+      < 1): every mode's damping ratio may be anywhere in [lo, hi] (the axis' own one is then used only to design
+      the classic shapers and the pseudo-polynomials): each mode is judged at `N_DAMPING` = 5 damping samples
+      spanning the range (both ends; geometric spacing when lo > 0, `damping_samples`), each against the unshaped
+      move's worst residual at that damping, so `worst_percent` is the worst over band × damping range and the
+      minimax design minimises it. `"unknown"`: the range (0.01, 0.1) (`UNKNOWN_DAMPING`), and the classic shapers
+      and pseudo-polynomials are designed at damping ratio 0.1 for every mode, as Klipper does for an axis whose
+      damping is not measured (its `damping_ratio` default). A mode's 5 % band is then where the residual stays
+      within 5 % at every damping sample; `plan.damping` records the range, `plan.axis` stays the user's axis. The
+      minimax LP weighs 5 copies of each mode: about 5 times its rows (a 1-mode design costs about what a 5-mode
+      one does, compile included);
     - `smooth`: the minimax design's command space. True (default): a continuous acceleration (cubic B-spline,
       continuous jerk). False: an acceleration that is constant on each of N equal intervals and jumps between
       them, as a shaped trapezoid's does; its limits are exact rather than a little conservative, so it can come
@@ -745,16 +851,27 @@ def design_move(
                 f"whose jerk is unbounded; with a jerk limit the design has ramps); got certify_rtol={certify_rtol!r} "
                 f"with j_max={j_max!r}"
             )
+    damp = _check_damping(damping)
     u = float(uncertainty)
     v_max, a_max = float(v_max), float(a_max)
     j_max = None if j_max is None else float(j_max)
     limits = (v_max, a_max, j_max)
     t_fixed = None if move_time is None else float(move_time)
     clearly = t_fixed is not None and t_fixed >= _SURELY_FEASIBLE * t_min
+    # `nominal`: the damping the classic shapers and the pseudo-polynomials are designed at; `user`: the axis the
+    # residuals are judged on (with a damping range, each mode once per damping sample, `per` copies each)
+    user = axis
+    nominal, per = axis, 1
+    if damp is not None:
+        if isinstance(damping, str):  # "unknown": Klipper's practice
+            nominal = ModalAxis(axis.frequencies, np.full(axis.n_modes, UNKNOWN_SHAPER_DAMPING), axis.gains)
+        zetas = damping_samples(*damp)
+        per = zetas.size
+        axis = _damping_axis(axis, zetas)
     far = None  # the modes the minimax LP leaves out (`_far_modes`): at a given time, known (and refused) at once
     if "minimax" in include and t_fixed is not None:
         far = _far_modes(axis, t_fixed, u, j_max, True, smooth)
-        _refuse_all_far(axis, t_fixed, u, far)
+        _refuse_all_far(axis, t_fixed, u, far, per)
     if "minimax" in include and t_fixed is not None and clearly and far is not None:
         # the minimax design's programs start compiling now, in the background, while the reference and the other
         # candidates are computed (their types only: a stand-in reference of the right shape)
@@ -764,6 +881,7 @@ def design_move(
     ref_cmd = fastest_move(d, v_max, a_max, j_max)
     band = _measure_grids(u)[0]
     ref = np.max(np.asarray(residual_curve(axis, ref_cmd, band)), axis=1)
+    ref_nominal = ref if per == 1 else np.max(np.asarray(residual_curve(nominal, ref_cmd, band)), axis=1)
     rows = []
     # --- classic shapers
     shaped = {}
@@ -771,20 +889,20 @@ def design_move(
         if name not in include:
             continue
         try:
-            tau_end = float(shaper_for_axis(name, axis.frequencies, axis.damping_ratios)[1][-1])
+            tau_end = float(shaper_for_axis(name, nominal.frequencies, nominal.damping_ratios)[1][-1])
         except ShaperRangeError as e:  # a firmware fit asked for beyond its damping range: listed, not built
             shaped[name] = (None, math.nan if move_time is None else float(move_time), e.note)
             continue
         if move_time is None:
             T_s = fastest_time(d, v_max, a_max, j_max) + tau_end
-            cmd, _ = _shaped(axis, name, d, T_s * (1 + 1e-12), v_max, a_max, j_max)
+            cmd, _ = _shaped(nominal, name, d, T_s * (1 + 1e-12), v_max, a_max, j_max)
             shaped[name] = (cmd, T_s, "")
         else:
-            cmd, t_short = _shaped(axis, name, d, float(move_time), v_max, a_max, j_max)
+            cmd, t_short = _shaped(nominal, name, d, float(move_time), v_max, a_max, j_max)
             shaped[name] = (cmd, float(move_time) if cmd is not None else t_short, "")
     for name, (cmd, T_s, why) in shaped.items():
         note = why or ("" if cmd is not None else f"infeasible: needs a move time >= {T_s:.4g} s")
-        rows.append(_row(name, axis, cmd, T_s, ref, u, limits, note=note, ok=cmd is not None))
+        rows.append(_row(name, axis, cmd, T_s, ref, u, limits, note=note, ok=cmd is not None, per=per))
     classic = [r for r in rows if r.ok]
     target = min((r.worst_percent for r in classic), default=math.nan)
     # --- the minimax design
@@ -796,7 +914,7 @@ def design_move(
         )
         if far is None:
             far = _far_modes(axis, T_guess, u, j_max, False, smooth)
-            _refuse_all_far(axis, T_guess, u, far)
+            _refuse_all_far(axis, T_guess, u, far, per)
         # modes far above the knots' reach are left out of the LP (`_far_modes`); every row is measured on `axis`
         lp_axis = _sub_axis(axis, far.kept) if far.left_out else axis
         kept = np.asarray(far.kept, dtype=int)
@@ -823,6 +941,7 @@ def design_move(
                         limits,
                         ok=False,
                         note=f"infeasible for the smooth design: needs a move time >= {t_f:.4g} s",
+                        per=per,
                     )
                 )
             elif mm is None:
@@ -846,9 +965,10 @@ def design_move(
                 if certify_rtol is not None:
                     mm, bound, note = _certify(solver, mm, bound, certify_rtol, progress)
                 note += f"; any command leaves >= {100 * bound:.3g} % (continuous bound)"
-            row = _row("minimax", axis, mm.command, float(mm.command.duration), ref, u, limits, note=note, ok=ok)
+            T_mm = float(mm.command.duration)
+            row = _row("minimax", axis, mm.command, T_mm, ref, u, limits, note=note, ok=ok, per=per)
             if far.left_out:  # the left-out modes' residual, exact for this command (the program `_row` ran)
-                row = dataclasses.replace(row, note=row.note + "; " + _far_note(axis, row.command, ref, u, far))
+                row = dataclasses.replace(row, note=row.note + "; " + _far_note(axis, row.command, ref, u, far, per))
             rows.append(row)
     # --- Incerti's pseudo-polynomial commands
     T_common = (
@@ -857,13 +977,16 @@ def design_move(
         else (float(mm.command.duration) if mm is not None else min((r.move_time for r in classic), default=2 * t_min))
     )
     if "pseudo-polynomial" in include:
-        rows += _pseudo_rows(axis, d, T_common, v_max, a_max, j_max, u, ref, limits, progress)
+        rows += _pseudo_rows(
+            nominal, ref_nominal, axis, ref, per, d, T_common, v_max, a_max, j_max, u, limits, progress
+        )
     if "unshaped" in include:
         if move_time is None:
-            rows.append(_row("unshaped (time-optimal)", axis, ref_cmd, float(ref_cmd.duration), ref, u, limits))
+            T_ref = float(ref_cmd.duration)
+            rows.append(_row("unshaped (time-optimal)", axis, ref_cmd, T_ref, ref, u, limits, per=per))
         else:
             base = trapezoid_move(d, T_common, v_max, a_max, j_max)
-            rows.append(_row("unshaped", axis, base, T_common, ref, u, limits))
+            rows.append(_row("unshaped", axis, base, T_common, ref, u, limits, per=per))
     ranked = sorted(rows, key=lambda r: (not r.ok, r.worst_percent if math.isfinite(r.worst_percent) else math.inf))
     best = next((r for r in ranked if r.ok), None)
     if best is None:
@@ -874,22 +997,28 @@ def design_move(
             stacklevel=2,
         )
     return MovePlan(
-        axis=axis,
+        axis=user,
         distance=d,
         move_time=T_common,
         v_max=v_max,
         a_max=a_max,
         j_max=j_max,
         uncertainty=u,
-        reference_m=ref,
+        reference_m=ref if per == 1 else ref.reshape(user.n_modes, per).max(axis=1),
         table=tuple(ranked),
         best=best,
         minimax=mm,
         continuous_bound=bound,
+        damping=damp,
+        measure_axis=None if per == 1 and damp is None else axis,
+        measure_reference_m=None if per == 1 and damp is None else ref,
     )
 
 
-def _pseudo_rows(axis, d, T, v_max, a_max, j_max, u, ref, limits, progress):
+def _pseudo_rows(axis, ref_design, measure_axis, ref, per, d, T, v_max, a_max, j_max, u, limits, progress):
+    """Incerti's commands designed on `axis` (references `ref_design`), measured on `measure_axis` (`ref`; with a
+    damping range, `per` damping copies of each mode of `axis`; the design on the expanded axis would cost a
+    program per size for little: the exponents are few)."""
     try:
         from .pseudo import pseudo_polynomial_designs
     except ImportError:  # pragma: no cover - the module is part of the package
@@ -908,7 +1037,7 @@ def _pseudo_rows(axis, d, T, v_max, a_max, j_max, u, ref, limits, progress):
         a_max=a_max,
         j_max=j_max,
         uncertainty=u,
-        reference=jnp.asarray(ref[kept]),
+        reference=jnp.asarray(ref_design[kept]),
         progress=progress,
     )
     for name, pd in designs.items():
@@ -921,7 +1050,7 @@ def _pseudo_rows(axis, d, T, v_max, a_max, j_max, u, ref, limits, progress):
                     f"exponents optimised without mode(s) {', '.join(str(i + 1) for i in far.far)}",
                 ]
             )
-        out.append(_row(name, axis, pd.command, T, ref, u, limits, note=note, ok=ok))
+        out.append(_row(name, measure_axis, pd.command, T, ref, u, limits, note=note, ok=ok, per=per))
     return out
 
 
