@@ -76,6 +76,7 @@ def test_plan_records_the_range(plans):
     assert p.axis.n_modes == 1 and all(len(c.band_hz) == 1 for c in p.table)
     np.testing.assert_allclose(np.asarray(p.measure_axis.damping_ratios), np.geomspace(0.01, 0.1, 5), rtol=1e-12)
     assert "damping ratio 0.01 – 0.1" in dict((k, v) for k, v, _ in p._display().fields)["band"]
+    assert p.format_table().splitlines()[-1] == "band: ±20 % of each frequency, × damping ratio 0.01 – 0.1 (5 samples)"
     assert plans["nominal"].damping is None and plans["nominal"].measure_axis is None
 
 
@@ -142,6 +143,14 @@ def test_damping_none_is_unchanged(plans):
             b.band_hz,
         )
     np.testing.assert_array_equal(p.reference_m, plans["nominal"].reference_m)
+
+
+def test_a_range_without_the_axis_damping_is_refused():
+    # the classic shapers are designed at the axis' own damping ratio: a range that leaves it out is a contradiction
+    with pytest.raises(
+        ValueError, match=r"`damping` \(0\.06, 0\.1\) must contain the axis' own damping ratios \[0\.05\]"
+    ):
+        jb.design_move(jb.ModalAxis([F], [ZETA]), D, T, damping=(0.06, 0.1), **KW)
 
 
 @pytest.mark.parametrize("bad", [(0.2, 0.1), (-0.1, 0.1), (0.1, 1.0), "foo", (0.1,), (0.01, float("nan"))])

@@ -187,6 +187,8 @@ class MovePlan:
                 f"{mark}{c.name:27s} {c.move_time:7.3f} {c.worst_percent:9.4f} {c.mean_percent:9.4f} "
                 f"{c.worst_m:10.3e} {c.outside_percent:9.3g} {bands} {c.peak_v:8.4f} {c.peak_a:8.4f}  {c.note}"
             )
+        if self.damping is not None:
+            lines.append(f"band: ±{100 * self.uncertainty:g} % of each frequency{self._damping_words()}")
         return "\n".join(lines)
 
     def to_csv(self, path, rate_hz: float, candidate: str | None = None) -> tuple[float, float, float]:
@@ -789,17 +791,17 @@ def design_move(
     - `v_max` [m/s], `a_max` [m/s²], `j_max` [m/s³] (optional): limits every candidate respects;
     - `uncertainty` u in [0, 0.9): the band $f_i(1 \\pm u)$ every residual is judged on (damping ratio kept);
     - `include`: which candidates to build;
-    - `damping`: None (default): every mode at its own damping ratio. `(lo, hi)` (damping ratios, 0 <= lo <= hi
-      < 1): every mode's damping ratio may be anywhere in [lo, hi] (the axis' own one is then used only to design
-      the classic shapers and the pseudo-polynomials): each mode is judged at `N_DAMPING` = 5 damping samples
-      spanning the range (both ends; geometric spacing when lo > 0, `damping_samples`), each against the unshaped
-      move's worst residual at that damping, so `worst_percent` is the worst over band × damping range and the
-      minimax design minimises it. `"unknown"`: the range (0.01, 0.1) (`UNKNOWN_DAMPING`), and the classic shapers
-      and pseudo-polynomials are designed at damping ratio 0.1 for every mode, as Klipper does for an axis whose
-      damping is not measured (its `damping_ratio` default). A mode's 5 % band is then where the residual stays
-      within 5 % at every damping sample; `plan.damping` records the range, `plan.axis` stays the user's axis. The
-      minimax LP weighs 5 copies of each mode: about 5 times its rows (a 1-mode design costs about what a 5-mode
-      one does, compile included);
+    - `damping`: None (default): every mode at its own damping ratio. `(lo, hi)` (damping ratios,
+      0 <= lo <= hi < 1): every mode's damping ratio may be anywhere in [lo, hi]; the axis' own one, which must
+      lie in it, is then used only to design the classic shapers and the pseudo-polynomials. Each mode is judged
+      at `N_DAMPING` = 5 damping samples spanning the range (both ends; geometric spacing when lo > 0,
+      `damping_samples`), each against the unshaped move's worst residual at that damping, so `worst_percent` is
+      the worst over band × damping range and the minimax design minimises it. `"unknown"`: the range
+      (0.01, 0.1) (`UNKNOWN_DAMPING`), and the classic shapers and pseudo-polynomials are designed at damping
+      ratio 0.1 for every mode, as Klipper does for an axis whose damping is not measured (its `damping_ratio`
+      default). A mode's 5 % band is then where the residual stays within 5 % at every damping sample;
+      `plan.damping` records the range, `plan.axis` stays the user's axis. The minimax LP weighs 5 copies of each
+      mode: about 5 times its rows (a 1-mode design costs about what a 5-mode one does, compile included);
     - `smooth`: the minimax design's command space. True (default): a continuous acceleration (cubic B-spline,
       continuous jerk). False: an acceleration that is constant on each of N equal intervals and jumps between
       them, as a shaped trapezoid's does; its limits are exact rather than a little conservative, so it can come
@@ -862,6 +864,14 @@ def design_move(
     # residuals are judged on (with a damping range, each mode once per damping sample, `per` copies each)
     user = axis
     nominal, per = axis, 1
+    if damp is not None and not isinstance(damping, str):
+        zs = np.asarray(axis.damping_ratios, dtype=float)
+        if np.any(zs < damp[0]) or np.any(zs > damp[1]):
+            raise ValueError(
+                f"design_move: parameter `damping` {damp} must contain the axis' own damping ratios "
+                f"{np.round(zs, 6).tolist()} (the classic shapers are designed at them): widen the range, or give "
+                "damping='unknown' (0.01-0.1, the shapers at 0.1)"
+            )
     if damp is not None:
         if isinstance(damping, str):  # "unknown": Klipper's practice
             nominal = ModalAxis(axis.frequencies, np.full(axis.n_modes, UNKNOWN_SHAPER_DAMPING), axis.gains)
