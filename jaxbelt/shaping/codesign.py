@@ -158,6 +158,8 @@ ROOT_RTOL = 1e-8
 #: relative tolerance of `shortest_move_time`'s answer re-designed (`refine=True`): a design at the returned time,
 #: with the given design's discretisation, leaves a worst residual (fine grid) within this fraction of the target
 REDESIGN_RTOL = 5e-3
+#: relative tolerance of the root on the design's grid while `refine=True` calibrates its level (`_shortest_time`)
+CALIBRATION_RTOL = 1e-5
 #: how far `shortest_move_time` looks for the target without a bracket: up to this multiple of the design's time
 MAX_EXPANSION = 64.0
 
@@ -251,7 +253,7 @@ def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, r
     `refine=False`: c = 1, to `ROOT_RTOL`. `refine=True`: c is calibrated so that a fresh design at the root
     (`_redesign`: its own frequency exchange) leaves a fine-grid worst within `REDESIGN_RTOL` of the target: c <- c
     target / (fresh design's fine worst), from c = LP value / fine worst of `design` itself (usually 1-2 fresh
-    designs), each root to 1e-5. The answer stays a root on `design`'s grid at a fixed level, so its derivative is
+    designs), each root to `CALIBRATION_RTOL`. The answer stays a root on `design`'s grid at a fixed level, so its derivative is
     the implicit one on that grid."""
     o = "shortest_move_time"
     feasible_from = [float(design.command.duration)]  # the design exists there: feasible at and above it
@@ -284,7 +286,7 @@ def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, r
     c = float(design.worst) / float(design.fine_worst)
     T, best = start, (start, math.inf, c)
     for _ in range(6):
-        T = root(c * target, T, 1e-5)  # to 1e-5 while the level is calibrated; the answer to ROOT_RTOL
+        T = root(c * target, T, CALIBRATION_RTOL)
         d = _redesign(axis, design, T)
         if not d.converged:
             raise ValueError(
@@ -295,9 +297,9 @@ def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, r
         if abs(f - target) < abs(best[1] - target):
             best = (T, f, c)
         if abs(f - target) <= REDESIGN_RTOL * target:
-            return T  # a root to 1e-5 of the calibrated level: the re-made design there meets the target
+            return T  # a root of the calibrated level: the re-made design there meets the target
         c *= target / f
-    return root(best[2] * target, best[0], 1e-5)
+    return root(best[2] * target, best[0], CALIBRATION_RTOL)
 
 
 @blas_limited

@@ -891,7 +891,6 @@ def design_move(
     ref_cmd = fastest_move(d, v_max, a_max, j_max)
     band = _measure_grids(u)[0]
     ref = np.max(np.asarray(residual_curve(axis, ref_cmd, band)), axis=1)
-    ref_nominal = ref if per == 1 else np.max(np.asarray(residual_curve(nominal, ref_cmd, band)), axis=1)
     rows = []
     # --- classic shapers
     shaped = {}
@@ -987,6 +986,8 @@ def design_move(
         else (float(mm.command.duration) if mm is not None else min((r.move_time for r in classic), default=2 * t_min))
     )
     if "pseudo-polynomial" in include:
+        # designed at the nominal damping: the references there (the expanded axis' ones where there is no range)
+        ref_nominal = ref if per == 1 else np.max(np.asarray(residual_curve(nominal, ref_cmd, band)), axis=1)
         rows += _pseudo_rows(
             nominal, ref_nominal, axis, ref, per, d, T_common, v_max, a_max, j_max, u, limits, progress
         )
@@ -1020,8 +1021,8 @@ def design_move(
         minimax=mm,
         continuous_bound=bound,
         damping=damp,
-        measure_axis=None if per == 1 and damp is None else axis,
-        measure_reference_m=None if per == 1 and damp is None else ref,
+        measure_axis=None if damp is None else axis,
+        measure_reference_m=None if damp is None else ref,
     )
 
 

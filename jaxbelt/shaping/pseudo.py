@@ -675,9 +675,14 @@ def _designs_batch(axis, D, T, limits, reference, u, n_nodes, bar):
     steps = np.zeros(len(orders), dtype=int)
     reason = np.full(len(orders), 2)
     gmax = np.full(len(orders), np.nan)
+
     # stage 0: inside the limits (the penalty alone), for the starts that break one
-    _, pk0 = _evaluate_np(kern_np, m, n_nodes, D, T, np.stack(
-        [_exponents_np(t, b, MARGIN, g, MAX_STEP) for t, b, g in zip(theta0, lower, gap)]), act)  # fmt: skip
+    def evaluated(thetas):
+        exps = np.stack([_exponents_np(t, b, MARGIN, g, MAX_STEP) for t, b, g in zip(thetas, lower, gap)])
+        return _evaluate_np(kern_np, m, n_nodes, D, T, exps, act)
+
+    # r0: the ratios after stage 0, which the optimal design's objective is relative to (its tests are then relative)
+    r0, pk0 = evaluated(theta0)
     inv = np.array([0.0 if x is None else 1.0 / x for x in limits])
     over = np.any(pk0 * inv > 1.0 - SLACK, axis=1)
     feasible = ~over
@@ -686,10 +691,7 @@ def _designs_batch(axis, D, T, limits, reference, u, n_nodes, bar):
                          max_iter=np.where(over, FEASIBILITY_STEPS, 0))  # fmt: skip
         st = run_stage(LBFGS, sh, runs, theta)
         theta, steps = st.theta, steps + np.asarray(st.n_iter)
-    # the optimal design's objective relative to its value after stage 0 (its tests are then relative)
-    r0, pk1 = _evaluate_np(kern_np, m, n_nodes, D, T, np.stack(
-        [_exponents_np(t, b, MARGIN, g, MAX_STEP) for t, b, g in zip(np.asarray(theta), lower, gap)]), act)  # fmt: skip
-    if np.any(over):
+        r0, pk1 = evaluated(np.asarray(theta))
         # The penalty is squared, so its gradient fades at the boundary: L-BFGS can stop (gradient below its
         # tolerance) with the penalty a rounding above zero, the peaks at 1 - SLACK of their limits plus ~1e-13
         # (seen on a GPU, whose sums round otherwise). Such a start is inside the limits with room to spare: the
