@@ -3,10 +3,12 @@
 `benchmarks/shaping_axis.py` compares with the best shaper of each axis (the longest). This script takes each of
 Klipper's six shapers (ZV, MZV, ZVD, EI, 2-hump EI, 3-hump EI) on the held-out axes of that benchmark, at the
 shaper's own shortest move time, and designs the minimax command at exactly that time with the shaper's own peak
-velocity and acceleration as its limits, both command spaces: the smooth default (continuous acceleration) and the
-steps (`smooth=False`, acceleration that may jump, as a shaped trapezoid's does). Every residual is the worst over
-±20 % of every mode in % of one reference per axis (the unshaped time-optimal move at the user's limits).
-Target: the steps design leaves no more than any shaper (ratio <= 1) on every axis and shaper.
+velocity and acceleration as its limits, both command spaces: the smooth one (`smooth=True`, continuous
+acceleration) and the steps (`smooth=False`, acceleration that may jump, as a shaped trapezoid's does), and what a
+user gets by default (`smooth="auto"`, the shaper in the same table: the smooth design, plus the one with jumps where
+the shaper leaves no more; the better minimax row counts). Every residual is the worst over ±20 % of every mode in %
+of one reference per axis (the unshaped time-optimal move at the user's limits).
+Target: the steps design and the default leave no more than any shaper (ratio <= 1) on every axis and shaper.
 
 With `--jerk J` [m/s³] the same on the single-mode named axes under a jerk limit: the shapers on the S-curve with
 |jerk| <= J, and the minimax designs with each shaper's own peak jerk as a limit too, the design "with steps" then
@@ -64,14 +66,32 @@ def every_shaper(label, f, z, d, shapers=CLASSIC, j_max=None):
             cells[key + "_worst"] = worst_against(axis, mm.command, ref) if mm.command is not None else float("nan")
             cells[key + "_ok"] = bool(mm.ok)
             cells[key + "_ratio"] = cells[key + "_worst"] / row.worst_percent
+        plan = jb.design_move(
+            axis, d, row.move_time, v_max=row.peak_v, a_max=row.peak_a, j_max=row.peak_j if j_max is not None else None,
+            uncertainty=U, include=("minimax", row.name),
+        )  # fmt: skip
+        default_cells(cells, plan, lambda cmd: worst_against(axis, cmd, ref), row.worst_percent)
         out.append(cells)
         print(
             f"{label:28s} {row.name:10s} {row.move_time:.3f} s: shaper {row.worst_percent:.3g} %, smooth "
             f"{cells['smooth_worst']:.3g} % (x{cells['smooth_ratio']:.3g}), steps {cells['steps_worst']:.3g} % "
-            f"(x{cells['steps_ratio']:.3g})",
+            f"(x{cells['steps_ratio']:.3g}), default {cells['default_worst']:.3g} % (x{cells['default_ratio']:.3g}, "
+            f"{cells['default_row']})",
             flush=True,
         )
     return out
+
+
+def default_cells(cells, plan, measure, shaper_worst):
+    """The default `design_move` (`smooth="auto"`, the shaper in the table at its own time and peaks): the minimax
+    row a user takes (the better of "minimax" and, where added, "minimax (jumps)"), measured by `measure` (a
+    command's worst residual in %), against the shaper's; into `cells` (`default_*`)."""
+    rows = [c for c in plan.table if c.name in ("minimax", "minimax (jumps)") and c.ok]
+    best = min(rows, key=lambda c: c.worst_percent) if rows else None
+    cells["default_row"] = best.name if best is not None else None
+    cells["default_rows"] = [c.name for c in plan.table if c.name.startswith("minimax")]
+    cells["default_worst"] = measure(best.command) if best is not None else float("nan")
+    cells["default_ratio"] = cells["default_worst"] / shaper_worst
 
 
 #: the damping range of `--damping` (`design_move(..., damping="unknown")`), the shapers' damping ratio, and the
@@ -121,11 +141,19 @@ def unknown_damping(label, f, d, shapers=CLASSIC):
             cells[key + "_stated"] = mm.worst_percent  # over the 5 samples, against the plan's own references
             cells[key + "_ok"] = bool(mm.ok)
             cells[key + "_ratio"] = cells[key + "_worst"] / shaper
+        t0 = time.perf_counter()
+        plan = jb.design_move(
+            at_klipper, d, row.move_time, v_max=row.peak_v, a_max=row.peak_a, uncertainty=U,
+            include=("minimax", row.name), damping="unknown",
+        )  # fmt: skip
+        cells["default_design_move_s"] = time.perf_counter() - t0
+        default_cells(cells, plan, lambda cmd: worst_against(dense, cmd, ref), shaper)
         out.append(cells)
         print(
             f"{label:28s} {row.name:10s} {row.move_time:.3f} s: shaper (zeta 0.1) {shaper:.3g} %, smooth "
             f"{cells['smooth_worst']:.3g} % (x{cells['smooth_ratio']:.3g}, {cells['smooth_design_move_s']:.2f} s), "
-            f"steps {cells['steps_worst']:.3g} % (x{cells['steps_ratio']:.3g}, {cells['steps_design_move_s']:.2f} s)",
+            f"steps {cells['steps_worst']:.3g} % (x{cells['steps_ratio']:.3g}, {cells['steps_design_move_s']:.2f} s), "
+            f"default {cells['default_worst']:.3g} % (x{cells['default_ratio']:.3g}, {cells['default_row']})",
             flush=True,
         )
     return out
@@ -143,6 +171,9 @@ def damping_headline(rows):
         dict(what="steps design (damping='unknown') / Klipper shaper at zeta 0.1, equal time and peaks, worst over "
              "band x damping 0.01-0.1 (max over axes and shapers)", value=float(np.nanmax(steps)), unit="x",
              target="<= 1"),
+        dict(what="default design_move (smooth='auto', damping='unknown') / Klipper shaper at zeta 0.1, equal time "
+             "and peaks (max over axes and shapers)", value=float(np.nanmax([r["default_ratio"] for r in rows])),
+             unit="x", target="<= 1"),
         dict(what="smooth design (damping='unknown') / Klipper shaper at zeta 0.1 (max over the pairs where it is "
              "feasible)", value=float(np.nanmax(smooth)), unit="x", target=None),
         dict(what="pairs where the smooth design leaves more than the shaper", value=int(np.sum(smooth > 1)), unit="",
@@ -166,6 +197,9 @@ def headline_of(rows):
     return [
         dict(what="design with jumps (steps; with a jerk limit, ramps) / shaper, equal time and peaks (max over axes and shapers)", value=float(np.nanmax(steps)),
              unit="x", target="<= 1"),
+        dict(what="default design_move (smooth='auto': the smooth design, and the one with jumps where a shaper "
+             "leaves no more) / shaper, equal time and peaks (max over axes and shapers)",
+             value=float(np.nanmax([r["default_ratio"] for r in rows])), unit="x", target="<= 1"),
         dict(what="smooth design / shaper, equal time and peaks (max over the pairs where it is feasible)",
              value=float(np.nanmax(smooth)), unit="x", target=None),
         dict(what="pairs (axis, shaper) where the smooth design leaves more than the shaper",

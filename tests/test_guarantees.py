@@ -295,6 +295,8 @@ _SHAPING_AXIS = ["shaping", "--mode", "7.3:0.02", "--distance", "0.1", "--v-max"
             "argument --damping: give LO HI with 0 <= LO <= HI < 1 (damping ratios), or 'unknown'; got low",
         ),
         (["shaping", "--damping", "unknown"], "argument --damping: only with an axis (--mode or --measured)"),
+        ([*_SHAPING_AXIS, "--smooth", "maybe"], "argument --smooth: invalid choice: 'maybe'"),
+        (["shaping", "--smooth", "false"], "argument --smooth: only with an axis (--mode or --measured)"),
     ],
 )
 def test_cli_refuses_bad_arguments_before_computing(argv, needle, capsys):

@@ -27,8 +27,10 @@ PAPER_DEFAULTS = {
 #: the options of the overview figure only (the profiles figure is the paper's Fig. 2, fixed)
 OVERVIEW_ONLY = ("gammas", "duration", "revolutions", "robust_order", "robust_mode", "band", "spread")
 #: the options of a design on the user's axis and their defaults
-AXIS_DEFAULTS = {"uncertainty": 0.2, "rate": 1000.0}
-AXIS_ONLY = ("distance", "move_time", "v_max", "a_max", "j_max", "n_modes", "uncertainty", "damping", "rate")
+AXIS_DEFAULTS = {"uncertainty": 0.2, "rate": 1000.0, "smooth": "auto"}
+AXIS_ONLY = (
+    "distance", "move_time", "v_max", "a_max", "j_max", "n_modes", "uncertainty", "damping", "smooth", "rate",
+)  # fmt: skip
 
 
 def register(subparsers):
@@ -95,6 +97,14 @@ def register(subparsers):
         help="damping ratios every residual is judged over, as well as the band: a range LO HI (0 <= LO <= HI < 1), "
         "or 'unknown' for 0.01-0.1 with the classic shapers designed at 0.1 (Klipper's default); default: each "
         "mode's own damping ratio",
+    )
+    axis.add_argument(
+        "--smooth",
+        choices=["auto", "true", "false"],
+        default=None,
+        help="the minimax design's command space: true, a continuous acceleration; false, one that may jump as a "
+        "shaped trapezoid's does; auto (default), the smooth design and, where a classic shaper leaves no more or it "
+        "is infeasible, the one with jumps too",
     )
     axis.add_argument(
         "--rate",
@@ -373,6 +383,7 @@ def _axis_run(args) -> int:
         uncertainty=args.uncertainty,
         progress=not args.no_progress,
         damping=args.damping,
+        smooth={"auto": "auto", "true": True, "false": False}[args.smooth],
     )
     print(plan.format_table())
     best = plan.best

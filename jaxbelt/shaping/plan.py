@@ -775,7 +775,7 @@ def design_move(
     uncertainty=0.2,
     include=("minimax", *SHAPERS, "pseudo-polynomial", "unshaped"),
     progress: bool = False,
-    smooth: bool = True,
+    smooth: bool | str = "auto",
     certify_rtol: float | None = None,
     damping=None,
 ) -> MovePlan:
@@ -802,14 +802,23 @@ def design_move(
       default). A mode's 5 % band is then where the residual stays within 5 % at every damping sample;
       `plan.damping` records the range, `plan.axis` stays the user's axis. The minimax LP weighs 5 copies of each
       mode: about 5 times its rows (a 1-mode design costs about what a 5-mode one does, compile included);
-    - `smooth`: the minimax design's command space. True (default): a continuous acceleration (cubic B-spline,
-      continuous jerk). False: an acceleration that is constant on each of N equal intervals and jumps between
-      them, as a shaped trapezoid's does; its limits are exact rather than a little conservative, so it can come
-      closer to the least residual any command can leave (a 40 Hz, damping 0.003 axis at ZV's own time and
-      peaks: 2.3 % against 32 % for the smooth design and 22 % for ZV). With `j_max` [m/s³], False gives an
-      acceleration that is continuous and linear on each of N equal intervals (piecewise-constant jerk that jumps
-      between them, as a shaped S-curve's does): |a| and |jerk| limits exact, |v| guaranteed everywhere through the
-      velocity's B-spline coefficients (conservative by at most j_max h²/8 [m/s], h = move time / N).
+    - `smooth`: the minimax design's command space. True: a continuous acceleration (cubic B-spline, continuous
+      jerk). False: an acceleration that is constant on each of N equal intervals and jumps between them, as a
+      shaped trapezoid's does; its limits are exact rather than a little conservative, so it can come closer to
+      the least residual any command can leave (a 40 Hz, damping 0.003 axis at ZV's own time and peaks: 2.3 %
+      against 32 % for the smooth design and 22 % for ZV). With `j_max` [m/s³], False gives an acceleration that
+      is continuous and linear on each of N equal intervals (piecewise-constant jerk that jumps between them, as a
+      shaped S-curve's does): |a| and |jerk| limits exact, |v| guaranteed everywhere through the velocity's
+      B-spline coefficients (conservative by at most j_max h²/8 [m/s], h = move time / N).
+      `"auto"` (default): the smooth design, and, at a given `move_time`, also the design with jumps (a second
+      row, `"minimax (jumps)"`, its note saying why) where the smooth one is not feasible or not converged, or
+      where a classic shaper of the table leaves no more than it: then the table always holds a minimax design
+      whose command space includes the shaped moves (measured: at most 0.45x each of Klipper's six shapers at
+      their own time and peaks). The smooth design costs that margin: on lightly damped high modes it can leave
+      more than ZV (1.45x on a 40 Hz, damping 0.003 axis at ZV's time and peaks); its exported samples are
+      corrected for a drive that interpolates linearly (see `MovePlan.samples`), those of a design with jumps are
+      exact samples whose jumps such a drive smooths over one sample. `plan.minimax` is the design of the better
+      of the two rows.
 
     The minimax row's note states its certificate: the LP's own gap (its command is the least residual of its
     command space: splines of its knots, or steps or ramps of its intervals) and, with `smooth=False` and no jerk
@@ -830,17 +839,19 @@ def design_move(
     is reported in the table, never recommended), `plan.to_csv(path, rate_hz)`, `plan.plot()`.
     """
     d, t_min = _check_inputs(axis, distance, move_time, v_max, a_max, j_max, uncertainty, include)
-    if not isinstance(smooth, bool | np.bool_):
-        raise ValueError(f"design_move: parameter `smooth` must be True or False; got {smooth!r}")
+    auto = isinstance(smooth, str) and smooth == "auto"
+    if not (auto or isinstance(smooth, bool | np.bool_)):
+        raise ValueError(f"design_move: parameter `smooth` must be True, False or 'auto'; got {smooth!r}")
     if not isinstance(progress, bool | np.bool_):
         raise TypeError(f"design_move: parameter `progress` must be True or False; got {progress!r}")
-    smooth = bool(smooth)
+    smooth_arg = smooth
+    smooth = auto or bool(smooth)  # the first (or only) minimax design's basis: the spline unless smooth=False
     if certify_rtol is not None:
         if smooth:
             raise ValueError(
                 "design_move: `certify_rtol` needs `smooth=False` (the continuous certificate bounds the steps "
                 f"design; the spline's multipliers bound next to nothing); got certify_rtol={certify_rtol!r} with "
-                "smooth=True"
+                f"smooth={smooth_arg!r}"
             )
         if isinstance(certify_rtol, bool) or not isinstance(certify_rtol, int | float | np.floating | np.integer):
             raise ValueError(f"design_move: parameter `certify_rtol` must be a number in (0, 1); got {certify_rtol!r}")
@@ -949,7 +960,8 @@ def design_move(
                         u,
                         limits,
                         ok=False,
-                        note=f"infeasible for the smooth design: needs a move time >= {t_f:.4g} s",
+                        note=f"infeasible for the {'smooth' if smooth else 'steps'} design: needs a move time >= "
+                        f"{t_f:.4g} s",
                         per=per,
                     )
                 )
@@ -958,27 +970,19 @@ def design_move(
         else:
             mm = _shortest_minimax(solver, t_min, target, progress)
         if mm is not None:
-            note = f"certified gap {float(mm.gap):.1e}"
-            if float(mm.gap) > _design.CERTIFIED_GAP:  # accepted by the absolute gap (an optimum near zero)
-                note = f"certified within {100 * float(mm.worst - mm.lower_bound):.1e} % of the optimum"
-            ok = mm.converged
-            if not ok:
-                lp = mm.lp
-                note = (
-                    f"not converged (gap {float(mm.gap):.1e}; the LP's interior-point solver stopped after "
-                    f"{int(np.asarray(lp.iterations))} iterations, primal residual {float(np.asarray(lp.primal_residual)):.1e}, "
-                    f"dual {float(np.asarray(lp.dual_residual)):.1e}): try a longer `move_time` or `smooth=False`"
-                )
-            elif mm.options.basis == "steps":  # the spline's multipliers bound next to nothing: steps only
-                bound = continuous_lower_bound(mm)
-                if certify_rtol is not None:
-                    mm, bound, note = _certify(solver, mm, bound, certify_rtol, progress)
-                note += f"; any command leaves >= {100 * bound:.3g} % (continuous bound)"
-            T_mm = float(mm.command.duration)
-            row = _row("minimax", axis, mm.command, T_mm, ref, u, limits, note=note, ok=ok, per=per)
-            if far.left_out:  # the left-out modes' residual, exact for this command (the program `_row` ran)
-                row = dataclasses.replace(row, note=row.note + "; " + _far_note(axis, row.command, ref, u, far, per))
+            row, mm, bound = _minimax_row("minimax", solver, mm, axis, ref, u, limits, far, per, certify_rtol, progress)
             rows.append(row)
+        if auto and move_time is not None:
+            primary = next((r for r in rows if r.name == "minimax"), None)
+            why = _jumps_reason(primary, classic)
+            if why:
+                jrow, jmm, jbound = _jumps_minimax(axis, d, float(move_time), v_max, a_max, j_max, u, ref, limits, per,
+                                                    t_min, why, progress)  # fmt: skip
+                rows.append(jrow)
+                if jmm is not None and jrow.ok:
+                    bound = jbound
+                    if primary is None or not primary.ok or jrow.worst_percent < primary.worst_percent:
+                        mm = jmm  # `plan.minimax`: the design of the better minimax row
     # --- Incerti's pseudo-polynomial commands
     T_common = (
         float(move_time)
@@ -1024,6 +1028,73 @@ def design_move(
         measure_axis=None if damp is None else axis,
         measure_reference_m=None if damp is None else ref,
     )
+
+
+#: the name of the row `design_move` adds, with `smooth="auto"`, for the minimax design whose acceleration may jump
+JUMPS = "minimax (jumps)"
+
+
+def _minimax_row(name, solver, mm, axis, ref, u, limits, far, per, certify_rtol, progress):
+    """The table row of a solved minimax design `mm` (its note states the certificate: the LP's gap and, for the
+    steps basis, the continuous bound, refined to `certify_rtol` if given), and the (possibly refined) design and
+    the continuous bound (NaN but for the steps basis): `(row, mm, bound)`."""
+    bound = math.nan
+    note = f"certified gap {float(mm.gap):.1e}"
+    if float(mm.gap) > _design.CERTIFIED_GAP:  # accepted by the absolute gap (an optimum near zero)
+        note = f"certified within {100 * float(mm.worst - mm.lower_bound):.1e} % of the optimum"
+    ok = mm.converged
+    if not ok:
+        lp = mm.lp
+        note = (
+            f"not converged (gap {float(mm.gap):.1e}; the LP's interior-point solver stopped after "
+            f"{int(np.asarray(lp.iterations))} iterations, primal residual {float(np.asarray(lp.primal_residual)):.1e}, "
+            f"dual {float(np.asarray(lp.dual_residual)):.1e}): try a longer `move_time` or `smooth=False`"
+        )
+    elif mm.options.basis == "steps":  # the spline's multipliers bound next to nothing: steps only
+        bound = continuous_lower_bound(mm)
+        if certify_rtol is not None:
+            mm, bound, note = _certify(solver, mm, bound, certify_rtol, progress)
+        note += f"; any command leaves >= {100 * bound:.3g} % (continuous bound)"
+    T_mm = float(mm.command.duration)
+    row = _row(name, axis, mm.command, T_mm, ref, u, limits, note=note, ok=ok, per=per)
+    if far.left_out:  # the left-out modes' residual, exact for this command (the program `_row` ran)
+        row = dataclasses.replace(row, note=row.note + "; " + _far_note(axis, row.command, ref, u, far, per))
+    return row, mm, bound
+
+
+def _jumps_reason(primary, classic) -> str:
+    """Why `smooth="auto"` adds the design with jumps ("" when it does not): the smooth minimax row is missing, not
+    feasible or not converged, or a classic shaper of the table leaves no more than it."""
+    if primary is None or not primary.ok or not math.isfinite(primary.worst_percent):
+        return "added: the smooth design is not feasible or not converged at this time"
+    beaten = [r for r in classic if r.worst_percent <= primary.worst_percent]
+    if not beaten:
+        return ""
+    r = min(beaten, key=lambda r: r.worst_percent)
+    return f"added: {r.name} leaves {r.worst_percent:.3g} % <= the smooth design's {primary.worst_percent:.3g} %"
+
+
+def _jumps_minimax(axis, d, T, v_max, a_max, j_max, u, ref, limits, per, t_min, why, progress):
+    """The minimax design at move time `T` whose acceleration may jump (steps; with `j_max`, ramps whose jerk may
+    jump), as `smooth=False` designs it: `(row, design or None, continuous bound)`. Its command space holds what a
+    classic shaper makes of the time-optimal move (a shaped trapezoid or S-curve), so at equal time and limits it
+    leaves no more than the shapers (measured: `benchmarks/shaping_every_shaper.py`)."""
+    if progress:
+        print(f"design_move: {why}; designing the minimax command with jumps ...", flush=True)
+    far = _far_modes(axis, T, u, j_max, True, False)  # keeps every mode the spline's LP keeps (`_refuse_all_far`)
+    lp_axis = _sub_axis(axis, far.kept) if far.left_out else axis
+    kept = np.asarray(far.kept, dtype=int)
+    opts = _minimax_options(_knots_axis(axis, far), T, u, j_max, fixed_time=True, smooth=False)
+    solver = _Minimax(lp_axis, d, v_max, a_max, j_max, u, ref[kept], opts)
+    mm = solver.design(T) if T >= _SURELY_FEASIBLE * t_min else None
+    if (mm is None or not mm.converged) and not solver.feasible(T):
+        t_f = solver.shortest_feasible(t_min)
+        note = f"{why}; infeasible with {opts.n_knots} equal steps: needs a move time >= {t_f:.4g} s"
+        return _row(JUMPS, axis, None, T, ref, u, limits, ok=False, note=note, per=per), None, math.nan
+    if mm is None:
+        mm = solver.design(T)
+    row, mm, bound = _minimax_row(JUMPS, solver, mm, axis, ref, u, limits, far, per, None, progress)
+    return dataclasses.replace(row, note=why + "; " + row.note), mm, bound
 
 
 def _pseudo_rows(axis, ref_design, measure_axis, ref, per, d, T, v_max, a_max, j_max, u, limits, progress):
