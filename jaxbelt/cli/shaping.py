@@ -342,6 +342,7 @@ def _axis_run(args) -> int:
 
     from .._io import save_figure
     from ..models.axis import ModalAxis
+    from ..shaping.moves import PiecewiseMove
     from ..shaping.plan import design_move
     from ..solution import SolveError
 
@@ -409,6 +410,13 @@ def _axis_run(args) -> int:
                 f"wrote {o} ({args.rate:g} Hz, columns t,x,v,a; sampled peaks |v| {pv:.6g} m/s, |a| {pa:.6g} m/s^2, "
                 f"|j| {pj:.6g} m/s^3; limits {limits})"
             )
+            if isinstance(best.command, PiecewiseMove):
+                print(
+                    f"note: the recommended command's {'jerk' if args.j_max is not None else 'acceleration'} jumps; "
+                    "a drive that interpolates linearly between samples smooths each jump over one sample, so its "
+                    "residual can differ from the table's: give a high --rate (10000 Hz and more) or --smooth true "
+                    "(its samples are corrected for that drive)"
+                )
             if not figures:
                 figures.append(o.with_suffix(".png"))
     fig = plan.plot()
