@@ -10,6 +10,9 @@ the shaper leaves no more; the better minimax row counts). Every residual is the
 of one reference per axis (the unshaped time-optimal move at the user's limits).
 Target: the steps design and the default leave no more than any shaper (ratio <= 1) on every axis and shaper.
 
+With `--drawn` also on the 12 axes that `benchmarks/shaping_axis.py` draws (1-3 modes, 1-20 Hz; its table's
+rows), so every axis of the shaping benchmarks is compared with every shaper that fits its move.
+
 With `--jerk J` [m/s³] the same on the single-mode named axes under a jerk limit: the shapers on the S-curve with
 |jerk| <= J, and the minimax designs with each shaper's own peak jerk as a limit too, the design "with steps" then
 being the ramps (a jerk constant on each interval that may jump, as a shaped S-curve's does).
@@ -22,9 +25,16 @@ the band ±20 % times 25 damping ratios (geometric) of [0.01, 0.1], each against
 at that damping (`jb.residual_curve` on that dense grid, not the design's 5 samples). Records the ratio
 minimax / shaper and the wall time of each `design_move` call (the first on an axis includes its compilation).
 
+With `--certify` the continuous certificate on the named single-mode axes, at ZV's and EI's own time and peaks:
+the design with jumps (`smooth=False`) as `design_move` makes it, and again with `certify_rtol=0.05` (refined until
+the rigorous lower bound on what any command can leave is within 5 % of its worst, or 1024 steps); each against an
+independent LP solved by scipy's HiGHS over piecewise-constant accelerations on 4x the design's steps (the design's
+frequencies and cuts, exact limits): the bound must lie below HiGHS's value, and the design within 5 % of it.
+
 Writes `benchmarks/results/shaping_every_shaper.json` (with `--jerk`: `shaping_every_shaper_jerk.json`; with
-`--damping`: `shaping_every_shaper_damping.json`). Run: `python benchmarks/shaping_every_shaper.py [--jerk 20 |
---damping]`.
+`--damping`: `shaping_every_shaper_damping.json`; with `--certify`: `shaping_every_shaper_certify.json`). Run:
+`python benchmarks/shaping_every_shaper.py [--jerk 20 | --damping | --certify]` (`--certify` takes about 15
+minutes on 2 cores: HiGHS on 3072 steps takes minutes).
 """
 
 from __future__ import annotations
@@ -37,15 +47,21 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent))
 sys.path.insert(0, str(HERE))
+sys.path.insert(0, str(HERE.parent / "tests"))  # the independent references of the test suite (HiGHS's LP)
 
 import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 from _common import write_results  # noqa: E402
-from shaping_axis import A_MAX, CLASSIC, NAMED_AXES, V_MAX, U, on_shaper_terms, worst_against  # noqa: E402
+from shaping_axis import A_MAX, CLASSIC, NAMED_AXES, V_MAX, D, U, draw_axes, on_shaper_terms, worst_against  # noqa: E402
 
 import jaxbelt as jb  # noqa: E402
+
+
+def _label(f, z) -> str:
+    """An axis' label as the shaping tables write it: frequency [Hz] (damping ratio) of each mode."""
+    return ", ".join(f"{x:.2f} ({y:.3f})" for x, y in zip(f, z, strict=True))
 
 
 def every_shaper(label, f, z, d, shapers=CLASSIC, j_max=None):
@@ -210,18 +226,80 @@ def headline_of(rows):
     ]  # fmt: skip
 
 
+#: `--certify`: the relative tolerance, and the (axis label, shaper) pairs
+CERTIFY_RTOL = 0.05
+CERTIFY_PAIRS = (("2 Hz, ζ 0.08, 2.5 cycles", "ZV"), ("40 Hz, ζ 0.003", "ZV"), ("40 Hz, ζ 0.003", "EI"))
+
+
+def certify_rows():
+    """`--certify`: per pair, the design with jumps as made and certified, against HiGHS on 4x its steps."""
+    from references import highs_steps_lp
+
+    named = {label: (f, z, d) for label, f, z, d in NAMED_AXES}
+    out = []
+    for label, shaper in CERTIFY_PAIRS:
+        f, z, d = named[label]
+        axis = jb.ModalAxis(f, z)
+        row = jb.design_move(axis, d, None, v_max=V_MAX, a_max=A_MAX, uncertainty=U, include=(shaper,)).table[0]
+        cells = dict(axis=label, shaper=shaper, time=row.move_time, shaper_worst=row.worst_percent)
+        for key, rtol in (("made", None), ("certified", CERTIFY_RTOL)):
+            t0 = time.perf_counter()
+            plan = jb.design_move(
+                axis, d, row.move_time, v_max=row.peak_v, a_max=row.peak_a, uncertainty=U, include=("minimax",),
+                smooth=False, certify_rtol=rtol,
+            )  # fmt: skip
+            wall = time.perf_counter() - t0
+            mm = plan.minimax
+            t0 = time.perf_counter()
+            highs = highs_steps_lp(mm, 4 * mm.options.n_knots)
+            cells.update({
+                f"{key}_design_move_s": wall, f"{key}_steps": mm.options.n_knots, f"{key}_cuts": mm.options.n_angles,
+                f"{key}_lp_worst": float(mm.worst), f"{key}_bound": plan.continuous_bound,
+                f"{key}_highs_4x": highs, f"{key}_highs_s": time.perf_counter() - t0,
+                f"{key}_over_highs": float(mm.worst) / highs, f"{key}_bound_below_highs": plan.continuous_bound <= highs + 1e-9,
+                f"{key}_note": plan.table[0].note,
+            })  # fmt: skip
+        out.append(cells)
+        print(
+            f"{label:28s} {shaper:4s}: made {cells['made_steps']} steps, {cells['made_over_highs']:.4f}x HiGHS(4x); "
+            f"certified {cells['certified_steps']} steps, {cells['certified_over_highs']:.4f}x HiGHS(4x), bound "
+            f"{cells['certified_bound']:.4g} <= HiGHS {cells['certified_highs_4x']:.4g}: {cells['certified_bound_below_highs']} "
+            f"({cells['certified_design_move_s']:.0f} s)",
+            flush=True,
+        )
+    return out
+
+
+def certify_headline(rows):
+    made = np.array([r["made_over_highs"] for r in rows])
+    cert = np.array([r["certified_over_highs"] for r in rows])
+    return [
+        dict(what="design with jumps as design_move makes it / HiGHS on 4x its steps (max over the pairs)",
+             value=float(np.max(made)), unit="x", target=None),
+        dict(what=f"design with jumps, certify_rtol={CERTIFY_RTOL} / HiGHS on 4x its steps (max over the pairs)",
+             value=float(np.max(cert)), unit="x", target="<= 1.05"),
+        dict(what="pairs whose continuous bound lies above HiGHS's value (a wrong bound)",
+             value=int(sum(not (r["made_bound_below_highs"] and r["certified_bound_below_highs"]) for r in rows)),
+             unit="", target="<= 0"),
+        dict(what="pairs compared", value=len(rows), unit="", target=None),
+    ]  # fmt: skip
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="one axis, two shapers (CI size)")
     ap.add_argument("--headline", action="store_true", help="only recompute the headline from the last run's rows")
     ap.add_argument("--jerk", type=float, default=None, help="a jerk limit [m/s^3]: the single-mode axes, S-curves")
     ap.add_argument("--damping", action="store_true", help="unknown damping: shapers at 0.1, judged over 0.01-0.1")
+    ap.add_argument("--drawn", action="store_true", help="also the 12 drawn axes of shaping_axis.py (about 20 min)")
+    ap.add_argument("--certify", action="store_true", help="the continuous certificate against HiGHS on 4x the steps")
     args = ap.parse_args(argv)
-    if args.damping and args.jerk is not None:
-        ap.error("--damping and --jerk are separate modes")
+    if sum((args.damping, args.jerk is not None, args.certify)) > 1:
+        ap.error("--damping, --jerk and --certify are separate modes")
     name = "shaping_every_shaper" if args.jerk is None else "shaping_every_shaper_jerk"
     name = "shaping_every_shaper_damping" if args.damping else name
-    heads = damping_headline if args.damping else headline_of
+    name = "shaping_every_shaper_certify" if args.certify else name
+    heads = damping_headline if args.damping else (certify_headline if args.certify else headline_of)
     if args.headline:
         import json
 
@@ -235,8 +313,16 @@ def main(argv=None):
         write_text(path, json.dumps(data, indent=2, default=float))
         return
     t0 = time.perf_counter()
+    if args.certify:
+        rows = certify_rows()
+        write_results(name, rows, heads(rows), quick=False, extra=dict(wall_s=time.perf_counter() - t0))
+        for h in heads(rows):
+            print(f"{h['what']}: {h['value']:.4g} {h['unit']} (target {h['target']})")
+        return
     rows = []
     axes = NAMED_AXES[:1] if args.quick else NAMED_AXES[:3]  # the 10-mode axis has no buildable shaper
+    if args.drawn:  # and the 12 axes `shaping_axis.py` draws (its table's rows)
+        axes = [*axes, *((_label(f, z), f, z, D) for f, z in draw_axes(12))]
     if args.jerk is not None:
         axes = [a for a in axes if len(a[1]) == 1]
     for label, f, z, d in axes:

@@ -6,6 +6,7 @@ entry by entry against eq. (10)-(11) of Incerti (2014).
 
 import numpy as np
 import scipy.linalg as sl
+from scipy.optimize import linprog
 
 
 def expm_reference(A, F, s, x0, ts):
@@ -126,3 +127,46 @@ def piecewise_move_reference(times, steps, ramps, duration):
         return np.sum(st * d**2 / 2 + rp * d**3 / 6, axis=-1)
 
     return acc, vel, pos, tk
+
+
+def highs_steps_lp(design, cells: int) -> float:
+    """The least worst residual over `design`'s own frequencies and cuts of a piecewise-constant acceleration on
+    `cells` equal intervals, within the design's |a| and |v| limits (exact: |v| at the interval ends), distance and
+    rest to rest: an LP written here from the definitions and solved by HiGHS. Every such command is a command of
+    the continuous problem, so the value bounds its optimum (on these frequencies) from above."""
+    p, o = design.problem, design.options
+    T, D, A, V = (float(np.asarray(x)) for x in (p.move_time, p.distance, p.a_max, p.v_max))
+    mask = np.asarray(p.mask) > 0
+    w = np.asarray(p.axis.omega)[:, None] * np.asarray(p.factors)
+    z = np.asarray(p.axis.damping_ratios)[:, None] * np.ones_like(w)
+    wd = w * np.sqrt(1 - z**2)
+    s = (-z * w + 1j * wd)[mask]
+    gains = np.abs(np.asarray(p.axis.gains))[:, None] * np.ones_like(w)
+    weight = (gains / (wd * np.asarray(p.reference)[:, None]))[mask]
+    d = T / cells
+    u = np.arange(cells) * d
+    # int over [u, u + d] of e^{s (T - t)} dt, weighted
+    k = np.exp(np.multiply.outer(s, T - u - d)) * ((np.exp(s * d) - 1.0) / s)[:, None] * weight[:, None]
+    theta = 2 * np.pi * np.arange(o.n_angles) / o.n_angles
+    cuts = np.real(np.exp(-1j * theta)[:, None, None] * k[None]).reshape(-1, cells)
+    vel = np.tril(np.ones((cells, cells))) * d
+    G = np.vstack(
+        [
+            np.hstack([cuts, -np.ones((cuts.shape[0], 1))]),
+            np.hstack([vel, np.zeros((cells, 1))]),
+            np.hstack([-vel, np.zeros((cells, 1))]),
+        ]
+    )
+    h = np.r_[np.zeros(cuts.shape[0]), np.full(2 * cells, V)]
+    A_eq = np.array([np.r_[np.full(cells, d), 0.0], np.r_[d * (T - u - d / 2), 0.0]])
+    r = linprog(
+        np.r_[np.zeros(cells), 1.0],
+        A_ub=G,
+        b_ub=h,
+        A_eq=A_eq,
+        b_eq=[0.0, D],
+        bounds=[(-A, A)] * cells + [(0, None)],
+        method="highs",
+    )
+    assert r.status == 0, r.message
+    return float(r.fun)

@@ -3,55 +3,11 @@ may jump (`design_move(..., smooth=False)`), against an independent LP solved by
 
 import numpy as np
 import pytest
-from references import modal_residual_reference, piecewise_move_reference
-from scipy.optimize import linprog
+from references import highs_steps_lp, modal_residual_reference, piecewise_move_reference
 
 import jaxbelt as jb
 from jaxbelt.shaping.certify import continuous_lower_bound
 from jaxbelt.shaping.plan import JUMPS
-
-
-def highs_steps_lp(design, cells: int) -> float:
-    """The least worst residual over `design`'s own frequencies and cuts of a piecewise-constant acceleration on
-    `cells` equal intervals, within the design's |a| and |v| limits (exact: |v| at the interval ends), distance and
-    rest to rest: an LP written here from the definitions and solved by HiGHS. Every such command is a command of
-    the continuous problem, so the value bounds its optimum (on these frequencies) from above."""
-    p, o = design.problem, design.options
-    T, D, A, V = (float(np.asarray(x)) for x in (p.move_time, p.distance, p.a_max, p.v_max))
-    mask = np.asarray(p.mask) > 0
-    w = np.asarray(p.axis.omega)[:, None] * np.asarray(p.factors)
-    z = np.asarray(p.axis.damping_ratios)[:, None] * np.ones_like(w)
-    wd = w * np.sqrt(1 - z**2)
-    s = (-z * w + 1j * wd)[mask]
-    gains = np.abs(np.asarray(p.axis.gains))[:, None] * np.ones_like(w)
-    weight = (gains / (wd * np.asarray(p.reference)[:, None]))[mask]
-    d = T / cells
-    u = np.arange(cells) * d
-    # int over [u, u + d] of e^{s (T - t)} dt, weighted
-    k = np.exp(np.multiply.outer(s, T - u - d)) * ((np.exp(s * d) - 1.0) / s)[:, None] * weight[:, None]
-    theta = 2 * np.pi * np.arange(o.n_angles) / o.n_angles
-    cuts = np.real(np.exp(-1j * theta)[:, None, None] * k[None]).reshape(-1, cells)
-    vel = np.tril(np.ones((cells, cells))) * d
-    G = np.vstack(
-        [
-            np.hstack([cuts, -np.ones((cuts.shape[0], 1))]),
-            np.hstack([vel, np.zeros((cells, 1))]),
-            np.hstack([-vel, np.zeros((cells, 1))]),
-        ]
-    )
-    h = np.r_[np.zeros(cuts.shape[0]), np.full(2 * cells, V)]
-    A_eq = np.array([np.r_[np.full(cells, d), 0.0], np.r_[d * (T - u - d / 2), 0.0]])
-    r = linprog(
-        np.r_[np.zeros(cells), 1.0],
-        A_ub=G,
-        b_ub=h,
-        A_eq=A_eq,
-        b_eq=[0.0, D],
-        bounds=[(-A, A)] * cells + [(0, None)],
-        method="highs",
-    )
-    assert r.status == 0, r.message
-    return float(r.fun)
 
 
 @pytest.fixture(scope="module")
@@ -118,18 +74,6 @@ def test_the_default_adds_the_design_with_jumps_where_a_shaper_beats_the_smooth_
         [40.0], [0.003], [1.0], acc, breaks, float(cmd.duration), np.linspace(0.8, 1.2, 401)
     )
     assert 100 * np.max(dense) / plan.reference_m[0] == pytest.approx(jumps.worst_percent, rel=0.03)
-
-
-def test_the_default_adds_nothing_where_the_smooth_design_beats_every_shaper():
-    """A 5.5 Hz, damping 0.02 axis at 0.8 s (the smooth design leaves less than each of ZV and EI): the default
-    plan has one minimax row, the smooth one."""
-    plan = jb.design_move(
-        jb.ModalAxis([5.5], [0.02]), 0.1, 0.8, v_max=0.3, a_max=1.2, uncertainty=0.2, include=("minimax", "ZV", "EI")
-    )
-    names = [c.name for c in plan.table]
-    assert JUMPS not in names and plan.best.name == "minimax"
-    assert all(plan.candidate(n).worst_percent > plan.best.worst_percent for n in ("ZV", "EI"))
-    assert plan.minimax.options.basis == "spline"
 
 
 @pytest.mark.parametrize(

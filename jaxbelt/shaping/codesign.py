@@ -98,8 +98,10 @@ def _problem(design: MinimaxDesign, axis, move_time):
 
 
 #: below this multiple of the time-optimal move time, `best_residual` checks that the design's spline covers the
-#: distance within the limits (an LP, ~30 ms once compiled): the spline's own shortest move is a few % longer
-SPLINE_CHECK_BELOW = 1.5
+#: distance within the limits (an LP, ~30 ms once compiled, ~3 s to compile): the spline's own shortest move is a
+#: few % longer (3-7 % measured with 48-96 knots, `plan._SURELY_FEASIBLE`), so 25 % leaves room and spares most
+#: `shortest_move_time` calls the compile
+SPLINE_CHECK_BELOW = 1.25
 
 
 def _check_spline_reaches(owner: str, axis, move_time, design: MinimaxDesign) -> None:
@@ -158,10 +160,17 @@ ROOT_RTOL = 1e-8
 #: relative tolerance of `shortest_move_time`'s answer re-designed (`refine=True`): a design at the returned time,
 #: with the given design's discretisation, leaves a worst residual (fine grid) within this fraction of the target
 REDESIGN_RTOL = 5e-3
-#: relative tolerance of the root on the design's grid while `refine=True` calibrates its level (`_shortest_time`)
-CALIBRATION_RTOL = 1e-5
+#: relative tolerance of the root on the design's grid while `refine=True` calibrates its level (`_shortest_time`):
+#: each root is checked by a design re-made there (to `REDESIGN_RTOL`), so it need not be finer than a fifth of that
+CALIBRATION_RTOL = 1e-3
 #: how far `shortest_move_time` looks for the target without a bracket: up to this multiple of the design's time
 MAX_EXPANSION = 64.0
+
+
+def _first_step(T: float, v: float, target: float) -> float:
+    """The first move time to try from T [s], whose value is v, towards `target` (no slope known yet): 1 % towards
+    it (the secant takes over from the second value on)."""
+    return T * (1.01 if v > target else 0.99)
 
 
 def _root_time(value, target, lo, hi, start, feasible, known, *, rtol: float, owner: str, iters: int = 60):
@@ -186,6 +195,11 @@ def _root_time(value, target, lo, hi, start, feasible, known, *, rtol: float, ow
         (t0, g0), (t1, g1) = pts
         step = t1 - g1 * (t1 - t0) / (g1 - g0)
         T = step if lo < step < hi else T
+    elif len(pts) == 1 and known[-1][0] == T:  # the start's value is known (the design's own): step from it
+        if abs(known[-1][1] - target) <= rtol * target:
+            return known[-1]
+        step = _first_step(T, known[-1][1], target)
+        T = step if lo < step < hi else (0.5 * (lo + hi) if math.isfinite(hi) else T)
     best = None
     v = math.nan
     for _ in range(iters):
@@ -215,8 +229,8 @@ def _root_time(value, target, lo, hi, start, feasible, known, *, rtol: float, ow
         if len(pts) == 2 and pts[0][1] != pts[1][1]:
             (t0, g0), (t1, g1) = pts
             step = t1 - g1 * (t1 - t0) / (g1 - g0)
-        if len(pts) == 1:  # no slope yet: a 1 % step towards the target
-            step = T * (1.01 if v > target else 0.99)
+        if len(pts) == 1:  # no slope yet
+            step = _first_step(T, v, target)
         if math.isfinite(step) and lo < step < hi:
             T = step
         elif math.isfinite(hi):
@@ -247,6 +261,18 @@ def _redesign(axis, design: MinimaxDesign, T: float) -> MinimaxDesign:
     return minimax_design(_problem(design, axis, T), design.options)
 
 
+def _same_axis(axis, design) -> bool:
+    """Whether `axis` is (concretely) the axis `design` was made on: then the LP's value on the design's grid at the
+    design's own move time is the design's worst, known without a solve."""
+    mine = design.problem.axis
+    if not is_concrete((axis, mine)):
+        return False
+    return all(
+        np.array_equal(np.asarray(getattr(axis, k)), np.asarray(getattr(mine, k)))
+        for k in ("frequencies", "damping_ratios", "gains")
+    )
+
+
 def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, refine: bool) -> float:
     """The shortest move time: the root of the LP's value on `design`'s grid, `V(T) = c target` (to `ROOT_RTOL`).
 
@@ -270,6 +296,9 @@ def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, r
 
     tau = jax.lax.stop_gradient(design.worst)
     known: list[tuple[float, float]] = []  # the LP's values on the design's grid evaluated so far
+    if start == float(design.command.duration) and _same_axis(axis, design):
+        # the design's own LP value at its own time: known without a solve (the secant's first point)
+        known.append((start, float(design.worst)))
 
     def on_grid(T_):
         return minimax_value(_problem(design, axis, T_), design.options, tau=tau)
