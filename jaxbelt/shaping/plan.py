@@ -139,8 +139,9 @@ class MovePlan:
     `Candidate`; None when no candidate is feasible, converged and within the limits), the axis, the move's data, `reference_m` (per mode, the unshaped move's worst residual over the
     band [m]) and the minimax design's details (`minimax`: a `MinimaxDesign` or None); `continuous_bound`: a rigorous
     lower bound on the least worst residual any command within the plan's limits, distance and time can leave over
-    the band, as a fraction of the references (the minimax row's worst % is at least 100x this; NaN without a
-    converged `smooth=False` minimax design without a jerk limit; `jaxbelt.shaping.certify`).
+    the band, as a fraction of the references (the minimax rows' worst % are at least 100x this; NaN without a
+    converged minimax design with steps, `smooth=False` or the row `smooth="auto"` adds, without a jerk limit;
+    `jaxbelt.shaping.certify`).
 
     `damping`: the damping range `(lo, hi)` every residual was judged over (`design_move(..., damping=...)`), or
     None (the axis' own damping ratios). With a range, `axis` is the user's axis, `reference_m` per mode the largest
@@ -813,7 +814,7 @@ def design_move(
       `"auto"` (default): the smooth design, and, at a given `move_time`, also the design with jumps (a second
       row, `"minimax (jumps)"`, its note saying why) where the smooth one is not feasible or not converged, or
       where a classic shaper of the table leaves no more than it: then the table always holds a minimax design
-      whose command space includes the shaped moves (measured: at most 0.45x each of Klipper's six shapers at
+      whose command space includes the shaped moves (measured: at most 0.81x each of Klipper's six shapers at
       their own time and peaks). The smooth design costs that margin: on lightly damped high modes it can leave
       more than ZV (1.45x on a 40 Hz, damping 0.003 axis at ZV's time and peaks); its exported samples are
       corrected for a drive that interpolates linearly (see `MovePlan.samples`), those of a design with jumps are
@@ -821,8 +822,8 @@ def design_move(
       of the two rows.
 
     The minimax row's note states its certificate: the LP's own gap (its command is the least residual of its
-    command space: splines of its knots, or steps or ramps of its intervals) and, with `smooth=False` and no jerk
-    limit, a rigorous lower bound on the least worst residual *any* command within the same limits, distance and
+    command space: splines of its knots, or steps or ramps of its intervals) and, for a design with steps (no jerk
+    limit; `smooth=False`, or the row `smooth="auto"` adds), a rigorous lower bound on the least worst residual *any* command within the same limits, distance and
     time can leave over the band
     (`jaxbelt.shaping.certify`; also `plan.continuous_bound`): the design is then proved within (worst - bound) of
     the best any command can do, smooth or not, classic shapers included.
