@@ -7,7 +7,7 @@ from references import highs_steps_lp, modal_residual_reference, piecewise_move_
 
 import jaxbelt as jb
 from jaxbelt.shaping.certify import continuous_lower_bound
-from jaxbelt.shaping.plan import JUMPS
+from jaxbelt.shaping.plan import CERTIFY_ATOL, JUMPS
 
 
 @pytest.fixture(scope="module")
@@ -104,6 +104,24 @@ def test_certify_rtol_refines_until_the_continuous_bound_is_within_the_tolerance
     assert bound <= fine + 1e-9 and float(mm.worst) >= fine - 1e-9
     # the default design (16 cuts) is not within 1 %: the refinement did something
     assert mm.options.n_angles > 16
+
+
+def test_certify_rtol_near_a_zero_optimum_stops_at_the_absolute_floor():
+    """A 5.5 Hz axis at 0.8 s: the optimum is near zero, the bound 0, so no relative tolerance can be proved; the
+    design is within `CERTIFY_ATOL` (0.01 % of the unshaped move's residual) of the least any command can leave at
+    once, with no refinement, and the note says which tolerance was met. An independent HiGHS LP on 4x the steps (a
+    finer command space holding the design's) lies between the bound and the design's LP value."""
+    plan = jb.design_move(
+        jb.ModalAxis([5.5], [0.02]), 0.1, 0.8, v_max=0.3, a_max=1.2, uncertainty=0.2, smooth=False,
+        include=("minimax",), certify_rtol=0.01,
+    )  # fmt: skip
+    row, mm, bound = plan.candidate("minimax"), plan.minimax, plan.continuous_bound
+    assert row.ok and "(absolute, at most CERTIFY_ATOL" in row.note and "not within" not in row.note
+    assert mm.options.n_angles == 16  # not refined
+    worst = row.worst_percent / 100
+    assert 0.0 <= bound <= worst and worst - bound <= CERTIFY_ATOL
+    fine = highs_steps_lp(mm, 4 * mm.options.n_knots)
+    assert bound <= fine + 1e-9 and float(mm.worst) >= fine - 1e-9
 
 
 @pytest.mark.parametrize(

@@ -829,7 +829,9 @@ def design_move(
     the best any command can do, smooth or not, classic shapers included.
 
     `certify_rtol` (with `smooth=False` and `j_max=None` only; default None: one design): refine until the design is
-    certified within this fraction of its own worst residual, (worst - bound) <= certify_rtol * worst: first the modulus
+    certified within this fraction of its own worst residual, (worst - bound) <= certify_rtol * worst, or within
+    `CERTIFY_ATOL` = 0.01 % of the unshaped move's residual, absolute, whichever is larger (near a zero optimum the
+    bound is 0 and no relative tolerance can be proved; the note says which one was met): first the modulus
     cuts and the frequency grid are refined (16 cuts let a residual exceed the LP's value by 2 %), then the number
     of steps doubles (up to 1024, `CERTIFY_MAX_STEPS`); the best bound met is kept. The row's note gives both
     numbers, and says so when the limit is reached first. Each refinement costs one more compiled LP (about 10 s
@@ -1139,6 +1141,10 @@ def _pseudo_rows(axis, ref_design, measure_axis, ref, per, d, T, v_max, a_max, j
 
 #: the most acceleration steps `design_move(..., certify_rtol=...)` refines to
 CERTIFY_MAX_STEPS = 1024
+#: the absolute floor of `certify_rtol`'s proof (a fraction of the references: 0.01 % of the unshaped move's
+#: residual): where the optimum is near zero the bound is 0 and no relative tolerance can be proved, but a design
+#: within this of the least any command can leave needs no refining
+CERTIFY_ATOL = 1e-4
 
 
 def _certify_options(opts, rtol: float):
@@ -1157,13 +1163,14 @@ def _certify_options(opts, rtol: float):
 
 
 def _certify(solver: _Minimax, mm, bound: float, rtol: float, progress: bool):
-    """Refine the steps design until (worst - bound) <= rtol * worst (the worst on the fine grid): first the cuts
+    """Refine the steps design until (worst - bound) <= max(rtol * worst, `CERTIFY_ATOL`) (the worst on the fine
+    grid): first the cuts
     and the frequency grid (`_certify_options`), then the number of steps, doubled up to `CERTIFY_MAX_STEPS`. The
     least-residual design met on the way, the best bound so far, and the row's note."""
     T = float(mm.command.duration)
 
     def within(d, b):
-        return float(d.fine_worst) - b <= rtol * float(d.fine_worst)
+        return float(d.fine_worst) - b <= max(rtol * float(d.fine_worst), CERTIFY_ATOL)
 
     opts = _certify_options(mm.options, rtol)
     while not within(mm, bound) and opts.n_knots <= CERTIFY_MAX_STEPS:
@@ -1176,10 +1183,14 @@ def _certify(solver: _Minimax, mm, bound: float, rtol: float, progress: bool):
         if float(finer.fine_worst) <= float(mm.fine_worst):
             mm = finer
         opts = opts._replace(n_knots=2 * opts.n_knots)
-    rel = (float(mm.fine_worst) - bound) / float(mm.fine_worst)
+    gap = float(mm.fine_worst) - bound
+    rel = gap / float(mm.fine_worst)
+    how = f"{100 * rel:.2g} % (relative)"
+    if rel > rtol and gap <= CERTIFY_ATOL:  # met by the absolute floor (an optimum near zero)
+        how = f"{100 * gap:.2g} % of the unshaped move's residual (absolute, at most CERTIFY_ATOL = {100 * CERTIFY_ATOL:g} %)"
     note = (
         f"certified gap {float(mm.gap):.1e}; {mm.options.n_knots} steps, {mm.options.n_angles} cuts: within "
-        f"{100 * rel:.2g} % (relative) of the least any command can leave"
+        f"{how} of the least any command can leave"
         + ("" if within(mm, bound) else f" (not within certify_rtol at {CERTIFY_MAX_STEPS} steps, the most)")
     )
     return mm, bound, note
