@@ -178,7 +178,8 @@ def _root_time(value, target, lo, hi, start, feasible, known, *, rtol: float, ow
     inside a bracket [lo, hi] that shrinks as the signs of value - target are learnt; `hi` may be inf (the bracket
     then grows by steps of 1.5 up to `MAX_EXPANSION` times `start`). `feasible(T)` False (a move time too short
     for the design's command) counts as above the target. `known`: the `(T, value)` pairs evaluated so far (the
-    bracket and the first secant start from them; each evaluation is appended). Stops at |value - target| <= rtol
+    bracket and the first secant start from them; each evaluation is appended; a single known pair at `start` is its
+    value there, so the search steps away from it at once). Stops at |value - target| <= rtol
     target. Returns `(T, value(T))`. Forward solves only: no derivative program is compiled."""
 
     def g(v_):

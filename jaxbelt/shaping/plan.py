@@ -899,9 +899,8 @@ def design_move(
     if "minimax" in include and t_fixed is not None and clearly and far is not None:
         # the minimax design's programs start compiling now, in the background, while the reference and the other
         # candidates are computed (their types only: a stand-in reference of the right shape)
-        lp_axis = _sub_axis(axis, far.kept) if far.left_out else axis
-        opts = _minimax_options(_knots_axis(axis, far), t_fixed, u, j_max, fixed_time=True, smooth=smooth)
-        _Minimax(lp_axis, d, v_max, a_max, j_max, u, np.ones(lp_axis.n_modes), opts).prepare(t_fixed)
+        stand_in = np.ones(axis.n_modes)
+        _minimax_solver(axis, far, d, v_max, a_max, j_max, u, stand_in, t_fixed, True, smooth).prepare(t_fixed)
     ref_cmd = fastest_move(d, v_max, a_max, j_max)
     band = _measure_grids(u)[0]
     ref = np.max(np.asarray(residual_curve(axis, ref_cmd, band)), axis=1)
@@ -939,37 +938,13 @@ def design_move(
             far = _far_modes(axis, T_guess, u, j_max, False, smooth)
             _refuse_all_far(axis, T_guess, u, far, per)
         # modes far above the knots' reach are left out of the LP (`_far_modes`); every row is measured on `axis`
-        lp_axis = _sub_axis(axis, far.kept) if far.left_out else axis
-        kept = np.asarray(far.kept, dtype=int)
-        opts = _minimax_options(
-            _knots_axis(axis, far), T_guess, u, j_max, fixed_time=move_time is not None, smooth=smooth
-        )
-        solver = _Minimax(lp_axis, d, v_max, a_max, j_max, u, ref[kept], opts)
+        solver = _minimax_solver(axis, far, d, v_max, a_max, j_max, u, ref, T_guess, move_time is not None, smooth)
         if move_time is not None:
             T = float(move_time)
-            # a smooth (B-spline) move needs a little more time than the time-optimal one: well above that (`clearly`),
-            # skip the feasibility LP (its program costs a compile) unless the design then fails to converge
-            mm = solver.design(T) if clearly else None
-            if (mm is None or not mm.converged) and not solver.feasible(T):
-                mm = None
-                t_f = solver.shortest_feasible(t_min)
-                rows.append(
-                    _row(
-                        "minimax",
-                        axis,
-                        None,
-                        T,
-                        ref,
-                        u,
-                        limits,
-                        ok=False,
-                        note=f"infeasible for the {'smooth' if smooth else 'steps'} design: needs a move time >= "
-                        f"{t_f:.4g} s",
-                        per=per,
-                    )
-                )
-            elif mm is None:
-                mm = solver.design(T)
+            mm, t_f = _design_at(solver, T, t_min, clearly)
+            if mm is None:
+                note = f"infeasible for the {'smooth' if smooth else 'steps'} design: needs a move time >= {t_f:.4g} s"
+                rows.append(_row("minimax", axis, None, T, ref, u, limits, ok=False, note=note, per=per))
         else:
             mm = _shortest_minimax(solver, t_min, target, progress)
         if mm is not None:
@@ -980,7 +955,7 @@ def design_move(
             why = _jumps_reason(primary, classic)
             if why:
                 jrow, jmm, jbound = _jumps_minimax(axis, d, float(move_time), v_max, a_max, j_max, u, ref, limits, per,
-                                                    t_min, why, progress)  # fmt: skip
+                                                    t_min, clearly, why, progress)  # fmt: skip
                 rows.append(jrow)
                 if jmm is not None and jrow.ok:
                     bound = jbound
@@ -1033,6 +1008,26 @@ def design_move(
     )
 
 
+def _minimax_solver(axis, far: _FarModes, d, v_max, a_max, j_max, u, ref, T, fixed_time: bool, smooth: bool):
+    """The minimax design's `_Minimax` on `axis` at (about) move time `T` [s]: the LP weighs the modes `far` keeps
+    (`ref`, the references of every mode of `axis`, taken for those), its knots set by the modes they resolve."""
+    lp_axis = _sub_axis(axis, far.kept) if far.left_out else axis
+    kept = np.asarray(far.kept, dtype=int)
+    opts = _minimax_options(_knots_axis(axis, far), T, u, j_max, fixed_time=fixed_time, smooth=smooth)
+    return _Minimax(lp_axis, d, v_max, a_max, j_max, u, np.asarray(ref)[kept], opts)
+
+
+def _design_at(solver: _Minimax, T: float, t_min: float, clearly: bool):
+    """`solver`'s design at move time `T` [s], and NaN; or None and the shortest move time its basis can make
+    (bisection) where it cannot make this one. A smooth (B-spline) move needs a little more time than the
+    time-optimal one (`t_min`): well above that (`clearly`), the feasibility LP (its program costs a compile) is
+    skipped unless the design then fails to converge."""
+    mm = solver.design(T) if clearly else None
+    if (mm is None or not mm.converged) and not solver.feasible(T):
+        return None, solver.shortest_feasible(t_min)
+    return (solver.design(T) if mm is None else mm), math.nan
+
+
 #: the name of the row `design_move` adds, with `smooth="auto"`, for the minimax design whose acceleration may jump
 JUMPS = "minimax (jumps)"
 
@@ -1077,7 +1072,7 @@ def _jumps_reason(primary, classic) -> str:
     return f"added: {r.name} leaves {r.worst_percent:.3g} % <= the smooth design's {primary.worst_percent:.3g} %"
 
 
-def _jumps_minimax(axis, d, T, v_max, a_max, j_max, u, ref, limits, per, t_min, why, progress):
+def _jumps_minimax(axis, d, T, v_max, a_max, j_max, u, ref, limits, per, t_min, clearly, why, progress):
     """The minimax design at move time `T` whose acceleration may jump (steps; with `j_max`, ramps whose jerk may
     jump), as `smooth=False` designs it: `(row, design or None, continuous bound)`. Its command space holds what a
     classic shaper makes of the time-optimal move (a shaped trapezoid or S-curve), so at equal time and limits it
@@ -1085,17 +1080,11 @@ def _jumps_minimax(axis, d, T, v_max, a_max, j_max, u, ref, limits, per, t_min, 
     if progress:
         print(f"design_move: {why}; designing the minimax command with jumps ...", flush=True)
     far = _far_modes(axis, T, u, j_max, True, False)  # keeps every mode the spline's LP keeps (`_refuse_all_far`)
-    lp_axis = _sub_axis(axis, far.kept) if far.left_out else axis
-    kept = np.asarray(far.kept, dtype=int)
-    opts = _minimax_options(_knots_axis(axis, far), T, u, j_max, fixed_time=True, smooth=False)
-    solver = _Minimax(lp_axis, d, v_max, a_max, j_max, u, ref[kept], opts)
-    mm = solver.design(T) if T >= _SURELY_FEASIBLE * t_min else None
-    if (mm is None or not mm.converged) and not solver.feasible(T):
-        t_f = solver.shortest_feasible(t_min)
-        note = f"{why}; infeasible with {opts.n_knots} equal steps: needs a move time >= {t_f:.4g} s"
-        return _row(JUMPS, axis, None, T, ref, u, limits, ok=False, note=note, per=per), None, math.nan
+    solver = _minimax_solver(axis, far, d, v_max, a_max, j_max, u, ref, T, True, False)
+    mm, t_f = _design_at(solver, T, t_min, clearly)
     if mm is None:
-        mm = solver.design(T)
+        note = f"{why}; infeasible with {solver.opts.n_knots} equal steps: needs a move time >= {t_f:.4g} s"
+        return _row(JUMPS, axis, None, T, ref, u, limits, ok=False, note=note, per=per), None, math.nan
     row, mm, bound = _minimax_row(JUMPS, solver, mm, axis, ref, u, limits, far, per, None, progress)
     return dataclasses.replace(row, note=why + "; " + row.note), mm, bound
 
