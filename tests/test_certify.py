@@ -1,6 +1,8 @@
 """The certificate of the continuous problem (`jaxbelt.shaping.certify`) and the minimax design whose acceleration
 may jump (`design_move(..., smooth=False)`), against an independent LP solved by scipy's HiGHS."""
 
+import math
+
 import numpy as np
 import pytest
 from references import highs_steps_lp, modal_residual_reference, piecewise_move_reference
@@ -107,16 +109,23 @@ def test_certify_rtol_refines_until_the_continuous_bound_is_within_the_tolerance
 
 
 def test_certify_rtol_near_a_zero_optimum_stops_at_the_absolute_floor():
-    """A 5.5 Hz axis at 0.8 s: the optimum is near zero, the bound 0, so no relative tolerance can be proved; the
-    design is within `CERTIFY_ATOL` (0.01 % of the unshaped move's residual) of the least any command can leave at
-    once, with no refinement, and the note says which tolerance was met. An independent HiGHS LP on 4x the steps (a
-    finer command space holding the design's) lies between the bound and the design's LP value."""
+    """A 5.5 Hz axis at 0.8 s, the default command space (`smooth="auto"`): `certify_rtol` adds the design with
+    jumps, which carries the certificate. The optimum is near zero, the bound 0, so no relative tolerance can be
+    proved; that design is within `CERTIFY_ATOL` (0.01 % of the unshaped move's residual) of the least any command
+    can leave at once, with no refinement, and its note says which tolerance was met. The smooth row's note states
+    the same bound, which lies below its worst. An independent HiGHS LP on 4x the steps (a finer command space
+    holding the design's) lies between the bound and the design's LP value."""
     plan = jb.design_move(
-        jb.ModalAxis([5.5], [0.02]), 0.1, 0.8, v_max=0.3, a_max=1.2, uncertainty=0.2, smooth=False,
-        include=("minimax",), certify_rtol=0.01,
+        jb.ModalAxis([5.5], [0.02]), 0.1, 0.8, v_max=0.3, a_max=1.2, uncertainty=0.2, include=("minimax",),
+        certify_rtol=0.01,
     )  # fmt: skip
-    row, mm, bound = plan.candidate("minimax"), plan.minimax, plan.continuous_bound
-    assert row.ok and "(absolute, at most CERTIFY_ATOL" in row.note and "not within" not in row.note
+    row, smooth, bound = plan.candidate(JUMPS), plan.candidate("minimax"), plan.continuous_bound
+    assert row.ok and row.note.startswith("added: `certify_rtol` asks for the continuous certificate")
+    assert "(absolute, at most CERTIFY_ATOL" in row.note and "not within" not in row.note
+    assert smooth.ok and "(continuous bound, from the design with jumps)" in smooth.note
+    assert bound <= smooth.worst_percent / 100
+    mm = plan.minimax  # the better of the two rows: here the design with jumps (0.0053 % against 0.071 %)
+    assert mm.options.basis == "steps" and plan.best is row
     assert mm.options.n_angles == 16  # not refined
     worst = row.worst_percent / 100
     assert 0.0 <= bound <= worst and worst - bound <= CERTIFY_ATOL
@@ -125,9 +134,29 @@ def test_certify_rtol_near_a_zero_optimum_stops_at_the_absolute_floor():
 
 
 @pytest.mark.parametrize(
+    "worst_percent, bound, says",
+    [
+        (12.0, 0.0125, "any command leaves >= 1.25 % (continuous bound, from the design with jumps): this one at most 11 percentage points above"),
+        (0.004, math.nan, "within 0.004 percentage points of the least any command can leave (its worst is below CERTIFY_ATOL"),
+        (0.5, math.nan, None),
+    ],
+)  # fmt: skip
+def test_the_smooth_rows_note_states_what_is_proved(worst_percent, bound, says):
+    """The smooth row's place against any command: the bound of the design with jumps where there is one (then the
+    gap in percentage points, worst - bound); with none, a worst below `CERTIFY_ATOL` (0.01 %) is within that of
+    the least any command can leave (a residual is never below 0); otherwise nothing is claimed."""
+    from types import SimpleNamespace
+
+    from jaxbelt.shaping.plan import _smooth_certificate
+
+    note = _smooth_certificate(SimpleNamespace(worst_percent=worst_percent), bound)
+    assert (says in note) if says else note == ""
+
+
+@pytest.mark.parametrize(
     "kw, message",
     [
-        (dict(certify_rtol=0.01), "`certify_rtol` needs `smooth=False`"),
+        (dict(smooth=True, certify_rtol=0.01), "`certify_rtol` needs `smooth=False` or 'auto'"),
         (dict(smooth=False, certify_rtol=0.0), r"`certify_rtol` must lie in \(0, 1\); got 0.0"),
         (dict(smooth=False, certify_rtol="1%"), r"`certify_rtol` must be a number in \(0, 1\)"),
     ],
@@ -137,25 +166,55 @@ def test_bad_certify_rtol_is_refused_by_name(kw, message):
         jb.design_move(jb.ModalAxis([5.5], [0.02]), 0.1, 1.0, v_max=0.3, a_max=1.2, **kw)
 
 
-@pytest.mark.parametrize("flag, value", [("auto", "auto"), ("true", True), ("false", False)])
-def test_cli_smooth_reaches_design_move(flag, value, monkeypatch, tmp_path):
-    """`jaxbelt shaping --smooth {auto,true,false}` hands design_move `smooth` = "auto", True or False (stopped
-    there: nothing is designed)."""
+class _Stop(Exception):
+    """Raised by the stand-in of design_move: the CLI stops there, nothing is designed."""
+
+
+def _cli_until_design_move(monkeypatch, tmp_path, extra):
+    """Run `jaxbelt shaping` on a 5.5 Hz axis with `extra` options, design_move replaced by a stand-in that records
+    its keyword arguments and stops: `(exit code or None where it stopped at design_move, the keywords seen)`."""
     from jaxbelt.cli import main
     from jaxbelt.shaping import plan as plan_module
 
     seen = {}
 
-    class Stop(Exception):
-        pass
-
     def capture(*args, **kwargs):
         seen.update(kwargs)
-        raise Stop
+        raise _Stop
 
     monkeypatch.setattr(plan_module, "design_move", capture)
     argv = ["--no-cache", "shaping", "--mode", "5.5:0.02", "--distance", "0.1", "--move-time", "0.8", "--v-max", "0.3"]
-    argv += ["--a-max", "1.2", "--smooth", flag, "--out", str(tmp_path / "m.csv"), "--no-progress"]
-    with pytest.raises(Stop):
-        main(argv)
-    assert seen["smooth"] == value and type(seen["smooth"]) is type(value)
+    argv += ["--a-max", "1.2", "--out", str(tmp_path / "m.csv"), "--no-progress", *extra]
+    try:
+        return main(argv), seen
+    except _Stop:
+        return None, seen
+    except SystemExit as e:  # argparse's own refusal (a value outside the type's range)
+        return e.code, seen
+
+
+@pytest.mark.parametrize("flag, value", [("auto", "auto"), ("true", True), ("false", False)])
+def test_cli_smooth_reaches_design_move(flag, value, monkeypatch, tmp_path):
+    """`jaxbelt shaping --smooth {auto,true,false}` hands design_move `smooth` = "auto", True or False (stopped
+    there: nothing is designed)."""
+    code, seen = _cli_until_design_move(monkeypatch, tmp_path, ["--smooth", flag])
+    assert code is None and seen["smooth"] == value and type(seen["smooth"]) is type(value)
+
+
+@pytest.mark.parametrize(
+    "extra, expect",
+    [
+        (["--certify", "0.05"], 0.05),
+        (["--certify", "0.05", "--smooth", "true"], "argument --certify: the continuous certificate bounds"),
+        (["--certify", "0.05", "--j-max", "20"], "not with --j-max"),
+        (["--certify", "1"], "argument --certify: must lie in (0, 1)"),
+    ],
+)
+def test_cli_certify_reaches_design_move_or_is_refused_by_name(extra, expect, monkeypatch, tmp_path, capsys):
+    """`jaxbelt shaping --certify RTOL` hands design_move `certify_rtol` = RTOL (stopped there: nothing is
+    designed); with `--smooth true`, `--j-max` or outside (0, 1) it is refused in one line naming the option."""
+    code, seen = _cli_until_design_move(monkeypatch, tmp_path, extra)
+    if isinstance(expect, float):
+        assert code is None and seen["certify_rtol"] == expect
+    else:
+        assert code == 2 and expect in capsys.readouterr().err and not seen

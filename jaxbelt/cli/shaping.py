@@ -29,7 +29,8 @@ OVERVIEW_ONLY = ("gammas", "duration", "revolutions", "robust_order", "robust_mo
 #: the options of a design on the user's axis and their defaults
 AXIS_DEFAULTS = {"uncertainty": 0.2, "rate": 1000.0, "smooth": "auto"}
 AXIS_ONLY = (
-    "distance", "move_time", "v_max", "a_max", "j_max", "n_modes", "uncertainty", "damping", "smooth", "rate",
+    "distance", "move_time", "v_max", "a_max", "j_max", "n_modes", "uncertainty", "damping", "smooth", "certify",
+    "rate",
 )  # fmt: skip
 
 
@@ -105,6 +106,15 @@ def register(subparsers):
         help="the minimax design's command space: true, a continuous acceleration; false, one that may jump as a "
         "shaped trapezoid's does; auto (default), the smooth design and, where a classic shaper leaves no more or it "
         "is infeasible, the one with jumps too",
+    )
+    axis.add_argument(
+        "--certify",
+        type=float_in(0.0, 1.0, lo_open=True, hi_open=True),
+        default=None,
+        metavar="RTOL",
+        help="refine the minimax design with jumps until a rigorous lower bound on what any command can leave is "
+        "within RTOL of it (e.g. 0.05; with --smooth auto or false, without --j-max; a minute or more on a hard "
+        "axis); default: no refinement, the bound reported where a design with jumps is made",
     )
     axis.add_argument(
         "--rate",
@@ -263,6 +273,10 @@ def check(args) -> str | None:
             return "argument --distance: must be non-zero"
         if args.n_modes is not None and not args.measured:
             return "argument --n-modes: only with --measured"
+        if args.certify is not None and (args.smooth == "true" or args.j_max is not None):
+            return "argument --certify: the continuous certificate bounds the design with jumps: not with " + (
+                "--smooth true (give auto or false)" if args.smooth == "true" else "--j-max"
+            )
         if args.damping is not None:
             damping = _damping(args.damping)
             if isinstance(damping, str) and damping != "unknown":
@@ -385,6 +399,7 @@ def _axis_run(args) -> int:
         progress=not args.no_progress,
         damping=args.damping,
         smooth={"auto": "auto", "true": True, "false": False}[args.smooth],
+        certify_rtol=args.certify,
     )
     print(plan.format_table())
     best = plan.best

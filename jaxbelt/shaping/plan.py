@@ -823,12 +823,18 @@ def design_move(
 
     The minimax row's note states its certificate: the LP's own gap (its command is the least residual of its
     command space: splines of its knots, or steps or ramps of its intervals) and, for a design with steps (no jerk
-    limit; `smooth=False`, or the row `smooth="auto"` adds), a rigorous lower bound on the least worst residual *any* command within the same limits, distance and
-    time can leave over the band
-    (`jaxbelt.shaping.certify`; also `plan.continuous_bound`): the design is then proved within (worst - bound) of
-    the best any command can do, smooth or not, classic shapers included.
+    limit; `smooth=False`, or the row `smooth="auto"` adds), a rigorous lower bound on the least worst residual
+    *any* command within the same limits, distance and time can leave over the band (`jaxbelt.shaping.certify`;
+    also `plan.continuous_bound`): the design is then proved within (worst - bound) of the best any command can
+    do, smooth or not, classic shapers included. The smooth row's note states the same bound where the design with
+    jumps is made beside it (how far the smooth command is from the best any command can do, in percentage points
+    of the unshaped move's residual), or, where its worst is below `CERTIFY_ATOL`, that it is within that of the
+    best (a residual is never below 0); otherwise it claims nothing beyond its own command space (the spline's
+    own multipliers bound next to nothing; `certify_rtol` makes the bound).
 
-    `certify_rtol` (with `smooth=False` and `j_max=None` only; default None: one design): refine until the design is
+    `certify_rtol` (with `smooth=False` or `"auto"`, and `j_max=None`; default None: no refinement; with `"auto"`
+    the design with jumps is then always made beside the smooth one, at the smooth design's time where `move_time`
+    is None, its note saying why): the design with jumps is refined until it is
     certified within this fraction of its own worst residual, (worst - bound) <= certify_rtol * worst, or within
     `CERTIFY_ATOL` = 0.01 % of the unshaped move's residual, absolute, whichever is larger (near a zero optimum the
     bound is 0 and no relative tolerance can be proved; the note says which one was met): first the modulus
@@ -850,11 +856,11 @@ def design_move(
     smooth_arg = smooth
     smooth = auto or bool(smooth)  # the first (or only) minimax design's basis: the spline unless smooth=False
     if certify_rtol is not None:
-        if smooth:
+        if smooth and not auto:
             raise ValueError(
-                "design_move: `certify_rtol` needs `smooth=False` (the continuous certificate bounds the steps "
-                f"design; the spline's multipliers bound next to nothing); got certify_rtol={certify_rtol!r} with "
-                f"smooth={smooth_arg!r}"
+                "design_move: `certify_rtol` needs `smooth=False` or 'auto' (the continuous certificate bounds the "
+                "steps design, which 'auto' then adds beside the smooth one; the spline's multipliers bound next to "
+                f"nothing); got certify_rtol={certify_rtol!r} with smooth={smooth_arg!r}"
             )
         if isinstance(certify_rtol, bool) or not isinstance(certify_rtol, int | float | np.floating | np.integer):
             raise ValueError(f"design_move: parameter `certify_rtol` must be a number in (0, 1); got {certify_rtol!r}")
@@ -950,17 +956,26 @@ def design_move(
         if mm is not None:
             row, mm, bound = _minimax_row("minimax", solver, mm, axis, ref, u, limits, far, per, certify_rtol, progress)
             rows.append(row)
-        if auto and move_time is not None:
-            primary = next((r for r in rows if r.name == "minimax"), None)
-            why = _jumps_reason(primary, classic)
-            if why:
-                jrow, jmm, jbound = _jumps_minimax(axis, d, float(move_time), v_max, a_max, j_max, u, ref, limits, per,
-                                                    t_min, clearly, why, progress)  # fmt: skip
-                rows.append(jrow)
-                if jmm is not None and jrow.ok:
-                    bound = jbound
-                    if primary is None or not primary.ok or jrow.worst_percent < primary.worst_percent:
-                        mm = jmm  # `plan.minimax`: the design of the better minimax row
+        primary = next((r for r in rows if r.name == "minimax"), None)
+        # `smooth="auto"`: the design with jumps beside the smooth one, at the given time (or, to certify, the
+        # smooth design's)
+        T_j = float(move_time) if move_time is not None else (float(mm.command.duration) if mm is not None else None)
+        why = _jumps_reason(primary, classic) if move_time is not None else ""
+        if auto and T_j is not None and (why or certify_rtol is not None):
+            why = (
+                why or "added: `certify_rtol` asks for the continuous certificate, which the design with jumps carries"
+            )
+            clearly_j = T_j >= _SURELY_FEASIBLE * t_min
+            jrow, jmm, jbound = _jumps_minimax(axis, d, T_j, v_max, a_max, j_max, u, ref, limits, per, t_min,
+                                                clearly_j, why, certify_rtol, progress)  # fmt: skip
+            rows.append(jrow)
+            if jmm is not None and jrow.ok:
+                bound = jbound
+                if primary is None or not primary.ok or jrow.worst_percent < primary.worst_percent:
+                    mm = jmm  # `plan.minimax`: the design of the better minimax row
+        if primary is not None and primary.ok and smooth:  # the smooth row's place against any command
+            k = rows.index(primary)
+            rows[k] = dataclasses.replace(primary, note=primary.note + _smooth_certificate(primary, bound))
     # --- Incerti's pseudo-polynomial commands
     T_common = (
         float(move_time)
@@ -1072,7 +1087,25 @@ def _jumps_reason(primary, classic) -> str:
     return f"added: {r.name} leaves {r.worst_percent:.3g} % <= the smooth design's {primary.worst_percent:.3g} %"
 
 
-def _jumps_minimax(axis, d, T, v_max, a_max, j_max, u, ref, limits, per, t_min, clearly, why, progress):
+def _smooth_certificate(row, bound: float) -> str:
+    """What the smooth row's note says of its place against any command: the continuous bound where the design with
+    jumps gave one, or, where its worst is below `CERTIFY_ATOL`, that it is within that of the least any command can
+    leave (a residual is never below 0); "" otherwise (no bound is computed: `certify_rtol` makes one)."""
+    worst = row.worst_percent / 100
+    if math.isfinite(bound):
+        return (
+            f"; any command leaves >= {100 * bound:.3g} % (continuous bound, from the design with jumps): this one "
+            f"at most {100 * max(worst - bound, 0.0):.2g} percentage points above the least any command can leave"
+        )
+    if worst <= CERTIFY_ATOL:
+        return (
+            f"; within {100 * worst:.2g} percentage points of the least any command can leave (its worst is below CERTIFY_ATOL = "
+            f"{100 * CERTIFY_ATOL:g} %)"
+        )
+    return ""
+
+
+def _jumps_minimax(axis, d, T, v_max, a_max, j_max, u, ref, limits, per, t_min, clearly, why, certify_rtol, progress):
     """The minimax design at move time `T` whose acceleration may jump (steps; with `j_max`, ramps whose jerk may
     jump), as `smooth=False` designs it: `(row, design or None, continuous bound)`. Its command space holds what a
     classic shaper makes of the time-optimal move (a shaped trapezoid or S-curve), so at equal time and limits it
@@ -1085,7 +1118,7 @@ def _jumps_minimax(axis, d, T, v_max, a_max, j_max, u, ref, limits, per, t_min, 
     if mm is None:
         note = f"{why}; infeasible with {solver.opts.n_knots} equal steps: needs a move time >= {t_f:.4g} s"
         return _row(JUMPS, axis, None, T, ref, u, limits, ok=False, note=note, per=per), None, math.nan
-    row, mm, bound = _minimax_row(JUMPS, solver, mm, axis, ref, u, limits, far, per, None, progress)
+    row, mm, bound = _minimax_row(JUMPS, solver, mm, axis, ref, u, limits, far, per, certify_rtol, progress)
     return dataclasses.replace(row, note=why + "; " + row.note), mm, bound
 
 
@@ -1162,12 +1195,15 @@ def _certify(solver: _Minimax, mm, bound: float, rtol: float, progress: bool):
         return float(d.fine_worst) - b <= max(rtol * float(d.fine_worst), CERTIFY_ATOL)
 
     opts = _certify_options(mm.options, rtol)
+    stopped = f"{mm.options.n_knots} steps, the most within CERTIFY_MAX_STEPS = {CERTIFY_MAX_STEPS}"
     while not within(mm, bound) and opts.n_knots <= CERTIFY_MAX_STEPS:
         if progress:
             print(f"design_move: certifying with {opts.n_knots} steps, {opts.n_angles} cuts ...", flush=True)
         finer = _Minimax(*solver.args, opts).design(T)
         if not finer.converged:
+            stopped = f"the design with {opts.n_knots} steps did not converge"
             break
+        stopped = f"{opts.n_knots} steps, the most within CERTIFY_MAX_STEPS = {CERTIFY_MAX_STEPS}"
         bound = max(bound, continuous_lower_bound(finer))
         if float(finer.fine_worst) <= float(mm.fine_worst):
             mm = finer
@@ -1180,7 +1216,7 @@ def _certify(solver: _Minimax, mm, bound: float, rtol: float, progress: bool):
     note = (
         f"certified gap {float(mm.gap):.1e}; {mm.options.n_knots} steps, {mm.options.n_angles} cuts: within "
         f"{how} of the least any command can leave"
-        + ("" if within(mm, bound) else f" (not within certify_rtol at {CERTIFY_MAX_STEPS} steps, the most)")
+        + ("" if within(mm, bound) else f" (not within certify_rtol: {stopped})")
     )
     return mm, bound, note
 
