@@ -1195,7 +1195,8 @@ def _certify(solver: _Minimax, mm, bound: float, rtol: float, progress: bool):
         return float(d.fine_worst) - b <= max(rtol * float(d.fine_worst), CERTIFY_ATOL)
 
     opts = _certify_options(mm.options, rtol)
-    stopped = f"{mm.options.n_knots} steps, the most within CERTIFY_MAX_STEPS = {CERTIFY_MAX_STEPS}"
+    tried = mm.options.n_knots  # the most steps designed so far
+    stopped = ""  # why the refinement stopped short, where a finer design did not converge
     while not within(mm, bound) and opts.n_knots <= CERTIFY_MAX_STEPS:
         if progress:
             print(f"design_move: certifying with {opts.n_knots} steps, {opts.n_angles} cuts ...", flush=True)
@@ -1203,11 +1204,12 @@ def _certify(solver: _Minimax, mm, bound: float, rtol: float, progress: bool):
         if not finer.converged:
             stopped = f"the design with {opts.n_knots} steps did not converge"
             break
-        stopped = f"{opts.n_knots} steps, the most within CERTIFY_MAX_STEPS = {CERTIFY_MAX_STEPS}"
+        tried = opts.n_knots
         bound = max(bound, continuous_lower_bound(finer))
         if float(finer.fine_worst) <= float(mm.fine_worst):
             mm = finer
         opts = opts._replace(n_knots=2 * opts.n_knots)
+    stopped = stopped or f"{tried} steps, the most within CERTIFY_MAX_STEPS = {CERTIFY_MAX_STEPS}"
     gap = float(mm.fine_worst) - bound
     rel = gap / float(mm.fine_worst)
     how = f"{100 * rel:.2g} % (relative)"
