@@ -12,7 +12,7 @@ variable). The variants switch off one piece each:
 - `private off`: `JAXBELT_PRIVATE_APIS=0`: none of the private internals (`jaxbelt._compat`: checkify's pass
   over loops, equinox's internal checks as values, the check counter), the public fallback.
 
-Run: `python benchmarks/machinery.py [--repeats N] [NAME ...]`; writes `benchmarks/results/machinery.json`.
+Run: `python benchmarks/machinery.py [--repeats N] [--quick] [NAME ...]`; writes `benchmarks/results/machinery.json`.
 """
 
 from __future__ import annotations
@@ -51,11 +51,21 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("names", nargs="*", default=list(DEFAULT))
     parser.add_argument("--repeats", type=int, default=2)
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="check that the benchmark runs: residual_energy only, jaxbelt as shipped against JAX's cache alone, one "
+        "repeat; writes into the scratch folder",
+    )
     args = parser.parse_args()
+    variants = VARIANTS
+    if args.quick:
+        args.names, args.repeats = ["residual_energy"], 1
+        variants = {k: VARIANTS[k] for k in ("all on", "store off")}
     rows = []
     with tempfile.TemporaryDirectory() as data_dir:
         for name in args.names:
-            for variant, (spec, env_extra) in VARIANTS.items():
+            for variant, (spec, env_extra) in variants.items():
                 cold, warm = [], []
                 for _ in range(args.repeats):
                     with tempfile.TemporaryDirectory() as cache:
@@ -72,10 +82,15 @@ def main() -> None:
                 )
                 rows.append(row)
                 print(f"{name:18s} {variant:18s} cold {row['cold_s']:.2f} s  warm {row['warm_s']:.2f} s", flush=True)
-    out_dir = results_dir()
+    out_dir = results_dir(args.quick)
     out_dir.mkdir(parents=True, exist_ok=True)
     result = dict(
-        scene="machinery", machine=machine_info(), repeats=args.repeats, rows=rows, when=time.strftime("%Y-%m-%d")
+        scene="machinery",
+        machine=machine_info(),
+        quick=args.quick,
+        repeats=args.repeats,
+        rows=rows,
+        when=time.strftime("%Y-%m-%d"),
     )
     (out_dir / "machinery.json").write_text(json.dumps(result, indent=2) + "\n")
 

@@ -1,8 +1,9 @@
 """Regenerate the benchmark tables of the README and the docs from `benchmarks/results/*.json`.
 
-The tables replace the text between `<!-- bench:start -->` and `<!-- bench:end -->` in README.md
-and in docs/benchmarks.md (the documentation site's benchmarks page); a file without those
-markers is left untouched (for the README the table is printed instead). Each JSON's `headline`
+The tables replace the text between `<!-- bench:start -->` and `<!-- bench:end -->` in
+docs/benchmarks.md (the documentation site's benchmarks page, which holds every table) and in a README that
+has those markers (the repository's README links to the page instead); a file without the markers is left
+untouched. Each JSON's `headline`
 list gives the rows (see `_common.py` for the schema). The README shows the matched-error
 comparison and folds the long headline table into a `<details>` block; the docs page shows both.
 
@@ -455,8 +456,9 @@ def update_readme(
         # the shaping docs page only with the repository's own README (a test's README stands alone)
         update_shaping_blocks(readme, SHAPING_PAGE if readme == README else None, results_dir)
     if not _replace_block(readme, table):
-        print(f"readme_table: {readme.name} has no '{START}' ... '{END}' markers; the tables are:\n")
-        print(build_table(results_dir))
+        if docs_page is None:  # nowhere else to put them: show them
+            print(f"readme_table: {readme.name} has no '{START}' ... '{END}' markers; the tables are:\n")
+            print(build_table(results_dir))
         return False
     print(f"readme_table: updated the benchmark table in {readme}")
     return True

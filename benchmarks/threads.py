@@ -12,7 +12,7 @@ calls (`jaxbelt._threads`). This benchmark measures, each in a fresh process, th
 with the cores idle and with every core busy (one spinning Python process per core). Target: with the cores
 busy, `user` <= 2x `OPENBLAS_NUM_THREADS=1` for the warm `design_move`.
 
-Run: `python benchmarks/threads.py [--repeats N]`; writes `benchmarks/results/threads.json` and `.png`.
+Run: `python benchmarks/threads.py [--repeats N] [--quick]`; writes `benchmarks/results/threads.json` and `.png`.
 Nothing here sets a thread variable for the processes it measures, except the setting being measured.
 """
 
@@ -40,6 +40,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 import jaxbelt as jb
 repeats = int(sys.argv[1])
+wanted = sys.argv[2].split(",")
 axis = jb.ModalAxis(frequencies=[7.3, 18.0], damping_ratios=[0.015, 0.01])
 drive, pid = jb.FourBarDrive(), jb.PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0, v_limit=60.0)
 tasks = {
@@ -47,7 +48,7 @@ tasks = {
     "tune_pid": lambda: jb.tune_pid(drive, pid, t0=0.375, t1=0.5, steps=3, progress=False),
 }
 out = {}
-for name, task in tasks.items():
+for name, task in ((k, tasks[k]) for k in wanted):
     task()  # compiles
     samples = []
     for _ in range(repeats):
@@ -76,12 +77,15 @@ def _busy(n: int):
     return [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
 
 
-def measure(setting: str, busy: bool, repeats: int) -> dict:
+TASKS = ("design_move", "tune_pid")
+
+
+def measure(setting: str, busy: bool, repeats: int, tasks=TASKS) -> dict:
     spinners = _busy(os.cpu_count() or 1) if busy else []
     try:
         time.sleep(0.5 if busy else 0.0)
         run = subprocess.run(
-            [sys.executable, "-c", PROBE, str(repeats)],
+            [sys.executable, "-c", PROBE, str(repeats), ",".join(tasks)],
             capture_output=True,
             text=True,
             env=_env(SETTINGS[setting]),
@@ -100,11 +104,20 @@ def measure(setting: str, busy: bool, repeats: int) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeats", type=int, default=5, help="warm calls per task and process (default 5)")
+    parser.add_argument(
+        "--quick",
+        action="store_true",
+        help="check that the benchmark runs: tune_pid only, cores idle, one repeat, the user's setting against "
+        "OPENBLAS_NUM_THREADS=1; writes into the scratch folder",
+    )
     args = parser.parse_args()
+    tasks, loads, settings = TASKS, (False, True), tuple(SETTINGS)
+    if args.quick:
+        args.repeats, tasks, loads, settings = 1, ("tune_pid",), (False,), ("user", "OPENBLAS_NUM_THREADS=1")
     rows = []
-    for busy in (False, True):
-        for setting in SETTINGS:
-            samples = measure(setting, busy, args.repeats)
+    for busy in loads:
+        for setting in settings:
+            samples = measure(setting, busy, args.repeats, tasks)
             for task, s in samples.items():
                 row = dict(
                     task=task,
@@ -121,11 +134,12 @@ def main() -> None:
                 )
 
     def med(task, setting, cores):
-        return next(r["median_s"] for r in rows if (r["task"], r["setting"], r["cores"]) == (task, setting, cores))
+        found = [r["median_s"] for r in rows if (r["task"], r["setting"], r["cores"]) == (task, setting, cores)]
+        return found[0] if found else float("nan")
 
     headline = []
-    for task in ("design_move", "tune_pid"):
-        for cores in ("idle", "busy"):
+    for task in tasks:
+        for cores in ("idle", "busy")[: len(loads)]:
             ratio = med(task, "user", cores) / med(task, "OPENBLAS_NUM_THREADS=1", cores)
             before = med(task, "limit off", cores) / med(task, "OPENBLAS_NUM_THREADS=1", cores)
             target = "<= 2" if (task, cores) == ("design_move", "busy") else None
@@ -145,9 +159,9 @@ def main() -> None:
                     target=None,
                 )
             )
-    out_dir = results_dir()
+    out_dir = results_dir(args.quick)
     out_dir.mkdir(parents=True, exist_ok=True)
-    result = dict(scene="threads", machine=machine_info(), quick=False, rows=rows, headline=headline)
+    result = dict(scene="threads", machine=machine_info(), quick=args.quick, rows=rows, headline=headline)
     (out_dir / "threads.json").write_text(json.dumps(result, indent=2) + "\n")
     _plot(rows, out_dir / "threads.png")
     for h in headline:
@@ -164,7 +178,10 @@ def _plot(rows, path: Path) -> None:
     for ax, task in zip(axes, ("design_move", "tune_pid")):
         for k, cores in enumerate(("idle", "busy")):
             for j, setting in enumerate(SETTINGS):
-                r = next(r for r in rows if (r["task"], r["setting"], r["cores"]) == (task, setting, cores))
+                found = [r for r in rows if (r["task"], r["setting"], r["cores"]) == (task, setting, cores)]
+                if not found:  # a quick run measures a part
+                    continue
+                r = found[0]
                 x = k * (len(SETTINGS) + 1) + j
                 ax.bar(x, r["median_s"], color=f"C{j}", label=setting if k == 0 else None)
                 ax.errorbar(

@@ -52,6 +52,23 @@ import pytest  # noqa: E402
 jax.config.update("jax_enable_x64", True)
 
 
+# --- the two tiers (tests/tiers.py) ----------------------------------------------------------------
+_FULL_MARKS = ("slow", "stress", "notebook")
+
+
+@pytest.hookimpl(tryfirst=True)  # before `-m` selects: the `quick` mark must be there to select on
+def pytest_collection_modifyitems(config, items):
+    """Mark `quick` every test that is not in the full tier only (marked slow, stress or notebook, or named in
+    tests/tiers.json from measured durations): `-m quick` runs the quick tier."""
+    from tiers import full_only
+
+    full = full_only()
+    for item in items:
+        if item.nodeid not in full and not any(item.get_closest_marker(m) for m in _FULL_MARKS):
+            item.add_marker(pytest.mark.quick)
+    _scene_order(config, items)
+
+
 # --- distribution over xdist workers (`pytest -n 2`) ------------------------------------------
 # Most of the suite's time is XLA compilation, and a compiled program is reused only inside the
 # process that compiled it (a persistent cache shared by the workers was measured to save nothing
@@ -131,7 +148,7 @@ def pytest_configure_node(node):
     node.workerinput["jaxbelt_scene_groups"] = _scene_scheduling(node.config)
 
 
-def pytest_collection_modifyitems(config, items):
+def _scene_order(config, items):
     # only in xdist workers under SceneScheduling: a plain run keeps the file order
     if not getattr(config, "workerinput", {}).get("jaxbelt_scene_groups"):
         return

@@ -61,11 +61,11 @@ def test_ci_lints_formats_and_type_checks_before_the_readme_test_command():
     lines = [ln.strip() for ln in (ROOT / ".ci" / "run").read_text().splitlines()]
     lines = [ln for ln in lines if ln and not ln.startswith("#")]
     install = lines.index('python -m pip install -e ".[dev]"')
-    order = [
-        lines.index(cmd) for cmd in ("ruff check .", "ruff format --check .", "pyright", "python -m pytest -n 2 -q")
-    ]
+    commands = ("ruff check .", "ruff format --check .", "pyright", "python -m pytest -n 2 -q -m quick")
+    order = [lines.index(cmd) for cmd in commands]
     assert install < order[0] and order == sorted(order)
-    assert lines[-1] == "python -m pytest -n 2 -q"  # the README's test command (tests/test_docs.py)
+    # the README's test command (the quick tier, tests/test_docs.py), then the full suite
+    assert lines[-2:] == ["python -m pytest -n 2 -q -m quick", "python -m pytest -n 2 -q"]
     assert PYPROJECT["tool"]["pyright"]["typeCheckingMode"] in ("basic", "standard", "strict")
 
 
