@@ -46,7 +46,17 @@ def full_only() -> frozenset[str]:
 
 def _collected() -> list[str]:
     run = subprocess.run(
-        [sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider", "-m", "not slow and not stress and not notebook"],
+        [
+            sys.executable,
+            "-m",
+            "pytest",
+            "--collect-only",
+            "-q",
+            "-p",
+            "no:cacheprovider",
+            "-m",
+            "not slow and not stress and not notebook",
+        ],
         cwd=ROOT,
         capture_output=True,
         text=True,
