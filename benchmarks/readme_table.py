@@ -467,5 +467,6 @@ def update_readme(
 if __name__ == "__main__":
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--print", action="store_true", help="print the tables, do not edit README.md or the docs page")
+    p.add_argument("--quick", action="store_true", help="the same as --print (every benchmark script takes --quick)")
     args = p.parse_args()
-    update_readme(print_only=args.print)
+    update_readme(print_only=args.print or args.quick)

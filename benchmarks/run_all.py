@@ -45,7 +45,9 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="CI-sized runs (< 2 minutes in all on 2 cores)")
     p.add_argument("--only", nargs="+", metavar="SCENE", help="run only these scenes")
-    p.add_argument("--timeout", type=float, default=None, help="per-scene time limit [s]")
+    p.add_argument(
+        "--timeout", type=float, default=None, help="per-scene time limit [s] (default: none; 300 with --quick)"
+    )
     p.add_argument(
         "--xla-defaults",
         action="store_true",
@@ -57,6 +59,8 @@ def main(argv=None) -> int:
         help="with --quick: overwrite the committed results and README table (default: scratch folder)",
     )
     args = p.parse_args(argv)
+    if args.quick and args.timeout is None:
+        args.timeout = 300.0  # a quick script that hangs fails the run instead of holding it
     scenes = discover()
     if args.only:
         unknown = sorted(set(args.only) - set(scenes))
@@ -100,11 +104,12 @@ def main(argv=None) -> int:
         import readme_table
 
         readme_table.update_readme()
-    print(
-        f"run_all: {len(scenes) - len(failed)}/{len(scenes)} benchmarks ran in {time.perf_counter() - t0:.1f} s"
-        + (f"; failed: {failed}" if failed else "")
-    )
-    return 1 if failed else 0
+    summary = f"run_all: {len(scenes) - len(failed)}/{len(scenes)} benchmarks ran in {time.perf_counter() - t0:.1f} s"
+    if failed:
+        print(f"{summary}; FAILED: {' '.join(failed)} (their output is above)", file=sys.stderr)
+        return 1
+    print(summary)
+    return 0
 
 
 if __name__ == "__main__":

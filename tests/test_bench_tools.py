@@ -233,3 +233,20 @@ def test_committed_shaping_table_is_generated_from_the_committed_json(name):
     assert start in text and end in text
     block = text[text.index(start) + len(start) : text.index(end)]
     assert block == "\n" + readme_table.shaping_table() + "\n"
+
+
+def test_every_benchmark_script_takes_quick():
+    """`run_all.py --quick` runs every discovered script with `--quick`; the tools take it too (the README says every
+    script checks that it runs with it)."""
+    import ast
+
+    here = Path(run_all.__file__).resolve().parent
+    missing = []
+    for script in sorted(here.glob("*.py")):
+        if script.stem.startswith("_"):
+            continue
+        tree = ast.parse(script.read_text())
+        strings = {n.value for n in ast.walk(tree) if isinstance(n, ast.Constant) and isinstance(n.value, str)}
+        if "--quick" not in strings:
+            missing.append(script.name)
+    assert not missing, f"benchmark scripts without a --quick option: {missing}"
