@@ -46,6 +46,9 @@ import optimistix as optx
 
 from .._checks import check_int, device_array
 from .._threads import blas_limited
+from .readers import is_spectrum_file as is_spectrum_file
+from .readers import load_record as load_record
+from .readers import load_spectrum as load_spectrum
 
 __all__ = ["identify_axis", "identify_axis_from_psd", "load_record", "load_spectrum"]
 
@@ -104,6 +107,22 @@ def _first_bad(name: str, x: np.ndarray, owner: str = _OWNER) -> None:
         )
 
 
+def _time_rounding(t: np.ndarray) -> float:
+    """Half a unit of the last decimal the times `t` were written with (`%.6f`: 5e-7 s), found from the values
+    (the fewest decimals, 0-9, that every time is a whole number of); 0 where they hold more (not rounded)."""
+    scale = float(np.max(np.abs(t))) if t.size else 0.0
+    for d in range(10):
+        unit = 10.0**-d
+        x = t / unit
+        if np.all(np.abs(x - np.round(x)) <= 1e-6 + 8 * np.finfo(float).eps * scale / unit):
+            return 0.5 * unit
+    return 0.0
+
+
+def _decimals(rounding: float) -> int:
+    return round(-math.log10(2 * rounding))
+
+
 def _check_record(t, y, n_modes, offset):
     """Validated host arrays `(t, y)`, the step `dt` [s] and the number of parameters `p`."""
     n = check_int(_OWNER, "n_modes", n_modes, lo=1)
@@ -144,14 +163,23 @@ def _check_record(t, y, n_modes, offset):
         raise ValueError(
             f"{_OWNER}: parameter `t` must be strictly increasing; got t[{k}] = {t[k]!r} >= t[{k + 1}] = {t[k + 1]!r}"
         )
-    dt = (t[-1] - t[0]) / (t.size - 1)
-    dev = np.abs(t - (t[0] + dt * np.arange(t.size))) / dt
-    k = int(np.argmax(dev))
-    if dev[k] > UNIFORM_RTOL:
+    # the grid t0 + k dt by least squares: time stamps rounded by their writer scatter about it by up to half a
+    # unit of their last decimal, on both ends as in the middle
+    k = np.arange(t.size, dtype=float)
+    kc = k - k.mean()
+    dt = float(kc @ (t - t.mean()) / (kc @ kc))
+    grid = t.mean() + dt * kc
+    rounding = _time_rounding(t)
+    allowed = UNIFORM_RTOL * dt + rounding
+    dev = np.abs(t - grid)
+    i = int(np.argmax(dev))
+    if dev[i] > allowed:
+        written = f" plus the rounding of its {_decimals(rounding)} decimals ({rounding:.3g} s)" if rounding else ""
         raise ValueError(
-            f"{_OWNER}: parameter `t` must be uniformly sampled: every time within {UNIFORM_RTOL:g} of a step "
-            f"of the grid t[0] + k*dt (dt = {dt:.6g} s); the largest deviation is {dev[k]:.3g} steps at index {k} "
-            f"(t = {t[k]!r} s). Resample the record to a uniform rate first"
+            f"{_OWNER}: parameter `t` must be uniformly sampled: every time within {UNIFORM_RTOL:g} of a step{written} "
+            f"of the grid t0 + k*dt (dt = {dt:.6g} s, fitted); the largest deviation is {dev[i] / dt:.3g} steps at "
+            f"index {i} (t = {t[i]!r} s). A gap (lost samples) or a changing rate: keep one uninterrupted part, or "
+            "resample the record to a uniform rate first"
         )
     if np.ptp(y) == 0.0:
         raise ValueError(f"{_OWNER}: parameter `y` is constant ({y[0]!r}): the record holds no vibration to identify")
@@ -392,9 +420,11 @@ def identify_axis(
     axis.frequencies, axis.frequency_std            # Hz
     ```
 
-    - `t`: sample times [s], 1-D, strictly increasing and uniform (every time within `UNIFORM_RTOL` = 1e-3
-      of a step of the grid $t_0 + k\\Delta t$: time stamps rounded in a CSV file are accepted, the fit uses
-      the exact grid); any start time $t_0$.
+    - `t`: sample times [s], 1-D, strictly increasing and uniform: every time within `UNIFORM_RTOL` = 1e-3
+      of a step, plus the rounding of its writer, of the grid $t_0 + k\\Delta t$ fitted to the times by least
+      squares. The rounding is half a unit of the last decimal the times hold (found from the values:
+      Klipper's raw accelerometer file writes `%.6f`, 0.5 µs, 1.6e-3 of a step at 3.2 kHz); the fit uses the
+      exact grid. Any start time $t_0$; a rate off its nominal value (a sensor's clock) is the fitted one.
     - `y`: the samples, same shape, any unit: a free decay, or a step response from the end of the move on
       (the model holds only where nothing drives the axis: crop the move away).
     - `n_modes`: number of modes $n \\ge 1$ to fit. The record needs at least
@@ -897,268 +927,3 @@ def identify_axis_from_psd(
     from ..models.axis import ModalAxis
 
     return ModalAxis(fi, zeta, None, frequency_std=f_std, damping_std=z_std)
-
-
-# --------------------------------------------------------------------------------------------
-# reading a record
-# --------------------------------------------------------------------------------------------
-#: first column names that mark a spectrum, not a time record (Klipper's resonance test writes
-#: `freq,psd_x,psd_y,psd_z,psd_xyz`)
-_SPECTRUM_NAMES = ("freq", "frequency", "f", "hz", "freq_hz", "frequency_hz")
-
-
-def _path_and_channel(owner: str, path, channel, first: str):
-    """`(path as str, channel)`: a path of the wrong type is a `TypeError` naming `path`; a numpy integer channel
-    is an index like a Python int; anything else but a name or an index >= 1 is a `ValueError` naming `channel`."""
-    if not isinstance(path, str | bytes | os.PathLike):
-        raise TypeError(
-            f"{owner}: parameter `path` must be a file path (str or os.PathLike); got {type(path).__name__}"
-        )
-    path = os.fsdecode(os.fspath(path))
-    if isinstance(channel, np.integer):
-        channel = int(channel)
-    if (channel is not None and not isinstance(channel, (int, str))) or isinstance(channel, bool):
-        raise ValueError(f"{owner}: parameter `channel` must be a column name or index (int >= 1), got {channel!r}")
-    if isinstance(channel, int) and channel < 1:
-        raise ValueError(f"{owner}: parameter `channel` must be >= 1 (column 0 holds the {first}), got {channel}")
-    return path, channel
-
-
-def load_record(path, channel: int | str | None = None):
-    """Read a measured record `(t, y)` (two float numpy arrays) from a CSV file: the time [s] in the first column
-    and the measured value (any unit) in the second, or in the column `channel`.
-
-    - comma-separated, one sample per line;
-    - an optional header line (any names, e.g. `t,y` or `time_s,accel`) as the first non-empty line, written
-      plainly or as a comment: `#time,accel_x,accel_y,accel_z` (the header of Klipper's raw accelerometer files)
-      names the columns too;
-    - blank lines and other lines starting with `#` are skipped; spaces around the values are allowed;
-    - two columns, or more with `channel`: the column to read, by its header name (`"accel_x"`, any case) or by
-      its index (1 = the first column after the time). A file of more than two columns without `channel` is an
-      error rather than silently read as its first channel.
-    - a spectrum is refused: a file whose first column is named like a frequency (`freq,psd_x,...`, the power
-      spectral density of Klipper's resonance test) is not a time record, and identifying modes from its columns
-      as if they were one would give a meaningless "mode": `load_spectrum` reads it and `identify_axis_from_psd`
-      identifies its modes.
-
-    Raises `FileNotFoundError` (`OSError`) for a missing or unreadable path and `ValueError`, naming the file
-    and the line, for anything else (not text, wrong number of columns, an unknown `channel`, a spectrum, a value
-    that is not a number, fewer than two samples). The times are not checked here: `identify_axis` checks them.
-    """
-    path, channel = _path_and_channel("load_record", path, channel, "time")
-    if not os.path.exists(path):
-        raise FileNotFoundError(f"load_record: no file {path!r} (a CSV file with the columns t,y)")
-    if os.path.isdir(path):
-        raise IsADirectoryError(f"load_record: {path!r} is a folder, not a CSV file with the columns t,y")
-    try:
-        with open(path, encoding="utf-8-sig") as fh:  # utf-8-sig: a spreadsheet's byte-order mark is skipped
-            lines = fh.read().splitlines()
-    except UnicodeDecodeError as e:
-        raise ValueError(f"load_record: {path!r} is not a text (CSV) file ({e.reason} at byte {e.start})") from None
-    spectrum = _spectrum_header(lines)
-    if spectrum is not None:
-        raise ValueError(
-            f"load_record: {path}:{spectrum[0]}: the first column is {spectrum[1][0]!r}: a spectrum (e.g. the power "
-            "spectral density of a firmware's resonance test), not a time record: read it with load_spectrum and "
-            "identify its modes with identify_axis_from_psd (identify_axis needs a time record, e.g. the raw "
-            "accelerometer file #time,accel_x,accel_y,accel_z)"
-        )
-    rows: list = []
-    names: list[str] | None = None
-    column = 1
-    n_columns = None
-    for lineno, line in enumerate(lines, start=1):
-        text = line.strip()
-        if text.startswith("#"):
-            # a comment; with `channel`, the first line may be a commented header (Klipper's `#time,accel_x,...`)
-            if channel is None or rows or names is not None:
-                continue
-            text = text.lstrip("#").strip()
-            if "," not in text:
-                continue
-        if not text:
-            continue
-        fields = [f.strip() for f in text.split(",")]
-        if channel is None and len(fields) != 2:
-            raise ValueError(
-                f"load_record: {path}:{lineno}: expected 2 comma-separated columns t,y; got {len(fields)} in "
-                f"{line!r}"
-                + (
-                    " (one channel per file: drop the other columns, or choose one with `channel`)"
-                    if len(fields) > 2
-                    else ""
-                )
-            )
-        try:
-            values = [float(f) for f in fields]
-        except ValueError:
-            values = None
-        if values is None:
-            if rows or names is not None:
-                raise ValueError(f"load_record: {path}:{lineno}: the values must be numbers; got {line!r}")
-            names = fields  # the first non-empty line: a header
-            continue
-        if n_columns is None:
-            n_columns = len(fields)
-            if channel is not None:
-                column = _channel_column(path, channel, names, n_columns)
-        elif len(fields) != n_columns:
-            raise ValueError(
-                f"load_record: {path}:{lineno}: expected {n_columns} comma-separated columns as in the first line; "
-                f"got {len(fields)} in {line!r}"
-            )
-        rows.append((values[0], values[column]))
-    if len(rows) < 2:
-        raise ValueError(f"load_record: {path!r} holds {len(rows)} sample(s); a record needs at least 2 lines t,y")
-    data = np.asarray(rows, dtype=float)
-    return data[:, 0].copy(), data[:, 1].copy()
-
-
-def _channel_column(path, channel, names, n_columns, owner: str = "load_record", first: str = "time") -> int:
-    """The column index of `channel` (a header name, any case, or an index >= 1) in a file of `n_columns`
-    (column 0 holds the `first` quantity)."""
-    if isinstance(channel, int):
-        if channel >= n_columns:
-            raise ValueError(
-                f"{owner}: {path}: `channel` {channel} is out of range: the file has {n_columns} columns, the "
-                f"{first} and {n_columns - 1} channel(s) (1-{n_columns - 1})"
-            )
-        return channel
-    if names is None or len(names) != n_columns:
-        raise ValueError(f"{owner}: {path}: `channel` {channel!r} names a column, but the file has no header line")
-    lowered = [n.lower() for n in names]
-    if channel.lower() not in lowered[1:]:
-        raise ValueError(f"{owner}: {path}: parameter `channel`: no column {channel!r}; the channels are {names[1:]}")
-    return lowered.index(channel.lower(), 1)
-
-
-def _spectrum_header(lines) -> tuple[int, list[str]] | None:
-    """`(line number, column names)` of the header of a spectrum file, whose first column is named like a
-    frequency (`_SPECTRUM_NAMES`): the first line that is not blank and not a `#` comment, or, where that line
-    holds numbers, the comment line just before it (a header written as `#freq,psd`). None when there is none."""
-    comment = None
-    for lineno, line in enumerate(lines, start=1):
-        text = line.strip()
-        if not text:
-            continue
-        if text.startswith("#"):
-            comment = (lineno, [x.strip() for x in text.lstrip("#").split(",")])
-            continue
-        fields = [x.strip() for x in text.split(",")]
-        if fields[0].lower() in _SPECTRUM_NAMES:
-            return lineno, fields
-        if comment is not None and len(comment[1]) > 1 and comment[1][0].lower() in _SPECTRUM_NAMES:
-            return comment
-        return None
-    return None
-
-
-def is_spectrum_file(path) -> bool:
-    """Whether the CSV file `path` is a spectrum (its header's first column is named like a frequency:
-    `freq`, `frequency`, `f`, `hz`, `freq_hz` or `frequency_hz`, e.g. Klipper's `freq,psd_x,psd_y,psd_z,psd_xyz`)
-    rather than a time record. False for a file that cannot be read as text (its reader says why)."""
-    try:
-        with open(os.fspath(path), encoding="utf-8-sig") as fh:
-            head = [line for _, line in zip(range(200), fh)]
-    except (OSError, UnicodeDecodeError):
-        return False
-    return _spectrum_header(head) is not None
-
-
-def load_spectrum(path, channel: int | str | None = None):
-    """Read a power spectral density `(f, psd)` (two float numpy arrays: frequencies [Hz] and the PSD in the
-    file's unit, e.g. (mm/s²)²/Hz) from a CSV file such as a firmware's resonance test writes (Klipper's
-    `calibration_data_*.csv`: `freq,psd_x,psd_y,psd_z,psd_xyz`, and in newer versions more columns after these).
-
-    ```python
-    f, psd = jb.load_spectrum("calibration_data_x.csv")            # the column psd_xyz
-    f, psd = jb.load_spectrum("calibration_data_x.csv", "psd_x")   # or one axis
-    axis = jb.identify_axis_from_psd(f, psd, n_modes=2)
-    ```
-
-    - comma-separated, one frequency per line, in strictly increasing order;
-    - a header line, the first that is not blank and not a `#` comment (comment lines and blank lines are
-      skipped anywhere; a header written as a comment, `#freq,psd`, is read too), whose first column is named
-      like a frequency: `freq`, `frequency`, `f`, `hz`, `freq_hz` or `frequency_hz` (any case);
-    - `channel`: the PSD column, by its header name (any case) or index (1 = the first column after the
-      frequency). Default: `psd_xyz` (the sum over the three axes) where the file has it, else the only PSD
-      column; a file of several columns without `psd_xyz` needs `channel`. Only the frequency and the chosen
-      column are read as numbers: other columns (a firmware's shaper responses) are left alone.
-
-    Raises `FileNotFoundError` (`OSError`) for a missing or unreadable path and `ValueError`, naming the file and
-    the line, for anything else: not text, no frequency header (a time record: `load_record` reads it), an unknown
-    or ambiguous column, a line of another number of columns, a value that is not a number or not finite, a
-    negative PSD, frequencies not strictly increasing, fewer than two lines of data.
-    """
-    owner = "load_spectrum"
-    path, channel = _path_and_channel(owner, path, channel, "frequency")
-    if not os.path.exists(path):
-        raise FileNotFoundError(f"{owner}: no file {path!r} (a CSV file with the columns freq,psd)")
-    if os.path.isdir(path):
-        raise IsADirectoryError(f"{owner}: {path!r} is a folder, not a CSV file with the columns freq,psd")
-    try:
-        with open(path, encoding="utf-8-sig") as fh:
-            lines = fh.read().splitlines()
-    except UnicodeDecodeError as e:
-        raise ValueError(f"{owner}: {path!r} is not a text (CSV) file ({e.reason} at byte {e.start})") from None
-    found = _spectrum_header(lines)
-    if found is None:
-        first = next(
-            ((i, ln) for i, ln in enumerate(lines, start=1) if ln.strip() and not ln.strip().startswith("#")), None
-        )
-        if first is None:
-            raise ValueError(f"{owner}: {path!r} holds no data (only blank or # comment lines)")
-        raise ValueError(
-            f"{owner}: {path}:{first[0]}: expected a header line whose first column names the frequency "
-            f"({', '.join(_SPECTRUM_NAMES)}), e.g. freq,psd_x,psd_y,psd_z,psd_xyz; got {first[1]!r} (a time "
-            "record t,y is read by load_record)"
-        )
-    header_line, names = found
-    n_columns = len(names)
-    if n_columns < 2:
-        raise ValueError(f"{owner}: {path}:{header_line}: the header {names} has no PSD column after the frequency")
-    lowered = [name.lower() for name in names]
-    if channel is not None:
-        column = _channel_column(path, channel, names, n_columns, owner, "frequency")
-    elif "psd_xyz" in lowered[1:]:
-        column = lowered.index("psd_xyz", 1)
-    elif n_columns == 2:
-        column = 1
-    else:
-        raise ValueError(
-            f"{owner}: {path}:{header_line}: {n_columns - 1} columns after the frequency ({names[1:]}) and none is "
-            "psd_xyz: choose one with `channel` (its name or index >= 1)"
-        )
-    rows: list = []
-    for lineno, line in enumerate(lines[header_line:], start=header_line + 1):
-        text = line.strip()
-        if not text or text.startswith("#"):
-            continue
-        fields = [x.strip() for x in text.split(",")]
-        if len(fields) != n_columns:
-            raise ValueError(
-                f"{owner}: {path}:{lineno}: expected {n_columns} comma-separated columns as in the header "
-                f"({','.join(names)}); got {len(fields)} in {line!r}"
-            )
-        try:
-            fk, pk = float(fields[0]), float(fields[column])
-        except ValueError:
-            raise ValueError(
-                f"{owner}: {path}:{lineno}: the frequency and {names[column]} must be numbers; got {line!r}"
-            ) from None
-        if not (math.isfinite(fk) and math.isfinite(pk)):
-            raise ValueError(f"{owner}: {path}:{lineno}: the values must be finite (no nan or inf); got {line!r}")
-        if pk < 0:
-            raise ValueError(
-                f"{owner}: {path}:{lineno}: {names[column]} must be >= 0 (a power spectral density); got {pk!r}"
-            )
-        if rows and not fk > rows[-1][0]:
-            raise ValueError(
-                f"{owner}: {path}:{lineno}: the frequencies must be strictly increasing; got {fk!r} after "
-                f"{rows[-1][0]!r}"
-            )
-        rows.append((fk, pk))
-    if len(rows) < 2:
-        raise ValueError(f"{owner}: {path!r} holds {len(rows)} line(s) of data; a spectrum needs at least 2")
-    data = np.asarray(rows, dtype=float)
-    return data[:, 0].copy(), data[:, 1].copy()
