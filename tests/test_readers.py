@@ -76,7 +76,9 @@ def test_a_gap_is_refused_naming_the_line(tmp_path):
     y = decay(t)
     keep = np.r_[0:900, 903:N]  # 3 samples lost: lines 902 (= sample 900 + header + 1) is the one after the gap
     path = write(tmp_path / "raw_gap.csv", klipper_lines(t[keep], y[keep]))
-    with pytest.raises(ValueError, match=r"raw_gap.csv:902: a gap in the record: .*line 901.*3.99 steps.*about 3 sample"):
+    with pytest.raises(
+        ValueError, match=r"raw_gap.csv:902: a gap in the record: .*line 901.*3.99 steps.*about 3 sample"
+    ):
         jb.load_record(path, channel="accel_x")
 
 
