@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import jaxbelt as jb
-from jaxbelt.shaping import identify as ident
+from jaxbelt.shaping import psd as psd_fit
 
 sys.path.insert(0, __file__.rsplit("/", 1)[0])
 from compiles import count_compiles  # noqa: E402
@@ -207,7 +207,7 @@ GOOD = spectrum(seed=0)
             GOOD[:69],
             2,
             {},
-            r"too short: 2 mode\(s\) and the floor are 7 parameters.*at least 70 points.*got 69",
+            r"too short: 2 mode\(s\) and the level\(s\) are 7 parameters.*at least 70 points.*got 69",
         ),
         (GRID, GOOD, 2, {"band": (30.0, 60.0)}, r"too short.*within `band` = \(30, 60\) Hz.*got 61"),
         (GRID, GOOD, 2, {"band": (60.0, 30.0)}, r"`band` must be finite with 0 <= low < high"),
@@ -278,20 +278,20 @@ def test_a_damping_narrower_than_the_frequency_grid_is_refused():
     # 38 Hz at zeta 0.004: a half-power bandwidth of 0.3 Hz, under two 0.5 Hz steps
     psd = spectrum(seed=4, zetas=[0.004, 0.03])
     with pytest.raises(
-        ValueError, match=r"mode 1 \(3[78]\.\d+ Hz.* half-power bandwidth of 0.3\d* Hz, under 2 steps.*`f`: 0.5 Hz"
+        ValueError, match=r"mode 1 \(3[78]\.\d+ Hz.* half-power bandwidth of 0.3\d* Hz, under 2 step\(s\).*`f`: 0.5 Hz"
     ):
         jb.identify_axis_from_psd(GRID, psd, 2)
 
 
 def test_a_damping_ratio_outside_zero_one_is_refused(monkeypatch):
     # the coordinates keep 0 < zeta < 1, but a logit beyond ~37 rounds the ratio to 1.0 in float64
-    true_fit = ident._fit_psd
+    true_fit = psd_fit._fit_psd
 
     def saturated(*args, **kw):
         u, *rest = true_fit(*args, **kw)
         return (np.asarray(u).copy() + np.array([0, 0, 800.0, 0, 0, 0, 0]), *rest)
 
-    monkeypatch.setattr(ident, "_fit_psd", saturated)
+    monkeypatch.setattr(psd_fit, "_fit_psd", saturated)
     with pytest.raises(ValueError, match=r"a damping ratio comes out outside \(0, 1\).*`psd`"):
         jb.identify_axis_from_psd(GRID, GOOD, 2)
 
