@@ -405,6 +405,7 @@ def identify_axis(
     y,
     n_modes: int,
     *,
+    t_start: float | None = None,
     offset: bool = True,
     rtol: float = 1e-10,
     atol: float = 1e-12,
@@ -426,6 +427,9 @@ def identify_axis(
       exact grid. Any start time $t_0$; a rate off its nominal value (a sensor's clock) is the fitted one.
     - `y`: the samples, same shape, any unit: a free decay, or a step response from the end of the move on
       (the model holds only where nothing drives the axis: crop the move away).
+    - `t_start`: the time [s] from which the record is a free decay (the end of the move, or of the tap); the
+      samples before it are left out. None: the whole record, checked for a start that does not follow a free
+      decay (below).
     - `n_modes`: number of modes $n \\ge 1$ to fit. The record needs at least
       `SAMPLES_PER_PARAMETER` = 10 samples per parameter ($4n$, +1 with the offset).
     - `offset`: fit a constant $c_0$ (the final value of a step response, an encoder's position, a sensor
@@ -437,6 +441,14 @@ def identify_axis(
     $\\tau = t - t_0$, $\\sigma_i = \\zeta_i\\omega_i$, $\\omega_{d,i} = \\omega_i\\sqrt{1-\\zeta_i^2}$,
     $\\omega_i = 2\\pi f_i$, starts from a matrix-pencil estimate (Hua and Sarkar, 1990) and is refined by
     Levenberg-Marquardt on all parameters; see the module's documentation.
+
+    **A record that holds the move.** A step response logged from the start of the move holds the move itself,
+    which no sum of free decays follows. Without `t_start`, the residuals of the fit are cut in 10 blocks: where
+    the first ones stand out (RMS over `_HEAD_RATIO` = 2 times the median block's, within the first half), the
+    record is fitted again after them, with a `UserWarning` that says from when, and that `t_start` chooses it.
+    Residuals still structured after the fit (a start that stands out, or a lag-1 autocorrelation over 0.5:
+    a trend, a mode left out, the move) are named in a `UserWarning` with what to pass. The standard errors are
+    widened by the residuals' long-run variance factor (Newey and West, 1987; 1 for white noise).
 
     Returns `ModalAxis(frequencies, damping_ratios, gains=None, frequency_std=..., damping_std=...)`, the
     modes sorted by frequency, with the linearised standard errors $\\sqrt{\\mathrm{diag}\\,C}$,
@@ -455,6 +467,139 @@ def identify_axis(
     is off (the fit needs float64).
     """
     _require_x64()
+    t, y = _crop(t, y, t_start)
+    axis, r, dt = _fit_record(t, y, n_modes, offset, rtol, atol, max_steps)
+    if t_start is not None:
+        _warn_structure(r, dt, t[0], cropped=None)
+        return axis
+    head = _head_blocks(r)
+    if head and _noisy(r):
+        # the record's start does not follow a free decay (the move, the tap): fit after it, once
+        keep = int(round(head * r.size / _BLOCKS))
+        t2, y2 = t[keep:], y[keep:]
+        try:
+            axis2, r2, _ = _fit_record(t2, y2, n_modes, offset, rtol, atol, max_steps)
+        except ValueError:
+            axis2 = None
+        if axis2 is not None:
+            _warn_structure(r2, dt, t2[0], cropped=(t[0], t2[0]))
+            return axis2
+    _warn_structure(r, dt, t[0], cropped=None)
+    return axis
+
+
+#: the residuals' blocks of the check for structure (the record's start, the move)
+_BLOCKS = 10
+#: a block whose RMS residual exceeds this many times the median block's holds what the model does not
+_HEAD_RATIO = 2.0
+#: lag-1 autocorrelation of the residuals above which they hold structure (white noise: about 1/sqrt(N))
+_STRUCTURE_RHO = 0.5
+
+
+def _crop(t, y, t_start):
+    """`(t, y)` from `t_start` [s] on (all of it for None); `t_start` must lie within the record."""
+    if t_start is None:
+        return t, y
+    try:
+        t_start = float(t_start)
+    except (TypeError, ValueError):
+        raise ValueError(f"{_OWNER}: parameter `t_start` must be a time [s] or None; got {t_start!r}") from None
+    tt = np.asarray(t, dtype=float)
+    yy = np.asarray(y, dtype=float)
+    if tt.ndim != 1 or yy.shape != tt.shape:
+        return t, y  # `_check_record` says what is wrong
+    if not (math.isfinite(t_start) and tt.size and tt[0] <= t_start < tt[-1]):
+        raise ValueError(
+            f"{_OWNER}: parameter `t_start` must lie within the record, {tt[0]:.6g} <= t_start < {tt[-1]:.6g} s; "
+            f"got {t_start!r}"
+        )
+    keep = tt >= t_start
+    return tt[keep], yy[keep]
+
+
+def _head_blocks(r: np.ndarray) -> int:
+    """How many of the residuals' first `_BLOCKS` blocks (at most half) stand above the rest: a block whose RMS
+    exceeds `_HEAD_RATIO` times the median block's, and every block before it. 0 where the start is like the rest."""
+    rms = np.array([math.sqrt(float(np.mean(b**2))) for b in np.array_split(r, _BLOCKS)])
+    median = float(np.median(rms))
+    if median <= 0:
+        return 0
+    high = rms > _HEAD_RATIO * median
+    if not high[0]:
+        return 0
+    last = int(np.flatnonzero(high[: _BLOCKS // 2])[-1])
+    return last + 1
+
+
+def _lag1(r: np.ndarray) -> float:
+    r = r - r.mean()
+    c0 = float(r @ r)
+    return float(r[1:] @ r[:-1]) / c0 if c0 > 0 else 0.0
+
+
+def _long_run_factor(r: np.ndarray, lags: int = 4) -> float:
+    """$1 + 2\\sum_{l=1}^{L}(1 - l/(L+1))\\rho_l$ (at least 1) of the residuals `r` (Newey and West, 1987,
+    Econometrica 55(3)): the variance of a least-squares estimate under correlated residuals, over its value
+    for white ones."""
+    r = r - r.mean()
+    c0 = float(r @ r)
+    if c0 <= 0:
+        return 1.0
+    total = 1.0
+    for lag in range(1, lags + 1):
+        total += 2.0 * (1.0 - lag / (lags + 1)) * float(r[lag:] @ r[:-lag]) / c0
+    return max(total, 1.0)
+
+
+def _noisy(r: np.ndarray) -> bool:
+    """Whether the residuals (in units of the record's spread) are more than rounding: a noise-free record fitted
+    to 1e-12 has no structure worth a word."""
+    return math.sqrt(float(np.mean(r**2))) > _RESIDUAL_FLOOR
+
+
+#: RMS residual, in units of the record's spread, below which the fit is exact to rounding (no check of structure)
+_RESIDUAL_FLOOR = 1e-7
+
+
+def _warn_structure(r: np.ndarray, dt: float, t0: float, cropped) -> None:
+    """Warnings that name what the residuals hold and what to pass: the start cut off (`cropped` = (first time,
+    new first time)), a start that still stands out, or residuals correlated from sample to sample."""
+    import warnings
+
+    if cropped is not None:
+        warnings.warn(
+            f"{_OWNER}: the record's start ({cropped[0]:.6g}-{cropped[1]:.6g} s) does not follow a free decay (the move "
+            f"or the excitation, still in the record): the modes are fitted from t = {cropped[1]:.6g} s on; pass "
+            "`t_start` (the end of the move) to choose where the free decay starts",
+            UserWarning,
+            stacklevel=4,
+        )
+    if not _noisy(r):
+        return
+    if _head_blocks(r):
+        warnings.warn(
+            f"{_OWNER}: the residuals of the fit from t = {t0:.6g} s stand out at its start: the record there holds "
+            "what the fit does not (the move, the excitation, or a fast-decaying mode left out): pass a later "
+            "`t_start`, or another `n_modes`",
+            UserWarning,
+            stacklevel=4,
+        )
+        return
+    rho = _lag1(r)
+    if rho > _STRUCTURE_RHO:
+        warnings.warn(
+            f"{_OWNER}: the residuals hold structure (lag-1 autocorrelation {rho:.2f}; white noise: about "
+            f"{1 / math.sqrt(r.size):.2g}): a trend, another mode, or the move is in the record: try another "
+            "`n_modes`, `offset=True`, or a later `t_start`; the standard errors are widened for it (Newey-West) "
+            "but a model that misses part of the record is biased",
+            UserWarning,
+            stacklevel=4,
+        )
+
+
+def _fit_record(t, y, n_modes, offset, rtol, atol, max_steps):
+    """The fit of `identify_axis` on the record as given: `(ModalAxis, residuals in units of the record's spread,
+    dt [s])`."""
     t, y, dt, n, p = _check_record(t, y, n_modes, offset)
     offset = bool(offset)
     rtol, atol = float(rtol), float(atol)
@@ -521,7 +666,7 @@ def identify_axis(
             )
         raise RuntimeError(
             f"{_OWNER}: {failed}, {start}. {hint[0].upper() + hint[1:]}, try another `n_modes` (the record may "
-            f"hold fewer or more modes), or crop the record to where the axis rings freely"
+            f"hold fewer or more modes), or pass `t_start`: the end of the move, where the axis rings freely"
         )
     if not finite:
         raise RuntimeError(
@@ -557,7 +702,9 @@ def identify_axis(
         )
     from ..models.axis import ModalAxis
 
-    return ModalAxis(f, zeta, None, frequency_std=f_std, damping_std=z_std)
+    # correlated residuals (structure the model misses, a coloured noise) carry less information than white ones
+    widen = math.sqrt(_long_run_factor(np.asarray(r))) if _noisy(np.asarray(r)) else 1.0
+    return ModalAxis(f, zeta, None, frequency_std=f_std * widen, damping_std=z_std * widen), np.asarray(r), dt
 
 
 def __getattr__(name: str):

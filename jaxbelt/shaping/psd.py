@@ -336,18 +336,6 @@ def _fit_psd(fo, kw, logp, weight, floor_ref, theta0, scale, *, n, excitation, p
     return _core._levenberg_marquardt(resid, jnp.zeros_like(theta0), rtol=rtol, atol=atol, max_steps=max_steps)
 
 
-def _long_run_factor(r: np.ndarray) -> float:
-    """$1 + 2\\sum_{l=1}^{L}(1 - l/(L+1))\\rho_l$ (at least 1) of the residuals `r` (Newey and West, 1987)."""
-    r = r - r.mean()
-    c0 = float(r @ r)
-    if c0 <= 0:
-        return 1.0
-    total = 1.0
-    for lag in range(1, _HAC_LAGS + 1):
-        total += 2.0 * (1.0 - lag / (_HAC_LAGS + 1)) * float(r[lag:] @ r[:-lag]) / c0
-    return max(total, 1.0)
-
-
 def _resolve_kind(kind, window, band):
     owner = _OWNER
     if kind is None:
@@ -497,7 +485,7 @@ def identify_axis_from_psd(
     fi = fi * fref
     start = f"started from the half-power estimate f = {_core._fmt(f0)} Hz, zeta = {_core._fmt(z0)}"
     if finite:
-        factor = _long_run_factor(np.asarray(r)[:N])
+        factor = _core._long_run_factor(np.asarray(r)[:N], _HAC_LAGS)
         var = np.diag(_core._covariance(r, sv, vt, scale, p, N)) * factor  # the padding's residuals are 0
         f_std = fi * np.sqrt(var[:n])
         z_std = zeta * (1.0 - zeta) * np.sqrt(var[n : 2 * n])
