@@ -79,7 +79,10 @@ def test_a_gap_is_refused_naming_the_line(tmp_path):
     with pytest.raises(
         ValueError, match=r"raw_gap.csv:902: a gap in the record: .*line 901.*3.99 steps.*about 3 sample"
     ):
-        jb.load_record(path, channel="accel_x")
+        jb.load_record(path, channel="accel_x", check_times=True)
+    t2, y2 = jb.load_record(path, channel="accel_x")  # as written: identify_axis refuses it, by index
+    with pytest.raises(ValueError, match=r"`t` must be uniformly sampled.*A gap \(lost samples\)"):
+        jb.identify_axis(t2, y2, 2)
 
 
 def test_a_repeated_sample_is_dropped_with_a_warning_and_a_time_going_back_is_refused(tmp_path):
@@ -89,13 +92,13 @@ def test_a_repeated_sample_is_dropped_with_a_warning_and_a_time_going_back_is_re
     repeated = lines[:501] + [lines[500]] + lines[501:]  # sample 499 (line 501) written twice: line 502
     path = write(tmp_path / "raw_repeat.csv", repeated)
     with pytest.warns(UserWarning, match=r"line\(s\) 502 repeat the line before exactly.*1 line\(s\) dropped"):
-        tr, yr = jb.load_record(path, channel="accel_x")
+        tr, yr = jb.load_record(path, channel="accel_x", check_times=True)
     tc, yc = jb.load_record(write(tmp_path / "raw.csv", lines), channel="accel_x")
     np.testing.assert_array_equal(tr, tc)
     np.testing.assert_array_equal(yr, yc)
     other = lines[:501] + [lines[500].replace(lines[500].split(",")[1], "1.000000")] + lines[501:]
     with pytest.raises(ValueError, match=r"raw_back.csv:502: the time must increase from line to line"):
-        jb.load_record(write(tmp_path / "raw_back.csv", other), channel="accel_x")
+        jb.load_record(write(tmp_path / "raw_back.csv", other), channel="accel_x", check_times=True)
 
 
 def rrf_lines(y_g, rate=1344, overflows=0, axes="XYZ"):
@@ -126,7 +129,7 @@ def test_reprapfirmware_accelerometer_file(tmp_path):
         jb.load_record(write(tmp_path / "accel_c.csv", rrf_lines(y, rate)[:-1]), channel="X")
     lines = rrf_lines(y, rate)
     with pytest.raises(ValueError, match=r"accel_g.csv:12: a gap in the record: the sample number jumps"):
-        jb.load_record(write(tmp_path / "accel_g.csv", lines[:11] + lines[12:]), channel="X")
+        jb.load_record(write(tmp_path / "accel_g.csv", lines[:11] + lines[12:]), channel="X", check_times=True)
 
 
 def test_spectrum_kind_follows_klipper_files(tmp_path):

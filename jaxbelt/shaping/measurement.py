@@ -48,7 +48,8 @@ def identify_measurement(path, n_modes: int = 1, *, column: int | str | None = N
     - A spectrum (a first column named like a frequency: `load_spectrum`): fitted by `identify_axis_from_psd`
       with `kind` (one of `KINDS`); default: the file's own (`spectrum_kind`: Klipper's two calibration CSV forms),
       else `"displacement"`.
-    - A time record (`load_record`: two columns t,y; Klipper's raw file; RepRapFirmware's file): `kind` is
+    - A time record (`load_record(..., check_times=True)`: two columns t,y; Klipper's raw file; RepRapFirmware's
+      file; a gap refused naming the line, a repeated line dropped with a warning): `kind` is
       `"decay"` (a free decay, or a step response from the end of the move: `identify_axis`) or `"sweep"` (the
       record of a resonance sweep: `identify_axis_from_sweep`); default: a sweep where the record looks like one
       (`looks_like_sweep`), else a decay.
@@ -72,7 +73,7 @@ def identify_measurement(path, n_modes: int = 1, *, column: int | str | None = N
             f"one of {', '.join(map(repr, RECORD_KINDS))}"
             + (" (the spectrum kinds are for a file whose first column is the frequency)" if kind in _psd.KINDS else "")
         )
-    t, y = _readers.load_record(path, column)
+    t, y = _readers.load_record(path, column, check_times=True)
     if kind is None:
         kind = "sweep" if looks_like_sweep(t, y) else "decay"
     if kind == "sweep":

@@ -67,7 +67,7 @@ def _read_lines(owner: str, path: str, what: str) -> list[str]:
         raise ValueError(f"{owner}: {path!r} is not a text (CSV) file ({e.reason} at byte {e.start})") from None
 
 
-def load_record(path, channel: int | str | None = None):
+def load_record(path, channel: int | str | None = None, *, check_times: bool = False):
     """Read a measured record `(t, y)` (two float numpy arrays) from a CSV file: the time [s] in the first column
     and the measured value (any unit) in the second, or in the column `channel`.
 
@@ -91,7 +91,9 @@ def load_record(path, channel: int | str | None = None):
     - a spectrum is refused: a file whose first column is named like a frequency (`freq,psd_x,...`, the power
       spectral density of Klipper's resonance test) is not a time record: `load_spectrum` reads it.
 
-    **The time stamps.** A sampled record has one step $\\Delta t$ (the median step here). A step longer than
+    **The time stamps**, with `check_times=True` (as `identify_measurement` and the command line read; without
+    it the rows come back as written, and `identify_axis` refuses non-uniform times by index). A sampled record
+    has one step $\\Delta t$ (the median step here). A step longer than
     `GAP_STEPS` = 1.5 $\\Delta t$ is a gap (samples lost, e.g. a sensor's buffer overflow): refused, naming the
     lines on both sides, since no model of one uninterrupted record holds across it (crop the file to one side).
     A line that repeats the previous one exactly (time and values) is a sample written twice: it is dropped
@@ -178,7 +180,8 @@ def load_record(path, channel: int | str | None = None):
             f"{owner}: {path}: a RepRapFirmware accelerometer file (header {','.join(names or [])}) ends with the line "
             "'Rate <Hz>, overflows <n>', which gives the times; this file has none (cut short?)"
         )
-    data, lineno_arr = _check_times(owner, path, data, lineno_arr, "sample number" if rrf else "time")
+    if check_times:
+        data, lineno_arr = _check_times(owner, path, data, lineno_arr, "sample number" if rrf else "time")
     t = data[:, 0] / rate if rrf and rate is not None else data[:, 0].copy()
     return t, data[:, 1].copy()
 
