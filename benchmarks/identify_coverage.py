@@ -3,7 +3,7 @@ often the 95 % intervals (estimate +- 1.96 standard errors) hold the true freque
 90-98 %), and the median relative errors.
 
     python benchmarks/identify_coverage.py            # 200 of each kind (a few minutes), 20 Klipper sweeps
-    python benchmarks/identify_coverage.py --quick    # 5 decays and 5 tap spectra (< 20 s)
+    python benchmarks/identify_coverage.py --quick    # 3 decays and 3 tap spectra (< 20 s)
 
 Kinds (every draw seeded; the modes drawn at random in the stated ranges):
 
@@ -145,12 +145,12 @@ def run(kind: str, count: int, seed: int) -> dict:
 
 def main(argv=None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--quick", action="store_true", help="5 decays and 5 tap spectra (< 20 s)")
+    parser.add_argument("--quick", action="store_true", help="3 decays and 3 tap spectra (< 20 s)")
     parser.add_argument("--count", type=int, default=200, help="draws per kind in a full run (default 200)")
     parser.add_argument("--klipper", type=int, default=20, help="Klipper sweeps in a full run (default 20)")
     args = parser.parse_args(argv)
     plan = (
-        [("decay", 5), ("tap", 5)]
+        [("decay", 3), ("tap", 3)]
         if args.quick
         else [("decay", args.count), ("tap", args.count), ("welch", args.count), ("klipper", args.klipper)]
     )
