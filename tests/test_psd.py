@@ -146,6 +146,7 @@ def test_welch_estimate_of_simulated_modal_responses():
 
 
 # --- the committed example files -----------------------------------------------------------------------------
+@pytest.mark.slow
 def test_example_psd_files_identify_to_their_stated_modes():
     """Klipper's two calibration CSV forms of one simulated sweep (docs/examples/make_examples.py): the kind follows
     the file; frequencies within 2 % and damping within 30 % (the issue's target; measured: 0.03 % and 3-8 %),

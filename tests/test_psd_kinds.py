@@ -101,6 +101,7 @@ def accelerometer_record(db, seed, fs=1000.0, seconds=60.0):
     return qdd + np.sqrt(floor * fs / 2) * rng.standard_normal(qdd.size)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("db", [30, 20])
 def test_welch_estimate_of_a_noisy_accelerometer_record(db):
     """Refused before as "not resolved above the noise" at 30 dB: now f within 1 %, zeta within 20 %, at 30 dB and
