@@ -71,3 +71,17 @@ def test_a_clean_free_decay_gives_no_warning():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         check(jb.identify_axis(t, y, 2))
+
+
+def test_a_drift_is_warned_about_and_the_errors_still_cover():
+    """A slow drift (0.3 Hz, 10 % of the peak) the model does not hold: a warning names the structure (lag-1
+    autocorrelation) and what to pass; the modes stay within 3 (widened) standard errors."""
+    t = np.arange(2000) / 1000.0
+    y = np.exp(-0.015 * 2 * np.pi * 7.3 * t) * np.cos(2 * np.pi * 7.3 * t) + 0.6 * np.exp(
+        -0.01 * 2 * np.pi * 18 * t
+    ) * np.sin(2 * np.pi * 18 * t)
+    y = y + 0.02 * np.random.default_rng(1).standard_normal(t.size) + 0.1 * np.sin(2 * np.pi * 0.3 * t)
+    with pytest.warns(
+        UserWarning, match=r"residuals hold structure \(lag-1 autocorrelation 0\.\d+.*a trend.*`n_modes`"
+    ):
+        check(jb.identify_axis(t, y, 2))
