@@ -139,9 +139,7 @@ if _typing.TYPE_CHECKING:
 
     # --- command shaping on the user's axis ---------------------------------------------------------
     from .shaping.identify import identify_axis as identify_axis
-    from .shaping.identify import identify_axis_from_psd as identify_axis_from_psd
-    from .shaping.identify import load_record as load_record
-    from .shaping.identify import load_spectrum as load_spectrum
+    from .shaping.measurement import identify_measurement as identify_measurement
     from .shaping.moves import PiecewiseMove as PiecewiseMove
     from .shaping.moves import SplineMove as SplineMove
     from .shaping.moves import fastest_move as fastest_move
@@ -150,8 +148,14 @@ if _typing.TYPE_CHECKING:
     from .shaping.plan import Candidate as Candidate
     from .shaping.plan import MovePlan as MovePlan
     from .shaping.plan import design_move as design_move
+    from .shaping.psd import identify_axis_from_psd as identify_axis_from_psd
+    from .shaping.psd import welch as welch
+    from .shaping.readers import load_record as load_record
+    from .shaping.readers import load_spectrum as load_spectrum
     from .shaping.residual import residual_amplitudes as residual_amplitudes
     from .shaping.residual import residual_curve as residual_curve
+    from .shaping.resonance_test import identify_axis_from_sweep as identify_axis_from_sweep
+    from .shaping.resonance_test import klipper_sweep as klipper_sweep
     from .shaping.shapers import shaper_impulses as shaper_impulses
     from .solution import Solution as Solution
     from .solution import SolveError as SolveError

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import jaxbelt as jb
-from jaxbelt.shaping import identify as ident
+from jaxbelt.shaping import psd as psd_fit
 
 sys.path.insert(0, __file__.rsplit("/", 1)[0])
 from compiles import count_compiles  # noqa: E402
@@ -146,14 +146,30 @@ def test_welch_estimate_of_simulated_modal_responses():
 
 
 # --- the committed example files -----------------------------------------------------------------------------
-def test_example_psd_file_identifies_to_its_stated_modes():
+@pytest.mark.slow
+def test_example_psd_files_identify_to_their_stated_modes():
+    """Klipper's two calibration CSV forms of one simulated sweep (docs/examples/make_examples.py): the kind follows
+    the file; frequencies within 2 % and damping within 30 % (the issue's target; measured: 0.03 % and 3-8 %),
+    within 3 standard errors in frequency."""
     text = PSD_EXAMPLE.read_text()
-    assert text.startswith("#") and "38 Hz (damping ratio 0.05) and 92 Hz (0.03)" in text and len(text) < 200_000
+    assert (
+        text.startswith("#") and "ModalAxis([38 Hz, 92 Hz], damping ratios [0.05, 0.03]" in text and len(text) < 200_000
+    )
+    for path, kind in ((PSD_EXAMPLE, "klipper-normalised"), (EXAMPLES / "klipper_resonances_example.csv", "klipper")):
+        assert jb.shaping.readers.spectrum_kind(path) == kind
+        ax, what = jb.identify_measurement(path, 2)
+        assert kind in what
+        within(ax, f_rel=0.02, z_rel=0.30, sigmas=None)
+        assert np.all(np.abs(np.asarray(ax.frequencies) - FREQS) < 3 * np.asarray(ax.frequency_std))
     f, psd = jb.load_spectrum(PSD_EXAMPLE)  # psd_xyz
-    np.testing.assert_allclose(f, GRID)
-    within(jb.identify_axis_from_psd(f, psd, 2))
     f, psd_x = jb.load_spectrum(PSD_EXAMPLE, channel="PSD_X")
-    assert np.all(psd_x < psd)
+    assert np.all(psd_x <= psd)
+
+
+def test_example_rrf_file_identifies_to_its_stated_modes():
+    t, y = jb.load_record(EXAMPLES / "rrf_accelerometer_example.csv", channel="X")
+    np.testing.assert_allclose(np.diff(t), 1 / 1344, rtol=1e-12)
+    within(jb.identify_axis(t, y, 2), z_rel=0.15)  # measured: f within 0.3 %, zeta within 11 % (2 standard errors)
 
 
 def test_example_raw_file_identifies_to_its_stated_modes():
@@ -207,7 +223,7 @@ GOOD = spectrum(seed=0)
             GOOD[:69],
             2,
             {},
-            r"too short: 2 mode\(s\) and the floor are 7 parameters.*at least 70 points.*got 69",
+            r"too short: 2 mode\(s\) and the level\(s\) are 7 parameters.*at least 70 points.*got 69",
         ),
         (GRID, GOOD, 2, {"band": (30.0, 60.0)}, r"too short.*within `band` = \(30, 60\) Hz.*got 61"),
         (GRID, GOOD, 2, {"band": (60.0, 30.0)}, r"`band` must be finite with 0 <= low < high"),
@@ -278,20 +294,20 @@ def test_a_damping_narrower_than_the_frequency_grid_is_refused():
     # 38 Hz at zeta 0.004: a half-power bandwidth of 0.3 Hz, under two 0.5 Hz steps
     psd = spectrum(seed=4, zetas=[0.004, 0.03])
     with pytest.raises(
-        ValueError, match=r"mode 1 \(3[78]\.\d+ Hz.* half-power bandwidth of 0.3\d* Hz, under 2 steps.*`f`: 0.5 Hz"
+        ValueError, match=r"mode 1 \(3[78]\.\d+ Hz.* half-power bandwidth of 0.3\d* Hz, under 2 step\(s\).*`f`: 0.5 Hz"
     ):
         jb.identify_axis_from_psd(GRID, psd, 2)
 
 
 def test_a_damping_ratio_outside_zero_one_is_refused(monkeypatch):
     # the coordinates keep 0 < zeta < 1, but a logit beyond ~37 rounds the ratio to 1.0 in float64
-    true_fit = ident._fit_psd
+    true_fit = psd_fit._fit_psd
 
     def saturated(*args, **kw):
         u, *rest = true_fit(*args, **kw)
         return (np.asarray(u).copy() + np.array([0, 0, 800.0, 0, 0, 0, 0]), *rest)
 
-    monkeypatch.setattr(ident, "_fit_psd", saturated)
+    monkeypatch.setattr(psd_fit, "_fit_psd", saturated)
     with pytest.raises(ValueError, match=r"a damping ratio comes out outside \(0, 1\).*`psd`"):
         jb.identify_axis_from_psd(GRID, GOOD, 2)
 
@@ -400,8 +416,8 @@ def test_cli_designs_a_move_from_the_example_psd(tmp_path, capsys, monkeypatch):
     )
     assert code == 0
     text = capsys.readouterr().out
-    assert "(power spectral density)" in text and "mode 1: 38.0" in text and "mode 2: 92." in text
-    within(seen["axis"])
+    assert "(power spectral density, 'klipper-normalised')" in text and "mode 1: 38.0" in text and "mode 2: 92." in text
+    within(seen["axis"], f_rel=0.02, z_rel=0.30, sigmas=None)
     assert out.exists() and figures == [out.with_suffix(".png")]
     data = np.genfromtxt(out, delimiter=",", names=True)
     assert data["x"][-1] == pytest.approx(0.01)
@@ -426,7 +442,11 @@ def test_cli_reads_a_column_of_a_raw_accelerometer_file(tmp_path, capsys, monkey
     # without --column the four columns are ambiguous: one line, status 2
     assert main([*args, "--out", str(tmp_path / "m.csv")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert len(err) == 1 and "choose one with `channel`" in err[0]
+    assert len(err) == 1 and "choose one with --column" in err[0] and "channel`" not in err[0]
+    # a spectrum's kind for a time record: refused naming --kind
+    assert main([*args, "--column", "accel_x", "--kind", "klipper", "--out", str(tmp_path / "m.csv")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--kind 'klipper' is not a time record's" in err[0] and "'decay', 'sweep'" in err[0]
 
 
 @pytest.mark.parametrize(
@@ -434,6 +454,9 @@ def test_cli_reads_a_column_of_a_raw_accelerometer_file(tmp_path, capsys, monkey
     [
         (["--mode", "5:0.01", "--column", "psd_x", *AXIS_ARGS], "argument --column: only with --measured"),
         (["--column", "2"], "argument --column: only with --measured"),
+        (["--kind", "sweep"], "argument --kind: only with --measured"),
+        (["--measured", str(PSD_EXAMPLE), "--kind", "decay", *AXIS_ARGS], "--kind 'decay' is not a spectrum's"),
+        (["--measured", str(PSD_EXAMPLE), "--column", "psd_q", *AXIS_ARGS], "--column: no column 'psd_q'"),
         (["--measured", str(PSD_EXAMPLE), "--column", "0", *AXIS_ARGS], "an index must be >= 1"),
     ],
 )

@@ -77,6 +77,14 @@ def register(subparsers):
         help="the column of --measured to read, by header name (any case) or index (1 = the first after the time or "
         "frequency); default: the only one, or psd_xyz in a spectrum",
     )
+    axis.add_argument(
+        "--kind",
+        default=None,
+        metavar="K",
+        help="what --measured holds: for a time record decay or sweep (default: a sweep where the record looks like "
+        "one); for a spectrum displacement, velocity, acceleration (a tap test), base-acceleration, klipper or "
+        "klipper-normalised (default: the file's own, Klipper's calibration CSVs; else displacement)",
+    )
     axis.add_argument("--distance", type=finite_float, help="move distance [m] (or rad), non-zero")
     axis.add_argument(
         "--move-time", type=positive_float, help="move time [s] (default: the shortest that beats the shapers)"
@@ -202,6 +210,13 @@ def _record_path(text: str):
     return p
 
 
+def _cli_names(message: str) -> str:
+    """An identification's refusal with the command line's options in place of the API's parameter names."""
+    for api, option in (("channel", "--column"), ("column", "--column"), ("kind", "--kind"), ("n_modes", "--n-modes")):
+        message = message.replace(f"parameter `{api}`", option).replace(f"`{api}`", option)
+    return message
+
+
 def _column(text: str) -> int | str:
     """A column by its header name, or by its index >= 1 (digits)."""
     import argparse
@@ -260,6 +275,8 @@ def check(args) -> str | None:
 
     if args.column is not None and not args.measured:
         return "argument --column: only with --measured (the column of the measured file)"
+    if args.kind is not None and not args.measured:
+        return "argument --kind: only with --measured (what the measured file holds)"
     if args.mode or args.measured:
         if args.mode and args.measured:
             return "argument --measured: give the axis either by --mode or by --measured, not both"
@@ -361,16 +378,12 @@ def _axis_run(args) -> int:
     from ..solution import SolveError
 
     if args.measured:
-        from ..shaping import identify
+        from ..shaping.measurement import identify_measurement
 
-        if identify.is_spectrum_file(args.measured):  # a header whose first column is a frequency
-            f, psd = identify.load_spectrum(args.measured, args.column)
-            axis = identify.identify_axis_from_psd(f, psd, args.n_modes or 1)
-            what = "power spectral density"
-        else:
-            t, y = identify.load_record(args.measured, args.column)
-            axis = identify.identify_axis(t, y, args.n_modes or 1)
-            what = "free decay"
+        try:
+            axis, what = identify_measurement(args.measured, args.n_modes or 1, column=args.column, kind=args.kind)
+        except ValueError as e:  # the API names its parameters; the command line names its own options
+            raise ValueError(_cli_names(str(e))) from None
         column = f", column {args.column}" if args.column is not None else ""
         print(f"identified from {args.measured} ({what}{column}):")
         for i in range(axis.n_modes):

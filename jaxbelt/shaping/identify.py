@@ -36,7 +36,6 @@ from __future__ import annotations
 
 import functools
 import math
-import os
 
 import jax
 import jax.numpy as jnp
@@ -46,8 +45,11 @@ import optimistix as optx
 
 from .._checks import check_int, device_array
 from .._threads import blas_limited
+from .readers import is_spectrum_file as is_spectrum_file
+from .readers import load_record as load_record
+from .readers import load_spectrum as load_spectrum
 
-__all__ = ["identify_axis", "identify_axis_from_psd", "load_record", "load_spectrum"]
+__all__ = ["identify_axis", "load_record", "load_spectrum"]
 
 _OWNER = "identify_axis"
 #: largest deviation of a time stamp from the uniform grid, in units of the step (see `identify_axis`)
@@ -104,6 +106,22 @@ def _first_bad(name: str, x: np.ndarray, owner: str = _OWNER) -> None:
         )
 
 
+def _time_rounding(t: np.ndarray) -> float:
+    """Half a unit of the last decimal the times `t` were written with (`%.6f`: 5e-7 s), found from the values
+    (the fewest decimals, 0-9, that every time is a whole number of); 0 where they hold more (not rounded)."""
+    scale = float(np.max(np.abs(t))) if t.size else 0.0
+    for d in range(10):
+        unit = 10.0**-d
+        x = t / unit
+        if np.all(np.abs(x - np.round(x)) <= 1e-6 + 8 * np.finfo(float).eps * scale / unit):
+            return 0.5 * unit
+    return 0.0
+
+
+def _decimals(rounding: float) -> int:
+    return round(-math.log10(2 * rounding))
+
+
 def _check_record(t, y, n_modes, offset):
     """Validated host arrays `(t, y)`, the step `dt` [s] and the number of parameters `p`."""
     n = check_int(_OWNER, "n_modes", n_modes, lo=1)
@@ -144,14 +162,23 @@ def _check_record(t, y, n_modes, offset):
         raise ValueError(
             f"{_OWNER}: parameter `t` must be strictly increasing; got t[{k}] = {t[k]!r} >= t[{k + 1}] = {t[k + 1]!r}"
         )
-    dt = (t[-1] - t[0]) / (t.size - 1)
-    dev = np.abs(t - (t[0] + dt * np.arange(t.size))) / dt
-    k = int(np.argmax(dev))
-    if dev[k] > UNIFORM_RTOL:
+    # the grid t0 + k dt by least squares: time stamps rounded by their writer scatter about it by up to half a
+    # unit of their last decimal, on both ends as in the middle
+    k = np.arange(t.size, dtype=float)
+    kc = k - k.mean()
+    dt = float(kc @ (t - t.mean()) / (kc @ kc))
+    grid = t.mean() + dt * kc
+    rounding = _time_rounding(t)
+    allowed = UNIFORM_RTOL * dt + rounding
+    dev = np.abs(t - grid)
+    i = int(np.argmax(dev))
+    if dev[i] > allowed:
+        written = f" plus the rounding of its {_decimals(rounding)} decimals ({rounding:.3g} s)" if rounding else ""
         raise ValueError(
-            f"{_OWNER}: parameter `t` must be uniformly sampled: every time within {UNIFORM_RTOL:g} of a step "
-            f"of the grid t[0] + k*dt (dt = {dt:.6g} s); the largest deviation is {dev[k]:.3g} steps at index {k} "
-            f"(t = {t[k]!r} s). Resample the record to a uniform rate first"
+            f"{_OWNER}: parameter `t` must be uniformly sampled: every time within {UNIFORM_RTOL:g} of a step{written} "
+            f"of the grid t0 + k*dt (dt = {dt:.6g} s, fitted); the largest deviation is {dev[i] / dt:.3g} steps at "
+            f"index {i} (t = {t[i]!r} s). A gap (lost samples) or a changing rate: keep one uninterrupted part, or "
+            "resample the record to a uniform rate first"
         )
     if np.ptp(y) == 0.0:
         raise ValueError(f"{_OWNER}: parameter `y` is constant ({y[0]!r}): the record holds no vibration to identify")
@@ -378,6 +405,7 @@ def identify_axis(
     y,
     n_modes: int,
     *,
+    t_start: float | None = None,
     offset: bool = True,
     rtol: float = 1e-10,
     atol: float = 1e-12,
@@ -392,11 +420,16 @@ def identify_axis(
     axis.frequencies, axis.frequency_std            # Hz
     ```
 
-    - `t`: sample times [s], 1-D, strictly increasing and uniform (every time within `UNIFORM_RTOL` = 1e-3
-      of a step of the grid $t_0 + k\\Delta t$: time stamps rounded in a CSV file are accepted, the fit uses
-      the exact grid); any start time $t_0$.
+    - `t`: sample times [s], 1-D, strictly increasing and uniform: every time within `UNIFORM_RTOL` = 1e-3
+      of a step, plus the rounding of its writer, of the grid $t_0 + k\\Delta t$ fitted to the times by least
+      squares. The rounding is half a unit of the last decimal the times hold (found from the values:
+      Klipper's raw accelerometer file writes `%.6f`, 0.5 µs, 1.6e-3 of a step at 3.2 kHz); the fit uses the
+      exact grid. Any start time $t_0$; a rate off its nominal value (a sensor's clock) is the fitted one.
     - `y`: the samples, same shape, any unit: a free decay, or a step response from the end of the move on
       (the model holds only where nothing drives the axis: crop the move away).
+    - `t_start`: the time [s] from which the record is a free decay (the end of the move, or of the tap); the
+      samples before it are left out. None: the whole record, checked for a start that does not follow a free
+      decay (below).
     - `n_modes`: number of modes $n \\ge 1$ to fit. The record needs at least
       `SAMPLES_PER_PARAMETER` = 10 samples per parameter ($4n$, +1 with the offset).
     - `offset`: fit a constant $c_0$ (the final value of a step response, an encoder's position, a sensor
@@ -408,6 +441,14 @@ def identify_axis(
     $\\tau = t - t_0$, $\\sigma_i = \\zeta_i\\omega_i$, $\\omega_{d,i} = \\omega_i\\sqrt{1-\\zeta_i^2}$,
     $\\omega_i = 2\\pi f_i$, starts from a matrix-pencil estimate (Hua and Sarkar, 1990) and is refined by
     Levenberg-Marquardt on all parameters; see the module's documentation.
+
+    **A record that holds the move.** A step response logged from the start of the move holds the move itself,
+    which no sum of free decays follows. Without `t_start`, the residuals of the fit are cut in 10 blocks: where
+    the first ones stand out (RMS over `_HEAD_RATIO` = 2 times the median block's, within the first half), the
+    record is fitted again after them, with a `UserWarning` that says from when, and that `t_start` chooses it.
+    Residuals still structured after the fit (a start that stands out, or a lag-1 autocorrelation over 0.5:
+    a trend, a mode left out, the move) are named in a `UserWarning` with what to pass. The standard errors are
+    widened by the residuals' long-run variance factor (Newey and West, 1987; 1 for white noise).
 
     Returns `ModalAxis(frequencies, damping_ratios, gains=None, frequency_std=..., damping_std=...)`, the
     modes sorted by frequency, with the linearised standard errors $\\sqrt{\\mathrm{diag}\\,C}$,
@@ -426,6 +467,139 @@ def identify_axis(
     is off (the fit needs float64).
     """
     _require_x64()
+    t, y = _crop(t, y, t_start)
+    axis, r, dt = _fit_record(t, y, n_modes, offset, rtol, atol, max_steps)
+    if t_start is not None:
+        _warn_structure(r, dt, t[0], cropped=None)
+        return axis
+    head = _head_blocks(r)
+    if head and _noisy(r):
+        # the record's start does not follow a free decay (the move, the tap): fit after it, once
+        keep = int(round(head * r.size / _BLOCKS))
+        t2, y2 = t[keep:], y[keep:]
+        try:
+            axis2, r2, _ = _fit_record(t2, y2, n_modes, offset, rtol, atol, max_steps)
+        except ValueError:
+            axis2 = None
+        if axis2 is not None:
+            _warn_structure(r2, dt, t2[0], cropped=(t[0], t2[0]))
+            return axis2
+    _warn_structure(r, dt, t[0], cropped=None)
+    return axis
+
+
+#: the residuals' blocks of the check for structure (the record's start, the move)
+_BLOCKS = 10
+#: a block whose RMS residual exceeds this many times the median block's holds what the model does not
+_HEAD_RATIO = 2.0
+#: lag-1 autocorrelation of the residuals above which they hold structure (white noise: about 1/sqrt(N))
+_STRUCTURE_RHO = 0.5
+
+
+def _crop(t, y, t_start):
+    """`(t, y)` from `t_start` [s] on (all of it for None); `t_start` must lie within the record."""
+    if t_start is None:
+        return t, y
+    try:
+        t_start = float(t_start)
+    except (TypeError, ValueError):
+        raise ValueError(f"{_OWNER}: parameter `t_start` must be a time [s] or None; got {t_start!r}") from None
+    tt = np.asarray(t, dtype=float)
+    yy = np.asarray(y, dtype=float)
+    if tt.ndim != 1 or yy.shape != tt.shape:
+        return t, y  # `_check_record` says what is wrong
+    if not (math.isfinite(t_start) and tt.size and tt[0] <= t_start < tt[-1]):
+        raise ValueError(
+            f"{_OWNER}: parameter `t_start` must lie within the record, {tt[0]:.6g} <= t_start < {tt[-1]:.6g} s; "
+            f"got {t_start!r}"
+        )
+    keep = tt >= t_start
+    return tt[keep], yy[keep]
+
+
+def _head_blocks(r: np.ndarray) -> int:
+    """How many of the residuals' first `_BLOCKS` blocks (at most half) stand above the rest: a block whose RMS
+    exceeds `_HEAD_RATIO` times the median block's, and every block before it. 0 where the start is like the rest."""
+    rms = np.array([math.sqrt(float(np.mean(b**2))) for b in np.array_split(r, _BLOCKS)])
+    median = float(np.median(rms))
+    if median <= 0:
+        return 0
+    high = rms > _HEAD_RATIO * median
+    if not high[0]:
+        return 0
+    last = int(np.flatnonzero(high[: _BLOCKS // 2])[-1])
+    return last + 1
+
+
+def _lag1(r: np.ndarray) -> float:
+    r = r - r.mean()
+    c0 = float(r @ r)
+    return float(r[1:] @ r[:-1]) / c0 if c0 > 0 else 0.0
+
+
+def _long_run_factor(r: np.ndarray, lags: int = 4) -> float:
+    """$1 + 2\\sum_{l=1}^{L}(1 - l/(L+1))\\rho_l$ (at least 1) of the residuals `r` (Newey and West, 1987,
+    Econometrica 55(3)): the variance of a least-squares estimate under correlated residuals, over its value
+    for white ones."""
+    r = r - r.mean()
+    c0 = float(r @ r)
+    if c0 <= 0:
+        return 1.0
+    total = 1.0
+    for lag in range(1, lags + 1):
+        total += 2.0 * (1.0 - lag / (lags + 1)) * float(r[lag:] @ r[:-lag]) / c0
+    return max(total, 1.0)
+
+
+def _noisy(r: np.ndarray) -> bool:
+    """Whether the residuals (in units of the record's spread) are more than rounding: a noise-free record fitted
+    to 1e-12 has no structure worth a word."""
+    return math.sqrt(float(np.mean(r**2))) > _RESIDUAL_FLOOR
+
+
+#: RMS residual, in units of the record's spread, below which the fit is exact to rounding (no check of structure)
+_RESIDUAL_FLOOR = 1e-7
+
+
+def _warn_structure(r: np.ndarray, dt: float, t0: float, cropped) -> None:
+    """Warnings that name what the residuals hold and what to pass: the start cut off (`cropped` = (first time,
+    new first time)), a start that still stands out, or residuals correlated from sample to sample."""
+    import warnings
+
+    if cropped is not None:
+        warnings.warn(
+            f"{_OWNER}: the record's start ({cropped[0]:.6g}-{cropped[1]:.6g} s) does not follow a free decay (the move "
+            f"or the excitation, still in the record): the modes are fitted from t = {cropped[1]:.6g} s on; pass "
+            "`t_start` (the end of the move) to choose where the free decay starts",
+            UserWarning,
+            stacklevel=4,
+        )
+    if not _noisy(r):
+        return
+    if _head_blocks(r):
+        warnings.warn(
+            f"{_OWNER}: the residuals of the fit from t = {t0:.6g} s stand out at its start: the record there holds "
+            "what the fit does not (the move, the excitation, or a fast-decaying mode left out): pass a later "
+            "`t_start`, or another `n_modes`",
+            UserWarning,
+            stacklevel=4,
+        )
+        return
+    rho = _lag1(r)
+    if rho > _STRUCTURE_RHO:
+        warnings.warn(
+            f"{_OWNER}: the residuals hold structure (lag-1 autocorrelation {rho:.2f}; white noise: about "
+            f"{1 / math.sqrt(r.size):.2g}): a trend, another mode, or the move is in the record: try another "
+            "`n_modes`, `offset=True`, or a later `t_start`; the standard errors are widened for it (Newey-West) "
+            "but a model that misses part of the record is biased",
+            UserWarning,
+            stacklevel=4,
+        )
+
+
+def _fit_record(t, y, n_modes, offset, rtol, atol, max_steps):
+    """The fit of `identify_axis` on the record as given: `(ModalAxis, residuals in units of the record's spread,
+    dt [s])`."""
     t, y, dt, n, p = _check_record(t, y, n_modes, offset)
     offset = bool(offset)
     rtol, atol = float(rtol), float(atol)
@@ -492,7 +666,7 @@ def identify_axis(
             )
         raise RuntimeError(
             f"{_OWNER}: {failed}, {start}. {hint[0].upper() + hint[1:]}, try another `n_modes` (the record may "
-            f"hold fewer or more modes), or crop the record to where the axis rings freely"
+            f"hold fewer or more modes), or pass `t_start`: the end of the move, where the axis rings freely"
         )
     if not finite:
         raise RuntimeError(
@@ -528,637 +702,15 @@ def identify_axis(
         )
     from ..models.axis import ModalAxis
 
-    return ModalAxis(f, zeta, None, frequency_std=f_std, damping_std=z_std)
+    # correlated residuals (structure the model misses, a coloured noise) carry less information than white ones
+    widen = math.sqrt(_long_run_factor(np.asarray(r))) if _noisy(np.asarray(r)) else 1.0
+    return ModalAxis(f, zeta, None, frequency_std=f_std * widen, damping_std=z_std * widen), np.asarray(r), dt
 
 
-# --------------------------------------------------------------------------------------------
-# the modes from a power spectral density (a firmware's resonance test)
-# --------------------------------------------------------------------------------------------
-_PSD_OWNER = "identify_axis_from_psd"
-#: a mode's amplitude $A_i$ must exceed this many of its standard errors (a peak of noise does not)
-PSD_MIN_SIGNIFICANCE = 8.0
-#: a mode's half-power bandwidth $2\zeta_i f_i$ must span at least this many steps of the frequency grid
-MIN_BANDWIDTH_STEPS = 2.0
-#: the fit's arrays are padded (with points of zero weight) to a multiple of this length, so that spectra of
-#: nearby lengths (another `band`, another file) share one compiled program
-_PSD_PAD = 64
-#: points of the moving average of ln PSD that the start's peak search runs on
-_PSD_SMOOTH = 3
-#: smallest and largest damping ratio of the start point
-_PSD_ZETA0 = (1e-3, 0.5)
+def __getattr__(name: str):
+    """The power spectral density's fit moved to `jaxbelt.shaping.psd`: its names still resolve here."""
+    if name in ("identify_axis_from_psd", "PSD_MIN_SIGNIFICANCE", "MIN_BANDWIDTH_STEPS"):
+        from . import psd
 
-
-def _check_spectrum(f, psd, n_modes, band):
-    """Validated host arrays `(f, psd)` inside the band (the 0 Hz point left out), the band's ends [Hz], the
-    number of modes `n` and of parameters `p`."""
-    owner = _PSD_OWNER
-    n = check_int(owner, "n_modes", n_modes, lo=1)
-    arrays = []
-    for name, x, what in (("f", f, "frequencies [Hz]"), ("psd", psd, "power spectral densities")):
-        try:
-            a = np.asarray(x, dtype=float)
-        except (TypeError, ValueError) as e:
-            raise ValueError(
-                f"{owner}: parameter `{name}` must be a 1-D array of {what}; got {type(x).__name__} ({e})"
-            ) from None
-        if a.ndim != 1:
-            raise ValueError(f"{owner}: parameter `{name}` must be a 1-D array of {what}; got shape {a.shape}")
-        arrays.append(a)
-    f, psd = arrays
-    if psd.shape != f.shape:
-        raise ValueError(f"{owner}: parameter `psd` must have the shape of `f`, {f.shape}; got shape {psd.shape}")
-    _first_bad("f", f, owner)
-    _first_bad("psd", psd, owner)
-    steps = np.diff(f)
-    if np.any(steps <= 0):
-        k = int(np.flatnonzero(steps <= 0)[0])
-        raise ValueError(
-            f"{owner}: parameter `f` must be strictly increasing; got f[{k}] = {float(f[k])!r} >= f[{k + 1}] = {float(f[k + 1])!r}"
-        )
-    if f.size and f[0] < 0:
-        raise ValueError(f"{owner}: parameter `f` must be >= 0 Hz; got f[0] = {float(f[0])!r}")
-    if np.any(psd < 0):
-        k = int(np.flatnonzero(psd < 0)[0])
-        raise ValueError(
-            f"{owner}: parameter `psd` must be >= 0 (a power spectral density); got {float(psd[k])!r} at index {k} "
-            f"(f = {f[k]:.6g} Hz)"
-        )
-    if band is None:
-        lo, hi = 0.0, math.inf
-    else:
-        try:
-            lo, hi = (float(v) for v in band)
-        except (TypeError, ValueError):
-            raise ValueError(
-                f"{owner}: parameter `band` must be a pair (low, high) of frequencies [Hz]; got {band!r}"
-            ) from None
-        if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo < hi):
-            raise ValueError(f"{owner}: parameter `band` must be finite with 0 <= low < high [Hz]; got {band!r}")
-    keep = (f > 0) & (f >= lo) & (f <= hi)  # 0 Hz: the mean, which Welch's method removes from every segment
-    fs, ps = f[keep], psd[keep]
-    where = "" if band is None else f" within `band` = ({lo:g}, {hi:g}) Hz"
-    p = 3 * n + 1
-    n_min = SAMPLES_PER_PARAMETER * p
-    if fs.size < n_min:
-        raise ValueError(
-            f"{owner}: the spectrum (parameters `f`, `psd`) is too short: {n} mode(s) and the floor are {p} "
-            f"parameters, which need at least {n_min} points above 0 Hz{where} ({SAMPLES_PER_PARAMETER} per parameter); "
-            f"got {fs.size}"
-        )
-    if np.any(ps == 0):
-        k = int(np.flatnonzero(ps == 0)[0])
-        raise ValueError(
-            f"{owner}: parameter `psd` must be > 0 where it is fitted (the fit compares logarithms); got 0 at "
-            f"f = {fs[k]:.6g} Hz: leave that point out with `band`"
-        )
-    if np.ptp(ps) == 0.0:
-        raise ValueError(
-            f"{owner}: parameter `psd` is constant ({float(ps[0])!r}){where}: the spectrum holds no peak to identify"
-        )
-    return fs, ps, float(fs[0]), float(fs[-1]), n, p
-
-
-def _psd_peaks(f: np.ndarray, psd: np.ndarray, n: int):
-    """The start point of the fit: the `n` largest distinct peaks of the spectrum, `(f_peak [Hz], zeta, height)`
-    sorted by frequency, by the half-power bandwidth method: $\\zeta \\approx (f_2 - f_1)/(2 f_{peak})$ with $f_1$,
-    $f_2$ where the PSD has fallen to half its peak (e.g. Ewins, 2000, Modal Testing, sec. 4.3).
-
-    On a moving average of ln PSD (`_PSD_SMOOTH` points), its local maxima from the highest down: a peak is
-    distinct when the spectrum falls to half of it on both sides before rising above it; one that rises above it
-    first sits on a larger peak's flank (or is noise) and is passed over. Raises `ValueError` for a peak whose
-    half-power point lies beyond an end of the frequency range on one side (a mode at or beyond the edge), met
-    before `n` distinct peaks, and when the spectrum holds fewer than `n` distinct peaks."""
-    owner = _PSD_OWNER
-    N = f.size
-    logp = np.log(psd)
-    s = np.convolve(logp, np.ones(_PSD_SMOOTH), mode="same") / np.convolve(
-        np.ones(N), np.ones(_PSD_SMOOTH), mode="same"
-    )
-    up = np.concatenate([[True], s[1:] >= s[:-1]])
-    down = np.concatenate([s[:-1] >= s[1:], [True]])
-    candidates = np.flatnonzero(up & down)
-    candidates = candidates[np.argsort(-s[candidates], kind="stable")]
-    drop = math.log(2.0)
-    found = []
-    for k in candidates:
-        sides = []
-        for step in (-1, 1):
-            j = int(k)
-            while True:
-                j += step
-                if j < 0 or j >= N:
-                    sides.append(("edge", None))
-                    break
-                if s[j] > s[k]:
-                    sides.append(("higher", None))
-                    break
-                if s[j] < s[k] - drop:
-                    # the half-power frequency, by linear interpolation of ln PSD between j - step and j
-                    i = j - step
-                    w = (s[i] - (s[k] - drop)) / (s[i] - s[j])
-                    sides.append(("crossed", f[i] + w * (f[j] - f[i])))
-                    break
-        kinds = {kind for kind, _ in sides}
-        if "higher" in kinds or kinds == {"edge"}:
-            continue
-        if "edge" in kinds:
-            side = "low" if sides[0][0] == "edge" else "high"
-            end = f[0] if side == "low" else f[-1]
-            raise ValueError(
-                f"{owner}: the peak at {f[k]:.6g} Hz is at the edge of the frequency range (parameter `f`, "
-                f"{f[0]:.6g}-{f[-1]:.6g} Hz above 0 Hz, or `band`): the spectrum does not fall to half of it on the "
-                f"{side} side before {end:.6g} Hz, so a mode may lie beyond the range: widen the range, or leave the "
-                f"edge out with `band`"
-            )
-        f1, f2 = sides[0][1], sides[1][1]
-        zeta = (f2 - f1) / (2.0 * f[k])
-        found.append((float(f[k]), float(np.clip(zeta, *_PSD_ZETA0)), float(np.exp(s[k]))))
-        if len(found) == n:
-            break
-    if len(found) < n:
-        at = ", ".join(f"{fk:.6g} Hz" for fk, _, _ in sorted(found))
-        held = f"{len(found)} distinct peak(s) ({at})" if found else "no distinct peak (it may be noise)"
-        raise ValueError(
-            f"{owner}: the spectrum (`psd`) holds {held}, fewer than `n_modes` = {n} (a peak is distinct where the "
-            f"PSD falls to half of it on both sides before rising above it)"
-            + (": fit a smaller `n_modes`" if found else "")
-        )
-    found.sort()
-    fk, zk, hk = (np.array(v) for v in zip(*found))
-    return fk, zk, hk
-
-
-def _psd_log_model(theta, f, floor_ref, n: int):
-    """ln of the modelled PSD at the frequencies `f` [Hz] for the coordinates `theta` = (ln f_i, logit zeta_i,
-    ln A_i, v): $\\ln\\big(P_0 + \\sum_i A_i / ((1 - r_i^2)^2 + (2\\zeta_i r_i)^2)\\big)$, $r_i = f/f_i$, with the
-    floor $P_0 = v^2 P_{ref}$ (`floor_ref`).
-
-    The floor is $v^2$ rather than $e^v$: where the spectrum lies far above any floor (a narrow `band` about a
-    peak) the data do not fix it, and with $\\ln P_0$ as coordinate every Gauss-Newton step would move it down by
-    the same amount, for ever (its Jacobian column shrinks as fast as $P_0$); with $v$ the step halves $v$, which
-    converges to $v = 0$."""
-    fi = jnp.exp(theta[:n])
-    zeta = jax.nn.sigmoid(theta[n : 2 * n])
-    r = f[:, None] / fi[None, :]
-    d = ((1.0 - r) * (1.0 + r)) ** 2 + (2.0 * zeta * r) ** 2
-    return jnp.log(floor_ref * theta[3 * n] ** 2 + jnp.sum(jnp.exp(theta[2 * n : 3 * n]) / d, axis=1))
-
-
-@functools.partial(jax.jit, static_argnames=("n", "rtol", "atol", "max_steps"))
-def _fit_psd(f, logp, weight, floor_ref, theta0, scale, *, n, rtol, atol, max_steps):
-    """LM on `u` with `theta = theta0 + scale * u`, residuals `weight * (ln model - ln psd)` (weight 0 on the
-    padding). Returns as `_fit`."""
-
-    def resid(u, _):
-        return weight * (_psd_log_model(theta0 + scale * u, f, floor_ref, n) - logp)
-
-    return _levenberg_marquardt(resid, jnp.zeros_like(theta0), rtol=rtol, atol=atol, max_steps=max_steps)
-
-
-@blas_limited
-def identify_axis_from_psd(
-    f,
-    psd,
-    n_modes: int,
-    *,
-    band: tuple[float, float] | None = None,
-    rtol: float = 1e-10,
-    atol: float = 1e-12,
-    max_steps: int = 256,
-):
-    """The modes of a belt-driven axis from a power spectral density (PSD), such as a firmware's resonance test
-    writes: a `ModalAxis` with the frequencies [Hz], damping ratios and their standard errors.
-
-    ```python
-    f, psd = jb.load_spectrum("calibration_data_x.csv")   # Klipper: freq,psd_x,psd_y,psd_z,psd_xyz
-    axis = jb.identify_axis_from_psd(f, psd, n_modes=2)
-    axis.frequencies, axis.frequency_std                   # Hz
-    ```
-
-    - `f`: frequencies [Hz], 1-D, strictly increasing, >= 0 (a point at 0 Hz, which Welch's method leaves
-      without the mean, is left out); any spacing.
-    - `psd`: the power spectral density at `f`, same shape, >= 0 and > 0 where fitted, in any unit (e.g.
-      (m/s²)²/Hz, or (mm/s²)²/Hz as Klipper writes): only its shape matters.
-    - `n_modes`: number of modes $n \\ge 1$; the fit has $3n + 1$ parameters and needs `SAMPLES_PER_PARAMETER`
-      = 10 points for each.
-    - `band`: `(low, high)` [Hz]: fit only the points with low <= f <= high (None: all above 0 Hz). Use it to
-      leave out what the model does not hold: a rising low-frequency end, a peak outside the modes of interest.
-    - `rtol`, `atol`, `max_steps`: the Levenberg-Marquardt solver's step tolerances and step budget, as in
-      `identify_axis`.
-
-    **The model.** Broadband excitation of an axis makes each mode respond near its peak as a damped
-    oscillator, with a power spectral density proportional to the squared magnitude of its frequency response
-    (e.g. Bendat and Piersol, 2010, Random Data, ch. 6), over a floor (the sensor's noise, the other modes' far
-    flanks):
-
-    $P(f) = P_0 + \\sum_{i=1}^{n} \\dfrac{A_i}{(1 - r_i^2)^2 + (2\\zeta_i r_i)^2}$, $r_i = f/f_i$.
-
-    The fit minimises $\\sum_k (\\ln P(f_k) - \\ln \\mathrm{psd}_k)^2$: a PSD spans decades, and a Welch
-    estimate's scatter is multiplicative (a chi-square variable of $2K$ degrees of freedom times the true PSD,
-    for $K$ averaged segments; Welch, 1967), so its logarithm has the same scatter at every frequency. The
-    logarithm's mean offset ($\\approx -1/K$) scales every $A_i$ and $P_0$ alike and moves no $f_i$ or
-    $\\zeta_i$. Levenberg-Marquardt (`optimistix.least_squares`) in the coordinates $\\ln f_i$,
-    $\\operatorname{logit}\\zeta_i$, $\\ln A_i$ (every mode physical) and $v$, $P_0 = v^2 P_{ref}$ (a floor the data
-    do not fix, far below the peaks, converges to 0 rather than drifting), from the half-power bandwidth
-    method's estimate (Ewins, 2000, Modal Testing, sec. 4.3): the $n$ largest distinct peaks of the spectrum,
-    $\\zeta_i \\approx (f_2 - f_1)/(2 f_{peak})$ from the frequencies $f_1 < f_{peak} < f_2$ where it falls to
-    half. The arrays are padded to a multiple of 64 points: one compiled program per `n_modes` and padded length.
-
-    Returns `ModalAxis(frequencies, damping_ratios, gains=None, frequency_std=..., damping_std=...)`, the modes
-    sorted by frequency, with the linearised standard errors of `identify_axis` ($C = s^2(J^TJ)^{-1}$,
-    $s^2 = \\mathrm{SSR}/(N - p)$, delta method). The gains are unit gains: the PSD fixes each mode's frequency
-    and damping; its $A_i$ mix the excitation's level with the mode's participation.
-
-    **Where it holds.** The terms are the squared response of the modal coordinates; a spectrum of
-    accelerations, or an excitation whose level varies with frequency, multiplies each peak by a smooth factor,
-    which moves the fitted $f_i$ by a relative $O(\\zeta_i^2)$ (0.5 % at $\\zeta = 0.05$). Modes closer than
-    their half-power bandwidths make one peak (fewer distinct peaks than `n_modes`: refused). A Welch estimate
-    smears each peak over its window's bandwidth (1.5 steps of the frequency grid for a Hann window), which
-    widens it: the damping is resolved only where the half-power bandwidth $2\\zeta_i f_i$ spans several steps,
-    and a mode whose fitted bandwidth spans fewer than `MIN_BANDWIDTH_STEPS` = 2 is refused (identify such an
-    axis from a time record with `identify_axis`, e.g. the firmware's raw accelerometer file). Neighbouring
-    points of a Welch estimate with overlapping segments are correlated, so the standard errors assume more
-    independent points than there are: read them as lower bounds.
-
-    Raises `ValueError`, naming the argument, before anything is compiled for: arrays that are not 1-D of the
-    same shape, NaN or inf, `f` not strictly increasing or negative, `psd` negative (or zero where fitted), a
-    bad `band`, fewer than 10 points per parameter, `n_modes` not an integer >= 1, a peak at the edge of the
-    frequency range (its half-power point beyond `f`'s first or last point), fewer distinct peaks than
-    `n_modes`; and after the fit for: a frequency at or beyond the ends of the fitted range, a damping ratio
-    outside (0, 1), a half-power bandwidth under 2 frequency steps, a mode whose amplitude $A_i$ is below
-    `PSD_MIN_SIGNIFICANCE` = 8 standard errors (a fit to noise, or more `n_modes` than the spectrum holds; also
-    when the fit did not converge). Raises `RuntimeError` when the fit does not converge although every mode
-    stands out, and when JAX's 64-bit mode is off.
-    """
-    owner = _PSD_OWNER
-    _require_x64(owner)
-    fs, ps, lo, hi, n, p = _check_spectrum(f, psd, n_modes, band)
-    rtol, atol = float(rtol), float(atol)
-    if not (math.isfinite(rtol) and rtol > 0):
-        raise ValueError(f"{owner}: parameter `rtol` must be finite and > 0; got {rtol}")
-    if not (math.isfinite(atol) and atol >= 0):
-        raise ValueError(f"{owner}: parameter `atol` must be finite and >= 0; got {atol}")
-    max_steps = check_int(owner, "max_steps", max_steps, lo=1)
-    f0, z0, height = _psd_peaks(fs, ps, n)
-    # in units of the spectrum's median (any unit in, values near 1 in the fit)
-    unit = float(np.exp(np.median(np.log(ps))))
-    logp = np.log(ps / unit)
-    height = height / unit
-    floor0 = float(np.exp(np.percentile(logp, 10.0)))
-    amp0 = np.maximum(height - floor0, 0.1 * height) * (2.0 * z0) ** 2  # |H|^2 = 1/(2 zeta)^2 at r = 1
-    theta0 = np.concatenate([np.log(f0), np.log(z0) - np.log1p(-z0), np.log(amp0), [1.0]])
-    # column scaling: a change 1 of u moves a peak by about its half-power bandwidth, the rest by a factor e
-    scale = np.concatenate([z0, np.ones(2 * n + 1)])
-    N = fs.size
-    size = _PSD_PAD * math.ceil(N / _PSD_PAD)
-    pad = size - N
-    fp = np.concatenate([fs, np.full(pad, fs[-1])])
-    lp = np.concatenate([logp, np.full(pad, logp[-1])])
-    weight = np.concatenate([np.ones(N), np.zeros(pad)])
-    out = _fit_psd(
-        device_array(fp),
-        device_array(lp),
-        device_array(weight),
-        floor0,
-        device_array(theta0),
-        device_array(scale),
-        n=n,
-        rtol=rtol,
-        atol=atol,
-        max_steps=max_steps,
-    )
-    r, sv, vt, code, steps, finite, theta, fi, zeta = _fit_outcome(out, theta0, scale, n)
-    start = f"started from the half-power estimate f = {_fmt(f0)} Hz, zeta = {_fmt(z0)}"
-    if finite:
-        var = np.diag(_covariance(r, sv, vt, scale, p, N))  # N points: the padding's residuals are 0
-        f_std = fi * np.sqrt(var[:n])
-        z_std = zeta * (1.0 - zeta) * np.sqrt(var[n : 2 * n])
-        with np.errstate(divide="ignore"):
-            significance = np.nan_to_num(1.0 / np.sqrt(var[2 * n : 3 * n]), nan=0.0)  # A / std(A) = 1 / std(ln A)
-    else:
-        f_std = z_std = significance = np.zeros(n)
-    if code != 0:
-        reason = _RESULT_NAMES[code] if code >= 0 else "unknown solver failure"
-        failed = f"the Levenberg-Marquardt fit of {n} mode(s) did not converge ({reason}) after {steps} steps"
-        if finite and np.any(~(significance >= PSD_MIN_SIGNIFICANCE)):
-            i = int(np.argmin(significance))
-            raise ValueError(
-                f"{owner}: {failed}, and its last iterate has a mode ({fi[i]:.6g} Hz) whose amplitude is only "
-                f"{significance[i]:.3g} standard errors (at least {PSD_MIN_SIGNIFICANCE:g} are needed): the spectrum "
-                f"(`psd`) may hold fewer than `n_modes` = {n} modes: try a smaller `n_modes` ({start})"
-            )
-        hint = (
-            f"give a larger `max_steps` (now {max_steps})"
-            if reason in ("max_steps_reached", "nonlinear_max_steps_reached")
-            else "check that the spectrum is a PSD of the axis"
-        )
-        raise RuntimeError(
-            f"{owner}: {failed}, {start}. {hint[0].upper() + hint[1:]}, try another `n_modes`, or fit a narrower `band`"
-        )
-    if not finite:
-        raise RuntimeError(
-            f"{owner}: the fit of {n} mode(s) ended at non-finite values ({start}); try another `n_modes`"
-        )
-    order = np.argsort(fi)
-    fi, zeta, f_std, z_std, significance = (v[order] for v in (fi, zeta, f_std, z_std, significance))
-    found = f"identified f = {_fmt(fi)} Hz, zeta = {_fmt(zeta)}"
-    outside = np.flatnonzero((fi <= lo) | (fi >= hi))
-    if outside.size:
-        i = int(outside[0])
-        raise ValueError(
-            f"{owner}: mode {i + 1} comes out at {fi[i]:.6g} Hz, at or beyond the edge of the fitted frequency "
-            f"range {lo:.6g}-{hi:.6g} Hz (parameter `f`, or `band`): widen the range or fit fewer `n_modes` ({found})"
-        )
-    if not np.all((zeta > 0.0) & (zeta < 1.0)):
-        raise ValueError(
-            f"{owner}: a damping ratio comes out outside (0, 1) ({found}): `psd` is not a resonant spectrum"
-        )
-    weak = np.flatnonzero(~(significance >= PSD_MIN_SIGNIFICANCE))
-    if weak.size:
-        i = int(weak[0])
-        raise ValueError(
-            f"{owner}: mode {i + 1} ({fi[i]:.6g} Hz, zeta = {zeta[i]:.3g}) is not resolved above the noise: its "
-            f"amplitude is {significance[i]:.3g} standard errors (at least {PSD_MIN_SIGNIFICANCE:g} are needed): the "
-            f"spectrum (`psd`) may hold fewer than `n_modes` = {n} modes: try a smaller `n_modes` ({found})"
-        )
-    grid = np.diff(fs)
-    for i in range(n):
-        k = int(np.clip(np.searchsorted(fs, fi[i]), 1, N - 1))
-        step = float(grid[k - 1])
-        width = 2.0 * zeta[i] * fi[i]
-        if width < MIN_BANDWIDTH_STEPS * step:
-            raise ValueError(
-                f"{owner}: mode {i + 1} ({fi[i]:.6g} Hz, zeta = {zeta[i]:.3g}) has a half-power bandwidth of "
-                f"{width:.3g} Hz, under {MIN_BANDWIDTH_STEPS:g} steps of the frequency grid (`f`: {step:.3g} Hz "
-                f"there): the spectrum does not resolve its damping (a Welch estimate widens such a peak to its "
-                f"window's bandwidth); use a finer frequency grid (longer segments), or identify the axis from a "
-                f"time record with identify_axis ({found})"
-            )
-    from ..models.axis import ModalAxis
-
-    return ModalAxis(fi, zeta, None, frequency_std=f_std, damping_std=z_std)
-
-
-# --------------------------------------------------------------------------------------------
-# reading a record
-# --------------------------------------------------------------------------------------------
-#: first column names that mark a spectrum, not a time record (Klipper's resonance test writes
-#: `freq,psd_x,psd_y,psd_z,psd_xyz`)
-_SPECTRUM_NAMES = ("freq", "frequency", "f", "hz", "freq_hz", "frequency_hz")
-
-
-def _path_and_channel(owner: str, path, channel, first: str):
-    """`(path as str, channel)`: a path of the wrong type is a `TypeError` naming `path`; a numpy integer channel
-    is an index like a Python int; anything else but a name or an index >= 1 is a `ValueError` naming `channel`."""
-    if not isinstance(path, str | bytes | os.PathLike):
-        raise TypeError(
-            f"{owner}: parameter `path` must be a file path (str or os.PathLike); got {type(path).__name__}"
-        )
-    path = os.fsdecode(os.fspath(path))
-    if isinstance(channel, np.integer):
-        channel = int(channel)
-    if (channel is not None and not isinstance(channel, (int, str))) or isinstance(channel, bool):
-        raise ValueError(f"{owner}: parameter `channel` must be a column name or index (int >= 1), got {channel!r}")
-    if isinstance(channel, int) and channel < 1:
-        raise ValueError(f"{owner}: parameter `channel` must be >= 1 (column 0 holds the {first}), got {channel}")
-    return path, channel
-
-
-def load_record(path, channel: int | str | None = None):
-    """Read a measured record `(t, y)` (two float numpy arrays) from a CSV file: the time [s] in the first column
-    and the measured value (any unit) in the second, or in the column `channel`.
-
-    - comma-separated, one sample per line;
-    - an optional header line (any names, e.g. `t,y` or `time_s,accel`) as the first non-empty line, written
-      plainly or as a comment: `#time,accel_x,accel_y,accel_z` (the header of Klipper's raw accelerometer files)
-      names the columns too;
-    - blank lines and other lines starting with `#` are skipped; spaces around the values are allowed;
-    - two columns, or more with `channel`: the column to read, by its header name (`"accel_x"`, any case) or by
-      its index (1 = the first column after the time). A file of more than two columns without `channel` is an
-      error rather than silently read as its first channel.
-    - a spectrum is refused: a file whose first column is named like a frequency (`freq,psd_x,...`, the power
-      spectral density of Klipper's resonance test) is not a time record, and identifying modes from its columns
-      as if they were one would give a meaningless "mode": `load_spectrum` reads it and `identify_axis_from_psd`
-      identifies its modes.
-
-    Raises `FileNotFoundError` (`OSError`) for a missing or unreadable path and `ValueError`, naming the file
-    and the line, for anything else (not text, wrong number of columns, an unknown `channel`, a spectrum, a value
-    that is not a number, fewer than two samples). The times are not checked here: `identify_axis` checks them.
-    """
-    path, channel = _path_and_channel("load_record", path, channel, "time")
-    if not os.path.exists(path):
-        raise FileNotFoundError(f"load_record: no file {path!r} (a CSV file with the columns t,y)")
-    if os.path.isdir(path):
-        raise IsADirectoryError(f"load_record: {path!r} is a folder, not a CSV file with the columns t,y")
-    try:
-        with open(path, encoding="utf-8-sig") as fh:  # utf-8-sig: a spreadsheet's byte-order mark is skipped
-            lines = fh.read().splitlines()
-    except UnicodeDecodeError as e:
-        raise ValueError(f"load_record: {path!r} is not a text (CSV) file ({e.reason} at byte {e.start})") from None
-    spectrum = _spectrum_header(lines)
-    if spectrum is not None:
-        raise ValueError(
-            f"load_record: {path}:{spectrum[0]}: the first column is {spectrum[1][0]!r}: a spectrum (e.g. the power "
-            "spectral density of a firmware's resonance test), not a time record: read it with load_spectrum and "
-            "identify its modes with identify_axis_from_psd (identify_axis needs a time record, e.g. the raw "
-            "accelerometer file #time,accel_x,accel_y,accel_z)"
-        )
-    rows: list = []
-    names: list[str] | None = None
-    column = 1
-    n_columns = None
-    for lineno, line in enumerate(lines, start=1):
-        text = line.strip()
-        if text.startswith("#"):
-            # a comment; with `channel`, the first line may be a commented header (Klipper's `#time,accel_x,...`)
-            if channel is None or rows or names is not None:
-                continue
-            text = text.lstrip("#").strip()
-            if "," not in text:
-                continue
-        if not text:
-            continue
-        fields = [f.strip() for f in text.split(",")]
-        if channel is None and len(fields) != 2:
-            raise ValueError(
-                f"load_record: {path}:{lineno}: expected 2 comma-separated columns t,y; got {len(fields)} in "
-                f"{line!r}"
-                + (
-                    " (one channel per file: drop the other columns, or choose one with `channel`)"
-                    if len(fields) > 2
-                    else ""
-                )
-            )
-        try:
-            values = [float(f) for f in fields]
-        except ValueError:
-            values = None
-        if values is None:
-            if rows or names is not None:
-                raise ValueError(f"load_record: {path}:{lineno}: the values must be numbers; got {line!r}")
-            names = fields  # the first non-empty line: a header
-            continue
-        if n_columns is None:
-            n_columns = len(fields)
-            if channel is not None:
-                column = _channel_column(path, channel, names, n_columns)
-        elif len(fields) != n_columns:
-            raise ValueError(
-                f"load_record: {path}:{lineno}: expected {n_columns} comma-separated columns as in the first line; "
-                f"got {len(fields)} in {line!r}"
-            )
-        rows.append((values[0], values[column]))
-    if len(rows) < 2:
-        raise ValueError(f"load_record: {path!r} holds {len(rows)} sample(s); a record needs at least 2 lines t,y")
-    data = np.asarray(rows, dtype=float)
-    return data[:, 0].copy(), data[:, 1].copy()
-
-
-def _channel_column(path, channel, names, n_columns, owner: str = "load_record", first: str = "time") -> int:
-    """The column index of `channel` (a header name, any case, or an index >= 1) in a file of `n_columns`
-    (column 0 holds the `first` quantity)."""
-    if isinstance(channel, int):
-        if channel >= n_columns:
-            raise ValueError(
-                f"{owner}: {path}: `channel` {channel} is out of range: the file has {n_columns} columns, the "
-                f"{first} and {n_columns - 1} channel(s) (1-{n_columns - 1})"
-            )
-        return channel
-    if names is None or len(names) != n_columns:
-        raise ValueError(f"{owner}: {path}: `channel` {channel!r} names a column, but the file has no header line")
-    lowered = [n.lower() for n in names]
-    if channel.lower() not in lowered[1:]:
-        raise ValueError(f"{owner}: {path}: parameter `channel`: no column {channel!r}; the channels are {names[1:]}")
-    return lowered.index(channel.lower(), 1)
-
-
-def _spectrum_header(lines) -> tuple[int, list[str]] | None:
-    """`(line number, column names)` of the header of a spectrum file, whose first column is named like a
-    frequency (`_SPECTRUM_NAMES`): the first line that is not blank and not a `#` comment, or, where that line
-    holds numbers, the comment line just before it (a header written as `#freq,psd`). None when there is none."""
-    comment = None
-    for lineno, line in enumerate(lines, start=1):
-        text = line.strip()
-        if not text:
-            continue
-        if text.startswith("#"):
-            comment = (lineno, [x.strip() for x in text.lstrip("#").split(",")])
-            continue
-        fields = [x.strip() for x in text.split(",")]
-        if fields[0].lower() in _SPECTRUM_NAMES:
-            return lineno, fields
-        if comment is not None and len(comment[1]) > 1 and comment[1][0].lower() in _SPECTRUM_NAMES:
-            return comment
-        return None
-    return None
-
-
-def is_spectrum_file(path) -> bool:
-    """Whether the CSV file `path` is a spectrum (its header's first column is named like a frequency:
-    `freq`, `frequency`, `f`, `hz`, `freq_hz` or `frequency_hz`, e.g. Klipper's `freq,psd_x,psd_y,psd_z,psd_xyz`)
-    rather than a time record. False for a file that cannot be read as text (its reader says why)."""
-    try:
-        with open(os.fspath(path), encoding="utf-8-sig") as fh:
-            head = [line for _, line in zip(range(200), fh)]
-    except (OSError, UnicodeDecodeError):
-        return False
-    return _spectrum_header(head) is not None
-
-
-def load_spectrum(path, channel: int | str | None = None):
-    """Read a power spectral density `(f, psd)` (two float numpy arrays: frequencies [Hz] and the PSD in the
-    file's unit, e.g. (mm/s²)²/Hz) from a CSV file such as a firmware's resonance test writes (Klipper's
-    `calibration_data_*.csv`: `freq,psd_x,psd_y,psd_z,psd_xyz`, and in newer versions more columns after these).
-
-    ```python
-    f, psd = jb.load_spectrum("calibration_data_x.csv")            # the column psd_xyz
-    f, psd = jb.load_spectrum("calibration_data_x.csv", "psd_x")   # or one axis
-    axis = jb.identify_axis_from_psd(f, psd, n_modes=2)
-    ```
-
-    - comma-separated, one frequency per line, in strictly increasing order;
-    - a header line, the first that is not blank and not a `#` comment (comment lines and blank lines are
-      skipped anywhere; a header written as a comment, `#freq,psd`, is read too), whose first column is named
-      like a frequency: `freq`, `frequency`, `f`, `hz`, `freq_hz` or `frequency_hz` (any case);
-    - `channel`: the PSD column, by its header name (any case) or index (1 = the first column after the
-      frequency). Default: `psd_xyz` (the sum over the three axes) where the file has it, else the only PSD
-      column; a file of several columns without `psd_xyz` needs `channel`. Only the frequency and the chosen
-      column are read as numbers: other columns (a firmware's shaper responses) are left alone.
-
-    Raises `FileNotFoundError` (`OSError`) for a missing or unreadable path and `ValueError`, naming the file and
-    the line, for anything else: not text, no frequency header (a time record: `load_record` reads it), an unknown
-    or ambiguous column, a line of another number of columns, a value that is not a number or not finite, a
-    negative PSD, frequencies not strictly increasing, fewer than two lines of data.
-    """
-    owner = "load_spectrum"
-    path, channel = _path_and_channel(owner, path, channel, "frequency")
-    if not os.path.exists(path):
-        raise FileNotFoundError(f"{owner}: no file {path!r} (a CSV file with the columns freq,psd)")
-    if os.path.isdir(path):
-        raise IsADirectoryError(f"{owner}: {path!r} is a folder, not a CSV file with the columns freq,psd")
-    try:
-        with open(path, encoding="utf-8-sig") as fh:
-            lines = fh.read().splitlines()
-    except UnicodeDecodeError as e:
-        raise ValueError(f"{owner}: {path!r} is not a text (CSV) file ({e.reason} at byte {e.start})") from None
-    found = _spectrum_header(lines)
-    if found is None:
-        first = next(
-            ((i, ln) for i, ln in enumerate(lines, start=1) if ln.strip() and not ln.strip().startswith("#")), None
-        )
-        if first is None:
-            raise ValueError(f"{owner}: {path!r} holds no data (only blank or # comment lines)")
-        raise ValueError(
-            f"{owner}: {path}:{first[0]}: expected a header line whose first column names the frequency "
-            f"({', '.join(_SPECTRUM_NAMES)}), e.g. freq,psd_x,psd_y,psd_z,psd_xyz; got {first[1]!r} (a time "
-            "record t,y is read by load_record)"
-        )
-    header_line, names = found
-    n_columns = len(names)
-    if n_columns < 2:
-        raise ValueError(f"{owner}: {path}:{header_line}: the header {names} has no PSD column after the frequency")
-    lowered = [name.lower() for name in names]
-    if channel is not None:
-        column = _channel_column(path, channel, names, n_columns, owner, "frequency")
-    elif "psd_xyz" in lowered[1:]:
-        column = lowered.index("psd_xyz", 1)
-    elif n_columns == 2:
-        column = 1
-    else:
-        raise ValueError(
-            f"{owner}: {path}:{header_line}: {n_columns - 1} columns after the frequency ({names[1:]}) and none is "
-            "psd_xyz: choose one with `channel` (its name or index >= 1)"
-        )
-    rows: list = []
-    for lineno, line in enumerate(lines[header_line:], start=header_line + 1):
-        text = line.strip()
-        if not text or text.startswith("#"):
-            continue
-        fields = [x.strip() for x in text.split(",")]
-        if len(fields) != n_columns:
-            raise ValueError(
-                f"{owner}: {path}:{lineno}: expected {n_columns} comma-separated columns as in the header "
-                f"({','.join(names)}); got {len(fields)} in {line!r}"
-            )
-        try:
-            fk, pk = float(fields[0]), float(fields[column])
-        except ValueError:
-            raise ValueError(
-                f"{owner}: {path}:{lineno}: the frequency and {names[column]} must be numbers; got {line!r}"
-            ) from None
-        if not (math.isfinite(fk) and math.isfinite(pk)):
-            raise ValueError(f"{owner}: {path}:{lineno}: the values must be finite (no nan or inf); got {line!r}")
-        if pk < 0:
-            raise ValueError(
-                f"{owner}: {path}:{lineno}: {names[column]} must be >= 0 (a power spectral density); got {pk!r}"
-            )
-        if rows and not fk > rows[-1][0]:
-            raise ValueError(
-                f"{owner}: {path}:{lineno}: the frequencies must be strictly increasing; got {fk!r} after "
-                f"{rows[-1][0]!r}"
-            )
-        rows.append((fk, pk))
-    if len(rows) < 2:
-        raise ValueError(f"{owner}: {path!r} holds {len(rows)} line(s) of data; a spectrum needs at least 2")
-    data = np.asarray(rows, dtype=float)
-    return data[:, 0].copy(), data[:, 1].copy()
+        return getattr(psd, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
