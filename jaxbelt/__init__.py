@@ -136,6 +136,12 @@ if _typing.TYPE_CHECKING:
     from .shaping.codesign import shortest_move_time as shortest_move_time
     from .shaping.firmware_shaper import FirmwareShaper as FirmwareShaper
     from .shaping.firmware_shaper import design_shaper as design_shaper
+    from .shaping.klipper import KlipperConfig as KlipperConfig
+    from .shaping.klipper import klipper_calibration as klipper_calibration
+    from .shaping.klipper import klipper_impulses as klipper_impulses
+    from .shaping.klipper import parse_klipper as parse_klipper
+    from .shaping.rrf import m593_line as m593_line
+    from .shaping.rrf import parse_m593 as parse_m593
 
     # --- command shaping on the user's axis ---------------------------------------------------------
     from .shaping.identify import identify_axis as identify_axis
