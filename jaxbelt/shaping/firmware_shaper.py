@@ -368,7 +368,10 @@ def _free_design(axis, band, tau, u, K, firmware):
     def exported(c):
         A, T = c
         if firmware == "rrf":  # whole step clocks first: impulses that fall on one clock are one impulse
-            T = np.rint(np.asarray(T) * STEP_CLOCK_RATE) / STEP_CLOCK_RATE
+            T = (
+                np.minimum(np.rint(np.asarray(T) * STEP_CLOCK_RATE), math.floor(tau * STEP_CLOCK_RATE))
+                / STEP_CLOCK_RATE
+            )
         A, T = _exported(A, T)
         return _rrf_export(A, T) if firmware == "rrf" else (A, T)
 

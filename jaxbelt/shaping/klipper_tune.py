@@ -104,6 +104,9 @@ def grid(kind: str, tau: float, s, modes):
     zm = zeta_max(kind)
     zetas = sorted({min(z, zm) for _, z in modes} | {min(v, zm) for v in (0.02, 0.05, 0.1, 0.2)})
     pts = {(float(length_factor(kind, zm / 2)) / tau, zm / 2)}
+    for f, z in modes:  # the type at each mode's own frequency and damping, where it fits
+        if float(length_factor(kind, min(z, zm))) / f <= tau:
+            pts.add((f, min(z, zm)))
     for f, _ in modes:
         for r in np.geomspace(0.6, 1.6, 21):
             for z in zetas:
