@@ -236,3 +236,51 @@ def test_klipper_configuration_from_a_resonance_test_beats_klippers_own_calibrat
     assert T[-1] <= T0[-1] * (1 + 1e-12)
     truth = ([38.0, 92.0], [0.05, 0.03])
     assert band_worst(A, T, *truth) <= band_worst(A0, T0, *truth)
+
+
+@pytest.mark.slow
+def test_cli_prints_the_m593_line_of_the_design(tmp_path, capsys):
+    """`jaxbelt shaper --firmware rrf --mode 40:0.05 --duration D`: the printed and written M593 line is the one
+    `design_shaper` gives, and reads back to at most 5 impulses with the stated worst residual."""
+    from jaxbelt.cli import main
+
+    out = tmp_path / "shaper.g"
+    assert main(["shaper", "--firmware", "rrf", "--mode", "40:0.05", "--duration", "0.025", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    line = next(x for x in printed.splitlines() if x.startswith("M593"))
+    assert out.read_text() == line + "\n"
+    s = jb.design_shaper(jb.ModalAxis([40.0], [0.05]), 0.025, firmware="rrf")
+    assert line == s.to_firmware()
+    A, T = read_m593(line)
+    assert len(A) <= 5 and band_worst(A, T, [40.0], [0.05]) == pytest.approx(s.worst, rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["--firmware", "marlin", "--mode", "40:0.05"], "invalid choice: 'marlin'"),
+        (["--firmware", "rrf"], "give the axis by --mode"),
+        (["--firmware", "rrf", "--mode", "40:1.5"], "damping ratio Z must lie in"),
+        (["--firmware", "rrf", "--mode", "40:0.05", "--duration", "1", "--target", "0.1"], "not both"),
+    ],
+)
+def test_cli_refuses_bad_arguments_in_one_line(argv, message, capsys):
+    from jaxbelt.cli import main
+
+    with pytest.raises(SystemExit) as e:
+        code = main(["shaper", *argv])
+        raise SystemExit(code)
+    assert e.value.code == 2
+    assert message in capsys.readouterr().err
+
+
+@pytest.mark.slow
+def test_without_a_duration_the_shortest_shaper_that_reaches_the_target():
+    """`target=0.05`: the returned grid shaper reaches 5 % and one 2 % shorter does not (bisection to 1 %);
+    without a target the duration is that of the best of Klipper's six at the mode (here 3-hump EI, the widest)."""
+    ax = jb.ModalAxis([40.0], [0.05])
+    s = jb.design_shaper(ax, target=0.05)
+    assert s.worst <= 0.05
+    assert jb.design_shaper(ax, s.duration * 0.98).worst > 0.05
+    d = jb.design_shaper(ax).duration
+    assert d == pytest.approx(float(jb.klipper_impulses("3hump_ei", 40.0, 0.05)[1][-1]), rel=1e-12)
