@@ -97,7 +97,7 @@ def equal_duration(label, freqs, zetas, types):
         D = float(T0[-1])
         ref = worst(A0, T0, freqs, zetas)
         row = dict(
-            name=label, method=kind, error=None, duration_ms=1e3 * D, klipper=ref, klipper_smoothing=smoothing(A0, T0)
+            name=label, method=kind, error=None, duration_ms=1e3 * D, type_worst=ref, type_smoothing=smoothing(A0, T0)
         )
         for fw in ("rrf", "klipper"):
             t = time.perf_counter()
@@ -148,10 +148,50 @@ def calibration(label, freqs, zetas, peaks, seed):
     return row
 
 
+def table(path: Path) -> str:
+    """The markdown tables of docs/benchmarks.md ("Firmware shapers") from a results file."""
+    import json
+
+    data = json.loads(path.read_text())
+    eq = [r for r in data["rows"] if r["method"] != "calibration"]
+    cal = [r for r in data["rows"] if r["method"] == "calibration"]
+    out = [
+        "| axis | Klipper type (at the lowest mode) | duration [ms] | Klipper's worst | RRF (<= 5 impulses) | "
+        "jaxbelt's Klipper config | lower bound | smoothing [mm] Klipper / RRF / config |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in eq:
+        out.append(
+            f"| {r['name']} | {r['method']} | {r['duration_ms']:.2f} | {100 * r['type_worst']:.3g} % | "
+            f"{100 * r['rrf']:.3g} % ({r['rrf_ratio']:.3f}x) | {100 * r['klipper']:.3g} % "
+            f"({r['klipper_ratio']:.3f}x) | {100 * r['lower_bound']:.3g} % | {r['type_smoothing']:.3f} / "
+            f"{r['rrf_smoothing']:.3f} / {r['klipper_smoothing']:.3f} |"
+        )
+    if cal:
+        out += [
+            "",
+            "| resonance test (true axis) | Klipper's calibration picks | duration [ms] | its worst (true axis) | "
+            "jaxbelt's Klipper config (identified axis) | RRF |",
+            "|---|---|---|---|---|---|",
+        ]
+        for r in cal:
+            cfg = r["klipper_config"].replace("SET_INPUT_SHAPER ", "").replace("_X=", "=")
+            out.append(
+                f"| {r['name']} | {r['pick'].replace('SET_INPUT_SHAPER ', '').replace('_X=', '=')} | "
+                f"{r['duration_ms']:.2f} | {100 * r['pick_worst']:.3g} % | {100 * r['klipper']:.3g} % "
+                f"({r['klipper_ratio']:.3f}x; {cfg}) | {100 * r['rrf']:.3g} % ({r['rrf_ratio']:.3f}x) |"
+            )
+    return "\n".join(out)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--quick", action="store_true", help="the 40 Hz axis at EI's duration only")
+    ap.add_argument("--table", type=Path, default=None, help="print the docs tables of a results file and stop")
     args = ap.parse_args()
+    if args.table is not None:
+        print(table(args.table))
+        return
     t0 = time.perf_counter()
     if args.quick:
         rows = equal_duration(*NAMED[1], ("ei",))

@@ -284,3 +284,16 @@ def test_without_a_duration_the_shortest_shaper_that_reaches_the_target():
     assert jb.design_shaper(ax, s.duration * 0.98).worst > 0.05
     d = jb.design_shaper(ax).duration
     assert d == pytest.approx(float(jb.klipper_impulses("3hump_ei", 40.0, 0.05)[1][-1]), rel=1e-12)
+
+
+@pytest.mark.slow
+def test_max_impulses_without_a_firmware_frees_the_times():
+    """firmware=None, max_impulses=3 at EI's length (40 Hz, damping 0.05): at most 3 impulses at free times, at most
+    what EI leaves (it is a start; measured 0.86x), at least the certified bound."""
+    f, z = 40.0, 0.05
+    A0, T0 = jb.shaper_impulses("EI", f, z)
+    s = jb.design_shaper(jb.ModalAxis([f], [z]), float(T0[-1]), max_impulses=3)
+    A, T = s.as_lists()
+    assert len(A) <= 3 and T[-1] <= T0[-1] * (1 + 1e-12)
+    assert band_worst(A, T, [f], [z]) == pytest.approx(s.worst, rel=1e-12)
+    assert s.lower_bound <= s.worst <= band_worst(A0, T0, [f], [z])
