@@ -153,7 +153,7 @@ def test_klipper_configuration_is_one_of_klippers_types_and_leaves_at_most_that_
     kind, fs, zs = read_klipper_section(s.to_firmware())
     assert (kind, fs, zs) == (s.config.kind, s.config.freq, s.config.damping)
     assert s.to_firmware("command", "y") == (
-        f"SET_INPUT_SHAPER SHAPER_TYPE_Y={kind} SHAPER_FREQ_Y={fs:.3f} DAMPING_RATIO_Y={zs:.6f}"
+        f"SET_INPUT_SHAPER SHAPER_TYPE_Y={kind} SHAPER_FREQ_Y={fs!r} DAMPING_RATIO_Y={zs!r}"
     )
     assert jb.parse_klipper(s.to_firmware()) == s.config
     A, T = jb.shaper_impulses(KLIPPER_NAMES[kind], fs, zs)

@@ -415,9 +415,11 @@ def test_klipper_impulses_are_the_published_formulas(kind, f, zeta):
 def test_klipper_text_reads_back_and_refuses_what_klipper_refuses():
     cfg = jb.KlipperConfig("2hump_ei", 48.1234, 0.0712345)
     text = cfg.section("y")
-    assert text == "[input_shaper]\nshaper_type_y: 2hump_ei\nshaper_freq_y: 48.123\ndamping_ratio_y: 0.071235\n"
-    assert jb.parse_klipper(text, "y") == jb.KlipperConfig("2hump_ei", 48.123, 0.071235)
-    assert jb.parse_klipper(cfg.command("x")) == jb.KlipperConfig("2hump_ei", 48.123, 0.071235)
+    assert text == "[input_shaper]\nshaper_type_y: 2hump_ei\nshaper_freq_y: 48.1234\ndamping_ratio_y: 0.0712345\n"
+    assert jb.parse_klipper(text, "y") == cfg  # the numbers in full: the same floats
+    assert jb.parse_klipper(cfg.command("x")) == cfg
+    odd = jb.KlipperConfig("ei", 40.0 / 3.0, 0.1 / 3.0)
+    assert jb.parse_klipper(odd.section()) == odd
     assert jb.parse_klipper("[input_shaper]\nshaper_freq_x: 40\n") == jb.KlipperConfig("mzv", 40.0, 0.1)  # defaults
     with pytest.raises(ValueError, match="shaper_type_x 'zvdd' is not one of"):
         jb.parse_klipper("[input_shaper]\nshaper_type: ZVDD\nshaper_freq_x: 40\n")

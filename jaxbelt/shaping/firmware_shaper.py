@@ -30,8 +30,8 @@ value over every mode of the axis and every frequency of its band $f_i(1 \\pm u)
 
 **What is stated is what is exported.** A firmware design's `amplitudes` and `times` are those the firmware
 runs: the text (`to_firmware()`) is read back by a reader written from the firmware's source (RepRapFirmware's
-single-precision amplitudes and whole step clocks; Klipper's impulses from the frequency and damping ratio as
-the text rounds them), and `worst` is measured on those impulses, on a frequency grid 4x finer than the
+single-precision amplitudes and whole step clocks; Klipper's impulses from the frequency and damping ratio the
+text states in full), and `worst` is measured on those impulses, on a frequency grid 4x finer than the
 design's. A grid design drops no impulse either: impulses of zero amplitude are removed before `worst` is
 measured, on what is exported (the residual is measured from the last impulse, so removing trailing zeros
 would otherwise change it).
@@ -58,7 +58,7 @@ from .._checks import check_real, is_concrete
 from .._io import atomic_open, check_output_path
 from .._threads import blas_limited
 from ..models.axis import ModalAxis
-from .klipper import KLIPPER_MAX_PULSES, KLIPPER_SHAPERS, KlipperConfig, impulses, klipper_impulses, rounded
+from .klipper import KLIPPER_MAX_PULSES, KLIPPER_SHAPERS, KlipperConfig, impulses, klipper_impulses
 from .rrf import RRF_MAX_IMPULSES, STEP_CLOCK_RATE, m593_line, parse_m593
 from .shapers import shaper_response
 
@@ -407,15 +407,13 @@ def _klipper_design(axis, band, tau, u, K):
 
 
 def _klipper_round(cfg, tau):
-    """The configuration as its text states it, its frequency raised by 1 mHz steps until it lasts <= tau."""
-    zmax = KLIPPER_SHAPERS[cfg.kind][1]
-    c = rounded(KlipperConfig(cfg.kind, cfg.freq, min(cfg.damping, zmax)))
-    if c.damping > zmax:
-        c = KlipperConfig(c.kind, c.freq, zmax)
-    for _ in range(1000):
+    """The configuration with its damping ratio within the type's range and its duration at most tau (the
+    frequency raised by round-off steps where the duration's float exceeds tau by round-off)."""
+    c = KlipperConfig(cfg.kind, float(cfg.freq), min(float(cfg.damping), KLIPPER_SHAPERS[cfg.kind][1]))
+    for _ in range(100):
         if klipper_impulses(c.kind, c.freq, c.damping)[1][-1] <= tau:
             break
-        c = KlipperConfig(c.kind, round(c.freq + 0.001, 3), c.damping)
+        c = KlipperConfig(c.kind, c.freq * (1 + 1e-13), c.damping)
     return c
 
 

@@ -141,7 +141,9 @@ def klipper_impulses(kind: str, freq: float, damping: float):
 
 
 class KlipperConfig(NamedTuple):
-    """One axis' Klipper input shaper: `kind` (Klipper's type name), `freq` [Hz], `damping`."""
+    """One axis' Klipper input shaper: `kind` (Klipper's type name), `freq` [Hz], `damping`. The text writes the
+    numbers in full (the shortest decimal that reads back to the same float: Klipper reads its configuration's
+    numbers as Python floats), so Klipper runs exactly the shaper whose residual jaxbelt states."""
 
     kind: str
     freq: float
@@ -150,22 +152,17 @@ class KlipperConfig(NamedTuple):
     def section(self, axis: str = "x") -> str:
         """The `[input_shaper]` section of Klipper's configuration for `axis`."""
         return (
-            f"[input_shaper]\nshaper_type_{axis}: {self.kind}\nshaper_freq_{axis}: {self.freq:.3f}\n"
-            f"damping_ratio_{axis}: {self.damping:.6f}\n"
+            f"[input_shaper]\nshaper_type_{axis}: {self.kind}\nshaper_freq_{axis}: {float(self.freq)!r}\n"
+            f"damping_ratio_{axis}: {float(self.damping)!r}\n"
         )
 
     def command(self, axis: str = "x") -> str:
         """The `SET_INPUT_SHAPER` command that sets this shaper on `axis` at run time."""
         a = axis.upper()
         return (
-            f"SET_INPUT_SHAPER SHAPER_TYPE_{a}={self.kind} SHAPER_FREQ_{a}={self.freq:.3f} "
-            f"DAMPING_RATIO_{a}={self.damping:.6f}"
+            f"SET_INPUT_SHAPER SHAPER_TYPE_{a}={self.kind} SHAPER_FREQ_{a}={float(self.freq)!r} "
+            f"DAMPING_RATIO_{a}={float(self.damping)!r}"
         )
-
-
-def rounded(config: KlipperConfig) -> KlipperConfig:
-    """The configuration as its text states it (frequency to 1 mHz, damping ratio to 1e-6)."""
-    return KlipperConfig(config.kind, float(f"{config.freq:.3f}"), float(f"{config.damping:.6f}"))
 
 
 def parse_klipper(text: str, axis: str = "x") -> KlipperConfig:
