@@ -9,7 +9,7 @@ value over every mode of the axis and every frequency of its band $f_i(1 \\pm u)
 (`design_shaper(..., firmware=)`):
 
 - **`None`** (any number of impulses): the times a uniform grid over the length $\\tau$, the amplitudes the
-  linear programme
+  linear programme (solved by HiGHS, scipy's `linprog`)
 
   $\\min_{A}\\ t$ subject to $\\mathrm{Re}(e^{-i\\theta_p}\\sum_k A_k e^{s_g(\\tau - t_k)}) \\le t$, $A_k \\ge 0$,
   $\\sum_k A_k = 1$,
@@ -23,7 +23,8 @@ value over every mode of the axis and every frequency of its band $f_i(1 \\pm u)
   the length $\\tau$ at each mode's damping, each mode's shapers at their own length where they fit, two modes'
   ZV shapers convolved, and K impulses on a uniform grid with the LP's amplitudes; the amplitudes at the best
   times are polished by the LP. Every start is itself a candidate, so the result leaves at most what each
-  start leaves. Exported as RepRapFirmware's `M593 P"custom"` line (`jaxbelt.shaping.rrf`).
+  start leaves on the check grid (up to RepRapFirmware's rounding of the delays to its step clock: 1.7e-5
+  relative for a ZV at 40 Hz). Exported as RepRapFirmware's `M593 P"custom"` line (`jaxbelt.shaping.rrf`).
 - **`"klipper"`**: one of Klipper's six shaper types (`jaxbelt.shaping.klipper`), its frequency and damping
   ratio chosen by gradient for the band (`jaxbelt.shaping.klipper_tune`), at most $\\tau$ long; exported as the
   `[input_shaper]` section or the `SET_INPUT_SHAPER` command.
