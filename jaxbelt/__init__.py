@@ -136,18 +136,16 @@ if _typing.TYPE_CHECKING:
     from .shaping.codesign import shortest_move_time as shortest_move_time
     from .shaping.firmware_shaper import FirmwareShaper as FirmwareShaper
     from .shaping.firmware_shaper import design_shaper as design_shaper
-    from .shaping.klipper import KlipperConfig as KlipperConfig
-    from .shaping.klipper import klipper_calibration as klipper_calibration
-    from .shaping.klipper import klipper_impulses as klipper_impulses
-    from .shaping.klipper import parse_klipper as parse_klipper
-    from .shaping.rrf import m593_line as m593_line
-    from .shaping.rrf import parse_m593 as parse_m593
 
     # --- command shaping on the user's axis ---------------------------------------------------------
     from .shaping.identify import identify_axis as identify_axis
     from .shaping.identify import identify_axis_from_psd as identify_axis_from_psd
     from .shaping.identify import load_record as load_record
     from .shaping.identify import load_spectrum as load_spectrum
+    from .shaping.klipper import KlipperConfig as KlipperConfig
+    from .shaping.klipper import klipper_calibration as klipper_calibration
+    from .shaping.klipper import klipper_impulses as klipper_impulses
+    from .shaping.klipper import parse_klipper as parse_klipper
     from .shaping.moves import PiecewiseMove as PiecewiseMove
     from .shaping.moves import SplineMove as SplineMove
     from .shaping.moves import fastest_move as fastest_move
@@ -158,6 +156,8 @@ if _typing.TYPE_CHECKING:
     from .shaping.plan import design_move as design_move
     from .shaping.residual import residual_amplitudes as residual_amplitudes
     from .shaping.residual import residual_curve as residual_curve
+    from .shaping.rrf import m593_line as m593_line
+    from .shaping.rrf import parse_m593 as parse_m593
     from .shaping.shapers import shaper_impulses as shaper_impulses
     from .solution import Solution as Solution
     from .solution import SolveError as SolveError
