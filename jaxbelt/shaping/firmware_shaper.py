@@ -9,7 +9,7 @@ value over every mode of the axis and every frequency of its band $f_i(1 \\pm u)
 (`design_shaper(..., firmware=)`):
 
 - **`None`** (any number of impulses): the times a uniform grid over the length $\\tau$, the amplitudes the
-  linear programme (solved by HiGHS, scipy's `linprog`)
+  linear programme (solved by jaxbelt's interior point method, `jaxbelt.shaping.lp`)
 
   $\\min_{A}\\ t$ subject to $\\mathrm{Re}(e^{-i\\theta_p}\\sum_k A_k e^{s_g(\\tau - t_k)}) \\le t$, $A_k \\ge 0$,
   $\\sum_k A_k = 1$,
@@ -38,7 +38,7 @@ measured, on what is exported (the residual is measured from the last impulse, s
 would otherwise change it).
 
 **The lower bound** of a free-time or Klipper design (`lp_value`, `lower_bound`): the LP on a uniform grid of
-257 times over $[0, \\tau]$ with any number of impulses, on the design's frequency grid, solved by HiGHS.
+257 times over $[0, \\tau]$ with any number of impulses, on the design's frequency grid (the same solver).
 `lp_value` is its optimum: no shaper whose times lie on that grid leaves less. `lower_bound` holds for every
 shaper of length at most $\\tau$, any number of impulses, any times (weak duality: the LP's multipliers $z$
 of the cut rows, normalised, give a weighting under which each impulse at time t contributes
@@ -246,38 +246,53 @@ class _Band:
         return max(float(np.max(shaper_response(A, T, fi * self.fine, zi))) for fi, zi in zip(self.f, self.z))
 
 
-def _lp(times, s, tau):
-    """The LP of the module docstring at fixed `times` (K,) over [0, tau], solved by HiGHS (scipy's `linprog`):
-    `(amplitudes, value, lower_bound)`. The bound is weak duality with the solver's multipliers $z$ of the cut
-    rows (clipped to >= 0 and normalised to add to 1): every row is at most t, so $t \\ge z^TCA \\ge
-    \\min_k (z^TC)_k$ for amplitudes A that add to 1; it holds whatever the solver's tolerances."""
-    from scipy.optimize import linprog
+#: the LP's impulse counts, padded up to one of these (compile once per size, not per call)
+_LP_SIZES = (8, 17, 33, 65, 129, 257)
 
+
+def _lp(times, s, tau, polish: bool = False):
+    """The LP of the module docstring at fixed `times` (K,) over [0, tau], solved by jaxbelt's interior point
+    method (`jaxbelt.shaping.lp.solve_lp`): `(amplitudes, value, lower_bound, w)`. The times are padded with
+    copies of the last one up to a size of `_LP_SIZES` (a copy is the same column: the LP's value is unchanged,
+    and the copies' amplitudes are added back), so that one program serves every call of that size. The bound
+    is weak duality with the solver's multipliers $z$ of the cut rows (normalised to add to 1): every row is at
+    most t, so $t \\ge z^TCA \\ge \\min_k (z^TC)_k$ for amplitudes A that add to 1; it holds whatever the
+    solver's tolerances. `w`: the multipliers as weights of the poles (for `_bound`). `polish=True` (amplitudes at
+    times optimised elsewhere, which may nearly coincide and make the LP degenerate): None where the solver does
+    not converge, the candidate then simply not offered."""
+    from .lp import solve_lp
+
+    times = np.asarray(times, dtype=float)
     K = len(times)
-    kern = np.exp(np.multiply.outer(s, tau - np.asarray(times)))  # (G, K)
+    n = next((m for m in _LP_SIZES if m >= K), K)
+    padded = np.r_[times, np.full(n - K, times[-1])]
+    kern = np.exp(np.multiply.outer(s, tau - padded))  # (G, n)
     P = 32
     theta = 2.0 * np.pi * np.arange(P) / P
-    cuts = np.real(np.exp(-1j * theta)[:, None, None] * kern[None]).reshape(-1, K)
-    G = np.hstack([cuts, -np.ones((cuts.shape[0], 1))])
-    c = np.r_[np.zeros(K), 1.0]
-    res = linprog(
-        c,
-        A_ub=G,
-        b_ub=np.zeros(cuts.shape[0]),
-        A_eq=np.r_[np.ones(K), 0.0][None],
-        b_eq=np.ones(1),
-        bounds=[(0.0, 1.0)] * K + [(None, None)],
-        method="highs",
+    cuts = np.real(np.exp(-1j * theta)[:, None, None] * kern[None]).reshape(-1, n)
+    m = cuts.shape[0]
+    G = np.vstack(
+        [
+            np.hstack([cuts, -np.ones((m, 1))]),
+            np.hstack([-np.eye(n), np.zeros((n, 1))]),  # A_k >= 0
+            np.hstack([np.eye(n), np.zeros((n, 1))]),  # A_k <= 1 (implied; bounds the variables)
+        ]
     )
-    if res.status != 0:  # a feasible, bounded LP: HiGHS failing on it is a bug, not the user's input
-        raise RuntimeError(f"design_shaper: the LP solver stopped without an optimum ({res.message})")
-    z = np.clip(-np.asarray(res.ineqlin.marginals), 0.0, None)
+    h = np.r_[np.zeros(m), np.zeros(n), np.ones(n)]
+    c = np.r_[np.zeros(n), 1.0]
+    res = solve_lp(c, G, h, np.r_[np.ones(n), 0.0][None], np.ones(1), x_bound=np.r_[np.ones(n), 1.0], tol=1e-10)
+    if not bool(res.converged):  # a feasible, bounded LP: not converging on it is a bug, not the user's input
+        if polish:
+            return None
+        raise RuntimeError("design_shaper: the LP solver stopped without an optimum (iteration limit)")
+    z = np.clip(np.asarray(res.z)[:m], 0.0, None)
     z = z / z.sum() if z.sum() > 0 else np.full(z.shape, 1.0 / z.size)
     # the multipliers as weights of the poles: z^T C's column at time t is Re(sum_g w_g e^{s_g (tau - t)})
     w = (z.reshape(P, -1) * np.exp(-1j * theta)[:, None]).sum(axis=0)
-    amps = np.clip(np.asarray(res.x)[:K], 0.0, None)
+    x = np.clip(np.asarray(res.x)[:n], 0.0, None)
+    amps = np.r_[x[: K - 1], x[K - 1 :].sum()]  # the copies of the last time are its impulse
     amps[amps < 1e-12 * amps.max()] = 0.0
-    return amps / amps.sum(), float(res.fun), float(np.min(z @ cuts)), w
+    return amps / amps.sum(), float(res.value), float(np.min(z @ cuts)), w
 
 
 def _exported(A, T):
@@ -363,8 +378,9 @@ def _free_design(axis, band, tau, u, K, firmware):
     cands = [(np.asarray(A), np.asarray(T)) for A, T in starts] + runs
     cands.sort(key=lambda c: band.worst(*_exported(*c)))
     for _, T in cands[:4]:  # the LP's amplitudes at the best runs' times
-        A_lp, _, _, _ = _lp(T, band.s, tau)
-        cands.append((A_lp, T))
+        polished = _lp(T, band.s, tau, polish=True)
+        if polished is not None:
+            cands.append((polished[0], T))
 
     def exported(c):
         A, T = c
