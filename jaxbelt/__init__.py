@@ -139,6 +139,10 @@ if _typing.TYPE_CHECKING:
 
     # --- command shaping on the user's axis ---------------------------------------------------------
     from .shaping.identify import identify_axis as identify_axis
+    from .shaping.klipper import KlipperConfig as KlipperConfig
+    from .shaping.klipper import klipper_calibration as klipper_calibration
+    from .shaping.klipper import klipper_impulses as klipper_impulses
+    from .shaping.klipper import parse_klipper as parse_klipper
     from .shaping.measurement import identify_measurement as identify_measurement
     from .shaping.moves import PiecewiseMove as PiecewiseMove
     from .shaping.moves import SplineMove as SplineMove
@@ -156,6 +160,8 @@ if _typing.TYPE_CHECKING:
     from .shaping.residual import residual_curve as residual_curve
     from .shaping.resonance_test import identify_axis_from_sweep as identify_axis_from_sweep
     from .shaping.resonance_test import klipper_sweep as klipper_sweep
+    from .shaping.rrf import m593_line as m593_line
+    from .shaping.rrf import parse_m593 as parse_m593
     from .shaping.shapers import shaper_impulses as shaper_impulses
     from .solution import Solution as Solution
     from .solution import SolveError as SolveError

@@ -393,3 +393,35 @@ def test_exact_peaks_of_a_shaped_move_agree_with_a_fine_sampling(j_max):
         # the sampling can only miss a peak between samples (by O(h^2) of the velocity's curvature): exact >= sampled
         assert np.all(exact >= sampled * (1 - 1e-12))
         np.testing.assert_allclose(exact, sampled, rtol=1e-9, atol=1e-15)
+
+
+# --------------------------------------------------------------------------------------------
+# Klipper's shapers as Klipper computes them (jaxbelt.shaping.klipper), its text and its reader
+# --------------------------------------------------------------------------------------------
+KLIPPER_TYPES = {"zv": "ZV", "mzv": "MZV", "zvd": "ZVD", "ei": "EI", "2hump_ei": "2-hump EI", "3hump_ei": "3-hump EI"}
+
+
+@pytest.mark.parametrize("kind", list(KLIPPER_TYPES))
+@pytest.mark.parametrize("f, zeta", [(40.0, 0.1), (23.7, 0.0), (61.0, 0.19)])
+def test_klipper_impulses_are_the_published_formulas(kind, f, zeta):
+    """`jb.klipper_impulses` (Klipper's arithmetic; MZV from its zero-placement solve) against the published
+    formulas typed out above, normalised: 1e-13 (the MZV solve's round-off)."""
+    A, T = jb.klipper_impulses(kind, f, zeta)
+    A0, T0 = published(KLIPPER_TYPES[kind], f, zeta)
+    np.testing.assert_allclose(A, np.asarray(A0) / np.sum(A0), rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(T, T0, rtol=1e-13, atol=1e-15)
+
+
+def test_klipper_text_reads_back_and_refuses_what_klipper_refuses():
+    cfg = jb.KlipperConfig("2hump_ei", 48.1234, 0.0712345)
+    text = cfg.section("y")
+    assert text == "[input_shaper]\nshaper_type_y: 2hump_ei\nshaper_freq_y: 48.1234\ndamping_ratio_y: 0.0712345\n"
+    assert jb.parse_klipper(text, "y") == cfg  # the numbers in full: the same floats
+    assert jb.parse_klipper(cfg.command("x")) == cfg
+    odd = jb.KlipperConfig("ei", 40.0 / 3.0, 0.1 / 3.0)
+    assert jb.parse_klipper(odd.section()) == odd
+    assert jb.parse_klipper("[input_shaper]\nshaper_freq_x: 40\n") == jb.KlipperConfig("mzv", 40.0, 0.1)  # defaults
+    with pytest.raises(ValueError, match="shaper_type_x 'zvdd' is not one of"):
+        jb.parse_klipper("[input_shaper]\nshaper_type: ZVDD\nshaper_freq_x: 40\n")
+    with pytest.raises(ValueError, match=r"parameter `damping` must lie in \[0, 0.4\] for ei"):
+        jb.klipper_impulses("ei", 40.0, 0.5)

@@ -385,7 +385,7 @@ def test_load_record_path_of_the_wrong_type_names_the_argument(path):
 # =====================================================================================
 SHAPER_BAD = {
     "axis": st.sampled_from([None, [40.0], jb.BeltPlatform()]),
-    "duration": st.one_of(NONFINITE, st.just(0.0), st.floats(-1e6, -1e-300), st.sampled_from(["x", True, None])),
+    "duration": st.one_of(NONFINITE, st.just(0.0), st.floats(-1e6, -1e-300), st.sampled_from(["x", True, 1e300])),
     "uncertainty": st.one_of(NONFINITE, st.floats(-1.0, -1e-12), st.floats(0.9, 1e6), st.sampled_from(["x", None])),
     "n_impulses": st.sampled_from([1, 0, 258, 2.5, True, "17"]),
     "n_freq": st.sampled_from([0, 402, 1.5, False]),

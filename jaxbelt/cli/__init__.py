@@ -21,7 +21,7 @@ import warnings
 
 from .._lapack import bind_tables
 
-SUBCOMMANDS = ("startup", "shaping", "fourbar", "string", "nonlinear", "bench")
+SUBCOMMANDS = ("startup", "shaping", "shaper", "fourbar", "string", "nonlinear", "bench")
 
 #: set by `entry`: the command runs in a process of its own (no user code), see `_prepare_figures`
 _OWN_PROCESS = False

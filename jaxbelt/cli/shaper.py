@@ -1,0 +1,103 @@
+"""`jaxbelt shaper`: an input shaper for the user's axis, as the text a firmware loads (`jaxbelt.design_shaper`).
+
+`jaxbelt shaper --firmware rrf --mode 40:0.05` prints RepRapFirmware's `M593 P"custom" H… T…` line;
+`--firmware klipper` Klipper's `[input_shaper]` section and its `SET_INPUT_SHAPER` command. The axis comes from
+`--mode F:Z` (one per mode) or `--measured FILE` (a free decay t,y, or a power spectral density such as Klipper's
+resonance test writes; `--n-modes`, `--column`). `--duration` [s] or `--target` (the shortest shaper that leaves
+at most that residual ratio); neither: the duration of the best classic shaper. `--out FILE` writes the text.
+"""
+
+from __future__ import annotations
+
+from ._args import float_in, int_in, positive_float
+
+
+def register(subparsers):
+    p = subparsers.add_parser(
+        "shaper",
+        help="an input shaper for your axis as the firmware's text (RepRapFirmware M593, Klipper [input_shaper])",
+        description=__doc__.split("\n\n")[0] if __doc__ else None,
+    )
+    p.add_argument("--firmware", choices=("rrf", "klipper"), required=True, help="the firmware that loads it")
+    p.add_argument("--mode", type=_mode, action="append", default=[], help="a mode: frequency F [Hz]:damping Z")
+    p.add_argument("--measured", default=None, help="identify the modes from a CSV (free decay t,y or a PSD)")
+    p.add_argument("--n-modes", type=int_in(1, 8), default=None, help="modes to identify from --measured (1)")
+    p.add_argument("--column", default=None, help="the column of --measured to read (name or index)")
+    p.add_argument("--duration", type=positive_float, default=None, help="the shaper's longest length [s]")
+    p.add_argument(
+        "--target", type=float_in(0.0, 1.0, lo_open=True, hi_open=True), default=None, help="residual ratio to reach"
+    )
+    p.add_argument(
+        "--uncertainty", type=float_in(0.0, 0.9, hi_open=True), default=0.2, help="band +-u of every mode (0.2)"
+    )
+    p.add_argument("--axis-name", choices=("x", "y"), default="x", help="Klipper's axis letter (x)")
+    p.add_argument("--out", default=None, help="write the firmware text to this file (.g, .gcode, .cfg or .txt)")
+    p.set_defaults(func=run, early_check=early_check)
+
+
+def _mode(text: str):
+    """F:Z -> (frequency [Hz] > 0, damping ratio in [0, 1))."""
+    import argparse
+    import math
+
+    try:
+        f, z = (float(x) for x in text.split(":"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected F:Z (two numbers), got {text!r}") from None
+    if not (math.isfinite(f) and f > 0):
+        raise argparse.ArgumentTypeError(f"frequency F must be finite and > 0 Hz, got {f:g}")
+    if not (math.isfinite(z) and 0 <= z < 1):
+        raise argparse.ArgumentTypeError(f"damping ratio Z must lie in [0, 1), got {z:g}")
+    return f, z
+
+
+def early_check(args) -> str | None:
+    """Relations between the arguments (the standard library only)."""
+    if bool(args.mode) == bool(args.measured):
+        return "give the axis by --mode F:Z (one per mode) or by --measured FILE, one of the two"
+    if args.measured is None and (args.n_modes is not None or args.column is not None):
+        return "argument --n-modes/--column: only with --measured"
+    if args.duration is not None and args.target is not None:
+        return "argument --target: give --duration or --target, not both"
+    if args.out is not None and not str(args.out).lower().endswith((".g", ".gcode", ".cfg", ".txt")):
+        return "argument --out: the file must end in .g, .gcode, .cfg or .txt"
+    return None
+
+
+def run(args) -> int:
+    from ..models.axis import ModalAxis
+    from ..shaping.firmware_shaper import design_shaper
+
+    if args.measured:
+        from ..shaping import identify
+
+        if identify.is_spectrum_file(args.measured):
+            f, psd = identify.load_spectrum(args.measured, args.column)
+            axis = identify.identify_axis_from_psd(f, psd, args.n_modes or 1)
+        else:
+            t, y = identify.load_record(args.measured, args.column)
+            axis = identify.identify_axis(t, y, args.n_modes or 1)
+    else:
+        fs, zs = zip(*args.mode)
+        axis = ModalAxis(list(fs), list(zs))
+    s = design_shaper(axis, args.duration, uncertainty=args.uncertainty, firmware=args.firmware, target=args.target)
+    modes = ", ".join(
+        f"{float(f):.3f} Hz (damping {float(z):.4f})" for f, z in zip(axis.frequencies, axis.damping_ratios)
+    )
+    print(f"; axis: {modes}; band +-{100 * s.uncertainty:g} %")
+    print(
+        f"; {len(s.amplitudes)} impulses over {1e3 * s.duration:.3f} ms: worst residual {100 * s.worst:.3g} % "
+        f"(no shaper of this length leaves less than {100 * s.lower_bound:.3g} %)"
+    )
+    if args.firmware == "rrf":
+        text = s.to_firmware() + "\n"
+    else:
+        text = s.to_firmware("config", args.axis_name) + "\n" + s.to_firmware("command", args.axis_name) + "\n"
+    print(text, end="")
+    if args.out:
+        from .._io import atomic_open
+
+        with atomic_open(args.out, "w") as fh:
+            fh.write(text)
+        print(f"; written to {args.out}")
+    return 0
