@@ -47,9 +47,11 @@ from ..commands import AbstractMotionCommand
 from ..models.axis import ModalAxis
 from . import design as _design
 from .certify import continuous_lower_bound
+from .hull import INTERPOLATIONS, best_blend
 from .moves import (
     PiecewiseMove,
     SplineMove,
+    blend_moves,
     check_move_limits,
     executable_samples,
     fastest_move,
@@ -481,6 +483,17 @@ def _check_inputs(axis, distance, move_time, v_max, a_max, j_max, uncertainty, i
     return d, t_min
 
 
+def _check_execution(rate_hz, interpolation) -> float:
+    """`design_move`'s drive: its setpoint rate [Hz] (finite, > 0) and interpolation; a `ValueError` naming them."""
+    check_positive("rate_hz", rate_hz, "Hz", "design_move")
+    if not (isinstance(interpolation, str) and interpolation in INTERPOLATIONS):
+        raise ValueError(
+            f"design_move: parameter `interpolation` must be one of {INTERPOLATIONS} (position setpoints, linear "
+            f"between them); got {interpolation!r}"
+        )
+    return float(rate_hz)
+
+
 def _check_damping(damping) -> tuple[float, float] | None:
     """`design_move`'s `damping` as `(lo, hi)`, or None; a `ValueError` naming it otherwise."""
     if damping is None:
@@ -591,13 +604,29 @@ def _row(name, axis, cmd, T, ref, u, limits, note="", ok=True, per: int = 1):
 
 
 def _shaped(axis, name, distance, T, v_max, a_max, j_max):
-    """The classic shaper `name` on the gentlest base that ends at T, or (None, shortest time)."""
+    """The classic shaper `name` on the gentlest base that ends at T, or (None, shortest time).
+
+    The base is the gentlest within the limits; where none is, the gentlest whose *shaped* move is within them (a
+    shaper spreads the base's acceleration over its impulses: ZV halves the peak acceleration of a base whose
+    acceleration phase is shorter than its delay, so at a ZV-shaped move's own time and peaks the base exceeds
+    `a_max` while the shaped move does not)."""
     A, tau = shaper_for_axis(name, axis.frequencies, axis.damping_ratios)
-    base = trapezoid_move(distance, T - tau[-1], v_max, a_max, j_max) if T > tau[-1] else None
     t_short = fastest_time(distance, v_max, a_max, j_max) + float(tau[-1])
+    if not T > tau[-1]:
+        return None, t_short
+    base = trapezoid_move(distance, T - tau[-1], v_max, a_max, j_max)
+    if base is not None:
+        return shape_move(base, A, tau), t_short
+    relax = 1.0 / float(np.min(np.asarray(A)))  # a shaped peak is at least min(A) times the base's
+    base = trapezoid_move(distance, T - tau[-1], v_max, a_max * relax, None if j_max is None else j_max * relax)
     if base is None:
         return None, t_short
-    return shape_move(base, A, tau), t_short
+    cmd = shape_move(base, A, tau)
+    pv, pa, pj = peaks(cmd)
+    tol = 1 + 1e-9
+    if pv > v_max * tol or pa > a_max * tol or (j_max is not None and pj > j_max * tol):
+        return None, t_short
+    return cmd, t_short
 
 
 def _minimax_options(axis, T_guess: float, u: float, j_max, fixed_time: bool, smooth: bool = True):
@@ -779,6 +808,8 @@ def design_move(
     smooth: bool | str = "auto",
     certify_rtol: float | None = None,
     damping=None,
+    rate_hz: float = 1000.0,
+    interpolation: str = "linear",
 ) -> MovePlan:
     """Design the move of `distance` [m] on `axis` every way jaxbelt knows, under the same limits and move time,
     and rank them (see the module docstring).
@@ -874,6 +905,7 @@ def design_move(
                 f"with j_max={j_max!r}"
             )
     damp = _check_damping(damping)
+    rate = _check_execution(rate_hz, interpolation)
     u = float(uncertainty)
     v_max, a_max = float(v_max), float(a_max)
     j_max = None if j_max is None else float(j_max)
@@ -957,10 +989,11 @@ def design_move(
             row, mm, bound = _minimax_row("minimax", solver, mm, axis, ref, u, limits, far, per, certify_rtol, progress)
             rows.append(row)
         primary = next((r for r in rows if r.name == "minimax"), None)
-        # `smooth="auto"`: the design with jumps beside the smooth one, at the given time (or, to certify, the
-        # smooth design's)
         T_j = float(move_time) if move_time is not None else (float(mm.command.duration) if mm is not None else None)
-        why = _jumps_reason(primary, classic) if move_time is not None else ""
+        # every classic shaped move and the unshaped move at the minimax design's time, whatever `include` shows:
+        # the members of its command space (`jaxbelt.shaping.hull`)
+        space = _members(nominal, d, T_j, v_max, a_max, j_max) if T_j is not None else {}
+        why = _jumps_reason(primary, space, axis, ref, band, rate) if move_time is not None else ""
         if auto and T_j is not None and (why or certify_rtol is not None):
             why = (
                 why or "added: `certify_rtol` asks for the continuous certificate, which the design with jumps carries"
@@ -976,6 +1009,8 @@ def design_move(
         if primary is not None and primary.ok and smooth:  # the smooth row's place against any command
             k = rows.index(primary)
             rows[k] = dataclasses.replace(primary, note=primary.note + _smooth_certificate(primary, bound))
+        if space and smooth_arg is not True:  # the command space that holds every candidate
+            rows = _space_rows(rows, space, axis, ref, u, limits, per, band, rate)
     # --- Incerti's pseudo-polynomial commands
     T_common = (
         float(move_time)
@@ -995,7 +1030,9 @@ def design_move(
         else:
             base = trapezoid_move(d, T_common, v_max, a_max, j_max)
             rows.append(_row("unshaped", axis, base, T_common, ref, u, limits, per=per))
-    ranked = sorted(rows, key=lambda r: (not r.ok, r.worst_percent if math.isfinite(r.worst_percent) else math.inf))
+    ranked = _not_beaten(
+        sorted(rows, key=lambda r: (not r.ok, r.worst_percent if math.isfinite(r.worst_percent) else math.inf))
+    )
     best = next((r for r in ranked if r.ok), None)
     if best is None:
         warnings.warn(
@@ -1075,16 +1112,85 @@ def _minimax_row(name, solver, mm, axis, ref, u, limits, far, per, certify_rtol,
     return row, mm, bound
 
 
-def _jumps_reason(primary, classic) -> str:
+def _jumps_reason(primary, space, axis, ref, band, rate) -> str:
     """Why `smooth="auto"` adds the design with jumps ("" when it does not): the smooth minimax row is missing, not
-    feasible or not converged, or a classic shaper of the table leaves no more than it."""
+    feasible or not converged, or a classic shaped move (whether or not the table shows it) or the unshaped move
+    leaves no more than it, as executed (`space`: `_members`; `rate`: the drive's setpoint rate [Hz])."""
     if primary is None or not primary.ok or not math.isfinite(primary.worst_percent):
         return "added: the smooth design is not feasible or not converged at this time"
-    beaten = [r for r in classic if r.worst_percent <= primary.worst_percent]
-    if not beaten:
+    names = list(space)
+    _, _, worst = best_blend(axis, [primary.command, *space.values()], ref, band, rate)
+    k = int(np.argmin(worst[1:]))
+    if worst[1 + k] > worst[0]:
         return ""
-    r = min(beaten, key=lambda r: r.worst_percent)
-    return f"added: {r.name} leaves {r.worst_percent:.3g} % <= the smooth design's {primary.worst_percent:.3g} %"
+    return (
+        f"added: {names[k]} leaves {100 * worst[1 + k]:.3g} % <= the smooth design's {100 * worst[0]:.3g} % (as "
+        f"executed at {rate:g} Hz)"
+    )
+
+
+def _not_beaten(ranked: list) -> list:
+    """`ranked` (least worst first) with the note of each minimax row that leaves more than another usable row
+    saying so: its certificate holds within its own command space only."""
+    best = next((r for r in ranked if r.ok), None)
+    out = []
+    for r in ranked:
+        if best is not None and r.ok and r.name in ("minimax", JUMPS) and r.worst_percent > best.worst_percent:
+            r = dataclasses.replace(
+                r,
+                note=r.note + f"; not the least of this table: {best.name} leaves {best.worst_percent:.3g} % (its "
+                "certificate holds within its own command space only)",
+            )
+        out.append(r)
+    return out
+
+
+def _members(nominal, d, T, v_max, a_max, j_max) -> dict:
+    """The candidates the minimax design's command space holds at move time `T` [s]: every classic shaper buildable
+    on `nominal` within the limits (`_shaped`), and the unshaped move: `{name: command}`."""
+    out = {}
+    for name in SHAPERS:
+        try:
+            cmd, _ = _shaped(nominal, name, d, T, v_max, a_max, j_max)
+        except ShaperRangeError:
+            continue
+        if cmd is not None:
+            out[name] = cmd
+    base = trapezoid_move(d, T, v_max, a_max * (1 + 1e-9), j_max)
+    if base is not None:
+        out["unshaped"] = base
+    return out
+
+
+def _space_rows(rows, space, axis, ref, u, limits, per, band, rate):
+    """`rows` with each minimax row replaced by the least worst residual, as executed at `rate` [Hz], of the blends
+    of its design with the designs with jumps of the table and the members of `space` (`jaxbelt.shaping.hull`):
+    at most what each of them leaves, by construction. The row's note says which blend it is."""
+    designs = {r.name: r.command for r in rows if r.name in ("minimax", JUMPS) and r.ok and r.command is not None}
+    out = []
+    for r in rows:
+        if r.name not in ("minimax", JUMPS):
+            out.append(r)
+            continue
+        keys = [n for n in designs if n in (r.name, JUMPS)]
+        names, cmds = keys + list(space), [designs[n] for n in keys] + list(space.values())
+        w, worst, each = best_blend(axis, cmds, ref, band, rate)
+        parts = ", ".join(f"{names[i]} {w[i]:.3g}" for i in np.flatnonzero(w))
+        own = r.name in designs
+        note = (
+            f"its command space holds every classic shaped move and the unshaped move: the blend {parts} leaves "
+            f"{100 * worst:.3g} % as executed at {rate:g} Hz ("
+            + (f"the design alone {100 * each[0]:.3g} %; " if own else "")
+            + f"least member {100 * float(np.min(each)):.3g} %)"
+        )
+        if own and w[0] == 1.0:
+            out.append(dataclasses.replace(r, note=r.note + "; " + note))
+            continue
+        cmd = blend_moves(cmds, w)
+        T = float(cmd.end_time)
+        prefix = r.note + "; " if own else ""
+        out.append(_row(r.name, axis, cmd, T, ref, u, limits, note=prefix + note, per=per))
+    return out
 
 
 def _smooth_certificate(row, bound: float) -> str:
