@@ -108,3 +108,48 @@ def test_execution_parameters_are_checked():
         jb.design_move(axis, 0.1, 0.8, v_max=V, a_max=A, include=("unshaped",), rate_hz=0.0)
     with pytest.raises(ValueError, match="interpolation"):
         jb.design_move(axis, 0.1, 0.8, v_max=V, a_max=A, include=("unshaped",), interpolation="cubic")
+
+
+def test_samples_refused_before_allocating():
+    """A rate whose samples would not fit in memory is refused by name, with the rates that fit; a rate that fits
+    gives ceil(T rate) + 1 samples."""
+    axis = jb.ModalAxis([5.0], [0.02])
+    plan = jb.design_move(axis, 0.1, 0.8, v_max=V, a_max=A, uncertainty=U, include=("unshaped",))
+    for rate in (1e9, 1e15):
+        with pytest.raises(ValueError, match=r"`rate_hz` = .* give rate_hz in \(0, "):
+            plan.samples(rate)
+    assert plan.samples(RATE)[0].size == 801
+
+
+def test_position_range():
+    """A command that backs off behind its start: a = -a0 on [0, tau], +a0 on [tau, 3 tau], -a0 on [3 tau, 4 tau]
+    (zero net distance) lowest at x(2 tau) = -a0 tau^2; added to a trapezoid that ends later, the whole is noted
+    as leaving the segment, and marked not ok where it leaves `x_min`."""
+    from jaxbelt.shaping.moves import PiecewiseMove, blend_moves
+    from jaxbelt.shaping.plan import _row, _within_range
+
+    a0, tau, d = 4.0, 0.05, 0.1
+    back = PiecewiseMove(np.array([0, tau, 3 * tau, 4 * tau]), np.array([-a0, 2 * a0, -2 * a0, a0]), np.zeros(4), 0.8)
+    base = trapezoid_move(d, 0.8, V, A)
+    assert base is not None
+    cmd = blend_moves([back, base], [1.0, 1.0])
+    axis = jb.ModalAxis([5.0], [0.02])
+    row = _row("test", axis, cmd, 0.8, np.ones(1), U, (10.0, 10.0, None))
+    tf = np.linspace(0.0, 4 * tau, 40001)  # the sum's minimum, on a fine grid: x_back in closed form per phase
+    x_back = np.where(
+        tf < tau,
+        -a0 * tf**2 / 2,
+        np.where(tf < 3 * tau, -a0 * tau**2 / 2 - a0 * tau * (tf - tau) + a0 * (tf - tau) ** 2 / 2, 0.0),
+    )
+    x_back = np.where(
+        tf >= 3 * tau, -a0 * tau**2 / 2 + a0 * tau * (tf - 3 * tau) - a0 * (tf - 3 * tau) ** 2 / 2, x_back
+    )
+    lowest = float(np.min(x_back + np.asarray(base.derivative(tf, 0))))
+    noted = _within_range(row, d, None, RATE)
+    assert noted.ok and "leaves the segment from start to end" in noted.note
+    low = float(noted.note.split("positions ")[1].split(" to")[0])
+    assert low == pytest.approx(lowest, rel=1e-3)  # the samples' minimum (its velocity is ~0 there)
+    assert not _within_range(row, d, (-1e-3, 0.2), RATE).ok
+    assert _within_range(row, d, (1.01 * lowest, 0.2), RATE).ok
+    with pytest.raises(ValueError, match="x_min"):
+        jb.design_move(axis, d, 0.8, v_max=V, a_max=A, include=("unshaped",), x_min=0.01)

@@ -26,10 +26,14 @@ import math
 import numpy as np
 
 from ..models.axis import ModalAxis
-from .moves import PiecewiseMove, derivatives_at
+from .moves import BlendMove, PiecewiseMove, derivatives_at
 
 #: angles of the modulus' polygon in the blend's programme (|r| <= t to within 1/cos(pi/32) - 1 = 0.5 %)
 _ANGLES = 32
+#: the least relative gain over the best member for which `best_blend` takes a blend (less is round-off's)
+_GAIN = 1e-2
+#: setpoints per block of `executed_integral`
+_BLOCK = 4096
 #: the drive's interpolation of its setpoints that `executed_integral` models
 INTERPOLATIONS = ("linear",)
 
@@ -49,6 +53,8 @@ def positions(cmd, t) -> np.ndarray:
         tk, al, be = (np.asarray(q, dtype=float) for q in (cmd.times, cmd.steps, cmd.ramps))
         d = np.maximum(np.minimum(t, T)[:, None] - tk, 0.0)
         return (d**2 / 2) @ al + (d**3 / 6) @ be
+    if isinstance(cmd, BlendMove):
+        return sum(float(w) * positions(m, t) for w, m in zip(np.asarray(cmd.weights), cmd.members))
     return derivatives_at(cmd, t, (0,))[0]
 
 
@@ -61,7 +67,10 @@ def executed_integral(t, x, s) -> np.ndarray:
     v = np.diff(x) / h
     dv = np.diff(np.concatenate([[0.0], v, [0.0]]))  # the velocity's jumps at t_0 .. t_n
     s = np.asarray(s, dtype=complex)
-    W = np.exp(np.multiply.outer(s.ravel(), t[-1] - t)) @ dv
+    W = np.zeros(s.size, dtype=complex)
+    for k0 in range(0, t.size, _BLOCK):  # memory O(len(s) x _BLOCK)
+        k1 = min(k0 + _BLOCK, t.size)
+        W += np.exp(np.multiply.outer(s.ravel(), t[-1] - t[k0:k1])) @ dv[k0:k1]
     return W.reshape(s.shape)
 
 
@@ -88,7 +97,7 @@ def best_blend(axis: ModalAxis, members, reference, factors, rate_hz: float):
     """The weights of the blend of `members` (moves of one duration) that leaves the least worst residual over the
     band `factors` as executed at `rate_hz` [Hz] (see the module docstring), in units of `reference` [m] per mode:
     `(weights, worst, member_worsts)`, `worst` <= min(`member_worsts`) (a member itself where the programme's blend
-    is not below it; the earliest member on ties)."""
+    is not below it by `_GAIN`, 1 %, of it; the earliest member on ties)."""
     from scipy.optimize import linprog
 
     C = np.stack([executed_ratios(axis, m, reference, factors, rate_hz).ravel() for m in members], axis=1)
@@ -113,6 +122,6 @@ def best_blend(axis: ModalAxis, members, reference, factors, rate_hz: float):
             w = np.where(res.x[:M] > 1e-9, res.x[:M], 0.0)  # the programme's round-off weights dropped
             w = w / w.sum()
             worst = float(np.max(np.abs(C @ w)))
-            if worst < best:
+            if worst < best * (1 - _GAIN):
                 best_w, best = w, worst
     return best_w, best, member_worst

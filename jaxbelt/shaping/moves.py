@@ -302,22 +302,34 @@ class BlendMove(AbstractMotionCommand):
         return _sample(self, rate_hz)
 
 
-def blend_moves(members, weights) -> "PiecewiseMove | BlendMove":
-    """$\\sum_m w_m$ `members[m]` (moves of one duration): a `PiecewiseMove` (their terms, scaled) when every member
-    is one, else a `BlendMove`. Members of zero weight are dropped; a single member of weight 1 is returned as is."""
+def blend_moves(members, weights) -> "PiecewiseMove | SplineMove | BlendMove":
+    """$\\sum_m w_m$ `members[m]` (moves of one duration). A single member of weight 1 is returned as is; otherwise the
+    `PiecewiseMove` members are merged into one (their terms, scaled, padded to a power of two: blends of one axis
+    size share their compiled programs), returned as is when every member is one, else as the last member of a
+    `BlendMove` with the others."""
     w = np.asarray(weights, dtype=float)
     keep = [i for i in range(w.size) if w[i] != 0.0]
     if len(keep) == 1 and w[keep[0]] == 1.0:
         return members[keep[0]]
-    ms, ws = [members[i] for i in keep], w[keep]
-    if all(isinstance(m, PiecewiseMove) for m in ms):
-        return PiecewiseMove(
-            jnp.concatenate([m.times for m in ms]),
-            jnp.concatenate([wi * m.steps for wi, m in zip(ws, ms)]),
-            jnp.concatenate([wi * m.ramps for wi, m in zip(ws, ms)]),
-            ms[0].duration,
+    pieces = [(w[i], members[i]) for i in keep if isinstance(members[i], PiecewiseMove)]
+    others = [(w[i], members[i]) for i in keep if not isinstance(members[i], PiecewiseMove)]
+    parts, ws = [m for _, m in others], [wi for wi, _ in others]
+    if pieces:
+        # in numpy (no eager JAX operation to compile), padded with zero terms at t = 0
+        times = np.concatenate([np.asarray(m.times) for _, m in pieces])
+        size = 1 << max(times.size - 1, 1).bit_length()
+        pad = np.zeros(size - times.size)
+        merged = PiecewiseMove(
+            np.concatenate([times, pad]),
+            np.concatenate([*(wi * np.asarray(m.steps) for wi, m in pieces), pad]),
+            np.concatenate([*(wi * np.asarray(m.ramps) for wi, m in pieces), pad]),
+            pieces[0][1].duration,
         )
-    return BlendMove(tuple(ms), ws, ms[0].duration)
+        if not others:
+            return merged
+        parts.append(merged)
+        ws.append(1.0)
+    return BlendMove(tuple(parts), np.asarray(ws), parts[0].duration)
 
 
 # --------------------------------------------------------------------------------------------

@@ -33,6 +33,7 @@ time at which it reaches that target (bisection on the time).
 import csv
 import dataclasses
 import math
+import os
 import warnings
 from typing import Any
 
@@ -47,7 +48,7 @@ from ..commands import AbstractMotionCommand
 from ..models.axis import ModalAxis
 from . import design as _design
 from .certify import continuous_lower_bound
-from .hull import INTERPOLATIONS, best_blend
+from .hull import INTERPOLATIONS, best_blend, positions, sample_times
 from .moves import (
     PiecewiseMove,
     SplineMove,
@@ -196,9 +197,13 @@ class MovePlan:
 
     def to_csv(self, path, rate_hz: float, candidate: str | None = None) -> tuple[float, float, float]:
         """Write the recommended command (or the candidate named `candidate`) sampled at `rate_hz` [Hz] as CSV
-        columns `t,x,v,a` (s, m, m/s, m/s²) with that header line. A drive that executes the acceleration
-        linearly between samples reproduces the table's residual (the design's acceleration is continuous), and
-        the samples respect the plan's limits (see `samples`).
+        columns `t,x,v,a` (s, m, m/s, m/s²) with that header line. The position column `x` is the command: a drive
+        that executes it as position setpoints, linear between them, at the plan's rate (`design_move(...,
+        rate_hz=)`, 1 kHz by default) leaves the residual the minimax rows state as executed (an independent replay
+        finds it within 1 %, tests/test_shaping_space.py). The `v` and `a` columns are the command's own velocity
+        and acceleration at the samples, for feed-forward only: a drive that interpolates the `a` column instead of
+        following `x` runs another command (for a design whose acceleration jumps, one that can leave many times the
+        stated residual). The samples respect the plan's limits (see `samples`).
 
         `path`: a `.csv` file in an existing, writable folder; `rate_hz` must exceed twice the highest frequency
         of the band (the samples must carry the modes). Both are checked before anything is computed. The file
@@ -223,6 +228,7 @@ class MovePlan:
     def _check_rate(self, rate_hz, owner: str) -> None:
         check_positive("rate_hz", rate_hz, "Hz", owner)
         check_rate(rate_hz, self.nyquist_hz(), owner)
+        check_sample_count(rate_hz, max((c.move_time for c in self.table if c.command is not None), default=0.0), owner)
 
     def samples(self, rate_hz: float, candidate: str | None = None):
         """`(t, x, v, a)` of the recommended command (or `candidate`) sampled at `rate_hz` [Hz], as `to_csv` writes
@@ -236,6 +242,7 @@ class MovePlan:
         would change the distance); another command that exceeds them by a rounding is stretched in time by the
         least factor that brings it within them (same distance, same rate; `jaxbelt.shaping.moves.limited_samples`)."""
         c = self._chosen(candidate, "MovePlan.samples")
+        check_sample_count(rate_hz, c.move_time, "MovePlan.samples")
         limits = (self.v_max, self.a_max, self.j_max)
         cmd = c.command
         assert cmd is not None  # `_chosen` refuses a candidate without a command
@@ -437,6 +444,34 @@ def nyquist_hz(frequencies, uncertainty: float) -> float:
     return 2.0 * float(np.max(np.asarray(frequencies, dtype=float))) * (1.0 + float(uncertainty))
 
 
+#: bytes an export holds per sample at its peak, an upper estimate: the four columns, and for the smooth design the
+#: banded basis of `executable_samples` (4 columns, values, indices, knot positions) and its temporaries
+BYTES_PER_SAMPLE = 512
+
+
+def _available_bytes() -> int:
+    """The memory available to this process now [bytes] (Linux `sysconf`; 8 GiB where it cannot be read)."""
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - not Linux
+        return 8 << 30
+
+
+def check_sample_count(rate_hz, duration: float, owner: str) -> None:
+    """A `ValueError` naming `rate_hz` [Hz] where the samples of a `duration` [s] move would need more than half the
+    memory available (`BYTES_PER_SAMPLE` each), stating the rates that fit, before anything is allocated."""
+    check_positive("rate_hz", rate_hz, "Hz", owner)
+    n = float(duration) * float(rate_hz) + 1.0
+    avail = _available_bytes()
+    if n * BYTES_PER_SAMPLE > avail / 2:
+        top = (avail / 2 / BYTES_PER_SAMPLE - 1.0) / max(float(duration), 1e-300)
+        raise ValueError(
+            f"{owner}: parameter `rate_hz` = {float(rate_hz):g} Hz makes {n:.3g} samples of the {float(duration):.4g} "
+            f"s move, about {n * BYTES_PER_SAMPLE / 1e9:.3g} GB, more than half the memory available "
+            f"({avail / 1e9:.3g} GB): give rate_hz in (0, {top:.4g}] Hz"
+        )
+
+
 def check_rate(rate_hz, nyquist: float, owner: str) -> None:
     """A `ValueError` naming `rate_hz` unless it exceeds `nyquist` [Hz] (the samples must carry the modes)."""
     if not float(rate_hz) > nyquist:
@@ -483,9 +518,18 @@ def _check_inputs(axis, distance, move_time, v_max, a_max, j_max, uncertainty, i
     return d, t_min
 
 
+#: the highest setpoint rate `design_move` models [Hz]: every candidate is sampled at it (a 10 s move: 1e7 samples)
+MAX_RATE_HZ = 1e6
+
+
 def _check_execution(rate_hz, interpolation) -> float:
     """`design_move`'s drive: its setpoint rate [Hz] (finite, > 0) and interpolation; a `ValueError` naming them."""
     check_positive("rate_hz", rate_hz, "Hz", "design_move")
+    if not float(rate_hz) <= MAX_RATE_HZ:
+        raise ValueError(
+            f"design_move: parameter `rate_hz` must lie in (0, {MAX_RATE_HZ:g}] Hz (a drive's setpoint rate); got "
+            f"{rate_hz!r}"
+        )
     if not (isinstance(interpolation, str) and interpolation in INTERPOLATIONS):
         raise ValueError(
             f"design_move: parameter `interpolation` must be one of {INTERPOLATIONS} (position setpoints, linear "
@@ -810,6 +854,8 @@ def design_move(
     damping=None,
     rate_hz: float = 1000.0,
     interpolation: str = "linear",
+    x_min=None,
+    x_max=None,
 ) -> MovePlan:
     """Design the move of `distance` [m] on `axis` every way jaxbelt knows, under the same limits and move time,
     and rank them (see the module docstring).
@@ -834,6 +880,14 @@ def design_move(
       default). A mode's 5 % band is then where the residual stays within 5 % at every damping sample;
       `plan.damping` records the range, `plan.axis` stays the user's axis. The minimax LP weighs 5 copies of each
       mode: about 5 times its rows (a 1-mode design costs about what a 5-mode one does, compile included);
+    - `rate_hz` [Hz] (default 1000, as the CLI's export; at most `MAX_RATE_HZ`) and `interpolation` (`"linear"`):
+      how the user's drive executes the command, position setpoints at `rate_hz`, linear between them (what
+      `MovePlan.to_csv` writes). The minimax rows are chosen on the residual as executed so
+      (`jaxbelt.shaping.hull`); their notes state it;
+    - `x_min`, `x_max` [m, positions from the start] (optional): the axis' travel. A candidate whose positions, as
+      executed, leave it is marked not ok; any candidate that leaves the segment between its start and its end by
+      more than `EXCURSION_RTOL` (1 %) of the distance is noted so (a long move's design may back off behind its
+      start);
     - `smooth`: the minimax design's command space. True: a continuous acceleration (cubic B-spline, continuous
       jerk). False: an acceleration that is constant on each of N equal intervals and jumps between them, as a
       shaped trapezoid's does; its limits are exact rather than a little conservative, so it can come closer to
@@ -851,6 +905,13 @@ def design_move(
       corrected for a drive that interpolates linearly (see `MovePlan.samples`), those of a design with jumps are
       exact samples whose jumps such a drive smooths over one sample. `plan.minimax` is the design of the better
       of the two rows.
+      With `"auto"` or False, the command space holds every candidate: each minimax row is the least worst blend
+      (`jaxbelt.shaping.hull`: $\\sum_m w_m x_m(t)$, $w \\ge 0$, $\\sum w = 1$, within the same limits) of its
+      design, the design with jumps where the table has it, every classic shaped move buildable at its time and
+      the unshaped move, built whatever `include` shows and judged as executed: so at any classic shaper's own
+      time and peaks the minimax row leaves no more than that shaper, by construction (its note names the
+      blend). `smooth=True` keeps the continuous acceleration as a constraint (no blend with jumps), at its cost:
+      the smooth row may leave more than a shaper, and its note then says so.
 
     The minimax row's note states its certificate: the LP's own gap (its command is the least residual of its
     command space: splines of its knots, or steps or ramps of its intervals) and, for a design with steps (no jerk
@@ -906,6 +967,7 @@ def design_move(
             )
     damp = _check_damping(damping)
     rate = _check_execution(rate_hz, interpolation)
+    x_range = _check_range(x_min, x_max, d)
     u = float(uncertainty)
     v_max, a_max = float(v_max), float(a_max)
     j_max = None if j_max is None else float(j_max)
@@ -1030,6 +1092,7 @@ def design_move(
         else:
             base = trapezoid_move(d, T_common, v_max, a_max, j_max)
             rows.append(_row("unshaped", axis, base, T_common, ref, u, limits, per=per))
+    rows = [_within_range(r, d, x_range, rate) for r in rows]
     ranked = _not_beaten(
         sorted(rows, key=lambda r: (not r.ok, r.worst_percent if math.isfinite(r.worst_percent) else math.inf))
     )
@@ -1129,6 +1192,47 @@ def _jumps_reason(primary, space, axis, ref, band, rate) -> str:
     )
 
 
+#: how far [fraction of the distance] a command may leave the segment between its start and its end before the
+#: table notes it
+EXCURSION_RTOL = 0.01
+
+
+def _check_range(x_min, x_max, d: float) -> tuple[float, float] | None:
+    """`design_move`'s position range `(x_min, x_max)` [m, from the start], None where neither is given; a
+    `ValueError` naming them unless x_min <= min(0, d) and x_max >= max(0, d) (the range holds the start and the
+    end)."""
+    if x_min is None and x_max is None:
+        return None
+    lo = -math.inf if x_min is None else float(x_min)
+    hi = math.inf if x_max is None else float(x_max)
+    if math.isnan(lo) or math.isnan(hi) or not (lo <= min(0.0, d) and hi >= max(0.0, d)):
+        raise ValueError(
+            f"design_move: parameters `x_min`, `x_max` [m, positions from the start] must hold the start 0 and the "
+            f"end {d:g}: x_min <= {min(0.0, d):g} and x_max >= {max(0.0, d):g}; got x_min={x_min!r}, x_max={x_max!r}"
+        )
+    return lo, hi
+
+
+def _within_range(row, d: float, x_range, rate: float):
+    """`row` with its note saying where its command, as executed at `rate` [Hz], leaves the segment between the start
+    and the end by more than `EXCURSION_RTOL` of the distance, and marked not ok where it leaves `x_range`."""
+    if row.command is None:
+        return row
+    t = sample_times(float(row.command.end_time), rate)
+    x = positions(row.command, t)
+    lo, hi = float(np.min(x)), float(np.max(x))
+    below, above = min(0.0, d) - lo, hi - max(0.0, d)
+    notes, ok = [], row.ok
+    if max(below, above) > EXCURSION_RTOL * abs(d):
+        notes.append(f"leaves the segment from start to end: positions {lo:.4g} to {hi:.4g} m")
+    if x_range is not None and (lo < x_range[0] or hi > x_range[1]):
+        ok = False
+        notes.append(f"leaves the position range [{x_range[0]:g}, {x_range[1]:g}] m")
+    if not notes:
+        return row
+    return dataclasses.replace(row, ok=ok, note="; ".join([row.note, *notes] if row.note else notes))
+
+
 def _not_beaten(ranked: list) -> list:
     """`ranked` (least worst first) with the note of each minimax row that leaves more than another usable row
     saying so: its certificate holds within its own command space only."""
@@ -1181,7 +1285,7 @@ def _space_rows(rows, space, axis, ref, u, limits, per, band, rate):
             f"its command space holds every classic shaped move and the unshaped move: the blend {parts} leaves "
             f"{100 * worst:.3g} % as executed at {rate:g} Hz ("
             + (f"the design alone {100 * each[0]:.3g} %; " if own else "")
-            + f"least member {100 * float(np.min(each)):.3g} %)"
+            + f"the least of the others {100 * float(np.min(each[1:] if own else each)):.3g} %)"
         )
         if own and w[0] == 1.0:
             out.append(dataclasses.replace(r, note=r.note + "; " + note))
