@@ -54,7 +54,7 @@ def positions(cmd, t) -> np.ndarray:
         d = np.maximum(np.minimum(t, T)[:, None] - tk, 0.0)
         return (d**2 / 2) @ al + (d**3 / 6) @ be
     if isinstance(cmd, BlendMove):
-        return sum(float(w) * positions(m, t) for w, m in zip(np.asarray(cmd.weights), cmd.members))
+        return np.sum([float(w) * positions(m, t) for w, m in zip(np.asarray(cmd.weights), cmd.members)], axis=0)
     return derivatives_at(cmd, t, (0,))[0]
 
 
