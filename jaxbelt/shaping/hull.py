@@ -32,6 +32,8 @@ from .moves import BlendMove, PiecewiseMove, derivatives_at
 _ANGLES = 32
 #: the least relative gain over the best member for which `best_blend` takes a blend (less is round-off's)
 _GAIN = 1e-2
+#: the programme of `best_blend` weighs every this-many-th frequency factor of the band (the blend is judged on all)
+_LP_STRIDE = 4
 #: setpoints per block of `executed_integral`
 _BLOCK = 4096
 #: the drive's interpolation of its setpoints that `executed_integral` models
@@ -93,11 +95,13 @@ def executed_ratios(axis: ModalAxis, cmd, reference, factors, rate_hz: float) ->
     return g * W / (wd * np.asarray(reference, dtype=float)[:, None])
 
 
-def best_blend(axis: ModalAxis, members, reference, factors, rate_hz: float):
+def best_blend(axis: ModalAxis, members, reference, factors, rate_hz: float, blend: bool = True):
     """The weights of the blend of `members` (moves of one duration) that leaves the least worst residual over the
     band `factors` as executed at `rate_hz` [Hz] (see the module docstring), in units of `reference` [m] per mode:
     `(weights, worst, member_worsts)`, `worst` <= min(`member_worsts`) (a member itself where the programme's blend
-    is not below it by `_GAIN`, 1 %, of it; the earliest member on ties)."""
+    is not below it by `_GAIN`, 1 %, of it; the earliest member on ties). The programme weighs every
+    `_LP_STRIDE`-th factor (and the last); the blend is then judged on all of them. `blend=False`: the members'
+    worsts only (the weights pick the least)."""
     from scipy.optimize import linprog
 
     C = np.stack([executed_ratios(axis, m, reference, factors, rate_hz).ravel() for m in members], axis=1)
@@ -105,9 +109,12 @@ def best_blend(axis: ModalAxis, members, reference, factors, rate_hz: float):
     M = C.shape[1]
     k0 = int(np.argmin(member_worst))  # the first of the least
     best_w, best = np.eye(M)[k0], float(member_worst[k0])
-    if M > 1:
+    if M > 1 and blend:
+        K = np.asarray(factors).size
+        coarse = np.unique(np.r_[np.arange(0, K, _LP_STRIDE), K - 1])
+        Cl = np.stack([c.reshape(-1, K)[:, coarse].ravel() for c in C.T], axis=1)
         th = 2 * np.pi * np.arange(_ANGLES) / _ANGLES
-        rows = np.real(np.exp(-1j * th)[:, None, None] * C[None]).reshape(-1, M)
+        rows = np.real(np.exp(-1j * th)[:, None, None] * Cl[None]).reshape(-1, M)
         A_ub = np.hstack([rows, -np.ones((rows.shape[0], 1))])
         res = linprog(
             np.r_[np.zeros(M), 1.0],

@@ -126,7 +126,7 @@ def _jumps_reason(primary, space, axis, ref, band, rate) -> str:
     if primary is None or not primary.ok or not math.isfinite(primary.worst_percent):
         return "added: the smooth design is not feasible or not converged at this time"
     names = list(space)
-    _, _, worst = best_blend(axis, [primary.command, *space.values()], ref, band, rate)
+    _, _, worst = best_blend(axis, [primary.command, *space.values()], ref, band, rate, blend=False)
     k = int(np.argmin(worst[1:]))
     if worst[1 + k] > worst[0]:
         return ""
