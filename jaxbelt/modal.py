@@ -181,7 +181,15 @@ def modal_decomposition(A):
     Incerti (2014) eq. (40): $y_i^T x_i = 1$. Also returns the condition number of X.
     """
     require_x64("jaxbelt.modal.modal_decomposition")
-    lam, X = jnp.linalg.eig(A)
+    try:
+        lam, X = jnp.linalg.eig(A)
+    except NotImplementedError as e:  # JAX's derivative rule of `eig` refuses the eigenvectors' derivative
+        raise NotImplementedError(
+            "simulate(method='modal'): the modal solution is not differentiable: JAX gives no derivative of the "
+            "eigenvectors of a non-symmetric matrix (Incerti's state matrix is one). Under jax.grad/jax.jvp use "
+            "method='expm' (or 'closed', or the default 'auto'): the same closed form by the matrix exponential, "
+            "differentiable, equal to the modal solution to rounding"
+        ) from e
     Yt = jnp.linalg.inv(X)
     return lam, X, Yt, jnp.linalg.cond(X)
 

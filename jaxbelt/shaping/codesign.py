@@ -22,6 +22,7 @@ import numpy as np
 
 from .._checks import check_real, is_concrete
 from .._guard import checked, reraising
+from .._params import recheck
 from .._threads import blas_limited
 from ..models.axis import ModalAxis
 from .design import MinimaxDesign, max_distance, minimax_design, minimax_value
@@ -131,7 +132,10 @@ def best_residual(axis: ModalAxis, move_time, design: MinimaxDesign):
     Raises `ValueError` at the call, before any solve, for a `design` that is not a `MinimaxDesign` and for a
     `move_time` that is not finite and > 0 or is shorter than the shortest feasible move of the design's
     distance within its limits (the time-optimal move, `fastest_time`): no command meets it, and the LP's value
-    there means nothing. A traced `move_time` (under `jax.grad`) is checked at run time."""
+    there means nothing. Traced values (under `jax.jit`, `jax.vmap`, `jax.grad`) are checked at run time, the
+    axis first: a frequency that is NaN, <= 0 or outside `FREQUENCY_RANGE_HZ`, a damping ratio outside [0, 1) or
+    a zero gain raises a `ValueError` naming the parameter and the mode (and, under `vmap`, the element of the
+    batch), then a `move_time` out of range; never a finite "residual" of an invalid axis."""
     o = "best_residual"
     _check_design(o, design)
     _check_axis(o, axis, design)
@@ -151,7 +155,9 @@ def best_residual(axis: ModalAxis, move_time, design: MinimaxDesign):
         if not np.isfinite(float(value)):
             raise ValueError(lost.replace("at this `move_time`", f"at `move_time` = {float(move_time):.6g} s"))
         return value
-    return checked(value, checks=[*checks, (jnp.isfinite(value), lost)])
+    # the axis' own checks first (a traced frequency of 0, NaN or 1e-300 Hz, a damping ratio of 1.5): the error
+    # names the parameter and the mode, not the LP's non-finite value that follows from it
+    return checked(value, axis, checks=[*checks, (jnp.isfinite(value), lost)])
 
 
 #: relative tolerance of `shortest_move_time`'s root on the design's grid (`refine=False`; the LP's own value is
@@ -364,6 +370,12 @@ def shortest_move_time(axis: ModalAxis, target, design: MinimaxDesign, *, bracke
     _check_design(o, design)
     _check_axis(o, axis, design)
     check_real("target", target, "", o)
+    if not is_concrete(target):
+        raise ValueError(
+            f"{o}: parameter `target` must be a concrete number (a worst residual, as a fraction of the references), "
+            "not a traced value: the shortest move time is differentiable with respect to the axis only; "
+            "differentiate the axis' arrays, or call it outside jax.jit/jax.vmap"
+        )
     if not (is_concrete(target) and np.ndim(target) == 0 and math.isfinite(float(target)) and float(target) > 0):
         raise ValueError(
             f"{o}: parameter `target` (a worst residual, as a fraction of the references) must be a finite scalar "
@@ -390,10 +402,29 @@ def shortest_move_time(axis: ModalAxis, target, design: MinimaxDesign, *, bracke
     return _shortest(tuple(leaves), *args)
 
 
+def _concrete_axis(axis) -> None:
+    """The axis on which the root search runs: concrete values (the search is on the host), checked as at
+    construction. Under `jax.grad`/`jax.jvp` called eagerly the search sees the primal values, so an invalid
+    traced value (a NaN or negative frequency, a damping ratio of 1.5) is named here, before any LP is solved;
+    under `jax.jit` or `jax.vmap` there are no values to search with."""
+    o = "shortest_move_time"
+    if not is_concrete(axis):
+        raise ValueError(
+            f"{o}: parameter `axis` is traced by jax.jit or jax.vmap: the shortest move time is a root found on "
+            "the host from concrete values, so it cannot be compiled or batched. Call it outside jax.jit (for a "
+            "batch of axes, a Python loop); jax.grad and jax.jvp called eagerly work (implicit derivative)"
+        )
+    try:
+        recheck(axis)
+    except ValueError as e:
+        raise ValueError(f"{o}: {e}") from None
+
+
 def _shortest(leaves, target, treedef, design, lo, hi, start, user_bracket, refine):
     @jax.custom_jvp
     def f(leaves):
         axis = jax.tree_util.tree_unflatten(treedef, leaves)
+        _concrete_axis(axis)
         return jnp.asarray(
             _shortest_time(axis, target, design, lo, hi, start, user_bracket=user_bracket, refine=refine)
         )
