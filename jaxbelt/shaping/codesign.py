@@ -390,6 +390,8 @@ def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, r
             best = (T, f, c)
         if abs(f - target) <= REDESIGN_RTOL * target:
             return T  # a root of the calibrated level: the re-made design there meets the target
+        if f < target and not feasible(T * (1 - 1e-3)):
+            return T  # the shortest move the design's spline makes already leaves less than the target
         tried.append((math.log(c), math.log(f)))
         c = _next_level(tried, target)
     if abs(best[1] - target) > MEETS_RTOL * target:
