@@ -250,6 +250,7 @@ def _bad_pair(bad, j):
     return name, jnp.asarray(f1), jnp.asarray(z1)
 
 
+@pytest.mark.slow  # the vmapped LP of the valid batch compiles once (12-30 s on 2 cores)
 @examples(5)
 @given(bad=DEGENERATE, j=st.integers(0, 1))
 def test_vmapped_best_residual_with_a_degenerate_axis_names_the_parameter_and_element(solved, bad, j):
