@@ -1047,6 +1047,102 @@ def cases():
             "shortest-axis-none", "shortest_move_time", lambda: jb.shortest_move_time(None, 0.01, design()), bt("axis")
         )
     )
+
+    # --- round 5: traced degenerate axes, degenerate magnitudes, targets below the LP's resolution, links -------
+    def _br(f, z=0.015):
+        return jb.best_residual(jb.ModalAxis(jnp.stack([f, 18.0]), jnp.stack([z, 0.01])), 0.8, design())
+
+    add(Case("axis-f-1e-300", "ModalAxis", lambda: jb.ModalAxis([1e-300], [0.01]), bt("frequencies")))
+    add(Case("axis-f-1e300", "ModalAxis", lambda: jb.ModalAxis([7.3, 1e300], [0.01, 0.01]), bt("frequencies")))
+    add(
+        Case(
+            "design-f-1e-300",
+            "design_move",
+            lambda: jb.design_move(jb.ModalAxis([1e-300], [0.01]), 0.1, 0.8, v_max=0.3, a_max=1.2),
+            bt("frequencies"),
+        )
+    )
+    for label, f, z in (("negative", -7.3, 0.015), ("zero", 0.0, 0.015), ("nan", nan, 0.015), ("tiny", 1e-300, 0.015)):
+        add(
+            Case(
+                f"best-vmap-f-{label}",
+                "best_residual",
+                lambda f=f, z=z: jax.vmap(_br)(jnp.array([7.3, f]), jnp.array([0.015, z])),
+                bt("frequencies"),
+            )
+        )
+    add(
+        Case(
+            "best-vmap-damping-1.5",
+            "best_residual",
+            lambda: jax.vmap(_br)(jnp.array([7.3, 7.3]), jnp.array([0.015, 1.5])),
+            bt("damping_ratios"),
+        )
+    )
+    add(Case("best-grad-f-nan", "best_residual", lambda: jax.grad(_br)(jnp.asarray(nan)), bt("frequencies")))
+    add(
+        Case(
+            "shortest-grad-f-negative",
+            "shortest_move_time",
+            lambda: jax.grad(
+                lambda f: jb.shortest_move_time(jb.ModalAxis(jnp.stack([f, 18.0]), [0.015, 0.01]), 1e-3, design())
+            )(jnp.asarray(-7.3)),
+            bt("frequencies"),
+        )
+    )
+    add(
+        Case(
+            "shortest-jit",
+            "shortest_move_time",
+            lambda: jax.jit(
+                lambda f: jb.shortest_move_time(jb.ModalAxis(jnp.stack([f, 18.0]), [0.015, 0.01]), 1e-3, design())
+            )(jnp.asarray(7.3)),
+            bt("axis"),
+        )
+    )
+    add(
+        Case(
+            "shortest-target-1e-12",
+            "shortest_move_time",
+            lambda: jb.shortest_move_time(AX, 1e-12, design()),
+            bt("target"),
+        )
+    )
+
+    def _through_link():
+        target = TMP / "link-target.csv"
+        target.write_text("previous move\n")
+        link = TMP / "link.csv"
+        link.unlink(missing_ok=True)
+        link.symlink_to(target)
+        design()
+        _DESIGN["plan"].to_csv(link, 1000.0)
+        return target.read_text()
+
+    def _written_through(text):
+        assert text != "previous move\n" and len(text.splitlines()) > 100, text[:80]  # the new move, in the target
+        assert (TMP / "link.csv").is_symlink()
+
+    add(Case("to-csv-symlink", "MovePlan.to_csv", _through_link, (), "result", _written_through))
+
+    def _hard_link():
+        first = TMP / "hard-a.csv"
+        first.write_text("previous\n")
+        second = TMP / "hard-b.csv"
+        second.unlink(missing_ok=True)
+        os.link(first, second)
+        design()
+        return _DESIGN["plan"].to_csv(second, 1000.0)
+
+    add(Case("to-csv-hardlink", "MovePlan.to_csv", _hard_link, bt("path")))
+
+    def _cache_on_file():
+        f = TMP / "cache-file"
+        f.write_text("x")
+        return jb.enable_compilation_cache(f)
+
+    add(Case("cache-on-a-file", "enable_compilation_cache", _cache_on_file, bt("path")))
+    # --- design_shaper ---------------------------------------------------------------------------------
     # --- design_shaper ---------------------------------------------------------------------------------
     add(Case("shaper-duration-0", "design_shaper", lambda: jb.design_shaper(AX, 0.0), bt("duration")))
     add(Case("shaper-duration-nan", "design_shaper", lambda: jb.design_shaper(AX, nan), bt("duration")))

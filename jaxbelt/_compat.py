@@ -3,7 +3,8 @@
 Everything here saves time (tracing, compiling, a later process's start), never correctness: each function
 returns what a private module holds *only* on the versions it was written and tested for (`WRITTEN_FOR`), and
 its fallback (`None`, `False`, an empty list) on any other version, on any failure, or when the environment
-variable `JAXBELT_PRIVATE_APIS=0` is set. Every caller has a public path for the fallback that computes the same
+variable `JAXBELT_PRIVATE_APIS=0` is set (`0`, `false`, `no`, `off`: off; unset, `1`, `true`, `yes`, `on`: on;
+any other value: off, with a warning naming these). Every caller has a public path for the fallback that computes the same
 results, only slower:
 
 | function | what it saves | fallback in the caller |
@@ -47,10 +48,38 @@ def _version(dist: str) -> tuple[int, int] | None:
     return (int(found.group(1)), int(found.group(2))) if found else None
 
 
+#: the values of `JAXBELT_PRIVATE_APIS` (case-insensitive, blanks around ignored); unset or empty is on
+_ON = ("1", "true", "yes", "on")
+_OFF = ("0", "false", "no", "off")
+
+
+def _switch() -> bool:
+    """`JAXBELT_PRIVATE_APIS` read: True for unset, empty or one of `_ON`, False for one of `_OFF`. Any other value
+    is read as off (the public paths: the same results, only slower) with a `UserWarning` naming the accepted
+    values, once per value."""
+    raw = os.environ.get("JAXBELT_PRIVATE_APIS", "")
+    value = raw.strip().lower()
+    if value in ("", *_ON):
+        return True
+    if value in _OFF:
+        return False
+    if _state.get("warned") != raw:
+        _state["warned"] = raw
+        import warnings
+
+        warnings.warn(
+            f"jaxbelt: environment variable JAXBELT_PRIVATE_APIS={raw!r} is not one of {', '.join(_ON)} (on) or "
+            f"{', '.join(_OFF)} (off); read as off (public APIs only: the same results, slower)",
+            UserWarning,
+            stacklevel=3,
+        )
+    return False
+
+
 def private_apis(*dists: str) -> bool:
     """Whether the private layouts of `dists` (default: all of `WRITTEN_FOR`) may be used: each installed version
     within its `WRITTEN_FOR` range, and `JAXBELT_PRIVATE_APIS` not set to 0."""
-    if os.environ.get("JAXBELT_PRIVATE_APIS", "1").strip().lower() in ("0", "false", "no", "off"):
+    if not _switch():
         return False
     for dist in dists or tuple(WRITTEN_FOR):
         key = f"ok:{dist}"

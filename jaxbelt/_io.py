@@ -9,6 +9,14 @@ gets the previous file's permission bits, or those a plain `open(path, "w")` wou
 `check_output_path(path, parameter, owner, formats)` is what an entry point calls first: the folder exists and
 is writable, the path is not a folder, and its extension is a format the writer knows. It touches nothing.
 
+Links. A symbolic link is written *through*: the file written is the link's final target (`os.path.realpath`),
+atomically (the temporary file goes into the target's own folder and is renamed over the target), and the link
+stays a link, so a program that reads the target (a printer's firmware, a watcher) sees the new file. A dangling
+link creates its target (its folder must exist); a loop of links is refused by name. A file with more than one
+hard link is refused by name before the work: an atomic rename gives the path a new file and leaves the other
+names holding the previous contents (a silent split), and writing in place is not atomic; remove the other
+names (or write to another path) first.
+
 Only the standard library: the command line checks its paths with it before importing JAX.
 """
 
@@ -34,14 +42,46 @@ def _new_file_mode(path: Path) -> int:
         return 0o666 & ~mask
 
 
+def _link_problem(p: Path) -> str | None:
+    """What is wrong with writing through `p`'s links (a short phrase), or None: a loop of symbolic links, or a
+    final target with other hard links."""
+    if os.path.islink(p):
+        target = Path(os.path.realpath(p))
+        if os.path.islink(target):  # realpath stops inside a loop, at a link
+            return f"{str(p)!r} is a symbolic link in a loop (it never reaches a file)"
+    else:
+        target = p
+    try:
+        st = os.stat(target)
+    except OSError:
+        return None
+    if os.path.isfile(target) and st.st_nlink > 1:
+        named = f"its target {str(target)!r}" if target != p else "it"
+        return (
+            f"{named} has {st.st_nlink} hard links: replacing the file would leave the other names holding the "
+            "previous contents; remove the other links or write to another path"
+        )
+    return None
+
+
+def write_target(path) -> Path:
+    """The file a write of `path` replaces: `path` itself, or the final target of a symbolic link (written
+    through, see the module's docstring). `ValueError` for a loop of links or a file with other hard links."""
+    p = Path(os.path.expanduser(os.fspath(path)))
+    problem = _link_problem(p)
+    if problem is not None:
+        raise ValueError(f"cannot write {str(p)!r}: {problem}")
+    return Path(os.path.realpath(p)) if os.path.islink(p) else p
+
+
 @contextlib.contextmanager
 def atomic_open(path, mode: str = "w", **kwargs):
     """Open a temporary file beside `path` for writing (`mode` "w" or "wb"; `kwargs` as for `open`); on a normal
     exit of the block it is flushed, synced and renamed over `path`; on an exception it is removed and `path` is
-    left untouched."""
+    left untouched. A symbolic link is written through to its target (`write_target`)."""
     if mode not in ("w", "wb"):
         raise ValueError(f"atomic_open: parameter `mode` must be 'w' or 'wb'; got {mode!r}")
-    path = Path(path)
+    path = write_target(path)
     folder = path.parent if str(path.parent) else Path(".")
     fd, tmp = tempfile.mkstemp(dir=folder, prefix=_TMP_PREFIX + path.name + ".")
     try:
@@ -102,6 +142,13 @@ def output_path_problem(path, formats=None) -> str | None:
     if formats is not None and p.suffix.lower() not in formats:
         shown = repr(p.suffix) if p.suffix else "none"
         return f"format {shown} is not one of {', '.join(formats)}"
+    problem = _link_problem(p)
+    if problem is not None:
+        return problem
+    if os.path.islink(p):  # written through: the target's folder is the one written
+        p = Path(os.path.realpath(p))
+        if p.is_dir():
+            return f"its target {str(p)!r} is a folder, not a file"
     folder = p.parent if str(p.parent) else Path(".")
     if not folder.is_dir():
         return f"folder {str(folder)!r} does not exist"

@@ -71,21 +71,78 @@ def enable_compilation_cache(path=None, *, min_compile_time: float = 0.0, progra
 
     Call it once per process before the first simulation (a notebook: in its first cell);
     calling it again with another folder switches to that folder. Returns the folder used.
+
+    Raises `ValueError` naming `path` when the folder cannot be used (it is a file, it cannot be created, it or its
+    `jaxbelt-programs` folder is not writable), before anything changes: JAX's cache settings and jaxbelt's
+    program store are then as they were.
     """
+    o = "enable_compilation_cache"
+    if (
+        not isinstance(min_compile_time, (int, float))
+        or isinstance(min_compile_time, bool)
+        or not (min_compile_time >= 0 and min_compile_time < float("inf"))
+    ):
+        raise ValueError(
+            f"{o}: parameter `min_compile_time` must be a finite number >= 0 [s]; got {min_compile_time!r}"
+        )
+    if path is not None and not isinstance(path, (str, os.PathLike)):
+        raise TypeError(f"{o}: parameter `path` must be a folder path (str or os.PathLike); got {path!r}")
     folder = Path(path).expanduser() if path is not None else default_cache_dir()
-    folder.mkdir(parents=True, exist_ok=True)
-    previous = jax.config.values["jax_compilation_cache_dir"]
-    jax.config.update("jax_enable_compilation_cache", True)
-    jax.config.update("jax_compilation_cache_dir", str(folder))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_time))
-    jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)  # no size floor: small programs count too
-    if previous not in (None, str(folder)):
-        _reset_cache()  # JAX opens the cache once; make it reopen at the new folder
-    if programs:
-        _store.enable(folder / "jaxbelt-programs")
-    else:
-        _store.disable()
+    _usable_folder(o, folder, programs)
+    keys = (
+        "jax_enable_compilation_cache",
+        "jax_compilation_cache_dir",
+        "jax_persistent_cache_min_compile_time_secs",
+        "jax_persistent_cache_min_entry_size_bytes",
+    )
+    before = {k: jax.config.values[k] for k in keys}
+    store_before = _store.folder()
+    previous = before["jax_compilation_cache_dir"]
+    try:
+        jax.config.update("jax_enable_compilation_cache", True)
+        jax.config.update("jax_compilation_cache_dir", str(folder))
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", float(min_compile_time))
+        jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)  # no size floor: small programs count too
+        if previous not in (None, str(folder)):
+            _reset_cache()  # JAX opens the cache once; make it reopen at the new folder
+        if programs:
+            _store.enable(folder / "jaxbelt-programs")
+        else:
+            _store.disable()
+    except Exception as e:
+        for k, v in before.items():  # leave JAX's cache as it was
+            jax.config.update(k, v)
+        _reset_cache()
+        if store_before is None:
+            _store.disable()
+        else:
+            _store.enable(store_before)
+        if isinstance(e, OSError):
+            raise ValueError(f"{o}: parameter `path` = {str(folder)!r} cannot be used as the cache folder: {e}") from e
+        raise
     return folder
+
+
+def _usable_folder(owner: str, folder: Path, programs: bool) -> None:
+    """Create `folder` (and `jaxbelt-programs` in it when `programs`) and check that they are writable folders;
+    else a `ValueError` naming `path` and the reason. Nothing else changes."""
+    why = None
+    for f in (folder, folder / "jaxbelt-programs") if programs else (folder,):
+        if f.exists() and not f.is_dir():
+            why = f"{str(f)!r} is a file, not a folder"
+        else:
+            try:
+                f.mkdir(parents=True, exist_ok=True)
+            except OSError as e:
+                why = f"{str(f)!r} cannot be created ({e.strerror or e})"
+            else:
+                if not os.access(f, os.W_OK | os.X_OK):
+                    why = f"folder {str(f)!r} is not writable"
+        if why:
+            raise ValueError(
+                f"{owner}: parameter `path` cannot be used as the compilation cache folder: {why}; give a writable "
+                "folder (JAX's cache settings are unchanged)"
+            )
 
 
 def disable_compilation_cache() -> None:

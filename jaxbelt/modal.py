@@ -174,6 +174,27 @@ def expm_solve(A, F, s, x0, t0, ts, uniform: bool | None = False):
     return zs[:, :n]
 
 
+#: what a derivative of the modal solution says (JAX gives none of a non-symmetric matrix's eigenvectors)
+MODAL_GRAD_MESSAGE = (
+    "simulate(method='modal'): the modal solution is not differentiable: JAX gives no derivative of the "
+    "eigenvectors of a non-symmetric matrix (Incerti's state matrix is one). Under jax.grad/jax.jvp use "
+    "method='expm' (or 'closed', or the default 'auto'): the same closed form by the matrix exponential, "
+    "differentiable, equal to the modal solution to rounding"
+)
+
+
+@jax.custom_jvp
+def _eig(A):
+    """`jnp.linalg.eig(A)`, whose derivative is refused with `MODAL_GRAD_MESSAGE` (JAX's own error names neither
+    the method nor what to use instead)."""
+    return jnp.linalg.eig(A)
+
+
+@_eig.defjvp
+def _eig_jvp(primals, tangents):
+    raise NotImplementedError(MODAL_GRAD_MESSAGE)
+
+
 def modal_decomposition(A):
     """Eigenvalues Λ, right eigenvectors X and left eigenvectors $Y^T = X^{-1}$ of A.
 
@@ -181,7 +202,7 @@ def modal_decomposition(A):
     Incerti (2014) eq. (40): $y_i^T x_i = 1$. Also returns the condition number of X.
     """
     require_x64("jaxbelt.modal.modal_decomposition")
-    lam, X = jnp.linalg.eig(A)
+    lam, X = _eig(A)
     Yt = jnp.linalg.inv(X)
     return lam, X, Yt, jnp.linalg.cond(X)
 

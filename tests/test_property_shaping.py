@@ -38,7 +38,7 @@ import pytest
 from compiles import count_compiles
 from hypothesis import given
 from hypothesis import strategies as st
-from hypothesis_profile import NONFINITE, examples, inf, nan
+from hypothesis_profile import NONFINITE, RUNTIME, examples, inf, nan
 from references import modal_residual_reference, piecewise_move_reference, spline_move_reference
 
 import jaxbelt as jb
@@ -221,6 +221,103 @@ def test_best_residual_at_the_designs_time_is_its_commands_residual_on_its_grid(
     # of 0, the least any move leaves that slowly
     far = float(jb.best_residual(AX, 1e6, design))
     assert 0.0 <= far <= 1e-9 * float(design.worst)
+
+
+# =====================================================================================
+# best_residual, shortest_move_time with traced degenerate axes (reliability round 5)
+# =====================================================================================
+#: degenerate magnitudes of a mode: invalid (0, negative, NaN, inf) and outside the physical range (1e-300 Hz,
+#: 1e300 Hz: `FREQUENCY_RANGE_HZ`), a damping ratio at or beyond critical
+DEGENERATE = st.one_of(
+    st.tuples(
+        st.just("frequencies"),
+        st.one_of(NONFINITE, st.sampled_from([0.0, 1e-300, 1e-5, 3e7, 1e300]), st.floats(-1e3, -1e-9)),
+    ),
+    st.tuples(
+        st.just("damping_ratios"), st.one_of(NONFINITE, st.sampled_from([1.0, 1.5, 1e300]), st.floats(-1.0, -1e-9))
+    ),
+)
+
+
+def _traced_axis(f1, z1):
+    return jb.ModalAxis(jnp.stack([f1, 18.0]), jnp.stack([z1, 0.01]))
+
+
+def _bad_pair(bad, j):
+    name, value = bad
+    f1, z1 = np.array([7.3, 7.3]), np.array([0.015, 0.015])
+    (f1 if name == "frequencies" else z1)[j] = value
+    return name, jnp.asarray(f1), jnp.asarray(z1)
+
+
+@pytest.mark.slow  # the vmapped LP of the valid batch compiles once (12-30 s on 2 cores)
+@examples(5)
+@given(bad=DEGENERATE, j=st.integers(0, 1))
+def test_vmapped_best_residual_with_a_degenerate_axis_names_the_parameter_and_element(solved, bad, j):
+    design = solved.minimax
+    name, f1, z1 = _bad_pair(bad, j)
+    with pytest.raises(ValueError) as e:
+        jax.vmap(lambda f, z: jb.best_residual(_traced_axis(f, z), 0.8, design))(f1, z1)
+    first = str(e.value).splitlines()[0]
+    # the cause (the axis' parameter), not the LP's non-finite value that follows from it (was: a finite
+    # "residual" for a negative frequency, and "the LP ... returned a non-finite value" for 0, NaN, damping 1.5)
+    assert first.startswith(f"best_residual: ModalAxis: parameter `{name}` must"), first
+    assert f"(element {j} of the batch)" in first, first
+    if name == "frequencies":
+        assert "mode 1 (index 0)" in first, first
+    # valid draws of the same program: the design's own worst at its own time (the LP's value there)
+    good = jax.vmap(lambda f, z: jb.best_residual(_traced_axis(f, z), 0.8, design))(
+        jnp.array([7.3, 7.3]), jnp.array([0.015, 0.015])
+    )
+    np.testing.assert_allclose(np.asarray(good), float(design.worst), rtol=1e-6)
+
+
+@examples(4)
+@given(bad=DEGENERATE)
+def test_grad_of_best_residual_and_shortest_move_time_at_a_degenerate_axis_names_the_parameter(solved, bad):
+    design = solved.minimax
+    name, f1, z1 = _bad_pair(bad, 0)
+    with pytest.raises(ValueError, match=f"best_residual: ModalAxis: parameter `{name}` must"):
+        jax.grad(lambda f, z: jb.best_residual(_traced_axis(f, z), 0.8, design), argnums=(0, 1))(f1[0], z1[0])
+    # shortest_move_time: named before any LP is solved (was: "give a target closer", "math domain error", or a
+    # finite derivative at a negative frequency)
+    with count_compiles() as box, pytest.raises(ValueError, match=f"shortest_move_time: ModalAxis: parameter `{name}`"):
+        jax.grad(lambda f, z: jb.shortest_move_time(_traced_axis(f, z), 1e-3, design), argnums=(0, 1))(f1[0], z1[0])
+    assert box["n"] == 0
+
+
+def test_shortest_move_time_under_jit_or_vmap_says_it_runs_on_the_host(solved):
+    design = solved.minimax
+
+    def shortest(f):
+        return jb.shortest_move_time(_traced_axis(f, 0.015), 1e-3, design)
+
+    for transform in (jax.jit, jax.vmap):
+        arg = jnp.asarray(7.3) if transform is jax.jit else jnp.array([7.3, 7.4])
+        with pytest.raises(ValueError, match=r"shortest_move_time: parameter `axis` is traced by jax.jit or jax.vmap"):
+            transform(shortest)(arg)
+    with pytest.raises(ValueError, match=r"`target` must be a concrete number"):
+        jax.grad(lambda t: jb.shortest_move_time(AX, t, design))(1e-3)
+
+
+def test_shortest_move_time_refuses_a_target_below_what_the_lp_resolves(solved):
+    from jaxbelt.shaping.codesign import TARGET_FLOOR
+
+    for target in (1e-12, 1e-300, 0.5 * TARGET_FLOOR):
+        e = refused(lambda t=target: jb.shortest_move_time(AX, t, solved.minimax), ("target",))
+        assert "below what the minimax LP resolves" in str(e.value)  # was: a time (26 s, 10.4 s) for 1e-12
+
+
+@pytest.mark.slow
+@examples(3)
+@given(bad=DEGENERATE)
+def test_jitted_best_residual_with_a_degenerate_axis_raises_naming_the_parameter(solved, bad):
+    design = solved.minimax
+    name, f1, z1 = _bad_pair(bad, 0)
+    f = jax.jit(lambda f, z: jb.best_residual(_traced_axis(f, z), 0.8, design))
+    with pytest.raises(RUNTIME, match=f"ModalAxis: parameter `{name}` must"):
+        jax.block_until_ready(f(f1[0], z1[0]))
+    assert float(f(7.3, 0.015)) == pytest.approx(float(design.worst), rel=1e-6)
 
 
 # =====================================================================================

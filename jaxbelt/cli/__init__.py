@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import atexit
 import contextlib
+import errno
 import gc
 import importlib
 import os
@@ -100,7 +101,7 @@ def _run(args) -> int:
 
             try:
                 enable_compilation_cache()
-            except OSError as e:  # an unwritable cache folder costs time, not the result
+            except (OSError, ValueError) as e:  # an unwritable cache folder costs time, not the result
                 print(f"jaxbelt: compilation cache disabled ({e})", file=sys.stderr)
     try:
         with _OneLineWarnings(f"jaxbelt {args.command}"):
@@ -144,9 +145,38 @@ def _failure(error: BaseException) -> tuple[str, int] | None:
         return inner, 1
     if isinstance(error, ValueError):
         return str(error), 2
+    system = _system_failure(error)
+    if system is not None:
+        return system, 1
     if isinstance(error, RuntimeError | FloatingPointError) and type(error).__module__.startswith("jaxbelt"):
         return str(error), 1
     return None
+
+
+#: errors of the system, not of jaxbelt, that a command reports in one line (status 1): a full disk or quota, a
+#: file-size limit, a read-only file system, no permission, an I/O error
+_SYSTEM_ERRNOS = {
+    errno.ENOSPC: "free some space (or write to another disk) and run again",
+    errno.EDQUOT: "free some space (or write to another disk) and run again",
+    errno.EFBIG: "the file system or `ulimit -f` limits the file's size",
+    errno.EROFS: "write to another folder",
+    errno.EACCES: "check the permissions, or write to another folder",
+    errno.EPERM: "check the permissions, or write to another folder",
+    errno.EIO: "the disk reported an error",
+}
+
+
+def _system_failure(error: BaseException) -> str | None:
+    """One line for an `OSError` of the system (`_SYSTEM_ERRNOS`: a full disk, ...): what failed on which file and
+    what to do, instead of a traceback; None for any other error. Outputs are written atomically
+    (`jaxbelt._io`), so a failed write leaves the previous file whole."""
+    if not isinstance(error, OSError) or error.errno not in _SYSTEM_ERRNOS:
+        return None
+    where = f" writing {error.filename!r}" if error.filename else ""
+    return (
+        f"{error.strerror or os.strerror(error.errno)}{where}: {_SYSTEM_ERRNOS[error.errno]} (any previous output "
+        "file is left as it was)"
+    )
 
 
 class _OneLineWarnings(contextlib.ContextDecorator):

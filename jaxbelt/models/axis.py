@@ -31,6 +31,14 @@ from .._model import AbstractModel, observable
 from .._params import converted, document, param
 from ..commands import AbstractMotionCommand
 
+#: the natural frequencies [Hz] a `ModalAxis` accepts. Below 1 mHz a "mode" has a period of over 16 minutes: no
+#: move of a belt-driven axis lasts a fraction of it, the mode's static deflection per unit acceleration
+#: ($g/\omega^2$, 25 km per m/s^2 at 1 mHz) is a drift, not a vibration to shape, and at 1e-300 Hz the residual
+#: underflows to 0 and every command looks perfect. Above 10 MHz a mode is beyond anything a motion command
+#: excites (drives update their setpoints at 100 kHz at most; a 1 MHz mode already leaves 1e-10 of a 7 Hz mode's
+#: residual) and the phase $\omega T$ of a 100 s move (6e9 rad) keeps only ~6 significant digits in float64.
+FREQUENCY_RANGE_HZ = (1e-3, 1e7)
+
 
 @document
 class ModalAxis(AbstractModel):
@@ -54,7 +62,14 @@ class ModalAxis(AbstractModel):
     traced values).
     """
 
-    frequencies: Float[Array, " n"] = param(unit="Hz", shape=None, symbol="$f_i$", doc="natural frequency of each mode")
+    frequencies: Float[Array, " n"] = param(
+        unit="Hz",
+        check="none",
+        valid="[0.001, 1e+07]",
+        shape=None,
+        symbol="$f_i$",
+        doc="natural frequency of each mode (`FREQUENCY_RANGE_HZ`: 1 mHz to 10 MHz)",
+    )
     damping_ratios: Float[Array, " n"] = param(
         unit="–",
         check="range",
@@ -86,7 +101,7 @@ class ModalAxis(AbstractModel):
         self.frequency_std = None if frequency_std is None else atleast_1d(as_float_array(frequency_std))
         self.damping_std = None if damping_std is None else atleast_1d(as_float_array(damping_std))
 
-    def _check_relations(self):
+    def _check_relations(self, host):
         o = "ModalAxis"
         f = self.frequencies
         if f.ndim != 1 or f.shape[0] < 1:
@@ -94,6 +109,7 @@ class ModalAxis(AbstractModel):
                 f"{o}: parameter `frequencies` must be a 1-D array of n >= 1 frequencies [Hz]; got shape {f.shape}"
             )
         n = f.shape[0]
+        self._check_frequencies(host.get("frequencies"))
         for name in ("damping_ratios", "gains"):
             if getattr(self, name).shape != (n,):
                 raise ValueError(
@@ -105,6 +121,26 @@ class ModalAxis(AbstractModel):
                 raise ValueError(f"{msg}; got {np.asarray(self.gains).tolist()}")
         else:
             record(jnp.all(self.gains != 0), msg)
+
+    def _check_frequencies(self, known) -> None:
+        """Each frequency finite and within `FREQUENCY_RANGE_HZ`, named by its mode: concrete, a `ValueError`;
+        traced, one recorded check per mode (so that the run-time error names the mode too)."""
+        lo, hi = FREQUENCY_RANGE_HZ
+        what = (
+            f"ModalAxis: parameter `frequencies` must be finite and within [{lo:g}, {hi:g}] Hz (a mode's period from "
+            "0.1 us to 16 min: below, a drift no move can shape; above, beyond what a motion command excites)"
+        )
+        f = self.frequencies
+        if known is not None or is_concrete(f):
+            v = np.atleast_1d(np.asarray(known if known is not None else f, dtype=float))
+            bad = np.flatnonzero(~(np.isfinite(v) & (v >= lo) & (v <= hi)))
+            if bad.size:
+                i = int(bad[0])
+                raise ValueError(f"{what}; got {float(v[i])!r} Hz for mode {i + 1} (index {i}) of {v.tolist()}")
+            return
+        for i in range(f.shape[0]):
+            fi = f[i]
+            record(jnp.isfinite(fi) & (fi >= lo) & (fi <= hi), f"{what}; mode {i + 1} (index {i}) is outside")
 
     # --- derived ------------------------------------------------------------------------------
     @property

@@ -21,10 +21,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._checks import check_real, is_concrete
-from .._guard import checked, reraising
+from .._guard import all_ok, checked, reraising, traced_checks
+from .._params import recheck
 from .._threads import blas_limited
 from ..models.axis import ModalAxis
-from .design import MinimaxDesign, max_distance, minimax_design, minimax_value
+from .design import MinimaxDesign, default_options, max_distance, minimax_design, minimax_value
 from .moves import fastest_time
 
 
@@ -131,14 +132,23 @@ def best_residual(axis: ModalAxis, move_time, design: MinimaxDesign):
     Raises `ValueError` at the call, before any solve, for a `design` that is not a `MinimaxDesign` and for a
     `move_time` that is not finite and > 0 or is shorter than the shortest feasible move of the design's
     distance within its limits (the time-optimal move, `fastest_time`): no command meets it, and the LP's value
-    there means nothing. A traced `move_time` (under `jax.grad`) is checked at run time."""
+    there means nothing. Traced values (under `jax.jit`, `jax.vmap`, `jax.grad`) are checked at run time, the
+    axis first: a frequency that is NaN, <= 0 or outside `FREQUENCY_RANGE_HZ`, a damping ratio outside [0, 1) or
+    a zero gain raises a `ValueError` naming the parameter and the mode (and, under `vmap`, the element of the
+    batch), then a `move_time` out of range; never a finite "residual" of an invalid axis."""
     o = "best_residual"
     _check_design(o, design)
     _check_axis(o, axis, design)
     checks = _check_move_time(o, "move_time", move_time, design)
     if not checks and is_concrete((axis, design.problem)):
         _check_spline_reaches(o, axis, move_time, design)
-    value = minimax_value(_problem(design, axis, move_time), design.options, tau=jax.lax.stop_gradient(design.worst))
+    axis_checks = traced_checks(axis)
+    lp_axis, lp_time = _valid_or_designs(axis, move_time, design, axis_checks + checks)
+    if axis_checks or checks:
+        # on the LP's inputs: under an eager `vmap`/`grad` an invalid element raises here, before the LP is compiled
+        # and solved (12-30 s); under `jit` the LP depends on them, so the check runs whatever the caller keeps
+        lp_axis, lp_time = checked((lp_axis, lp_time), checks=[*axis_checks, *checks])
+    value = minimax_value(_problem(design, lp_axis, lp_time), design.options, tau=jax.lax.stop_gradient(design.worst))
     # a move time far beyond the design's (1e5 s for a 0.8 s design) leaves a residual far below the LP's tolerance,
     # and its solve can end in NaN: an error naming the move time, never a NaN "residual"
     T0 = float(design.command.duration) if is_concrete(design.command.duration) else math.nan
@@ -151,7 +161,31 @@ def best_residual(axis: ModalAxis, move_time, design: MinimaxDesign):
         if not np.isfinite(float(value)):
             raise ValueError(lost.replace("at this `move_time`", f"at `move_time` = {float(move_time):.6g} s"))
         return value
-    return checked(value, checks=[*checks, (jnp.isfinite(value), lost)])
+    # the axis' own checks came first (a traced frequency of 0, NaN or 1e-300 Hz, a damping ratio of 1.5): the error
+    # names the parameter and the mode, not the LP's non-finite value that would follow from it
+    return checked(value, checks=[(jnp.isfinite(value), lost)])
+
+
+def _valid_or_designs(axis, move_time, design: MinimaxDesign, checks):
+    """`(axis, move_time)` for the LP: where a traced check fails (an element of a `vmap` batch with a NaN or
+    negative frequency, ...), the design's own axis and move time instead, so that the LP of that element converges
+    at once rather than iterating on NaN to its limit; the failed check raises on the value all the same. Where
+    every check holds the values pass through unchanged (derivatives included)."""
+    if not checks:
+        return axis, move_time
+    ok = all_ok(checks)
+    mine = design.problem.axis
+
+    def pick(x, y):
+        return jnp.where(ok, x, jax.lax.stop_gradient(y))
+
+    names = ("frequencies", "damping_ratios", "gains")
+    safe = eqx.tree_at(
+        lambda a: tuple(getattr(a, k) for k in names),
+        axis,
+        tuple(pick(getattr(axis, k), getattr(mine, k)) for k in names),
+    )
+    return safe, pick(jnp.asarray(move_time, dtype=float), design.problem.move_time)
 
 
 #: relative tolerance of `shortest_move_time`'s root on the design's grid (`refine=False`; the LP's own value is
@@ -163,6 +197,16 @@ REDESIGN_RTOL = 5e-3
 #: relative tolerance of the root on the design's grid while `refine=True` calibrates its level (`_shortest_time`):
 #: each root is checked by a design re-made there (to `REDESIGN_RTOL`), so it need not be finer than a fifth of that
 CALIBRATION_RTOL = 1e-3
+#: relative tolerance `shortest_move_time(refine=True)` guarantees: where the re-made designs cannot come within
+#: `REDESIGN_RTOL`, the closest is returned if within this, else a `ValueError` says the target is not resolved
+MEETS_RTOL = 1e-2
+#: the absolute tolerance [fraction of the references] to which the minimax LP meets its residual constraints (its
+#: relative primal residual, duality gap and dual residual are solved to 1e-9, `minimax_value`)
+LP_RESOLUTION = 1e-9
+#: the least `target` `shortest_move_time` accepts: a worst residual that the LP resolves to 1 %
+#: (`LP_RESOLUTION` / `MEETS_RTOL` = 1e-7: 1e-5 % of the unshaped move's residual). Below it the LP's value is its own
+#: rounding, and a root there (26 s, 10 s for a target of 1e-12) would be noise.
+TARGET_FLOOR = 1e-7
 #: how far `shortest_move_time` looks for the target without a bracket: up to this multiple of the design's time
 MAX_EXPANSION = 64.0
 
@@ -256,10 +300,27 @@ def _not_in_bracket(owner: str, target: float, v: float, T: float) -> ValueError
     )
 
 
+def _redesign_options(design: MinimaxDesign, T: float):
+    """The discretisation `design_move` picks at move time `T` [s] for a design made by its rule
+    (`default_options`: knots per cycle of the highest mode over the move, a starting grid that grows with T),
+    else `design`'s own. A design re-made at a longer time with more knots leaves a smaller residual (20 % smaller
+    at 1e-6 of the references, 160 instead of 128 knots): `shortest_move_time` calibrates against the design
+    `design_move` would make there."""
+    o, p = design.options, design.problem
+    freqs, u, T0 = np.asarray(p.axis.frequencies), float(np.asarray(p.uncertainty)), float(design.command.duration)
+    for kpc in (6.0, 12.0):  # design_move's rule at a fixed time, and while it searches the shortest time
+        mine = default_options(freqs, T0, u, o.jerk, kpc, o.basis)
+        if (mine.n_knots, mine.n_freq) == (o.n_knots, o.n_freq):
+            at_T = default_options(freqs, T, u, o.jerk, kpc, o.basis)
+            return o._replace(n_knots=at_T.n_knots, n_freq=at_T.n_freq)
+    return o
+
+
 def _redesign(axis, design: MinimaxDesign, T: float) -> MinimaxDesign:
-    """A fresh design at move time `T` [s] with `design`'s discretisation and references (the same compiled
-    programs: no new compilation): its own frequency grid, exchanged from the start."""
-    return minimax_design(_problem(design, axis, T), design.options)
+    """A fresh design at move time `T` [s] with the discretisation `design_move` picks there (`_redesign_options`:
+    `design`'s own where it keeps its knots; one compilation per new knot count) and `design`'s references: its own
+    frequency grid, exchanged from the start."""
+    return minimax_design(_problem(design, axis, T), _redesign_options(design, T))
 
 
 def _same_axis(axis, design) -> bool:
@@ -278,7 +339,7 @@ def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, r
     """The shortest move time: the root of the LP's value on `design`'s grid, `V(T) = c target` (to `ROOT_RTOL`).
 
     `refine=False`: c = 1, to `ROOT_RTOL`. `refine=True`: c is calibrated so that a fresh design at the root
-    (`_redesign`: its own frequency exchange) leaves a fine-grid worst within `REDESIGN_RTOL` of the target: c <- c
+    (`_redesign`: its own frequency exchange) leaves a fine-grid worst within `REDESIGN_RTOL` of the target (`_next_level`): c <- c
     target / (fresh design's fine worst), from c = LP value / fine worst of `design` itself (usually 1-2 fresh
     designs), each root to `CALIBRATION_RTOL`. The answer stays a root on `design`'s grid at a fixed level, so its derivative is
     the implicit one on that grid."""
@@ -315,6 +376,7 @@ def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, r
         return root(target, start, ROOT_RTOL)
     c = float(design.worst) / float(design.fine_worst)
     T, best = start, (start, math.inf, c)
+    tried: list[tuple[float, float]] = []  # (log c, log f) of the re-made designs
     for _ in range(6):
         T = root(c * target, T, CALIBRATION_RTOL)
         d = _redesign(axis, design, T)
@@ -328,8 +390,30 @@ def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, r
             best = (T, f, c)
         if abs(f - target) <= REDESIGN_RTOL * target:
             return T  # a root of the calibrated level: the re-made design there meets the target
-        c *= target / f
-    return root(best[2] * target, best[0], CALIBRATION_RTOL)
+        if f < target and not feasible(T * (1 - 1e-3)):
+            return T  # the shortest move the design's spline makes already leaves less than the target
+        tried.append((math.log(c), math.log(f)))
+        c = _next_level(tried, target)
+    if abs(best[1] - target) > MEETS_RTOL * target:
+        raise ValueError(
+            f"{o}: the target {target:g} is not resolved: the designs re-made at the move times tried leave at best "
+            f"{best[1]:.4g} on their fine grids ({100 * (best[1] / target - 1):+.2g} % from the target, at "
+            f"{best[0]:.6g} s), not within {100 * MEETS_RTOL:g} %; give a larger `target`, or pass `refine=False` for "
+            "the root on the design's own grid"
+        )
+    return best[0]  # a root of the level best[2] target: its re-made design comes within MEETS_RTOL of the target
+
+
+def _next_level(tried, target: float) -> float:
+    """The next level factor c of the calibration from the re-made designs' `(log c, log f)`: f ~ c at first
+    (c <- c target / f), then a secant of log f against log c (the re-made design's worst grows faster than the
+    level where a longer move time adds knots: the proportional step alone oscillated, 5 re-made designs at a
+    target of 1e-6), its slope kept within [0.25, 4]."""
+    lc, lf = tried[-1]
+    slope = 1.0
+    if len(tried) >= 2 and tried[-2][0] != lc:
+        slope = min(4.0, max(0.25, (lf - tried[-2][1]) / (lc - tried[-2][0])))
+    return math.exp(lc + (math.log(target) - lf) / slope)
 
 
 @blas_limited
@@ -358,16 +442,34 @@ def shortest_move_time(axis: ModalAxis, target, design: MinimaxDesign, *, bracke
     the design's discretisation is kept, and the move time is an argument.
 
     Raises `ValueError` at the call for a `design` that is not a `MinimaxDesign`, a `target` that is not finite
-    and > 0, and a `bracket` that is not `(lo, hi)` with 0 < lo < hi or whose lower end is shorter than the
-    shortest feasible move (the default bracket starts there instead)."""
+    and > 0 or lies below what the LP resolves (`TARGET_FLOOR` = 1e-7 of the references: the LP meets its
+    constraints to about `LP_RESOLUTION` = 1e-9, so a smaller target is rounding), a traced `target`, and a
+    `bracket` that is not `(lo, hi)` with 0 < lo < hi or whose lower end is shorter than the shortest feasible
+    move (the default bracket starts there instead); under `jax.jit` or `jax.vmap` (the root is found on the host)
+    and for an invalid axis under `jax.grad` (its parameter and mode named, before any solve). With `refine=True`,
+    where no re-made design comes within `MEETS_RTOL` = 1 % of the target, a `ValueError` says the target is not
+    resolved (never a time whose design misses it)."""
     o = "shortest_move_time"
     _check_design(o, design)
     _check_axis(o, axis, design)
     check_real("target", target, "", o)
+    if not is_concrete(target):
+        raise ValueError(
+            f"{o}: parameter `target` must be a concrete number (a worst residual, as a fraction of the references), "
+            "not a traced value: the shortest move time is differentiable with respect to the axis only; "
+            "differentiate the axis' arrays, or call it outside jax.jit/jax.vmap"
+        )
     if not (is_concrete(target) and np.ndim(target) == 0 and math.isfinite(float(target)) and float(target) > 0):
         raise ValueError(
             f"{o}: parameter `target` (a worst residual, as a fraction of the references) must be a finite scalar "
             f"> 0; got {target!r}"
+        )
+    if float(target) < TARGET_FLOOR:
+        raise ValueError(
+            f"{o}: parameter `target` = {float(target):g} lies below what the minimax LP resolves: it meets its "
+            f"residual constraints to about {LP_RESOLUTION:g} of the references, so a worst residual below "
+            f"{TARGET_FLOOR:g} ({100 * TARGET_FLOOR:g} % of the unshaped move's) cannot be told from rounding to "
+            f"{100 * MEETS_RTOL:g} %; give `target` >= {TARGET_FLOOR:g}"
         )
     if not isinstance(refine, bool | np.bool_):
         raise ValueError(f"{o}: parameter `refine` must be True or False; got {refine!r}")
@@ -390,10 +492,29 @@ def shortest_move_time(axis: ModalAxis, target, design: MinimaxDesign, *, bracke
     return _shortest(tuple(leaves), *args)
 
 
+def _concrete_axis(axis) -> None:
+    """The axis on which the root search runs: concrete values (the search is on the host), checked as at
+    construction. Under `jax.grad`/`jax.jvp` called eagerly the search sees the primal values, so an invalid
+    traced value (a NaN or negative frequency, a damping ratio of 1.5) is named here, before any LP is solved;
+    under `jax.jit` or `jax.vmap` there are no values to search with."""
+    o = "shortest_move_time"
+    if not is_concrete(axis):
+        raise ValueError(
+            f"{o}: parameter `axis` is traced by jax.jit or jax.vmap: the shortest move time is a root found on "
+            "the host from concrete values, so it cannot be compiled or batched. Call it outside jax.jit (for a "
+            "batch of axes, a Python loop); jax.grad and jax.jvp called eagerly work (implicit derivative)"
+        )
+    try:
+        recheck(axis)
+    except ValueError as e:
+        raise ValueError(f"{o}: {e}") from None
+
+
 def _shortest(leaves, target, treedef, design, lo, hi, start, user_bracket, refine):
     @jax.custom_jvp
     def f(leaves):
         axis = jax.tree_util.tree_unflatten(treedef, leaves)
+        _concrete_axis(axis)
         return jnp.asarray(
             _shortest_time(axis, target, design, lo, hi, start, user_bracket=user_bracket, refine=refine)
         )

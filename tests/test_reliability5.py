@@ -1,0 +1,195 @@
+"""Reliability round 5: traced values checked where they enter, degenerate magnitudes refused at the call, outputs
+through links, solvers that say when a target lies below what they resolve, and the unclear errors made clear.
+
+Each test states its reference: the value an eager call gives (the axis' own checks), the bytes written, JAX's
+configuration before the call, the time-optimal move (a closed form) and a design re-made at the answer.
+"""
+
+import errno
+import os
+import warnings
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxbelt as jb
+from jaxbelt import _compat, _io
+from jaxbelt.models.axis import FREQUENCY_RANGE_HZ
+
+LIMITS = dict(v_max=0.3, a_max=1.2)
+AX = jb.ModalAxis([7.3, 18.0], [0.015, 0.01])
+
+
+# =====================================================================================
+# degenerate magnitudes: a mode's frequency within [1 mHz, 10 MHz], named by its mode
+# =====================================================================================
+@pytest.mark.parametrize("bad", [1e-300, 1e-4, 0.0, -7.3, 2e7, 1e300, np.nan, np.inf])
+def test_modal_axis_refuses_a_degenerate_frequency_naming_the_mode(bad):
+    with pytest.raises(
+        ValueError, match=r"parameter `frequencies` must be finite and within \[0\.001, 1e\+07\] Hz"
+    ) as e:
+        jb.ModalAxis([7.3, bad], [0.015, 0.01])
+    assert "mode 2 (index 1)" in str(e.value)
+
+
+def test_modal_axis_accepts_the_ends_of_its_frequency_range():
+    lo, hi = FREQUENCY_RANGE_HZ
+    axis = jb.ModalAxis([lo, hi], [0.01, 0.01])
+    np.testing.assert_array_equal(np.asarray(axis.frequencies), [lo, hi])
+
+
+def test_traced_degenerate_frequency_names_the_mode_under_vmap():
+    move = jb.fastest_move(0.1, 0.3, 1.2)
+
+    def amplitudes(f2):
+        return jb.residual_amplitudes(jb.ModalAxis(jnp.stack([7.3, f2]), jnp.array([0.015, 0.01])), move)
+
+    with pytest.raises(ValueError) as e:
+        jax.vmap(amplitudes)(jnp.array([18.0, 1e-300, 18.0]))
+    first = str(e.value).splitlines()[0]
+    assert first.startswith("residual_curve: ModalAxis: parameter `frequencies` must be finite and within"), first
+    assert "mode 2 (index 1)" in first and "(element 1 of the batch)" in first
+
+
+# =====================================================================================
+# outputs through links
+# =====================================================================================
+def test_a_symbolic_link_is_written_through_atomically(tmp_path):
+    target = tmp_path / "real" / "move.csv"
+    target.parent.mkdir()
+    target.write_text("previous move\n")
+    link = tmp_path / "out.csv"
+    link.symlink_to(target)
+    assert _io.check_output_path(link, "path", "t", (".csv",)) == link
+    _io.write_text(link, "new move\n")
+    assert link.is_symlink() and os.readlink(link) == str(target)  # the link stays a link
+    assert target.read_text() == "new move\n"  # its target holds the new move (was: the previous one)
+    assert sorted(p.name for p in target.parent.iterdir()) == ["move.csv"]  # no temporary file left
+    # a dangling link creates its target
+    dangling = tmp_path / "new.csv"
+    dangling.symlink_to(tmp_path / "real" / "fresh.csv")
+    _io.write_bytes(dangling, b"x")
+    assert (tmp_path / "real" / "fresh.csv").read_bytes() == b"x" and dangling.is_symlink()
+
+
+def test_a_hard_linked_file_and_a_loop_of_links_are_refused_by_name(tmp_path):
+    first = tmp_path / "a.csv"
+    first.write_text("previous\n")
+    os.link(first, tmp_path / "b.csv")
+    with pytest.raises(ValueError, match=r"`path` .* 2 hard links"):
+        _io.check_output_path(tmp_path / "b.csv", "path", "MovePlan.to_csv", (".csv",))
+    with pytest.raises(ValueError, match="2 hard links"):
+        _io.write_text(tmp_path / "b.csv", "new\n")
+    assert first.read_text() == "previous\n"  # nothing written
+    (tmp_path / "l1.csv").symlink_to(tmp_path / "l2.csv")
+    (tmp_path / "l2.csv").symlink_to(tmp_path / "l1.csv")
+    with pytest.raises(ValueError, match=r"`path` .* symbolic link in a loop"):
+        _io.check_output_path(tmp_path / "l1.csv", "path", "MovePlan.to_csv", (".csv",))
+
+
+# =====================================================================================
+# unclear errors made clear
+# =====================================================================================
+_CACHE_KEYS = (
+    "jax_enable_compilation_cache",
+    "jax_compilation_cache_dir",
+    "jax_persistent_cache_min_compile_time_secs",
+    "jax_persistent_cache_min_entry_size_bytes",
+)
+
+
+def _cache_state():
+    from jaxbelt import _store
+
+    return {k: jax.config.values[k] for k in _CACHE_KEYS}, _store.folder()
+
+
+def test_enable_compilation_cache_on_a_file_or_an_unwritable_folder_names_path_and_changes_nothing(
+    tmp_path, monkeypatch
+):
+    before = _cache_state()
+    afile = tmp_path / "xla"
+    afile.write_text("not a folder")
+    with pytest.raises(ValueError, match=r"`path` .* is a file, not a folder"):
+        jb.enable_compilation_cache(afile)
+    with pytest.raises(ValueError, match=r"`path` .* cannot be created"):
+        jb.enable_compilation_cache(afile / "below")
+    assert _cache_state() == before
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    real_access = os.access
+    monkeypatch.setattr(os, "access", lambda p, m: False if str(p).startswith(str(ro)) else real_access(p, m))
+    with pytest.raises(ValueError, match=r"`path` .* is not writable.*unchanged"):
+        jb.enable_compilation_cache(ro)
+    assert _cache_state() == before  # JAX's persistent cache is left as it was (was: switched on)
+
+
+def test_unknown_private_apis_value_warns_naming_the_accepted_values(monkeypatch):
+    monkeypatch.setattr(_compat, "_state", {})
+    monkeypatch.setenv("JAXBELT_PRIVATE_APIS", "banana")
+    with pytest.warns(UserWarning, match=r"JAXBELT_PRIVATE_APIS='banana' is not one of 1, true, yes, on .* 0, false"):
+        assert _compat.private_apis() is False  # read as off: the public paths
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert _compat.private_apis() is False  # warned once per value
+        for value, on in (("0", False), ("OFF", False), (" yes ", True), ("", True)):
+            monkeypatch.setenv("JAXBELT_PRIVATE_APIS", value)
+            assert _compat._switch() is on
+
+
+def test_cli_on_a_full_disk_prints_one_line(capsys, tmp_path):
+    import argparse
+
+    from jaxbelt.cli import _run
+
+    out = str(tmp_path / "move.csv")
+
+    def full(args):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), out)
+
+    args = argparse.Namespace(command="bench", func=full, no_cache=True)
+    assert _run(args) == 1
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert err[0].startswith("jaxbelt bench: error: No space left on device writing ") and out in err[0]
+
+
+def test_grad_of_a_modal_method_simulation_names_the_method_to_use():
+    ts = jnp.linspace(0.0, 0.05, 4)
+
+    def final(k, method):
+        return jb.simulate(jb.Scene(jb.BeltStartup(k=k), jb.ExponentialVoltage(), ts=ts), method=method).ys[-1, 2]
+
+    with pytest.raises(NotImplementedError, match=r"method='modal'.*not differentiable.*use method='expm'"):
+        jax.grad(final)(9e4, "modal")
+    # the method it names gives the derivative: central differences of the modal solution itself
+    g = float(jax.grad(final)(9e4, "expm"))
+    h = 9e4 * 1e-5
+    fd = (float(final(9e4 + h, "modal")) - float(final(9e4 - h, "modal"))) / (2 * h)
+    assert g == pytest.approx(fd, rel=1e-5, abs=1e-12)
+
+
+# =====================================================================================
+# shortest_move_time that lands (issue #54, item 4)
+# =====================================================================================
+@pytest.mark.slow
+@pytest.mark.parametrize(
+    ("freqs", "damping", "target"),
+    [
+        ([7.3, 18.0], [0.015, 0.01], 1e-6),  # a longer move: design_move picks 160 knots there, the design 128
+        ([7.3, 18.0, 41.0], [0.015, 0.01, 0.02], None),  # three modes, at 0.3 x the design's worst
+    ],
+)
+def test_a_design_re_made_by_design_move_at_the_shortest_time_meets_the_target(freqs, damping, target):
+    axis = jb.ModalAxis(freqs, damping)
+    design = jb.design_move(axis, 0.1, 0.8, include=("minimax",), **LIMITS).minimax
+    target = 0.3 * float(design.fine_worst) if target is None else target
+    T = float(jb.shortest_move_time(axis, target, design))
+    # the reference: design_move's own design at that time, its worst residual on its fine grid
+    again = jb.design_move(axis, 0.1, T, include=("minimax",), **LIMITS)
+    assert float(again.minimax.fine_worst) == pytest.approx(target, rel=1e-2)  # was 20 % below at 1e-6
+    # the least such time: design_move 0.5 % sooner leaves more than the target
+    sooner = jb.design_move(axis, 0.1, T * 0.995, include=("minimax",), **LIMITS)
+    assert float(sooner.minimax.fine_worst) > target
