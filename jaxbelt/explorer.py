@@ -49,7 +49,7 @@ from typing import Any
 
 import numpy as np
 
-from ._display import Display, Table, fmt_list, with_unit
+from ._display import Display, Table, fmt, fmt_list, with_unit
 
 __all__ = ["Explorer", "Knob", "explore"]
 
@@ -122,11 +122,35 @@ def _bounds_of(p) -> tuple[float, float, bool]:
     return -math.inf, math.inf, False
 
 
+#: the memory a view may take per output time [bytes]: its curves and the solver's saved states, with room for the
+#: intermediate arrays (measured: 136 bytes per point for the start-up's closed form, more for the ODE scenes)
+BYTES_PER_POINT = 2048
+
+
+def max_points() -> int:
+    """The most output times a view takes: those whose arrays (`BYTES_PER_POINT` each) fit in a quarter of this
+    machine's memory (1e7 where the memory cannot be read)."""
+    import os
+
+    try:
+        memory = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (AttributeError, ValueError, OSError):
+        return 10**7
+    return max(int(memory // 4 // BYTES_PER_POINT), 1000)
+
+
 def _time_grid(owner: str, t_end: float, n_points, least: int = 2):
-    """The view's output times `(ts on the device, t on the host)`: `n_points` (an integer >= `least`) equally
-    spaced from 0 to `t_end` [s] (checked by the caller)."""
+    """The view's output times `(ts on the device, t on the host)`: `n_points` (an integer in [`least`,
+    `max_points()`]: refused before anything is allocated) equally spaced from 0 to `t_end` [s] (checked by the
+    caller)."""
     if isinstance(n_points, bool) or not isinstance(n_points, int | np.integer) or n_points < least:
         raise ValueError(f"{owner}: option `n_points` must be an integer >= {least}; got {n_points!r}")
+    most = max_points()
+    if n_points > most:
+        raise ValueError(
+            f"{owner}: option `n_points` must lie in [{least}, {most}] (the output times whose arrays fit in a quarter "
+            f"of this machine's memory, {BYTES_PER_POINT} bytes each; a figure shows a few thousand); got {n_points!r}"
+        )
     import jax
 
     ts = jax.device_put(np.linspace(0.0, t_end, int(n_points)))
@@ -213,21 +237,97 @@ def _with_ranges(knobs: list[Knob], ranges, owner: str) -> list[Knob]:
     return out
 
 
+def _grid(lo: float, hi: float, value: float, n: int = 200) -> tuple[float, float]:
+    """`(min, step)` of a slider over `[lo, hi]` whose grid `min + k step` holds `value` (in the slider's own
+    coordinate: the exponent for a logarithmic slider), about `n` steps over the range.
+
+    A browser's slider (noUiSlider, under ipywidgets) snaps its value to `min + k step` when it is shown and sends the
+    snapped value back: a start off that grid would change the view's numbers by opening it (80 on a grid of 1.2 from
+    0 becomes 80.4). So the step is the nearest to `(hi - lo) / n` that divides `value - lo` (the low end stays); a
+    value within half a step of `lo` moves the low end to the value instead."""
+    step = (hi - lo) / n
+    k = round((value - lo) / step)
+    if k >= 1:
+        return lo, (value - lo) / k
+    return value, step
+
+
+def _off_grid(slider, new, log: bool) -> bool:
+    """Whether `new`, a value a front-end sends for `slider`, lies within half a step of the slider's value: the echo
+    of the value snapped to the front-end's grid (a rounding), not a move (a move is at least one step)."""
+    try:
+        new, old, step = float(new), float(slider.value), float(slider.step)
+    except (TypeError, ValueError):
+        return False
+    if log:
+        if not (new > 0 and old > 0):
+            return False
+        base = float(slider.base)
+        return abs(math.log(new, base) - math.log(old, base)) < 0.5 * step
+    return abs(new - old) < 0.5 * step  # NaN: False
+
+
+_SLIDER_CLASSES: dict = {}
+
+
+def _slider_class(w, log: bool):
+    """ipywidgets' `FloatSlider` (`FloatLogSlider` where `log`) that ignores a front-end's echo of its value snapped
+    to the front-end's grid (`_off_grid`): the value set from Python stays exact, and the echo recomputes nothing."""
+    cls = _SLIDER_CLASSES.get(log)
+    if cls is None:
+        base = w.FloatLogSlider if log else w.FloatSlider
+
+        class Slider(base):  # type: ignore[valid-type, misc]
+            def set_state(self, sync_data):
+                """A state from the front-end, less a `value` that only rounds this slider's value to its grid."""
+                if "value" in sync_data and _off_grid(self, sync_data["value"], log):
+                    sync_data = {k: v for k, v in sync_data.items() if k != "value"}
+                if sync_data:
+                    super().set_state(sync_data)
+
+        Slider.__name__ = Slider.__qualname__ = "LogSlider" if log else "Slider"
+        cls = _SLIDER_CLASSES[log] = Slider
+    return cls
+
+
+def _slider_range(k: Knob, value: float) -> dict:
+    """`{min, max, step}` of the slider of `k` with `value` on its grid (`_grid`; exponents for a log slider)."""
+    if k.log:
+        lo, hi, x = math.log10(k.lo), math.log10(k.hi), math.log10(value)
+    else:
+        lo, hi, x = k.lo, k.hi, value
+    mn, step = _grid(lo, hi, x)
+    if k.log and mn == x:  # base**min may round above the value: keep the low end a hair below it
+        mn = x - 1e-9 * step
+    return dict(min=mn, max=hi, step=step)
+
+
+def _set_slider(slider, k: Knob, value: float) -> None:
+    """Move `slider` to `value` with its grid re-aligned to hold it, as one message to the front-end (`hold_sync`):
+    a front-end that received the range and the value apart would snap the old value to the new range, or the new
+    value to the old grid, and send that back."""
+    r = _slider_range(k, value)
+    with slider.hold_sync():
+        slider.min = min(float(slider.min), r["min"])  # widen first: the value is validated against the range
+        slider.max = max(float(slider.max), r["max"])
+        slider.value = value
+        slider.min, slider.max, slider.step = r["min"], r["max"], r["step"]
+
+
 def _slider(w, k: Knob):
-    """The ipywidgets slider of a knob (logarithmic where `k.log`)."""
-    desc = with_unit(k.label, k.unit)
+    """The ipywidgets slider of a knob (logarithmic where `k.log`), its grid holding the start value (`_grid`)."""
     common = dict(
-        description=desc,
+        description=with_unit(k.label, k.unit),
         continuous_update=True,
         readout_format=".4g",
-        style={"description_width": "110px"},
-        layout=w.Layout(width="420px"),
+        style={"description_width": "100px"},
+        layout=w.Layout(width="400px"),
         tooltip=k.doc,
+        **_slider_range(k, k.value),
     )
     if k.log:
-        lo, hi = math.log10(k.lo), math.log10(k.hi)
-        return w.FloatLogSlider(value=k.value, base=10.0, min=lo, max=hi, step=(hi - lo) / 200, **common)
-    return w.FloatSlider(value=k.value, min=k.lo, max=k.hi, step=(k.hi - k.lo) / 200, **common)
+        return _slider_class(w, True)(value=k.value, base=10.0, **common)
+    return _slider_class(w, False)(value=k.value, **common)
 
 
 def _options(owner: str, given: dict, allowed: Sequence[str]) -> None:
@@ -291,7 +391,7 @@ def _style(ax, xlabel: str, ylabel: str) -> None:
     ax.set_xlabel(xlabel, fontsize=9)
     ax.set_ylabel(ylabel, fontsize=9)
     ax.grid(alpha=0.3)
-    ax.tick_params(labelsize=8)
+    ax.tick_params(labelsize=9)
     ax.xaxis.set_major_locator(MaxNLocator(5))
     if ax.get_yscale() == "linear":
         ax.yaxis.set_major_locator(MaxNLocator(5))
@@ -407,7 +507,7 @@ class _Startup(_Scene):
         (self.l_current,) = axes[0].plot([], [], color="C0")
         (self.l_w1,) = axes[1].plot([], [], color="C0", label="pulley 1")
         (self.l_w2,) = axes[1].plot([], [], color="C1", label="pulley 2")
-        legend = axes[1].legend(loc="lower right", fontsize=7)
+        legend = axes[1].legend(loc="lower right", fontsize=9)
         (self.l_a2,) = axes[2].plot([], [], color="C1")
         self.dynamic = [self.l_current, self.l_w1, self.l_w2, legend, self.l_a2]
         for ax, label in zip(axes, ("current I [A]", "speeds θ̇1, θ̇2 [rad/s]", "pulley 2 acceleration θ̈2 [rad/s²]")):
@@ -523,7 +623,7 @@ class _FourBar(_Scene):
         chi = float(r["chi"])
         t0, t1 = self.window
         return [
-            ("chi", f"χ over {t0:g}–{t1:g} s (eq. 22)", chi, "–", f"{chi:.4g} ({100 * chi:.3g} %)"),
+            ("chi", f"χ over {t0:g}–{t1:g} s (eq. 22)", chi, "–", f"{chi:.4g} ({100 * chi:.4g} %)"),
             ("peak_voltage", "peak |V|", float(np.max(np.abs(r["voltage"]))), "V", None),
             ("peak_current", "peak |I|", float(np.max(np.abs(r["current"]))), "A", None),
         ]
@@ -668,7 +768,7 @@ class _Shaping(_Scene):
         axes[1].axvline(self.T, color="0.5", lw=0.8, ls=":")
         _style(axes[1], "time t [s]", "platform acceleration [rad/s²]")
         axes[1].set_xlim(self.t[0], self.t[-1])
-        legends = [ax.legend(fontsize=7, loc="upper right") for ax in axes]
+        legends = [ax.legend(fontsize=9, loc="upper right") for ax in axes]
         self.dynamic = [self.l_acc, self.l_step, self.l_plat, self.l_rigid, *legends]
 
     def draw(self, r):
@@ -793,7 +893,7 @@ class _Spans(_Scene):
         (self.l_cross,) = ax.plot([], [], "ko", ms=4, label="exciting speeds (eq. 55)")
         self.l_speed = ax.axvline(np.nan, color="C3", lw=1.0)
         _style(ax, "belt speed V [m/s]", "natural frequency f [Hz]")
-        legend = ax.legend(fontsize=7, loc="upper right")
+        legend = ax.legend(fontsize=9, loc="upper right")
         self.l_shape = [axes[1].plot([], [], color="C0", alpha=0.35 + 0.13 * k)[0] for k in range(5)]
         _style(axes[1], "x along the span [mm]", "mode 1 (eq. 49), 5 instants")
         self.dynamic = [*self.l_modes, *self.l_loads, self.l_cross, self.l_speed, legend, *self.l_shape]
@@ -821,7 +921,7 @@ class _Spans(_Scene):
         out = [
             ("critical_speed", "critical speed V_cr (eq. 52)", float(r["vc"]), "m/s", None),
             ("speed", "belt speed V", float(r["V"]), "m/s", None),
-            ("frequencies", "f_n at V (eq. 39)", tuple(float(x) for x in f), "Hz", fmt_list(f, ".5g")),
+            ("frequencies", "f_n at V (eq. 39)", tuple(float(x) for x in f), "Hz", None),
         ]
         rpm = r["rotor"] * 30.0 / np.pi
         out.append(("exciting_rpm", "exciting rotor speeds (eq. 55)", rpm, "rpm", "table below"))
@@ -869,7 +969,7 @@ class _Nonlinear(_Scene):
         damping = np.atleast_1d(np.asarray(b.damping, dtype=float))
         knobs = [
             _declared_knob(NonlinearBelt, "wave_speed", b.wave_speed, "v_t", factors=(0.8, 1.25)),
-            _declared_knob(NonlinearBelt, "v_l", b.v_l, "v_l", factors=(0.2, 3.0)),
+            _declared_knob(NonlinearBelt, "v_l", b.v_l, "v_l = c/v_t", factors=(0.2, 3.0)),
             _declared_knob(NonlinearBelt, "damping", damping[0], "ξ1", factors=(0.25, 4.0), log=True, name="damping1"),
         ]
         self.knobs = _with_ranges(knobs, ranges, o)
@@ -922,7 +1022,7 @@ class _Nonlinear(_Scene):
             ax.axvline(np.nan, color="0.5", lw=0.8, ls=":", label="folds" if k == 0 else None) for k in range(6)
         ]
         _style(ax, "belt speed V [m/s]", "peak-to-peak 1 cm from the pulley [mm]")
-        legend = ax.legend(fontsize=7, loc="upper left")
+        legend = ax.legend(fontsize=9, loc="upper left")
         self.dynamic = [self.l_stable, self.l_unstable, *self.l_folds, legend]
 
     def draw(self, r):
@@ -940,9 +1040,9 @@ class _Nonlinear(_Scene):
     def numbers(self, r):
         folds = r["folds"]
         return [
-            ("folds", "fold (jump) speeds", tuple(float(x) for x in folds), "m/s", fmt_list(folds) or "none"),
-            ("max_pp", "largest peak-to-peak", float(np.nanmax(r["pp"])), "m", None),
-            ("speed_range", "speed range", tuple(float(x) for x in r["range"]), "m/s", fmt_list(r["range"], ".4g")),
+            ("folds", "fold (jump) speeds", tuple(float(x) for x in folds), "m/s", None),
+            ("max_pp", "largest peak-to-peak", 1e3 * float(np.nanmax(r["pp"])), "mm", None),
+            ("speed_range", "speed range", tuple(float(x) for x in r["range"]), "m/s", None),
         ]
 
 
@@ -1078,12 +1178,12 @@ class _Axis(_Scene):
         ax.set_yscale("log")
         ax.set_xlim(self.factors[0], self.factors[-1])
         _style(ax, "actual / nominal frequency", "residual [% of unshaped, worst mode]")
-        self.legend0 = ax.legend(fontsize=7, loc="lower left", ncol=2)
+        self.legend0 = ax.legend(fontsize=9, loc="lower left", ncol=2)
         (self.l_best,) = axes[1].plot([], [], color="C0", label="recommended")
         (self.l_unshaped,) = axes[1].plot([], [], color="0.5", ls="--", lw=0.8, label="unshaped")
         _style(axes[1], "time t [s]", "acceleration [m/s²]")
         axes[1].set_xlim(0.0, self.T_max)
-        self.legend1 = axes[1].legend(fontsize=7, loc="upper right")
+        self.legend1 = axes[1].legend(fontsize=9, loc="upper right")
         self.dynamic = [*self.l_curves.values(), self.l_best, self.l_unshaped, self.legend0, self.legend1]
 
     def draw(self, r):
@@ -1370,7 +1470,7 @@ class Explorer:
         self._quiet = True
         try:
             for name, v in checked.items():
-                self.controls[name].value = v
+                _set_slider(self.controls[name], self._knobs[name], v)
         finally:
             self._quiet = False
         self._refresh(wait=wait, raise_errors=True)
@@ -1387,16 +1487,24 @@ class Explorer:
 
     @property
     def widget(self):
-        """The composed ipywidgets box: sliders (and the scene's buttons), key numbers and status, the figure."""
+        """The composed ipywidgets box, at most `WIDTH` px wide: the figure on top (it stays in place while the
+        numbers below change height), then the sliders (and the scene's buttons) beside the key numbers and the
+        status; the numbers' column wraps its text and moves below the sliders where the view is narrower."""
         if self._box is None:
             w = self._w
             if self._mode == "canvas":
                 view = self.figure.canvas
             else:
-                self._image = view = w.Image(value=self._png(), format="png")
-            left = w.VBox([*self.controls.values(), *self._extra])
-            right = w.VBox([self._numbers, w.HBox([self._progress, self._status])])
-            self._box = w.VBox([w.HBox([left, right]), view])
+                self._image = view = w.Image(
+                    value=self._png(), format="png", layout=w.Layout(max_width="100%", height="auto")
+                )
+            left = w.VBox([*self.controls.values(), *self._extra], layout=w.Layout(flex="0 0 auto", width="410px"))
+            right = w.VBox(
+                [self._numbers, w.HBox([self._progress, self._status], layout=w.Layout(flex_flow="row wrap"))],
+                layout=w.Layout(flex="1 1 300px", min_width="0"),
+            )
+            controls = w.HBox([left, right], layout=w.Layout(flex_flow="row wrap", width="100%"))
+            self._box = w.VBox([view, controls], layout=w.Layout(max_width=f"{WIDTH}px", overflow="hidden"))
         return self._box
 
     def tune(self, wait: bool = True) -> Explorer:
@@ -1530,14 +1638,12 @@ class Explorer:
         nums = scene.numbers(result)
         self.values = {k: v for k, _, v, _, _ in nums}
         self.units = {k: u for k, _, _, u, _ in nums}
-        fields = tuple(
-            (label, v if shown is None else shown, u if shown is None else "") for _, label, v, u, shown in nums
-        )
-        self._display = Display(scene.title, fields, scene.tables(result))
-        self._numbers.value = self._display.html()
+        fields = tuple((label, _shown(v, u) if shown is None else shown, "") for _, label, v, u, shown in nums)
+        self._display = Display(scene.title, fields, scene.tables(result), spec=SPEC)
+        self._numbers.value = _wrapped(self._display.html())
         note = result.get("note") if isinstance(result, dict) else None
         self.error = ""
-        self._status.value = "" if not note else f"<small>{_escape(note)}</small>"
+        self._status.value = "" if not note else _wrapped(f"<small>{_escape(note)}</small>")
         self.stats["computed"] += 1
         self._redraw()
 
@@ -1548,27 +1654,37 @@ class Explorer:
         self._quiet = True
         try:
             for name, v in gains.items():
-                s, k = self.controls[name], self._knobs[name]
+                k = self._knobs[name]
                 if not k.lo <= v <= k.hi:  # widen the slider to hold the tuned gain
                     k = self._knobs[name] = dataclasses.replace(k, lo=min(k.lo, v), hi=max(k.hi, v))
-                    s.min, s.max = k.lo, k.hi
-                s.value = v
+                _set_slider(self.controls[name], k, v)  # range, grid and value in one message to the front-end
         finally:
             self._quiet = False
         self._generation += 1
         self._apply(self.scene.compute(self.slider_values))
         msg = (
-            f"tune_pid: χ {100 * res.chi_initial:.3g} % → {100 * res.chi:.3g} % in {getattr(self.scene, 'tune_steps', '?')} Adam "
+            f"tune_pid: χ {100 * res.chi_initial:.4g} % → {100 * res.chi:.4g} % in {getattr(self.scene, 'tune_steps', '?')} Adam "
             f"steps ({res.status})"
         )
         if caught:
             msg += "; " + "; ".join(caught)
         self.values["tuned_chi"] = float(res.chi)
-        self._status.value = f"<small>{_escape(msg)}</small>"
+        self._status.value = _wrapped(f"<small>{_escape(msg)}</small>")
 
     def _show_error(self, e: BaseException) -> None:
+        """Show the error of a computation at the sliders' values, and no number from earlier values: the key numbers
+        (`values`) become NaN, their display is cleared and the curves are emptied (the axes stay)."""
+        from matplotlib.lines import Line2D
+
         self.error = f"{type(e).__name__}: {e}"
-        self._status.value = f'<span style="color:#b00">{_escape(self.error)}</span>'
+        self.values = {k: math.nan for k in self.values}
+        self._display = Display(self.scene.title)
+        self._numbers.value = _wrapped(self._display.html())
+        self._status.value = _wrapped(f'<span style="color:#b00">{_escape(self.error)}</span>')
+        for a in getattr(self.scene, "dynamic", ()):
+            if isinstance(a, Line2D):
+                a.set_data([], [])
+        self._redraw()
 
     def _redraw(self) -> None:
         """Redraw the figure in place: on ipympl's canvas `draw_idle()` (it renders and sends the image); on the Agg
@@ -1594,6 +1710,29 @@ class Explorer:
         buf = io.BytesIO()
         self.figure.savefig(buf, format="png")
         return buf.getvalue()
+
+
+#: the widest a view is laid out [px] (a notebook's output area of a 1000 px window holds it: no horizontal scrollbar)
+WIDTH = 960
+
+#: the format of the numbers a view shows (3-4 significant digits: what a slider's readout resolves)
+SPEC = ".4g"
+
+
+def _shown(value, unit: str) -> str:
+    """A key number as the view shows it: `SPEC` digits (each element of a sequence) and its unit."""
+    if isinstance(value, str):
+        text = value
+    elif isinstance(value, tuple | list | np.ndarray) and np.ndim(value) > 0:
+        text = fmt_list(value, SPEC) if np.size(value) else "none"
+    else:
+        text = fmt(value, SPEC)
+    return text + (f" {unit}" if unit and unit not in ("-", "–") and text not in ("–", "none") else "")
+
+
+def _wrapped(html: str) -> str:
+    """`html` in a block whose text wraps (an ipywidgets `HTML` keeps a line unbroken by default)."""
+    return f'<div style="white-space:normal;overflow-wrap:anywhere">{html}</div>'
 
 
 def _escape(text: str) -> str:
