@@ -33,6 +33,13 @@ frequency or the move time crosses one of its problem sizes: its frequency grid 
 ratio never does.)
 
 `Explorer.update(**values)` sets sliders from code (what the tests and the benchmark do) and waits for the figure.
+
+**In a browser** (ipywidgets 8 on noUiSlider) a slider snaps its value to its grid `min + k step` when shown and
+sends the snapped value back. Each slider's grid holds the value it starts from (`_grid`), a value set from code
+moves the grid to hold it and reaches the front-end as one message (`_set_slider`: range, step and value together),
+and a value the front-end sends within half a step of the slider's is a rounding, ignored (`_slider_class`): opening a
+view changes no number, and the tuned gains reach the browser as they are. Numbers show 4 significant digits (`SPEC`)
+with their units; a failed computation leaves `values` NaN (no number from earlier values).
 """
 
 from __future__ import annotations
@@ -1410,10 +1417,10 @@ class Explorer:
     - `controls`: `{name: ipywidgets slider}` (units in each description); dragging one recomputes and redraws;
     - `figure`: the scene's matplotlib `Figure`, redrawn in place (its lines' data change, the figure stays);
     - `values`: `{name: number}` of the key numbers of the last result (χ, H, the worst residual, the fold
-      speeds, ...), `units`: their units;
+      speeds, ...), `units`: their units; NaN after a computation that failed (`error` says why);
     - `update(**values)`: set sliders from code and wait for the redrawn figure (`wait=False`: do not wait);
-    - `widget`: the composed ipywidgets box (sliders, numbers, status, figure); a notebook shows it when the
-      explorer is the cell's value (a static renderer shows the figure as a PNG);
+    - `widget`: the composed ipywidgets box (figure on top; sliders, numbers and status below); a notebook shows it
+      when the explorer is the cell's value (a static renderer shows the figure as a PNG);
     - `wait(timeout)`: wait until no background computation is in flight (long scenes); `close()`.
 
     Long scenes compute in one background thread: a slider change that arrives while a computation runs makes
