@@ -201,3 +201,23 @@ def test_a_nan_slider_leaves_no_old_number():
     assert len(ex.scene.l_speed.get_xdata()) == 0  # the curves are emptied too
     ex.controls["kp"].value = 80.0
     assert not ex.error and ex.values["chi"] == chi
+
+
+def test_numbers_show_four_digits_with_their_units():
+    """The non-linear view's fold speeds, speed range (m/s) and peak-to-peak (mm, as its plot) with their units, at
+    4 significant digits; a long note in a table wraps (its cell's style) instead of widening the view."""
+    from jaxbelt._display import Display, Table
+    from jaxbelt.explorer import _Nonlinear, _shown
+
+    scene = _Nonlinear()
+    r = dict(
+        folds=np.array([7.512345678, 8.0987654321]),
+        pp=np.array([0.001234567, 0.0045678912]),
+        range=(7.1234567, 9.87654),
+    )
+    shown = {k: _shown(v, u) if s is None else s for k, _, v, u, s in scene.numbers(r)}
+    assert shown == {"folds": "7.512, 8.099 m/s", "max_pp": "4.568 mm", "speed_range": "7.123, 9.877 m/s"}
+    assert _shown((), "m/s") == "none" and _shown(math.nan, "m/s") == "–"
+    assert scene.knobs[1].label == "v_l = c/v_t"
+    html = Display("t", tables=(Table(("note",), (("a note " * 30,),)),), spec=".4g").html()
+    assert "white-space:normal" in html and "max-width:32em" in html
