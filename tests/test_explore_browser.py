@@ -139,7 +139,7 @@ def test_the_stand_in_front_end_snaps_as_the_browser_did():
     assert nouislider_snap(30.0, 9.0, 60.0, 51.0 / 200) == pytest.approx(29.91, abs=1e-12)
 
 
-@pytest.mark.parametrize("scene", ["startup", "fourbar", "shaping", "spans"])
+@pytest.mark.parametrize("scene", ["startup", "fourbar", pytest.param("shaping", marks=pytest.mark.slow), "spans"])
 def test_opening_a_view_changes_no_slider_and_no_number(scene):
     ex = jb.explore(scene)
     sliders, values, computed = dict(ex.slider_values), dict(ex.values), ex.stats["computed"]
@@ -164,6 +164,7 @@ def test_opening_a_view_changes_no_slider_and_no_number(scene):
         np.testing.assert_array_equal(ex.values[k], v)
 
 
+@pytest.mark.slow
 def test_the_tune_button_pressed_in_the_browser_moves_every_gain():
     steps = 3
     ex = jb.explore("fourbar", tune_steps=steps, ranges={"kd": (0.0, 0.016)})
@@ -207,7 +208,8 @@ def test_numbers_show_four_digits_with_their_units():
     """The non-linear view's fold speeds, speed range (m/s) and peak-to-peak (mm, as its plot) with their units, at
     4 significant digits; a long note in a table wraps (its cell's style) instead of widening the view."""
     from jaxbelt._display import Display, Table
-    from jaxbelt.explorer import _Nonlinear, _shown
+    from jaxbelt.explorer._nonlinear import _Nonlinear
+    from jaxbelt.explorer._view import _shown
 
     scene = _Nonlinear()
     r = dict(
