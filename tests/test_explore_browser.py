@@ -82,6 +82,7 @@ class FrontEnd:
         self.state: dict = {}
         self.outbox: list = []  # (widget, state) from the front-end, delivered by `deliver`
         self.received: list = []  # (widget, state) of the kernel's `update` messages
+        self.ranges: dict = {}  # the range each slider view holds now
         for s in self.sliders:
             s.comm = _Comm(self, s)
 
@@ -93,18 +94,30 @@ class FrontEnd:
 
     def _render(self, s):
         st = self.state[s]
+        self.ranges[s] = {k: st[k] for k in ("min", "max", "step")}
         value = browser_value(st)
         if value != st["value"]:  # the view's `model.set('value', snapped)` + `touch()`: a change is sent
             st["value"] = value
             self.outbox.append((s, {"value": value}))
 
     def receive(self, widget, data):
+        """A kernel's `update`: the model takes every key at once, then its change handlers run in the keys' order
+        (Backbone): a range key re-creates the slider's range at the model's value; `value` moves the slider within
+        the range it has then (a value ahead of its new range is clamped to the old one)."""
         if data.get("method") != "update" or widget not in self.state:
             return  # an `echo_update` repeats what this front-end sent
         self.received.append((widget, dict(data["state"])))
-        self.state[widget].update(data["state"])
-        if {"value", "min", "max", "step"} & set(data["state"]):
-            self._render(widget)
+        st = self.state[widget]
+        shown = self.ranges.get(widget, {k: st[k] for k in ("min", "max", "step")})
+        st.update(data["state"])
+        for key in data["state"]:
+            if key in ("min", "max", "step"):
+                shown = self.ranges[widget] = {k: st[k] for k in ("min", "max", "step")}
+            if key in ("min", "max", "step", "value"):
+                value = browser_value({**st, **shown})
+                if value != st["value"]:
+                    st["value"] = value
+                    self.outbox.append((widget, {"value": value}))
 
     def drag(self, s, steps: int):
         """Move a slider by `steps` steps of the browser's grid (as the arrow keys do) and send the value."""
@@ -184,7 +197,7 @@ def test_the_tune_button_pressed_in_the_browser_moves_every_gain():
         assert st["value"] == pytest.approx(v, rel=1e-12) and st["max"] >= v  # the browser's: the same, in range
     # each gain reached the browser as one message (range, grid and value together)
     kd_msgs = [m for w, m in front.received if w is ex.controls["kd"]]
-    assert kd_msgs and {"value", "max", "step"} <= set(kd_msgs[-1])
+    assert kd_msgs and {"value", "max", "step"} <= set(kd_msgs[-1]) and list(kd_msgs[-1])[-1] == "value"
     ts = np.linspace(0.0, 0.5, 1001)  # the view's grid: chi (eq. 22) at the tuned gains, by the library
     sol = jb.simulate(jb.Scene(jb.FourBarDrive(), ref.pid, ts=ts, observe=("motor_speed", "voltage")))
     assert ex.values["chi"] == pytest.approx(float(jb.fluctuation_index(sol, 0.375, 0.5)), rel=1e-10)

@@ -68,6 +68,14 @@ def _slider_class(w, log: bool):
                 if sync_data:
                     super().set_state(sync_data)
 
+            def send_state(self, key=None):
+                """Send the state of `key` with the range (`min`, `max`, `step`) before the `value`: the front-end
+                handles the keys in the message's order, and a value ahead of its new range would be clamped to the
+                old one (a tuned gain beyond the slider's first range came back as the old maximum)."""
+                if key is not None and not isinstance(key, str):
+                    key = sorted(key, key=lambda k: (k == "value", str(k)))
+                super().send_state(key)
+
         Slider.__name__ = Slider.__qualname__ = "LogSlider" if log else "Slider"
         cls = _SLIDER_CLASSES[log] = Slider
     return cls
