@@ -59,6 +59,10 @@ def with_unit(label: str, unit: str) -> str:
     return f"{label} [{unit}]" if unit and unit not in ("-", "–") else label
 
 
+#: the style of an HTML cell of text: it wraps at spaces and, in a long word, anywhere (never widens its table)
+_WRAP = "text-align:left;white-space:normal;overflow-wrap:anywhere;max-width:32em"
+
+
 # --- the shared structure and its two renderings --------------------------------------------------------------
 @dataclasses.dataclass(frozen=True)
 class Table:
@@ -75,11 +79,14 @@ class Table:
 
 @dataclasses.dataclass(frozen=True)
 class Display:
-    """A result as a title, labelled values `fields` ((label, value, unit) triples) and `tables`."""
+    """A result as a title, labelled values `fields` ((label, value, unit) triples) and `tables`; numbers are written
+    by the format `spec` (`fmt`; the live view's `".4g"`: 3-4 significant digits). In the HTML, text cells wrap
+    (a long note makes a taller row, not a wider table)."""
 
     title: str
     fields: tuple = ()
     tables: tuple = ()
+    spec: str = ".6g"
 
     def html(self) -> str:
         """HTML for a notebook (`_repr_html_`): a heading, the labelled values and the tables; text escaped."""
@@ -88,10 +95,8 @@ class Display:
         if self.fields:
             parts.append('<table class="jaxbelt-fields"><tbody>')
             for label, value, unit in self.fields:
-                text = fmt(value) + (f" {unit}" if unit and unit not in ("-", "–") else "")
-                parts.append(
-                    f'<tr><th style="text-align:left">{e(label)}</th><td style="text-align:left">{e(text)}</td></tr>'
-                )
+                text = fmt(value, self.spec) + (f" {unit}" if unit and unit not in ("-", "–") else "")
+                parts.append(f'<tr><th style="text-align:left">{e(label)}</th><td style="{_WRAP}">{e(text)}</td></tr>')
             parts.append("</tbody></table>")
         for t in self.tables:
             parts.append('<table class="jaxbelt-table">')
@@ -102,7 +107,12 @@ class Display:
             parts.append(f"<thead><tr>{head}</tr></thead><tbody>")
             for i, row in enumerate(t.rows):
                 marked = mark_col and i == t.marked
-                cells = "".join(f"<td>{e(fmt(c))}</td>" for c in row)
+                cells = "".join(
+                    f'<td style="{_WRAP}">{e(fmt(c, self.spec))}</td>'
+                    if isinstance(c, str)
+                    else f"<td>{e(fmt(c, self.spec))}</td>"
+                    for c in row
+                )
                 if mark_col:
                     cells = (f'<td title="{e(t.mark)}">★</td>' if marked else "<td></td>") + cells
                 attrs = ' class="jaxbelt-best" style="font-weight:bold"' if marked else ""
@@ -117,19 +127,20 @@ class Display:
         lines = [self.title]
         width = max((len(label) for label, _, _ in self.fields), default=0)
         for label, value, unit in self.fields:
-            text = fmt(value) + (f" {unit}" if unit and unit not in ("-", "–") else "")
+            text = fmt(value, self.spec) + (f" {unit}" if unit and unit not in ("-", "–") else "")
             lines.append(f"  {label + ':':{width + 1}s} {text}")
         for t in self.tables:
             lines.append("")
             if t.caption:
                 lines.append(t.caption)
-            lines += text_table(t.headers, t.rows, t.marked)
+            lines += text_table(t.headers, t.rows, t.marked, self.spec)
         return "\n".join(lines)
 
 
-def text_table(headers, rows, marked: int | None = None) -> list[str]:
-    """Aligned plain-text lines of a table (numbers right-aligned, text left), a `*` before the `marked` row."""
-    cells = [[fmt(c) for c in row] for row in rows]
+def text_table(headers, rows, marked: int | None = None, spec: str = ".6g") -> list[str]:
+    """Aligned plain-text lines of a table (numbers right-aligned by `spec`, text left), a `*` before the `marked`
+    row."""
+    cells = [[fmt(c, spec) for c in row] for row in rows]
     numeric = [all(_is_number(row[j]) for row in rows) for j in range(len(headers))]
     widths = [max([len(h)] + [len(r[j]) for r in cells]) for j, h in enumerate(headers)]
 
