@@ -61,9 +61,9 @@ def test_window_smearing_is_the_expectation_of_the_windowed_estimate():
     expected = np.array([np.sum(psd(fk + nu[near]) * W2[near]) / np.sum(W2[near]) for fk in f])
     axis = jb.ModalAxis([50.0], [0.02])
     _, smeared = spectrum_fit(f, expected, axis, window="hann", resolution=rate / m)
-    np.testing.assert_allclose(smeared, expected, rtol=1e-2)
+    np.testing.assert_allclose(smeared, expected, rtol=1e-3)  # 2.4e-5 measured
     _, plain = spectrum_fit(f, expected, axis, window="none")
-    assert np.max(np.abs(plain / expected - 1)) > 0.1  # the smearing matters here
+    assert np.max(np.abs(plain / expected - 1)) > 0.1  # the smearing matters here: 26 % measured
 
 
 def test_decay_is_given_back():
