@@ -16,18 +16,6 @@ import numpy as np
 
 __all__ = ["decay_fit", "plot_decay_fit", "plot_spectrum_fit", "spectrum_fit"]
 
-#: the spectrum kinds: kind -> (excitation, power), as `jaxbelt.shaping.psd.KINDS`
-_KINDS = {
-    "displacement": ("force", 0),
-    "velocity": ("force", 1),
-    "acceleration": ("force", 2),
-    "base-acceleration": ("base", 0),
-    "klipper": ("base", 1),
-    "klipper-normalised": ("base", 1),
-}
-#: Klipper's default sweep (5-135 Hz): the band of its kinds
-_KLIPPER_BAND = (5.0, 135.0)
-
 
 def _modes(axis, owner: str):
     f = np.atleast_1d(np.asarray(axis.frequencies, dtype=float))
@@ -83,9 +71,11 @@ def spectrum_fit(
     """
     from scipy.optimize import least_squares
 
+    from ..shaping.psd import KINDS, KLIPPER_BAND  # the identification's kinds: kind -> (excitation, power)
+
     owner = "spectrum_fit"
-    if kind not in _KINDS:
-        raise ValueError(f"{owner}: parameter `kind` must be one of {', '.join(map(repr, _KINDS))}; got {kind!r}")
+    if kind not in KINDS:
+        raise ValueError(f"{owner}: parameter `kind` must be one of {', '.join(map(repr, KINDS))}; got {kind!r}")
     klipper = kind.startswith("klipper")
     window = ("kaiser" if klipper else "none") if window is None else window
     if window not in ("none", "hann", "kaiser"):
@@ -93,14 +83,14 @@ def spectrum_fit(
     f, p = np.asarray(f, dtype=float), np.asarray(psd, dtype=float)
     if f.ndim != 1 or f.shape != p.shape or not (np.all(np.isfinite(f)) and np.all(np.isfinite(p))):
         raise ValueError(f"{owner}: parameters `f` and `psd` must be finite 1-D arrays of the same shape")
-    lo, hi = band if band is not None else (_KLIPPER_BAND if klipper else (0.0, math.inf))
+    lo, hi = band if band is not None else (KLIPPER_BAND if klipper else (0.0, math.inf))
     keep = (f > 0) & (f >= lo) & (f <= hi)
     fb, pb = f[keep], p[keep]
     if fb.size < 8 or np.any(pb <= 0):
         raise ValueError(f"{owner}: parameter `psd` must be > 0 at 8 or more frequencies of the band; got {fb.size}")
     fi, zi = _modes(axis, owner)
     n = fi.size
-    excitation, power = _KINDS[kind]
+    excitation, power = KINDS[kind]
     df = (fb[-1] - fb[0]) / (fb.size - 1) if resolution is None else float(resolution)
     offsets, kw = _spectral_window(window)
     fo = np.maximum(fb[:, None] + offsets[None, :] * df, 1e-3 * fb[0])  # (N, K): where the window looks
@@ -171,6 +161,8 @@ def plot_spectrum_fit(f, psd, axis, *, kind: str = "displacement", ax=None, labe
     ax.semilogy(fb, model, "C3-", lw=1.5, label=f"fit ({kind!r}): {_title(axis)}")
     for fk in np.atleast_1d(np.asarray(axis.frequencies, dtype=float)):
         ax.axvline(fk, color="C3", lw=0.6, ls=":")
+    # the PSD's range over the fitted band (the taper below Klipper's band would squash it)
+    ax.set_ylim(0.1 * float(np.min(model)), 3.0 * float(max(np.max(model), np.max(np.asarray(psd)[np.isin(f, fb)]))))
     ax.set_xlabel("frequency [Hz]")
     ax.set_ylabel("PSD")
     ax.legend(fontsize=8)
