@@ -84,6 +84,7 @@ _GROUPS = {
     "tests/test_notebooks.py::test_notebook_executes[04_belt_spans]": "tests/test_string.py",
     "tests/test_notebooks.py::test_notebook_executes[05_nonlinear_belt]": "tests/test_nonlinear_harmonic.py",
     "tests/test_notebooks.py::test_notebook_executes[06_shaping_axis]": "tests/test_shaping_axis.py",
+    "tests/test_notebooks.py::test_notebook_executes[07_measurements]": "tests/test_psd_kinds.py",
     # the same tuning programs as test_fourbar.py's tune_pid test
     "tests/test_coldstart.py::test_tune_pid_": "tests/test_fourbar.py",
 }

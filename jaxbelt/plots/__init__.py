@@ -11,6 +11,10 @@ if _typing.TYPE_CHECKING:  # the public names, imported on first use (`jaxbelt._
     from .fourbar import fourbar_figure as fourbar_figure
     from .fourbar import linkage_strip as linkage_strip
     from .fourbar import plot_regulators as plot_regulators
+    from .measurement import decay_fit as decay_fit
+    from .measurement import plot_decay_fit as plot_decay_fit
+    from .measurement import plot_spectrum_fit as plot_spectrum_fit
+    from .measurement import spectrum_fit as spectrum_fit
     from .nonlinear import response_figure as response_figure
     from .plan import plan_figure as plan_figure
     from .shaping import plot_fig3 as plot_fig3
