@@ -66,10 +66,11 @@ def spectrum_fit(
     smeared by the estimate's `window` (`"none"`, `"hann"`, `"kaiser"`; None: `"kaiser"` for Klipper's kinds,
     else `"none"`) over bins of `resolution` [Hz] (None: the mean step of `f` in the band). The frequencies and
     damping ratios are the axis's; the levels ($P_0$, $A_i$; or $P_0$, $E$, $g_i$) are fitted here by least squares
-    on $\\ln P$ (scipy), as the identification fits them. `band`: `(low, high)` [Hz] (None: all above 0 Hz, Klipper's
+    on $\\ln P$ (optimistix's Levenberg-Marquardt), as the identification fits them. `band`: `(low, high)` [Hz] (None: all above 0 Hz, Klipper's
     kinds 5-135 Hz).
     """
-    from scipy.optimize import least_squares
+    import jax.numpy as jnp
+    import optimistix as optx
 
     from ..shaping.psd import KINDS, KLIPPER_BAND  # the identification's kinds: kind -> (excitation, power)
 
@@ -104,19 +105,28 @@ def spectrum_fit(
     trend = (fo / fref) ** (2 * power)
     floor0 = float(np.percentile(target, 10.0))
 
+    shapes_j, kw_j, trend_j = jnp.asarray(shapes), jnp.asarray(kw), jnp.asarray(trend)
+
     def model(theta):
         if excitation == "force":
-            return np.exp(theta[0]) + (shapes * np.exp(theta[1:])).sum(axis=-1) @ kw
-        T = 1.0 + (shapes * theta[2:]).sum(axis=-1)
-        return np.exp(theta[0]) + np.exp(theta[1]) * ((trend * np.abs(T) ** 2) @ kw)
+            return jnp.exp(theta[0]) + (shapes_j * jnp.exp(theta[1:])).sum(axis=-1) @ kw_j
+        T = 1.0 + (shapes_j * theta[2:]).sum(axis=-1)
+        return jnp.exp(theta[0]) + jnp.exp(theta[1]) * ((trend_j * jnp.abs(T) ** 2) @ kw_j)
 
     if excitation == "force":
         peak = np.array([target[np.argmin(np.abs(fb - fk))] for fk in fi])
         theta0 = np.concatenate([[math.log(floor0)], np.log(np.maximum(peak, floor0) * (2.0 * zi) ** 2)])
     else:
         theta0 = np.concatenate([[math.log(floor0), math.log(float(np.median(target / trend[:, 0])))], np.ones(n)])
-    sol = least_squares(lambda th: np.log(model(th)) - np.log(target), theta0, method="lm", xtol=1e-14, ftol=1e-14)
-    out = model(sol.x) * unit
+    log_target = jnp.log(jnp.asarray(target))
+    sol = optx.least_squares(
+        lambda th, _: jnp.log(model(th)) - log_target,
+        optx.LevenbergMarquardt(rtol=1e-12, atol=1e-14),
+        jnp.asarray(theta0),
+        max_steps=512,
+        throw=False,
+    )
+    out = np.asarray(model(sol.value)) * unit
     if kind == "klipper-normalised":
         out = out * norm
     return fb, out

@@ -250,49 +250,38 @@ class _Band:
 _LP_SIZES = (8, 17, 33, 65, 129, 257)
 
 
-def _lp(times, s, tau, polish: bool = False):
+def _lp_or_none(times, s, tau):
     """The LP of the module docstring at fixed `times` (K,) over [0, tau], solved by jaxbelt's interior point
     method (`jaxbelt.shaping.lp.solve_lp`): `(amplitudes, value, lower_bound, w)`. The times are padded with
     copies of the last one up to a size of `_LP_SIZES` (a copy is the same column: the LP's value is unchanged,
     and the copies' amplitudes are added back), so that one program serves every call of that size. The bound
     is weak duality with the solver's multipliers $z$ of the cut rows (normalised to add to 1): every row is at
     most t, so $t \\ge z^TCA \\ge \\min_k (z^TC)_k$ for amplitudes A that add to 1; it holds whatever the
-    solver's tolerances. `w`: the multipliers as weights of the poles (for `_bound`). `polish=True` (amplitudes at
-    times optimised elsewhere, which may nearly coincide and make the LP degenerate): None where the solver does
-    not converge, the candidate then simply not offered."""
-    from .lp import solve_lp
+    solver's tolerances. `w`: the multipliers as weights of the poles (for `_bound`). None where the solver does
+    not converge (times optimised elsewhere may nearly coincide and make the LP degenerate)."""
+    from .lp import simplex_minimax
 
     times = np.asarray(times, dtype=float)
-    K = len(times)
-    n = next((m for m in _LP_SIZES if m >= K), K)
-    padded = np.r_[times, np.full(n - K, times[-1])]
-    kern = np.exp(np.multiply.outer(s, tau - padded))  # (G, n)
+    kern = np.exp(np.multiply.outer(s, tau - times))  # (G, K)
     P = 32
     theta = 2.0 * np.pi * np.arange(P) / P
-    cuts = np.real(np.exp(-1j * theta)[:, None, None] * kern[None]).reshape(-1, n)
-    m = cuts.shape[0]
-    G = np.vstack(
-        [
-            np.hstack([cuts, -np.ones((m, 1))]),
-            np.hstack([-np.eye(n), np.zeros((n, 1))]),  # A_k >= 0
-            np.hstack([np.eye(n), np.zeros((n, 1))]),  # A_k <= 1 (implied; bounds the variables)
-        ]
-    )
-    h = np.r_[np.zeros(m), np.zeros(n), np.ones(n)]
-    c = np.r_[np.zeros(n), 1.0]
-    res = solve_lp(c, G, h, np.r_[np.ones(n), 0.0][None], np.ones(1), x_bound=np.r_[np.ones(n), 1.0], tol=1e-10)
-    if not bool(res.converged):  # a feasible, bounded LP: not converging on it is a bug, not the user's input
-        if polish:
-            return None
-        raise RuntimeError("design_shaper: the LP solver stopped without an optimum (iteration limit)")
-    z = np.clip(np.asarray(res.z)[:m], 0.0, None)
-    z = z / z.sum() if z.sum() > 0 else np.full(z.shape, 1.0 / z.size)
+    cuts = np.real(np.exp(-1j * theta)[:, None, None] * kern[None]).reshape(-1, len(times))
+    amps, value, z, converged = simplex_minimax(cuts, _LP_SIZES)
+    if not converged:
+        return None
     # the multipliers as weights of the poles: z^T C's column at time t is Re(sum_g w_g e^{s_g (tau - t)})
     w = (z.reshape(P, -1) * np.exp(-1j * theta)[:, None]).sum(axis=0)
-    x = np.clip(np.asarray(res.x)[:n], 0.0, None)
-    amps = np.r_[x[: K - 1], x[K - 1 :].sum()]  # the copies of the last time are its impulse
     amps[amps < 1e-12 * amps.max()] = 0.0
-    return amps / amps.sum(), float(res.value), float(np.min(z @ cuts)), w
+    return amps / amps.sum(), value, float(np.min(z @ cuts)), w
+
+
+def _lp(times, s, tau):
+    """`_lp_or_none` on times of jaxbelt's own (a uniform grid): a feasible, bounded LP whose solver does not
+    converge is a bug, not the user's input."""
+    out = _lp_or_none(times, s, tau)
+    if out is None:
+        raise RuntimeError("design_shaper: the LP solver stopped without an optimum (iteration limit)")
+    return out
 
 
 def _exported(A, T):
@@ -378,7 +367,7 @@ def _free_design(axis, band, tau, u, K, firmware):
     cands = [(np.asarray(A), np.asarray(T)) for A, T in starts] + runs
     cands.sort(key=lambda c: band.worst(*_exported(*c)))
     for _, T in cands[:4]:  # the LP's amplitudes at the best runs' times
-        polished = _lp(T, band.s, tau, polish=True)
+        polished = _lp_or_none(T, band.s, tau)  # not offered where the LP does not converge
         if polished is not None:
             cands.append((polished[0], T))
 

@@ -102,7 +102,7 @@ def best_blend(axis: ModalAxis, members, reference, factors, rate_hz: float, ble
     is not below it by `_GAIN`, 1 %, of it; the earliest member on ties). The programme weighs every
     `_LP_STRIDE`-th factor (and the last); the blend is then judged on all of them. `blend=False`: the members'
     worsts only (the weights pick the least)."""
-    from scipy.optimize import linprog
+    from .lp import simplex_minimax
 
     C = np.stack([executed_ratios(axis, m, reference, factors, rate_hz).ravel() for m in members], axis=1)
     member_worst = np.max(np.abs(C), axis=0)
@@ -115,18 +115,9 @@ def best_blend(axis: ModalAxis, members, reference, factors, rate_hz: float, ble
         Cl = np.stack([c.reshape(-1, K)[:, coarse].ravel() for c in C.T], axis=1)
         th = 2 * np.pi * np.arange(_ANGLES) / _ANGLES
         rows = np.real(np.exp(-1j * th)[:, None, None] * Cl[None]).reshape(-1, M)
-        A_ub = np.hstack([rows, -np.ones((rows.shape[0], 1))])
-        res = linprog(
-            np.r_[np.zeros(M), 1.0],
-            A_ub=A_ub,
-            b_ub=np.zeros(rows.shape[0]),
-            A_eq=np.r_[np.ones(M), 0.0][None, :],
-            b_eq=[1.0],
-            bounds=[(0, None)] * M + [(None, None)],
-            method="highs",
-        )
-        if res.status == 0:
-            w = np.where(res.x[:M] > 1e-9, res.x[:M], 0.0)  # the programme's round-off weights dropped
+        x, _, _, converged = simplex_minimax(rows, (4, 8, 16, 32), tol=1e-9)
+        if converged:  # else: the least member, as without a blend
+            w = np.where(x > 1e-9, x, 0.0)  # the programme's round-off weights dropped
             w = w / w.sum()
             worst = float(np.max(np.abs(C @ w)))
             if worst < best * (1 - _GAIN):

@@ -383,3 +383,36 @@ def solve_lp_data(c, G, h, A, b, x_bound, tol, max_iter, groups=()):
     res = _solve_impl(c_, G_, h_, A_, b_, xb_, jnp.asarray(tol, dtype=float), max_iter, groups)
     value = lp_value(c, G, h, A, b, stop(res.x), stop(res.z), stop(res.y))
     return res._replace(value=value, lower_bound=stop(res.lower_bound))
+
+
+def simplex_minimax(cuts, sizes=(8, 17, 33, 65, 129, 257), tol: float = 1e-10):
+    """The least worst row over the simplex: $\\min_{x, t}\\ t$ subject to $C x \\le t$, $x \\ge 0$, $\\sum x = 1$
+    (`cuts` C of shape (m, K)), by `solve_lp`. Where a weighting of K given columns (amplitudes of impulses, weights
+    of moves) minimises a worst case over cut rows. The columns are padded with copies of the last one up to the
+    first of `sizes` that holds K (a copy is the same column: the optimum is unchanged and the copies' weights
+    are added back), so that one compiled program serves every call of that size.
+
+    Returns `(x, value, z, converged)`: the weights (K,), the optimal t, the multipliers of the cut rows (m,),
+    normalised to add to 1 (weak duality: $\\min_k (z^TC)_k$ is a lower bound on t whatever the solver's
+    tolerances), and whether the solver met its tolerance."""
+    C = np.asarray(cuts, dtype=float)
+    m, K = C.shape
+    n = next((s for s in sizes if s >= K), K)
+    C = np.hstack([C, np.repeat(C[:, -1:], n - K, axis=1)])
+    eye = np.eye(n)
+    G = np.vstack(
+        [
+            np.hstack([C, -np.ones((m, 1))]),
+            np.hstack([-eye, np.zeros((n, 1))]),  # x >= 0
+            np.hstack([eye, np.zeros((n, 1))]),  # x <= 1 (implied; bounds every variable)
+        ]
+    )
+    h = np.r_[np.zeros(m), np.zeros(n), np.ones(n)]
+    c = np.r_[np.zeros(n), 1.0]
+    A = np.r_[np.ones(n), 0.0][None]
+    res = solve_lp(c, G, h, A, np.ones(1), x_bound=np.r_[np.ones(n), np.abs(C).max(initial=1.0)], tol=tol)
+    x = np.clip(np.asarray(res.x)[:n], 0.0, None)
+    x = np.r_[x[: K - 1], x[K - 1 :].sum()]
+    z = np.clip(np.asarray(res.z)[:m], 0.0, None)
+    z = z / z.sum() if z.sum() > 0 else np.full(m, 1.0 / m)
+    return x, float(res.value), z, bool(res.converged)
