@@ -34,7 +34,8 @@ HELPERS = {
     "shortcuts",
     "coldstart",
     "hostile_probe",
-}  # coldstart: minutes of cold CLI runs, run alone; hostile_probe: not a scene
+    "browser_view",
+}  # coldstart: minutes of cold CLI runs, run alone; hostile_probe: not a scene; browser_view: needs a browser
 
 
 def discover() -> list[str]:
