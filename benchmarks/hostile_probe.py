@@ -19,6 +19,7 @@ Run from the repository root (a few minutes on 2 cores):
 
     nice python benchmarks/hostile_probe.py            # all cases
     nice python benchmarks/hostile_probe.py design_move  # the cases of one entry point
+    python benchmarks/hostile_probe.py --quick          # the first case of each entry point, nothing written
 
 Writes `benchmarks/results/hostile_probe.json` (case, entry point, category, seconds, first line) and prints a
 summary table.
@@ -1574,7 +1575,11 @@ CATEGORIES = (
 
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else argv
+    quick = "--quick" in argv  # one case per entry point, nothing written: checks that the probe runs
+    argv = [a for a in argv if a != "--quick"]
     todo = [c for c in cases() if not argv or c.entry in argv or c.id in argv]
+    if quick:
+        todo = list({c.entry: c for c in reversed(todo)}.values())[::-1]
     rows = []
     for c in todo:
         category, seconds, line = classify(c)
@@ -1586,7 +1591,7 @@ def main(argv=None):
         mine = [r for r in rows if r["entry"] == entry]
         print(f"{entry:32s} " + " ".join(f"{sum(r['category'] == k for r in mine):9d}" for k in CATEGORIES))
     print(f"{'all (' + str(len(rows)) + ' cases)':32s} " + " ".join(f"{counts[k]:9d}" for k in CATEGORIES))
-    if not argv:
+    if not argv and not quick:
         from jaxbelt._io import write_text
 
         OUT.parent.mkdir(parents=True, exist_ok=True)
