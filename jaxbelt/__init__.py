@@ -171,6 +171,6 @@ from ._lazy import attach as _attach  # noqa: E402
 
 __getattr__, __dir__, _names = _attach(__name__, __file__)
 #: the one place the version is written (pyproject.toml reads it; CHANGELOG.md has a section per version)
-__version__ = "0.2.0"
+__version__ = "0.3.0"
 # type checkers read the public names from the TYPE_CHECKING block above; at run time they come from the same block
 __all__ = [*_names]  # pyright: ignore[reportUnsupportedDunderAll]

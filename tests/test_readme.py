@@ -30,7 +30,7 @@ def test_the_readme_is_short_and_opens_with_its_commands():
     assert len(text.splitlines()) <= 120
     blocks = python_blocks(text)
     assert len(blocks) == 3
-    assert "design_move" in blocks[0] and "to_csv" in blocks[0]
+    assert "design_move" in blocks[0] and "to_csv" in blocks[0] and "to_firmware" in blocks[0]
     assert "simulate" in blocks[1] and "explore" in blocks[2]
 
 
@@ -95,6 +95,29 @@ def test_the_shaping_snippet_exports_what_its_table_states(readme_namespace):
     # the band is the table's within 5 % (a coarser 9-point band here; the table's grid is finer)
     replayed = _replayed_worst_percent(axis, t, x, plan.uncertainty, np.asarray(plan.reference_m))
     assert replayed == pytest.approx(best.worst_percent, rel=0.05)
+
+
+@pytest.mark.slow
+def test_the_firmware_line_gives_back_the_shaper_whose_residual_is_stated(readme_namespace):
+    """The M593 line, read back by a reader written here from RepRapFirmware's rules (`H`: the amplitudes of every
+    impulse but the last, which is 1 minus their sum; `T`: the delays of the later impulses [s]), gives impulses
+    whose worst residual ratio over ±`uncertainty` of each mode, evaluated here in closed form, is `worst`."""
+    shaper, axis = readme_namespace["shaper"], readme_namespace["axis"]
+    line = shaper.to_firmware()
+    assert line.startswith('M593 P"custom"')
+    fields = dict(re.findall(r"\b([HT])([-0-9.e:]+)", line))
+    H = [float(v) for v in fields["H"].split(":")]
+    T = [float(v) for v in fields["T"].split(":")]
+    assert len(H) == len(T) <= 4
+    A, times = np.r_[H, 1.0 - sum(H)], np.r_[0.0, T]
+    worst = 0.0
+    for f0, z in zip(np.asarray(axis.frequencies), np.asarray(axis.damping_ratios)):
+        for f in np.linspace(0.8 * f0, 1.2 * f0, 241):
+            w = 2 * np.pi * f
+            wd = w * np.sqrt(1 - z * z)
+            terms = A * np.exp(z * w * (times - times[-1]))
+            worst = max(worst, float(np.hypot(terms @ np.cos(wd * times), terms @ np.sin(wd * times))))
+    assert worst == pytest.approx(shaper.worst, rel=2e-3)
 
 
 def test_the_sweep_snippet_equals_one_unbatched_solve(readme_namespace):
