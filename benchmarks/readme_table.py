@@ -48,11 +48,21 @@ def _fmt(v) -> str:
 
 
 def target_met(target, value):
-    """Whether `value` meets `target` ("<= 0.2", "< 1e-3", ">= 1000x", "<= 20 us", "16.0 +/- 0.1"), in the
-    headline's own unit; None when the target is not a number to compare with ("reported", none)."""
+    """Whether `value` meets `target` ("<= 0.2", "< 1e-3", ">= 1000x", "<= 20 us", "16.0 +/- 0.1", a range
+    "90-98 %", a count "6"), in the headline's own unit; None when the target is not a number to compare with
+    ("reported", none)."""
+    import re
+
     if not target or value is None:
         return None
     text = str(target).strip()
+    number = r"\d+(?:\.\d*)?(?:e[-+]?\d+)?"
+    found = re.fullmatch(rf"({number})\s*-\s*({number})(?:\s+\S+)?", text)
+    if found:  # a range, both ends included
+        return float(found.group(1)) <= float(value) <= float(found.group(2))
+    found = re.fullmatch(rf"({number})(?:\s+\S+)?", text)
+    if found:  # a count or a flag to equal
+        return float(value) == float(found.group(1))
     try:
         if "+/-" in text:
             centre, tol = (float(x.split()[0].rstrip("x")) for x in text.split("+/-"))

@@ -248,8 +248,13 @@ def test_cli_figure_failing_mid_way_keeps_the_previous_file(argv, out, tmp_path,
         raise OSError(28, "No space left on device")
 
     monkeypatch.setattr(matplotlib.figure.Figure, "savefig", failing)
-    with pytest.raises(OSError):
-        main(["--no-cache", *argv, "--out", str(path)])
+    try:
+        rc = main(["--no-cache", *argv, "--out", str(path)])
+    except SystemExit as e:
+        rc = e.code
+    assert rc == 1  # a full disk is reported in one line, not a traceback
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "No space left on device" in err[0]
     _assert_intact(path)
 
 

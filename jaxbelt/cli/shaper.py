@@ -69,14 +69,10 @@ def run(args) -> int:
     from ..shaping.firmware_shaper import design_shaper
 
     if args.measured:
-        from ..shaping import identify
+        from ..shaping.measurement import identify_measurement
 
-        if identify.is_spectrum_file(args.measured):
-            f, psd = identify.load_spectrum(args.measured, args.column)
-            axis = identify.identify_axis_from_psd(f, psd, args.n_modes or 1)
-        else:
-            t, y = identify.load_record(args.measured, args.column)
-            axis = identify.identify_axis(t, y, args.n_modes or 1)
+        # the model the file holds (a Klipper calibration CSV is Klipper's kind; a raw sweep is a sweep)
+        axis, _ = identify_measurement(args.measured, args.n_modes or 1, column=args.column)
     else:
         fs, zs = zip(*args.mode)
         axis = ModalAxis(list(fs), list(zs))

@@ -705,12 +705,3 @@ def _fit_record(t, y, n_modes, offset, rtol, atol, max_steps):
     # correlated residuals (structure the model misses, a coloured noise) carry less information than white ones
     widen = math.sqrt(_long_run_factor(np.asarray(r))) if _noisy(np.asarray(r)) else 1.0
     return ModalAxis(f, zeta, None, frequency_std=f_std * widen, damping_std=z_std * widen), np.asarray(r), dt
-
-
-def __getattr__(name: str):
-    """The power spectral density's fit moved to `jaxbelt.shaping.psd`: its names still resolve here."""
-    if name in ("identify_axis_from_psd", "PSD_MIN_SIGNIFICANCE", "MIN_BANDWIDTH_STEPS"):
-        from . import psd
-
-        return getattr(psd, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

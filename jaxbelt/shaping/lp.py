@@ -387,7 +387,7 @@ def solve_lp_data(c, G, h, A, b, x_bound, tol, max_iter, groups=()):
 
 def simplex_minimax(cuts, sizes=(8, 17, 33, 65, 129, 257), tol: float = 1e-10):
     """The least worst row over the simplex: $\\min_{x, t}\\ t$ subject to $C x \\le t$, $x \\ge 0$, $\\sum x = 1$
-    (`cuts` C of shape (m, K)), by `solve_lp`. Where a weighting of K given columns (amplitudes of impulses, weights
+    (`cuts` C of shape (m, K), rows that are cuts of a modulus, so that $t \\ge 0$), by `solve_lp`. Where a weighting of K given columns (amplitudes of impulses, weights
     of moves) minimises a worst case over cut rows. The columns are padded with copies of the last one up to the
     first of `sizes` that holds K (a copy is the same column: the optimum is unchanged and the copies' weights
     are added back), so that one compiled program serves every call of that size.
@@ -405,9 +405,10 @@ def simplex_minimax(cuts, sizes=(8, 17, 33, 65, 129, 257), tol: float = 1e-10):
             np.hstack([C, -np.ones((m, 1))]),
             np.hstack([-eye, np.zeros((n, 1))]),  # x >= 0
             np.hstack([eye, np.zeros((n, 1))]),  # x <= 1 (implied; bounds every variable)
+            np.r_[np.zeros(n), -1.0][None],  # t >= 0 (valid where every row is a cut of a modulus; bounds t)
         ]
     )
-    h = np.r_[np.zeros(m), np.zeros(n), np.ones(n)]
+    h = np.r_[np.zeros(m), np.zeros(n), np.ones(n), 0.0]
     c = np.r_[np.zeros(n), 1.0]
     A = np.r_[np.ones(n), 0.0][None]
     res = solve_lp(c, G, h, A, np.ones(1), x_bound=np.r_[np.ones(n), np.abs(C).max(initial=1.0)], tol=tol)
