@@ -50,17 +50,13 @@ TESTS = (
 
 
 def draw_axes(n: int, seed: int = 2026):
-    """As `benchmarks/shaping_axis.py` draws its axes (1-3 modes, 1-20 Hz, distinct, damping 0.005-0.1)."""
-    rng = np.random.default_rng(seed)
-    out = []
-    for k in range(n):
-        m = 1 + k % 3
-        while True:
-            f = np.sort(rng.uniform(1.0, 20.0, m))
-            if m == 1 or np.min(np.diff(f)) / f[-1] > 0.15:
-                break
-        out.append((f"drawn {k + 1} ({m} mode{'s' if m > 1 else ''})", list(f), list(rng.uniform(0.005, 0.1, m))))
-    return out
+    """The axes `benchmarks/shaping_axis.py` draws (1-3 modes, 1-20 Hz, distinct, damping 0.005-0.1), labelled."""
+    from shaping_axis import draw_axes as drawn
+
+    return [
+        (f"drawn {k + 1} ({len(f)} mode{'s' if len(f) > 1 else ''})", list(f), list(z))
+        for k, (f, z) in enumerate(drawn(n, seed))
+    ]
 
 
 def worst(A, T, freqs, zetas, n=401):
