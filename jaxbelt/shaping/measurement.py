@@ -36,7 +36,9 @@ def looks_like_sweep(t, y) -> bool:
     return bool(rises.sum() >= _SWEEP_CHUNKS - 2 and peaks[-1] >= 2.0 * peaks[0])
 
 
-def identify_measurement(path, n_modes: int = 1, *, column: int | str | None = None, kind: str | None = None):
+def identify_measurement(
+    path, n_modes: int = 1, *, column: int | str | None = None, kind: str | None = None, sweep=None
+):
     """The modes of an axis from a measurement file, read as its writer wrote it: returns `(axis, what)`, the
     `ModalAxis` and a line saying what was fitted.
 
@@ -54,10 +56,19 @@ def identify_measurement(path, n_modes: int = 1, *, column: int | str | None = N
       record of a resonance sweep: `identify_axis_from_sweep`); default: a sweep where the record looks like one
       (`looks_like_sweep`), else a decay.
     - `column`: the file's column (the `channel` of the readers), by header name or index >= 1.
+    - `sweep`: the sweep's schedule `(ends [s], accel [m/s²])` for a sweep's record (`klipper_sweep(...)` with the
+      test's settings); None: Klipper's defaults. Refused for anything else than a sweep's record.
 
     Raises as the readers and fits do, and `ValueError` naming `kind` for a kind the file cannot hold.
     """
+    if sweep is not None and kind not in (None, "sweep"):
+        raise ValueError(f"identify_measurement: parameter `sweep` is for a sweep's record; got `kind` = {kind!r}")
     if _readers.is_spectrum_file(path):
+        if sweep is not None:
+            raise ValueError(
+                f"identify_measurement: parameter `sweep` is for a sweep's record; {path} is a spectrum (its first "
+                "column is a frequency)"
+            )
         if kind is not None and kind not in _psd.KINDS:
             raise ValueError(
                 f"identify_measurement: parameter `kind` {kind!r} is not a spectrum's: {path} is a spectrum (its "
@@ -76,6 +87,14 @@ def identify_measurement(path, n_modes: int = 1, *, column: int | str | None = N
     t, y = _readers.load_record(path, column, check_times=True)
     if kind is None:
         kind = "sweep" if looks_like_sweep(t, y) else "decay"
+    if kind == "decay" and sweep is not None:
+        raise ValueError(
+            "identify_measurement: parameter `sweep` is for a sweep's record; this record looks like a free decay "
+            "(give `kind='sweep'` if it is a sweep's)"
+        )
     if kind == "sweep":
-        return _sweep.identify_axis_from_sweep(t, y, n_modes), "resonance sweep (its spectrum, 'klipper')"
+        return (
+            _sweep.identify_axis_from_sweep(t, y, n_modes, sweep=sweep),
+            "resonance sweep (its transfer function from the sweep's schedule)",
+        )
     return _decay.identify_axis(t, y, n_modes), "free decay"
