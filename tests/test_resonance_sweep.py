@@ -4,6 +4,7 @@ function against scipy's `least_squares` on the same frequency-domain model (the
 edge, from the true delay); the truth within the standard errors; one compiled program per length."""
 
 import numpy as np
+import pytest
 
 import jaxbelt as jb
 from jaxbelt.shaping import resonance_test as rt
@@ -21,12 +22,13 @@ def record(seed, axis=AXIS, lead=LEAD):
     return np.round(t + 100.0, 6), y, sweep
 
 
+@pytest.mark.slow
 def test_sweep_response_matches_solve_ivp():
     """Exact propagation against scipy's RK45 at rtol 1e-11, segment by segment (the acceleration constant on
     each): the payload's acceleration within 1e-7 of its peak."""
     from scipy.integrate import solve_ivp
 
-    ends, accel = jb.klipper_sweep(freq_start=30.0, freq_end=34.0, hz_per_sec=4.0, sweeping_period=0.4)
+    ends, accel = jb.klipper_sweep(freq_start=30.0, freq_end=32.0, hz_per_sec=4.0, sweeping_period=0.2)
     (f1, f2), (z1, z2), (g1, g2) = AXIS
     t, y = rt.sweep_response(jb.ModalAxis(*AXIS), RATE, ends, accel, lead=0.05)
     w = 2 * np.pi * np.array([f1, f2])
@@ -41,10 +43,11 @@ def test_sweep_response_matches_solve_ivp():
     x, ref = np.zeros(4), np.empty_like(y)
     for lo, hi, a in zip(bounds[:-1], bounds[1:], levels):
         inside = (t >= lo) & (t < hi)
-        sol = solve_ivp(rhs, (lo, hi), x, args=(a,), t_eval=t[inside], rtol=1e-11, atol=1e-14, method="RK45")
-        q, v = sol.y[:2], sol.y[2:]
+        times = np.append(t[inside], hi)
+        sol = solve_ivp(rhs, (lo, hi), x, args=(a,), t_eval=times, rtol=1e-11, atol=1e-14, method="RK45")
+        q, v = sol.y[:2, :-1], sol.y[2:, :-1]
         ref[inside] = a + np.sum(-(w[:, None] ** 2) * q - 2 * (z * w)[:, None] * v - g[:, None] * a, axis=0)
-        x = solve_ivp(rhs, (lo, hi), x, args=(a,), rtol=1e-11, atol=1e-14, method="RK45").y[:, -1]
+        x = sol.y[:, -1]
     last = t >= bounds[-1]
     assert np.all(~last[:-1])  # the record ends at the sweep's end
     np.testing.assert_allclose(y[~last], ref[~last], atol=1e-7 * np.max(np.abs(ref)))
@@ -99,6 +102,7 @@ def _reference_fit(t, y, sweep, tau):
     return ref.x[:2], ref.x[2:4], std[:2], std[2:4]
 
 
+@pytest.mark.slow
 def test_the_fit_matches_scipy_least_squares_and_the_truth():
     """The same model fitted by scipy's `least_squares` (from the true delay): frequencies and damping
     ratios within half a standard error of it, its standard errors within 10 %; the truth within 3 standard
@@ -116,3 +120,46 @@ def test_the_fit_matches_scipy_least_squares_and_the_truth():
     np.testing.assert_allclose(sz, rsz, rtol=0.1)
     assert np.all(np.abs(f - AXIS[0]) < 3 * sf) and np.all(np.abs(z - AXIS[1]) < 3 * sz)
     assert np.all(np.abs(f / AXIS[0] - 1) < 0.01) and np.all(np.abs(z / AXIS[1] - 1) < 0.10)  # the issue's targets
+
+
+@pytest.mark.slow
+def test_a_second_record_of_the_same_length_compiles_nothing():
+    """Another sweep's record of the same length (other noise, other modes, another clock) runs the compiled fit:
+    no compilation at all, and its modes within 0.1 %."""
+    from compiles import count_compiles
+
+    t, y, sweep = record(5)
+    jb.identify_axis_from_sweep(t, y, 2, sweep=sweep)
+    axis = ([36.0, 55.0], [0.05, 0.02], [1.0, 0.3])
+    t2, y2, _ = record(6, axis=axis)
+    with count_compiles() as compiles:
+        ax = jb.identify_axis_from_sweep(t2 + 50.0, y2, 2, sweep=sweep)
+    assert compiles["n"] == 0
+    np.testing.assert_allclose(np.asarray(ax.frequencies), axis[0], rtol=1e-3)
+
+
+@pytest.mark.slow
+def test_the_sweep_is_found_wherever_the_record_starts():
+    """A record that starts 0.7 s before the sweep and one that starts with it: the same modes, within a standard
+    error of each other (the delay is found from the record, not from its time stamps)."""
+    t, y, sweep = record(8, lead=0.7)
+    t0, y0, _ = record(8, lead=0.0)
+    a = jb.identify_axis_from_sweep(t, y, 2, sweep=sweep)
+    b = jb.identify_axis_from_sweep(t0, y0, 2, sweep=sweep)
+    for ax in (a, b):
+        assert np.all(np.abs(np.asarray(ax.frequencies) - AXIS[0]) < 4 * np.asarray(ax.frequency_std))
+        assert np.all(np.abs(np.asarray(ax.damping_ratios) - AXIS[1]) < 4 * np.asarray(ax.damping_std))
+
+
+def test_bad_sweeps_and_bands_are_refused_naming_them():
+    sweep = jb.klipper_sweep(freq_start=20.0, freq_end=30.0, hz_per_sec=20.0)
+    t, y = rt.sweep_response(jb.ModalAxis(*AXIS), RATE, *sweep)
+    ends, accel = sweep
+    for bad in ((ends[::-1], accel), (ends, accel[:-1]), "sweep", (ends[:1], accel[:1])):
+        with pytest.raises(ValueError, match=r"identify_axis_from_sweep: parameter `sweep` must be a pair"):
+            jb.identify_axis_from_sweep(t, y, 2, sweep=bad)
+    for band in ((50.0, 20.0), (5.0, 2000.0), "wide"):
+        with pytest.raises(ValueError, match=r"identify_axis_from_sweep: parameter `band` must be"):
+            jb.identify_axis_from_sweep(t, y, 2, sweep=sweep, band=band)
+    with pytest.raises(ValueError, match=r"does not hold the sweep"):
+        jb.identify_axis_from_sweep(t, y, 1, sweep=jb.klipper_sweep())

@@ -9,9 +9,12 @@ by `hz_per_sec` (1 Hz/s) times the time elapsed: a linear sweep. Newer versions 
 $\\pm$`sweeping_accel` (400 mm/s²) with period `sweeping_period` (1.2 s; 0 switches it off) that moves the
 carriage along the axis, starting a quarter-period ($\\sqrt2/8$ of a period) in.
 
-The record of the test is a forced response, not a free decay: its spectrum is the base-excited model of
-`identify_axis_from_psd` with `kind="klipper"` (the carriage's acceleration puts energy rising as $f^2$ at
-each frequency), so `identify_axis_from_sweep` estimates it as Klipper does (Welch, Kaiser window) and fits that.
+The record of the test is a forced response to this known excitation, not a free decay:
+`identify_axis_from_sweep` fits its transfer function, in the DFT of the whole record, with the exact model of a
+record that starts and ends anywhere (its documentation gives it), the sweep's start in the record found from the
+record. Its standard errors hold (the residuals are the sensor's white noise, independent between bins), where a
+fit of the record's Welch estimate (the model of `identify_axis_from_psd` with `kind="klipper"`, what Klipper's own
+files hold) gave errors 2-4 times too large and damping biased low.
 """
 
 from __future__ import annotations
@@ -386,15 +389,20 @@ def identify_axis_from_sweep(
     rounds) until the delay moves by under 0.01 sample. One compiled program per `n_modes` and number of bins
     (padded to a multiple of 512).
 
-    An estimate of the record's PSD (Welch's, as Klipper computes it) does not serve here: a sweep excites each
-    frequency during a few of its segments only, so the estimate neither has the chi-square scatter of a
-    stationary one (its standard errors came out 2-4 times too large) nor the expectation of the smeared PSD
-    (its damping came out biased low by up to 7 % for slow sweeps, whose segments hold the resonance's build-up
-    and ring-down apart); fitted through its transfer function the record has neither problem.
+    Why not the record's PSD, as Klipper estimates it (Welch's method, `kind="klipper"` of
+    `identify_axis_from_psd`, as this function did before): that model takes the response as stationary, and a
+    sweep's is not. It excites each frequency during a few of the estimate's segments only, so the estimate has
+    neither the chi-square scatter of $K$ averages (the standard errors came out 2-4 times too large: over 20
+    sweeps the standardised errors had a spread of 0.24 in f and 0.43 in zeta) nor the expectation of the smeared
+    stationary PSD: each segment's periodogram holds the part of the resonance's build-up and ring-down that
+    falls in it, windowed, and their average is not the stationary peak smeared by the window: its width depends
+    on how the sweep's rate compares with the mode's decay, which the model does not hold (the damping came out
+    biased low, by up to 7 % for the slower sweeps). The transfer function has neither problem: 95 % intervals hold the truth 90-98 % of the time
+    (docs/benchmarks.md, "Identification: coverage of the intervals").
 
     Returns `ModalAxis(frequencies, damping_ratios, gains=None, frequency_std=..., damping_std=...)`, the modes
     sorted by frequency (unit gains, as `identify_axis` returns). Raises `ValueError` as `identify_axis` does
-    for the record, for a bad `sweep` or `band`, for a record that does not hold the sweep, and after the fit for
+    for the record, for a bad `sweep` or `band`, for a record that does not hold at least half of the sweep, and after the fit for
     a mode at or beyond the band's ends, a damping ratio outside (0, 1) or a mode whose gain is below
     `PSD_MIN_SIGNIFICANCE` = 8 standard errors; `RuntimeError` when the fit does not converge.
     """
@@ -451,10 +459,12 @@ def identify_axis_from_sweep(
     N2, k2, f_ratio, E, wgt, ratio = _transfer_estimate(y, ends, accel, h, (lo, hi))
     f0, z0, _ = _psd._psd_peaks(f_ratio, ratio, n)
     tau = _delay_estimate(N2, k2, f_ratio, E, wgt, f0, z0, h)
-    if not (tau < T and tau + ends[-1] > 0):
+    overlap = min(T, tau + ends[-1]) - max(0.0, tau)
+    if not overlap >= 0.5 * ends[-1]:
         raise ValueError(
             f"{owner}: the record (`t`, `y`, {T:.3g} s) does not hold the sweep (`sweep`, {ends[-1]:.3g} s): its best "
-            f"match starts {tau:.3g} s after the record's first sample"
+            f"match starts {tau:.3g} s after the record's first sample and holds {max(overlap, 0.0):.3g} s of it (at "
+            "least half is needed): give the sweep's schedule as the test ran it (klipper_sweep with its settings)"
         )
     fref = math.sqrt(lo * hi)
     w = 2.0 * np.pi * m / T
