@@ -349,3 +349,31 @@ def test_load_record_errors(tmp_path):
     bad.write_bytes(b"\x89PNG\r\n\x1a\n\x00\xff\xfe")
     with pytest.raises(ValueError, match=r"is not a text \(CSV\) file"):
         jb.load_record(bad)
+
+
+def test_the_fit_matches_scipy_least_squares_on_the_same_model():
+    """The module's model (damped cosines and sines and an offset) fitted by scipy's `least_squares` (an
+    independent solver, trust-region reflective): the same frequencies and damping ratios to 1e-6, the same
+    standard errors $s^2(J^TJ)^{-1}$ to 1 %."""
+    from scipy.optimize import least_squares
+
+    t, y = decay(*AXIS_A, seed=4)
+    ax = jb.identify_axis(t, y, 2)
+    tau = t - t[0]
+
+    def resid(p):
+        f, z, a, b, c = p[:2], p[2:4], p[4:6], p[6:8], p[8]
+        w = 2 * np.pi * f
+        wd = w * np.sqrt(1 - z**2)
+        e = np.exp(-np.outer(tau, z * w))
+        return c + np.sum(e * (a * np.cos(np.outer(tau, wd)) + b * np.sin(np.outer(tau, wd))), axis=1) - y
+
+    amps, phases = np.array(AMPS), np.array(PHASES)
+    p0 = np.concatenate([AXIS_A[0], AXIS_A[1], amps * np.cos(phases), -amps * np.sin(phases), [0.0]])
+    ref = least_squares(resid, p0, x_scale="jac", xtol=1e-15, ftol=1e-15, gtol=1e-15)
+    s2 = float(ref.fun @ ref.fun) / (y.size - p0.size)
+    std = np.sqrt(np.diag(np.linalg.inv(ref.jac.T @ ref.jac)) * s2)
+    np.testing.assert_allclose(np.asarray(ax.frequencies), ref.x[:2], rtol=1e-6)
+    np.testing.assert_allclose(np.asarray(ax.damping_ratios), ref.x[2:4], rtol=1e-6)
+    np.testing.assert_allclose(np.asarray(ax.frequency_std), std[:2], rtol=0.01)
+    np.testing.assert_allclose(np.asarray(ax.damping_std), std[2:4], rtol=0.01)
