@@ -163,3 +163,10 @@ def test_bad_sweeps_and_bands_are_refused_naming_them():
             jb.identify_axis_from_sweep(t, y, 2, sweep=sweep, band=band)
     with pytest.raises(ValueError, match=r"does not hold the sweep"):
         jb.identify_axis_from_sweep(t, y, 1, sweep=jb.klipper_sweep())
+
+
+@pytest.mark.slow
+def test_more_modes_than_the_record_holds_is_an_error_naming_n_modes():
+    t, y, sweep = record(12)
+    with pytest.raises(ValueError, match=r"may hold fewer than `n_modes` = 3 modes"):
+        jb.identify_axis_from_sweep(t, y, 3, sweep=sweep)

@@ -404,7 +404,8 @@ def identify_axis_from_sweep(
     sorted by frequency (unit gains, as `identify_axis` returns). Raises `ValueError` as `identify_axis` does
     for the record, for a bad `sweep` or `band`, for a record that does not hold at least half of the sweep, and after the fit for
     a mode at or beyond the band's ends, a damping ratio outside (0, 1) or a mode whose gain is below
-    `PSD_MIN_SIGNIFICANCE` = 8 standard errors; `RuntimeError` when the fit does not converge.
+    `PSD_MIN_SIGNIFICANCE` = 8 standard errors (also where the fit did not converge: more `n_modes` than the record
+    holds); `RuntimeError` when the fit does not converge although every mode stands out.
     """
     owner = "identify_axis_from_sweep"
     _core._require_x64(owner)
@@ -518,6 +519,24 @@ def identify_axis_from_sweep(
             break
     fi = fi * fref
     start = f"started from f = {_core._fmt(f0)} Hz, zeta = {_core._fmt(z0)}, the sweep {tau:.6g} s into the record"
+    r, theta, fi, zeta = (np.asarray(v, dtype=float) for v in (r, theta, fi, zeta))
+    if finite:
+        var = np.diag(_core._covariance(r, sv, vt, scale, p, 2 * m.size))
+        ib = slice(2 * n + 2, 3 * n + 2)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            significance = np.nan_to_num(np.abs(theta[ib]) / np.sqrt(var[ib]), nan=0.0)
+    else:
+        var, significance = np.zeros(p), np.zeros(n)
+    f_std = fi * np.sqrt(var[:n])
+    z_std = zeta * (1.0 - zeta) * np.sqrt(var[n : 2 * n])
+    if code != 0 and finite and np.any(~(significance >= _psd.PSD_MIN_SIGNIFICANCE)):
+        i = int(np.argmin(significance))
+        raise ValueError(
+            f"{owner}: the Levenberg-Marquardt fit of {n} mode(s) did not converge after {steps} steps, and its last "
+            f"iterate has a mode ({fi[i]:.6g} Hz) whose gain is only {significance[i]:.3g} standard errors (at least "
+            f"{_psd.PSD_MIN_SIGNIFICANCE:g} are needed): the record may hold fewer than `n_modes` = {n} modes in "
+            f"`band`: try a smaller `n_modes` ({start})"
+        )
     if code != 0 or not finite:
         reason = (
             (_core._RESULT_NAMES[code] if code >= 0 else "unknown solver failure") if finite else "non-finite values"
@@ -527,14 +546,6 @@ def identify_axis_from_sweep(
             f"{start}; give a larger `max_steps` (now {max_steps}), try another `n_modes`, or check `sweep` (the "
             "excitation the record holds)"
         )
-    r, theta, fi, zeta = (np.asarray(v, dtype=float) for v in (r, theta, fi, zeta))
-    n_obs = 2 * m.size
-    var = np.diag(_core._covariance(r, sv, vt, scale, p, n_obs))
-    f_std = fi * np.sqrt(var[:n])
-    z_std = zeta * (1.0 - zeta) * np.sqrt(var[n : 2 * n])
-    ib = slice(2 * n + 2, 3 * n + 2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        significance = np.nan_to_num(np.abs(theta[ib]) / np.sqrt(var[ib]), nan=0.0)
     order = np.argsort(fi)
     fi, zeta, f_std, z_std, significance = (v[order] for v in (fi, zeta, f_std, z_std, significance))
     found = f"identified f = {_core._fmt(fi)} Hz, zeta = {_core._fmt(zeta)}"
