@@ -23,6 +23,8 @@ of a blend is again the blend of the members' executed residuals: `best_blend` r
 
 import math
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 from ..models.axis import ModalAxis
@@ -34,6 +36,10 @@ _ANGLES = 32
 _GAIN = 1e-2
 #: the programme of `best_blend` weighs every this-many-th frequency factor of the band (the blend is judged on all)
 _LP_STRIDE = 4
+#: the programme's columns: every call is padded to this many members (at most 2 designs, the 6 classic shapers and
+#: the unshaped move: 9), so that one set of programs serves every axis of a size whatever number of the candidates
+#: its move time makes buildable (a size per member count compiled the programme anew for a second axis)
+_LP_COLUMNS = 16
 #: setpoints per block of `executed_integral`
 _BLOCK = 4096
 #: the drive's interpolation of its setpoints that `executed_integral` models
@@ -95,6 +101,31 @@ def executed_ratios(axis: ModalAxis, cmd, reference, factors, rate_hz: float) ->
     return g * W / (wd * np.asarray(reference, dtype=float)[:, None])
 
 
+@jax.jit
+def _blend_programme(C, tol):
+    """$\\min t$ s.t. $C w \\le t$, $w \\ge 0$, $\\sum w = 1$ (`C` (m, n): the cut rows of the members' residuals) by
+    jaxbelt's interior point LP (`lp.solve_lp_data`): `(w, converged)`. One compiled program per shape of `C` (a
+    module-level jit: the LP's loops, run op by op, would be traced and compiled anew at every call)."""
+    from .lp import solve_lp_data
+
+    m, n = C.shape
+    eye = jnp.eye(n)
+    G = jnp.concatenate(
+        [
+            jnp.concatenate([C, -jnp.ones((m, 1))], axis=1),
+            jnp.concatenate([-eye, jnp.zeros((n, 1))], axis=1),  # w >= 0
+            jnp.concatenate([eye, jnp.zeros((n, 1))], axis=1),  # w <= 1 (implied; bounds every variable)
+            jnp.concatenate([jnp.zeros(n), -jnp.ones(1)])[None],  # t >= 0 (every row is a cut of a modulus)
+        ]
+    )
+    h = jnp.concatenate([jnp.zeros(m + n), jnp.ones(n), jnp.zeros(1)])
+    c = jnp.concatenate([jnp.zeros(n), jnp.ones(1)])
+    A = jnp.concatenate([jnp.ones(n), jnp.zeros(1)])[None]
+    xb = jnp.concatenate([jnp.ones(n), jnp.maximum(jnp.max(jnp.abs(C)), 1.0)[None]])
+    res = solve_lp_data(c, G, h, A, jnp.ones(1), xb, tol, 100)
+    return jnp.clip(res.x[:n], 0.0, None), res.converged
+
+
 def best_blend(axis: ModalAxis, members, reference, factors, rate_hz: float, blend: bool = True):
     """The weights of the blend of `members` (moves of one duration) that leaves the least worst residual over the
     band `factors` as executed at `rate_hz` [Hz] (see the module docstring), in units of `reference` [m] per mode:
@@ -102,8 +133,6 @@ def best_blend(axis: ModalAxis, members, reference, factors, rate_hz: float, ble
     is not below it by `_GAIN`, 1 %, of it; the earliest member on ties). The programme weighs every
     `_LP_STRIDE`-th factor (and the last); the blend is then judged on all of them. `blend=False`: the members'
     worsts only (the weights pick the least)."""
-    from .lp import simplex_minimax
-
     C = np.stack([executed_ratios(axis, m, reference, factors, rate_hz).ravel() for m in members], axis=1)
     member_worst = np.max(np.abs(C), axis=0)
     M = C.shape[1]
@@ -115,8 +144,13 @@ def best_blend(axis: ModalAxis, members, reference, factors, rate_hz: float, ble
         Cl = np.stack([c.reshape(-1, K)[:, coarse].ravel() for c in C.T], axis=1)
         th = 2 * np.pi * np.arange(_ANGLES) / _ANGLES
         rows = np.real(np.exp(-1j * th)[:, None, None] * Cl[None]).reshape(-1, M)
-        x, _, _, converged = simplex_minimax(rows, (4, 8, 16, 32), tol=1e-9)
-        if converged:  # else: the least member, as without a blend
+        if M > _LP_COLUMNS:
+            raise ValueError(f"best_blend: at most {_LP_COLUMNS} members; got {M}")
+        padded = np.hstack([rows, np.repeat(rows[:, -1:], _LP_COLUMNS - M, axis=1)])  # copies of the last member
+        xp, converged = _blend_programme(jnp.asarray(padded), jnp.asarray(1e-9))
+        xp = np.asarray(xp)
+        x = np.r_[xp[: M - 1], xp[M - 1 :].sum()]  # the copies' weights added back
+        if bool(converged):  # else: the least member, as without a blend
             w = np.where(x > 1e-9, x, 0.0)  # the programme's round-off weights dropped
             w = w / w.sum()
             worst = float(np.max(np.abs(C @ w)))
