@@ -139,31 +139,29 @@ def _jumps_reason(primary, space, axis, ref, band, rate) -> str:
 def _space_rows(rows, space, axis, ref, u, limits, per, band, rate):
     """`rows` with each minimax row replaced by the least worst residual, as executed at `rate` [Hz], of the blends
     of its design with the designs with jumps of the table and the members of `space` (`jaxbelt.shaping.hull`):
-    at most what each of them leaves, by construction. The row's note says which blend it is."""
+    at most what each of them leaves, by construction. The row's note says which blend it is. A minimax row whose
+    design is infeasible or did not converge is kept as it is (not ok, its note says why): a blend of the other
+    candidates alone is not that design, and the table shows those candidates' own rows."""
     designs = {r.name: r.command for r in rows if r.name in ("minimax", JUMPS) and r.ok and r.command is not None}
     out = []
     for r in rows:
-        if r.name not in ("minimax", JUMPS):
+        if r.name not in designs:  # not a minimax row, or one whose design failed: it keeps its own verdict
             out.append(r)
             continue
         keys = [n for n in designs if n in (r.name, JUMPS)]
         names, cmds = keys + list(space), [designs[n] for n in keys] + list(space.values())
         w, worst, each = best_blend(axis, cmds, ref, band, rate)
         parts = ", ".join(f"{names[i]} {w[i]:.3g}" for i in np.flatnonzero(w))
-        own = r.name in designs
         note = (
             f"its command space holds every classic shaped move and the unshaped move: the blend {parts} leaves "
-            f"{100 * worst:.3g} % as executed at {rate:g} Hz ("
-            + (f"the design alone {100 * each[0]:.3g} %; " if own else "")
-            + f"the least of the others {100 * float(np.min(each[1:] if own else each)):.3g} %)"
+            f"{100 * worst:.3g} % as executed at {rate:g} Hz (the design alone {100 * each[0]:.3g} %; the least of "
+            f"the others {100 * float(np.min(each[1:])):.3g} %)"
         )
-        if own and w[0] == 1.0:
+        if w[0] == 1.0:
             out.append(dataclasses.replace(r, note=r.note + "; " + note))
             continue
         cmd = blend_moves(cmds, w)
-        T = float(cmd.end_time)
-        prefix = r.note + "; " if own else ""
-        out.append(_row(r.name, axis, cmd, T, ref, u, limits, note=prefix + note, per=per))
+        out.append(_row(r.name, axis, cmd, float(cmd.end_time), ref, u, limits, note=r.note + "; " + note, per=per))
     return out
 
 
