@@ -96,6 +96,32 @@ def _far_modes(axis: ModalAxis, T: float, u: float, j_max, fixed_time: bool, smo
     return _FarModes(tuple(i for i in range(f.size) if i not in out), far, left, nyq)
 
 
+@dataclasses.dataclass(frozen=True)
+class LPSetup:
+    """What the minimax LP weighs at a move time, decided once (`lp_setup`): `far` (`_FarModes`), the `ModalAxis` of
+    the modes it keeps (`lp_axis`), their indices (`kept`) and the design's options (`opts`: knots set by the modes
+    they resolve)."""
+
+    far: _FarModes
+    lp_axis: ModalAxis
+    kept: np.ndarray
+    opts: "_design.DesignOptions"
+
+
+def lp_setup(
+    axis: ModalAxis, T: float, u: float, j_max, fixed_time: bool, smooth: bool, per: int = 1, refuse: bool = True
+) -> LPSetup:
+    """The minimax design's LP on `axis` at (about) move time `T` [s] (band ±`u`): the modes it leaves out
+    (`_far_modes`; with `refuse`, the `ValueError` of `_refuse_all_far` where it would weigh none), the axis of the
+    modes it keeps and its options (`_minimax_options` on `_knots_axis`), in one call."""
+    far = _far_modes(axis, T, u, j_max, fixed_time, smooth)
+    if refuse:
+        _refuse_all_far(axis, T, u, far, per)
+    lp_axis = _sub_axis(axis, far.kept) if far.left_out else axis
+    opts = _minimax_options(_knots_axis(axis, far), T, u, j_max, fixed_time=fixed_time, smooth=smooth)
+    return LPSetup(far, lp_axis, np.asarray(far.kept, dtype=int), opts)
+
+
 def _knots_axis(axis: ModalAxis, far: _FarModes) -> ModalAxis:
     """The modes that set the minimax design's discretisation (knots, grid): those the knots resolve, when there are
     any (a far mode the steps keep in their LP does not force the finest grid, which resolves it no better)."""

@@ -12,7 +12,7 @@ from .._checks import device_array
 from . import design as _design
 from .candidates import _members
 from .certify import continuous_lower_bound
-from .far_modes import _far_modes, _far_note, _FarModes, _knots_axis, _minimax_options, _refuse_all_far, _sub_axis
+from .far_modes import LPSetup, _far_note, lp_setup
 from .hull import best_blend
 from .measure import _measure_grids, _row
 from .moves import (
@@ -67,13 +67,10 @@ class _Minimax:
         prepare_peaks(cmd)
 
 
-def _minimax_solver(axis, far: _FarModes, d, v_max, a_max, j_max, u, ref, T, fixed_time: bool, smooth: bool):
-    """The minimax design's `_Minimax` on `axis` at (about) move time `T` [s]: the LP weighs the modes `far` keeps
-    (`ref`, the references of every mode of `axis`, taken for those), its knots set by the modes they resolve."""
-    lp_axis = _sub_axis(axis, far.kept) if far.left_out else axis
-    kept = np.asarray(far.kept, dtype=int)
-    opts = _minimax_options(_knots_axis(axis, far), T, u, j_max, fixed_time=fixed_time, smooth=smooth)
-    return _Minimax(lp_axis, d, v_max, a_max, j_max, u, np.asarray(ref)[kept], opts)
+def _minimax_solver(setup: LPSetup, d, v_max, a_max, j_max, u, ref):
+    """The minimax design's `_Minimax` of `setup` (`far_modes.lp_setup`): the LP weighs the modes it keeps (`ref`,
+    the references of every mode of the axis, taken for those)."""
+    return _Minimax(setup.lp_axis, d, v_max, a_max, j_max, u, np.asarray(ref)[setup.kept], setup.opts)
 
 
 def _design_at(solver: _Minimax, T: float, t_min: float, clearly: bool):
@@ -190,8 +187,9 @@ def _jumps_minimax(axis, d, T, v_max, a_max, j_max, u, ref, limits, per, t_min, 
     leaves no more than the shapers (measured: `benchmarks/shaping_every_shaper.py`)."""
     if progress:
         print(f"design_move: {why}; designing the minimax command with jumps ...", flush=True)
-    far = _far_modes(axis, T, u, j_max, True, False)  # keeps every mode the spline's LP keeps (`_refuse_all_far`)
-    solver = _minimax_solver(axis, far, d, v_max, a_max, j_max, u, ref, T, True, False)
+    # keeps every mode the spline's LP keeps (refused there where it keeps none)
+    setup = lp_setup(axis, T, u, j_max, True, False, refuse=False)
+    far, solver = setup.far, _minimax_solver(setup, d, v_max, a_max, j_max, u, ref)
     mm, t_f = _design_at(solver, T, t_min, clearly)
     if mm is None:
         note = f"{why}; infeasible with {solver.opts.n_knots} equal steps: needs a move time >= {t_f:.4g} s"
@@ -293,35 +291,33 @@ def _shortest_minimax(solver: _Minimax, t_min, target, progress):
 
 
 def prepare_minimax(req: MoveRequest):
-    """At a given move time: the modes the minimax LP leaves out (`_far_modes`; refused at once when it would weigh
-    none), and, well above the time-optimal move, the design's programs start compiling in the background while the
-    reference and the other candidates are computed (a stand-in reference of the right shape). None otherwise."""
+    """At a given move time: the minimax LP's setup (`far_modes.lp_setup`: the modes it leaves out, refused at once
+    when it would weigh none), and, well above the time-optimal move, the design's programs start compiling in the
+    background while the reference and the other candidates are computed (a stand-in reference of the right shape).
+    None otherwise."""
     if "minimax" not in req.include or req.move_time is None:
         return None
-    axis, T, u = req.axis, req.move_time, req.uncertainty
-    far = _far_modes(axis, T, u, req.j_max, True, req.smooth)
-    _refuse_all_far(axis, T, u, far, req.per)
+    setup = lp_setup(req.axis, req.move_time, req.uncertainty, req.j_max, True, req.smooth, req.per)
     if req.clearly:
-        stand_in = np.ones(axis.n_modes)
-        _minimax_solver(axis, far, req.distance, req.v_max, req.a_max, req.j_max, u, stand_in, T, True,
-                        req.smooth).prepare(T)  # fmt: skip
-    return far
+        stand_in = np.ones(req.axis.n_modes)
+        _minimax_solver(setup, req.distance, req.v_max, req.a_max, req.j_max, req.uncertainty, stand_in).prepare(
+            req.move_time
+        )
+    return setup
 
 
-def minimax_rows(req: MoveRequest, ref, classic: list, far):
+def minimax_rows(req: MoveRequest, ref, classic: list, setup: LPSetup | None):
     """The minimax rows (the design; with `smooth="auto"` the design with jumps where the smooth one does not win),
     each the least worst blend of the command space that holds every candidate (`_space_rows`), the design of the
     better row and the continuous bound: `(rows, design or None, bound)`. `classic`: the classic rows (the target
-    with `move_time` None); `far`: `prepare_minimax`'s."""
+    with `move_time` None); `setup`: `prepare_minimax`'s."""
     axis, d, u, per, ref = req.axis, req.distance, req.uncertainty, req.per, np.asarray(ref)
     usable = [r for r in classic if r.ok]
     target = min((r.worst_percent for r in usable), default=math.nan)
     T_guess = req.move_time if req.move_time is not None else min((r.move_time for r in usable), default=2 * req.t_min)
-    if far is None:
-        far = _far_modes(axis, T_guess, u, req.j_max, False, req.smooth)
-        _refuse_all_far(axis, T_guess, u, far, per)
-    solver = _minimax_solver(axis, far, d, req.v_max, req.a_max, req.j_max, u, ref, T_guess, req.move_time is not None,
-                             req.smooth)  # fmt: skip
+    if setup is None:
+        setup = lp_setup(axis, T_guess, u, req.j_max, False, req.smooth, per)
+    far, solver = setup.far, _minimax_solver(setup, d, req.v_max, req.a_max, req.j_max, u, ref)
     rows, bound = [], math.nan
     if req.move_time is not None:
         mm, t_f = _design_at(solver, req.move_time, req.t_min, req.clearly)

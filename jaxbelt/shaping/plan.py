@@ -43,6 +43,7 @@ from .._io import IMAGE_FORMATS, atomic_open, check_output_path, save_figure
 from .._threads import blas_limited
 from ..models.axis import ModalAxis
 from .candidates import classic_rows, pseudo_rows, unshaped_rows
+from .far_modes import _far_modes as _far_modes  # noqa: E402
 from .measure import _N_WIDE, _WIDE, Candidate, _within_range, reference
 
 # names of the pipeline's stages that users and tests reach through this module
@@ -51,7 +52,6 @@ from .measure import _row as _row  # noqa: E402
 from .minimax_rows import CERTIFY_ATOL as CERTIFY_ATOL  # noqa: E402
 from .minimax_rows import CERTIFY_MAX_STEPS as CERTIFY_MAX_STEPS  # noqa: E402
 from .minimax_rows import JUMPS as JUMPS  # noqa: E402
-from .minimax_rows import _far_modes as _far_modes  # noqa: E402
 from .minimax_rows import _smooth_certificate as _smooth_certificate  # noqa: E402
 from .minimax_rows import minimax_rows, prepare_minimax
 from .moves import (
