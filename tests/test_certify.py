@@ -65,10 +65,11 @@ def test_the_default_adds_the_design_with_jumps_where_a_shaper_beats_the_smooth_
     )  # fmt: skip
     smooth, jumps, zv_eq = plan.candidate("minimax"), plan.candidate(JUMPS), plan.candidate("ZV")
     assert zv_eq.ok and jumps.ok, (zv_eq.note, jumps.note)
-    assert smooth.worst_percent >= zv_eq.worst_percent  # why it was added, as its note says
-    assert jumps.note.startswith("added: ZV leaves")
+    assert jumps.note.startswith("added: ZV leaves")  # the smooth design alone leaves more than ZV
     assert jumps.worst_percent < 0.2 * zv_eq.worst_percent
-    assert plan.best is jumps and plan.minimax.options.basis == "steps"
+    # the minimax row's command space holds the design with jumps and ZV: it leaves no more than either
+    assert "the design alone" in smooth.note and smooth.worst_percent <= jumps.worst_percent * (1 + 1e-9)
+    assert plan.best.worst_percent <= jumps.worst_percent * (1 + 1e-9) and plan.minimax.options.basis == "steps"
     assert 0.0 < plan.continuous_bound <= jumps.worst_percent / 100
     cmd = jumps.command
     acc, _, _, breaks = piecewise_move_reference(cmd.times, cmd.steps, cmd.ramps, cmd.duration)
@@ -125,7 +126,8 @@ def test_certify_rtol_near_a_zero_optimum_stops_at_the_absolute_floor():
     assert smooth.ok and "(continuous bound, from the design with jumps)" in smooth.note
     assert bound <= smooth.worst_percent / 100
     mm = plan.minimax  # the better of the two rows: here the design with jumps (0.0053 % against 0.071 %)
-    assert mm.options.basis == "steps" and plan.best is row
+    # the minimax row's command space holds the design with jumps: the recommendation leaves what it leaves
+    assert mm.options.basis == "steps" and plan.best.worst_percent == pytest.approx(row.worst_percent, rel=1e-9)
     assert mm.options.n_angles == 16  # not refined
     worst = row.worst_percent / 100
     assert 0.0 <= bound <= worst and worst - bound <= CERTIFY_ATOL

@@ -260,6 +260,79 @@ class PiecewiseMove(AbstractMotionCommand):
 
 
 # --------------------------------------------------------------------------------------------
+# BlendMove: a convex combination of moves of one duration
+# --------------------------------------------------------------------------------------------
+class BlendMove(AbstractMotionCommand):
+    """A weighted sum of rest-to-rest moves of one duration: $x(t) = \\sum_m w_m x_m(t)$.
+
+    - `members`: a tuple of `SplineMove`s and `PiecewiseMove`s, each over the same `duration` T [s];
+    - `weights` $w_m$ (shape (M,)): with $w_m \\ge 0$, $\\sum_m w_m = 1$ the blend moves the members' common
+      distance, rests at both ends, and its peak |v|, |a|, |jerk| are at most the largest member's (the limits are
+      convex), while its residual integral is the same sum of theirs, $W(s) = \\sum_m w_m W_m(s)$.
+
+    Build one with `blend_moves`, which returns a plain `PiecewiseMove` when every member is one."""
+
+    array_fields: ClassVar[tuple[str, ...]] = ("weights",)
+
+    members: tuple
+    weights: Float[Array, " M"] = eqx.field(converter=as_float_array)
+    duration: Float[Array, ""] = eqx.field(converter=as_float_array)
+
+    def __check_init__(self):
+        if self.weights.ndim != 1 or self.weights.shape[0] != len(self.members) or not self.members:
+            raise ValueError(
+                f"BlendMove: `weights` must be 1-D with one weight per member; got shape {self.weights.shape} for "
+                f"{len(self.members)} member(s)"
+            )
+
+    @property
+    def end_time(self):
+        return self.duration
+
+    def derivative(self, t, k: int = 0):
+        """k-th derivative of the position (the weighted sum of the members')."""
+        return sum(w * m.derivative(t, k) for w, m in zip(self.weights, self.members))
+
+    def residual_integral(self, s):
+        """$W(s) = \\sum_m w_m W_m(s)$ for complex `s` (any shape) [m/s]."""
+        return sum(w * m.residual_integral(s) for w, m in zip(self.weights, self.members))
+
+    def sample(self, rate_hz: float):
+        """`(t, x, v, a)` numpy arrays sampled every `1 / rate_hz` seconds (`AbstractMotionCommand.sample`)."""
+        return _sample(self, rate_hz)
+
+
+def blend_moves(members, weights) -> "PiecewiseMove | SplineMove | BlendMove":
+    """$\\sum_m w_m$ `members[m]` (moves of one duration). A single member of weight 1 is returned as is; otherwise the
+    `PiecewiseMove` members are merged into one (their terms, scaled, padded to a power of two: blends of one axis
+    size share their compiled programs), returned as is when every member is one, else as the last member of a
+    `BlendMove` with the others."""
+    w = np.asarray(weights, dtype=float)
+    keep = [i for i in range(w.size) if w[i] != 0.0]
+    if len(keep) == 1 and w[keep[0]] == 1.0:
+        return members[keep[0]]
+    pieces = [(w[i], members[i]) for i in keep if isinstance(members[i], PiecewiseMove)]
+    others = [(w[i], members[i]) for i in keep if not isinstance(members[i], PiecewiseMove)]
+    parts, ws = [m for _, m in others], [wi for wi, _ in others]
+    if pieces:
+        # in numpy (no eager JAX operation to compile), padded with zero terms at t = 0
+        times = np.concatenate([np.asarray(m.times) for _, m in pieces])
+        size = 1 << max(times.size - 1, 1).bit_length()
+        pad = np.zeros(size - times.size)
+        merged = PiecewiseMove(
+            np.concatenate([times, pad]),
+            np.concatenate([*(wi * np.asarray(m.steps) for wi, m in pieces), pad]),
+            np.concatenate([*(wi * np.asarray(m.ramps) for wi, m in pieces), pad]),
+            pieces[0][1].duration,
+        )
+        if not others:
+            return merged
+        parts.append(merged)
+        ws.append(1.0)
+    return BlendMove(tuple(parts), np.asarray(ws), parts[0].duration)
+
+
+# --------------------------------------------------------------------------------------------
 # Base moves under limits
 # --------------------------------------------------------------------------------------------
 def _scurve(distance: float, duration: float, v_max: float, j_max: float | None):

@@ -33,104 +33,45 @@ time at which it reaches that target (bisection on the time).
 import csv
 import dataclasses
 import math
-import warnings
-from typing import Any
+import os
 
-import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_positive, check_range, device_array
+from .._checks import check_positive
 from .._display import Display, Table, fmt, fmt_list, require, with_unit
 from .._io import IMAGE_FORMATS, atomic_open, check_output_path, save_figure
 from .._threads import blas_limited
-from ..commands import AbstractMotionCommand
 from ..models.axis import ModalAxis
-from . import design as _design
-from .certify import continuous_lower_bound
+from .candidates import classic_rows, pseudo_rows, unshaped_rows
+from .far_modes import _far_modes as _far_modes  # noqa: E402
+from .measure import _N_WIDE, _WIDE, Candidate, _within_range, reference
+
+# names of the pipeline's stages that users and tests reach through this module
+from .measure import EXCURSION_RTOL as EXCURSION_RTOL  # noqa: E402
+from .measure import _row as _row  # noqa: E402
+from .minimax_rows import CERTIFY_ATOL as CERTIFY_ATOL  # noqa: E402
+from .minimax_rows import CERTIFY_MAX_STEPS as CERTIFY_MAX_STEPS  # noqa: E402
+from .minimax_rows import JUMPS as JUMPS  # noqa: E402
+from .minimax_rows import _smooth_certificate as _smooth_certificate  # noqa: E402
+from .minimax_rows import minimax_rows, prepare_minimax
 from .moves import (
-    PiecewiseMove,
     SplineMove,
-    check_move_limits,
     executable_samples,
-    fastest_move,
-    fastest_time,
     limited_samples,
-    padded,
-    peaks,
-    prepare_peaks,
     sampled_peaks,
-    shape_move,
-    trapezoid_move,
 )
-from .residual import prepare_curve, residual_curve, tolerance_band
-from .shapers import SHAPERS, ShaperRangeError, shaper_for_axis
-
-#: move time, relative to the time-optimal move's, above which the smooth design is feasible (measured: it needs
-#: 3-7 % more with 48-96 knots; the design's convergence is checked, and the feasibility LP decides otherwise)
-_SURELY_FEASIBLE = 1.15
-
-#: frequency factors of the curves the table and the figure are computed on: the band, and a wider view
-_N_BAND = 401
-_WIDE = (0.5, 1.5)
-_N_WIDE = 501
+from .rank import rank
+from .request import MAX_RATE_HZ as MAX_RATE_HZ  # noqa: E402
+from .request import N_DAMPING as N_DAMPING  # noqa: E402
+from .request import UNKNOWN_DAMPING as UNKNOWN_DAMPING  # noqa: E402
+from .request import UNKNOWN_SHAPER_DAMPING as UNKNOWN_SHAPER_DAMPING  # noqa: E402
+from .request import damping_samples as damping_samples  # noqa: E402
+from .request import validate
+from .residual import residual_curve
+from .shapers import SHAPERS
 
 #: units of the sampled move (`MovePlan.samples_to_pandas`)
 _SAMPLE_UNITS = {"t": "s", "x": "m", "v": "m/s", "a": "m/s²"}
-
-#: damping samples per mode with `design_move(..., damping=(lo, hi))`: the worst residual of a design over the damping
-#: range lies within 2 % of the worst over these samples (1.9 % measured on a 25-sample grid of (0.01, 0.1) for a
-#: 7.3 Hz minimax design, whose residual the LP equalises over the samples; tests/test_damping_range.py)
-N_DAMPING = 5
-#: the damping range `damping="unknown"` stands for, and the damping ratio the classic shapers are then designed at
-#: (Klipper's default for an axis whose damping is not measured)
-UNKNOWN_DAMPING = (0.01, 0.1)
-UNKNOWN_SHAPER_DAMPING = 0.1
-
-
-@dataclasses.dataclass(frozen=True)
-class Candidate:
-    """One row of a `MovePlan`'s table.
-
-    - `name`; `command`: the motion command (None when the candidate is infeasible at this move time);
-    - `move_time` [s];
-    - `worst_percent`, `mean_percent`: worst and mean residual over every mode's band, in % of the unshaped
-      move's worst residual on that mode; `worst_m`: the worst residual amplitude in length units [m];
-    - `band_hz`: per mode, `(low, high)` [Hz] of the 5 % band (NaN when the nominal residual is above 5 %); with a
-      damping range, the band within which the residual stays within 5 % at every damping sample (the
-      intersection of the samples' bands);
-    - `peak_v` [m/s], `peak_a` [m/s²], `peak_j` [m/s³];
-    - `ok`: feasible, converged and within the limits; `note`: why not, or what to know;
-    - `outside_percent`: the worst residual outside the band, between 0.5 and 1.5 times each mode's frequency,
-      in % of the same references (what an unmodelled or mistaken mode there would see; the ranking ignores it).
-    """
-
-    name: str
-    command: AbstractMotionCommand | None
-    move_time: float
-    worst_percent: float
-    mean_percent: float
-    worst_m: float
-    band_hz: tuple
-    peak_v: float
-    peak_a: float
-    peak_j: float
-    ok: bool
-    note: str = ""
-    outside_percent: float = math.nan
-
-    def sample(self, rate_hz: float):
-        """`(t, x, v, a)` of the command sampled at `rate_hz` [Hz] (see `AbstractMotionCommand.sample`)."""
-        if self.command is None:
-            raise ValueError(f"{self.name}: no command ({self.note})")
-        return self.command.sample(rate_hz)
-
-    def as_dict(self) -> dict:
-        d = {k: getattr(self, k) for k in ("name", "move_time", "worst_percent", "mean_percent", "worst_m")}
-        d.update(outside_percent=self.outside_percent)
-        d.update(peak_v=self.peak_v, peak_a=self.peak_a, peak_j=self.peak_j, ok=self.ok, note=self.note)
-        for i, (lo, hi) in enumerate(self.band_hz):
-            d[f"band5_mode{i + 1}_hz"] = (lo, hi)
-        return d
 
 
 @dataclasses.dataclass(frozen=True)
@@ -194,9 +135,13 @@ class MovePlan:
 
     def to_csv(self, path, rate_hz: float, candidate: str | None = None) -> tuple[float, float, float]:
         """Write the recommended command (or the candidate named `candidate`) sampled at `rate_hz` [Hz] as CSV
-        columns `t,x,v,a` (s, m, m/s, m/s²) with that header line. A drive that executes the acceleration
-        linearly between samples reproduces the table's residual (the design's acceleration is continuous), and
-        the samples respect the plan's limits (see `samples`).
+        columns `t,x,v,a` (s, m, m/s, m/s²) with that header line. The position column `x` is the command: a drive
+        that executes it as position setpoints, linear between them, at the plan's rate (`design_move(...,
+        rate_hz=)`, 1 kHz by default) leaves the residual the minimax rows state as executed (an independent replay
+        finds it within 1 %, tests/test_shaping_space.py). The `v` and `a` columns are the command's own velocity
+        and acceleration at the samples, for feed-forward only: a drive that interpolates the `a` column instead of
+        following `x` runs another command (for a design whose acceleration jumps, one that can leave many times the
+        stated residual). The samples respect the plan's limits (see `samples`).
 
         `path`: a `.csv` file in an existing, writable folder; `rate_hz` must exceed twice the highest frequency
         of the band (the samples must carry the modes). Both are checked before anything is computed. The file
@@ -221,6 +166,7 @@ class MovePlan:
     def _check_rate(self, rate_hz, owner: str) -> None:
         check_positive("rate_hz", rate_hz, "Hz", owner)
         check_rate(rate_hz, self.nyquist_hz(), owner)
+        check_sample_count(rate_hz, max((c.move_time for c in self.table if c.command is not None), default=0.0), owner)
 
     def samples(self, rate_hz: float, candidate: str | None = None):
         """`(t, x, v, a)` of the recommended command (or `candidate`) sampled at `rate_hz` [Hz], as `to_csv` writes
@@ -234,6 +180,7 @@ class MovePlan:
         would change the distance); another command that exceeds them by a rounding is stretched in time by the
         least factor that brings it within them (same distance, same rate; `jaxbelt.shaping.moves.limited_samples`)."""
         c = self._chosen(candidate, "MovePlan.samples")
+        check_sample_count(rate_hz, c.move_time, "MovePlan.samples")
         limits = (self.v_max, self.a_max, self.j_max)
         cmd = c.command
         assert cmd is not None  # `_chosen` refuses a candidate without a command
@@ -435,6 +382,34 @@ def nyquist_hz(frequencies, uncertainty: float) -> float:
     return 2.0 * float(np.max(np.asarray(frequencies, dtype=float))) * (1.0 + float(uncertainty))
 
 
+#: bytes an export holds per sample at its peak, an upper estimate: the four columns, and for the smooth design the
+#: banded basis of `executable_samples` (4 columns, values, indices, knot positions) and its temporaries
+BYTES_PER_SAMPLE = 512
+
+
+def _available_bytes() -> int:
+    """The memory available to this process now [bytes] (Linux `sysconf`; 8 GiB where it cannot be read)."""
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - not Linux
+        return 8 << 30
+
+
+def check_sample_count(rate_hz, duration: float, owner: str) -> None:
+    """A `ValueError` naming `rate_hz` [Hz] where the samples of a `duration` [s] move would need more than half the
+    memory available (`BYTES_PER_SAMPLE` each), stating the rates that fit, before anything is allocated."""
+    check_positive("rate_hz", rate_hz, "Hz", owner)
+    n = float(duration) * float(rate_hz) + 1.0
+    avail = _available_bytes()
+    if n * BYTES_PER_SAMPLE > avail / 2:
+        top = (avail / 2 / BYTES_PER_SAMPLE - 1.0) / max(float(duration), 1e-300)
+        raise ValueError(
+            f"{owner}: parameter `rate_hz` = {float(rate_hz):g} Hz makes {n:.3g} samples of the {float(duration):.4g} "
+            f"s move, about {n * BYTES_PER_SAMPLE / 1e9:.3g} GB, more than half the memory available "
+            f"({avail / 1e9:.3g} GB): give rate_hz in (0, {top:.4g}] Hz"
+        )
+
+
 def check_rate(rate_hz, nyquist: float, owner: str) -> None:
     """A `ValueError` naming `rate_hz` unless it exceeds `nyquist` [Hz] (the samples must carry the modes)."""
     if not float(rate_hz) > nyquist:
@@ -442,326 +417,6 @@ def check_rate(rate_hz, nyquist: float, owner: str) -> None:
             f"{owner}: parameter `rate_hz` must exceed twice the highest frequency of the band "
             f"(Nyquist: > {nyquist:g} Hz); got {rate_hz}"
         )
-
-
-def _check_inputs(axis, distance, move_time, v_max, a_max, j_max, uncertainty, include):
-    o = "design_move"
-    if not isinstance(axis, ModalAxis):
-        raise TypeError(
-            f"{o}: `axis` must be a jaxbelt.ModalAxis (or BeltPlatform(...).to_axis()); got {type(axis).__name__}"
-        )
-    check_move_limits(o, distance, v_max, a_max, j_max)
-    d = float(np.asarray(distance))
-    check_range("uncertainty", uncertainty, lo=0.0, hi=0.9, hi_open=True, owner=o)
-    valid = ("minimax", *SHAPERS, "pseudo-polynomial", "unshaped")
-    if isinstance(include, str) or not all(isinstance(n, str) for n in include):
-        raise TypeError(f"{o}: parameter `include` must be a tuple of candidate names out of {valid}; got {include!r}")
-    unknown = [n for n in include if n not in valid]
-    if unknown or not include:
-        raise ValueError(
-            f"{o}: parameter `include` must name at least one candidate out of {valid}; got {tuple(include)!r}"
-            + (f" ({', '.join(map(repr, unknown))} unknown)" if unknown else "")
-        )
-    if move_time is None and not any(n in SHAPERS for n in include):
-        raise ValueError(
-            f"{o}: with `move_time` None the shortest time is the one at which the minimax design reaches the best "
-            f"classic shaper's residual, so parameter `include` must name at least one of {SHAPERS}; got "
-            f"{tuple(include)!r} (or give `move_time`)"
-        )
-    t_min = fastest_time(d, v_max, a_max, j_max)
-    if move_time is not None:
-        check_positive("move_time", move_time, "s", o)
-        if float(move_time) < t_min * (1 - 1e-12):
-            raise ValueError(
-                f"{o}: parameter `move_time` = {float(move_time):g} s is shorter than the limits allow: the shortest "
-                f"rest-to-rest move of {d:g} m with v_max = {float(v_max):g}, a_max = {float(a_max):g}"
-                + (f", j_max = {float(j_max):g}" if j_max is not None else "")
-                + f" takes {t_min:.6g} s"
-            )
-    return d, t_min
-
-
-def _check_damping(damping) -> tuple[float, float] | None:
-    """`design_move`'s `damping` as `(lo, hi)`, or None; a `ValueError` naming it otherwise."""
-    if damping is None:
-        return None
-    if isinstance(damping, str) and damping == "unknown":
-        return UNKNOWN_DAMPING
-    msg = (
-        "design_move: parameter `damping` must be None, 'unknown' or (lo, hi) with 0 <= lo <= hi < 1 (damping "
-        f"ratios); got {damping!r}"
-    )
-    if isinstance(damping, str | bytes) or not hasattr(damping, "__len__") or len(damping) != 2:
-        raise ValueError(msg)
-    try:
-        lo, hi = (float(x) for x in damping)
-    except (TypeError, ValueError):
-        raise ValueError(msg) from None
-    if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo <= hi < 1.0):
-        raise ValueError(msg)
-    return lo, hi
-
-
-def damping_samples(lo: float, hi: float, n: int = N_DAMPING) -> np.ndarray:
-    """The damping ratios a range [lo, hi] is judged at: `n` samples including both ends, spaced geometrically when
-    lo > 0 (the residual of a lightly damped mode changes with log zeta), evenly from 0; one when lo == hi."""
-    if hi == lo:
-        return np.array([lo])
-    return np.geomspace(lo, hi, n) if lo > 0 else np.linspace(lo, hi, n)
-
-
-def _damping_axis(axis: ModalAxis, zetas) -> ModalAxis:
-    """Each mode of `axis` once per damping ratio of `zetas` (frequency and gain kept), mode by mode: the copies
-    of mode i are i * len(zetas) ... (i + 1) * len(zetas) - 1."""
-    z = np.asarray(zetas, dtype=float)
-    n = z.size
-    return ModalAxis(
-        np.repeat(np.asarray(axis.frequencies, dtype=float), n),
-        np.tile(z, axis.n_modes),
-        np.repeat(np.asarray(axis.gains, dtype=float), n),
-    )
-
-
-def _mode_label(axis: ModalAxis, i: int, per: int) -> str:
-    """Mode `i` of an axis with `per` damping copies per mode of the user's, as the user numbers it."""
-    if per == 1:
-        return f"mode {i + 1}"
-    return f"mode {i // per + 1} at ζ = {float(np.asarray(axis.damping_ratios)[i]):.3g}"
-
-
-def _measure_grids(u: float):
-    """The frequency factors `_measure` evaluates a command's residual on: the band ±u, and the wide range."""
-    return (np.linspace(1 - u, 1 + u, _N_BAND) if u > 0 else np.ones(1)), np.linspace(*_WIDE, _N_WIDE)
-
-
-def _measure(axis, cmd, ref, u, limits, per: int = 1) -> tuple[dict[str, Any], bool]:
-    """The table's numbers for one command (`per`: damping copies of each user mode in `axis`)."""
-    band, wide = _measure_grids(u)
-    res = np.asarray(residual_curve(axis, cmd, band))  # (modes, K)
-    ratio = res / ref[:, None]
-    wr = np.asarray(residual_curve(axis, cmd, wide)) / ref[:, None]
-    f = np.asarray(axis.frequencies)
-    bands = []
-    for i in range(0, axis.n_modes, per):
-        # with damping copies: the band within which every copy stays within 5 % (each contains the nominal
-        # frequency, so the intersection is empty only when one of them is, NaN)
-        sides = np.array([tolerance_band(wide, wr[k], 0.05) for k in range(i, i + per)], dtype=float)
-        lo, hi = float(np.max(sides[:, 0])), float(np.min(sides[:, 1]))  # NaN propagates
-        bands.append((lo * f[i], hi * f[i]) if per == 1 or lo <= hi else (math.nan, math.nan))
-    pv, pa, pj = peaks(cmd)
-    v_max, a_max, j_max = limits
-    within = pv <= v_max * (1 + 1e-6) and pa <= a_max * (1 + 1e-6) and (j_max is None or pj <= j_max * (1 + 1e-6))
-    outside = (wide < 1.0 - u) | (wide > 1.0 + u)
-    return dict(
-        outside_percent=100.0 * float(wr[:, outside].max()) if outside.any() else math.nan,
-        worst_percent=100.0 * float(ratio.max()),
-        mean_percent=100.0 * float(ratio.mean()),
-        worst_m=float(res.max()),
-        band_hz=tuple(bands),
-        peak_v=pv,
-        peak_a=pa,
-        peak_j=pj,
-    ), within
-
-
-def _pad_size(n_modes: int, jerk: bool, terms: int) -> int:
-    """One padded size for the piecewise moves of a plan, so that they share their compiled programs: up to 3
-    modes the longest shaped move's (3-hump EI, 5 impulses per mode, 4 terms per impulse without a jerk limit, 8
-    with one); beyond, `terms` rounded up to a power of two (the sizes grow as 5**modes)."""
-    if n_modes <= 3:
-        return (8 if jerk else 4) * 5**n_modes
-    return 1 << max(int(terms) - 1, 1).bit_length()
-
-
-def _row(name, axis, cmd, T, ref, u, limits, note="", ok=True, per: int = 1):
-    """One candidate measured on `axis` (with `per` damping copies of each of the user's modes)."""
-    n_user = axis.n_modes // per
-    if isinstance(cmd, PiecewiseMove):  # shaped on the user's modes: padded to their size
-        cmd = padded(cmd, _pad_size(n_user, limits[2] is not None, cmd.times.shape[0]))
-    if cmd is None:
-        nan = math.nan
-        return Candidate(
-            name, None, T, nan, nan, nan, tuple((nan, nan) for _ in range(n_user)), nan, nan, nan, False, note
-        )
-    m, within = _measure(axis, cmd, ref, u, limits, per)
-    if not within:
-        ok = False
-        note = (note + "; " if note else "") + "exceeds the limits"
-    return Candidate(name, cmd, float(T), ok=ok, note=note, **m)
-
-
-def _shaped(axis, name, distance, T, v_max, a_max, j_max):
-    """The classic shaper `name` on the gentlest base that ends at T, or (None, shortest time)."""
-    A, tau = shaper_for_axis(name, axis.frequencies, axis.damping_ratios)
-    base = trapezoid_move(distance, T - tau[-1], v_max, a_max, j_max) if T > tau[-1] else None
-    t_short = fastest_time(distance, v_max, a_max, j_max) + float(tau[-1])
-    if base is None:
-        return None, t_short
-    return shape_move(base, A, tau), t_short
-
-
-def _minimax_options(axis, T_guess: float, u: float, j_max, fixed_time: bool, smooth: bool = True):
-    """The minimax design's options: 6 knots per cycle of the highest mode at a given move time, 12 when the
-    shortest time is searched; the spline basis (`smooth`), else acceleration ramps (piecewise-constant jerk) with a
-    jerk limit `j_max`, acceleration steps without one."""
-    basis = "spline" if smooth else ("steps" if j_max is None else "ramps")
-    return _design.default_options(axis.frequencies, T_guess, u, j_max is not None, 6.0 if fixed_time else 12.0, basis)
-
-
-class _Minimax:
-    """The convex design at a move time, with its feasibility (one problem structure per axis size)."""
-
-    def __init__(self, axis, distance, v_max, a_max, j_max, u, ref, opts):
-        self.args = (axis, distance, v_max, a_max, j_max, u, ref)
-        self.opts = opts
-
-    def problem(self, T):
-        axis, distance, v_max, a_max, j_max, u, ref = self.args
-        return _design.make_problem(axis, distance, T, v_max, a_max, j_max, u, ref, self.opts)
-
-    def feasible(self, T) -> bool:
-        return _design.max_distance(self.problem(T), self.opts) >= 1.0
-
-    def shortest_feasible(self, t_min):
-        """The least time at which the spline can move the distance within the limits (bisection)."""
-        lo, hi = t_min, t_min * 1.05
-        while not self.feasible(hi):
-            lo, hi = hi, hi * 1.2
-        for _ in range(30):
-            if hi - lo <= 1e-4 * hi:
-                break
-            mid = 0.5 * (lo + hi)
-            lo, hi = (lo, mid) if self.feasible(mid) else (mid, hi)
-        return hi
-
-    def design(self, T):
-        return _design.minimax_design(self.problem(T), self.opts)
-
-    def prepare(self, T) -> None:
-        """While the program store is on: start compiling, in the background, the programs a design at T runs and
-        those `_measure` runs on its command, each traced while the ones before compile (on two cores the LP's
-        compilation, the longest, overlaps the others' tracing and compiling). Nothing otherwise."""
-        problem = self.problem(T)
-        coef = _design.prepare_design(problem, self.opts)
-        if coef is None:
-            return
-        axis, u = self.args[0], self.args[5]
-        cmd = _design.design_command(device_array(np.zeros(coef.shape, coef.dtype)), problem.move_time, self.opts)
-        for factors in _measure_grids(u):
-            prepare_curve(axis, cmd, factors)
-        prepare_peaks(cmd)
-
-
-#: the damping exponent (zeta omega (1 + u) h, times d + 1 for a basis of degree d) beyond which the steps leave a far
-#: mode out of their LP: it is damped within one interval, so only the last one excites it. Set when the LP's kernel
-#: held e^{-sh} and overflowed there; the kernel is now written without overflow (`design.lp_data_grouped`), so this
-#: is a choice (the mode's residual is computed exactly instead), no longer a limit of the LP
-_LP_EXPONENT = 600.0
-
-
-@dataclasses.dataclass(frozen=True)
-class _FarModes:
-    """How the minimax design treats the modes of an axis at a move time (`_far_modes`).
-
-    - `kept`: indices of the modes the LP weighs; `far`: of the modes far above the finest knot grid's Nyquist
-      frequency; `left_out`: those of `far` the LP does not weigh (all of them for the spline basis; for the
-      steps, only those whose LP rows cannot be represented), each with its reason;
-    - `nyquist_hz`: `KNOT_COUNTS[-1] / (2 T)` [Hz], the Nyquist frequency of the finest grid."""
-
-    kept: tuple[int, ...]
-    far: tuple[int, ...]
-    left_out: tuple[tuple[int, str], ...]
-    nyquist_hz: float
-
-
-def _sub_axis(axis: ModalAxis, idx) -> ModalAxis:
-    """The `ModalAxis` of the modes `idx` of `axis` (frequencies, damping ratios and gains kept)."""
-    idx = np.asarray(idx, dtype=int)
-    return ModalAxis(
-        np.asarray(axis.frequencies)[idx], np.asarray(axis.damping_ratios)[idx], np.asarray(axis.gains)[idx]
-    )
-
-
-def _far_modes(axis: ModalAxis, T: float, u: float, j_max, fixed_time: bool, smooth: bool) -> _FarModes:
-    """Split the modes of `axis` for the minimax design at the move time `T` [s] (band ±`u`).
-
-    A mode is *far* when its whole band lies above the Nyquist frequency of the finest knot grid the design has,
-    $f_i(1 - u) > N_{max}/(2T)$, $N_{max}$ = `KNOT_COUNTS[-1]`: no basis of the design resolves it (a 1 MHz or a
-    2 kHz mode in a 0.8 s move: 160 Hz), and it does not set the knots (the other modes do).
-
-    - spline basis (`smooth`): the acceleration and its jerk are continuous, so a far mode sees only the spline's
-      smoothed ends: its residual falls like $(\\omega h)^{-3}$ of the unshaped move's (1e-15 at 1 MHz beside
-      7.3 Hz), so it would only weigh on the LP with rows near zero. Every far mode is left out of the LP;
-      `design_move` computes its residual exactly for the command and says so.
-    - steps (or any basis whose acceleration jumps): each jump excites a far mode as the trapezoid's do (the last
-      one is not damped away before the end), so the LP keeps it unless it is damped within one interval
-      ($\\zeta\\omega(1 + u)\\,h$ above `_LP_EXPONENT`: only the last interval excites it); those are left out,
-      with their exact residual.
-    """
-    f = np.asarray(axis.frequencies, dtype=float)
-    z = np.asarray(axis.damping_ratios, dtype=float)
-    nyq = _design.KNOT_COUNTS[-1] / (2.0 * T)
-    far = tuple(int(i) for i in np.flatnonzero(f * (1.0 - u) > nyq))
-    resolved = [i for i in range(f.size) if i not in far]
-    if smooth:
-        why = (
-            f"its band {{lo:.4g}}-{{hi:.4g}} Hz lies above {nyq:.4g} Hz, the Nyquist frequency of the finest knot grid"
-        )
-        left = tuple((i, why.format(lo=f[i] * (1 - u), hi=f[i] * (1 + u))) for i in far)
-        return _FarModes(tuple(resolved), far, left, nyq)
-    # the steps' intervals: those the resolved modes set (the least count without them)
-    sub = _sub_axis(axis, resolved) if resolved else axis
-    opts = _minimax_options(sub, T, u, j_max, fixed_time, smooth)
-    h = T / opts.n_knots
-    power = _design._DEGREE[opts.basis] + 1.0  # the kernel's phi1 power (`design.lp_data_grouped`)
-    expo = power * z * 2.0 * np.pi * f * (1.0 + u) * h
-    left = tuple(
-        (
-            i,
-            f"its damping time 1/(zeta omega) = {1.0 / (z[i] * 2 * np.pi * f[i]):.3g} s is far below one of the "
-            f"{opts.n_knots} steps ({h:.3g} s): only the last step excites it",
-        )
-        for i in far
-        if expo[i] > _LP_EXPONENT
-    )
-    out = {i for i, _ in left}
-    return _FarModes(tuple(i for i in range(f.size) if i not in out), far, left, nyq)
-
-
-def _knots_axis(axis: ModalAxis, far: _FarModes) -> ModalAxis:
-    """The modes that set the minimax design's discretisation (knots, grid): those the knots resolve, when there are
-    any (a far mode the steps keep in their LP does not force the finest grid, which resolves it no better)."""
-    resolved = [i for i in range(axis.n_modes) if i not in far.far]
-    return _sub_axis(axis, resolved) if far.far and resolved else axis
-
-
-def _refuse_all_far(axis: ModalAxis, T: float, u: float, far: _FarModes, per: int = 1) -> None:
-    """The `ValueError` of `design_move` when the minimax LP would weigh no mode of `axis`."""
-    if far.kept:
-        return
-    freqs = ", ".join(f"{float(x):.6g}" for x in np.asarray(axis.frequencies)[::per])
-    raise ValueError(
-        f"design_move: every mode of parameter `axis` ({freqs} Hz) lies far above what the minimax design resolves "
-        f"in a {T:.4g} s move (band ±{u:g}; Nyquist frequency of its finest grid {far.nyquist_hz:.4g} Hz): "
-        + "; ".join(f"{_mode_label(axis, i, per)}: {why}" for i, why in far.left_out)
-        + ". Leave 'minimax' out of `include` (the classic shapers still apply), give a longer `move_time`, or "
-        "check the frequencies' unit (Hz)"
-    )
-
-
-def _far_note(axis: ModalAxis, cmd, ref, u: float, far: _FarModes, per: int = 1) -> str:
-    """The minimax row's words on the modes left out of its LP: which, why, and the worst residual the command leaves
-    them over their band, computed exactly (closed form) on the full axis, in % of the unshaped move's."""
-    if not far.left_out:
-        return ""
-    band = _measure_grids(u)[0]
-    ratio = np.asarray(residual_curve(axis, cmd, band)) / np.asarray(ref)[:, None]
-    f = np.asarray(axis.frequencies, dtype=float)
-    parts = [
-        f"{_mode_label(axis, i, per)} ({f[i]:.6g} Hz; {why}): {100.0 * float(np.max(ratio[i])):.2g} % (exact)"
-        for i, why in far.left_out
-    ]
-    return "left out of the LP, their residual computed for this command: " + "; ".join(parts)
 
 
 @blas_limited
@@ -779,6 +434,10 @@ def design_move(
     smooth: bool | str = "auto",
     certify_rtol: float | None = None,
     damping=None,
+    rate_hz: float = 1000.0,
+    interpolation: str = "linear",
+    x_min=None,
+    x_max=None,
 ) -> MovePlan:
     """Design the move of `distance` [m] on `axis` every way jaxbelt knows, under the same limits and move time,
     and rank them (see the module docstring).
@@ -803,6 +462,14 @@ def design_move(
       default). A mode's 5 % band is then where the residual stays within 5 % at every damping sample;
       `plan.damping` records the range, `plan.axis` stays the user's axis. The minimax LP weighs 5 copies of each
       mode: about 5 times its rows (a 1-mode design costs about what a 5-mode one does, compile included);
+    - `rate_hz` [Hz] (default 1000, as the CLI's export; at most `MAX_RATE_HZ`) and `interpolation` (`"linear"`):
+      how the user's drive executes the command, position setpoints at `rate_hz`, linear between them (what
+      `MovePlan.to_csv` writes). The minimax rows are chosen on the residual as executed so
+      (`jaxbelt.shaping.hull`); their notes state it;
+    - `x_min`, `x_max` [m, positions from the start] (optional): the axis' travel. A candidate whose positions, as
+      executed, leave it is marked not ok; any candidate that leaves the segment between its start and its end by
+      more than `EXCURSION_RTOL` (1 %) of the distance is noted so (a long move's design may back off behind its
+      start);
     - `smooth`: the minimax design's command space. True: a continuous acceleration (cubic B-spline, continuous
       jerk). False: an acceleration that is constant on each of N equal intervals and jumps between them, as a
       shaped trapezoid's does; its limits are exact rather than a little conservative, so it can come closer to
@@ -820,6 +487,13 @@ def design_move(
       corrected for a drive that interpolates linearly (see `MovePlan.samples`), those of a design with jumps are
       exact samples whose jumps such a drive smooths over one sample. `plan.minimax` is the design of the better
       of the two rows.
+      With `"auto"` or False, the command space holds every candidate: each minimax row is the least worst blend
+      (`jaxbelt.shaping.hull`: $\\sum_m w_m x_m(t)$, $w \\ge 0$, $\\sum w = 1$, within the same limits) of its
+      design, the design with jumps where the table has it, every classic shaped move buildable at its time and
+      the unshaped move, built whatever `include` shows and judged as executed: so at any classic shaper's own
+      time and peaks the minimax row leaves no more than that shaper, by construction (its note names the
+      blend). `smooth=True` keeps the continuous acceleration as a constraint (no blend with jumps), at its cost:
+      the smooth row may leave more than a shaper, and its note then says so.
 
     The minimax row's note states its certificate: the LP's own gap (its command is the least residual of its
     command space: splines of its knots, or steps or ramps of its intervals) and, for a design with steps (no jerk
@@ -847,405 +521,44 @@ def design_move(
     the candidates that are feasible, converged and within the limits; a design the solver did not converge on
     is reported in the table, never recommended), `plan.to_csv(path, rate_hz)`, `plan.plot()`.
     """
-    d, t_min = _check_inputs(axis, distance, move_time, v_max, a_max, j_max, uncertainty, include)
-    auto = isinstance(smooth, str) and smooth == "auto"
-    if not (auto or isinstance(smooth, bool | np.bool_)):
-        raise ValueError(f"design_move: parameter `smooth` must be True, False or 'auto'; got {smooth!r}")
-    if not isinstance(progress, bool | np.bool_):
-        raise TypeError(f"design_move: parameter `progress` must be True or False; got {progress!r}")
-    smooth_arg = smooth
-    smooth = auto or bool(smooth)  # the first (or only) minimax design's basis: the spline unless smooth=False
-    if certify_rtol is not None:
-        if smooth and not auto:
-            raise ValueError(
-                "design_move: `certify_rtol` needs `smooth=False` or 'auto' (the continuous certificate bounds the "
-                "steps design, which 'auto' then adds beside the smooth one; the spline's multipliers bound next to "
-                f"nothing); got certify_rtol={certify_rtol!r} with smooth={smooth_arg!r}"
-            )
-        if isinstance(certify_rtol, bool) or not isinstance(certify_rtol, int | float | np.floating | np.integer):
-            raise ValueError(f"design_move: parameter `certify_rtol` must be a number in (0, 1); got {certify_rtol!r}")
-        if not (math.isfinite(float(certify_rtol)) and 0.0 < float(certify_rtol) < 1.0):
-            raise ValueError(f"design_move: parameter `certify_rtol` must lie in (0, 1); got {certify_rtol!r}")
-        certify_rtol = float(certify_rtol)
-        if j_max is not None:
-            raise ValueError(
-                "design_move: `certify_rtol` needs `j_max=None` (the continuous certificate bounds the steps design, "
-                f"whose jerk is unbounded; with a jerk limit the design has ramps); got certify_rtol={certify_rtol!r} "
-                f"with j_max={j_max!r}"
-            )
-    damp = _check_damping(damping)
-    u = float(uncertainty)
-    v_max, a_max = float(v_max), float(a_max)
-    j_max = None if j_max is None else float(j_max)
-    limits = (v_max, a_max, j_max)
-    t_fixed = None if move_time is None else float(move_time)
-    clearly = t_fixed is not None and t_fixed >= _SURELY_FEASIBLE * t_min
-    # `nominal`: the damping the classic shapers and the pseudo-polynomials are designed at; `user`: the axis the
-    # residuals are judged on (with a damping range, each mode once per damping sample, `per` copies each)
-    user = axis
-    nominal, per = axis, 1
-    if damp is not None and not isinstance(damping, str):
-        zs = np.asarray(axis.damping_ratios, dtype=float)
-        if np.any(zs < damp[0]) or np.any(zs > damp[1]):
-            raise ValueError(
-                f"design_move: parameter `damping` {damp} must contain the axis' own damping ratios "
-                f"{np.round(zs, 6).tolist()} (the classic shapers are designed at them): widen the range, or give "
-                "damping='unknown' (0.01-0.1, the shapers at 0.1)"
-            )
-    if damp is not None:
-        if isinstance(damping, str):  # "unknown": Klipper's practice
-            nominal = ModalAxis(axis.frequencies, np.full(axis.n_modes, UNKNOWN_SHAPER_DAMPING), axis.gains)
-        zetas = damping_samples(*damp)
-        per = zetas.size
-        axis = _damping_axis(axis, zetas)
-    far = None  # the modes the minimax LP leaves out (`_far_modes`): at a given time, known (and refused) at once
-    if "minimax" in include and t_fixed is not None:
-        far = _far_modes(axis, t_fixed, u, j_max, True, smooth)
-        _refuse_all_far(axis, t_fixed, u, far, per)
-    if "minimax" in include and t_fixed is not None and clearly and far is not None:
-        # the minimax design's programs start compiling now, in the background, while the reference and the other
-        # candidates are computed (their types only: a stand-in reference of the right shape)
-        stand_in = np.ones(axis.n_modes)
-        _minimax_solver(axis, far, d, v_max, a_max, j_max, u, stand_in, t_fixed, True, smooth).prepare(t_fixed)
-    ref_cmd = fastest_move(d, v_max, a_max, j_max)
-    band = _measure_grids(u)[0]
-    ref = np.max(np.asarray(residual_curve(axis, ref_cmd, band)), axis=1)
-    rows = []
-    # --- classic shapers
-    shaped = {}
-    for name in SHAPERS:
-        if name not in include:
-            continue
-        try:
-            tau_end = float(shaper_for_axis(name, nominal.frequencies, nominal.damping_ratios)[1][-1])
-        except ShaperRangeError as e:  # a firmware fit asked for beyond its damping range: listed, not built
-            shaped[name] = (None, math.nan if move_time is None else float(move_time), e.note)
-            continue
-        if move_time is None:
-            T_s = fastest_time(d, v_max, a_max, j_max) + tau_end
-            cmd, _ = _shaped(nominal, name, d, T_s * (1 + 1e-12), v_max, a_max, j_max)
-            shaped[name] = (cmd, T_s, "")
-        else:
-            cmd, t_short = _shaped(nominal, name, d, float(move_time), v_max, a_max, j_max)
-            shaped[name] = (cmd, float(move_time) if cmd is not None else t_short, "")
-    for name, (cmd, T_s, why) in shaped.items():
-        note = why or ("" if cmd is not None else f"infeasible: needs a move time >= {T_s:.4g} s")
-        rows.append(_row(name, axis, cmd, T_s, ref, u, limits, note=note, ok=cmd is not None, per=per))
-    classic = [r for r in rows if r.ok]
-    target = min((r.worst_percent for r in classic), default=math.nan)
-    # --- the minimax design
-    mm = None
-    bound = math.nan  # the continuous certificate's lower bound (a fraction of the references)
-    if "minimax" in include:
-        T_guess = (
-            float(move_time) if move_time is not None else (min(r.move_time for r in classic) if classic else 2 * t_min)
-        )
-        if far is None:
-            far = _far_modes(axis, T_guess, u, j_max, False, smooth)
-            _refuse_all_far(axis, T_guess, u, far, per)
-        # modes far above the knots' reach are left out of the LP (`_far_modes`); every row is measured on `axis`
-        solver = _minimax_solver(axis, far, d, v_max, a_max, j_max, u, ref, T_guess, move_time is not None, smooth)
-        if move_time is not None:
-            T = float(move_time)
-            mm, t_f = _design_at(solver, T, t_min, clearly)
-            if mm is None:
-                note = f"infeasible for the {'smooth' if smooth else 'steps'} design: needs a move time >= {t_f:.4g} s"
-                rows.append(_row("minimax", axis, None, T, ref, u, limits, ok=False, note=note, per=per))
-        else:
-            mm = _shortest_minimax(solver, t_min, target, progress)
-        if mm is not None:
-            row, mm, bound = _minimax_row("minimax", solver, mm, axis, ref, u, limits, far, per, certify_rtol, progress)
-            rows.append(row)
-        primary = next((r for r in rows if r.name == "minimax"), None)
-        # `smooth="auto"`: the design with jumps beside the smooth one, at the given time (or, to certify, the
-        # smooth design's)
-        T_j = float(move_time) if move_time is not None else (float(mm.command.duration) if mm is not None else None)
-        why = _jumps_reason(primary, classic) if move_time is not None else ""
-        if auto and T_j is not None and (why or certify_rtol is not None):
-            why = (
-                why or "added: `certify_rtol` asks for the continuous certificate, which the design with jumps carries"
-            )
-            clearly_j = T_j >= _SURELY_FEASIBLE * t_min
-            jrow, jmm, jbound = _jumps_minimax(axis, d, T_j, v_max, a_max, j_max, u, ref, limits, per, t_min,
-                                                clearly_j, why, certify_rtol, progress)  # fmt: skip
-            rows.append(jrow)
-            if jmm is not None and jrow.ok:
-                bound = jbound
-                if primary is None or not primary.ok or jrow.worst_percent < primary.worst_percent:
-                    mm = jmm  # `plan.minimax`: the design of the better minimax row
-        if primary is not None and primary.ok and smooth:  # the smooth row's place against any command
-            k = rows.index(primary)
-            rows[k] = dataclasses.replace(primary, note=primary.note + _smooth_certificate(primary, bound))
-    # --- Incerti's pseudo-polynomial commands
-    T_common = (
-        float(move_time)
-        if move_time is not None
-        else (float(mm.command.duration) if mm is not None else min((r.move_time for r in classic), default=2 * t_min))
-    )
-    if "pseudo-polynomial" in include:
-        # designed at the nominal damping: the references there (the expanded axis' ones where there is no range)
-        ref_nominal = ref if per == 1 else np.max(np.asarray(residual_curve(nominal, ref_cmd, band)), axis=1)
-        rows += _pseudo_rows(
-            nominal, ref_nominal, axis, ref, per, d, T_common, v_max, a_max, j_max, u, limits, progress
-        )
-    if "unshaped" in include:
-        if move_time is None:
-            T_ref = float(ref_cmd.duration)
-            rows.append(_row("unshaped (time-optimal)", axis, ref_cmd, T_ref, ref, u, limits, per=per))
-        else:
-            base = trapezoid_move(d, T_common, v_max, a_max, j_max)
-            rows.append(_row("unshaped", axis, base, T_common, ref, u, limits, per=per))
-    ranked = sorted(rows, key=lambda r: (not r.ok, r.worst_percent if math.isfinite(r.worst_percent) else math.inf))
-    best = next((r for r in ranked if r.ok), None)
-    if best is None:
-        warnings.warn(
-            "design_move: no candidate is feasible, converged and within the limits; nothing is recommended (the "
-            "table's notes say why)",
-            RuntimeWarning,
-            stacklevel=2,
-        )
+    req = validate(axis, distance, move_time, v_max=v_max, a_max=a_max, j_max=j_max, uncertainty=uncertainty,
+                   include=include, progress=progress, smooth=smooth, certify_rtol=certify_rtol, damping=damping,
+                   rate_hz=rate_hz, interpolation=interpolation, x_min=x_min, x_max=x_max)  # fmt: skip
+    far = prepare_minimax(req)  # the design's programs compile while the reference and the shapers are computed
+    ref_cmd, ref = reference(req)
+    rows = classic_rows(req, ref)
+    mm, bound = None, math.nan
+    if "minimax" in req.include:
+        minimax, mm, bound = minimax_rows(req, ref, rows, far)
+        rows += minimax
+    T = _common_time(req, mm, rows)
+    rows += pseudo_rows(req, ref, ref_cmd, T) + unshaped_rows(req, ref, ref_cmd, T)
+    table, best = rank([_within_range(r, req.distance, req.x_range, req.rate_hz) for r in rows])
+    user, per = req.user, req.per
     return MovePlan(
         axis=user,
-        distance=d,
-        move_time=T_common,
-        v_max=v_max,
-        a_max=a_max,
-        j_max=j_max,
-        uncertainty=u,
+        distance=req.distance,
+        move_time=T,
+        v_max=req.v_max,
+        a_max=req.a_max,
+        j_max=req.j_max,
+        uncertainty=req.uncertainty,
         reference_m=ref if per == 1 else ref.reshape(user.n_modes, per).max(axis=1),
-        table=tuple(ranked),
+        table=table,
         best=best,
         minimax=mm,
         continuous_bound=bound,
-        damping=damp,
-        measure_axis=None if damp is None else axis,
-        measure_reference_m=None if damp is None else ref,
+        damping=req.damping,
+        measure_axis=None if req.damping is None else req.axis,
+        measure_reference_m=None if req.damping is None else ref,
     )
 
 
-def _minimax_solver(axis, far: _FarModes, d, v_max, a_max, j_max, u, ref, T, fixed_time: bool, smooth: bool):
-    """The minimax design's `_Minimax` on `axis` at (about) move time `T` [s]: the LP weighs the modes `far` keeps
-    (`ref`, the references of every mode of `axis`, taken for those), its knots set by the modes they resolve."""
-    lp_axis = _sub_axis(axis, far.kept) if far.left_out else axis
-    kept = np.asarray(far.kept, dtype=int)
-    opts = _minimax_options(_knots_axis(axis, far), T, u, j_max, fixed_time=fixed_time, smooth=smooth)
-    return _Minimax(lp_axis, d, v_max, a_max, j_max, u, np.asarray(ref)[kept], opts)
-
-
-def _design_at(solver: _Minimax, T: float, t_min: float, clearly: bool):
-    """`solver`'s design at move time `T` [s], and NaN; or None and the shortest move time its basis can make
-    (bisection) where it cannot make this one. A smooth (B-spline) move needs a little more time than the
-    time-optimal one (`t_min`): well above that (`clearly`), the feasibility LP (its program costs a compile) is
-    skipped unless the design then fails to converge."""
-    mm = solver.design(T) if clearly else None
-    if (mm is None or not mm.converged) and not solver.feasible(T):
-        return None, solver.shortest_feasible(t_min)
-    return (solver.design(T) if mm is None else mm), math.nan
-
-
-#: the name of the row `design_move` adds, with `smooth="auto"`, for the minimax design whose acceleration may jump
-JUMPS = "minimax (jumps)"
-
-
-def _minimax_row(name, solver, mm, axis, ref, u, limits, far, per, certify_rtol, progress):
-    """The table row of a solved minimax design `mm` (its note states the certificate: the LP's gap and, for the
-    steps basis, the continuous bound, refined to `certify_rtol` if given), and the (possibly refined) design and
-    the continuous bound (NaN but for the steps basis): `(row, mm, bound)`."""
-    bound = math.nan
-    note = f"certified gap {float(mm.gap):.1e}"
-    if float(mm.gap) > _design.CERTIFIED_GAP:  # accepted by the absolute gap (an optimum near zero)
-        note = f"certified within {100 * float(mm.worst - mm.lower_bound):.1e} % of the optimum"
-    ok = mm.converged
-    if not ok:
-        lp = mm.lp
-        note = (
-            f"not converged (gap {float(mm.gap):.1e}; the LP's interior-point solver stopped after "
-            f"{int(np.asarray(lp.iterations))} iterations, primal residual {float(np.asarray(lp.primal_residual)):.1e}, "
-            f"dual {float(np.asarray(lp.dual_residual)):.1e}): try a longer `move_time` or `smooth=False`"
-        )
-    elif mm.options.basis == "steps":  # the spline's multipliers bound next to nothing: steps only
-        bound = continuous_lower_bound(mm)
-        if certify_rtol is not None:
-            mm, bound, note = _certify(solver, mm, bound, certify_rtol, progress)
-        note += f"; any command leaves >= {100 * bound:.3g} % (continuous bound)"
-    T_mm = float(mm.command.duration)
-    row = _row(name, axis, mm.command, T_mm, ref, u, limits, note=note, ok=ok, per=per)
-    if far.left_out:  # the left-out modes' residual, exact for this command (the program `_row` ran)
-        row = dataclasses.replace(row, note=row.note + "; " + _far_note(axis, row.command, ref, u, far, per))
-    return row, mm, bound
-
-
-def _jumps_reason(primary, classic) -> str:
-    """Why `smooth="auto"` adds the design with jumps ("" when it does not): the smooth minimax row is missing, not
-    feasible or not converged, or a classic shaper of the table leaves no more than it."""
-    if primary is None or not primary.ok or not math.isfinite(primary.worst_percent):
-        return "added: the smooth design is not feasible or not converged at this time"
-    beaten = [r for r in classic if r.worst_percent <= primary.worst_percent]
-    if not beaten:
-        return ""
-    r = min(beaten, key=lambda r: r.worst_percent)
-    return f"added: {r.name} leaves {r.worst_percent:.3g} % <= the smooth design's {primary.worst_percent:.3g} %"
-
-
-def _smooth_certificate(row, bound: float) -> str:
-    """What the smooth row's note says of its place against any command: the continuous bound where the design with
-    jumps gave one, or, where its worst is below `CERTIFY_ATOL`, that it is within that of the least any command can
-    leave (a residual is never below 0); "" otherwise (no bound is computed: `certify_rtol` makes one)."""
-    worst = row.worst_percent / 100
-    if math.isfinite(bound):
-        return (
-            f"; any command leaves >= {100 * bound:.3g} % (continuous bound, from the design with jumps): this one "
-            f"at most {100 * max(worst - bound, 0.0):.2g} percentage points above the least any command can leave"
-        )
-    if worst <= CERTIFY_ATOL:
-        return (
-            f"; within {100 * worst:.2g} percentage points of the least any command can leave (its worst is below CERTIFY_ATOL = "
-            f"{100 * CERTIFY_ATOL:g} %)"
-        )
-    return ""
-
-
-def _jumps_minimax(axis, d, T, v_max, a_max, j_max, u, ref, limits, per, t_min, clearly, why, certify_rtol, progress):
-    """The minimax design at move time `T` whose acceleration may jump (steps; with `j_max`, ramps whose jerk may
-    jump), as `smooth=False` designs it: `(row, design or None, continuous bound)`. Its command space holds what a
-    classic shaper makes of the time-optimal move (a shaped trapezoid or S-curve), so at equal time and limits it
-    leaves no more than the shapers (measured: `benchmarks/shaping_every_shaper.py`)."""
-    if progress:
-        print(f"design_move: {why}; designing the minimax command with jumps ...", flush=True)
-    far = _far_modes(axis, T, u, j_max, True, False)  # keeps every mode the spline's LP keeps (`_refuse_all_far`)
-    solver = _minimax_solver(axis, far, d, v_max, a_max, j_max, u, ref, T, True, False)
-    mm, t_f = _design_at(solver, T, t_min, clearly)
-    if mm is None:
-        note = f"{why}; infeasible with {solver.opts.n_knots} equal steps: needs a move time >= {t_f:.4g} s"
-        return _row(JUMPS, axis, None, T, ref, u, limits, ok=False, note=note, per=per), None, math.nan
-    row, mm, bound = _minimax_row(JUMPS, solver, mm, axis, ref, u, limits, far, per, certify_rtol, progress)
-    return dataclasses.replace(row, note=why + "; " + row.note), mm, bound
-
-
-def _pseudo_rows(axis, ref_design, measure_axis, ref, per, d, T, v_max, a_max, j_max, u, limits, progress):
-    """Incerti's commands designed on `axis` (references `ref_design`), measured on `measure_axis` (`ref`; with a
-    damping range, `per` damping copies of each mode of `axis`; the design on the expanded axis would cost a
-    program per size for little: the exponents are few)."""
-    try:
-        from .pseudo import pseudo_polynomial_designs
-    except ImportError:  # pragma: no cover - the module is part of the package
-        return []
-    out = []
-    # a pseudo-polynomial is smooth: its exponents are optimised on the modes within the knots' reach (as the smooth
-    # minimax design's), the far ones measured with the others (their quadrature needs ~2.5 omega T nodes: a 1 MHz
-    # mode would cap it, and slow it, for nothing)
-    far = _far_modes(axis, T, u, j_max, True, True)
-    kept = np.asarray(far.kept if far.kept else range(axis.n_modes), dtype=int)
-    designs = pseudo_polynomial_designs(
-        _sub_axis(axis, kept) if far.kept and far.far else axis,
-        d,
-        T,
-        v_max=v_max,
-        a_max=a_max,
-        j_max=j_max,
-        uncertainty=u,
-        reference=jnp.asarray(ref_design[kept]),
-        progress=progress,
-    )
-    for name, pd in designs.items():
-        ok = bool(pd.converged) and bool(pd.within_limits)
-        note = "" if ok else pd.message
-        if far.kept and far.far:
-            note = "; ".join(
-                [
-                    *([note] if note else []),
-                    f"exponents optimised without mode(s) {', '.join(str(i + 1) for i in far.far)}",
-                ]
-            )
-        out.append(_row(name, measure_axis, pd.command, T, ref, u, limits, note=note, ok=ok, per=per))
-    return out
-
-
-#: the most acceleration steps `design_move(..., certify_rtol=...)` refines to
-CERTIFY_MAX_STEPS = 1024
-#: the absolute floor of `certify_rtol`'s proof (a fraction of the references: 0.01 % of the unshaped move's
-#: residual): where the optimum is near zero the bound is 0 and no relative tolerance can be proved, but a design
-#: within this of the least any command can leave needs no refining
-CERTIFY_ATOL = 1e-4
-
-
-def _certify_options(opts, rtol: float):
-    """The discretisation a certificate within `rtol` needs besides the steps: the modulus |r| <= t is imposed by
-    P cuts (a P-gon that lets |r| exceed t by 1/cos(pi/P) - 1: 2 % for the default 16), so P grows until that is
-    below rtol/4, and the exchange refines the frequency grid until the fine grid is within rtol/4 of the LP's."""
-    P = opts.n_angles
-    while 1.0 / math.cos(math.pi / P) - 1.0 > rtol / 4:
-        P *= 2
-    return opts._replace(
-        n_angles=P,
-        exchange_tol=min(opts.exchange_tol, rtol / 4),
-        n_rounds=max(opts.n_rounds, 8),
-        n_extra=max(opts.n_extra, 24),
-    )
-
-
-def _certify(solver: _Minimax, mm, bound: float, rtol: float, progress: bool):
-    """Refine the steps design until (worst - bound) <= max(rtol * worst, `CERTIFY_ATOL`) (the worst on the fine
-    grid): first the cuts
-    and the frequency grid (`_certify_options`), then the number of steps, doubled up to `CERTIFY_MAX_STEPS`. The
-    least-residual design met on the way, the best bound so far, and the row's note."""
-    T = float(mm.command.duration)
-
-    def within(d, b):
-        return float(d.fine_worst) - b <= max(rtol * float(d.fine_worst), CERTIFY_ATOL)
-
-    opts = _certify_options(mm.options, rtol)
-    tried = mm.options.n_knots  # the most steps designed so far
-    stopped = ""  # why the refinement stopped short, where a finer design did not converge
-    while not within(mm, bound) and opts.n_knots <= CERTIFY_MAX_STEPS:
-        if progress:
-            print(f"design_move: certifying with {opts.n_knots} steps, {opts.n_angles} cuts ...", flush=True)
-        finer = _Minimax(*solver.args, opts).design(T)
-        if not finer.converged:
-            stopped = f"the design with {opts.n_knots} steps did not converge"
-            break
-        tried = opts.n_knots
-        bound = max(bound, continuous_lower_bound(finer))
-        if float(finer.fine_worst) <= float(mm.fine_worst):
-            mm = finer
-        opts = opts._replace(n_knots=2 * opts.n_knots)
-    stopped = stopped or f"{tried} steps, the most within CERTIFY_MAX_STEPS = {CERTIFY_MAX_STEPS}"
-    gap = float(mm.fine_worst) - bound
-    rel = gap / float(mm.fine_worst)
-    how = f"{100 * rel:.2g} % (relative)"
-    if rel > rtol and gap <= CERTIFY_ATOL:  # met by the absolute floor (an optimum near zero)
-        how = f"{100 * gap:.2g} % of the unshaped move's residual (absolute, at most CERTIFY_ATOL = {100 * CERTIFY_ATOL:g} %)"
-    note = (
-        f"certified gap {float(mm.gap):.1e}; {mm.options.n_knots} steps, {mm.options.n_angles} cuts: within "
-        f"{how} of the least any command can leave"
-        + ("" if within(mm, bound) else f" (not within certify_rtol: {stopped})")
-    )
-    return mm, bound, note
-
-
-def _shortest_minimax(solver: _Minimax, t_min, target, progress):
-    """The minimax design at the least move time whose worst residual (fine grid) reaches `target` (%):
-    bisection between the least feasible time and a time where the target is met."""
-    if not math.isfinite(target):
-        return None
-    lo = solver.shortest_feasible(t_min)
-    d_lo = solver.design(lo)
-    if 100 * float(d_lo.fine_worst) <= target:
-        return d_lo
-    hi = lo * 1.25
-    d_hi = solver.design(hi)
-    while 100 * float(d_hi.fine_worst) > target:
-        lo, hi = hi, hi * 1.25
-        if hi > 20 * t_min:
-            return d_hi
-        d_hi = solver.design(hi)
-    for _ in range(12):
-        if hi - lo <= 2e-3 * hi:
-            break
-        mid = 0.5 * (lo + hi)
-        d_mid = solver.design(mid)
-        if 100 * float(d_mid.fine_worst) <= target:
-            hi, d_hi = mid, d_mid
-        else:
-            lo = mid
-    return d_hi
+def _common_time(req, mm, rows) -> float:
+    """The move time of the pseudo-polynomials and the unshaped move [s]: the given one, else the minimax design's,
+    else the shortest classic shaper's (twice the time-optimal move's without one)."""
+    if req.move_time is not None:
+        return req.move_time
+    if mm is not None:
+        return float(mm.command.duration)
+    return min((r.move_time for r in rows if r.ok and r.name in SHAPERS), default=2 * req.t_min)

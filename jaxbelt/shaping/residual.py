@@ -27,7 +27,7 @@ from .._threads import blas_limited
 from .._xla import QUICK_COMPILE
 from ..commands import AbstractMotionCommand, PseudoPolynomial, ShapedCommand, falling_factorial
 from ..models.axis import ModalAxis
-from .moves import PiecewiseMove, SplineMove, fastest_move
+from .moves import BlendMove, PiecewiseMove, SplineMove, fastest_move
 
 _P = 4  # substitution power u = v**p of the pseudo-polynomial rule (as in jaxbelt.objectives.residual)
 
@@ -78,7 +78,7 @@ def _pseudo_polynomial_w(cmd: PseudoPolynomial, s, n_nodes: int):
 
 def residual_integral(cmd: AbstractMotionCommand, s):
     """$W(s) = \\int_0^T a(\\tau)e^{s(T-\\tau)}d\\tau$ [m/s] of a move for complex `s` (any shape), T its end time."""
-    if isinstance(cmd, SplineMove | PiecewiseMove):
+    if isinstance(cmd, SplineMove | PiecewiseMove | BlendMove):
         return cmd.residual_integral(s)
     if isinstance(cmd, PseudoPolynomial):
         return _pseudo_polynomial_w(cmd, s, _nodes_for(cmd, s))
@@ -93,7 +93,7 @@ def residual_integral(cmd: AbstractMotionCommand, s):
 
 
 def _has_closed_form(cmd) -> bool:
-    if isinstance(cmd, SplineMove | PiecewiseMove | PseudoPolynomial):
+    if isinstance(cmd, SplineMove | PiecewiseMove | BlendMove | PseudoPolynomial):
         return True
     return isinstance(cmd, ShapedCommand) and _has_closed_form(cmd.base)
 

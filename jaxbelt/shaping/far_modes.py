@@ -1,0 +1,158 @@
+"""The modes far above what the minimax design resolves at a move time: which the LP leaves out, and why
+(`_far_modes`); the pseudo-polynomials' design leaves them out the same way.
+"""
+
+import dataclasses
+
+import numpy as np
+
+from ..models.axis import ModalAxis
+from . import design as _design
+from .measure import _measure_grids, _mode_label
+from .residual import residual_curve
+
+
+def _minimax_options(axis, T_guess: float, u: float, j_max, fixed_time: bool, smooth: bool = True):
+    """The minimax design's options: 6 knots per cycle of the highest mode at a given move time, 12 when the
+    shortest time is searched; the spline basis (`smooth`), else acceleration ramps (piecewise-constant jerk) with a
+    jerk limit `j_max`, acceleration steps without one."""
+    basis = "spline" if smooth else ("steps" if j_max is None else "ramps")
+    return _design.default_options(axis.frequencies, T_guess, u, j_max is not None, 6.0 if fixed_time else 12.0, basis)
+
+
+#: the damping exponent (zeta omega (1 + u) h, times d + 1 for a basis of degree d) beyond which the steps leave a far
+#: mode out of their LP: it is damped within one interval, so only the last one excites it. Set when the LP's kernel
+#: held e^{-sh} and overflowed there; the kernel is now written without overflow (`design.lp_data_grouped`), so this
+#: is a choice (the mode's residual is computed exactly instead), no longer a limit of the LP
+_LP_EXPONENT = 600.0
+
+
+@dataclasses.dataclass(frozen=True)
+class _FarModes:
+    """How the minimax design treats the modes of an axis at a move time (`_far_modes`).
+
+    - `kept`: indices of the modes the LP weighs; `far`: of the modes far above the finest knot grid's Nyquist
+      frequency; `left_out`: those of `far` the LP does not weigh (all of them for the spline basis; for the
+      steps, only those whose LP rows cannot be represented), each with its reason;
+    - `nyquist_hz`: `KNOT_COUNTS[-1] / (2 T)` [Hz], the Nyquist frequency of the finest grid."""
+
+    kept: tuple[int, ...]
+    far: tuple[int, ...]
+    left_out: tuple[tuple[int, str], ...]
+    nyquist_hz: float
+
+
+def _sub_axis(axis: ModalAxis, idx) -> ModalAxis:
+    """The `ModalAxis` of the modes `idx` of `axis` (frequencies, damping ratios and gains kept)."""
+    idx = np.asarray(idx, dtype=int)
+    return ModalAxis(
+        np.asarray(axis.frequencies)[idx], np.asarray(axis.damping_ratios)[idx], np.asarray(axis.gains)[idx]
+    )
+
+
+def _far_modes(axis: ModalAxis, T: float, u: float, j_max, fixed_time: bool, smooth: bool) -> _FarModes:
+    """Split the modes of `axis` for the minimax design at the move time `T` [s] (band ±`u`).
+
+    A mode is *far* when its whole band lies above the Nyquist frequency of the finest knot grid the design has,
+    $f_i(1 - u) > N_{max}/(2T)$, $N_{max}$ = `KNOT_COUNTS[-1]`: no basis of the design resolves it (a 1 MHz or a
+    2 kHz mode in a 0.8 s move: 160 Hz), and it does not set the knots (the other modes do).
+
+    - spline basis (`smooth`): the acceleration and its jerk are continuous, so a far mode sees only the spline's
+      smoothed ends: its residual falls like $(\\omega h)^{-3}$ of the unshaped move's (1e-15 at 1 MHz beside
+      7.3 Hz), so it would only weigh on the LP with rows near zero. Every far mode is left out of the LP;
+      `design_move` computes its residual exactly for the command and says so.
+    - steps (or any basis whose acceleration jumps): each jump excites a far mode as the trapezoid's do (the last
+      one is not damped away before the end), so the LP keeps it unless it is damped within one interval
+      ($\\zeta\\omega(1 + u)\\,h$ above `_LP_EXPONENT`: only the last interval excites it); those are left out,
+      with their exact residual.
+    """
+    f = np.asarray(axis.frequencies, dtype=float)
+    z = np.asarray(axis.damping_ratios, dtype=float)
+    nyq = _design.KNOT_COUNTS[-1] / (2.0 * T)
+    far = tuple(int(i) for i in np.flatnonzero(f * (1.0 - u) > nyq))
+    resolved = [i for i in range(f.size) if i not in far]
+    if smooth:
+        why = (
+            f"its band {{lo:.4g}}-{{hi:.4g}} Hz lies above {nyq:.4g} Hz, the Nyquist frequency of the finest knot grid"
+        )
+        left = tuple((i, why.format(lo=f[i] * (1 - u), hi=f[i] * (1 + u))) for i in far)
+        return _FarModes(tuple(resolved), far, left, nyq)
+    # the steps' intervals: those the resolved modes set (the least count without them)
+    sub = _sub_axis(axis, resolved) if resolved else axis
+    opts = _minimax_options(sub, T, u, j_max, fixed_time, smooth)
+    h = T / opts.n_knots
+    power = _design._DEGREE[opts.basis] + 1.0  # the kernel's phi1 power (`design.lp_data_grouped`)
+    expo = power * z * 2.0 * np.pi * f * (1.0 + u) * h
+    left = tuple(
+        (
+            i,
+            f"its damping time 1/(zeta omega) = {1.0 / (z[i] * 2 * np.pi * f[i]):.3g} s is far below one of the "
+            f"{opts.n_knots} steps ({h:.3g} s): only the last step excites it",
+        )
+        for i in far
+        if expo[i] > _LP_EXPONENT
+    )
+    out = {i for i, _ in left}
+    return _FarModes(tuple(i for i in range(f.size) if i not in out), far, left, nyq)
+
+
+@dataclasses.dataclass(frozen=True)
+class LPSetup:
+    """What the minimax LP weighs at a move time, decided once (`lp_setup`): `far` (`_FarModes`), the `ModalAxis` of
+    the modes it keeps (`lp_axis`), their indices (`kept`) and the design's options (`opts`: knots set by the modes
+    they resolve)."""
+
+    far: _FarModes
+    lp_axis: ModalAxis
+    kept: np.ndarray
+    opts: "_design.DesignOptions"
+
+
+def lp_setup(
+    axis: ModalAxis, T: float, u: float, j_max, fixed_time: bool, smooth: bool, per: int = 1, refuse: bool = True
+) -> LPSetup:
+    """The minimax design's LP on `axis` at (about) move time `T` [s] (band ±`u`): the modes it leaves out
+    (`_far_modes`; with `refuse`, the `ValueError` of `_refuse_all_far` where it would weigh none), the axis of the
+    modes it keeps and its options (`_minimax_options` on `_knots_axis`), in one call."""
+    far = _far_modes(axis, T, u, j_max, fixed_time, smooth)
+    if refuse:
+        _refuse_all_far(axis, T, u, far, per)
+    lp_axis = _sub_axis(axis, far.kept) if far.left_out else axis
+    opts = _minimax_options(_knots_axis(axis, far), T, u, j_max, fixed_time=fixed_time, smooth=smooth)
+    return LPSetup(far, lp_axis, np.asarray(far.kept, dtype=int), opts)
+
+
+def _knots_axis(axis: ModalAxis, far: _FarModes) -> ModalAxis:
+    """The modes that set the minimax design's discretisation (knots, grid): those the knots resolve, when there are
+    any (a far mode the steps keep in their LP does not force the finest grid, which resolves it no better)."""
+    resolved = [i for i in range(axis.n_modes) if i not in far.far]
+    return _sub_axis(axis, resolved) if far.far and resolved else axis
+
+
+def _refuse_all_far(axis: ModalAxis, T: float, u: float, far: _FarModes, per: int = 1) -> None:
+    """The `ValueError` of `design_move` when the minimax LP would weigh no mode of `axis`."""
+    if far.kept:
+        return
+    freqs = ", ".join(f"{float(x):.6g}" for x in np.asarray(axis.frequencies)[::per])
+    raise ValueError(
+        f"design_move: every mode of parameter `axis` ({freqs} Hz) lies far above what the minimax design resolves "
+        f"in a {T:.4g} s move (band ±{u:g}; Nyquist frequency of its finest grid {far.nyquist_hz:.4g} Hz): "
+        + "; ".join(f"{_mode_label(axis, i, per)}: {why}" for i, why in far.left_out)
+        + ". Leave 'minimax' out of `include` (the classic shapers still apply), give a longer `move_time`, or "
+        "check the frequencies' unit (Hz)"
+    )
+
+
+def _far_note(axis: ModalAxis, cmd, ref, u: float, far: _FarModes, per: int = 1) -> str:
+    """The minimax row's words on the modes left out of its LP: which, why, and the worst residual the command leaves
+    them over their band, computed exactly (closed form) on the full axis, in % of the unshaped move's."""
+    if not far.left_out:
+        return ""
+    band = _measure_grids(u)[0]
+    ratio = np.asarray(residual_curve(axis, cmd, band)) / np.asarray(ref)[:, None]
+    f = np.asarray(axis.frequencies, dtype=float)
+    parts = [
+        f"{_mode_label(axis, i, per)} ({f[i]:.6g} Hz; {why}): {100.0 * float(np.max(ratio[i])):.2g} % (exact)"
+        for i, why in far.left_out
+    ]
+    return "left out of the LP, their residual computed for this command: " + "; ".join(parts)

@@ -1,0 +1,159 @@
+"""The minimax design's command space made to hold every candidate: the least worst residual over the blends.
+
+The classic shaped moves, the unshaped move and the convex (LP) designs of one move time all move the same distance
+from rest to rest within the same |v|, |a| (|jerk|) limits. So does any *blend* of them,
+$x(t) = \\sum_m w_m x_m(t)$ with $w_m \\ge 0$, $\\sum_m w_m = 1$ (the limits are convex), and its residual integral
+is the same blend of theirs, $W(s) = \\sum_m w_m W_m(s)$ (`jaxbelt.shaping.moves.BlendMove`). The least worst
+residual over the band of such blends is a small linear programme in the weights (plus the bound t):
+
+$\\min t$ subject to $\\mathrm{Re}(e^{-i\\theta_p} \\sum_m w_m c_{km}) \\le t$ for every mode and frequency k of the
+band and P angles $\\theta_p$, $w \\ge 0$, $\\sum_m w_m = 1$,
+
+$c_{km} = |g_i| W_m(s_k) / (\\omega_{d,k}\\, r_i)$ the residual of member m in units of the mode's reference $r_i$
+(the unshaped move's worst residual on it). Each member is the blend of weight 1 on itself, so the best blend
+leaves at most what every member leaves: `best_blend` checks it on the exact modulus (the P-gon lets |r| exceed t
+by $1/\\cos(\\pi/P) - 1$) and returns the best member instead where the programme's blend is not below it.
+
+**As executed.** A drive runs a command as position setpoints at its rate (1/h), linear between them: the velocity
+is constant on each sample interval, so the acceleration is a train of impulses, the velocity's jumps
+$\\Delta v_k$ at $t_k = kh$, and the residual integral over $[0, t_n]$ is
+$W(s) = \\sum_k \\Delta v_k e^{s(t_n - t_k)}$ (`executed_integral`). Sampling is linear, so the executed residual
+of a blend is again the blend of the members' executed residuals: `best_blend` ranks the blends as executed.
+"""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..models.axis import ModalAxis
+from .moves import BlendMove, PiecewiseMove, derivatives_at
+
+#: angles of the modulus' polygon in the blend's programme (|r| <= t to within 1/cos(pi/32) - 1 = 0.5 %)
+_ANGLES = 32
+#: the least relative gain over the best member for which `best_blend` takes a blend (less is round-off's)
+_GAIN = 1e-2
+#: the programme of `best_blend` weighs every this-many-th frequency factor of the band (the blend is judged on all)
+_LP_STRIDE = 4
+#: the programme's columns: every call is padded to this many members (at most 2 designs, the 6 classic shapers and
+#: the unshaped move: 9), so that one set of programs serves every axis of a size whatever number of the candidates
+#: its move time makes buildable (a size per member count compiled the programme anew for a second axis)
+_LP_COLUMNS = 16
+#: setpoints per block of `executed_integral`
+_BLOCK = 4096
+#: the drive's interpolation of its setpoints that `executed_integral` models
+INTERPOLATIONS = ("linear",)
+
+
+def sample_times(duration: float, rate_hz: float) -> np.ndarray:
+    """The setpoint times [s] of a move of `duration` [s] at `rate_hz` [Hz]: from 0 through the first at or after
+    the end (the command holds its final position there), as `MovePlan.to_csv` writes them."""
+    n = int(math.ceil(float(duration) * float(rate_hz) - 1e-9))
+    return np.arange(n + 1) / float(rate_hz)
+
+
+def positions(cmd, t) -> np.ndarray:
+    """The exact positions [m] of `cmd` at the times `t` [s] (numpy; a `PiecewiseMove` in closed form)."""
+    t = np.asarray(t, dtype=float)
+    if isinstance(cmd, PiecewiseMove):
+        T = float(cmd.duration)
+        tk, al, be = (np.asarray(q, dtype=float) for q in (cmd.times, cmd.steps, cmd.ramps))
+        d = np.maximum(np.minimum(t, T)[:, None] - tk, 0.0)
+        return (d**2 / 2) @ al + (d**3 / 6) @ be
+    if isinstance(cmd, BlendMove):
+        return np.sum([float(w) * positions(m, t) for w, m in zip(np.asarray(cmd.weights), cmd.members)], axis=0)
+    return derivatives_at(cmd, t, (0,))[0]
+
+
+def executed_integral(t, x, s) -> np.ndarray:
+    """$W(s) = \\sum_k \\Delta v_k e^{s(t_n - t_k)}$ [m/s]: the residual integral of the move a drive executes from the
+    position setpoints `x` [m] at the uniform times `t` [s], linear between them (at rest before the first and after
+    the last), for complex `s` of any shape."""
+    t, x = np.asarray(t, dtype=float), np.asarray(x, dtype=float)
+    h = float(t[1] - t[0])
+    v = np.diff(x) / h
+    dv = np.diff(np.concatenate([[0.0], v, [0.0]]))  # the velocity's jumps at t_0 .. t_n
+    s = np.asarray(s, dtype=complex)
+    W = np.zeros(s.size, dtype=complex)
+    for k0 in range(0, t.size, _BLOCK):  # memory O(len(s) x _BLOCK)
+        k1 = min(k0 + _BLOCK, t.size)
+        W += np.exp(np.multiply.outer(s.ravel(), t[-1] - t[k0:k1])) @ dv[k0:k1]
+    return W.reshape(s.shape)
+
+
+def _poles(axis: ModalAxis, factors):
+    """`(s, omega_d)`, shapes (n_modes, K), of every mode at each frequency factor (damping ratio kept)."""
+    w = np.asarray(axis.omega, dtype=float)[:, None] * np.asarray(factors, dtype=float)[None, :]
+    z = np.asarray(axis.damping_ratios, dtype=float)[:, None]
+    wd = w * np.sqrt(1.0 - z**2)
+    return -z * w + 1j * wd, wd
+
+
+def executed_ratios(axis: ModalAxis, cmd, reference, factors, rate_hz: float) -> np.ndarray:
+    """The complex residuals $g_i W(s)/(\\omega_d r_i)$ of `cmd` as executed at `rate_hz` (`executed_integral`), on
+    every mode of `axis` at each frequency factor, in units of `reference` $r_i$ [m]: shape (n_modes, K); their
+    modulus is the residual amplitude in units of the reference."""
+    s, wd = _poles(axis, factors)
+    t = sample_times(float(cmd.end_time), rate_hz)
+    W = executed_integral(t, positions(cmd, t), s)
+    g = np.abs(np.asarray(axis.gains, dtype=float))[:, None]
+    return g * W / (wd * np.asarray(reference, dtype=float)[:, None])
+
+
+@jax.jit
+def _blend_programme(C, tol):
+    """$\\min t$ s.t. $C w \\le t$, $w \\ge 0$, $\\sum w = 1$ (`C` (m, n): the cut rows of the members' residuals) by
+    jaxbelt's interior point LP (`lp.solve_lp_data`): `(w, converged)`. One compiled program per shape of `C` (a
+    module-level jit: the LP's loops, run op by op, would be traced and compiled anew at every call)."""
+    from .lp import solve_lp_data
+
+    m, n = C.shape
+    eye = jnp.eye(n)
+    G = jnp.concatenate(
+        [
+            jnp.concatenate([C, -jnp.ones((m, 1))], axis=1),
+            jnp.concatenate([-eye, jnp.zeros((n, 1))], axis=1),  # w >= 0
+            jnp.concatenate([eye, jnp.zeros((n, 1))], axis=1),  # w <= 1 (implied; bounds every variable)
+            jnp.concatenate([jnp.zeros(n), -jnp.ones(1)])[None],  # t >= 0 (every row is a cut of a modulus)
+        ]
+    )
+    h = jnp.concatenate([jnp.zeros(m + n), jnp.ones(n), jnp.zeros(1)])
+    c = jnp.concatenate([jnp.zeros(n), jnp.ones(1)])
+    A = jnp.concatenate([jnp.ones(n), jnp.zeros(1)])[None]
+    xb = jnp.concatenate([jnp.ones(n), jnp.maximum(jnp.max(jnp.abs(C)), 1.0)[None]])
+    res = solve_lp_data(c, G, h, A, jnp.ones(1), xb, tol, 100)
+    return jnp.clip(res.x[:n], 0.0, None), res.converged
+
+
+def best_blend(axis: ModalAxis, members, reference, factors, rate_hz: float, blend: bool = True):
+    """The weights of the blend of `members` (moves of one duration) that leaves the least worst residual over the
+    band `factors` as executed at `rate_hz` [Hz] (see the module docstring), in units of `reference` [m] per mode:
+    `(weights, worst, member_worsts)`, `worst` <= min(`member_worsts`) (a member itself where the programme's blend
+    is not below it by `_GAIN`, 1 %, of it; the earliest member on ties). The programme weighs every
+    `_LP_STRIDE`-th factor (and the last); the blend is then judged on all of them. `blend=False`: the members'
+    worsts only (the weights pick the least)."""
+    C = np.stack([executed_ratios(axis, m, reference, factors, rate_hz).ravel() for m in members], axis=1)
+    member_worst = np.max(np.abs(C), axis=0)
+    M = C.shape[1]
+    k0 = int(np.argmin(member_worst))  # the first of the least
+    best_w, best = np.eye(M)[k0], float(member_worst[k0])
+    if M > 1 and blend:
+        K = np.asarray(factors).size
+        coarse = np.unique(np.r_[np.arange(0, K, _LP_STRIDE), K - 1])
+        Cl = np.stack([c.reshape(-1, K)[:, coarse].ravel() for c in C.T], axis=1)
+        th = 2 * np.pi * np.arange(_ANGLES) / _ANGLES
+        rows = np.real(np.exp(-1j * th)[:, None, None] * Cl[None]).reshape(-1, M)
+        if M > _LP_COLUMNS:
+            raise ValueError(f"best_blend: at most {_LP_COLUMNS} members; got {M}")
+        padded = np.hstack([rows, np.repeat(rows[:, -1:], _LP_COLUMNS - M, axis=1)])  # copies of the last member
+        xp, converged = _blend_programme(jnp.asarray(padded), jnp.asarray(1e-9))
+        xp = np.asarray(xp)
+        x = np.r_[xp[: M - 1], xp[M - 1 :].sum()]  # the copies' weights added back
+        if bool(converged):  # else: the least member, as without a blend
+            w = np.where(x > 1e-9, x, 0.0)  # the programme's round-off weights dropped
+            w = w / w.sum()
+            worst = float(np.max(np.abs(C @ w)))
+            if worst < best * (1 - _GAIN):
+                best_w, best = w, worst
+    return best_w, best, member_worst
