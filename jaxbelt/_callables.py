@@ -37,13 +37,13 @@ import jax
 import numpy as np
 from jax.core import Tracer
 
-from . import _compat
+from ._compat import equinox_missing  # the module, not the package's lazy attribute (that loads _guard first)
 
 __all__ = ["by_value", "ByValue", "lasting_key"]
 
 #: equinox's private marker of absent fields in a module's flattened form (None on another equinox layout: such
 #: a field is not keyed)
-_MISSING = _compat.equinox_missing()
+_MISSING = equinox_missing()
 
 #: top-level packages whose functions are library code: their module globals are taken as fixed
 _LIBRARY_ROOTS = frozenset(

@@ -370,7 +370,7 @@ def solve_lp(c, G, h, A, b, *, x_bound=None, tol=1e-9, max_iter: int = 100) -> L
     if A.ndim != 2 or A.shape[1] != c.shape[0] or b.shape != (A.shape[0],) or A.shape[0] < 1:
         raise ValueError(f"solve_lp: shapes A (p, n), b (p,) with p >= 1 expected; got {A.shape}, {b.shape}")
     xb = jnp.full(c.shape, jnp.inf) if x_bound is None else jnp.broadcast_to(jnp.asarray(x_bound, dtype=float), c.shape)
-    return solve_lp_data(c, G, h, A, b, xb, tol, max_iter)
+    return _solve_lp_program(c, G, h, A, b, xb, jnp.asarray(tol, dtype=float), jnp.asarray(max_iter))
 
 
 def solve_lp_data(c, G, h, A, b, x_bound, tol, max_iter, groups=()):
@@ -383,6 +383,11 @@ def solve_lp_data(c, G, h, A, b, x_bound, tol, max_iter, groups=()):
     res = _solve_impl(c_, G_, h_, A_, b_, xb_, jnp.asarray(tol, dtype=float), max_iter, groups)
     value = lp_value(c, G, h, A, b, stop(res.x), stop(res.z), stop(res.y))
     return res._replace(value=value, lower_bound=stop(res.lower_bound))
+
+
+# one compiled program per shape of the data: called eagerly, the solver's loops would be traced and compiled anew
+# at every call (inside a caller's jit this is inlined as any jitted function)
+_solve_lp_program = jax.jit(solve_lp_data)
 
 
 def simplex_minimax(cuts, sizes=(8, 17, 33, 65, 129, 257), tol: float = 1e-10):
