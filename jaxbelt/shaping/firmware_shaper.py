@@ -58,7 +58,7 @@ import numpy as np
 from .._checks import check_real, is_concrete
 from .._io import atomic_open, check_output_path
 from .._threads import blas_limited
-from ..models.axis import ModalAxis
+from ..models.axis import FREQUENCY_RANGE_HZ, ModalAxis
 from .klipper import KLIPPER_MAX_PULSES, KLIPPER_SHAPERS, KlipperConfig, impulses, klipper_impulses
 from .rrf import RRF_MAX_IMPULSES, STEP_CLOCK_RATE, m593_line, parse_m593
 from .shapers import shaper_response
@@ -100,7 +100,22 @@ class FirmwareShaper:
         return float(self.times[-1])
 
     def response(self, freq, mode: int = 0):
-        """Residual ratio V at frequencies `freq` [Hz] for the damping ratio of mode `mode` (0 … n_modes - 1)."""
+        """Residual ratio V at frequencies `freq` [Hz] (finite, >= 0, at most `FREQUENCY_RANGE_HZ`'s top) for the
+        damping ratio of mode `mode` (0 … n_modes - 1)."""
+        o = "FirmwareShaper.response"
+        check_real("freq", freq, "Hz", o)
+        try:
+            f = np.asarray(freq, dtype=float)
+        except (TypeError, ValueError):
+            raise TypeError(
+                f"{o}: parameter `freq` must be a number or an array of numbers [Hz]; got {freq!r}"
+            ) from None
+        hi = FREQUENCY_RANGE_HZ[1]
+        bad = ~(np.isfinite(f) & (f >= 0) & (f <= hi))
+        if np.any(bad):
+            raise ValueError(
+                f"{o}: parameter `freq` must be finite and within [0, {hi:g}] Hz; got {f[bad].ravel()[0]!r}"
+            )
         z = np.asarray(self.axis.damping_ratios)
         n = z.size
         if isinstance(mode, bool) or not isinstance(mode, int | np.integer) or not 0 <= mode < n:
@@ -108,7 +123,7 @@ class FirmwareShaper:
                 f"FirmwareShaper.response: parameter `mode` must be an integer in [0, {n - 1}] (the axis has {n} "
                 f"mode{'s' if n > 1 else ''}); got {mode!r}"
             )
-        return shaper_response(self.amplitudes, self.times, freq, float(z[mode]))
+        return shaper_response(self.amplitudes, self.times, f, float(z[mode]))
 
     def as_lists(self) -> tuple[list[float], list[float]]:
         """`(A, T)`: the amplitudes and times [s] as plain lists, every exported impulse (the form firmware shaper
