@@ -6,6 +6,7 @@ configuration before the call, the time-optimal move (a closed form) and a desig
 """
 
 import errno
+import math
 import os
 import warnings
 
@@ -292,3 +293,27 @@ def test_firmware_shaper_response_refuses_a_frequency_outside_its_range_and_keep
     f = np.array([0.0, 20.0, 40.0])
     np.testing.assert_allclose(s.response(f), shaper_response(A, T, f, 0.015), rtol=1e-12)
     assert float(s.response(0.0)) == pytest.approx(1.0, rel=1e-12)  # at 0 Hz the impulses add up to the move
+
+
+# =====================================================================================
+# the live view: no number from earlier sliders while a background computation runs
+# =====================================================================================
+@pytest.mark.slow  # two designs of the axis scene (~25 s on 2 cores)
+def test_live_view_shows_no_number_of_earlier_sliders_while_it_recomputes():
+    pytest.importorskip("ipywidgets")
+    ex = jb.explore("axis")
+    assert ex.values["move_time"] == pytest.approx(0.8)
+    ex.update(wait=False, move_time=1.0)
+    # was: the 0.8 s design's numbers until the 1.0 s one was drawn; now NaN meanwhile (or, had it finished, its own)
+    pending = dict(ex.values)
+    ex.wait()
+    assert not ex.error
+    assert all((isinstance(v, float) and math.isnan(v)) or v == ex.values[k] for k, v in pending.items()), pending
+    assert "0.8" not in str(pending.get("move_time"))
+    # reference: design_move at the sliders' values (the view's own defaults: distance 0.1, v_max 0.3, a_max 1.2)
+    plan = jb.design_move(
+        jb.ModalAxis([7.3], [0.015]), 0.1, 1.0, v_max=0.3, a_max=1.2, include=("minimax", "ZV", "ZVD", "EI", "unshaped")
+    )
+    assert ex.values["move_time"] == pytest.approx(1.0)
+    assert ex.values["worst_percent"] == pytest.approx(plan.best.worst_percent, rel=1e-6)
+    ex.close()
