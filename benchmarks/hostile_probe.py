@@ -1247,6 +1247,38 @@ def cases():
             bt("max_points"),
         )
     )
+    # the firmware command line: options named, the output checked before the design (it was refused after 118 s)
+    shaper = ("shaper", "--firmware", "rrf")
+
+    def _shaper_out_hard_link():
+        first = TMP / "shaper-a.txt"
+        first.write_text("previous\n")
+        second = TMP / "shaper-b.txt"
+        second.unlink(missing_ok=True)
+        os.link(first, second)
+        return cli(*shaper, "--mode", "40:0.1", "--target", "0.01", "--out", str(second))()
+
+    add(Case("cli-shaper-out-hard-link", "cli shaper", _shaper_out_hard_link, opt("--out")))
+    add(Case("cli-shaper-mode-1e300", "cli shaper", cli(*shaper, "--mode", "1e300:0.1"), opt("--mode")))
+    add(Case("cli-shaper-mode-1e-300", "cli shaper", cli(*shaper, "--mode", "1e-300:0.1"), opt("--mode")))
+    add(
+        Case(
+            "cli-shaper-duration-1e300",
+            "cli shaper",
+            cli(*shaper, "--mode", "40:0.1", "--duration", "1e300"),
+            opt("--duration"),
+        )
+    )
+    add(
+        Case(
+            "cli-shaper-target-1e-300",
+            "cli shaper",
+            cli(*shaper, "--mode", "40:0.1", "--target", "1e-300"),
+            opt("--target"),
+        )
+    )
+    add(Case("cli-shaper-no-axis", "cli shaper", cli(*shaper), opt("--mode")))
+    add(Case("shaper-target-1e-300", "design_shaper", lambda: jb.design_shaper(AX, target=1e-300), bt("target")))
     # --- design_shaper ---------------------------------------------------------------------------------
     # --- design_shaper ---------------------------------------------------------------------------------
     add(Case("shaper-duration-0", "design_shaper", lambda: jb.design_shaper(AX, 0.0), bt("duration")))

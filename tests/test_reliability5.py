@@ -317,3 +317,48 @@ def test_live_view_shows_no_number_of_earlier_sliders_while_it_recomputes():
     assert ex.values["move_time"] == pytest.approx(1.0)
     assert ex.values["worst_percent"] == pytest.approx(plan.best.worst_percent, rel=1e-6)
     ex.close()
+
+
+# =====================================================================================
+# the firmware command line (`jaxbelt shaper`): options named, the output checked before the design
+# =====================================================================================
+def test_cli_shaper_ranges_are_the_librarys():
+    from jaxbelt.cli import shaper
+    from jaxbelt.shaping import firmware_shaper
+
+    assert shaper.FREQUENCY_RANGE_HZ == FREQUENCY_RANGE_HZ  # the command line parses without importing JAX
+    assert shaper.TARGET_FLOOR == firmware_shaper.TARGET_FLOOR
+
+
+@pytest.mark.parametrize(
+    ("argv", "lead"),
+    [
+        (["--mode", "1e300:0.1"], "argument --mode: frequency F must be finite and within [0.001, 1e+07] Hz"),
+        (["--mode", "40:0.1", "--duration", "1e300"], "argument --duration: design_shaper: parameter `duration`"),
+        (["--mode", "40:0.1", "--target", "1e-300"], "argument --target: must be >= 1e-06"),  # was: 84 s, then `target`
+        (["--mode", "40:0.1", "--target", "0.01", "--out", "HARD"], "argument --out: "),  # was: after a 118 s design
+    ],
+)
+def test_cli_shaper_names_the_option_before_the_design(argv, lead, tmp_path, capsys, monkeypatch):
+    from jaxbelt.cli import main
+    from jaxbelt.shaping import firmware_shaper
+
+    if "HARD" in argv:
+        (tmp_path / "a.txt").write_text("previous\n")
+        os.link(tmp_path / "a.txt", tmp_path / "b.txt")
+        argv = [str(tmp_path / "b.txt") if a == "HARD" else a for a in argv]
+    real = firmware_shaper.design_shaper
+
+    def no_design(axis, duration=None, **kw):
+        if duration is None:  # the checks alone (a duration is checked by design_shaper's own `_check`)
+            raise AssertionError("designed before refusing")
+        return real(axis, duration, **kw)
+
+    monkeypatch.setattr(firmware_shaper, "design_shaper", no_design)
+    try:
+        code = main(["--no-cache", "shaper", "--firmware", "rrf", *argv])
+    except SystemExit as e:  # argparse's own refusal of an option's value
+        code = e.code
+    assert code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"jaxbelt shaper: error: {lead}"), err

@@ -71,6 +71,11 @@ MAX_DURATION_PERIODS = 16.0
 #: The shortest, as a fraction of the shortest damped period: a shaper that short leaves its residual within
 #: 0.3 % of the unshaped move's.
 MIN_DURATION_PERIODS = 1e-3
+#: The least `target` (residual ratio) `design_shaper` accepts. Below it the residual a shaper leaves is the rounding
+#: of its numbers, not its design: RepRapFirmware holds the amplitudes in single precision (a relative 6e-8 each, so
+#: ~1e-7 of the move over 5 impulses) and its delays in whole step clocks, and the LP meets its constraints to 1e-9
+#: per row; a target of 1e-300 searched for 84 s before it said "not reached".
+TARGET_FLOOR = 1e-6
 #: The most impulses of a free-time design (`max_impulses`).
 MAX_FREE_IMPULSES = 16
 
@@ -235,8 +240,11 @@ def _check(axis, duration, uncertainty, n_impulses, n_freq, firmware, max_impuls
             raise ValueError(f"{o}: give `n_impulses` (a uniform grid) or `max_impulses` (free times), not both")
     if target is not None:
         check_real("target", target, "", o)
-        if not (isinstance(target, int | float | np.floating) and 0.0 < float(target) < 1.0):
-            raise ValueError(f"{o}: parameter `target` must be a residual ratio in (0, 1); got {target!r}")
+        if not (isinstance(target, int | float | np.floating) and TARGET_FLOOR <= float(target) < 1.0):
+            raise ValueError(
+                f"{o}: parameter `target` must be a residual ratio in [{TARGET_FLOOR:g}, 1) (`TARGET_FLOOR`: below, a "
+                f"shaper's residual is the rounding of its exported numbers); got {target!r}"
+            )
         if duration is not None:
             raise ValueError(f"{o}: give `duration` or `target` (the shortest shaper that reaches it), not both")
     return tau, u, (lo, hi)
