@@ -1143,6 +1143,29 @@ def cases():
         return jb.enable_compilation_cache(f)
 
     add(Case("cache-on-a-file", "enable_compilation_cache", _cache_on_file, bt("path")))
+
+    def _cache_dangling_link():
+        link = TMP / "cache-link"
+        link.unlink(missing_ok=True)
+        link.symlink_to(TMP / "cache-target")
+        try:
+            jb.enable_compilation_cache(link, programs=False)
+            return (TMP / "cache-target").is_dir()
+        finally:
+            from jaxbelt.cache import disable_compilation_cache
+
+            disable_compilation_cache()
+
+    add(
+        Case(
+            "cache-dangling-link",
+            "enable_compilation_cache",
+            _cache_dangling_link,
+            (),
+            "result",
+            lambda made: None if made is True else (_ for _ in ()).throw(AssertionError("target not created")),
+        )
+    )
     # --- round 5, held out: firmware text, Klipper's calibration, the shaper's response, the live view's options ---
     from jaxbelt.shaping.firmware_shaper import FirmwareShaper
 

@@ -362,3 +362,17 @@ def test_cli_shaper_names_the_option_before_the_design(argv, lead, tmp_path, cap
     assert code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith(f"jaxbelt shaper: error: {lead}"), err
+
+
+def test_enable_compilation_cache_through_a_dangling_link_creates_its_target(tmp_path):
+    # as files are written through symbolic links, a cache folder given by a dangling link is created where it
+    # points (was: "cannot be created (File exists)"); the conftest fixture restores JAX's cache settings after
+    link = tmp_path / "cache"
+    link.symlink_to(tmp_path / "real" / "xla")
+    (tmp_path / "real").mkdir()
+    jb.enable_compilation_cache(link, programs=False)
+    assert link.is_symlink() and (tmp_path / "real" / "xla").is_dir()
+    assert jax.config.values["jax_compilation_cache_dir"] == str(link)
+    from jaxbelt.cache import disable_compilation_cache
+
+    disable_compilation_cache()
