@@ -1270,6 +1270,17 @@ def cases():
             bt("max_points"),
         )
     )
+    add(
+        Case("shaper_impulses-freq-1e300", "shaper_impulses", lambda: jb.shaper_impulses("ZV", 1e300, 0.01), bt("freq"))
+    )
+    add(
+        Case(
+            "shaper_impulses-vmap",
+            "shaper_impulses",
+            lambda: jax.vmap(lambda f: jnp.stack(jb.shaper_impulses("ZV", f, 0.01)[1]))(jnp.array([10.0, -10.0])),
+            bt("freq"),
+        )
+    )
     # the firmware command line: options named, the output checked before the design (it was refused after 118 s)
     shaper = ("shaper", "--firmware", "rrf")
 

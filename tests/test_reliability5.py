@@ -257,6 +257,17 @@ _M593 = 'M593 P"custom" H0.5 T{}'
             ValueError,
             r"`freq_bins` must be a 1-D",
         ),
+        # a classic shaper for a degenerate mode, and under a transformation (was: JAX's ConcretizationTypeError)
+        (
+            lambda: jb.shaper_impulses("ZV", 1e300, 0.01),
+            ValueError,
+            r"shaper_impulses: parameter `freq` must be finite and within",
+        ),
+        (
+            lambda: jax.vmap(lambda f: jnp.stack(jb.shaper_impulses("ZV", f, 0.01)[1]))(jnp.array([10.0, -10.0])),
+            ValueError,
+            r"shaper_impulses: parameter `freq` is traced",
+        ),
         # sizes refused before allocating: 1e9 points asked XLA for 120 GB after 7 s
         (
             lambda: jb.response_curve(jb.NonlinearBelt(), max_points=10**9),
