@@ -1143,6 +1143,176 @@ def cases():
         return jb.enable_compilation_cache(f)
 
     add(Case("cache-on-a-file", "enable_compilation_cache", _cache_on_file, bt("path")))
+
+    def _cache_dangling_link():
+        link = TMP / "cache-link"
+        link.unlink(missing_ok=True)
+        link.symlink_to(TMP / "cache-target")
+        try:
+            jb.enable_compilation_cache(link, programs=False)
+            return (TMP / "cache-target").is_dir()
+        finally:
+            from jaxbelt.cache import disable_compilation_cache
+
+            disable_compilation_cache()
+
+    add(
+        Case(
+            "cache-dangling-link",
+            "enable_compilation_cache",
+            _cache_dangling_link,
+            (),
+            "result",
+            lambda made: None if made is True else (_ for _ in ()).throw(AssertionError("target not created")),
+        )
+    )
+    # --- round 5, held out: firmware text, Klipper's calibration, the shaper's response, the live view's options ---
+    from jaxbelt.shaping.firmware_shaper import FirmwareShaper
+
+    zv = jb.klipper_impulses("zv", 40.0, 0.1)
+    fs = FirmwareShaper(zv[0], zv[1], 0.1, 0.1, 0.05, AX, 0.2)
+    fb = np.linspace(1.0, 200.0, 996)
+    psd = 1.0 / (1.0 + ((fb - 40.0) / 2.0) ** 2)
+
+    def same_as_float(result):
+        for got, ref in zip(result, zv, strict=True):
+            np.testing.assert_array_equal(np.asarray(got), ref)
+
+    add(Case("kimp-freq-1e300", "klipper_impulses", lambda: jb.klipper_impulses("zv", 1e300, 0.1), bt("freq")))
+    add(Case("kimp-freq-1e-300", "klipper_impulses", lambda: jb.klipper_impulses("zv", 1e-300, 0.1), bt("freq")))
+    add(
+        Case(
+            "kimp-freq-float32",
+            "klipper_impulses",
+            lambda: jb.klipper_impulses("zv", np.float32(40.0), np.float64(0.1)),
+            (),
+            "result",
+            same_as_float,
+        )
+    )
+    add(Case("kimp-damping-str", "klipper_impulses", lambda: jb.klipper_impulses("zv", 40.0, "0.1"), bt("damping")))
+    section = "[input_shaper]\nshaper_freq_x: {}\ndamping_ratio_x: {}\n"
+    add(
+        Case(
+            "pk-damping-word",
+            "parse_klipper",
+            lambda: jb.parse_klipper(section.format(40, "abc")),
+            ("damping_ratio_x",),
+        )
+    )
+    add(
+        Case(
+            "pk-freq-word", "parse_klipper", lambda: jb.parse_klipper(section.format("forty", 0.1)), ("shaper_freq_x",)
+        )
+    )
+    add(
+        Case(
+            "pk-freq-1e300", "parse_klipper", lambda: jb.parse_klipper(section.format("1e300", 0.1)), ("shaper_freq_x",)
+        )
+    )
+    add(Case("pk-text-none", "parse_klipper", lambda: jb.parse_klipper(None), bt("text")))
+    add(Case("pk-text-bytes", "parse_klipper", lambda: jb.parse_klipper(b"[input_shaper]\n"), bt("text")))
+    add(Case("pk-axis-int", "parse_klipper", lambda: jb.parse_klipper("[input_shaper]\n", axis=1), bt("axis")))
+    add(Case("pk-axis-q", "parse_klipper", lambda: jb.parse_klipper("[input_shaper]\n", axis="q"), bt("axis")))
+    m593 = 'M593 P"custom" H0.5 T{}'
+    for label, rate in (("0", 0.0), ("negative", -1e6), ("nan", nan)):
+        add(
+            Case(
+                f"m593-clock-{label}",
+                "parse_m593",
+                lambda rate=rate: jb.parse_m593(m593.format(0.01), step_clock_rate=rate),
+                bt("step_clock_rate"),
+            )
+        )
+    add(Case("m593-T-1e30", "parse_m593", lambda: jb.parse_m593(m593.format("1e30")), ("parameter T",)))
+    add(Case("m593-T-1e300", "parse_m593", lambda: jb.parse_m593(m593.format("1e300")), ("parameter T",)))
+    add(Case("m593-line-none", "parse_m593", lambda: jb.parse_m593(None), bt("line")))
+    add(Case("m593line-A-nan", "m593_line", lambda: jb.m593_line([nan, 1.0], [0.0, 0.01]), bt("amplitudes")))
+    add(Case("m593line-T-nan", "m593_line", lambda: jb.m593_line([0.5, 0.5], [0.0, nan]), bt("times")))
+    add(Case("m593line-str", "m593_line", lambda: jb.m593_line("ab", [0.0, 0.01]), bt("amplitudes")))
+    add(Case("m593line-T-1e-12", "m593_line", lambda: jb.m593_line([0.5, 0.5], [0.0, 1e-12]), bt("times")))
+    add(Case("kcal-empty", "klipper_calibration", lambda: jb.klipper_calibration([], []), bt("freq_bins")))
+    add(Case("kcal-shape", "klipper_calibration", lambda: jb.klipper_calibration(fb, psd[:-1]), bt("psd")))
+    add(
+        Case("kcal-psd-nan", "klipper_calibration", lambda: jb.klipper_calibration(fb, np.r_[psd[:-1], nan]), bt("psd"))
+    )
+    add(Case("kcal-psd-zero", "klipper_calibration", lambda: jb.klipper_calibration(fb, 0 * psd), bt("psd")))
+    add(Case("kcal-psd-negative", "klipper_calibration", lambda: jb.klipper_calibration(fb, -psd), bt("psd")))
+    add(
+        Case(
+            "kcal-max_freq-0",
+            "klipper_calibration",
+            lambda: jb.klipper_calibration(fb, psd, max_freq=0.0),
+            bt("max_freq"),
+        )
+    )
+    add(Case("kcal-descending", "klipper_calibration", lambda: jb.klipper_calibration(fb[::-1], psd), bt("freq_bins")))
+    add(
+        Case(
+            "kcal-2d",
+            "klipper_calibration",
+            lambda: jb.klipper_calibration(fb.reshape(2, -1), psd.reshape(2, -1)),
+            bt("freq_bins"),
+        )
+    )
+    add(Case("fs-response-nan", "FirmwareShaper.response", lambda: fs.response(nan), bt("freq")))
+    add(Case("fs-response-negative", "FirmwareShaper.response", lambda: fs.response(-10.0), bt("freq")))
+    add(Case("fs-response-str", "FirmwareShaper.response", lambda: fs.response("10"), bt("freq")))
+    add(Case("explore-t_end-1e300", "explore", lambda: jb.explore("startup", t_end=1e300), bt("t_end")))
+    add(Case("explore-t_end-1e-300", "explore", lambda: jb.explore("startup", t_end=1e-300), bt("t_end")))
+    add(Case("explore-max_points-1e9", "explore", lambda: jb.explore("nonlinear", max_points=10**9), bt("max_points")))
+    add(Case("explore-tune_steps-1e9", "explore", lambda: jb.explore("fourbar", tune_steps=10**9), bt("tune_steps")))
+    add(
+        Case(
+            "curve-max_points-1e9",
+            "response_curve",
+            lambda: jb.response_curve(NL, max_points=10**9),
+            bt("max_points"),
+        )
+    )
+    add(
+        Case("shaper_impulses-freq-1e300", "shaper_impulses", lambda: jb.shaper_impulses("ZV", 1e300, 0.01), bt("freq"))
+    )
+    add(
+        Case(
+            "shaper_impulses-vmap",
+            "shaper_impulses",
+            lambda: jax.vmap(lambda f: jnp.stack(jb.shaper_impulses("ZV", f, 0.01)[1]))(jnp.array([10.0, -10.0])),
+            bt("freq"),
+        )
+    )
+    # the firmware command line: options named, the output checked before the design (it was refused after 118 s)
+    shaper = ("shaper", "--firmware", "rrf")
+
+    def _shaper_out_hard_link():
+        first = TMP / "shaper-a.txt"
+        first.write_text("previous\n")
+        second = TMP / "shaper-b.txt"
+        second.unlink(missing_ok=True)
+        os.link(first, second)
+        return cli(*shaper, "--mode", "40:0.1", "--target", "0.01", "--out", str(second))()
+
+    add(Case("cli-shaper-out-hard-link", "cli shaper", _shaper_out_hard_link, opt("--out")))
+    add(Case("cli-shaper-mode-1e300", "cli shaper", cli(*shaper, "--mode", "1e300:0.1"), opt("--mode")))
+    add(Case("cli-shaper-mode-1e-300", "cli shaper", cli(*shaper, "--mode", "1e-300:0.1"), opt("--mode")))
+    add(
+        Case(
+            "cli-shaper-duration-1e300",
+            "cli shaper",
+            cli(*shaper, "--mode", "40:0.1", "--duration", "1e300"),
+            opt("--duration"),
+        )
+    )
+    add(
+        Case(
+            "cli-shaper-target-1e-300",
+            "cli shaper",
+            cli(*shaper, "--mode", "40:0.1", "--target", "1e-300"),
+            opt("--target"),
+        )
+    )
+    add(Case("cli-shaper-no-axis", "cli shaper", cli(*shaper), opt("--mode")))
+    add(Case("shaper-target-1e-300", "design_shaper", lambda: jb.design_shaper(AX, target=1e-300), bt("target")))
     # --- design_shaper ---------------------------------------------------------------------------------
     # --- design_shaper ---------------------------------------------------------------------------------
     add(Case("shaper-duration-0", "design_shaper", lambda: jb.design_shaper(AX, 0.0), bt("duration")))

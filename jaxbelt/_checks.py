@@ -155,6 +155,12 @@ def is_concrete(x) -> bool:
 _collector = threading.local()
 
 
+def recording() -> bool:
+    """Whether a `collecting()` block is active: traced checks computed outside one are thrown away (a model built
+    inside the caller's `vmap`/`grad` is checked again where jaxbelt consumes it, `jaxbelt._guard.traced_checks`)."""
+    return getattr(_collector, "found", None) is not None
+
+
 def record(ok, message: str) -> None:
     """Record a traced check while `collecting()` is active (see `jaxbelt._guard.traced_checks`)."""
     found = getattr(_collector, "found", None)
@@ -226,7 +232,8 @@ def _enforce(name: str, value, what: str, unit: str, owner: str, ok) -> None:
             raise ValueError(f"{_message(name, what, unit, owner)}; got {v}")
         return
     if not is_concrete(value):
-        record(ok(jnp.asarray(value), jnp), _message(name, what, unit, owner))
+        if recording():  # else nobody keeps it: under an eager `vmap` each operation would compile a program
+            record(ok(jnp.asarray(value), jnp), _message(name, what, unit, owner))
         return
     _check_host(name, _values(value), what, unit, owner, ok)
 

@@ -15,6 +15,7 @@ results, only slower:
 | `checkify_counter` | a later process's programs hit JAX's persistent cache | one more compilation, once |
 | `checkify_rules` | checkify's pass steps over loops without checks (a third of a checked solve's tracing) | checkify's own pass |
 | `equinox_internal` | diffrax's own checks become values, so programs stay cacheable | those programs are not stored |
+| `peek` | a batch's or a derivative's invalid input refused on the host (ms), before a program is compiled (seconds) | the compiled check |
 | `private_apis("scipy")` | scipy's LAPACK tables load without `scipy.linalg` (`jaxbelt._lapack`) | the usual import |
 
 `tests/test_compat.py` runs jaxbelt's entry points both ways and compares the results. When a new release of
@@ -179,3 +180,45 @@ def _eqxi():
 def equinox_internal():
     """`equinox.internal` (diffrax calls its `error_if`), or None."""
     return _guarded(("equinox",), _eqxi)
+
+
+def _tracer_types():
+    batching = importlib.import_module("jax._src.interpreters.batching")
+    ad = importlib.import_module("jax._src.interpreters.ad")
+    return batching.BatchTracer, (ad.JVPTracer, ad.LinearizeTracer)
+
+
+def peek(x):
+    """The values behind `x` when it is traced only by an eager `jax.vmap` (one level) and/or `jax.grad`/`jax.jvp`
+    (no `jit` above): `(values, batched)`, `values` a numpy array with the batch axis first where `batched`; a
+    concrete `x` gives `(np.asarray(x), False)`. None where the values are not known before the program runs
+    (under `jit`, nested `vmap`s) or on an untested version."""
+    types = _guarded(("jax",), _tracer_types)
+    if types is None:
+        return None
+    batch_tracer, derivative_tracers = types
+    import numpy as np
+    from jax.core import Tracer
+
+    batch_dim = None
+    try:
+        while isinstance(x, Tracer):
+            if isinstance(x, batch_tracer):
+                if batch_dim is not None:
+                    return None  # nested vmaps
+                dim = x.batch_dim
+                if dim is not None:  # None: not mapped
+                    if type(dim) is not int:
+                        return None
+                    batch_dim = dim
+                x = x.val
+            elif isinstance(x, derivative_tracers):
+                x = x.primal  # the same shape: a batch axis found above stays where it is
+            else:
+                return None  # jit's tracers hold no values
+        values = np.asarray(x)
+    except Exception:  # noqa: BLE001 - a layout this version does not have: the compiled check
+        return None
+    if batch_dim is None:
+        return values, False
+    return np.moveaxis(values, batch_dim, 0), True

@@ -128,6 +128,8 @@ def _usable_folder(owner: str, folder: Path, programs: bool) -> None:
     else a `ValueError` naming `path` and the reason. Nothing else changes."""
     why = None
     for f in (folder, folder / "jaxbelt-programs") if programs else (folder,):
+        if f.is_symlink() and not f.exists():  # a dangling link: its target is the folder to create (as files are
+            f = Path(os.path.realpath(f))  # written through links, `jaxbelt._io`); a loop stays and is refused below
         if f.exists() and not f.is_dir():
             why = f"{str(f)!r} is a file, not a folder"
         else:

@@ -241,8 +241,20 @@ def test_axis_design_move_is_the_librarys():
 @pytest.mark.parametrize(
     "scene, kw, message",
     [
-        ("startup", dict(t_end=float("inf")), r"option `t_end` \(s\) must be > 0; got inf"),
-        ("shaping", dict(t_end=float("inf")), r"option `t_end` \(s\) must be > 0; got inf"),
+        (
+            "startup",
+            dict(t_end=float("inf")),
+            r"option `t_end` \(s\) must be > 0 and within \[1e-06, 1000\] s.*; got inf",
+        ),
+        (
+            "shaping",
+            dict(t_end=float("inf")),
+            r"option `t_end` \(s\) must be > 0 and within \[1e-06, 1000\] s.*; got inf",
+        ),
+        # degenerate spans: 1e300 s ended in a SolveError after 18 s, 1e-300 s drew a view of nothing
+        ("startup", dict(t_end=1e300), r"option `t_end` \(s\) must be > 0 and within \[1e-06, 1000\] s.*; got 1e\+300"),
+        ("startup", dict(t_end=1e-300), r"option `t_end` \(s\) must be > 0 and within \[1e-06, 1000\] s.*; got 1e-300"),
+        ("fourbar", dict(t_end=1e300), r"option `t_end` \(s\) must be > 0 and within \[1e-06, 1000\] s"),
         ("startup", dict(n_points=1), r"option `n_points` must be an integer >= 2; got 1"),
         ("shaping", dict(n_points=2.5), r"option `n_points` must be an integer >= 2; got 2.5"),
         ("fourbar", dict(n_points=2), r"option `n_points` must be an integer >= 3; got 2"),
@@ -251,7 +263,9 @@ def test_axis_design_move_is_the_librarys():
             dict(n_points=10**8),
             r"option `n_points` must lie in \[2, \d+\] \(the output times whose arrays fit",
         ),
-        ("fourbar", dict(t_end=1e6), r"option `n_points` must lie in \[3, \d+\]"),
+        ("fourbar", dict(t_end=999.0, n_points=10**10), r"option `n_points` must lie in \[3, \d+\]"),
+        ("fourbar", dict(tune_steps=10**9), r"option `tune_steps` must be an integer in \[1, 1000\]"),
+        ("nonlinear", dict(max_points=10**9), r"option `max_points` must be an integer in \[2, 100000\]"),
     ],
 )
 def test_bad_time_grid_is_refused_by_name(scene, kw, message):

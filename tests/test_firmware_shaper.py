@@ -186,7 +186,9 @@ def test_a_grid_shaper_states_the_residual_of_the_impulses_it_exports():
         (dict(duration=1e300), r"`duration` must lie in \[2.5\d*e-05, 0.4\d*\] s"),
         (dict(duration=1e-9, firmware="rrf"), r"`duration` must lie in"),
         (dict(target=0.05), "give `duration` or `target`"),
-        (dict(target=1.5, duration=None), r"`target` must be a residual ratio in \(0, 1\)"),
+        (dict(target=1.5, duration=None), r"`target` must be a residual ratio in \[1e-06, 1\)"),
+        # below what the exported numbers resolve (was: 84 s of designs, then "not reached")
+        (dict(target=1e-300, duration=None), r"`target` must be a residual ratio in \[1e-06, 1\)"),
         (dict(firmware="rrf", n_impulses=9), "`n_impulses` .* is for firmware=None"),
     ],
 )

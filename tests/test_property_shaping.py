@@ -286,6 +286,46 @@ def test_grad_of_best_residual_and_shortest_move_time_at_a_degenerate_axis_names
     assert box["n"] == 0
 
 
+@examples(6)
+@given(bad=DEGENERATE, j=st.integers(0, 2), transform=st.sampled_from(["vmap", "grad", "vmap-grad"]))
+def test_eager_vmap_or_grad_of_best_residual_refuses_a_degenerate_axis_before_compiling(solved, bad, j, transform):
+    """Late refusals (round 5, item 2): the first `vmap`/`grad` of `best_residual` in a process took 3.6-6.8 s to
+    refuse an invalid axis (its checks compiled programs). Under an eager `vmap` or `grad` the values are known:
+    they are checked on the host, before any program (the compiled guard and the LP are never called). Reference:
+    the axis' own eager message, and the element of the batch."""
+    from jaxbelt.shaping import codesign
+
+    design = solved.minimax
+    name, f1, z1 = _bad_pair(bad, 0)
+    f3, z3 = jnp.full(3, 7.3).at[j].set(f1[0]), jnp.full(3, 0.015).at[j].set(z1[0])
+
+    def br(f, z):
+        return jb.best_residual(_traced_axis(f, z), 0.8, design)
+
+    def never(*args, **kwargs):
+        raise AssertionError("a program was built for an input the host could refuse")
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(codesign, "_guarded_lp_inputs", never)
+        mp.setattr(codesign, "minimax_value", never)
+        with pytest.raises(ValueError) as e:
+            if transform == "vmap":
+                jax.vmap(br)(f3, z3)
+            elif transform == "grad":
+                jax.grad(br, argnums=(0, 1))(f1[0], z1[0])
+            else:
+                jax.vmap(jax.grad(br, argnums=(0, 1)))(f3, z3)
+    first = str(e.value).splitlines()[0]
+    assert first.startswith(f"best_residual: ModalAxis: parameter `{name}` must"), first
+    value = float(f1[0] if name == "frequencies" else z1[0])
+    with pytest.raises(ValueError) as eager:
+        jb.ModalAxis([value, 18.0], [0.015, 0.01]) if name == "frequencies" else jb.ModalAxis(
+            [7.3, 18.0], [value, 0.01]
+        )
+    assert str(eager.value) in first  # the axis' own message: the parameter, its range, the value (and the mode)
+    assert first.endswith(f"(element {j} of the batch)") == (transform != "grad"), first
+
+
 def test_shortest_move_time_under_jit_or_vmap_says_it_runs_on_the_host(solved):
     design = solved.minimax
 
@@ -636,3 +676,129 @@ def test_shape_move_refuses_negative_or_unsorted_delays_and_amplitudes_not_summi
     refused(lambda: jb.shape_move(base, "ab", [0.0, 0.1]), ("amplitudes",))
     move = jb.shape_move(base, [0.5, 0.5], [0.0, 0.1])  # valid: unchanged
     assert float(move.duration) == pytest.approx(float(base.duration) + 0.1, rel=1e-12)
+
+
+# =====================================================================================
+# firmware text, Klipper's shapers and calibration, a shaper's response (round 5, item 7)
+# =====================================================================================
+#: a mode's frequency outside `FREQUENCY_RANGE_HZ` or not a number at all
+FREQ_DEGENERATE = st.one_of(NONFINITE, st.sampled_from([0.0, 1e-300, 1e-4, 2e7, 1e300]), st.floats(-1e6, -1e-9))
+KLIPPER_KINDS = st.sampled_from(["zv", "mzv", "zvd", "ei", "2hump_ei", "3hump_ei"])
+
+
+@examples(12)
+@given(kind=KLIPPER_KINDS, f=FREQ_DEGENERATE, how=st.sampled_from(["impulses", "section", "command"]))
+def test_klipper_shapers_refuse_a_degenerate_frequency_by_name(kind, f, how):
+    if how == "impulses":
+        refused(lambda: jb.klipper_impulses(kind, f, 0.1), ("freq",))
+    elif f != 0.0:  # 0 is Klipper's "no shaping"
+        text = (
+            f"[input_shaper]\nshaper_type_x: {kind}\nshaper_freq_x: {f!r}\n"
+            if how == "section"
+            else f"SET_INPUT_SHAPER SHAPER_TYPE_X={kind} SHAPER_FREQ_X={f!r}"
+        )
+        with pytest.raises(ValueError, match=r"parse_klipper: shaper_freq_x must"):
+            jb.parse_klipper(text)
+
+
+@examples(12)
+@given(
+    kind=KLIPPER_KINDS,
+    f=st.floats(1e-3, 1e7),
+    z=st.floats(0.0, 0.15),
+    wrap=st.sampled_from([float, np.float64, np.float32, np.asarray]),
+)
+def test_klipper_config_text_reads_back_the_same_shaper(kind, f, z, wrap):
+    f = float(wrap(f))  # a numpy scalar or 0-d array gives the same shaper as its float
+    cfg = jb.KlipperConfig(kind, f, z)
+    assert jb.parse_klipper(cfg.section("y"), "y") == cfg
+    assert jb.parse_klipper(cfg.command("x")) == cfg
+    A, T = jb.klipper_impulses(kind, wrap(f), z)
+    A0, T0 = jb.klipper_impulses(kind, f, z)
+    np.testing.assert_array_equal(A, A0)
+    np.testing.assert_array_equal(T, T0)
+    assert abs(A.sum() - 1.0) <= 1e-12 and T[0] == 0.0 and np.all(np.diff(T) > 0)
+
+
+@st.composite
+def _rrf_shapers(draw):
+    """Impulses RepRapFirmware runs: 2-5 amplitudes > 0 adding to 1, delays whole step clocks, ascending, <= 10 s."""
+    from jaxbelt.shaping.rrf import STEP_CLOCK_RATE
+
+    k = draw(st.integers(2, 5))
+    w = np.asarray(draw(st.lists(st.floats(0.05, 1.0), min_size=k, max_size=k)))
+    clocks = np.cumsum(draw(st.lists(st.integers(1, 10**6), min_size=k - 1, max_size=k - 1)))
+    return w / w.sum(), np.r_[0.0, clocks / STEP_CLOCK_RATE]
+
+
+@examples(12)
+@given(shaper=_rrf_shapers())
+def test_m593_line_reads_back_within_the_firmwares_rounding(shaper):
+    A, T = shaper
+    back_A, back_T = jb.parse_m593(jb.m593_line(A, T))
+    # the reference: the firmware keeps the amplitudes in single precision and the delays in whole step clocks
+    np.testing.assert_allclose(back_A, A, rtol=0, atol=4e-7)
+    np.testing.assert_allclose(back_T, T, rtol=0, atol=1e-12)
+
+
+@examples(12)
+@given(
+    which=st.sampled_from(["amplitudes", "times", "rate", "delay"]),
+    bad=st.one_of(NONFINITE, st.sampled_from([0.0, -1.0, 1e30, 1e-300, "x"])),
+)
+def test_rrf_text_refuses_a_degenerate_number_by_name(which, bad):
+    A, T = [0.5, 0.5], [0.0, 0.0125]
+    if which == "amplitudes":
+        if bad == 0.0:
+            return  # [0, 0.5]: a valid amplitude that does not add to 1, refused below as such
+        refused(lambda: jb.m593_line([bad, 0.5], T), ("amplitudes",))
+    elif which == "times":
+        refused(lambda: jb.m593_line(A, [0.0, bad]), ("times",))
+    elif which == "rate":
+        refused(lambda: jb.parse_m593('M593 P"custom" H0.5 T0.0125', step_clock_rate=bad), ("step_clock_rate",))
+    elif not isinstance(bad, str) and not (math.isfinite(bad) and 0 <= bad < 1e3):
+        with pytest.raises(ValueError, match=r"parse_m593"):
+            jb.parse_m593(f'M593 P"custom" H0.5 T{bad!r}')
+
+
+_BINS = np.linspace(1.0, 200.0, 200)
+_PEAK = 1.0 / (1.0 + ((_BINS - 40.0) / 2.0) ** 2)
+
+
+@examples(10)
+@given(
+    which=st.sampled_from(["freq_bins", "psd", "max_freq"]),
+    bad=st.one_of(NONFINITE, st.sampled_from(["negative", "shape", "2d", "empty", "zero", "descending", 0.0, -5.0])),
+)
+def test_klipper_calibration_refuses_a_bad_record_by_name(which, bad):
+    f, p, mf = _BINS.copy(), _PEAK.copy(), 200.0
+    if which == "max_freq":
+        if isinstance(bad, str):
+            return
+        mf = bad
+    elif isinstance(bad, float):
+        (f if which == "freq_bins" else p)[7] = bad
+    elif bad == "negative":
+        (f if which == "freq_bins" else p)[7] = -1.0
+    elif bad == "shape":
+        f, p = (f[:-1], p) if which == "freq_bins" else (f, p[:-1])
+    elif bad == "2d":
+        f, p = f.reshape(2, -1), p.reshape(2, -1)
+    elif bad == "empty":
+        f, p = f[:0], p[:0]
+    elif bad == "zero":
+        p = 0.0 * p
+    else:
+        f = f[::-1]
+    names = (which, "psd") if bad in ("shape", "zero") else ("freq_bins", "psd") if bad in ("2d", "empty") else (which,)
+    refused(lambda: jb.klipper_calibration(f, p, max_freq=mf), names)
+
+
+@examples(10)
+@given(f=st.one_of(NONFINITE, st.floats(-1e9, -1e-9), st.sampled_from([2e7, 1e300, "40"])), batched=st.booleans())
+def test_firmware_shaper_response_refuses_a_bad_frequency_by_name(f, batched):
+    from jaxbelt.shaping.firmware_shaper import FirmwareShaper
+
+    A, T = jb.klipper_impulses("zv", 40.0, 0.1)
+    s = FirmwareShaper(A, T, 0.1, 0.1, 0.05, AX, 0.2)
+    refused(lambda: s.response([10.0, f] if batched and not isinstance(f, str) else f), ("freq",))

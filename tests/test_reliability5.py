@@ -6,6 +6,7 @@ configuration before the call, the time-optimal move (a closed form) and a desig
 """
 
 import errno
+import math
 import os
 import warnings
 
@@ -193,3 +194,196 @@ def test_a_design_re_made_by_design_move_at_the_shortest_time_meets_the_target(f
     # the least such time: design_move 0.5 % sooner leaves more than the target
     sooner = jb.design_move(axis, 0.1, T * 0.995, include=("minimax",), **LIMITS)
     assert float(sooner.minimax.fine_worst) > target
+
+
+# =====================================================================================
+# held-out cases (round 5b): firmware text, Klipper's calibration, a shaper's response, sizes before allocating
+# =====================================================================================
+_F = np.linspace(1.0, 200.0, 996)
+_PSD = 1.0 / (1.0 + ((_F - 40.0) / 2.0) ** 2)
+_SECTION = "[input_shaper]\nshaper_freq_x: {}\ndamping_ratio_x: {}\n"
+_M593 = 'M593 P"custom" H0.5 T{}'
+
+
+@pytest.mark.parametrize(
+    ("call", "error", "message"),
+    [
+        # degenerate magnitudes: a shaper for a 1e300 Hz or 1e-300 Hz mode (impulses 1e-300 s or 1e300 s apart)
+        (
+            lambda: jb.klipper_impulses("zv", 1e300, 0.1),
+            ValueError,
+            r"`freq` must be finite and within \[0.001, 1e\+07\]",
+        ),
+        (lambda: jb.klipper_impulses("zv", 1e-300, 0.1), ValueError, r"`freq` must be finite and within"),
+        (lambda: jb.klipper_impulses("zv", 40.0, "0.1"), TypeError, r"klipper_impulses: parameter `damping`"),
+        (
+            lambda: jb.parse_klipper(_SECTION.format("1e300", 0.1)),
+            ValueError,
+            r"shaper_freq_x must be 0 \(no shaping\)",
+        ),
+        # was: "could not convert string to float: 'abc'", AttributeError, bytes' TypeError
+        (
+            lambda: jb.parse_klipper(_SECTION.format(40, "abc")),
+            ValueError,
+            r"parse_klipper: damping_ratio_x must be a number",
+        ),
+        (
+            lambda: jb.parse_klipper(_SECTION.format("forty", 0.1)),
+            ValueError,
+            r"parse_klipper: shaper_freq_x must be a",
+        ),
+        (lambda: jb.parse_klipper(None), TypeError, r"parse_klipper: parameter `text` must be a str"),
+        (lambda: jb.parse_klipper(b"[input_shaper]\n"), TypeError, r"parameter `text` must be a str"),
+        (lambda: jb.parse_klipper("[input_shaper]\n", axis=1), ValueError, r"parameter `axis` must be 'x' or 'y'"),
+        # parse_m593: NaN delays at a step clock of 0 or NaN (silently), delays beyond the 32-bit clock count
+        (lambda: jb.parse_m593(_M593.format(0.01), step_clock_rate=0.0), ValueError, r"`step_clock_rate` must be"),
+        (lambda: jb.parse_m593(_M593.format(0.01), step_clock_rate=np.nan), ValueError, r"`step_clock_rate` must be"),
+        (lambda: jb.parse_m593(_M593.format("1e30")), ValueError, r"parameter T holds a delay beyond .* 32-bit"),
+        (lambda: jb.parse_m593(None), TypeError, r"parse_m593: parameter `line` must be a str"),
+        # m593_line: NaN amplitudes or times went into the line; a shaper shorter than a step clock is no shaper
+        (lambda: jb.m593_line([np.nan, 1.0], [0.0, 0.01]), ValueError, r"`amplitudes` must be finite"),
+        (lambda: jb.m593_line([0.5, 0.5], [0.0, np.nan]), ValueError, r"`times` must be finite"),
+        (lambda: jb.m593_line([0.5, 0.5], [0.0, 1e-12]), ValueError, r"`times` must end at least half a step clock"),
+        (lambda: jb.m593_line("ab", [0.0, 0.01]), TypeError, r"m593_line: parameter `amplitudes`"),
+        # klipper_calibration: numpy's errors, NaN results, and a 2-D or descending record accepted
+        (lambda: jb.klipper_calibration([], []), ValueError, r"`freq_bins` must be a 1-D array of at least 2"),
+        (lambda: jb.klipper_calibration(_F, _PSD[:-1]), ValueError, r"`psd` must have one value per frequency bin"),
+        (lambda: jb.klipper_calibration(_F, np.r_[_PSD[:-1], np.nan]), ValueError, r"`psd` must be finite and >= 0"),
+        (lambda: jb.klipper_calibration(_F, 0 * _PSD), ValueError, r"`psd` is 0 at every frequency"),
+        (lambda: jb.klipper_calibration(_F, _PSD, max_freq=0.0), ValueError, r"`max_freq` must be finite and above"),
+        (lambda: jb.klipper_calibration(_F[::-1], _PSD), ValueError, r"`freq_bins` must ascend strictly"),
+        (
+            lambda: jb.klipper_calibration(_F.reshape(2, -1), _PSD.reshape(2, -1)),
+            ValueError,
+            r"`freq_bins` must be a 1-D",
+        ),
+        # a classic shaper for a degenerate mode, and under a transformation (was: JAX's ConcretizationTypeError)
+        (
+            lambda: jb.shaper_impulses("ZV", 1e300, 0.01),
+            ValueError,
+            r"shaper_impulses: parameter `freq` must be finite and within",
+        ),
+        (
+            lambda: jax.vmap(lambda f: jnp.stack(jb.shaper_impulses("ZV", f, 0.01)[1]))(jnp.array([10.0, -10.0])),
+            ValueError,
+            r"shaper_impulses: parameter `freq` is traced",
+        ),
+        # sizes refused before allocating: 1e9 points asked XLA for 120 GB after 7 s
+        (
+            lambda: jb.response_curve(jb.NonlinearBelt(), max_points=10**9),
+            ValueError,
+            r"`max_points` must lie in \[2, 100000\]",
+        ),
+    ],
+)
+def test_held_out_firmware_and_calibration_inputs_are_refused_by_name(call, error, message):
+    with pytest.raises(error, match=message):
+        call()
+
+
+def test_klipper_impulses_takes_numpy_scalars_as_the_same_numbers():
+    # was refused ("must be a finite number of Hz > 0; got np.float32(40.0)"): the same impulses as from floats
+    for got, ref in zip(
+        jb.klipper_impulses("zv", np.float32(40.0), np.float64(0.1)), jb.klipper_impulses("zv", 40.0, 0.1)
+    ):
+        np.testing.assert_array_equal(got, ref)
+
+
+def test_firmware_shaper_response_refuses_a_frequency_outside_its_range_and_keeps_valid_ones():
+    from jaxbelt.shaping.firmware_shaper import FirmwareShaper
+    from jaxbelt.shaping.shapers import shaper_response
+
+    A, T = jb.klipper_impulses("zv", 40.0, 0.1)
+    s = FirmwareShaper(A, T, 0.1, 0.1, 0.05, AX, 0.2)
+    for bad in (np.nan, -10.0, np.inf, [40.0, np.nan]):
+        with pytest.raises(ValueError, match=r"FirmwareShaper.response: parameter `freq` must be finite and within"):
+            s.response(bad)  # was: NaN, or the response at |f|, without a word
+    with pytest.raises(TypeError, match=r"parameter `freq`"):
+        s.response("10")
+    # reference: the closed form of the impulses' residual at the mode's damping (ZV at its own frequency: ~0)
+    f = np.array([0.0, 20.0, 40.0])
+    np.testing.assert_allclose(s.response(f), shaper_response(A, T, f, 0.015), rtol=1e-12)
+    assert float(s.response(0.0)) == pytest.approx(1.0, rel=1e-12)  # at 0 Hz the impulses add up to the move
+
+
+# =====================================================================================
+# the live view: no number from earlier sliders while a background computation runs
+# =====================================================================================
+@pytest.mark.slow  # two designs of the axis scene (~25 s on 2 cores)
+def test_live_view_shows_no_number_of_earlier_sliders_while_it_recomputes():
+    pytest.importorskip("ipywidgets")
+    ex = jb.explore("axis")
+    assert ex.values["move_time"] == pytest.approx(0.8)
+    ex.update(wait=False, move_time=1.0)
+    # was: the 0.8 s design's numbers until the 1.0 s one was drawn; now NaN meanwhile (or, had it finished, its own)
+    pending = dict(ex.values)
+    ex.wait()
+    assert not ex.error
+    assert all((isinstance(v, float) and math.isnan(v)) or v == ex.values[k] for k, v in pending.items()), pending
+    assert "0.8" not in str(pending.get("move_time"))
+    # reference: design_move at the sliders' values (the view's own defaults: distance 0.1, v_max 0.3, a_max 1.2)
+    plan = jb.design_move(
+        jb.ModalAxis([7.3], [0.015]), 0.1, 1.0, v_max=0.3, a_max=1.2, include=("minimax", "ZV", "ZVD", "EI", "unshaped")
+    )
+    assert ex.values["move_time"] == pytest.approx(1.0)
+    assert ex.values["worst_percent"] == pytest.approx(plan.best.worst_percent, rel=1e-6)
+    ex.close()
+
+
+# =====================================================================================
+# the firmware command line (`jaxbelt shaper`): options named, the output checked before the design
+# =====================================================================================
+def test_cli_shaper_ranges_are_the_librarys():
+    from jaxbelt.cli import shaper
+    from jaxbelt.shaping import firmware_shaper
+
+    assert shaper.FREQUENCY_RANGE_HZ == FREQUENCY_RANGE_HZ  # the command line parses without importing JAX
+    assert shaper.TARGET_FLOOR == firmware_shaper.TARGET_FLOOR
+
+
+@pytest.mark.parametrize(
+    ("argv", "lead"),
+    [
+        (["--mode", "1e300:0.1"], "argument --mode: frequency F must be finite and within [0.001, 1e+07] Hz"),
+        (["--mode", "40:0.1", "--duration", "1e300"], "argument --duration: design_shaper: parameter `duration`"),
+        (["--mode", "40:0.1", "--target", "1e-300"], "argument --target: must be >= 1e-06"),  # was: 84 s, then `target`
+        (["--mode", "40:0.1", "--target", "0.01", "--out", "HARD"], "argument --out: "),  # was: after a 118 s design
+    ],
+)
+def test_cli_shaper_names_the_option_before_the_design(argv, lead, tmp_path, capsys, monkeypatch):
+    from jaxbelt.cli import main
+    from jaxbelt.shaping import firmware_shaper
+
+    if "HARD" in argv:
+        (tmp_path / "a.txt").write_text("previous\n")
+        os.link(tmp_path / "a.txt", tmp_path / "b.txt")
+        argv = [str(tmp_path / "b.txt") if a == "HARD" else a for a in argv]
+    real = firmware_shaper.design_shaper
+
+    def no_design(axis, duration=None, **kw):
+        if duration is None:  # the checks alone (a duration is checked by design_shaper's own `_check`)
+            raise AssertionError("designed before refusing")
+        return real(axis, duration, **kw)
+
+    monkeypatch.setattr(firmware_shaper, "design_shaper", no_design)
+    try:
+        code = main(["--no-cache", "shaper", "--firmware", "rrf", *argv])
+    except SystemExit as e:  # argparse's own refusal of an option's value
+        code = e.code
+    assert code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(f"jaxbelt shaper: error: {lead}"), err
+
+
+def test_enable_compilation_cache_through_a_dangling_link_creates_its_target(tmp_path):
+    # as files are written through symbolic links, a cache folder given by a dangling link is created where it
+    # points (was: "cannot be created (File exists)"); the conftest fixture restores JAX's cache settings after
+    link = tmp_path / "cache"
+    link.symlink_to(tmp_path / "real" / "xla")
+    (tmp_path / "real").mkdir()
+    jb.enable_compilation_cache(link, programs=False)
+    assert link.is_symlink() and (tmp_path / "real" / "xla").is_dir()
+    assert jax.config.values["jax_compilation_cache_dir"] == str(link)
+    from jaxbelt.cache import disable_compilation_cache
+
+    disable_compilation_cache()

@@ -35,8 +35,17 @@ def register(subparsers):
     p.set_defaults(func=run, early_check=early_check)
 
 
+#: `jaxbelt.models.axis.FREQUENCY_RANGE_HZ`, here without importing JAX (the command line is parsed first; a test
+#: keeps the two equal)
+FREQUENCY_RANGE_HZ = (1e-3, 1e7)
+#: `jaxbelt.shaping.firmware_shaper.TARGET_FLOOR`, likewise
+TARGET_FLOOR = 1e-6
+#: design_shaper's and identify_measurement's parameters, as the options that give them
+_OPTIONS = {"duration": "--duration", "target": "--target", "uncertainty": "--uncertainty", "channel": "--column"}
+
+
 def _mode(text: str):
-    """F:Z -> (frequency [Hz] > 0, damping ratio in [0, 1))."""
+    """F:Z -> (frequency [Hz] within `FREQUENCY_RANGE_HZ`, damping ratio in [0, 1))."""
     import argparse
     import math
 
@@ -44,8 +53,12 @@ def _mode(text: str):
         f, z = (float(x) for x in text.split(":"))
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected F:Z (two numbers), got {text!r}") from None
-    if not (math.isfinite(f) and f > 0):
-        raise argparse.ArgumentTypeError(f"frequency F must be finite and > 0 Hz, got {f:g}")
+    lo, hi = FREQUENCY_RANGE_HZ
+    if not (math.isfinite(f) and lo <= f <= hi):
+        raise argparse.ArgumentTypeError(
+            f"frequency F must be finite and within [{lo:g}, {hi:g}] Hz (a mode's period from 0.1 us to 16 min), "
+            f"got {f:g}"
+        )
     if not (math.isfinite(z) and 0 <= z < 1):
         raise argparse.ArgumentTypeError(f"damping ratio Z must lie in [0, 1), got {z:g}")
     return f, z
@@ -54,29 +67,55 @@ def _mode(text: str):
 def early_check(args) -> str | None:
     """Relations between the arguments (the standard library only)."""
     if bool(args.mode) == bool(args.measured):
-        return "give the axis by --mode F:Z (one per mode) or by --measured FILE, one of the two"
+        return "argument --mode/--measured: give the axis by --mode F:Z (one per mode) or by --measured FILE, one of the two"
     if args.measured is None and (args.n_modes is not None or args.column is not None):
         return "argument --n-modes/--column: only with --measured"
     if args.duration is not None and args.target is not None:
         return "argument --target: give --duration or --target, not both"
     if args.out is not None and not str(args.out).lower().endswith((".g", ".gcode", ".cfg", ".txt")):
         return "argument --out: the file must end in .g, .gcode, .cfg or .txt"
+    if args.target is not None and args.target < TARGET_FLOOR:
+        return (
+            f"argument --target: must be >= {TARGET_FLOOR:g} (below, a shaper's residual is the rounding of its "
+            f"exported numbers), got {args.target:g}"
+        )
+    if args.out is not None:
+        from .._io import output_path_problem
+
+        problem = output_path_problem(args.out)  # before the design (minutes for a --target): a hard link, ...
+        if problem is not None:
+            return f"argument --out: {problem}"
     return None
+
+
+def _named_by_option(error: ValueError) -> ValueError:
+    """`error` of a library call whose first line names a parameter that an option gives: the same, naming the
+    option ("argument --duration: ...")."""
+    import re
+
+    text = str(error)
+    found = re.search(r"parameter `(\w+)`", text.splitlines()[0] if text else "")
+    if found is None or found.group(1) not in _OPTIONS:
+        return error
+    return ValueError(f"argument {_OPTIONS[found.group(1)]}: {text}")
 
 
 def run(args) -> int:
     from ..models.axis import ModalAxis
     from ..shaping.firmware_shaper import design_shaper
 
-    if args.measured:
-        from ..shaping.measurement import identify_measurement
+    try:
+        if args.measured:
+            from ..shaping.measurement import identify_measurement
 
-        # the model the file holds (a Klipper calibration CSV is Klipper's kind; a raw sweep is a sweep)
-        axis, _ = identify_measurement(args.measured, args.n_modes or 1, column=args.column)
-    else:
-        fs, zs = zip(*args.mode)
-        axis = ModalAxis(list(fs), list(zs))
-    s = design_shaper(axis, args.duration, uncertainty=args.uncertainty, firmware=args.firmware, target=args.target)
+            # the model the file holds (a Klipper calibration CSV is Klipper's kind; a raw sweep is a sweep)
+            axis, _ = identify_measurement(args.measured, args.n_modes or 1, column=args.column)
+        else:
+            fs, zs = zip(*args.mode)
+            axis = ModalAxis(list(fs), list(zs))
+        s = design_shaper(axis, args.duration, uncertainty=args.uncertainty, firmware=args.firmware, target=args.target)
+    except ValueError as e:
+        raise _named_by_option(e) from e
     modes = ", ".join(
         f"{float(f):.3f} Hz (damping {float(z):.4f})" for f, z in zip(axis.frequencies, axis.damping_ratios)
     )

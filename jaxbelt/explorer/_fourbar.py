@@ -10,7 +10,7 @@ from typing import Any
 import numpy as np
 
 from ._figure import _fit, _style
-from ._knobs import _declared_knob, _time_grid, _with_ranges
+from ._knobs import MAX_TUNE_STEPS, _declared_knob, _time_grid, _with_ranges, check_t_end
 from ._scene import _host, _Scene
 
 
@@ -43,12 +43,19 @@ class _FourBar(_Scene):
             raise ValueError(f"{o}: option `window` must be (t0, t1) in s; got {window!r}") from None
         if not (0 <= t0 < t1):
             raise ValueError(f"{o}: option `window` must be (t0, t1) with 0 <= t0 < t1 [s]; got {(t0, t1)}")
-        t_end = t1 if t_end is None else float(t_end)
+        t_end = t1 if t_end is None else check_t_end(o, t_end)
         if not t_end >= t1:
             raise ValueError(f"{o}: option `t_end` must be >= the window's end {t1:g} s; got {t_end}")
         self.ts, self.t = _time_grid(o, t_end, int(round(t_end / 5e-4)) + 1 if n_points is None else n_points, 3)
-        if isinstance(tune_steps, bool) or not isinstance(tune_steps, int | np.integer) or tune_steps < 1:
-            raise ValueError(f"{o}: option `tune_steps` must be an integer >= 1; got {tune_steps!r}")
+        if (
+            isinstance(tune_steps, bool)
+            or not isinstance(tune_steps, int | np.integer)
+            or not 1 <= tune_steps <= MAX_TUNE_STEPS
+        ):
+            raise ValueError(
+                f"{o}: option `tune_steps` must be an integer in [1, {MAX_TUNE_STEPS}] (each step a simulation and a "
+                f"gradient); got {tune_steps!r}"
+            )
         import jax
 
         self.drive, self.pid, self.window, self.tune_steps = drive, pid, (t0, t1), int(tune_steps)

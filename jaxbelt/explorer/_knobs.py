@@ -80,6 +80,30 @@ def max_points() -> int:
     return max(int(memory // 4 // BYTES_PER_POINT), 1000)
 
 
+#: the span [s] of a time-domain view (`t_end`): a start-up's electrical time constant is ~1 ms and its mechanical
+#: one ~0.1 s, a platform's move ~1 s; 1 us to 1000 s reaches three decades beyond each, and far beyond (1e300 s)
+#: the closed form's accuracy, eps ||A|| t, is lost (a `SolveError` after seconds of work, not a named option)
+T_END_RANGE_S = (1e-6, 1e3)
+#: the most steps of a view's "tune" button (`tune_steps`): each is a simulation and a gradient (~0.1 s), so 1000
+#: steps already keep the view busy for minutes
+MAX_TUNE_STEPS = 1000
+
+
+def check_t_end(owner: str, t_end) -> float:
+    """`t_end` [s] as a float within `T_END_RANGE_S`, or a `ValueError` naming the option and the range."""
+    lo, hi = T_END_RANGE_S
+    try:
+        value = float(t_end)
+    except (TypeError, ValueError):
+        raise ValueError(f"{owner}: option `t_end` (s) must be a number in [{lo:g}, {hi:g}] s; got {t_end!r}") from None
+    if isinstance(t_end, bool) or not (math.isfinite(value) and lo <= value <= hi):
+        raise ValueError(
+            f"{owner}: option `t_end` (s) must be > 0 and within [{lo:g}, {hi:g}] s (the span of a view: from "
+            f"well below a start-up's electrical time constant to far beyond a move); got {t_end!r}"
+        )
+    return value
+
+
 def _time_grid(owner: str, t_end: float, n_points, least: int = 2):
     """The view's output times `(ts on the device, t on the host)`: `n_points` (an integer in [`least`,
     `max_points()`]: refused before anything is allocated) equally spaced from 0 to `t_end` [s] (checked by the

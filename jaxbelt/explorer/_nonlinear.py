@@ -28,9 +28,12 @@ class _Nonlinear(_Scene):
             belt = start
         elif start is not None:
             raise TypeError(f"{o}: start from a NonlinearBelt; got {start!r}")
-        for name, n, lo in (("n_harmonics", n_harmonics, 1), ("max_points", max_points, 2)):
-            if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < lo:
-                raise ValueError(f"{o}: option `{name}` must be an integer >= {lo}; got {n!r}")
+        from ..models.nonlinear.harmonic import MAX_CURVE_POINTS
+
+        for name, n, lo, hi in (("n_harmonics", n_harmonics, 1, None), ("max_points", max_points, 2, MAX_CURVE_POINTS)):
+            if isinstance(n, bool) or not isinstance(n, int | np.integer) or n < lo or (hi is not None and n > hi):
+                within = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
+                raise ValueError(f"{o}: option `{name}` must be an integer {within}; got {n!r}")
         if speed_range is not None:
             try:
                 a, b = (float(x) for x in speed_range)

@@ -9,7 +9,7 @@ import warnings
 import numpy as np
 
 from ._figure import _fit, _style
-from ._knobs import _declared_knob, _knob, _time_grid, _with_ranges
+from ._knobs import _declared_knob, _knob, _time_grid, _with_ranges, check_t_end
 from ._scene import _host, _program, _Scene
 
 
@@ -45,9 +45,7 @@ class _Shaping(_Scene):
 
         c = jax.device_get(cmd)
         T = float(c.duration)
-        t_end = 1.5 * T if t_end is None else float(t_end)
-        if not (math.isfinite(t_end) and t_end > 0):
-            raise ValueError(f"{o}: option `t_end` (s) must be > 0; got {t_end}")
+        t_end = check_t_end(o, 1.5 * T if t_end is None else t_end)
         self.ts, self.t = _time_grid(o, t_end, n_points)
         self.plat, self.cmd = plat, cmd
         self.T = T

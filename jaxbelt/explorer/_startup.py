@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 
 from ._figure import _fit, _style
-from ._knobs import _declared_knob, _time_grid, _with_ranges
+from ._knobs import _declared_knob, _time_grid, _with_ranges, check_t_end
 from ._scene import _host, _program, _Scene
 
 
@@ -43,9 +42,7 @@ class _Startup(_Scene):
             raise TypeError(
                 f"{o}: the scene must be a BeltStartup driven by an ExponentialVoltage of one time constant"
             )
-        t_end = float(t_end)
-        if not (math.isfinite(t_end) and t_end > 0):
-            raise ValueError(f"{o}: option `t_end` (s) must be > 0; got {t_end}")
+        t_end = check_t_end(o, t_end)
         self.ts, self.t = _time_grid(o, t_end, n_points)
         self.model, self.cmd = model, cmd
         import jax

@@ -28,7 +28,8 @@ class Explorer:
     - `controls`: `{name: ipywidgets slider}` (units in each description); dragging one recomputes and redraws;
     - `figure`: the scene's matplotlib `Figure`, redrawn in place (its lines' data change, the figure stays);
     - `values`: `{name: number}` of the key numbers of the last result (χ, H, the worst residual, the fold
-      speeds, ...), `units`: their units; NaN after a computation that failed (`error` says why);
+      speeds, ...), `units`: their units; NaN after a computation that failed (`error` says why), and NaN while a
+      background computation runs (`update(wait=False)`, a slider moved in a long scene: `wait()` for its numbers);
     - `update(**values)`: set sliders from code and wait for the redrawn figure (`wait=False`: do not wait);
     - `widget`: the composed ipywidgets box (figure on top; sliders, numbers and status below); a notebook shows it
       when the explorer is the cell's value (a static renderer shows the figure as a PNG);
@@ -134,6 +135,7 @@ class Explorer:
         with self._lock:
             gen = self._generation
         job = scene.tune_job(self.slider_values)
+        self._pending_numbers(gen)
         self._submit(gen, job, self._apply_tune, scene.busy_text)
         if wait:
             self.wait()
@@ -194,6 +196,7 @@ class Explorer:
             if raise_errors:
                 raise
             return
+        self._pending_numbers(gen)
         self._submit(gen, job, self._apply, self.scene.busy_text)
         if wait:
             self.wait()
@@ -288,6 +291,17 @@ class Explorer:
             msg += "; " + "; ".join(caught)
         self.values["tuned_chi"] = float(res.chi)
         self._status.value = _wrapped(f"<small>{_escape(msg)}</small>")
+
+    def _pending_numbers(self, gen: int) -> None:
+        """While the computation of generation `gen` runs in the background, no key number of earlier sliders is
+        shown or returned: `values` become NaN and the numbers' panel is cleared until the result is drawn (the
+        curves stay, under the busy indicator). A result of a later generation already drawn is left alone."""
+        with self._lock:
+            if gen != self._generation:
+                return
+            self.values = {k: math.nan for k in self.values}
+            self._display = Display(self.scene.title)
+            self._numbers.value = _wrapped(self._display.html())
 
     def _show_error(self, e: BaseException) -> None:
         """Show the error of a computation at the sliders' values, and no number from earlier values: the key numbers

@@ -25,7 +25,7 @@ import numpy as np
 from jax.core import Tracer
 from jaxtyping import Array, Float
 
-from .._checks import as_float_array, atleast_1d, device_array, is_concrete, record
+from .._checks import as_float_array, atleast_1d, device_array, is_concrete, record, recording
 from .._display import Display, Table, with_unit
 from .._model import AbstractModel, observable
 from .._params import converted, document, param
@@ -119,7 +119,7 @@ class ModalAxis(AbstractModel):
         if is_concrete(self.gains):
             if np.any(np.asarray(self.gains) == 0):
                 raise ValueError(f"{msg}; got {np.asarray(self.gains).tolist()}")
-        else:
+        elif recording():
             record(jnp.all(self.gains != 0), msg)
 
     def _check_frequencies(self, known) -> None:
@@ -137,6 +137,8 @@ class ModalAxis(AbstractModel):
             if bad.size:
                 i = int(bad[0])
                 raise ValueError(f"{what}; got {float(v[i])!r} Hz for mode {i + 1} (index {i}) of {v.tolist()}")
+            return
+        if not recording():  # nobody keeps the checks (see `recording`)
             return
         for i in range(f.shape[0]):
             fi = f[i]

@@ -24,7 +24,7 @@ from .._checks import check_real, is_concrete
 from .._guard import all_ok, checked, reraising, traced_checks
 from .._params import recheck
 from .._threads import blas_limited
-from ..models.axis import ModalAxis
+from ..models.axis import FREQUENCY_RANGE_HZ, ModalAxis
 from .design import MinimaxDesign, default_options, max_distance, minimax_design, minimax_value
 from .moves import fastest_time
 
@@ -81,6 +81,11 @@ def _check_move_time(owner: str, name: str, move_time, design: MinimaxDesign, wh
                 f"a_max {float(np.asarray(design.problem.a_max)):g}); give `{name}` >= {t_min:.6g} s or relax the limits"
             )
         return []
+    return _traced_time_checks(owner, name, move_time, t_min, what)
+
+
+def _traced_time_checks(owner: str, name: str, move_time, t_min: float, what: str):
+    """`[(ok, message)]`: the traced `move_time` [s] finite, > 0 and, where `t_min` [s] is finite, not below it."""
     T = jnp.asarray(move_time, dtype=float)
     ok = jnp.isfinite(T) & (T > 0)
     if math.isfinite(t_min):
@@ -139,15 +144,31 @@ def best_residual(axis: ModalAxis, move_time, design: MinimaxDesign):
     o = "best_residual"
     _check_design(o, design)
     _check_axis(o, axis, design)
-    checks = _check_move_time(o, "move_time", move_time, design)
-    if not checks and is_concrete((axis, design.problem)):
-        _check_spline_reaches(o, axis, move_time, design)
-    axis_checks = traced_checks(axis)
-    lp_axis, lp_time = _valid_or_designs(axis, move_time, design, axis_checks + checks)
-    if axis_checks or checks:
+    traced_time = not is_concrete(move_time)
+    if traced_time:
+        check_real("move_time", move_time, "s", o)  # a string, a bool or None is refused, not converted
+        if jnp.ndim(move_time) != 0:
+            raise ValueError(
+                f"{o}: parameter `move_time` must be a scalar move time [s]; got shape {jnp.shape(move_time)}"
+            )
+    else:
+        _check_move_time(o, "move_time", move_time, design)  # raises now
+        if is_concrete((axis, design.problem)):
+            _check_spline_reaches(o, axis, move_time, design)
+    lp_axis, lp_time = axis, move_time
+    if (traced_time or not is_concrete(axis)) and not _peeked_valid(o, axis, move_time, design):
         # on the LP's inputs: under an eager `vmap`/`grad` an invalid element raises here, before the LP is compiled
-        # and solved (12-30 s); under `jit` the LP depends on them, so the check runs whatever the caller keeps
-        lp_axis, lp_time = checked((lp_axis, lp_time), checks=[*axis_checks, *checks])
+        # and solved (12-30 s); under `jit` the LP depends on them, so the check runs whatever the caller keeps.
+        # The axis' own checks and the move time's run in one small compiled program (~0.3 s the first time), not
+        # one eager program per operation (3-7 s for the first `vmap` in a process)
+        lp_axis, lp_time = _guarded_lp_inputs(
+            axis,
+            jnp.asarray(move_time, dtype=float),
+            None if math.isnan(t_min := _fastest(design)) else t_min,  # static: NaN would never equal itself
+            traced_time,
+            design.problem.axis,
+            design.problem.move_time,
+        )
     value = minimax_value(_problem(design, lp_axis, lp_time), design.options, tau=jax.lax.stop_gradient(design.worst))
     # a move time far beyond the design's (1e5 s for a 0.8 s design) leaves a residual far below the LP's tolerance,
     # and its solve can end in NaN: an error naming the move time, never a NaN "residual"
@@ -157,7 +178,7 @@ def best_residual(axis: ModalAxis, move_time, design: MinimaxDesign):
         f"design's ({T0:.6g} s) leaves a residual below what the LP resolves (~0); give a `move_time` closer to the "
         "design's"
     )
-    if is_concrete(value) and not checks:
+    if is_concrete(value) and not traced_time:
         if not np.isfinite(float(value)):
             raise ValueError(lost.replace("at this `move_time`", f"at `move_time` = {float(move_time):.6g} s"))
         return value
@@ -166,7 +187,65 @@ def best_residual(axis: ModalAxis, move_time, design: MinimaxDesign):
     return checked(value, checks=[(jnp.isfinite(value), lost)])
 
 
-def _valid_or_designs(axis, move_time, design: MinimaxDesign, checks):
+def _peeked_valid(owner: str, axis: ModalAxis, move_time, design: MinimaxDesign) -> bool:
+    """The traced axis and move time of an eager `jax.vmap` or `jax.grad` checked on the host, before any program is
+    compiled (the compiled checks took 3-7 s to refuse the first batch of a process): a `ValueError` naming the
+    parameter, the mode and the element of the batch where one is invalid, True where all are valid, False where
+    the values are not known before the program runs (under `jit`: the compiled checks decide)."""
+    from .. import _compat
+
+    names = ("frequencies", "damping_ratios", "gains")
+    peeked = [_compat.peek(getattr(axis, k)) for k in names] + [_compat.peek(move_time)]
+    seen = [p for p in peeked if p is not None]
+    if len(seen) != len(peeked):
+        return False
+    sizes = {v.shape[0] for v, batched in seen if batched}
+    if len(sizes) != 1 and any(b for _, b in seen):
+        return False
+    n = sizes.pop() if sizes else None
+    f, z, g, T = (
+        np.asarray(v, dtype=float) if (b or n is None) else np.broadcast_to(v, (n, *np.shape(v))) for v, b in seen
+    )
+    lo, hi = FREQUENCY_RANGE_HZ
+    t_min = _fastest(design)
+    with np.errstate(invalid="ignore"):
+        ok = (
+            np.all(np.isfinite(f) & (f >= lo) & (f <= hi), axis=-1)
+            & np.all(np.isfinite(z) & (z >= 0) & (z < 1), axis=-1)
+            & np.all(np.isfinite(g) & (g != 0), axis=-1)
+            & np.isfinite(T)
+            & (T > 0)
+            & (~np.isfinite(t_min) | (T >= t_min * (1 - 1e-9)))
+        )
+    if np.all(ok):
+        return True
+    j = int(np.flatnonzero(~np.atleast_1d(ok))[0])
+    at = (lambda a: a[j]) if n is not None else (lambda a: a)
+    where = f" (element {j} of the batch)" if n is not None else ""
+    try:
+        ModalAxis(at(f), at(z), at(g))  # the axis' own message: the parameter, the mode, the value
+        _check_move_time(owner, "move_time", float(at(T)), design)
+    except ValueError as e:
+        lead = str(e) if str(e).startswith(f"{owner}:") else f"{owner}: {e}"
+        raise ValueError(lead + where) from None
+    return False  # a rule above that the constructors do not share: the compiled checks decide
+
+
+@eqx.filter_jit
+def _guarded_lp_inputs(axis, move_time, t_min: float | None, time_checked: bool, mine, mine_time):
+    """The LP's `(axis, move_time)` with the checks of `best_residual`'s traced inputs attached, in one program: the
+    axis' own checks first (the parameter, the mode), then, where `time_checked`, `move_time` [s] finite, > 0 and
+    not below `t_min` [s] (static: one program per design's shortest move); where a check fails, the design's own
+    axis and move time `(mine, mine_time)` go to the LP instead (`_valid_or_designs`)."""
+    checks = traced_checks(axis)
+    if time_checked:
+        t = math.nan if t_min is None else t_min
+        checks += _traced_time_checks("best_residual", "move_time", move_time, t, "move time")
+    safe = _valid_or_designs(axis, move_time, None, checks, mine=mine, mine_time=mine_time)
+    return checked(safe, checks=checks)
+
+
+def _valid_or_designs(axis, move_time, design: MinimaxDesign | None, checks, *, mine=None, mine_time=None):
     """`(axis, move_time)` for the LP: where a traced check fails (an element of a `vmap` batch with a NaN or
     negative frequency, ...), the design's own axis and move time instead, so that the LP of that element converges
     at once rather than iterating on NaN to its limit; the failed check raises on the value all the same. Where
@@ -174,7 +253,8 @@ def _valid_or_designs(axis, move_time, design: MinimaxDesign, checks):
     if not checks:
         return axis, move_time
     ok = all_ok(checks)
-    mine = design.problem.axis
+    if design is not None:
+        mine, mine_time = design.problem.axis, design.problem.move_time
 
     def pick(x, y):
         return jnp.where(ok, x, jax.lax.stop_gradient(y))
@@ -185,7 +265,7 @@ def _valid_or_designs(axis, move_time, design: MinimaxDesign, checks):
         axis,
         tuple(pick(getattr(axis, k), getattr(mine, k)) for k in names),
     )
-    return safe, pick(jnp.asarray(move_time, dtype=float), design.problem.move_time)
+    return safe, pick(jnp.asarray(move_time, dtype=float), mine_time)
 
 
 #: relative tolerance of `shortest_move_time`'s root on the design's grid (`refine=False`; the LP's own value is

@@ -58,7 +58,7 @@ import numpy as np
 from .._checks import check_real, is_concrete
 from .._io import atomic_open, check_output_path
 from .._threads import blas_limited
-from ..models.axis import ModalAxis
+from ..models.axis import FREQUENCY_RANGE_HZ, ModalAxis
 from .klipper import KLIPPER_MAX_PULSES, KLIPPER_SHAPERS, KlipperConfig, impulses, klipper_impulses
 from .rrf import RRF_MAX_IMPULSES, STEP_CLOCK_RATE, m593_line, parse_m593
 from .shapers import shaper_response
@@ -71,6 +71,11 @@ MAX_DURATION_PERIODS = 16.0
 #: The shortest, as a fraction of the shortest damped period: a shaper that short leaves its residual within
 #: 0.3 % of the unshaped move's.
 MIN_DURATION_PERIODS = 1e-3
+#: The least `target` (residual ratio) `design_shaper` accepts. Below it the residual a shaper leaves is the rounding
+#: of its numbers, not its design: RepRapFirmware holds the amplitudes in single precision (a relative 6e-8 each, so
+#: ~1e-7 of the move over 5 impulses) and its delays in whole step clocks, and the LP meets its constraints to 1e-9
+#: per row; a target of 1e-300 searched for 84 s before it said "not reached".
+TARGET_FLOOR = 1e-6
 #: The most impulses of a free-time design (`max_impulses`).
 MAX_FREE_IMPULSES = 16
 
@@ -100,7 +105,22 @@ class FirmwareShaper:
         return float(self.times[-1])
 
     def response(self, freq, mode: int = 0):
-        """Residual ratio V at frequencies `freq` [Hz] for the damping ratio of mode `mode` (0 … n_modes - 1)."""
+        """Residual ratio V at frequencies `freq` [Hz] (finite, >= 0, at most `FREQUENCY_RANGE_HZ`'s top) for the
+        damping ratio of mode `mode` (0 … n_modes - 1)."""
+        o = "FirmwareShaper.response"
+        check_real("freq", freq, "Hz", o)
+        try:
+            f = np.asarray(freq, dtype=float)
+        except (TypeError, ValueError):
+            raise TypeError(
+                f"{o}: parameter `freq` must be a number or an array of numbers [Hz]; got {freq!r}"
+            ) from None
+        hi = FREQUENCY_RANGE_HZ[1]
+        bad = ~(np.isfinite(f) & (f >= 0) & (f <= hi))
+        if np.any(bad):
+            raise ValueError(
+                f"{o}: parameter `freq` must be finite and within [0, {hi:g}] Hz; got {f[bad].ravel()[0]!r}"
+            )
         z = np.asarray(self.axis.damping_ratios)
         n = z.size
         if isinstance(mode, bool) or not isinstance(mode, int | np.integer) or not 0 <= mode < n:
@@ -108,7 +128,7 @@ class FirmwareShaper:
                 f"FirmwareShaper.response: parameter `mode` must be an integer in [0, {n - 1}] (the axis has {n} "
                 f"mode{'s' if n > 1 else ''}); got {mode!r}"
             )
-        return shaper_response(self.amplitudes, self.times, freq, float(z[mode]))
+        return shaper_response(self.amplitudes, self.times, f, float(z[mode]))
 
     def as_lists(self) -> tuple[list[float], list[float]]:
         """`(A, T)`: the amplitudes and times [s] as plain lists, every exported impulse (the form firmware shaper
@@ -220,8 +240,11 @@ def _check(axis, duration, uncertainty, n_impulses, n_freq, firmware, max_impuls
             raise ValueError(f"{o}: give `n_impulses` (a uniform grid) or `max_impulses` (free times), not both")
     if target is not None:
         check_real("target", target, "", o)
-        if not (isinstance(target, int | float | np.floating) and 0.0 < float(target) < 1.0):
-            raise ValueError(f"{o}: parameter `target` must be a residual ratio in (0, 1); got {target!r}")
+        if not (isinstance(target, int | float | np.floating) and TARGET_FLOOR <= float(target) < 1.0):
+            raise ValueError(
+                f"{o}: parameter `target` must be a residual ratio in [{TARGET_FLOOR:g}, 1) (`TARGET_FLOOR`: below, a "
+                f"shaper's residual is the rounding of its exported numbers); got {target!r}"
+            )
         if duration is not None:
             raise ValueError(f"{o}: give `duration` or `target` (the shortest shaper that reaches it), not both")
     return tau, u, (lo, hi)

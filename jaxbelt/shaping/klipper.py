@@ -44,6 +44,9 @@ from typing import NamedTuple
 
 import numpy as np
 
+from .._checks import check_real, is_concrete
+from ..models.axis import FREQUENCY_RANGE_HZ
+
 #: Klipper's shaper types in its order, with the calibration's lowest test frequency [Hz] and the largest
 #: damping ratio each type accepts (`INPUT_SHAPERS` in Klipper's shaper definitions).
 KLIPPER_SHAPERS = {
@@ -125,17 +128,38 @@ def impulses(kind: str, freq, damping, xp=np):
     raise ValueError(f"klipper shaper: parameter `kind` must be one of {tuple(KLIPPER_SHAPERS)}; got {kind!r}")
 
 
+def _real_scalar(owner: str, name: str, value, unit: str) -> float:
+    """`value` as a Python float: a real number, a numpy scalar or a concrete 0-d array; anything else (a string, a
+    bool, None, a complex number, an array of several values, a traced value) is refused by name."""
+    try:
+        check_real(name, value, unit, owner)
+        if not is_concrete(value) or np.ndim(value) != 0:
+            raise TypeError
+        return float(value)
+    except (TypeError, ValueError):
+        raise TypeError(
+            f"{owner}: parameter `{name}` must be one real number{f' [{unit}]' if unit else ''} (a concrete scalar); "
+            f"got {value!r}"
+        ) from None
+
+
 def klipper_impulses(kind: str, freq: float, damping: float):
     """Klipper's shaper `kind` at `freq` [Hz] > 0 and `damping` in [0, the type's largest]: `(amplitudes, times)`
     as numpy arrays, amplitudes normalised to sum 1 (as Klipper's kernel uses them), times [s] from 0."""
     if kind not in KLIPPER_SHAPERS:
         raise ValueError(f"klipper_impulses: parameter `kind` must be one of {tuple(KLIPPER_SHAPERS)}; got {kind!r}")
     zmax = KLIPPER_SHAPERS[kind][1]
-    if not (isinstance(freq, int | float) and math.isfinite(freq) and freq > 0):
-        raise ValueError(f"klipper_impulses: parameter `freq` must be a finite number of Hz > 0; got {freq!r}")
-    if not (isinstance(damping, int | float) and 0.0 <= damping <= zmax):
+    lo, hi = FREQUENCY_RANGE_HZ
+    freq = _real_scalar("klipper_impulses", "freq", freq, "Hz")
+    if not (math.isfinite(freq) and lo <= freq <= hi):
+        raise ValueError(
+            f"klipper_impulses: parameter `freq` must be finite and within [{lo:g}, {hi:g}] Hz (a mode's frequency, "
+            f"`FREQUENCY_RANGE_HZ`); got {freq!r}"
+        )
+    damping = _real_scalar("klipper_impulses", "damping", damping, "")
+    if not 0.0 <= damping <= zmax:
         raise ValueError(f"klipper_impulses: parameter `damping` must lie in [0, {zmax}] for {kind}; got {damping!r}")
-    A, T = impulses(kind, float(freq), float(damping))
+    A, T = impulses(kind, freq, damping)
     A = np.array([float(a) for a in A])
     return A / A.sum(), np.array([float(t) for t in T])
 
@@ -170,6 +194,13 @@ def parse_klipper(text: str, axis: str = "x") -> KlipperConfig:
     any case (lower-cased; `shaper_type` applies to both axes unless `shaper_type_x` is given; default `mzv`), the
     damping ratio (default 0.1) within [0, the type's largest], the frequency >= 0 (default 0: no shaping).
     Returns a `KlipperConfig`; anything Klipper would refuse raises a `ValueError` naming the field."""
+    o = "parse_klipper"
+    if not isinstance(text, str):
+        raise TypeError(
+            f"{o}: parameter `text` must be a str (a configuration section or a command); got {type(text).__name__}"
+        )
+    if not isinstance(axis, str) or axis.lower() not in ("x", "y"):
+        raise ValueError(f"{o}: parameter `axis` must be 'x' or 'y' (Klipper's shaped axes); got {axis!r}")
     a = axis.lower()
     values: dict[str, str] = {}
     if text.lstrip().upper().startswith("SET_INPUT_SHAPER"):
@@ -188,13 +219,27 @@ def parse_klipper(text: str, axis: str = "x") -> KlipperConfig:
     kind = values.get(f"shaper_type_{a}", values.get("shaper_type", "mzv")).lower()
     if kind not in KLIPPER_SHAPERS:
         raise ValueError(f"parse_klipper: shaper_type_{a} {kind!r} is not one of {tuple(KLIPPER_SHAPERS)}")
-    damping = float(values.get(f"damping_ratio_{a}", 0.1))
+
+    def number(key: str, default: float) -> float:
+        raw = values.get(key)
+        if raw is None:
+            return default
+        try:
+            return float(raw)
+        except ValueError:
+            raise ValueError(f"{o}: {key} must be a number; got {raw!r}") from None
+
+    damping = number(f"damping_ratio_{a}", 0.1)
     zmax = KLIPPER_SHAPERS[kind][1]
     if not 0.0 <= damping <= zmax:
         raise ValueError(f"parse_klipper: damping_ratio_{a} must lie in [0, {zmax}] for {kind}; got {damping}")
-    freq = float(values.get(f"shaper_freq_{a}", 0.0))
-    if not (math.isfinite(freq) and freq >= 0.0):
-        raise ValueError(f"parse_klipper: shaper_freq_{a} must be >= 0; got {freq}")
+    freq = number(f"shaper_freq_{a}", 0.0)
+    lo, hi = FREQUENCY_RANGE_HZ
+    if not (freq == 0.0 or (math.isfinite(freq) and lo <= freq <= hi)):
+        raise ValueError(
+            f"parse_klipper: shaper_freq_{a} must be 0 (no shaping) or within [{lo:g}, {hi:g}] Hz (a mode's "
+            f"frequency, `FREQUENCY_RANGE_HZ`); got {freq}"
+        )
     return KlipperConfig(kind, freq, damping)
 
 
@@ -239,13 +284,54 @@ def normalise_psd(freq_bins, psd):
     return p
 
 
+def _calibration_inputs(freq_bins, psd, normalised, max_freq):
+    """`klipper_calibration`'s arguments checked, by name, before the search: `freq_bins` [Hz] 1-D, finite, >= 0 and
+    ascending, at least 2; `psd` as many, finite, >= 0 and not all 0 below `max_freq` (its largest value sets
+    Klipper's threshold, and the remaining vibrations are a fraction of what lies above it); `max_freq` [Hz] finite
+    and above the first bin. Returns `(f, psd, max_freq)` as float arrays and a float."""
+    o = "klipper_calibration"
+    arrays = []
+    for name, value in (("freq_bins", freq_bins), ("psd", psd)):
+        check_real(name, value, "Hz" if name == "freq_bins" else "", o)
+        try:
+            a = np.asarray(value, dtype=float)
+        except (TypeError, ValueError):
+            raise TypeError(f"{o}: parameter `{name}` must be a 1-D array of numbers; got {value!r}") from None
+        if a.ndim != 1 or a.size < 2:
+            raise ValueError(f"{o}: parameter `{name}` must be a 1-D array of at least 2 values; got shape {a.shape}")
+        if not np.all(np.isfinite(a)) or np.any(a < 0):
+            i = int(np.flatnonzero(~(np.isfinite(a) & (a >= 0)))[0])
+            raise ValueError(f"{o}: parameter `{name}` must be finite and >= 0; got {a[i]!r} at index {i}")
+        arrays.append(a)
+    f, p = arrays
+    if p.shape != f.shape:
+        raise ValueError(f"{o}: parameter `psd` must have one value per frequency bin, shape {f.shape}; got {p.shape}")
+    if np.any(np.diff(f) <= 0):
+        i = int(np.flatnonzero(np.diff(f) <= 0)[0])
+        raise ValueError(
+            f"{o}: parameter `freq_bins` must ascend strictly (Klipper's calibration bins); bin {i + 1} = {f[i + 1]!r} "
+            f"Hz follows {f[i]!r} Hz"
+        )
+    if isinstance(normalised, bool | np.bool_) is False:
+        raise TypeError(f"{o}: parameter `normalised` must be True or False; got {normalised!r}")
+    check_real("max_freq", max_freq, "Hz", o)
+    mf = float(max_freq)
+    if not (math.isfinite(mf) and mf > f[0]):
+        raise ValueError(
+            f"{o}: parameter `max_freq` must be finite and above the first frequency bin ({f[0]:g} Hz); got {mf!r}"
+        )
+    if not np.any(p[f <= mf] > 0):
+        raise ValueError(f"{o}: parameter `psd` is 0 at every frequency up to `max_freq` = {mf:g} Hz: nothing to fit")
+    return f, p, mf
+
+
 def klipper_calibration(freq_bins, psd, *, normalised: bool = False, max_freq: float = 200.0) -> CalibrationChoice:
     """The shaper Klipper's calibration picks from a resonance test's PSD (`freq_bins` [Hz], `psd` of the summed
     axes, as Klipper's `calibration_data_*.csv` holds them): the rule of the module docstring, at Klipper's
     defaults (damping 0.1, test damping ratios 0.075/0.1/0.15, frequencies to 150 Hz in 0.2 Hz steps, no
     smoothing or vibration limits). `normalised=True`: `psd` is already normalised (`normalise_psd`)."""
-    f = np.asarray(freq_bins, dtype=float)
-    p = np.asarray(psd, dtype=float) if normalised else normalise_psd(f, psd)
+    f, raw, max_freq = _calibration_inputs(freq_bins, psd, normalised, max_freq)
+    p = raw if normalised else normalise_psd(f, raw)
     keep = f <= max_freq
     f, p = f[keep], p[keep]
     thr = p.max() / 20.0

@@ -70,6 +70,9 @@ import math
 
 import numpy as np
 
+from .._checks import is_concrete
+from ..models.axis import FREQUENCY_RANGE_HZ
+
 #: The classic shapers jaxbelt compares with, in order of length.
 SHAPERS = ("ZV", "MZV", "ZVD", "EI", "2-hump EI", "3-hump EI")
 
@@ -181,8 +184,19 @@ def shaper_impulses(name: str, freq: float, zeta: float, tolerance: float = 0.05
         raise ValueError(f"shaper_impulses: parameter `name` must be one of {SHAPERS}; got {name!r}")
     if form not in FORMS:
         raise ValueError(f"shaper_impulses: parameter `form` must be one of {FORMS}; got {form!r}")
-    if not (math.isfinite(freq) and freq > 0):
-        raise ValueError(f"shaper_impulses: parameter `freq` must be finite and > 0 Hz; got {freq}")
+    for name_, value in (("freq", freq), ("zeta", zeta), ("tolerance", tolerance)):
+        if not is_concrete(value):  # the impulse times are host numbers (a shaper is a table, not a traced function)
+            raise ValueError(
+                f"shaper_impulses: parameter `{name_}` is traced (jax.jit, jax.vmap, jax.grad): the shaper's impulses "
+                "are computed on the host from concrete numbers; call it outside the transformation, or use "
+                "`jaxbelt.shaping.klipper.impulses(kind, freq, damping, xp=jax.numpy)` for a differentiable Klipper shaper"
+            )
+    lo, hi = FREQUENCY_RANGE_HZ
+    if not (math.isfinite(freq) and lo <= freq <= hi):
+        raise ValueError(
+            f"shaper_impulses: parameter `freq` must be finite and within [{lo:g}, {hi:g}] Hz (a mode's frequency, "
+            f"`FREQUENCY_RANGE_HZ`); got {freq}"
+        )
     if not (0.0 <= zeta < 1.0):
         raise ValueError(f"shaper_impulses: parameter `zeta` must lie in [0, 1); got {zeta}")
     if not (0.0 < tolerance < 1.0):

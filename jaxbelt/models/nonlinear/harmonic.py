@@ -756,6 +756,11 @@ def _curve_post_jit(belt, us, acc, H):
     return jax.lax.map(one, (us, acc))
 
 
+#: the most points `response_curve` traces (`max_points`): its buffers are allocated for all of them before the
+#: continuation starts (1e9 points asked XLA for 120 GB); 1e5 keeps them within tens of MB, and a curve needs hundreds
+MAX_CURVE_POINTS = 100_000
+
+
 @blas_limited
 def response_curve(
     belt: NonlinearBelt,
@@ -776,6 +781,11 @@ def response_curve(
     H = check_int(o, "n_harmonics", n_harmonics)
     _check_equal_radii(belt)
     max_points = check_int(o, "max_points", max_points, 2)
+    if max_points > MAX_CURVE_POINTS:
+        raise ValueError(
+            f"{o}: parameter `max_points` must lie in [2, {MAX_CURVE_POINTS}] (a curve's buffers, a few hundred bytes "
+            f"per point and harmonic, are allocated up front; a few hundred points draw a curve); got {max_points}"
+        )
     check_positive("step", step, owner=o)  # a NaN step never ends the continuation; a negative one walks back
     check_positive("max_step", max_step, owner=o)
     if not float(step) <= float(max_step):
