@@ -8,6 +8,9 @@ configuration before the call, the time-optimal move (a closed form) and a desig
 import errno
 import math
 import os
+import subprocess
+import sys
+import time
 import warnings
 
 import jax
@@ -387,3 +390,45 @@ def test_enable_compilation_cache_through_a_dangling_link_creates_its_target(tmp
     from jaxbelt.cache import disable_compilation_cache
 
     disable_compilation_cache()
+
+
+# ---- round 5c: magnitudes the lead found after the held-out round (moves, the sweep schedule, the CLI's --mode)
+
+
+@pytest.mark.parametrize(
+    "call, name",
+    [
+        (lambda: jb.fastest_move(1e300, 1.0, 1.0), "distance"),
+        (lambda: jb.fastest_move(1e-300, 1.0, 1.0), "distance"),
+        (lambda: jb.fastest_move(0.1, 1e-300, 1.0), "v_max"),
+        (lambda: jb.trapezoid_move(0.1, 1e300, 1.0, 10.0), "duration"),
+        (lambda: jb.trapezoid_move(1e-300, 0.5, 1.0, 10.0), "distance"),
+        (lambda: jb.klipper_sweep(hz_per_sec=1e-300), "hz_per_sec"),
+        (lambda: jb.klipper_sweep(freq_end=1e300), "freq_end"),
+    ],
+)
+def test_degenerate_move_and_sweep_magnitudes_are_refused_at_once_by_name(call, name):
+    t0 = time.perf_counter()
+    with pytest.raises(ValueError, match=f"`{name}`"):
+        call()
+    assert time.perf_counter() - t0 < 3.0
+
+
+def test_trapezoid_move_within_the_ranges_is_unchanged():
+    """The range checks leave a valid move as it was: the triangle of 0.1 m in 0.5 s peaks at a = 4 D / T^2 (closed
+    form) and a duration too short still gives None."""
+    m = jb.trapezoid_move(0.1, 0.5, 1.0, 10.0)
+    assert m is not None
+    assert float(np.max(np.abs(np.asarray(m.steps)))) == pytest.approx(4 * 0.1 / 0.5**2, rel=1e-12)
+    assert jb.trapezoid_move(0.1, 1e-4, 1.0, 10.0) is None
+
+
+def test_cli_mode_outside_the_frequency_range_names_mode():
+    r = subprocess.run(
+        [sys.executable, "-m", "jaxbelt", "shaping", "--mode", "1e300:0.01"],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert r.returncode == 2
+    assert "argument --mode" in r.stderr and "1e+07" in r.stderr

@@ -191,8 +191,11 @@ def _mode(text: str):
         raise argparse.ArgumentTypeError(f"expected F:Z or F:Z:G (finite numbers), got {text!r}")
     f, z = vals[0], vals[1]
     g = vals[2] if len(vals) == 3 else 1.0
-    if not f > 0:
-        raise argparse.ArgumentTypeError(f"frequency F must be > 0 Hz, got {f:g}")
+    from .shaper import FREQUENCY_RANGE_HZ  # ModalAxis's range, without importing JAX
+
+    lo, hi = FREQUENCY_RANGE_HZ
+    if not lo <= f <= hi:
+        raise argparse.ArgumentTypeError(f"frequency F must lie in [{lo:g}, {hi:g}] Hz, got {f:g}")
     if not 0 <= z < 1:
         raise argparse.ArgumentTypeError(f"damping ratio Z must lie in [0, 1), got {z:g}")
     if g == 0:

@@ -392,7 +392,13 @@ def trapezoid_move(distance, duration, v_max, a_max, j_max=None) -> PiecewiseMov
     Without `j_max`: a trapezoidal velocity profile (a triangle when the speed limit allows), acceleration
     $\\pm a$ in steps; with `j_max` [m/s³]: the S-curve whose acceleration ramps at $\\pm j$. "Gentlest": the
     least peak acceleration of that family. Returns None when no such move respects `v_max` [m/s] and
-    `a_max` [m/s²] (the duration is too short)."""
+    `a_max` [m/s²] (the duration is too short). `ValueError` naming the parameter for a distance or limit that
+    `fastest_move` refuses, or a `duration` that is not finite or longer than `MOVE_TIME_RANGE_S` allows."""
+    check_move_limits("trapezoid_move", distance, v_max, a_max, j_max)
+    if not (math.isfinite(float(duration)) and float(duration) <= MOVE_TIME_RANGE_S[1]):
+        raise ValueError(
+            f"trapezoid_move: parameter `duration` must be finite and at most {MOVE_TIME_RANGE_S[1]:g} s; got {duration!r}"
+        )
     sign = 1.0 if float(distance) >= 0 else -1.0
     D = abs(float(distance))
     found = _scurve(D, float(duration), float(v_max), None if j_max is None else float(j_max))
@@ -416,12 +422,28 @@ def check_move_limits(owner, distance, v_max, a_max, j_max) -> None:
     """Refuse a distance that is NaN, infinite or 0 and limits that are not finite and > 0, by name."""
     check_scalar("distance", distance, "m", owner)
     d = float(np.asarray(distance))
-    if not (math.isfinite(d) and d != 0.0):
-        raise ValueError(f"{owner}: parameter `distance` must be finite and non-zero [m]; got {distance}")
+    lo, hi = DISTANCE_RANGE_M
+    if not (math.isfinite(d) and lo <= abs(d) <= hi):
+        raise ValueError(
+            f"{owner}: parameter `distance` must be finite with |distance| in [{lo:g}, {hi:g}] m; got {distance}"
+        )
     check_positive("v_max", v_max, "m/s", owner)
     check_positive("a_max", a_max, "m/s^2", owner)
     if j_max is not None:
         check_positive("j_max", j_max, "m/s^3", owner)
+    T = _fastest_time(distance, v_max, a_max, j_max)
+    if not MOVE_TIME_RANGE_S[0] <= T <= MOVE_TIME_RANGE_S[1]:
+        raise ValueError(
+            f"{owner}: parameters `distance`, `v_max`, `a_max`{', `j_max`' if j_max is not None else ''} make a "
+            f"fastest move of {T:.3g} s; a move within the limits must take {MOVE_TIME_RANGE_S[0]:g} to "
+            f"{MOVE_TIME_RANGE_S[1]:g} s (distance {distance!r} m, v_max {v_max!r} m/s, a_max {a_max!r} m/s^2)"
+        )
+
+
+#: the distances [m] a move may cover: a nanometre to a thousand kilometres (outside, a unit slip)
+DISTANCE_RANGE_M = (1e-9, 1e6)
+#: the durations [s] of a move: a microsecond to about eleven days
+MOVE_TIME_RANGE_S = (1e-6, 1e6)
 
 
 def fastest_time(distance, v_max, a_max, j_max=None) -> float:

@@ -34,6 +34,10 @@ from . import psd as _psd
 __all__ = ["identify_axis_from_sweep", "klipper_sweep", "sweep_response"]
 
 
+#: the most held segments a sweep schedule may hold (16 MB of schedule; Klipper's default test holds about 36 600)
+MAX_SWEEP_SEGMENTS = 1e6
+
+
 def klipper_sweep(
     freq_start: float = 5.0,
     freq_end: float = 135.0,
@@ -67,6 +71,14 @@ def klipper_sweep(
         raise ValueError(
             f"{owner}: parameters `sweeping_accel` and `sweeping_period` must be finite and >= 0; got "
             f"{sweeping_accel!r}, {sweeping_period!r}"
+        )
+    # the schedule holds about 2 (freq_end^2 - freq_start^2) / hz_per_sec held segments: bounded before it is built
+    n_est = 2.0 * (float(freq_end) - float(freq_start)) * (float(freq_end) + float(freq_start)) / float(hz_per_sec)
+    if not n_est <= MAX_SWEEP_SEGMENTS:
+        raise ValueError(
+            f"{owner}: parameters `freq_start`, `freq_end`, `hz_per_sec` ({freq_start!r}, {freq_end!r}, "
+            f"{hz_per_sec!r}) make a sweep of about {n_est:.3g} held segments; at most {MAX_SWEEP_SEGMENTS:g} "
+            "(Klipper's default test: 36 600): lower `freq_end` or raise `hz_per_sec`"
         )
     ends, accel = [], []
     freq, sign, time = float(freq_start), 1.0, 0.0
