@@ -5,8 +5,9 @@ call of every public entry point (cold, warm cache, second call, with their XLA 
 Writes `benchmarks/results/coldstart.json` (+ `.png`). Every ratio is measured in the same run
 (medians of repeats); the machine is shared with other work, so absolute times are noisy.
 
-Run: `python benchmarks/coldstart.py [--quick] [--cli startup fourbar ...]` (not part of
-`run_all.py`: the cold CLI runs alone take minutes). `python benchmarks/coldstart.py --entry-points [NAME ...]`
+Run: `python benchmarks/coldstart.py [--quick] [--cli startup fourbar ...]` (a full run is not part of
+`run_all.py`: the cold CLI runs alone take minutes; `run_all.py --quick` runs its quick form: fewer repeats,
+the start-up CLI command and the first entry point only). `python benchmarks/coldstart.py --entry-points [NAME ...]`
 measures only the entry points (about 6 minutes on 2 cores), merges them into the existing JSON and
 regenerates the first-call tables of README.md and docs/benchmarks.md.
 """
@@ -559,6 +560,10 @@ def _note(repeats: int, budget_s: float, fewer: list) -> str:
     )
 
 
+#: a quick run's entry points (each costs two fresh processes): the closed form, enough to check the machinery
+QUICK_ENTRY_POINTS = ("simulate_startup",)
+
+
 def entry_points(repeats: int, names=None, budget_s: float = 780.0) -> dict:
     """First call of each public entry point (ENTRY_POINTS) in a fresh process: "cold" (an empty cache folder),
     "warm" (a fresh process on the folder the cold one filled) and "second" (the same call again in the cold
@@ -682,7 +687,11 @@ def plot(data, path):
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--quick", action="store_true", help="fewer repeats, two CLI commands, a 200-gain sweep")
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help="a check of the script: one repeat, one CLI command, one entry point, a 200-gain sweep",
+    )
     p.add_argument(
         "--cli",
         nargs="*",
@@ -744,7 +753,7 @@ def main(argv=None) -> int:
         "noisy; compare the ratios, each measured in the same run (medians of repeats)",
     }
     parts = {
-        "imports": lambda: imports(3 if args.quick else 5),
+        "imports": lambda: imports(1 if args.quick else 5),
         "cli": lambda: cli(
             commands,
             args.cli_repeats or (1 if args.quick else 3),
@@ -755,7 +764,9 @@ def main(argv=None) -> int:
         "closed_form": lambda: closed_form(args.quick),
         "fourbar_sweep": lambda: fourbar_sweep(args.quick),
         "entry_points": lambda: entry_points(
-            args.entry_repeats or (1 if args.quick else 3), budget_s=args.entry_budget
+            args.entry_repeats or (1 if args.quick else 3),
+            names=QUICK_ENTRY_POINTS if args.quick else None,
+            budget_s=args.entry_budget,
         ),
     }
 
