@@ -74,6 +74,16 @@ def quick_scripts() -> list[str]:
     return sorted(names, key=lambda n: (-QUICK_COST.get(n, 10), n))
 
 
+def _children_cpu() -> float:
+    """CPU seconds (user + system) of this process's ended children and theirs; NaN where the OS does not say."""
+    try:
+        import resource
+    except ImportError:  # not on Windows
+        return float("nan")
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
 def _run_script(name: str, quick: bool, env: dict, timeout: float | None) -> tuple[str, object, float, str]:
     """Run one script in its own process; (name, exit status or "timeout", seconds, its output)."""
     cmd = [sys.executable, str(HERE / f"{name}.py")] + (["--quick"] if quick else [])
@@ -94,7 +104,7 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true", help="every script, CI-sized (<= 2 minutes in all on 2 cores)")
     p.add_argument("--only", nargs="+", metavar="SCENE", help="run only these scripts")
     p.add_argument(
-        "--timeout", type=float, default=None, help="per-script time limit [s] (default: none; 300 with --quick)"
+        "--timeout", type=float, default=None, help="per-script time limit [s] (default: none; 600 with --quick)"
     )
     p.add_argument(
         "--jobs",
@@ -114,7 +124,7 @@ def main(argv=None) -> int:
     )
     args = p.parse_args(argv)
     if args.quick and args.timeout is None:
-        args.timeout = 300.0  # a quick script that hangs fails the run instead of holding it
+        args.timeout = 600.0  # a quick script that hangs fails the run instead of holding it (600 s: a loaded machine)
     jobs = args.jobs if args.jobs is not None else (2 if args.quick else 1)
     if jobs < 1:
         print(f"run_all: --jobs must be an integer >= 1; got {jobs}", file=sys.stderr)
@@ -128,6 +138,7 @@ def main(argv=None) -> int:
         scenes = [s for s in scenes if s in args.only]
     failed = []
     t0 = time.perf_counter()
+    cpu0 = _children_cpu()
     scratch = args.quick and not args.update
     env = dict(os.environ)
     if scratch:
@@ -163,7 +174,13 @@ def main(argv=None) -> int:
         import readme_table
 
         readme_table.update_readme()
-    summary = f"run_all: {len(scenes) - len(failed)}/{len(scenes)} benchmarks ran in {time.perf_counter() - t0:.1f} s"
+    # the scripts' CPU time (user + system, their own subprocesses included): on a loaded machine the wall time
+    # says little; on idle cores a run takes at least this divided by the cores
+    cpu = _children_cpu() - cpu0
+    summary = (
+        f"run_all: {len(scenes) - len(failed)}/{len(scenes)} benchmarks ran in {time.perf_counter() - t0:.1f} s "
+        f"({cpu:.0f} s of CPU time)"
+    )
     if failed:
         print(f"{summary}; FAILED: {' '.join(sorted(failed))} (their output is above)", file=sys.stderr)
         return 1
