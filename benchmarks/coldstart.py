@@ -7,8 +7,9 @@ Writes `benchmarks/results/coldstart.json` (+ `.png`). Every ratio is measured i
 
 Run: `python benchmarks/coldstart.py [--quick] [--cli startup fourbar ...]` (a full run is not part of
 `run_all.py`: the cold CLI runs alone take minutes; `run_all.py --quick` runs its quick form: fewer repeats, the
-start-up CLI command, a closed-form batch of 10 000 (not 100 000) and the first entry point only).
-`python benchmarks/coldstart.py --entry-points [NAME ...]` measures only the entry points (about 6 minutes on 2 cores), merges them into the existing JSON and
+start-up CLI command, closed-form batches of 10 000 (not 100 000) and 1000, a 40-gain sweep, the first entry
+point). `python benchmarks/coldstart.py --entry-points [NAME ...]` measures only the entry points (about 6 minutes
+on 2 cores), merges them into the existing JSON and
 regenerates the first-call tables of README.md and docs/benchmarks.md.
 """
 
@@ -143,7 +144,7 @@ def compile_once(quick: bool) -> dict:
     jb.tune_pid(drive, pid, steps=steps, progress=False)
     first = time.perf_counter() - t
     seconds = []
-    for lr in (0.05, 0.08, 0.12):
+    for lr in (0.05,) if quick else (0.05, 0.08, 0.12):
         t = time.perf_counter()
         jb.tune_pid(drive, jb.PID(kp=70.0, v_limit=40.0), steps=steps, progress=False, learning_rate=lr)
         seconds.append(time.perf_counter() - t)
@@ -154,8 +155,9 @@ def compile_once(quick: bool) -> dict:
     cmd = jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]))
     eager = lambda: jb.residual_energy(plat, cmd)  # noqa: E731
     jitted = jax.jit(lambda p, c: jb.residual_energy(p, c))
-    t_e, _, _ = time_jax(eager, repeats=15, min_time=0.05)
-    t_j, _, _ = time_jax(jitted, plat, cmd, repeats=15, min_time=0.05)
+    repeats = 3 if quick else 15
+    t_e, _, _ = time_jax(eager, repeats=repeats, min_time=0.05)
+    t_j, _, _ = time_jax(jitted, plat, cmd, repeats=repeats, min_time=0.05)
     res["residual_energy"] = {"eager_s": t_e, "jit_s": t_j, "ratio": t_e / t_j}
 
     t = time.perf_counter()
@@ -264,7 +266,7 @@ def closed_form(quick: bool) -> dict:
     return res
 
 
-def asked_only(model, ts, quick: bool) -> dict:
+def asked_only(model, ts, quick: bool) -> dict:  # quick: a batch of 1000, shorter rounds
     """A batch of 10 000 start-up trajectories (501 times) as a user calls it (`jb.simulate`, jaxbelt's own
     programs): the full state (`observe=()`), one output (`observe=("electric_power",), state=False`), and the
     floor beside them: an XLA program that writes as many bytes as the full state, from the batch's parameters
@@ -275,7 +277,7 @@ def asked_only(model, ts, quick: bool) -> dict:
 
     import jaxbelt as jb
 
-    n, k = 10_000, model.n_states
+    n, k = (1000 if quick else 10_000), model.n_states
     g = jnp.linspace(0.01, 0.1, n)
     fill = jax.jit(lambda g: jnp.broadcast_to(g[:, None, None], (n, ts.shape[0], k)) * 1.5)
 
@@ -288,8 +290,8 @@ def asked_only(model, ts, quick: bool) -> dict:
             "one_output": lambda: jb.simulate(scene(observe=("electric_power",), state=False))["electric_power"],
             "floor": lambda: fill(g),
         },
-        rounds=5 if quick else 15,
-        min_time=0.2,
+        rounds=3 if quick else 15,
+        min_time=0.02 if quick else 0.2,
     )
     out = {
         "n": n,
@@ -320,7 +322,7 @@ def fourbar_sweep(quick: bool) -> dict:
     import jaxbelt as jb
 
     drive = jb.FourBarDrive()
-    n = 200 if quick else 1000
+    n = 40 if quick else 1000
     rng = np.random.default_rng(0)
     gains = jnp.asarray(np.array([KP, KI, KD]) * np.exp(rng.uniform(-0.7, 0.7, size=(n, 3))))
     base = jb.PID(kp=KP, ki=KI, kd=KD, omega_ref=W0)
@@ -330,7 +332,7 @@ def fourbar_sweep(quick: bool) -> dict:
             drive, base.with_gains(g), 0.375, 0.5, smooth=False, method=method, **kw
         )
 
-    n_ref = 20
+    n_ref = 10 if quick else 20
     ref = np.asarray(jax.jit(jax.vmap(chi("ode", rtol=1e-10, atol=1e-10)))(gains[:n_ref]))
     devices = jax.local_devices()
     out = {"n": n, "devices": len(devices)}
@@ -691,7 +693,7 @@ def main(argv=None) -> int:
     p.add_argument(
         "--quick",
         action="store_true",
-        help="a check of the script: one repeat, one CLI command, one entry point, a 200-gain sweep",
+        help="a check of the script: fewer repeats, one CLI command, one entry point, smaller batches, 40 gains",
     )
     p.add_argument(
         "--cli",

@@ -40,19 +40,20 @@ HELPERS = {"run_all", "readme_table", "shortcuts"}
 #: hostile_probe (not a scene: one case per entry point), browser_view (needs JupyterLab, selenium and Chromium; a
 #: machine without them gets a one-line note and exit status 0)
 QUICK_ONLY = {"coldstart", "hostile_probe", "browser_view"}
-#: measured seconds of each script's --quick run on 2 idle cores (2026-11-28), to start the longest first so
-#: that no long script starts last; a script not listed counts as 10 s
+#: seconds of each script's --quick run, relative (a run under a load of about 9 on 2 cores, 2026-11-28, divided
+#: by 5), to start the longest first so that no long script starts last; a script not listed counts as 10 s
 QUICK_COST = {
-    "coldstart": 40,
-    "fourbar": 35,
-    "gpu": 30,
-    "shaping_axis": 30,
-    "firmware_shapers": 25,
-    "hostile_probe": 25,
-    "nonlinear": 20,
-    "shaping_every_shaper": 20,
-    "threads": 15,
-    "explore": 12,
+    "coldstart": 60,
+    "shaping_axis": 60,
+    "hostile_probe": 45,
+    "threads": 35,
+    "fourbar": 32,
+    "shaping_every_shaper": 30,
+    "firmware_shapers": 27,
+    "nonlinear": 25,
+    "explore": 25,
+    "gpu": 17,
+    "identify_coverage": 12,
     "machinery": 10,
     "readme_table": 1,
     "browser_view": 1,
