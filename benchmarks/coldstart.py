@@ -5,9 +5,11 @@ call of every public entry point (cold, warm cache, second call, with their XLA 
 Writes `benchmarks/results/coldstart.json` (+ `.png`). Every ratio is measured in the same run
 (medians of repeats); the machine is shared with other work, so absolute times are noisy.
 
-Run: `python benchmarks/coldstart.py [--quick] [--cli startup fourbar ...]` (not part of
-`run_all.py`: the cold CLI runs alone take minutes). `python benchmarks/coldstart.py --entry-points [NAME ...]`
-measures only the entry points (about 6 minutes on 2 cores), merges them into the existing JSON and
+Run: `python benchmarks/coldstart.py [--quick] [--cli startup fourbar ...]` (a full run is not part of
+`run_all.py`: the cold CLI runs alone take minutes; `run_all.py --quick` runs its quick form: fewer repeats, the
+start-up CLI command, closed-form batches of 10 000 (not 100 000) and 1000, a 40-gain sweep, the first entry
+point). `python benchmarks/coldstart.py --entry-points [NAME ...]` measures only the entry points (about 6 minutes
+on 2 cores), merges them into the existing JSON and
 regenerates the first-call tables of README.md and docs/benchmarks.md.
 """
 
@@ -142,7 +144,7 @@ def compile_once(quick: bool) -> dict:
     jb.tune_pid(drive, pid, steps=steps, progress=False)
     first = time.perf_counter() - t
     seconds = []
-    for lr in (0.05, 0.08, 0.12):
+    for lr in (0.05,) if quick else (0.05, 0.08, 0.12):
         t = time.perf_counter()
         jb.tune_pid(drive, jb.PID(kp=70.0, v_limit=40.0), steps=steps, progress=False, learning_rate=lr)
         seconds.append(time.perf_counter() - t)
@@ -153,8 +155,9 @@ def compile_once(quick: bool) -> dict:
     cmd = jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]))
     eager = lambda: jb.residual_energy(plat, cmd)  # noqa: E731
     jitted = jax.jit(lambda p, c: jb.residual_energy(p, c))
-    t_e, _, _ = time_jax(eager, repeats=15, min_time=0.05)
-    t_j, _, _ = time_jax(jitted, plat, cmd, repeats=15, min_time=0.05)
+    repeats = 3 if quick else 15
+    t_e, _, _ = time_jax(eager, repeats=repeats, min_time=0.05)
+    t_j, _, _ = time_jax(jitted, plat, cmd, repeats=repeats, min_time=0.05)
     res["residual_energy"] = {"eager_s": t_e, "jit_s": t_j, "ratio": t_e / t_j}
 
     t = time.perf_counter()
@@ -204,7 +207,8 @@ def closed_form(quick: bool) -> dict:
     model = jb.BeltStartup()
     ts = jnp.linspace(0.0, 0.5, 501)
     res = {}
-    for n in (1000, 100_000) if not quick else (1000, 100_000):
+    big = 10_000 if quick else 100_000  # quick: a batch of 200 MB, not 2 GB
+    for n in (1000, big):
         g = jnp.linspace(0.01, 0.1, n)
         c = jax.jit(lambda g: startup_gamma_batch(model, g, ts)).lower(g).compile()
         ma = c.memory_analysis()
@@ -214,7 +218,7 @@ def closed_form(quick: bool) -> dict:
             "temp_bytes": ma.temp_size_in_bytes,
             "peak_over_output": (ma.output_size_in_bytes + ma.temp_size_in_bytes) / out_bytes,
         }
-    # process high-water mark (RSS) at 100 000: a fresh process, baseline without the call
+    # process high-water mark (RSS) of the large batch: a fresh process, baseline without the call
     code = (
         "import resource, jax, jax.numpy as jnp, jaxbelt as jb; from jaxbelt.fast import startup_gamma_batch;"
         "jax.config.update('jax_enable_x64', True);"
@@ -223,13 +227,13 @@ def closed_form(quick: bool) -> dict:
         "r0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss; y = c(g).block_until_ready();"
         "print(r0, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)"
     )
-    out = subprocess.run([sys.executable, "-c", code.format(n=100_000)], env=ENV, capture_output=True, text=True)
+    out = subprocess.run([sys.executable, "-c", code.format(n=big)], env=ENV, capture_output=True, text=True)
     if out.returncode == 0:
         r0, r1 = (int(x) * 1024 for x in out.stdout.split())
-        res["batch_100000"].update(
+        res[f"batch_{big}"].update(
             rss_before_bytes=r0,
             rss_peak_bytes=r1,
-            rss_growth_over_output=(r1 - r0) / res["batch_100000"]["output_bytes"],
+            rss_growth_over_output=(r1 - r0) / res[f"batch_{big}"]["output_bytes"],
         )
     # one closed-form simulate call against its compiled program (depends on solve.py's dispatch); and the
     # same call with the model, command and scene built in it
@@ -262,7 +266,7 @@ def closed_form(quick: bool) -> dict:
     return res
 
 
-def asked_only(model, ts, quick: bool) -> dict:
+def asked_only(model, ts, quick: bool) -> dict:  # quick: a batch of 1000, shorter rounds
     """A batch of 10 000 start-up trajectories (501 times) as a user calls it (`jb.simulate`, jaxbelt's own
     programs): the full state (`observe=()`), one output (`observe=("electric_power",), state=False`), and the
     floor beside them: an XLA program that writes as many bytes as the full state, from the batch's parameters
@@ -273,7 +277,7 @@ def asked_only(model, ts, quick: bool) -> dict:
 
     import jaxbelt as jb
 
-    n, k = 10_000, model.n_states
+    n, k = (1000 if quick else 10_000), model.n_states
     g = jnp.linspace(0.01, 0.1, n)
     fill = jax.jit(lambda g: jnp.broadcast_to(g[:, None, None], (n, ts.shape[0], k)) * 1.5)
 
@@ -286,8 +290,8 @@ def asked_only(model, ts, quick: bool) -> dict:
             "one_output": lambda: jb.simulate(scene(observe=("electric_power",), state=False))["electric_power"],
             "floor": lambda: fill(g),
         },
-        rounds=5 if quick else 15,
-        min_time=0.2,
+        rounds=3 if quick else 15,
+        min_time=0.02 if quick else 0.2,
     )
     out = {
         "n": n,
@@ -318,7 +322,7 @@ def fourbar_sweep(quick: bool) -> dict:
     import jaxbelt as jb
 
     drive = jb.FourBarDrive()
-    n = 200 if quick else 1000
+    n = 40 if quick else 1000
     rng = np.random.default_rng(0)
     gains = jnp.asarray(np.array([KP, KI, KD]) * np.exp(rng.uniform(-0.7, 0.7, size=(n, 3))))
     base = jb.PID(kp=KP, ki=KI, kd=KD, omega_ref=W0)
@@ -328,7 +332,7 @@ def fourbar_sweep(quick: bool) -> dict:
             drive, base.with_gains(g), 0.375, 0.5, smooth=False, method=method, **kw
         )
 
-    n_ref = 20
+    n_ref = 10 if quick else 20
     ref = np.asarray(jax.jit(jax.vmap(chi("ode", rtol=1e-10, atol=1e-10)))(gains[:n_ref]))
     devices = jax.local_devices()
     out = {"n": n, "devices": len(devices)}
@@ -559,6 +563,10 @@ def _note(repeats: int, budget_s: float, fewer: list) -> str:
     )
 
 
+#: a quick run's entry points (each costs two fresh processes): the closed form, enough to check the machinery
+QUICK_ENTRY_POINTS = ("simulate_startup",)
+
+
 def entry_points(repeats: int, names=None, budget_s: float = 780.0) -> dict:
     """First call of each public entry point (ENTRY_POINTS) in a fresh process: "cold" (an empty cache folder),
     "warm" (a fresh process on the folder the cold one filled) and "second" (the same call again in the cold
@@ -682,7 +690,11 @@ def plot(data, path):
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--quick", action="store_true", help="fewer repeats, two CLI commands, a 200-gain sweep")
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help="a check of the script: fewer repeats, one CLI command, one entry point, smaller batches, 40 gains",
+    )
     p.add_argument(
         "--cli",
         nargs="*",
@@ -744,7 +756,7 @@ def main(argv=None) -> int:
         "noisy; compare the ratios, each measured in the same run (medians of repeats)",
     }
     parts = {
-        "imports": lambda: imports(3 if args.quick else 5),
+        "imports": lambda: imports(1 if args.quick else 5),
         "cli": lambda: cli(
             commands,
             args.cli_repeats or (1 if args.quick else 3),
@@ -755,7 +767,9 @@ def main(argv=None) -> int:
         "closed_form": lambda: closed_form(args.quick),
         "fourbar_sweep": lambda: fourbar_sweep(args.quick),
         "entry_points": lambda: entry_points(
-            args.entry_repeats or (1 if args.quick else 3), budget_s=args.entry_budget
+            args.entry_repeats or (1 if args.quick else 3),
+            names=QUICK_ENTRY_POINTS if args.quick else None,
+            budget_s=args.entry_budget,
         ),
     }
 
@@ -813,11 +827,12 @@ def main(argv=None) -> int:
         )
     if "closed_form" in data:
         cf = data["closed_form"]
+        big = max(int(k[len("batch_") :]) for k in cf if k.startswith("batch_"))  # 100 000 (quick: 10 000)
         head.append(
             {
-                "what": "start-up batch of 100 000: peak / output (XLA)",
+                "what": f"start-up batch of {big:,}: peak / output (XLA)".replace(",", " "),
                 "unit": "x",
-                "value": cf["batch_100000"]["peak_over_output"],
+                "value": cf[f"batch_{big}"]["peak_over_output"],
                 "target": "<= 1.15",
             }
         )

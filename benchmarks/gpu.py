@@ -17,7 +17,7 @@ be reset), and so does each first call. Writes `benchmarks/results/gpu.json` and
 - **`design_move`** (2 modes) and **`tune_pid`** (3 steps): first call in a fresh process (compilation included,
   no cache) and the warm call after it.
 
-`--quick`: small sizes (the suite's check of this script on a CPU).
+`--quick`: small sizes (the suite's check of this script on a CPU), every section in one process.
 """
 
 from __future__ import annotations
@@ -139,26 +139,57 @@ def _run(code: str, *args, platform: str | None = None) -> dict:
     return json.loads(next(ln for ln in run.stdout.splitlines() if ln.startswith("RESULT "))[len("RESULT ") :])
 
 
+INFO = (
+    PRELUDE + "d = jax.devices()[0]; result(dict(backend=jax.default_backend(), device=d.device_kind, "
+    "count=jax.device_count(), jax=jax.__version__))"
+)
+
+# --quick: the sections one after the other in one process (a check of the script pays one start of Python, JAX and
+# jaxbelt instead of three); each section's code runs as it would alone, with its own arguments
+SEQUENCE = r"""
+import json, sys
+for code, args in json.loads(sys.argv[1]):
+    sys.argv = ["-c", *args]
+    try:
+        exec(compile(code, "<gpu benchmark section>", "exec"), {"__name__": "__main__"})
+    except Exception as e:
+        print("RESULT " + json.dumps({"error": f"{type(e).__name__}: {e}"}), flush=True)
+"""
+
+
 def _backend_info(platform: str | None) -> dict:
-    code = (
-        PRELUDE + "d = jax.devices()[0]; result(dict(backend=jax.default_backend(), device=d.device_kind, "
-        "count=jax.device_count(), jax=jax.__version__))"
-    )
-    return _run(code, platform=platform)
+    return _run(INFO, platform=platform)
+
+
+def _run_in_one_process(jobs: list[tuple[str, tuple]], platform: str | None) -> list[dict]:
+    """Run each (code, args) of `jobs` in turn in one fresh process; one result per job (an error where a job
+    printed none)."""
+    env = dict(os.environ, PYTHONPATH=str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", ""), MPLBACKEND="Agg")
+    if platform:
+        env["JAX_PLATFORMS"] = platform
+    spec = json.dumps([(code, [str(a) for a in args]) for code, args in jobs])
+    run = subprocess.run([sys.executable, "-c", SEQUENCE, spec], capture_output=True, text=True, env=env)
+    found = [json.loads(ln[len("RESULT ") :]) for ln in run.stdout.splitlines() if ln.startswith("RESULT ")]
+    tail = run.stderr.strip().splitlines()[-1] if run.stderr.strip() else f"exit {run.returncode}"
+    return found + [{"error": tail}] * (len(jobs) - len(found))
 
 
 def section(platform: str | None, quick: bool, repeats: int) -> dict:
-    info = _backend_info(platform)
-    gpu = info.get("backend") not in (None, "cpu")
-    if quick:
+    if quick:  # one process: the backend, a batch of 1000 (first, so that its memory peak is its own), a sweep of 64
         batches, sweeps = [(1000, False)], [64]
-    elif gpu:
-        batches, sweeps = [(10_000, False), (100_000, False), (1_000_000, True)], [1000, 8192]
-    else:  # a CPU's memory: 10^6 trajectories of one output would be 4 GB, of the full state 20 GB
-        batches, sweeps = [(10_000, False), (100_000, False)], [1000]
+        info, batch, sweep = _run_in_one_process(
+            [(INFO, ()), (BATCH, (1000, 0, repeats)), (SWEEP, (64, repeats))], platform
+        )
+        done = {("batch", 1000): batch, ("sweep", 64): sweep}
+    else:
+        info, done = _backend_info(platform), {}
+        if info.get("backend") not in (None, "cpu"):
+            batches, sweeps = [(10_000, False), (100_000, False), (1_000_000, True)], [1000, 8192]
+        else:  # a CPU's memory: 10^6 trajectories of one output would be 4 GB, of the full state 20 GB
+            batches, sweeps = [(10_000, False), (100_000, False)], [1000]
     out = dict(info, batches=[], sweeps=[], calls=[])
     for n, one in batches:
-        r = _run(BATCH, n, int(one), repeats, platform=platform)
+        r = done.get(("batch", n)) or _run(BATCH, n, int(one), repeats, platform=platform)
         out["batches"].append(dict(r, n=n, one_output=one))
         if "error" not in r:
             peak = r["peak_bytes"]
@@ -173,7 +204,7 @@ def section(platform: str | None, quick: bool, repeats: int) -> dict:
         else:
             print(f"[{info.get('backend')}] batch {n}: {r['error']}", flush=True)
     for n in sweeps:
-        r = _run(SWEEP, n, repeats, platform=platform)
+        r = done.get(("sweep", n)) or _run(SWEEP, n, repeats, platform=platform)
         out["sweeps"].append(dict(r, n=n))
         print(f"[{info.get('backend')}] four-bar chi sweep {n}: {r}", flush=True)
     if not quick:

@@ -10,7 +10,8 @@
    for the jaxbelt steady-state criterion (rtol, steps per period) and for scipy at moderate
    tolerances.
 
-Run: `python benchmarks/nonlinear.py [--quick]`; writes benchmarks/results/nonlinear.{json,png}.
+Run: `python benchmarks/nonlinear.py [--quick]`; writes benchmarks/results/nonlinear.{json,png}. `--quick` (a check of
+the script): one mode, 20 speeds, one speed against a scipy reference at rtol 1e-9, scipy at rtol 1e-5 only.
 """
 
 from __future__ import annotations
@@ -91,7 +92,7 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true")
     args = ap.parse_args(argv)
     quick = args.quick
-    n_speeds = 40 if quick else 200
+    n_speeds = 20 if quick else 200
     repeats = 1 if quick else 3
     speeds = jnp.linspace(7.5, 10.5, n_speeds)
     rows, headline, sweeps = [], [], {}
@@ -144,9 +145,11 @@ def main(argv=None):
     check = [9.0] if quick else [8.0, 9.0, 9.6, 10.5]
     belt = jb.NonlinearBelt(damping=XI, n_modes=1, sensor_pulley="drive")
     refs = {}
+    ref_rtol = 1e-9 if quick else 1e-11
     for s in check:
         t0 = time.perf_counter()
-        refs[s], nfev = scipy_pp(belt, s, 1e-11, 1e-14)
+        # quick: a reference at rtol 1e-9, still 100x below the error it judges (1e-3 at the defaults)
+        refs[s], nfev = scipy_pp(belt, s, ref_rtol, ref_rtol * 1e-3)
         print(
             f"scipy reference at {s} m/s: pp {refs[s] * 1e3:.6f} mm ({nfev} evaluations, {time.perf_counter() - t0:.1f} s)"
         )
@@ -173,7 +176,7 @@ def main(argv=None):
             }
         )
         print(f"jaxbelt rtol={rtol:g} steps/period={steps}: error {err:.2e}, {med:.3f} s for {len(check)} speeds")
-    for rtol in (1e-5, 1e-7):
+    for rtol in (1e-5,) if quick else (1e-5, 1e-7):
         med, out = time_py(lambda r=rtol: [scipy_pp(belt, s, r, r * 1e-3)[0] for s in check], repeats=1)
         err = max(abs(out[i] / refs[s] - 1) for i, s in enumerate(check))
         rows.append(
@@ -190,7 +193,7 @@ def main(argv=None):
         print(f"scipy rtol={rtol:g}: error {err:.2e}, {med:.3f} s")
     headline.append(
         {
-            "what": "steady pp error vs scipy rtol 1e-11 (defaults rtol 1e-4, 64 steps/period)",
+            "what": f"steady pp error vs scipy rtol {ref_rtol:g} (defaults rtol 1e-4, 64 steps/period)",
             "value": worst,
             "unit": "-",
             "target": "< 1e-3",

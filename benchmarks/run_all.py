@@ -3,16 +3,20 @@
 Discovers `benchmarks/<scene>.py` (every module here not starting with `_` and not one of the
 helpers), runs each as a subprocess (`python benchmarks/<scene>.py [--quick]`, so that one
 scene's compile caches and memory do not affect the next), and finally calls
-`readme_table.update_readme()`.
+`readme_table.update_readme()`. A full run runs the scenes one at a time (their timings undisturbed).
 
-Run: `python benchmarks/run_all.py [--quick] [--only startup fourbar]` (also `jaxbelt bench`).
-`--quick` is the CI size: the whole run stays under 2 minutes on 2 cores. Its figures go to the
-git-ignored scratch folder `benchmarks/results/quick/` and leave the committed results and the
-README table alone; `--update` writes them over the committed ones (and regenerates the table).
+Run: `python benchmarks/run_all.py [--quick] [--only startup fourbar] [--jobs N]` (also `jaxbelt bench`).
+`--quick` is the CI size: it runs *every* script here with `--quick` (the scenes, `coldstart`, `hostile_probe`,
+`browser_view` and `readme_table --quick`, which prints the tables), two at a time, longest first, and the
+whole run stays under 2 minutes on 2 cores. A script that fails or runs past `--timeout` fails the run (exit
+status 1, its name and output printed). `browser_view` on a machine without JupyterLab, selenium or Chromium
+prints one line saying what is missing and counts as run (it is a check of the browser, not of jaxbelt).
+A quick run's figures go to the git-ignored scratch folder `benchmarks/results/quick/` and leave the committed
+results and the README table alone; `--update` writes them over the committed ones (and regenerates the table).
 A quick run checks that every benchmark works, and most of its time is XLA compiling: it compiles
 with XLA's quicker CPU settings (`jaxbelt._xla.FAST_COMPILE_FLAGS`; recorded in each JSON as
-`machine.xla_flags`), so its run times are slower than the library's. `--xla-defaults` keeps XLA's
-defaults; a full run always does.
+`machine.xla_flags`), so its run times are slower than the library's (and two scripts share the cores).
+`--xla-defaults` keeps XLA's defaults; a full run always does.
 """
 
 from __future__ import annotations
@@ -22,32 +26,92 @@ import os
 import subprocess
 import sys
 import time
+from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
 
 # No thread variable is set: the figures are those of a user's environment (jaxbelt limits BLAS threads around
 # its own calls, `jaxbelt._threads`).
 
 HERE = Path(__file__).resolve().parent
-HELPERS = {
-    "run_all",
-    "readme_table",
-    "shortcuts",
-    "coldstart",
-    "hostile_probe",
-    "browser_view",
-}  # coldstart: minutes of cold CLI runs, run alone; hostile_probe: not a scene; browser_view: needs a browser
+#: not scenes: the table generator (run at the end of a full run; a quick run runs `readme_table.py --quick`, which
+#: prints the tables without writing them) and this script
+HELPERS = {"run_all", "readme_table", "shortcuts"}
+#: run by a quick run only, in their small form: coldstart (minutes of cold CLI runs in full, run it alone),
+#: hostile_probe (not a scene: one case per entry point), browser_view (needs JupyterLab, selenium and Chromium; a
+#: machine without them gets a one-line note and exit status 0)
+QUICK_ONLY = {"coldstart", "hostile_probe", "browser_view"}
+#: seconds of each script's --quick run, relative (a run under a load of about 9 on 2 cores, 2026-11-28, divided
+#: by 5), to start the longest first so that no long script starts last; a script not listed counts as 10 s
+QUICK_COST = {
+    "coldstart": 60,
+    "shaping_axis": 60,
+    "hostile_probe": 45,
+    "threads": 35,
+    "fourbar": 32,
+    "shaping_every_shaper": 30,
+    "firmware_shapers": 27,
+    "nonlinear": 25,
+    "explore": 25,
+    "gpu": 17,
+    "identify_coverage": 12,
+    "machinery": 10,
+    "readme_table": 1,
+    "browser_view": 1,
+}
 
 
 def discover() -> list[str]:
-    return sorted(p.stem for p in HERE.glob("*.py") if not p.stem.startswith("_") and p.stem not in HELPERS)
+    """The scene benchmarks (a full run runs these, one at a time, then regenerates the tables)."""
+    return sorted(
+        p.stem
+        for p in HERE.glob("*.py")
+        if not p.stem.startswith("_") and p.stem not in HELPERS and p.stem not in QUICK_ONLY
+    )
+
+
+def quick_scripts() -> list[str]:
+    """Every script a quick run runs with `--quick`: every script in benchmarks/ but this one, longest first."""
+    names = [p.stem for p in HERE.glob("*.py") if not p.stem.startswith("_") and p.stem != "run_all"]
+    return sorted(names, key=lambda n: (-QUICK_COST.get(n, 10), n))
+
+
+def _children_cpu() -> float:
+    """CPU seconds (user + system) of this process's ended children and theirs; NaN where the OS does not say."""
+    try:
+        import resource
+    except ImportError:  # not on Windows
+        return float("nan")
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
+def _run_script(name: str, quick: bool, env: dict, timeout: float | None) -> tuple[str, object, float, str]:
+    """Run one script in its own process; (name, exit status or "timeout", seconds, its output)."""
+    cmd = [sys.executable, str(HERE / f"{name}.py")] + (["--quick"] if quick else [])
+    t = time.perf_counter()
+    try:
+        run = subprocess.run(
+            cmd, cwd=HERE.parent, timeout=timeout, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+        )
+        rc, out = run.returncode, run.stdout
+    except subprocess.TimeoutExpired as e:
+        rc = "timeout"
+        out = e.stdout.decode(errors="replace") if isinstance(e.stdout, bytes) else (e.stdout or "")
+    return name, rc, time.perf_counter() - t, out
 
 
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--quick", action="store_true", help="CI-sized runs (< 2 minutes in all on 2 cores)")
-    p.add_argument("--only", nargs="+", metavar="SCENE", help="run only these scenes")
+    p.add_argument("--quick", action="store_true", help="every script, CI-sized (<= 2 minutes in all on 2 cores)")
+    p.add_argument("--only", nargs="+", metavar="SCENE", help="run only these scripts")
     p.add_argument(
-        "--timeout", type=float, default=None, help="per-scene time limit [s] (default: none; 300 with --quick)"
+        "--timeout", type=float, default=None, help="per-script time limit [s] (default: none; 600 with --quick)"
+    )
+    p.add_argument(
+        "--jobs",
+        type=int,
+        default=None,
+        help="scripts run at once (default: 2 with --quick, 1 otherwise, so that a full run's timings are undisturbed)",
     )
     p.add_argument(
         "--xla-defaults",
@@ -61,16 +125,21 @@ def main(argv=None) -> int:
     )
     args = p.parse_args(argv)
     if args.quick and args.timeout is None:
-        args.timeout = 300.0  # a quick script that hangs fails the run instead of holding it
-    scenes = discover()
+        args.timeout = 600.0  # a quick script that hangs fails the run instead of holding it (600 s: a loaded machine)
+    jobs = args.jobs if args.jobs is not None else (2 if args.quick else 1)
+    if jobs < 1:
+        print(f"run_all: --jobs must be an integer >= 1; got {jobs}", file=sys.stderr)
+        return 2
+    scenes = quick_scripts() if args.quick else discover()
     if args.only:
         unknown = sorted(set(args.only) - set(scenes))
         if unknown:
-            print(f"run_all: unknown scene(s) {unknown}; available: {scenes}", file=sys.stderr)
+            print(f"run_all: unknown scene(s) {unknown}; available: {sorted(scenes)}", file=sys.stderr)
             return 2
         scenes = [s for s in scenes if s in args.only]
     failed = []
     t0 = time.perf_counter()
+    cpu0 = _children_cpu()
     scratch = args.quick and not args.update
     env = dict(os.environ)
     if scratch:
@@ -85,17 +154,18 @@ def main(argv=None) -> int:
         if flags is not None:
             env["XLA_FLAGS"] = flags
             print(f"run_all: quick run compiled with XLA_FLAGS={flags} (run times slower than the library's)")
-    for scene in scenes:
-        cmd = [sys.executable, str(HERE / f"{scene}.py")] + (["--quick"] if args.quick else [])
-        print(f"=== {scene}: {' '.join(cmd[1:])}", flush=True)
-        t = time.perf_counter()
-        try:
-            rc = subprocess.run(cmd, cwd=HERE.parent, timeout=args.timeout, env=env).returncode
-        except subprocess.TimeoutExpired:
-            rc = "timeout"
-        print(f"=== {scene}: {'ok' if rc == 0 else f'FAILED ({rc})'} in {time.perf_counter() - t:.1f} s", flush=True)
-        if rc != 0:
-            failed.append(scene)
+    print(f"run_all: {len(scenes)} script(s), {jobs} at a time: {' '.join(scenes)}", flush=True)
+    # each script's output is printed in one block when it ends (scripts running at once do not interleave)
+    with ThreadPoolExecutor(max_workers=jobs) as pool:
+        futures = [pool.submit(_run_script, s, args.quick, env, args.timeout) for s in scenes]
+        for fut in as_completed(futures):
+            name, rc, dt, out = fut.result()
+            print(f"=== {name}{' --quick' if args.quick else ''}", flush=True)
+            print(out.rstrip("\n"), flush=True)
+            status = "ok" if rc == 0 else f"FAILED ({rc})"
+            print(f"=== {name}: {status} in {dt:.1f} s", flush=True)
+            if rc != 0:
+                failed.append(name)
     if scratch:
         print(
             f"run_all: quick results in {env['JAXBELT_BENCH_OUT']} (committed results untouched; --update to overwrite)"
@@ -105,9 +175,15 @@ def main(argv=None) -> int:
         import readme_table
 
         readme_table.update_readme()
-    summary = f"run_all: {len(scenes) - len(failed)}/{len(scenes)} benchmarks ran in {time.perf_counter() - t0:.1f} s"
+    # the scripts' CPU time (user + system, their own subprocesses included): on a loaded machine the wall time
+    # says little; on idle cores a run takes at least this divided by the cores
+    cpu = _children_cpu() - cpu0
+    summary = (
+        f"run_all: {len(scenes) - len(failed)}/{len(scenes)} benchmarks ran in {time.perf_counter() - t0:.1f} s "
+        f"({cpu:.0f} s of CPU time)"
+    )
     if failed:
-        print(f"{summary}; FAILED: {' '.join(failed)} (their output is above)", file=sys.stderr)
+        print(f"{summary}; FAILED: {' '.join(sorted(failed))} (their output is above)", file=sys.stderr)
         return 1
     print(summary)
     return 0

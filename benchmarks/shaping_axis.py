@@ -15,7 +15,9 @@ On axes drawn from a fixed seed (1 to 3 modes, 1-20 Hz, damping ratio 0.005-0.1)
 - **speed**: `design_move` at a fixed time, warm (median of repeats) and in a fresh process (1, 2, 3 modes);
 - **identification**: `identify_axis` on 2-mode records with 5 % noise: frequency and damping errors.
 
-Writes `benchmarks/results/shaping_axis.json` and `.png`. Run: `python benchmarks/shaping_axis.py [--quick]`.
+Writes `benchmarks/results/shaping_axis.json` and `.png`. Run: `python benchmarks/shaping_axis.py [--quick]`
+(`--quick`, a check of the script: one drawn axis, the 2-mode scale test once, the speed of the 1-mode axis with one
+fresh process, one identification record).
 """
 
 from __future__ import annotations
@@ -180,10 +182,12 @@ def compare(f, z, d=D, label=None):
     )
 
 
-def speed(repeats: int):
+def speed(repeats: int, modes=(1, 2, 3), fresh_runs: int | None = None):
+    """`design_move` (minimax only) on the axes of `modes` modes: warm time (median of `repeats`) in this process,
+    and the first call in fresh processes with XLA's defaults (`fresh_runs` of them; default max(2, repeats // 3))."""
     out = {}
     axes = {1: ([6.0], [0.02]), 2: ([7.3, 18.0], [0.015, 0.01]), 3: ([3.1, 9.7, 17.0], [0.03, 0.02, 0.01])}
-    for m, (f, z) in axes.items():
+    for m, (f, z) in ((m, axes[m]) for m in modes):
         axis = jb.ModalAxis(f, z)
 
         def run(axis=axis):
@@ -204,7 +208,7 @@ def speed(repeats: int):
         env = dict(os.environ, PYTHONPATH=str(HERE.parent))
         env.pop("XLA_FLAGS", None)
         fresh = []
-        for _ in range(max(2, repeats // 3)):
+        for _ in range(fresh_runs or max(2, repeats // 3)):
             r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=600)
             fresh.append(float(r.stdout.split()[-1]))
         out[m] = dict(
@@ -514,7 +518,8 @@ def main(argv=None):
             flush=True,
         )
     big = scale((6, 10)) if not args.quick else scale((2,), repeats=1)
-    sp = speed(1 if args.quick else 9)
+    # quick: the 1-mode axis, one fresh process (each fresh process compiles design_move with XLA's defaults)
+    sp = speed(1, modes=(1,), fresh_runs=1) if args.quick else speed(9)
     ident = identification(range(1 if args.quick else 10))
     compared = [c for c in cases if c["anchor"] is not None]
     ratios = np.array([c["equal_time_ratio"] for c in compared])

@@ -78,6 +78,33 @@ def test_run_all_discovers_scene_scripts_only():
     assert not {"run_all", "readme_table", "_common"} & set(scenes)
 
 
+def test_run_all_quick_runs_every_script_but_itself():
+    """`run_all.py --quick` runs every script of benchmarks/ (the tools and the scripts a full run leaves out too)."""
+    here = Path(run_all.__file__).resolve().parent
+    every = {p.stem for p in here.glob("*.py") if not p.stem.startswith("_")} - {"run_all"}
+    assert sorted(run_all.quick_scripts()) == sorted(every)
+    assert {"coldstart", "hostile_probe", "browser_view", "readme_table"} <= set(run_all.quick_scripts())
+
+
+def test_run_all_quick_fails_loudly_naming_the_failed_and_the_hung_script(tmp_path, monkeypatch, capsys):
+    """Three scripts two at a time: one passes, one exits 3, one runs past the time limit; the run exits 1 and names
+    the two, with the failed script's output."""
+    for name, body in (
+        ("good", "print('fine')"),
+        ("bad", "import sys; print('broken here'); sys.exit(3)"),
+        ("hangs", "import time; time.sleep(60)"),
+    ):
+        (tmp_path / f"{name}.py").write_text(body + "\n")
+    monkeypatch.setattr(run_all, "HERE", tmp_path)
+    rc = run_all.main(["--quick", "--xla-defaults", "--timeout", "1.5"])
+    out, err = capsys.readouterr()
+    assert rc == 1
+    assert "=== good: ok in" in out and "=== bad: FAILED (3)" in out and "=== hangs: FAILED (timeout)" in out
+    assert "broken here" in out
+    assert "FAILED: bad hangs" in err and err.startswith("run_all: 1/3 benchmarks ran")
+    assert not (tmp_path / "results").exists() or not any((tmp_path / "results").iterdir())
+
+
 def test_cli_bench_without_checkout_says_so(monkeypatch, capsys):
     from jaxbelt.cli import bench, main
 

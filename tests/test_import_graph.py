@@ -156,41 +156,49 @@ def test_import_loads_no_plotting_library_and_changes_no_configuration():
     assert out.stdout.split() == ["False", "False"]
 
 
-def _loaded_after(code: str) -> set:
-    """The heavy libraries loaded by `code` in a fresh process."""
-    heavy = ("diffrax", "optax", "optimistix", "lineax", "matplotlib", "matplotlib.pyplot")
-    probe = f"import sys; {code}; print(' '.join(m for m in {heavy!r} if m in sys.modules))"
+_HEAVY = ("diffrax", "optax", "optimistix", "lineax", "matplotlib", "matplotlib.pyplot")
+
+
+def _loaded_after(*steps: str) -> list[set]:
+    """The heavy libraries loaded after each of `steps`, run one after the other in one fresh process (each set
+    holds what the steps up to it loaded: a library a step loads is absent from the set before it)."""
+    probe = "import sys\n" + "".join(
+        f"{code}\nprint(' '.join(m for m in {_HEAVY!r} if m in sys.modules) + ' |')\n" for code in steps
+    )
     out = subprocess.run([sys.executable, "-c", probe], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
-    return set(out.stdout.split())
+    sets = [set(chunk.split()) for chunk in out.stdout.split("|")[:-1]]
+    assert len(sets) == len(steps), out.stdout
+    return sets
 
 
 def test_import_and_the_startup_closed_form_load_only_what_they_use():
     # `import jaxbelt` imports no heavy library; the start-up closed form adds equinox, never an ODE solver,
     # an optimiser or a plotting library; the first name of an optimiser loads its optimisation library, the
-    # first ODE solve diffrax
-    assert _loaded_after("import jaxbelt") == set()
-    assert (
-        _loaded_after(
-            "import jax, jaxbelt as jb, numpy as np; jax.config.update('jax_enable_x64', True); "
-            "ts, c = jb.startup_curves(gammas=[0.02], n_points=11); "
-            "assert np.all(np.isfinite(c['current']))"
-        )
-        == set()
+    # first ODE solve diffrax (two processes, each step's libraries read after it: what a step loads is what was
+    # absent before it)
+    imported, closed_form, ode, optimiser = _loaded_after(
+        "import jaxbelt",
+        "import jax, jaxbelt as jb, numpy as np; jax.config.update('jax_enable_x64', True); "
+        "ts, c = jb.startup_curves(gammas=[0.02], n_points=11); "
+        "assert np.all(np.isfinite(c['current']))",
+        "jb.simulate(jb.Scene(jb.FourBarDrive(), jb.PID(), ts=jax.numpy.linspace(0.0, 0.01, 3)))",
+        "jb.tune_pid",
     )
-    assert "optax" in _loaded_after("import jaxbelt as jb; jb.tune_pid")
-    assert "diffrax" in _loaded_after(
-        "import jax, jaxbelt as jb; jax.config.update('jax_enable_x64', True); "
-        "jb.simulate(jb.Scene(jb.FourBarDrive(), jb.PID(), ts=jax.numpy.linspace(0.0, 0.01, 3)))"
-    )
+    assert imported == set() and closed_form == set()
+    assert "diffrax" in ode and "optax" not in ode  # optax absent before the optimiser's name: its step loads it
+    assert "optax" in optimiser
     # the residual energy by its default quadrature, and an optimisation of it, need no ODE solver (0.26 s of
     # their first call); its `method="ode"` loads diffrax when called
     shaping = (
         "import jax, jaxbelt as jb; jax.config.update('jax_enable_x64', True); "
         "plat, cmd = jb.BeltPlatform(), jb.PseudoPolynomial(jax.numpy.array([3.0, 4.0, 5.0])); "
     )
-    assert "diffrax" not in _loaded_after(shaping + "jb.optimise_command(plat, cmd, progress=False)")
-    assert "diffrax" in _loaded_after(shaping + "jb.residual_energy(plat, cmd, method='ode')")
+    quadrature, ode = _loaded_after(
+        shaping + "jb.optimise_command(plat, cmd, progress=False)", "jb.residual_energy(plat, cmd, method='ode')"
+    )
+    assert "diffrax" not in quadrature
+    assert "diffrax" in ode
 
 
 def _lazy_packages():
