@@ -340,7 +340,7 @@ def _load_last(quick: bool) -> dict:
 def _write(quick: bool, cells, inv, sp, skipped, t_start, sections) -> None:
     """Write the results, keeping the sections this run does not compute from the last results file (so `--only`
     and a run stopped part way leave the others whole)."""
-    last = _load_last(quick)
+    last = {} if quick else _load_last(quick)  # a quick run never carries an earlier run's sections
     if "guarantee" not in sections:
         cells, skipped = last.get("rows", []), last.get("not_built", {})
     inv = inv if "inverse" in sections else last.get("inverse", {})
