@@ -432,3 +432,26 @@ def test_cli_mode_outside_the_frequency_range_names_mode():
     )
     assert r.returncode == 2
     assert "argument --mode" in r.stderr and "1e+07" in r.stderr
+
+
+def test_residual_curve_refuses_degenerate_factors_and_tolerances_by_name():
+    axis, move = jb.ModalAxis([5.0], [0.02]), jb.fastest_move(0.1, 0.5, 2.0)
+    for kw, name in ((dict(factors=1e300), "factors"), (dict(rtol=-1.0), "rtol"), (dict(atol=math.nan), "atol")):
+        with pytest.raises(ValueError, match=f"`{name}`"):
+            jb.residual_curve(axis, move, **kw)
+    # within the range the curve is unchanged: the nominal factor equals residual_amplitudes (same closed form)
+    np.testing.assert_allclose(
+        np.asarray(jb.residual_curve(axis, move, np.array([1.0])))[:, 0],
+        np.asarray(jb.residual_amplitudes(axis, move)),
+        rtol=1e-12,
+    )
+
+
+def test_tolerance_band_refuses_a_zero_reference_and_negative_values():
+    w = np.linspace(1.0, 3.0, 21)
+    with pytest.raises(ValueError, match="`reference`"):
+        jb.tolerance_band(w, np.full(21, 0.01), 0.0, 2.0)
+    with pytest.raises(ValueError, match="`values`"):
+        jb.tolerance_band(w, -np.ones(21), 1.0, 2.0)
+    # a V-shaped ratio |w - 2| / 10 crosses 0.05 at w = 1.5 and 2.5: the band is 1.0 rad/s wide, 0.5 of omega0
+    assert jb.tolerance_band(w, np.abs(w - 2.0) * 0.1, 1.0, 2.0) == pytest.approx(0.5, rel=1e-12)

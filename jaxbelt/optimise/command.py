@@ -760,6 +760,9 @@ def tolerance_band(omegas, values, reference, omega0, level: float = 0.05):
         )
     check_positive("level", level, owner=o)
     check_positive("omega0", omega0, "rad/s", owner=o)
+    if not (np.all(np.isfinite(e)) and np.all(e >= 0)):
+        raise ValueError(f"{o}: parameter `values` must be finite and >= 0 (amplitudes or energies)")
+    check_positive("reference", ref, owner=o)  # the ratio's denominator (0 divided by zero)
     if not w[0] <= float(omega0) <= w[-1]:
         raise ValueError(f"{o}: parameter `omega0` must lie within the grid [{w[0]:g}, {w[-1]:g}] rad/s; got {omega0}")
     r = e / ref

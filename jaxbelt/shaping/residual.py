@@ -21,7 +21,7 @@ import numpy as np
 from jax.scipy.special import gammaln
 from jax.typing import ArrayLike
 
-from .._checks import atleast_1d, check_range, collecting, device_array
+from .._checks import atleast_1d, check_positive, check_range, collecting, device_array
 from .._guard import checked, prepare, reraising, stored_jit
 from .._threads import blas_limited
 from .._xla import QUICK_COMPILE
@@ -107,13 +107,19 @@ def _poles(axis: ModalAxis, factors):
     return -z * w + 1j * wd, wd
 
 
+#: the largest frequency factor of `residual_curve`: a mode scaled a thousandfold is another axis, not an error of
+#: this one (1e300 gave overflowed poles)
+MAX_FACTOR = 1e3
+
+
 @reraising("residual_curve")
 @blas_limited
 def residual_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors: ArrayLike = 1.0, *, rtol=1e-10, atol=1e-14):
     """Residual amplitudes [m] (units of the command's position) of every mode after the move `cmd`, at the mode
     frequencies scaled by each of `factors` (damping ratios and gains kept): shape (n_modes, len(factors)).
 
-    `factors` > 0 (1.0: the nominal axis; `np.linspace(0.8, 1.2, 41)`: a ±20 % frequency error).
+    `factors` in (0, `MAX_FACTOR` = 1e3] (1.0: the nominal axis; `np.linspace(0.8, 1.2, 41)`: a ±20 % frequency
+    error); `rtol`, `atol` finite and > 0.
     Closed form or quadrature where the command allows (see the module docstring); otherwise an ODE solve
     of every mode at every factor with `rtol`, `atol`.
 
@@ -129,7 +135,9 @@ def residual_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors: ArrayLi
     if r.ndim != 1:
         raise ValueError(f"residual_curve: parameter `factors` must be a scalar or a 1-D array; got shape {r.shape}")
     with collecting() as found:  # traced factors: recorded, attached below with the traced modules' checks
-        check_range("factors", r, lo=0.0, lo_open=True, owner="residual_curve")
+        check_range("factors", r, lo=0.0, hi=MAX_FACTOR, lo_open=True, owner="residual_curve")
+    check_positive("rtol", rtol, owner="residual_curve")
+    check_positive("atol", atol, owner="residual_curve")
     if not _has_closed_form(cmd):
         return checked(_residual_ode(axis, cmd, r, rtol, atol), axis, cmd, checks=found)
     n_nodes = _nodes_for(cmd, _poles(axis, r)[0]) if isinstance(cmd, PseudoPolynomial) else 0
