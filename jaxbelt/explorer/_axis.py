@@ -50,6 +50,14 @@ class _Axis(_Scene):
         u = float(uncertainty)
         if not 0 <= u < 0.9:
             raise ValueError(f"{o}: option `uncertainty` must lie in [0, 0.9); got {uncertainty}")
+        if (
+            isinstance(include, str)
+            or not isinstance(include, (tuple, list))
+            or not all(isinstance(name, str) for name in include)
+        ):
+            raise TypeError(
+                f"{o}: option `include` must be a tuple of candidate names (of {', '.join(self.INCLUDE)}); got {include!r}"
+            )
         include = tuple(include)
         if "unshaped" not in include:
             include = include + ("unshaped",)

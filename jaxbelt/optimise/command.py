@@ -709,12 +709,14 @@ def sensitivity_curve(plat, commands: dict, *, rel: float = 0.3, n: int = 121, n
     The belt stiffness is scaled so that $\\omega$ sweeps $[1-rel, 1+rel]\\,\\omega_n$ (`n` points; the design value
     sits at the centre when `n` is odd). `measure="amplitude"` (default): the amplitude of the platform's residual
     deflection $A = |\\lambda||W|/\\omega_d$ [rad] (the measure of input-shaping practice); `measure="energy"`: the
-    paper's residual energy $E(T) = h\\mathcal H$ [J] (eq. 31). `rel` in (0, 1), `n` >= 2.
+    paper's residual energy $E(T) = h\\mathcal H$ [J] (eq. 31). `rel` in (0, 1), `n` >= 2, `n_nodes` >= 1 (an
+    integer: the quadrature's nodes).
     Returns `(omegas, {name: values})`.
     """
     o = "sensitivity_curve"
     check_range("rel", rel, 0.0, 1.0, lo_open=True, hi_open=True, owner=o)  # 1 - rel > 0: omega stays > 0
     n = check_int(o, "n", n, 2)
+    n_nodes = check_int(o, "n_nodes", n_nodes, 1)
     if measure not in ("amplitude", "energy"):
         raise ValueError(f"{o}: parameter `measure` must be 'amplitude' or 'energy'; got {measure!r}")
     omegas = jnp.linspace(1.0 - rel, 1.0 + rel, n) * plat.omega_n

@@ -125,6 +125,16 @@ def welch(y, rate: float, *, nperseg: int | None = None, window: str = "kaiser")
     rate = float(rate)
     if y.ndim != 1:
         raise ValueError(f"welch: parameter `y` must be 1-D; got shape {y.shape}")
+    if not np.all(np.isfinite(y)):
+        bad = np.flatnonzero(~np.isfinite(y))
+        raise ValueError(
+            f"welch: parameter `y` must be finite (no NaN or inf); got {y[bad[0]]} at index {int(bad[0])} "
+            f"({bad.size} non-finite value(s) in all)"
+        )
+    if y.size and not np.max(np.abs(y)) < 1e150:  # the periodograms square the samples: beyond, they overflow
+        raise ValueError(
+            f"welch: parameter `y` must have |y| < 1e150 (its squares stay finite); got {np.max(np.abs(y))}"
+        )
     if not (math.isfinite(rate) and rate > 0):
         raise ValueError(f"welch: parameter `rate` must be finite and > 0 Hz; got {rate}")
     if window not in ("kaiser", "hann"):
