@@ -93,8 +93,19 @@ def klipper_sweep(
         accel.append(-sign * a)
         freq += 2.0 * t_seg * hz_per_sec
         sign = -sign
+        if len(ends) > 2 * MAX_SWEEP_SEGMENTS:  # a step lost to rounding (freq_start ~ 1e300): no progress
+            raise ValueError(
+                f"{owner}: parameters `freq_start`, `freq_end`, `hz_per_sec` ({freq_start!r}, {freq_end!r}, "
+                f"{hz_per_sec!r}) make a sweep of more than {MAX_SWEEP_SEGMENTS:g} held segments"
+            )
     if not (sweeping_period and sweeping_accel):
         return np.array(ends), np.array(accel)
+    n_slow = 2.0 * time / sweeping_period  # the slow sweep's sign flips, each one more segment
+    if not n_slow <= MAX_SWEEP_SEGMENTS:
+        raise ValueError(
+            f"{owner}: parameter `sweeping_period` ({sweeping_period!r} s) splits the {time:.4g} s sweep into about "
+            f"{n_slow:.3g} more segments; at most {MAX_SWEEP_SEGMENTS:g}: raise `sweeping_period` (or 0: no slow sweep)"
+        )
     # the slow sweep: its sign flips at sqrt(2)/8 of a period, then every half period; segments split there
     out_t, out_a = [], []
     fraction = math.sqrt(2.0) * 0.125
@@ -422,6 +433,10 @@ def identify_axis_from_sweep(
     owner = "identify_axis_from_sweep"
     _core._require_x64(owner)
     t, y, h, n, _ = _core._check_record(t, y, n_modes, True)
+    if not np.max(np.abs(y)) < 1e150:  # the transfer estimate squares the spectra: beyond, they overflow
+        raise ValueError(
+            f"{owner}: parameter `y` must have |y| < 1e150 (its squared spectra stay finite); got {np.max(np.abs(y))}"
+        )
     if sweep is None:
         sweep = klipper_sweep()
     try:
