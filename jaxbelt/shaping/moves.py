@@ -399,6 +399,8 @@ def trapezoid_move(distance, duration, v_max, a_max, j_max=None) -> PiecewiseMov
         raise ValueError(
             f"trapezoid_move: parameter `duration` must be finite and at most {MOVE_TIME_RANGE_S[1]:g} s; got {duration!r}"
         )
+    if float(duration) <= 0.0:
+        return None  # no move takes no time
     sign = 1.0 if float(distance) >= 0 else -1.0
     D = abs(float(distance))
     found = _scurve(D, float(duration), float(v_max), None if j_max is None else float(j_max))
