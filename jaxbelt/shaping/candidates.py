@@ -10,10 +10,10 @@ import numpy as np
 from .far_modes import _far_modes, _sub_axis
 from .measure import _row
 from .moves import (
+    _trapezoid_move,
     fastest_time,
     peaks,
     shape_move,
-    trapezoid_move,
 )
 from .request import MoveRequest
 from .residual import residual_curve
@@ -31,11 +31,11 @@ def _shaped(axis, name, distance, T, v_max, a_max, j_max):
     t_short = fastest_time(distance, v_max, a_max, j_max) + float(tau[-1])
     if not T > tau[-1]:
         return None, t_short
-    base = trapezoid_move(distance, T - tau[-1], v_max, a_max, j_max)
+    base = _trapezoid_move(distance, T - tau[-1], v_max, a_max, j_max)
     if base is not None:
         return shape_move(base, A, tau), t_short
     relax = 1.0 / float(np.min(np.asarray(A)))  # a shaped peak is at least min(A) times the base's
-    base = trapezoid_move(distance, T - tau[-1], v_max, a_max * relax, None if j_max is None else j_max * relax)
+    base = _trapezoid_move(distance, T - tau[-1], v_max, a_max * relax, None if j_max is None else j_max * relax)
     if base is None:
         return None, t_short
     cmd = shape_move(base, A, tau)
@@ -57,7 +57,7 @@ def _members(nominal, d, T, v_max, a_max, j_max) -> dict:
             continue
         if cmd is not None:
             out[name] = cmd
-    base = trapezoid_move(d, T, v_max, a_max * (1 + 1e-9), j_max)
+    base = _trapezoid_move(d, T, v_max, a_max * (1 + 1e-9), j_max)
     if base is not None:
         out["unshaped"] = base
     return out
@@ -143,5 +143,5 @@ def unshaped_rows(req: MoveRequest, ref, ref_cmd, T: float) -> list:
         return [
             _row("unshaped (time-optimal)", req.axis, ref_cmd, T_ref, ref, req.uncertainty, req.limits, per=req.per)
         ]
-    base = trapezoid_move(req.distance, T, req.v_max, req.a_max, req.j_max)
+    base = _trapezoid_move(req.distance, T, req.v_max, req.a_max, req.j_max)
     return [_row("unshaped", req.axis, base, T, ref, req.uncertainty, req.limits, per=req.per)]

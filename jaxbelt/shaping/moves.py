@@ -399,6 +399,12 @@ def trapezoid_move(distance, duration, v_max, a_max, j_max=None) -> PiecewiseMov
         raise ValueError(
             f"trapezoid_move: parameter `duration` must be finite and at most {MOVE_TIME_RANGE_S[1]:g} s; got {duration!r}"
         )
+    return _trapezoid_move(distance, duration, v_max, a_max, j_max)
+
+
+def _trapezoid_move(distance, duration, v_max, a_max, j_max=None) -> PiecewiseMove | None:
+    """`trapezoid_move` of arguments already checked (`check_move_limits`, a duration within its range or <= 0):
+    the shaped and minimax candidates build their bases with it, many times a design."""
     if float(duration) <= 0.0:
         return None  # no move takes no time
     sign = 1.0 if float(distance) >= 0 else -1.0
@@ -420,8 +426,9 @@ def trapezoid_move(distance, duration, v_max, a_max, j_max=None) -> PiecewiseMov
     return PiecewiseMove(np.array(times), np.zeros(8), sign * np.array(ramps), T)
 
 
-def check_move_limits(owner, distance, v_max, a_max, j_max) -> None:
-    """Refuse a distance that is NaN, infinite or 0 and limits that are not finite and > 0, by name."""
+def check_move_limits(owner, distance, v_max, a_max, j_max) -> float:
+    """Refuse a distance that is NaN, infinite or 0 and limits that are not finite and > 0, by name; return the
+    fastest move's time [s] (`fastest_time`), which must lie in `MOVE_TIME_RANGE_S`."""
     check_scalar("distance", distance, "m", owner)
     d = float(np.asarray(distance))
     lo, hi = DISTANCE_RANGE_M
@@ -440,6 +447,7 @@ def check_move_limits(owner, distance, v_max, a_max, j_max) -> None:
             f"fastest move of {T:.3g} s; a move within the limits must take {MOVE_TIME_RANGE_S[0]:g} to "
             f"{MOVE_TIME_RANGE_S[1]:g} s (distance {distance!r} m, v_max {v_max!r} m/s, a_max {a_max!r} m/s^2)"
         )
+    return T
 
 
 #: the distances [m] a move may cover: a nanometre to a thousand kilometres (outside, a unit slip)
@@ -451,8 +459,7 @@ MOVE_TIME_RANGE_S = (1e-6, 1e6)
 def fastest_time(distance, v_max, a_max, j_max=None) -> float:
     """The shortest rest-to-rest time [s] for `distance` [m] with |v| <= `v_max`, |a| <= `a_max` (and |jerk| <=
     `j_max`): the time-optimal bang-coast-bang (or 7-segment S-curve) move, in closed form."""
-    check_move_limits("fastest_time", distance, v_max, a_max, j_max)
-    return _fastest_time(distance, v_max, a_max, j_max)
+    return check_move_limits("fastest_time", distance, v_max, a_max, j_max)
 
 
 def _fastest_time(distance, v_max, a_max, j_max) -> float:
@@ -482,10 +489,9 @@ def _fastest_time(distance, v_max, a_max, j_max) -> float:
 @blas_limited
 def fastest_move(distance, v_max, a_max, j_max=None) -> PiecewiseMove:
     """The time-optimal rest-to-rest move within the limits (`fastest_time`): the unshaped move a planner runs."""
-    check_move_limits("fastest_move", distance, v_max, a_max, j_max)
-    T = _fastest_time(distance, v_max, a_max, j_max)
+    T = check_move_limits("fastest_move", distance, v_max, a_max, j_max)
     for grow in (1.0, 1 + 1e-12, 1 + 1e-9, 1 + 1e-6):
-        m = trapezoid_move(distance, T * grow, v_max, a_max * (1 + 1e-9), j_max)
+        m = _trapezoid_move(distance, T * grow, v_max, a_max * (1 + 1e-9), j_max)
         if m is not None:
             return m
     raise RuntimeError("fastest_move: the time-optimal profile could not be built (report this)")
