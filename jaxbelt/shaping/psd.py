@@ -530,29 +530,22 @@ def identify_axis_from_psd(
         raise RuntimeError(
             f"{owner}: the fit of {n} mode(s) ended at non-finite values ({start}); try another `n_modes`"
         )
-    order = np.argsort(fi)
-    fi, zeta, f_std, z_std, significance = (v[order] for v in (fi, zeta, f_std, z_std, significance))
-    found = f"identified f = {_core._fmt(fi)} Hz, zeta = {_core._fmt(zeta)} as a {kind!r} spectrum"
-    outside = np.flatnonzero((fi <= lo) | (fi >= hi))
-    if outside.size:
-        i = int(outside[0])
-        raise ValueError(
-            f"{owner}: mode {i + 1} comes out at {fi[i]:.6g} Hz, at or beyond the edge of the fitted frequency "
-            f"range {lo:.6g}-{hi:.6g} Hz (parameter `f`, or `band`): widen the range, fit fewer `n_modes`, or check "
-            f"`kind` ({found})"
-        )
-    if not np.all((zeta > 0.0) & (zeta < 1.0)):
-        raise ValueError(
-            f"{owner}: a damping ratio comes out outside (0, 1) ({found}): `psd` is not a resonant spectrum"
-        )
-    weak = np.flatnonzero(~(significance >= PSD_MIN_SIGNIFICANCE))
-    if weak.size:
-        i = int(weak[0])
-        raise ValueError(
-            f"{owner}: mode {i + 1} ({fi[i]:.6g} Hz, zeta = {zeta[i]:.3g}) is not resolved above the noise: its "
-            f"amplitude is {significance[i]:.3g} standard errors (at least {PSD_MIN_SIGNIFICANCE:g} are needed): the "
-            f"spectrum (`psd`) may hold fewer than `n_modes` = {n} modes: try a smaller `n_modes` ({found})"
-        )
+    fi, zeta, f_std, z_std, found = sorted_fitted_modes(
+        owner,
+        n,
+        fi,
+        zeta,
+        f_std,
+        z_std,
+        significance,
+        (lo, hi),
+        found_suffix=f" as a {kind!r} spectrum",
+        edge=f"the fitted frequency range {lo:.6g}-{hi:.6g} Hz (parameter `f`, or `band`): widen the range, fit "
+        "fewer `n_modes`, or check `kind`",
+        zeta_hint="`psd` is not a resonant spectrum",
+        weak="amplitude",
+        holder="spectrum (`psd`)",
+    )
     min_steps = MIN_BANDWIDTH_STEPS if window == "none" else 1.0
     for i in range(n):
         width = 2.0 * zeta[i] * fi[i]
@@ -567,3 +560,34 @@ def identify_axis_from_psd(
     from ..models.axis import ModalAxis
 
     return ModalAxis(fi, zeta, None, frequency_std=f_std, damping_std=z_std)
+
+
+def sorted_fitted_modes(
+    owner, n, fi, zeta, f_std, z_std, significance, band, *, found_suffix, edge, zeta_hint, weak, holder
+):
+    """The fitted modes in ascending frequency, `(fi, zeta, f_std, z_std, found)`, after the checks every fit of
+    modes ends with (`identify_axis_from_psd`, `identify_axis_from_sweep`): a mode at or beyond an edge of `band`
+    (`edge`: what the band is and what to do), a damping ratio outside (0, 1) (`zeta_hint`), a mode whose `weak`
+    ("amplitude", "gain") is below `PSD_MIN_SIGNIFICANCE` standard errors (`holder`: what holds the modes). `found`:
+    the sentence naming the fitted values, for the caller's own messages."""
+    lo, hi = band
+    order = np.argsort(fi)
+    fi, zeta, f_std, z_std, significance = (v[order] for v in (fi, zeta, f_std, z_std, significance))
+    found = f"identified f = {_core._fmt(fi)} Hz, zeta = {_core._fmt(zeta)}{found_suffix}"
+    outside = np.flatnonzero((fi <= lo) | (fi >= hi))
+    if outside.size:
+        i = int(outside[0])
+        raise ValueError(
+            f"{owner}: mode {i + 1} comes out at {fi[i]:.6g} Hz, at or beyond the edge of {edge} ({found})"
+        )
+    if not np.all((zeta > 0.0) & (zeta < 1.0)):
+        raise ValueError(f"{owner}: a damping ratio comes out outside (0, 1) ({found}): {zeta_hint}")
+    below = np.flatnonzero(~(significance >= PSD_MIN_SIGNIFICANCE))
+    if below.size:
+        i = int(below[0])
+        raise ValueError(
+            f"{owner}: mode {i + 1} ({fi[i]:.6g} Hz, zeta = {zeta[i]:.3g}) is not resolved above the noise: its "
+            f"{weak} is {significance[i]:.3g} standard errors (at least {PSD_MIN_SIGNIFICANCE:g} are needed): the "
+            f"{holder} may hold fewer than `n_modes` = {n} modes: try a smaller `n_modes` ({found})"
+        )
+    return fi, zeta, f_std, z_std, found

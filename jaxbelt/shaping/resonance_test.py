@@ -573,26 +573,21 @@ def identify_axis_from_sweep(
             f"{start}; give a larger `max_steps` (now {max_steps}), try another `n_modes`, or check `sweep` (the "
             "excitation the record holds)"
         )
-    order = np.argsort(fi)
-    fi, zeta, f_std, z_std, significance = (v[order] for v in (fi, zeta, f_std, z_std, significance))
-    found = f"identified f = {_core._fmt(fi)} Hz, zeta = {_core._fmt(zeta)}"
-    outside = np.flatnonzero((fi <= lo) | (fi >= hi))
-    if outside.size:
-        i = int(outside[0])
-        raise ValueError(
-            f"{owner}: mode {i + 1} comes out at {fi[i]:.6g} Hz, at or beyond the edge of `band` = ({lo:g}, {hi:g}) "
-            f"Hz: widen the band, or fit fewer `n_modes` ({found})"
-        )
-    if not np.all((zeta > 0.0) & (zeta < 1.0)):
-        raise ValueError(f"{owner}: a damping ratio comes out outside (0, 1) ({found}): check `sweep`")
-    weak = np.flatnonzero(~(significance >= _psd.PSD_MIN_SIGNIFICANCE))
-    if weak.size:
-        i = int(weak[0])
-        raise ValueError(
-            f"{owner}: mode {i + 1} ({fi[i]:.6g} Hz, zeta = {zeta[i]:.3g}) is not resolved above the noise: its gain "
-            f"is {significance[i]:.3g} standard errors (at least {_psd.PSD_MIN_SIGNIFICANCE:g} are needed): the "
-            f"record may hold fewer than `n_modes` = {n} modes: try a smaller `n_modes` ({found})"
-        )
+    fi, zeta, f_std, z_std, _ = _psd.sorted_fitted_modes(
+        owner,
+        n,
+        fi,
+        zeta,
+        f_std,
+        z_std,
+        significance,
+        (lo, hi),
+        found_suffix="",
+        edge=f"`band` = ({lo:g}, {hi:g}) Hz: widen the band, or fit fewer `n_modes`",
+        zeta_hint="check `sweep`",
+        weak="gain",
+        holder="record",
+    )
     from ..models.axis import ModalAxis
 
     return ModalAxis(fi, zeta, None, frequency_std=f_std, damping_std=z_std)
