@@ -105,6 +105,26 @@ def spline_move_reference(coefficients, duration):
     return inside(acc), inside(vel), inside(pos, hold=True), h * np.arange(n + 1)
 
 
+def fastest_time_reference(distance, v_max, a_max, j_max=None):
+    """The time-optimal rest-to-rest time [s] in closed form: bang-coast-bang without `j_max`; with it the
+    symmetric double-S (seven-segment) profile of Biagiotti & Melchiorri (2008), "Trajectory Planning for Automatic
+    Machines and Robots", eqs. (3.19)-(3.30) with v0 = v1 = 0 (cruise if the distance allows, else the acceleration
+    phase of eq. (3.26), else no constant-acceleration segment)."""
+    D, v, a = abs(float(distance)), float(v_max), float(a_max)
+    if j_max is None:
+        return D / v + v / a if D >= v * v / a else 2.0 * np.sqrt(D / a)
+    j = float(j_max)
+    # acceleration phase reaching v: with a constant-acceleration segment when v j >= a^2
+    Ta = a / j + v / a if v * j >= a * a else 2.0 * np.sqrt(v / j)
+    if D / v >= Ta:  # the distance allows cruising at v: T = Ta + Tv + Td with Tv = D / v - Ta
+        return D / v + Ta
+    Tj = a / j  # no cruise, a_max reached: eq. (3.26)
+    Ta = (a * a / j + np.sqrt(a**4 / j**2 + 4.0 * a * D)) / (2.0 * a)
+    if Ta < 2.0 * Tj:  # a_max not reached: two jerk phases only
+        Ta = 2.0 * (D / (2.0 * j)) ** (1.0 / 3.0)
+    return 2.0 * Ta
+
+
 def piecewise_move_reference(times, steps, ramps, duration):
     """`(acceleration, velocity, position, breaks)` of $a(t) = \\sum_k \\alpha_k H(t - t_k) + \\beta_k (t - t_k)_+$
     on [0, T] (at rest after T)."""

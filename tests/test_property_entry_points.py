@@ -22,7 +22,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 from hypothesis_profile import examples, inf, nan
-from references import piecewise_move_reference
+from references import fastest_time_reference, piecewise_move_reference
 
 import jaxbelt as jb
 
@@ -68,10 +68,16 @@ def check_move(distance, v_max, a_max, j_max=None, duration=None):
         if duration is not None:
             assert T == pytest.approx(duration, rel=1e-12)
         assert float(pos(T)) == pytest.approx(distance, rel=1e-9, abs=1e-15)
-        assert abs(float(vel(T))) <= 1e-9 * max(abs(distance) / T, 1e-300) + 1e-15  # at rest at the end
+        # the velocity sums terms of size |ramp| T^2 / 2 (|step| T) that cancel: their rounding is the floor
+        floor = 4 * np.finfo(float).eps * float(np.sum(np.abs(cmd.steps)) * T + np.sum(np.abs(cmd.ramps)) * T**2 / 2)
+        assert abs(float(vel(T))) <= 1e-9 * max(abs(distance) / T, 1e-300) + 1e-15 + floor  # at rest at the end
         t = np.linspace(0.0, T, 401)
-        assert np.max(np.abs(vel(t))) <= v_max * (1 + 1e-9)
+        assert np.max(np.abs(vel(t))) <= v_max * (1 + 1e-9) + floor
         assert np.max(np.abs(acc(t))) <= a_max * (1 + 1e-9)
+        if j_max is not None:  # the jerk is the ramps' running sum: at most j_max in every segment
+            assert np.max(np.abs(np.cumsum(np.asarray(cmd.ramps)))) <= j_max * (1 + 1e-9)
+        if duration is None:  # fastest_move: as long as the closed-form fastest time (grown by at most 1e-6)
+            assert T == pytest.approx(fastest_time_reference(distance, v_max, a_max, j_max), rel=1.1e-6)
 
     return check
 
@@ -87,14 +93,16 @@ def test_fastest_move_refuses_naming_or_travels_its_distance(d, v, a, j):
     refused_or(lambda: jb.fastest_move(d, v, a, j), ("distance", "v_max", "a_max", "j_max"), check_move(d, v, a, j))
 
 
-@given(d=st.floats(0.01, 0.1), v=st.floats(0.2, 0.5), a=st.floats(0.5, 2.0), j=st.floats(20.0, 100.0))
-@examples(15)
+# short and long moves, low and high jerk limits: cruising at v_max or not, reaching a_max or not
+@given(d=st.floats(0.001, 2.0), v=st.floats(0.05, 1.0), a=st.floats(0.5, 20.0), j=st.floats(1.0, 1000.0))
+@examples(25)
 def test_fastest_move_with_jerk_limit_travels_its_distance(d, v, a, j):
     check_move(d, v, a, j)(jb.fastest_move(d, v, a, j))
 
 
-@pytest.mark.xfail(strict=True, raises=RuntimeError, reason="moves.py bug, reported: no jerk-limited profile built")
 def test_fastest_move_jerk_limited_long_move_is_built():
+    # a long move that cruises at v_max: the gentlest S-curve at the fastest time is a single point of the
+    # profiles' family (the grid of accel-phase times used to miss it: "could not be built", 28 % of random limits)
     check_move(0.5, 0.3, 1.2, 5.0)(jb.fastest_move(0.5, 0.3, 1.2, 5.0))
 
 

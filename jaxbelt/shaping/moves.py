@@ -352,11 +352,19 @@ def _scurve(distance: float, duration: float, v_max: float, j_max: float | None)
             v = v_max
         return v / t_acc, 0.0, t_acc
     # with a jerk limit: for an acceleration phase of length t_acc the least peak acceleration reaching
-    # v = D / (Tb - t_acc) is the small root of a^2 / j - a t_acc + v = 0 (jerk phases a / j each)
-    t = np.linspace(0.0, Tb / 2, 4001)[1:]
-    v = D / (Tb - t)
+    # v = D / (Tb - t_acc) is the small root of a^2 / j - a t_acc + v = 0 (jerk phases a / j each). The speed
+    # grows with t_acc, so |v| <= v_max holds for t_acc <= Tb - D / v_max: the grid ends there (or at Tb / 2), so that
+    # its last point is the cruising profile at v_max, the only one left near the fastest time (a grid over
+    # (0, Tb / 2] missed that single point). A discriminant below 0 by rounding only (the profile without
+    # constant acceleration, disc = 0 exactly) counts as 0.
+    t_hi = min(Tb / 2, Tb - D / v_max)
+    if not t_hi > 0:
+        return None
+    t = np.linspace(0.0, t_hi, 4001)[1:]
+    v = np.minimum(D / (Tb - t), v_max)
     disc = t**2 - 4 * v / j_max
-    ok = (disc >= 0) & (v <= v_max * (1 + 1e-12))
+    disc = np.where((disc < 0) & (disc > -1e-12 * t**2), 0.0, disc)
+    ok = disc >= 0
     if not np.any(ok):
         return None
     a = np.where(ok, 0.5 * j_max * (t - np.sqrt(np.where(ok, disc, 0.0))), np.inf)
