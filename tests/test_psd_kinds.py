@@ -134,8 +134,39 @@ def test_bad_kind_and_window_are_refused():
         jb.identify_axis_from_psd(GRID, psd, 1, kind="accel")
     with pytest.raises(ValueError, match=r"parameter `window` must be one of 'none', 'hann', 'kaiser'"):
         jb.identify_axis_from_psd(GRID, psd, 1, window="hamming")
-    with pytest.raises(ValueError, match=r"parameter `resolution` must be finite and > 0 Hz"):
-        jb.identify_axis_from_psd(GRID, psd, 1, resolution=-1.0)
+    for bad in (-1.0, 0.0, float("nan"), 1e300, 8.0):  # 1 mode: 4 parameters, (299.75 - 2) / 40 = 7.444 Hz at most
+        with pytest.raises(ValueError, match=r"parameter `resolution` .* must be finite, > 0 and at most 7.444 Hz"):
+            jb.identify_axis_from_psd(GRID, psd, 1, resolution=bad)
+
+
+def test_covariance_of_a_nearly_unidentified_direction_is_the_full_inverse():
+    # a Jacobian with one singular value 1e-8 of the largest (a fitted floor that went to 0) whose direction mixes
+    # the others at 1e-8: their variances are those of numpy's inverse of J^T J, not infinite
+    from jaxbelt.shaping import identify as core
+
+    rng = np.random.default_rng(3)
+    u, _ = np.linalg.qr(rng.standard_normal((60, 4)))
+    v, _ = np.linalg.qr(np.eye(4) + 2e-8 * rng.standard_normal((4, 4)))
+    sv = np.array([30.0, 5.0, 4.0, 3e-7])
+    J = (u * sv) @ v.T
+    r = rng.standard_normal(60)
+    scale = np.array([1.0, 2.0, 0.5, 1.0])
+    cov = core._covariance(r, sv, v.T, scale, 4, 60)
+    ref = np.linalg.inv(J.T @ J) * (r @ r) / 56 * np.outer(scale, scale)
+    np.testing.assert_allclose(np.diag(cov), np.diag(ref), rtol=1e-6)
+
+
+@pytest.mark.parametrize("resolution", [0.249, 0.2491, 0.25, 0.26, 0.3])
+def test_bin_widths_near_the_grid_step_identify_the_mode(resolution):
+    # a Welch-like spectrum whose fitted floor goes to 0: every bin width near the grid's step identifies the mode
+    # (some gave "0 standard errors" when the floor's direction touched the amplitude by 2e-8)
+    rng = np.random.default_rng(0)
+    f = np.linspace(1.0, 200.0, 800)
+    r = f / 40.0
+    psd = rng.exponential(1.0, f.size) / ((1 - r**2) ** 2 + (2 * 0.03 * r) ** 2)
+    ax = jb.identify_axis_from_psd(f, psd, 1, window="hann", resolution=resolution)
+    assert float(ax.frequencies[0]) == pytest.approx(40.0, rel=0.01)
+    assert float(ax.damping_ratios[0]) == pytest.approx(0.03, rel=0.35)
 
 
 # --- Klipper's resonance test, end to end ---------------------------------------------------------------------

@@ -369,15 +369,27 @@ def _standard_errors(theta, r, sv, vt, scale, n: int, p: int):
 
 def _covariance(r, sv, vt, scale, p: int, n_obs: int) -> np.ndarray:
     """The covariance of the fit's coordinates $\\theta = \\theta_0 + $ `scale` $u$ from the residuals `r` and the
-    singular values `sv` and vectors `vt` of the Jacobian dr/du at the optimum: $C_u = s^2 (J^TJ)^{-1}$,
-    $s^2 = \\mathrm{SSR}/(N - p)$ with $N$ = `n_obs` observations; a direction whose singular value is below 1e-7
-    of the largest is unidentified: infinite variance."""
+    singular values `sv` and vectors `vt` of the Jacobian dr/du at the optimum: $C_u = s^2 (J^TJ)^{-1}
+    = s^2 \\sum_k v_k v_k^T / \\sigma_k^2$, $s^2 = \\mathrm{SSR}/(N - p)$ with $N$ = `n_obs` observations.
+
+    A direction whose singular value is below 1e-7 of the largest is nearly unidentified (e.g. a noise floor
+    fitted to 0): it adds its term in full, so the coordinates it is made of get their large variance and the
+    others, which it touches only by a rounding-level mixing, keep theirs (marking every coordinate the direction
+    touches by more than 1e-8 as unidentified made a well-resolved mode's amplitude "0 standard errors" at some
+    bin widths). A singular value of 0 (or one whose term overflows) gives an infinite variance to the
+    coordinates it holds by more than 1e-8."""
     s2 = float(r @ r) / (n_obs - p)
     keep = sv > 1e-7 * sv[0]
     cov_u = (vt[keep].T / sv[keep] ** 2) @ vt[keep] * s2
-    if keep.sum() < p:
-        free = np.any(np.abs(vt[~keep]) > 1e-8, axis=0)
-        cov_u[np.ix_(free, free)] = np.inf
+    for k in np.flatnonzero(~keep):
+        with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+            w = vt[k] / sv[k]
+            term = np.outer(w, w) * s2
+        if np.all(np.isfinite(term)):
+            cov_u = cov_u + term
+        else:
+            free = np.abs(vt[k]) > 1e-8
+            cov_u[np.ix_(free, free)] = np.inf
     return cov_u * np.outer(scale, scale)
 
 

@@ -400,8 +400,9 @@ def identify_axis_from_psd(
       file.
     - `window`: the estimate's window, whose smearing the model then carries: `"hann"`, `"kaiser"` (Klipper's,
       $\\beta$ = 6), `"none"` (an exact PSD, or one whose bins are far narrower than its peaks). None: `"kaiser"`
-      for Klipper's kinds, else `"none"`. `resolution`: the estimate's bin width [Hz] (rate / segment length);
-      None: the mean step of `f` in the band.
+      for Klipper's kinds, else `"none"`. `resolution`: the estimate's bin width [Hz] (rate / segment length),
+      > 0 and at most the band's width over `SAMPLES_PER_PARAMETER` bins per parameter; None: the mean step of `f`
+      in the band.
     - `band`: `(low, high)` [Hz]: fit only the points with low <= f <= high. None: all above 0 Hz, and for
       Klipper's kinds its default sweep, `KLIPPER_BAND` = 5-135 Hz (pass the sweep's `FREQ_START`, `FREQ_END`
       where they differ).
@@ -445,8 +446,15 @@ def identify_axis_from_psd(
     step = (fs[-1] - fs[0]) / (N - 1)
     if resolution is not None:
         resolution = float(resolution)
-        if not (math.isfinite(resolution) and resolution > 0):
-            raise ValueError(f"{owner}: parameter `resolution` must be finite and > 0 Hz; got {resolution}")
+        # each bin of the estimate is one independent value: the band must hold SAMPLES_PER_PARAMETER of them per
+        # fitted parameter, as it must hold that many points
+        widest = (hi - lo) / (_core.SAMPLES_PER_PARAMETER * p)
+        if not (math.isfinite(resolution) and 0 < resolution <= widest):
+            raise ValueError(
+                f"{owner}: parameter `resolution` (the estimate's bin width) must be finite, > 0 and at most "
+                f"{widest:.4g} Hz (the fitted band {lo:.6g}-{hi:.6g} Hz over {_core.SAMPLES_PER_PARAMETER} independent bins "
+                f"for each of the {p} parameters); got {resolution}"
+            )
     df = step if resolution is None else resolution
     # in units of the spectrum's median, and of the band's middle frequency
     fref = math.sqrt(fs[0] * fs[-1])
