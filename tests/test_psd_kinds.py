@@ -128,6 +128,17 @@ def test_welch_matches_scipy():
         assert k == 3
 
 
+def test_welch_default_segment_longer_than_the_record_names_rate():
+    y = np.random.default_rng(0).standard_normal(1000)
+    for rate in (1e300, 2001.0):  # half a second is more than 1000 samples
+        with pytest.raises(ValueError, match=r"shorter than half a second at parameter `rate` = .* Hz"):
+            jb.welch(y, rate)
+    with pytest.raises(ValueError, match=r"shorter than one segment \(`nperseg` = 1024\)"):
+        jb.welch(y, 2000.0)  # half a second is 1000 samples, the segment its power of two above
+    f, _, k = jb.welch(y, 1000.0)  # 512-sample segments: 257 bins of 1000 / 512 Hz, 2 segments
+    assert (f.size, k) == (257, 2) and f[1] == pytest.approx(1000.0 / 512)
+
+
 def test_bad_kind_and_window_are_refused():
     psd = force_spectrum(GRID, [40.0], [0.03], [1.0], 0, 1e-3)
     with pytest.raises(ValueError, match=r"parameter `kind` must be one of 'displacement'.*got 'accel'"):

@@ -140,6 +140,11 @@ def welch(y, rate: float, *, nperseg: int | None = None, window: str = "kaiser")
     if window not in ("kaiser", "hann"):
         raise ValueError(f"welch: parameter `window` must be 'kaiser' or 'hann'; got {window!r}")
     if nperseg is None:
+        if rate * 0.5 > y.size:  # also keeps a degenerate rate (1e300 Hz) from making a 300-digit segment length
+            raise ValueError(
+                f"welch: the record (`y`, {y.size} samples) is shorter than half a second at parameter `rate` = "
+                f"{rate:.6g} Hz (the default `nperseg`, Klipper's): give a shorter `nperseg` or check `rate`"
+            )
         nperseg = 1 << int(rate * 0.5 - 1).bit_length()
     nperseg = check_int("welch", "nperseg", nperseg, lo=8)
     if y.size < nperseg:
