@@ -330,6 +330,28 @@ def check_range(name: str, value, lo=None, hi=None, *, lo_open=False, hi_open=Fa
     _enforce(name, value, f"must lie in {_interval(lo, hi, lo_open, hi_open)}", unit, owner, ok)
 
 
+def available_bytes() -> int:
+    """The memory available to this process now [bytes] (Linux `sysconf`; 8 GiB where it cannot be read)."""
+    import os
+
+    try:
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):  # pragma: no cover - not Linux
+        return 8 << 30
+
+
+def check_fits(owner: str, name: str, nbytes: float, what: str) -> None:
+    """A `ValueError` naming parameter `name` where `what` would need `nbytes` [bytes], more than half the memory
+    available now: said at the call, before anything is allocated (not XLA's or numpy's out-of-memory error after
+    seconds of work)."""
+    avail = available_bytes()
+    if nbytes > avail / 2:
+        raise ValueError(
+            f"{owner}: parameter `{name}` makes {what} of about {nbytes / 1e9:.3g} GB, more than half the memory "
+            f"available ({avail / 1e9:.3g} GB): give a smaller `{name}`"
+        )
+
+
 def check_int(owner: str, name: str, value, lo: int = 1) -> int:
     """Refuse anything but an integer >= lo (a float or a bool is refused, not truncated); return it."""
     if isinstance(value, bool) or not isinstance(value, (numbers.Integral, np.integer)) or int(value) < lo:

@@ -277,6 +277,17 @@ _M593 = 'M593 P"custom" H0.5 T{}'
             ValueError,
             r"`max_points` must lie in \[2, 100000\]",
         ),
+        # 1e10 frequency factors (a view, no memory) asked for 1.28 TB after the copy to the device
+        (
+            lambda: jb.residual_curve(AX, jb.fastest_move(0.1, 0.3, 1.2), np.broadcast_to(1.0, (10**10,))),
+            ValueError,
+            r"residual_curve: parameter `factors` makes a curve of 2 x 1e\+10 points of about 1.28e\+03 GB, more than",
+        ),
+        (
+            lambda: jb.welch(np.zeros(100), 1e300),
+            ValueError,
+            r"shorter than half a second at parameter `rate` = 1e\+300 Hz",
+        ),
     ],
 )
 def test_held_out_firmware_and_calibration_inputs_are_refused_by_name(call, error, message):

@@ -21,7 +21,7 @@ import numpy as np
 from jax.scipy.special import gammaln
 from jax.typing import ArrayLike
 
-from .._checks import atleast_1d, check_positive, check_range, collecting, device_array
+from .._checks import atleast_1d, check_fits, check_positive, check_range, collecting, device_array
 from .._guard import checked, prepare, reraising, stored_jit
 from .._threads import blas_limited
 from .._xla import QUICK_COMPILE
@@ -131,6 +131,11 @@ def residual_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors: ArrayLi
         raise TypeError(f"residual_curve: `axis` must be a ModalAxis; got {type(axis).__name__}")
     if not isinstance(cmd, AbstractMotionCommand):
         raise TypeError(f"residual_curve: `cmd` must be a motion command; got {type(cmd).__name__}")
+    # the curve holds a complex value per mode, factor and command term: bounded before `factors` is copied
+    terms = cmd.times.shape[-1] if isinstance(cmd, PiecewiseMove) else 8
+    modes = int(np.prod(np.shape(axis.frequencies)))
+    size = int(np.prod(np.shape(factors)))
+    check_fits("residual_curve", "factors", 16.0 * size * modes * terms, f"a curve of {modes} x {size:.3g} points")
     r = atleast_1d(device_array(factors, dtype=float))
     if r.ndim != 1:
         raise ValueError(f"residual_curve: parameter `factors` must be a scalar or a 1-D array; got shape {r.shape}")
