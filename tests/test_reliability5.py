@@ -466,3 +466,33 @@ def test_tolerance_band_refuses_a_zero_reference_and_negative_values():
         jb.tolerance_band(w, -np.ones(21), 1.0, 2.0)
     # a V-shaped ratio |w - 2| / 10 crosses 0.05 at w = 1.5 and 2.5: the band is 1.0 rad/s wide, 0.5 of omega0
     assert jb.tolerance_band(w, np.abs(w - 2.0) * 0.1, 1.0, 2.0) == pytest.approx(0.5, rel=1e-12)
+
+
+# --- shape_move under the caller's transformations: traced impulses are checked where the move is used --------
+def _shaped_residual(amps, delays):
+    move = jb.shape_move(jb.fastest_move(0.1, 0.3, 1.2), amps, delays)
+    return jnp.sum(jb.residual_amplitudes(jb.ModalAxis([40.0], [0.05]), move))
+
+
+@pytest.mark.parametrize(
+    "amps, delays, name",
+    [
+        ([0.5, 0.5], [0.0, float("nan")], "delays"),
+        ([0.5, 0.5], [0.0, -0.01], "delays"),
+        ([1.5, 0.5], [0.0, 0.0125], "amplitudes"),  # sums to 2: twice the distance (was a finite residual)
+    ],
+)
+def test_shape_move_refuses_traced_impulses_by_name(amps, delays, name):
+    with pytest.raises(Exception, match=rf"shape_move: parameter `{name}` must be"):
+        jax.jit(_shaped_residual)(jnp.array(amps), jnp.array(delays))
+    with pytest.raises(Exception, match=rf"shape_move: parameter `{name}` must be"):
+        jax.vmap(_shaped_residual)(jnp.array([[0.5, 0.5], amps]), jnp.array([[0.0, 0.0125], delays]))
+
+
+def test_shape_move_traced_valid_impulses_match_the_concrete_move_and_differentiate():
+    A, d = jnp.array([0.5, 0.5]), 0.0125
+    ref = _shaped_residual([0.5, 0.5], [0.0, d])
+    assert float(jax.jit(_shaped_residual)(A, jnp.array([0.0, d]))) == pytest.approx(float(ref), rel=1e-12)
+    g = jax.grad(lambda x: _shaped_residual(A, jnp.stack([0.0, x])))(d)
+    fd = (_shaped_residual([0.5, 0.5], [0.0, d + 1e-6]) - _shaped_residual([0.5, 0.5], [0.0, d - 1e-6])) / 2e-6
+    assert float(g) == pytest.approx(float(fd), rel=1e-5)  # central difference, step 1e-6 s

@@ -34,7 +34,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._checks import as_float_array, check_positive, check_real, check_scalar, is_concrete
-from .._guard import prepare, stored_jit
+from .._guard import checked, prepare, stored_jit
 from .._threads import blas_limited
 from ..commands import AbstractMotionCommand
 
@@ -506,13 +506,25 @@ def fastest_move(distance, v_max, a_max, j_max=None) -> PiecewiseMove:
 
 
 @blas_limited
-def _check_impulses(owner: str, amplitudes, delays) -> None:
+def _check_impulses(owner: str, amplitudes, delays) -> list:
     """`ValueError`/`TypeError` naming `amplitudes` or `delays` unless they are an impulse sequence (see
-    `shape_move`); traced values pass unchecked."""
+    `shape_move`). Traced values (under the caller's jit/vmap/grad): their shapes are checked now, their values
+    returned as `(ok, message)` checks for `jaxbelt._guard.checked` to attach to the result."""
     check_real("amplitudes", amplitudes, "", owner)
     check_real("delays", delays, "s", owner)
     if not is_concrete((amplitudes, delays)):
-        return
+        A, tau = jnp.asarray(amplitudes, dtype=float), jnp.asarray(delays, dtype=float)
+        if tau.ndim != 1 or tau.shape[0] < 1 or A.shape != tau.shape:
+            raise ValueError(
+                f"{owner}: parameters `amplitudes` and `delays` must be 1-D arrays of one shape with at least one "
+                f"impulse; got shapes {A.shape} and {tau.shape}"
+            )
+        ok_tau = jnp.all(jnp.isfinite(tau)) & (tau[0] >= 0) & jnp.all(jnp.diff(tau) >= 0)
+        ok_a = jnp.all(jnp.isfinite(A)) & (jnp.abs(jnp.sum(A) - 1.0) <= 1e-9)
+        return [
+            (ok_tau, f"{owner}: parameter `delays` must be finite, non-negative and non-decreasing times [s]"),
+            (ok_a, f"{owner}: parameter `amplitudes` must be finite and sum to 1 (to 1e-9)"),
+        ]
     A, tau = np.asarray(amplitudes, dtype=float), np.asarray(delays, dtype=float)
     if tau.ndim != 1 or tau.size < 1 or not np.all(np.isfinite(tau)) or tau[0] < 0 or np.any(np.diff(tau) < 0):
         raise ValueError(
@@ -523,21 +535,25 @@ def _check_impulses(owner: str, amplitudes, delays) -> None:
         raise ValueError(
             f"{owner}: parameter `amplitudes` must be finite, one per delay {tau.shape}, and sum to 1; got {A.tolist()}"
         )
+    return []
 
 
 def shape_move(base: PiecewiseMove, amplitudes, delays) -> PiecewiseMove:
     """The move `base` convolved with an impulse sequence (`amplitudes` summing to 1 at `delays` [s], the first
     at 0): $a_s(t) = \\sum_i A_i\\,a(t - \\tau_i)$. The move lasts $T + \\tau_{last}$.
 
-    Concrete values are checked (`ValueError` naming them): `delays` finite, >= 0 and non-decreasing, `amplitudes`
-    finite, of the same length, summing to 1 (to 1e-9: another sum changes the distance)."""
-    _check_impulses("shape_move", amplitudes, delays)
+    Checked (`ValueError` naming them): `delays` finite, >= 0 and non-decreasing, `amplitudes` finite, of the same
+    length, summing to 1 (to 1e-9: another sum changes the distance). Traced values (under the caller's
+    jit/vmap/grad) are checked at run time: the returned move carries the checks, and an invalid impulse raises,
+    naming the parameter, where the move is used (never a silently longer or NaN move)."""
+    found = _check_impulses("shape_move", amplitudes, delays)
     A = jnp.asarray(amplitudes, dtype=float)
     tau = jnp.asarray(delays, dtype=float)
     times = (base.times[None, :] + tau[:, None]).ravel()
     steps = (base.steps[None, :] * A[:, None]).ravel()
     ramps = (base.ramps[None, :] * A[:, None]).ravel()
-    return PiecewiseMove(times, steps, ramps, base.duration + tau[-1])
+    move = PiecewiseMove(times, steps, ramps, base.duration + tau[-1])
+    return checked(move, checks=found) if found else move
 
 
 @stored_jit  # its run time counts in a warm design (20001 samples): XLA's default options
