@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import check_int, check_positive, check_scalar
+from ._checks import check_fits, check_int, check_positive, check_scalar
 from ._threads import blas_limited
 from .commands import ConstantVoltage, ExponentialVoltage
 from .models.fourbar import FourBarDrive
@@ -34,6 +34,11 @@ STARTUP_OUTPUTS = (
 )
 
 
+#: bytes a run holds per saved time, an upper estimate: the state and the observed outputs (about 16 columns of
+#: float64) in the solver's output, its host copy and the result's arrays
+BYTES_PER_SAVED_POINT = 512
+
+
 @blas_limited
 def startup_curves(model=None, gammas=(0.02, 0.04, 0.06), v_max=24.0, t_end=0.5, n_points=501, method="auto"):
     """The eight time histories of Incerti (2014), Fig. 3, for each voltage time constant, as numpy arrays.
@@ -50,6 +55,7 @@ def startup_curves(model=None, gammas=(0.02, 0.04, 0.06), v_max=24.0, t_end=0.5,
     """
 
     n_points = check_int("startup_curves", "n_points", n_points, 2)
+    check_fits("startup_curves", "n_points", BYTES_PER_SAVED_POINT * n_points, f"{n_points:.3g} saved times")
     check_scalar("t_end", t_end, "s", "startup_curves")
     check_positive("t_end", t_end, "s", "startup_curves")
     model = BeltStartup() if model is None else model
@@ -81,6 +87,7 @@ def simulate_fig4(drive=None, pid=None, *, voltage: float = 25.0, t1: float = 1.
     check_scalar("t1", t1, "s", "simulate_fig4")
     check_positive("t1", t1, "s", "simulate_fig4")
     n = check_int("simulate_fig4", "n", n, 2)
+    check_fits("simulate_fig4", "n", 2 * BYTES_PER_SAVED_POINT * n, f"{n:.3g} saved times of two runs")
     drive = FourBarDrive() if drive is None else drive
     pid = PID(kp=80.0, ki=32.0, kd=0.015, omega_ref=30.0) if pid is None else pid
     ts = jnp.linspace(0.0, float(t1), n)
@@ -109,6 +116,7 @@ def platform_response(platform, command, t_end: float | None = None, n: int = 90
     check_scalar("t_end", t_end, "s", "platform_response")
     check_positive("t_end", t_end, "s", "platform_response")
     n = check_int("platform_response", "n", n, 2)
+    check_fits("platform_response", "n", BYTES_PER_SAVED_POINT * n, f"{n:.3g} saved times")
     ts = jnp.linspace(0.0, float(t_end), n)
     sol = simulate(Scene(platform, command, ts=ts, observe=PLATFORM_OUTPUTS), method="ode", rtol=rtol, atol=atol)
     out = {"t": np.asarray(ts), "velocity": np.asarray(sol.omega)}

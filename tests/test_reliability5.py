@@ -284,6 +284,26 @@ _M593 = 'M593 P"custom" H0.5 T{}'
             r"residual_curve: parameter `factors` makes a curve of 2 x 1e\+10 points of about 1.28e\+03 GB, more than",
         ),
         (
+            lambda: jb.startup_curves(n_points=10**10),  # hung for minutes
+            ValueError,
+            r"startup_curves: parameter `n_points` makes 1e\+10 saved times of about 5.12e\+03 GB",
+        ),
+        (
+            lambda: jb.platform_response(jb.BeltPlatform(), jb.PseudoPolynomial([3.0, 4.0, 5.0]), n=10**10),
+            ValueError,
+            r"platform_response: parameter `n` makes 1e\+10 saved times",  # was XLA's out of memory after 64 s
+        ),
+        (
+            lambda: jb.harmonic_balance(jb.NonlinearBelt(), 9.0, 10**6),  # was numpy's MemoryError (29 TiB)
+            ValueError,
+            r"harmonic_balance: parameter `n_harmonics` makes a Newton system of 4e\+06 unknowns",
+        ),
+        (
+            lambda: jax.jit(lambda v: jb.kbm_amplitudes(jb.NonlinearBelt(), v))(9.0),  # was TracerArrayConversionError
+            TypeError,
+            r"kbm_amplitudes: its roots come from numpy.roots, on concrete values only",
+        ),
+        (
             lambda: jb.welch(np.zeros(100), 1e300),
             ValueError,
             r"shorter than half a second at parameter `rate` = 1e\+300 Hz",

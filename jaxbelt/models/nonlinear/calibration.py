@@ -22,7 +22,7 @@ import optimistix as optx
 from ..._checks import check_int, is_concrete
 from ..._guard import reraise_checks
 from ..._threads import blas_limited
-from .harmonic import fold_speeds, jumps
+from .harmonic import check_harmonics, fold_speeds, jumps
 from .model import NonlinearBelt
 
 __all__ = [
@@ -220,7 +220,7 @@ def calibrate(
         raise ValueError(f"{o}: parameter `free` names a field twice; got {free!r}")
     if not isinstance(amplitudes, bool):
         raise TypeError(f"{o}: parameter `amplitudes` must be True or False; got {amplitudes!r}")
-    n_harmonics = check_int(o, "n_harmonics", n_harmonics)
+    n_harmonics = check_harmonics(o, n_harmonics, belt.n_modes if isinstance(belt, NonlinearBelt) else 1)
     max_steps = check_int(o, "max_steps", max_steps)
     if not is_concrete(belt):
         raise ValueError(f"{o}: the start `belt` must hold concrete values (calibrate is not traced)")

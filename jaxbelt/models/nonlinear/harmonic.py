@@ -50,7 +50,16 @@ if TYPE_CHECKING:
 else:  # imported by the first trace only: a process that loads the stored programs never needs them
     lx, optx = lazy_module("lineax"), lazy_module("optimistix")
 
-from ..._checks import check_int, check_positive, check_real, collecting, device_array, is_concrete, record
+from ..._checks import (
+    check_fits,
+    check_int,
+    check_positive,
+    check_real,
+    collecting,
+    device_array,
+    is_concrete,
+    record,
+)
 from ..._display import Display, Table, fmt, fmt_list, require, with_unit
 from ..._guard import all_ok, guard, prepare, stored_jit, traced_checks
 from ..._threads import blas_limited
@@ -160,6 +169,16 @@ def _hb_point(belt, speed, Y0, H: int, max_steps: int):
 
 
 @blas_limited
+def check_harmonics(owner: str, n_harmonics, n_modes: int) -> int:
+    """`n_harmonics` as an int >= 1 whose Newton system fits in memory: $2N(2H+1)$ unknowns for N modes and H
+    harmonics, a dense Jacobian of their square (8 bytes each) and its factorisation's temporaries, at most half the
+    memory available (1e6 harmonics asked numpy for 29 TiB after the call had started)."""
+    H = check_int(owner, "n_harmonics", n_harmonics)
+    unknowns = 2.0 * n_modes * (2 * H + 1)
+    check_fits(owner, "n_harmonics", 4 * 8.0 * unknowns**2, f"a Newton system of {unknowns:.3g} unknowns")
+    return H
+
+
 def harmonic_balance(
     belt: NonlinearBelt, speed, n_harmonics: int = 3, guess=None, *, max_steps: int = 50, throw: bool = True
 ) -> HarmonicSolution:
@@ -172,7 +191,7 @@ def harmonic_balance(
     parameters raise `ValueError`; traced ones (a belt or speed inside jit/vmap/grad) raise at run
     time, naming the parameter (`throw=False`: `success=False` and NaN values).
     """
-    H = check_int("harmonic_balance", "n_harmonics", n_harmonics)
+    H = check_harmonics("harmonic_balance", n_harmonics, belt.n_modes)
     _check_equal_radii(belt)
     with collecting() as checks:  # concrete: raises now; traced: recorded, attached to the results below
         belt.check_speed(speed)
@@ -489,7 +508,7 @@ def _check_range_speeds(owner, belt, speed_range):
 
 def _fold_options(owner, belt, speed_range, n_harmonics, n_folds, max_points):
     """The checked options of the fold searches (`fold_speeds`, `jumps`): `(H, n_folds, max_points, v0, v1)`."""
-    H = check_int(owner, "n_harmonics", n_harmonics)
+    H = check_harmonics(owner, n_harmonics, belt.n_modes)
     _check_equal_radii(belt)
     n_folds = check_int(owner, "n_folds", n_folds)
     max_points = check_int(owner, "max_points", max_points, 2)
@@ -778,7 +797,7 @@ def response_curve(
     not reach the end of the range within `max_points` points.
     """
     o = "response_curve"
-    H = check_int(o, "n_harmonics", n_harmonics)
+    H = check_harmonics(o, n_harmonics, belt.n_modes)
     _check_equal_radii(belt)
     max_points = check_int(o, "max_points", max_points, 2)
     if max_points > MAX_CURVE_POINTS:

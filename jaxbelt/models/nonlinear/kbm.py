@@ -188,9 +188,16 @@ def kbm_coefficients(belt: NonlinearBelt, speed, n: int = 1):
 def kbm_amplitudes(belt: NonlinearBelt, speed, n: int = 1):
     """Real positive steady modal amplitudes $a$ of eq. (31) at one speed, ascending (1 or 3).
 
-    With three, the middle one is the saddle. Uses `numpy.roots` (not differentiable).
+    With three, the middle one is the saddle. Uses `numpy.roots` (not differentiable): concrete values only, a
+    `TypeError` under jit/vmap/grad says so.
     """
-    C = np.asarray(kbm_coefficients(belt, speed, n), dtype=float)
+    C = kbm_coefficients(belt, speed, n)
+    if not is_concrete(C):
+        raise TypeError(
+            "kbm_amplitudes: its roots come from numpy.roots, on concrete values only: call it outside jit/vmap/grad "
+            "(the `belt` and `speed` are traced here), or trace kbm_coefficients (the cubic's coefficients) instead"
+        )
+    C = np.asarray(C, dtype=float)
     if C[0] == 0.0:  # linear belt (v_l = 0): C1 a^2 + C0 = 0
         return np.sqrt(np.array([-C[3] / C[2]]))
     r = np.roots(C)
