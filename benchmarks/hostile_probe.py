@@ -80,6 +80,7 @@ def bt(*names):
 # independent references
 # =====================================================================================
 from references import (  # noqa: E402
+    fastest_time_reference,
     modal_residual_reference,
     piecewise_move_reference,
     spline_move_reference,
@@ -1595,7 +1596,105 @@ def cases():
     )
     add(Case("cli-shaping-j-max-0", "cli shaping", cli(*axis_args, "--j-max", "0"), opt("--j-max")))
     add(Case("cli-unknown-command", "cli", cli("belts"), ("argument COMMAND", "invalid choice")))
+
+    # --- round 5, held out (2): traced impulses, sizes before allocating, a long jerk-limited move, fit widths ---
+    mv = jb.fastest_move(0.1, 0.3, 1.2)
+    ax1 = jb.ModalAxis([40.0], [0.05])
+
+    def _shaped(a, d):
+        return jnp.sum(jb.residual_amplitudes(ax1, jb.shape_move(mv, a, d)))
+
+    add(
+        Case(
+            "shape-vmap-amps-sum-2",
+            "shape_move",
+            lambda: jax.vmap(_shaped)(jnp.array([[0.5, 0.5], [1.5, 0.5]]), jnp.array([[0.0, 0.0125], [0.0, 0.0125]])),
+            bt("amplitudes"),
+        )
+    )
+    add(
+        Case(
+            "shape-grad-delay-nan",
+            "shape_move",
+            lambda: jax.grad(lambda d: _shaped(jnp.array([0.5, 0.5]), jnp.stack([0.0, d])))(nan),
+            bt("delays"),
+        )
+    )
+    add(
+        Case(
+            "rc-factors-1e10",
+            "residual_curve",
+            lambda: jb.residual_curve(ax1, mv, np.broadcast_to(1.0, (10**10,))),
+            bt("factors"),
+        )
+    )
+    add(Case("startup-points-1e10", "startup_curves", lambda: jb.startup_curves(n_points=10**10), bt("n_points")))
+    pp = jb.PseudoPolynomial([3.0, 4.0, 5.0])
+    add(
+        Case(
+            "platform-n-1e10",
+            "platform_response",
+            lambda: jb.platform_response(jb.BeltPlatform(), pp, n=10**10),
+            bt("n"),
+        )
+    )
+    add(
+        Case(
+            "hb-harmonics-1e6",
+            "harmonic_balance",
+            lambda: jb.harmonic_balance(jb.NonlinearBelt(), 9.0, 10**6),
+            bt("n_harmonics"),
+        )
+    )
+    add(
+        Case(
+            "kbm-jit",
+            "kbm_amplitudes",
+            lambda: jax.jit(lambda v: jb.kbm_amplitudes(jb.NonlinearBelt(), v))(9.0),
+            ("kbm_amplitudes",),
+        )
+    )
+    add(Case("welch-rate-1e300", "welch", lambda: jb.welch(np.zeros(100), 1e300), bt("rate")))
+    add(
+        Case(
+            "fastest-jerk-long",
+            "fastest_move",
+            lambda: jb.fastest_move(0.5, 0.3, 1.2, 5.0),
+            (),
+            "result",
+            close_time(fastest_time_reference(0.5, 0.3, 1.2, 5.0)),
+        )
+    )
+    fr = np.linspace(1.0, 200.0, 800)
+    spec = np.random.default_rng(0).exponential(1.0, fr.size) / ((1 - (fr / 40) ** 2) ** 2 + (0.06 * fr / 40) ** 2)
+    add(
+        Case(
+            "psd-resolution-step",
+            "identify_axis_from_psd",
+            lambda: jb.identify_axis_from_psd(fr, spec, 1, window="hann", resolution=0.2491),
+            (),
+            "result",
+            lambda ax: np.testing.assert_allclose(float(ax.frequencies[0]), 40.0, rtol=0.01),
+        )
+    )
+    add(
+        Case(
+            "psd-resolution-1e300",
+            "identify_axis_from_psd",
+            lambda: jb.identify_axis_from_psd(fr, spec, 1, window="hann", resolution=1e300),
+            bt("resolution"),
+        )
+    )
     return C
+
+
+def close_time(expected, rtol=1.1e-6):
+    """A move whose duration is `expected` [s] (the closed-form fastest time), to `rtol`."""
+
+    def check(move):
+        np.testing.assert_allclose(float(move.duration), expected, rtol=rtol)
+
+    return check
 
 
 def check_shortest(target):

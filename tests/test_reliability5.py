@@ -505,7 +505,7 @@ def _shaped_residual(amps, delays):
 def test_shape_move_refuses_traced_impulses_by_name(amps, delays, name):
     with pytest.raises(Exception, match=rf"shape_move: parameter `{name}` must be"):
         jax.jit(_shaped_residual)(jnp.array(amps), jnp.array(delays))
-    with pytest.raises(Exception, match=rf"shape_move: parameter `{name}` must be"):
+    with pytest.raises(ValueError, match=rf"shape_move: parameter `{name}` must be"):  # eager vmap: re-raised
         jax.vmap(_shaped_residual)(jnp.array([[0.5, 0.5], amps]), jnp.array([[0.0, 0.0125], delays]))
 
 

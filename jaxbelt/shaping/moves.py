@@ -34,7 +34,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from .._checks import as_float_array, check_positive, check_real, check_scalar, is_concrete
-from .._guard import checked, prepare, stored_jit
+from .._guard import checked, prepare, reraising, stored_jit
 from .._threads import blas_limited
 from ..commands import AbstractMotionCommand
 
@@ -538,6 +538,7 @@ def _check_impulses(owner: str, amplitudes, delays) -> list:
     return []
 
 
+@reraising("shape_move")
 def shape_move(base: PiecewiseMove, amplitudes, delays) -> PiecewiseMove:
     """The move `base` convolved with an impulse sequence (`amplitudes` summing to 1 at `delays` [s], the first
     at 0): $a_s(t) = \\sum_i A_i\\,a(t - \\tau_i)$. The move lasts $T + \\tau_{last}$.
