@@ -252,12 +252,22 @@ class PseudoPolynomial(AbstractMotionCommand):
     displacement: FloatParam = param(
         15 * 2 * 3.141592653589793,
         unit="rad",
-        check="finite",
+        check="range",
+        lo=-1e9,
+        hi=1e9,
         symbol="$\\Phi$",
         default_note="15 rev",
         doc="total motor displacement",
     )
-    duration: FloatParam = param(1.0, unit="s", symbol="$T$", doc="motion time")
+    duration: FloatParam = param(
+        1.0,
+        unit="s",
+        check="range",
+        lo=1e-6,
+        hi=1e6,
+        symbol="$T$",
+        doc="motion time",
+    )
 
     def _check_relations(self, host):
         o = "PseudoPolynomial"

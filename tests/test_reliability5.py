@@ -304,6 +304,21 @@ _M593 = 'M593 P"custom" H0.5 T{}'
             r"kbm_amplitudes: its roots come from numpy.roots, on concrete values only",
         ),
         (
+            lambda: jb.PseudoPolynomial([3.0, 4.0, 5.0], displacement=1e300),  # its residual energy was inf
+            ValueError,
+            r"PseudoPolynomial: parameter `displacement` must lie in \[-1e\+09, 1e\+09\] rad",
+        ),
+        (
+            lambda: jb.PseudoPolynomial([3.0, 4.0, 5.0], duration=1e-300),
+            ValueError,
+            r"PseudoPolynomial: parameter `duration` must lie in \[1e-06, 1e\+06\] s",
+        ),
+        (
+            lambda: jb.shaped_commands(jb.BeltPlatform(), jb.PseudoPolynomial([3.0, 4.0, 5.0]), equal_time="no"),
+            TypeError,
+            r"shaped_commands: parameter `equal_time` must be True or False",  # "no" was read as True
+        ),
+        (
             lambda: jb.welch(np.zeros(100), 1e300),
             ValueError,
             r"shorter than half a second at parameter `rate` = 1e\+300 Hz",

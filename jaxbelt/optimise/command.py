@@ -684,6 +684,8 @@ def shaped_commands(plat, base: PseudoPolynomial, *, equal_time: bool = True) ->
     $2\\pi/\\omega_d$ for ZVD), so its peaks rise as $(T/T')$ and $(T/T')^2$. `equal_time=False`: the shaper is
     applied to `base` itself and lengthens the move by its own length. Raises ValueError when the shaper is as long
     as the move."""
+    if not isinstance(equal_time, bool | np.bool_):
+        raise TypeError(f"shaped_commands: parameter `equal_time` must be True or False; got {equal_time!r}")
     T = float(base.duration)
     out = {}
     for name, make in (("ZV", ShapedCommand.zv), ("ZVD", ShapedCommand.zvd)):
