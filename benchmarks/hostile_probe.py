@@ -1685,6 +1685,30 @@ def cases():
             bt("resolution"),
         )
     )
+    add(
+        Case(
+            "pp-displacement-1e300",
+            "PseudoPolynomial",
+            lambda: jb.PseudoPolynomial([3.0, 4.0, 5.0], displacement=1e300),
+            bt("displacement"),
+        )
+    )
+    add(
+        Case(
+            "pp-duration-1e-300",
+            "PseudoPolynomial",
+            lambda: jb.PseudoPolynomial([3.0, 4.0, 5.0], duration=1e-300),
+            bt("duration"),
+        )
+    )
+    add(
+        Case(
+            "shaped-equal-time-str",
+            "shaped_commands",
+            lambda: jb.shaped_commands(jb.BeltPlatform(), pp, equal_time="no"),
+            bt("equal_time"),
+        )
+    )
     return C
 
 
