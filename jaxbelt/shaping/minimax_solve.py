@@ -31,7 +31,8 @@ class _Minimax:
         return _design.make_problem(axis, distance, T, v_max, a_max, j_max, u, ref, self.opts)
 
     def feasible(self, T) -> bool:
-        return _design.max_distance(self.problem(T), self.opts) >= 1.0
+        problem = self.problem(T)
+        return _design.max_distance(problem, self.opts) >= 1.0
 
     def shortest_feasible(self, t_min):
         """The least time at which the spline can move the distance within the limits (bisection)."""
@@ -46,7 +47,8 @@ class _Minimax:
         return hi
 
     def design(self, T):
-        return _design.minimax_design(self.problem(T), self.opts)
+        problem = self.problem(T)
+        return _design.minimax_design(problem, self.opts)
 
     def prepare(self, T) -> None:
         """While the program store is on: start compiling, in the background, the programs a design at T runs and

@@ -540,7 +540,8 @@ def design_move(
     T = common_time(req, mm, rows)
     timed = timed_commands(req, ref_nominal, T)
     rows += minimax + measure_rows(req, ref, timed)
-    table, best = rank([_within_range(r, req.distance, req.x_range, req.rate_hz) for r in rows])
+    rows = [_within_range(r, req.distance, req.x_range, req.rate_hz) for r in rows]  # as executed, on the travel
+    table, best = rank(rows)
     user, per, damped = req.user, req.per, req.damping is not None
     return MovePlan(axis=user, distance=req.distance, move_time=T, v_max=req.v_max, a_max=req.a_max, j_max=req.j_max,
                     uncertainty=req.uncertainty, table=table, best=best, minimax=mm, continuous_bound=bound,
