@@ -1,5 +1,8 @@
-"""Candidates: the commands other than the convex design, each built on its own: the classic shapers, Incerti's
-pseudo-polynomials and the unshaped move (`design_move`'s table rows).
+"""Build the candidates: the commands other than the convex design, each built on its own, none measured (the
+classic shapers, Incerti's pseudo-polynomials and the unshaped move: `design_move`'s table rows).
+
+Each builder returns `(name, command or None, move time [s], note, ok)` per row, which
+`jaxbelt.shaping.measure.measure_rows` measures.
 """
 
 import math
@@ -8,140 +11,84 @@ import jax.numpy as jnp
 import numpy as np
 
 from .far_modes import _far_modes, _sub_axis
-from .measure import _row
-from .moves import (
-    _trapezoid_move,
-    fastest_time,
-    peaks,
-    shape_move,
-)
+from .moves import _trapezoid_move
 from .request import MoveRequest
-from .residual import residual_curve
-from .shapers import SHAPERS, ShaperRangeError, shaper_for_axis
+from .shaped import gentlest_shaped
+from .shapers import SHAPERS, ShaperRangeError
 
 
-def _shaped(axis, name, distance, T, v_max, a_max, j_max):
-    """The classic shaper `name` on the gentlest base that ends at T, or (None, shortest time).
-
-    The base is the gentlest within the limits; where none is, the gentlest whose *shaped* move is within them (a
-    shaper spreads the base's acceleration over its impulses: ZV halves the peak acceleration of a base whose
-    acceleration phase is shorter than its delay, so at a ZV-shaped move's own time and peaks the base exceeds
-    `a_max` while the shaped move does not)."""
-    A, tau = shaper_for_axis(name, axis.frequencies, axis.damping_ratios)
-    t_short = fastest_time(distance, v_max, a_max, j_max) + float(tau[-1])
-    if not T > tau[-1]:
-        return None, t_short
-    base = _trapezoid_move(distance, T - tau[-1], v_max, a_max, j_max)
-    if base is not None:
-        return shape_move(base, A, tau), t_short
-    relax = 1.0 / float(np.min(np.asarray(A)))  # a shaped peak is at least min(A) times the base's
-    base = _trapezoid_move(distance, T - tau[-1], v_max, a_max * relax, None if j_max is None else j_max * relax)
-    if base is None:
-        return None, t_short
-    cmd = shape_move(base, A, tau)
-    pv, pa, pj = peaks(cmd)
-    tol = 1 + 1e-9
-    if pv > v_max * tol or pa > a_max * tol or (j_max is not None and pj > j_max * tol):
-        return None, t_short
-    return cmd, t_short
-
-
-def _members(nominal, d, T, v_max, a_max, j_max) -> dict:
-    """The candidates the minimax design's command space holds at move time `T` [s]: every classic shaper buildable
-    on `nominal` within the limits (`_shaped`), and the unshaped move: `{name: command}`."""
-    out = {}
-    for name in SHAPERS:
+def classic_commands(req: MoveRequest) -> list:
+    """The classic shapers `req.include` names, each on the gentlest base that ends at the move time (with
+    `move_time` None: at its own shortest time); a firmware fit beyond its damping range is listed, not built."""
+    out = []
+    for name in (n for n in SHAPERS if n in req.include):
         try:
-            cmd, _ = _shaped(nominal, name, d, T, v_max, a_max, j_max)
-        except ShaperRangeError:
+            cmd, T, t_short = gentlest_shaped(name, req.nominal, req.distance, req.move_time, req.t_min, req.v_max,
+                                              req.a_max, req.j_max)  # fmt: skip
+        except ShaperRangeError as e:
+            out.append((name, None, math.nan if req.move_time is None else req.move_time, e.note, False))
             continue
-        if cmd is not None:
-            out[name] = cmd
-    base = _trapezoid_move(d, T, v_max, a_max * (1 + 1e-9), j_max)
-    if base is not None:
-        out["unshaped"] = base
+        note = "" if cmd is not None else f"infeasible: needs a move time >= {t_short:.4g} s"
+        out.append((name, cmd, T if cmd is not None else t_short, note, cmd is not None))
     return out
 
 
-def _pseudo_rows(axis, ref_design, measure_axis, ref, per, d, T, v_max, a_max, j_max, u, limits, progress):
-    """Incerti's commands designed on `axis` (references `ref_design`), measured on `measure_axis` (`ref`; with a
-    damping range, `per` damping copies of each mode of `axis`; the design on the expanded axis would cost a
-    program per size for little: the exponents are few)."""
+def common_time(req: MoveRequest, mm, classic: list) -> float:
+    """The move time of the pseudo-polynomials and the unshaped move [s]: the given one, else the minimax design's
+    (`mm`), else the shortest usable classic shaper's (measured rows `classic`; twice the time-optimal move's
+    without one)."""
+    if req.move_time is not None:
+        return req.move_time
+    if mm is not None:
+        return float(mm.command.duration)
+    return min((r.move_time for r in classic if r.ok and r.name in SHAPERS), default=2 * req.t_min)
+
+
+def timed_commands(req: MoveRequest, ref_nominal, T: float) -> list:
+    """The candidates of the common move time `T` [s] (`common_time`): Incerti's commands (`pseudo_commands`) and
+    the unshaped move: the time-optimal one with `move_time` None, else the gentlest trapezoid (S-curve) of `T`."""
+    out = pseudo_commands(req, ref_nominal, T)
+    if "unshaped" not in req.include:
+        return out
+    if req.move_time is None:
+        return [*out, ("unshaped (time-optimal)", req.ref_cmd, float(req.ref_cmd.duration), "", True)]
+    return [*out, ("unshaped", _trapezoid_move(req.distance, T, req.v_max, req.a_max, req.j_max), T, "", True)]
+
+
+def pseudo_commands(req: MoveRequest, ref_nominal, T: float) -> list:
+    """Incerti's commands at move time `T` [s], designed on `req.nominal` (references `ref_nominal` [m], at the
+    nominal damping; with a damping range the design on the expanded axis would cost a program per size for
+    little: the exponents are few)."""
+    if "pseudo-polynomial" not in req.include:
+        return []
     try:
         from .pseudo import pseudo_polynomial_designs
     except ImportError:  # pragma: no cover - the module is part of the package
         return []
-    out = []
+    axis = req.nominal
     # a pseudo-polynomial is smooth: its exponents are optimised on the modes within the knots' reach (as the smooth
     # minimax design's), the far ones measured with the others (their quadrature needs ~2.5 omega T nodes: a 1 MHz
     # mode would cap it, and slow it, for nothing)
-    far = _far_modes(axis, T, u, j_max, True, True)
+    far = _far_modes(axis, T, req.uncertainty, req.j_max, True, True)
     kept = np.asarray(far.kept if far.kept else range(axis.n_modes), dtype=int)
+    without = ""
+    if far.kept and far.far:
+        without = f"exponents optimised without mode(s) {', '.join(str(i + 1) for i in far.far)}"
+        axis = _sub_axis(axis, kept)
     designs = pseudo_polynomial_designs(
-        _sub_axis(axis, kept) if far.kept and far.far else axis,
-        d,
+        axis,
+        req.distance,
         T,
-        v_max=v_max,
-        a_max=a_max,
-        j_max=j_max,
-        uncertainty=u,
-        reference=jnp.asarray(ref_design[kept]),
-        progress=progress,
+        v_max=req.v_max,
+        a_max=req.a_max,
+        j_max=req.j_max,
+        uncertainty=req.uncertainty,
+        reference=jnp.asarray(np.asarray(ref_nominal)[kept]),
+        progress=req.progress,
     )
+    out = []
     for name, pd in designs.items():
         ok = bool(pd.converged) and bool(pd.within_limits)
-        note = "" if ok else pd.message
-        if far.kept and far.far:
-            note = "; ".join(
-                [
-                    *([note] if note else []),
-                    f"exponents optimised without mode(s) {', '.join(str(i + 1) for i in far.far)}",
-                ]
-            )
-        out.append(_row(name, measure_axis, pd.command, T, ref, u, limits, note=note, ok=ok, per=per))
+        note = "; ".join(q for q in ("" if ok else pd.message, without) if q)
+        out.append((name, pd.command, T, note, ok))
     return out
-
-
-def classic_rows(req: MoveRequest, ref) -> list:
-    """The rows of the classic shapers `req.include` names, each on the gentlest base that ends at the move time
-    (with `move_time` None: at its own shortest time); a firmware fit beyond its damping range is listed, not built."""
-    rows = []
-    for name in (n for n in SHAPERS if n in req.include):
-        try:
-            tau_end = float(shaper_for_axis(name, req.nominal.frequencies, req.nominal.damping_ratios)[1][-1])
-        except ShaperRangeError as e:
-            T = math.nan if req.move_time is None else req.move_time
-            rows.append(_row(name, req.axis, None, T, ref, req.uncertainty, req.limits, e.note, False, req.per))
-            continue
-        T = req.move_time
-        if T is None:  # its own shortest time
-            T = fastest_time(req.distance, req.v_max, req.a_max, req.j_max) + tau_end
-        cmd, t_short = _shaped(req.nominal, name, req.distance, T * (1 + 1e-12 * (req.move_time is None)),
-                               req.v_max, req.a_max, req.j_max)  # fmt: skip
-        note = "" if cmd is not None else f"infeasible: needs a move time >= {t_short:.4g} s"
-        T = T if cmd is not None else t_short
-        rows.append(_row(name, req.axis, cmd, T, ref, req.uncertainty, req.limits, note, cmd is not None, req.per))
-    return rows
-
-
-def pseudo_rows(req: MoveRequest, ref, ref_cmd, T: float) -> list:
-    """Incerti's commands at move time `T` [s], designed at the nominal damping (the references there)."""
-    if "pseudo-polynomial" not in req.include:
-        return []
-    nominal, per = req.nominal, req.per
-    ref_nominal = ref if per == 1 else np.max(np.asarray(residual_curve(nominal, ref_cmd, req.band)), axis=1)
-    return _pseudo_rows(nominal, ref_nominal, req.axis, ref, per, req.distance, T, req.v_max, req.a_max, req.j_max,
-                        req.uncertainty, req.limits, req.progress)  # fmt: skip
-
-
-def unshaped_rows(req: MoveRequest, ref, ref_cmd, T: float) -> list:
-    """The unshaped move: the time-optimal one with `move_time` None, else the gentlest trapezoid (S-curve) of `T`."""
-    if "unshaped" not in req.include:
-        return []
-    if req.move_time is None:
-        T_ref = float(ref_cmd.duration)
-        return [
-            _row("unshaped (time-optimal)", req.axis, ref_cmd, T_ref, ref, req.uncertainty, req.limits, per=req.per)
-        ]
-    base = _trapezoid_move(req.distance, T, req.v_max, req.a_max, req.j_max)
-    return [_row("unshaped", req.axis, base, T, ref, req.uncertainty, req.limits, per=req.per)]

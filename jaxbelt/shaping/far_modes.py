@@ -8,16 +8,15 @@ import numpy as np
 
 from ..models.axis import ModalAxis
 from . import design as _design
-from .measure import _measure_grids, _mode_label
-from .residual import residual_curve
+from .bands import mode_label
 
 
-def _minimax_options(axis, T_guess: float, u: float, j_max, fixed_time: bool, smooth: bool = True):
-    """The minimax design's options: 6 knots per cycle of the highest mode at a given move time, 12 when the
-    shortest time is searched; the spline basis (`smooth`), else acceleration ramps (piecewise-constant jerk) with a
-    jerk limit `j_max`, acceleration steps without one."""
+def _minimax_options(freqs, T_guess: float, u: float, j_max, fixed_time: bool, smooth: bool = True):
+    """The minimax design's options for the modes of frequencies `freqs` [Hz]: 6 knots per cycle of the highest mode
+    at a given move time, 12 when the shortest time is searched; the spline basis (`smooth`), else acceleration ramps
+    (piecewise-constant jerk) with a jerk limit `j_max`, acceleration steps without one."""
     basis = "spline" if smooth else ("steps" if j_max is None else "ramps")
-    return _design.default_options(axis.frequencies, T_guess, u, j_max is not None, 6.0 if fixed_time else 12.0, basis)
+    return _design.default_options(freqs, T_guess, u, j_max is not None, 6.0 if fixed_time else 12.0, basis)
 
 
 #: the damping exponent (zeta omega (1 + u) h, times d + 1 for a basis of degree d) beyond which the steps leave a far
@@ -78,8 +77,7 @@ def _far_modes(axis: ModalAxis, T: float, u: float, j_max, fixed_time: bool, smo
         left = tuple((i, why.format(lo=f[i] * (1 - u), hi=f[i] * (1 + u))) for i in far)
         return _FarModes(tuple(resolved), far, left, nyq)
     # the steps' intervals: those the resolved modes set (the least count without them)
-    sub = _sub_axis(axis, resolved) if resolved else axis
-    opts = _minimax_options(sub, T, u, j_max, fixed_time, smooth)
+    opts = _minimax_options(f[resolved] if resolved else f, T, u, j_max, fixed_time, smooth)
     h = T / opts.n_knots
     power = _design._DEGREE[opts.basis] + 1.0  # the kernel's phi1 power (`design.lp_data_grouped`)
     expo = power * z * 2.0 * np.pi * f * (1.0 + u) * h
@@ -113,20 +111,26 @@ def lp_setup(
 ) -> LPSetup:
     """The minimax design's LP on `axis` at (about) move time `T` [s] (band ±`u`): the modes it leaves out
     (`_far_modes`; with `refuse`, the `ValueError` of `_refuse_all_far` where it would weigh none), the axis of the
-    modes it keeps and its options (`_minimax_options` on `_knots_axis`), in one call."""
+    modes it keeps and its options (`_minimax_options`: knots set by `_knots_modes`), in one call."""
     far = _far_modes(axis, T, u, j_max, fixed_time, smooth)
-    if refuse:
+    if refuse and not far.kept:
         _refuse_all_far(axis, T, u, far, per)
-    lp_axis = _sub_axis(axis, far.kept) if far.left_out else axis
-    opts = _minimax_options(_knots_axis(axis, far), T, u, j_max, fixed_time=fixed_time, smooth=smooth)
-    return LPSetup(far, lp_axis, np.asarray(far.kept, dtype=int), opts)
+    idx = np.asarray(far.kept, dtype=int)
+    knots = np.asarray(axis.frequencies)[_knots_modes(axis.n_modes, far)]
+    basis = "spline" if smooth else ("steps" if j_max is None else "ramps")  # as `_minimax_options`
+    opts = _design.default_options(knots, T, u, j_max is not None, 6.0 if fixed_time else 12.0, basis)
+    if not far.left_out:
+        return LPSetup(far, axis, idx, opts)
+    f, z, g = (np.asarray(q)[idx] for q in (axis.frequencies, axis.damping_ratios, axis.gains))
+    return LPSetup(far, ModalAxis(f, z, g), idx, opts)  # the modes it keeps (`_sub_axis`)
 
 
-def _knots_axis(axis: ModalAxis, far: _FarModes) -> ModalAxis:
-    """The modes that set the minimax design's discretisation (knots, grid): those the knots resolve, when there are
-    any (a far mode the steps keep in their LP does not force the finest grid, which resolves it no better)."""
-    resolved = [i for i in range(axis.n_modes) if i not in far.far]
-    return _sub_axis(axis, resolved) if far.far and resolved else axis
+def _knots_modes(n_modes: int, far: _FarModes) -> np.ndarray:
+    """The indices of the modes that set the minimax design's discretisation (knots, grid): those the knots resolve,
+    when there are any (a far mode the steps keep in their LP does not force the finest grid, which resolves it no
+    better)."""
+    resolved = [i for i in range(n_modes) if i not in far.far]
+    return np.asarray(resolved if far.far and resolved else range(n_modes), dtype=int)
 
 
 def _refuse_all_far(axis: ModalAxis, T: float, u: float, far: _FarModes, per: int = 1) -> None:
@@ -137,22 +141,7 @@ def _refuse_all_far(axis: ModalAxis, T: float, u: float, far: _FarModes, per: in
     raise ValueError(
         f"design_move: every mode of parameter `axis` ({freqs} Hz) lies far above what the minimax design resolves "
         f"in a {T:.4g} s move (band ±{u:g}; Nyquist frequency of its finest grid {far.nyquist_hz:.4g} Hz): "
-        + "; ".join(f"{_mode_label(axis, i, per)}: {why}" for i, why in far.left_out)
+        + "; ".join(f"{mode_label(axis, i, per)}: {why}" for i, why in far.left_out)
         + ". Leave 'minimax' out of `include` (the classic shapers still apply), give a longer `move_time`, or "
         "check the frequencies' unit (Hz)"
     )
-
-
-def _far_note(axis: ModalAxis, cmd, ref, u: float, far: _FarModes, per: int = 1) -> str:
-    """The minimax row's words on the modes left out of its LP: which, why, and the worst residual the command leaves
-    them over their band, computed exactly (closed form) on the full axis, in % of the unshaped move's."""
-    if not far.left_out:
-        return ""
-    band = _measure_grids(u)[0]
-    ratio = np.asarray(residual_curve(axis, cmd, band)) / np.asarray(ref)[:, None]
-    f = np.asarray(axis.frequencies, dtype=float)
-    parts = [
-        f"{_mode_label(axis, i, per)} ({f[i]:.6g} Hz; {why}): {100.0 * float(np.max(ratio[i])):.2g} % (exact)"
-        for i, why in far.left_out
-    ]
-    return "left out of the LP, their residual computed for this command: " + "; ".join(parts)

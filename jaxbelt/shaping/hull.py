@@ -157,3 +157,20 @@ def best_blend(axis: ModalAxis, members, reference, factors, rate_hz: float, ble
             if worst < best * (1 - _GAIN):
                 best_w, best = w, worst
     return best_w, best, member_worst
+
+
+def jumps_reason(primary, space, axis, ref, band, rate) -> str:
+    """Why `smooth="auto"` adds the design with jumps ("" when it does not): the smooth minimax row is missing, not
+    feasible or not converged, or a classic shaped move (whether or not the table shows it) or the unshaped move
+    leaves no more than it, as executed (`space`: `shaped.shaped_members`; `rate`: the drive's setpoint rate [Hz])."""
+    if primary is None or not primary.ok or not math.isfinite(primary.worst_percent):
+        return "added: the smooth design is not feasible or not converged at this time"
+    names = list(space)
+    _, _, worst = best_blend(axis, [primary.command, *space.values()], ref, band, rate, blend=False)
+    k = int(np.argmin(worst[1:]))
+    if worst[1 + k] > worst[0]:
+        return ""
+    return (
+        f"added: {names[k]} leaves {100 * worst[1 + k]:.3g} % <= the smooth design's {100 * worst[0]:.3g} % (as "
+        f"executed at {rate:g} Hz)"
+    )

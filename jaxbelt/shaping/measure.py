@@ -11,21 +11,18 @@ from typing import Any
 import numpy as np
 
 from ..commands import AbstractMotionCommand
-from ..models.axis import ModalAxis
-from .hull import positions, sample_times
+from .bands import _N_WIDE as _N_WIDE
+from .bands import _WIDE as _WIDE
+from .bands import JUMPS, measure_grids, mode_label
+from .hull import best_blend, positions, sample_times
 from .moves import (
     PiecewiseMove,
-    fastest_move,
+    blend_moves,
     padded,
     peaks,
 )
-from .request import _N_BAND, MoveRequest
+from .request import MoveRequest
 from .residual import residual_curve, tolerance_band
-
-_WIDE = (0.5, 1.5)
-
-
-_N_WIDE = 501
 
 
 @dataclasses.dataclass(frozen=True)
@@ -74,21 +71,13 @@ class Candidate:
         return d
 
 
-def _mode_label(axis: ModalAxis, i: int, per: int) -> str:
-    """Mode `i` of an axis with `per` damping copies per mode of the user's, as the user numbers it."""
-    if per == 1:
-        return f"mode {i + 1}"
-    return f"mode {i // per + 1} at ζ = {float(np.asarray(axis.damping_ratios)[i]):.3g}"
-
-
-def _measure_grids(u: float):
-    """The frequency factors `_measure` evaluates a command's residual on: the band ±u, and the wide range."""
-    return (np.linspace(1 - u, 1 + u, _N_BAND) if u > 0 else np.ones(1)), np.linspace(*_WIDE, _N_WIDE)
-
-
-def _measure(axis, cmd, ref, u, limits, per: int = 1) -> tuple[dict[str, Any], bool]:
-    """The table's numbers for one command (`per`: damping copies of each user mode in `axis`)."""
-    band, wide = _measure_grids(u)
+def _measure(axis, cmd, ref, u, limits, per: int = 1, size: int = 0) -> tuple[Any, dict[str, Any], bool]:
+    """The table's numbers for one command (`per`: damping copies of each user mode in `axis`), a `PiecewiseMove`
+    padded to `size` terms first: `(command, numbers, within the limits)`."""
+    if isinstance(cmd, PiecewiseMove):  # shaped on the user's modes: padded to their size
+        cmd = padded(cmd, size)
+    pv, pa, pj = peaks(cmd)
+    band, wide = measure_grids(u)
     res = np.asarray(residual_curve(axis, cmd, band))  # (modes, K)
     ratio = res / ref[:, None]
     wr = np.asarray(residual_curve(axis, cmd, wide)) / ref[:, None]
@@ -100,20 +89,23 @@ def _measure(axis, cmd, ref, u, limits, per: int = 1) -> tuple[dict[str, Any], b
         sides = np.array([tolerance_band(wide, wr[k], 0.05) for k in range(i, i + per)], dtype=float)
         lo, hi = float(np.max(sides[:, 0])), float(np.min(sides[:, 1]))  # NaN propagates
         bands.append((lo * f[i], hi * f[i]) if per == 1 or lo <= hi else (math.nan, math.nan))
-    pv, pa, pj = peaks(cmd)
     v_max, a_max, j_max = limits
     within = pv <= v_max * (1 + 1e-6) and pa <= a_max * (1 + 1e-6) and (j_max is None or pj <= j_max * (1 + 1e-6))
     outside = (wide < 1.0 - u) | (wide > 1.0 + u)
-    return dict(
-        outside_percent=100.0 * float(wr[:, outside].max()) if outside.any() else math.nan,
-        worst_percent=100.0 * float(ratio.max()),
-        mean_percent=100.0 * float(ratio.mean()),
-        worst_m=float(res.max()),
-        band_hz=tuple(bands),
-        peak_v=pv,
-        peak_a=pa,
-        peak_j=pj,
-    ), within
+    return (
+        cmd,
+        dict(
+            outside_percent=100.0 * float(wr[:, outside].max()) if outside.any() else math.nan,
+            worst_percent=100.0 * float(ratio.max()),
+            mean_percent=100.0 * float(ratio.mean()),
+            worst_m=float(res.max()),
+            band_hz=tuple(bands),
+            peak_v=pv,
+            peak_a=pa,
+            peak_j=pj,
+        ),
+        within,
+    )
 
 
 def _pad_size(n_modes: int, jerk: bool, terms: int) -> int:
@@ -128,18 +120,68 @@ def _pad_size(n_modes: int, jerk: bool, terms: int) -> int:
 def _row(name, axis, cmd, T, ref, u, limits, note="", ok=True, per: int = 1):
     """One candidate measured on `axis` (with `per` damping copies of each of the user's modes)."""
     n_user = axis.n_modes // per
-    if isinstance(cmd, PiecewiseMove):  # shaped on the user's modes: padded to their size
-        cmd = padded(cmd, _pad_size(n_user, limits[2] is not None, cmd.times.shape[0]))
+    size = _pad_size(n_user, limits[2] is not None, cmd.times.shape[0]) if isinstance(cmd, PiecewiseMove) else 0
     if cmd is None:
         nan = math.nan
         return Candidate(
             name, None, T, nan, nan, nan, tuple((nan, nan) for _ in range(n_user)), nan, nan, nan, False, note
         )
-    m, within = _measure(axis, cmd, ref, u, limits, per)
+    cmd, m, within = _measure(axis, cmd, ref, u, limits, per, size)
     if not within:
         ok = False
         note = (note + "; " if note else "") + "exceeds the limits"
     return Candidate(name, cmd, float(T), ok=ok, note=note, **m)
+
+
+def design_row(name: str, mm, T: float, note: str, ok: bool, far, req: MoveRequest, ref) -> Candidate:
+    """The table row of a minimax design `mm` (`note`, `ok`: its certificate, `minimax_solve.certificate`; None: no
+    design at move time `T` [s], `note` says why), measured as every candidate is (`_row`), its note then naming the
+    modes its LP left out (`far`, a `far_modes._FarModes`) with their residual, computed exactly for this command."""
+    axis, u, per = req.axis, req.uncertainty, req.per
+    cmd, T = (None, T) if mm is None else (mm.command, float(mm.command.duration))
+    row = _row(name, axis, cmd, T, ref, u, req.limits, note=note, ok=ok, per=per)
+    if row.command is None or not far.left_out:
+        return row
+    band = measure_grids(u)[0]
+    ratio = np.asarray(residual_curve(axis, row.command, band)) / np.asarray(ref)[:, None]
+    f = np.asarray(axis.frequencies, dtype=float)
+    parts = [
+        f"{mode_label(axis, i, per)} ({f[i]:.6g} Hz; {why}): {100.0 * float(np.max(ratio[i])):.2g} % (exact)"
+        for i, why in far.left_out
+    ]
+    words = "left out of the LP, their residual computed for this command: " + "; ".join(parts)
+    return dataclasses.replace(row, note=row.note + "; " + words)
+
+
+def blended_rows(req: MoveRequest, ref, rows: list, space: dict) -> list:
+    """`rows` with each minimax row replaced by the least worst residual, as executed at `req.rate_hz` [Hz], of the
+    blends of its design with the designs with jumps of the table and the members of `space`
+    (`shaped.shaped_members`; `jaxbelt.shaping.hull`): at most what each of them leaves, by construction. The row's
+    note says which blend it is. A minimax row whose design is infeasible or did not converge is kept as it is (not
+    ok, its note says why): a blend of the other candidates alone is not that design, and the table shows those
+    candidates' own rows."""
+    axis, u, limits, per, band, rate = req.axis, req.uncertainty, req.limits, req.per, req.band, req.rate_hz
+    designs = {r.name: r.command for r in rows if r.name in ("minimax", JUMPS) and r.ok and r.command is not None}
+    out = []
+    for r in rows:
+        if r.name not in designs:  # not a minimax row, or one whose design failed: it keeps its own verdict
+            out.append(r)
+            continue
+        keys = [n for n in designs if n in (r.name, JUMPS)]
+        names, cmds = keys + list(space), [designs[n] for n in keys] + list(space.values())
+        w, worst, each = best_blend(axis, cmds, ref, band, rate)
+        parts = ", ".join(f"{names[i]} {w[i]:.3g}" for i in np.flatnonzero(w))
+        note = (
+            f"its command space holds every classic shaped move and the unshaped move: the blend {parts} leaves "
+            f"{100 * worst:.3g} % as executed at {rate:g} Hz (the design alone {100 * each[0]:.3g} %; the least of "
+            f"the others {100 * float(np.min(each[1:])):.3g} %)"
+        )
+        if w[0] == 1.0:
+            out.append(dataclasses.replace(r, note=r.note + "; " + note))
+            continue
+        cmd = blend_moves(cmds, w)
+        out.append(_row(r.name, axis, cmd, float(cmd.end_time), ref, u, limits, note=r.note + "; " + note, per=per))
+    return out
 
 
 #: how far [fraction of the distance] a command may leave the segment between its start and its end before the
@@ -167,8 +209,19 @@ def _within_range(row, d: float, x_range, rate: float):
     return dataclasses.replace(row, ok=ok, note="; ".join([row.note, *notes] if row.note else notes))
 
 
+def measure_rows(req: MoveRequest, ref, built) -> list:
+    """Every built candidate measured the same way (`_row`) on `req.axis` against the references `ref` [m]:
+    `built` holds `(name, command or None, move time [s], note, ok)` (`jaxbelt.shaping.candidates`)."""
+    axis, u, limits, per = req.axis, req.uncertainty, req.limits, req.per
+    return [_row(name, axis, cmd, T, ref, u, limits, note, ok, per) for name, cmd, T, note, ok in built]
+
+
 def reference(req: MoveRequest):
-    """The time-optimal unshaped move (what a planner runs without shaping) and its worst residual over the band of
-    each mode of `req.axis` [m]: `(move, references)`, every row's reference."""
-    ref_cmd = fastest_move(req.distance, req.v_max, req.a_max, req.j_max)
-    return ref_cmd, np.max(np.asarray(residual_curve(req.axis, ref_cmd, req.band)), axis=1)
+    """The worst residual over the band of each mode of `req.axis` [m] that the time-optimal unshaped move
+    (`req.ref_cmd`, what a planner runs without shaping) leaves: every row's reference; and, with damping copies
+    (`req.per` > 1) and "pseudo-polynomial" in `req.include`, the same on the nominal axis the pseudo-polynomials are
+    designed on (else the references themselves): `(references, nominal references)`."""
+    ref = np.max(np.asarray(residual_curve(req.axis, req.ref_cmd, req.band)), axis=1)
+    if req.per == 1 or "pseudo-polynomial" not in req.include:
+        return ref, ref
+    return ref, np.max(np.asarray(residual_curve(req.nominal, req.ref_cmd, req.band)), axis=1)

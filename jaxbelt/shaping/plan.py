@@ -28,6 +28,73 @@ unshaped move's residual at that damping, and the minimax design minimises the w
 With `move_time=None`, each classic shaper runs at its own shortest time (time-optimal base + shaper length),
 the best of them (least worst residual) sets the target, and the minimax design is placed at the shortest move
 time at which it reaches that target (bisection on the time).
+
+**Damping ranges** (`damping`): None (default): every mode at its own damping ratio. `(lo, hi)` (damping ratios, 0
+<= lo <= hi < 1): every mode's damping ratio may be anywhere in [lo, hi]; the axis' own one, which must lie in it,
+is then used only to design the classic shapers and the pseudo-polynomials. Each mode is judged at `N_DAMPING` = 5
+damping samples spanning the range (both ends; geometric spacing when lo > 0, `damping_samples`), each against the
+unshaped move's worst residual at that damping, so `worst_percent` is the worst over band × damping range and the
+minimax design minimises it. `"unknown"`: the range (0.01, 0.1) (`UNKNOWN_DAMPING`), and the classic shapers and
+pseudo-polynomials are designed at damping ratio 0.1 for every mode, as Klipper does for an axis whose damping is
+not measured (its `damping_ratio` default). A mode's 5 % band is then where the residual stays within 5 % at every
+damping sample; `plan.damping` records the range, `plan.axis` stays the user's axis. The minimax LP weighs 5 copies
+of each mode: about 5 times its rows (a 1-mode design costs about what a 5-mode one does, compile included).
+
+**Execution and travel** (`rate_hz`, `interpolation`, `x_min`, `x_max`): `rate_hz` [Hz] (default 1000, as the CLI's
+export; at most `MAX_RATE_HZ`) and `interpolation` (`"linear"`): how the user's drive executes the command, position
+setpoints at `rate_hz`, linear between them (what `MovePlan.to_csv` writes). The minimax rows are chosen on the
+residual as executed so (`jaxbelt.shaping.hull`); their notes state it. `x_min`, `x_max` [m, positions from the
+start] (optional): the axis' travel. A candidate whose positions, as executed, leave it is marked not ok; any
+candidate that leaves the segment between its start and its end by more than `EXCURSION_RTOL` (1 %) of the distance
+is noted so (a long move's design may back off behind its start).
+
+**The minimax design's command space** (`smooth`): True: a continuous acceleration (cubic B-spline, continuous
+jerk). False: an acceleration that is constant on each of N equal intervals and jumps between them, as a shaped
+trapezoid's does; its limits are exact rather than a little conservative, so it can come closer to the least
+residual any command can leave (a 40 Hz, damping 0.003 axis at ZV's own time and peaks: 2.3 % against 32 % for the
+smooth design and 22 % for ZV). With `j_max` [m/s³], False gives an acceleration that is continuous and linear on
+each of N equal intervals (piecewise-constant jerk that jumps between them, as a shaped S-curve's does): |a| and
+|jerk| limits exact, |v| guaranteed everywhere through the velocity's B-spline coefficients (conservative by at most
+j_max h²/8 [m/s], h = move time / N). `"auto"` (default): the smooth design, and, at a given `move_time`, also the
+design with jumps (a second row, `"minimax (jumps)"`, its note saying why) where the smooth one is not feasible or
+not converged, or where a classic shaper of the table leaves no more than it: then the table always holds a minimax
+design whose command space includes the shaped moves (measured: at most 0.81x each of Klipper's six shapers at their
+own time and peaks). The smooth design costs that margin: on lightly damped high modes it can leave more than ZV
+(1.45x on a 40 Hz, damping 0.003 axis at ZV's time and peaks); its exported samples are corrected for a drive that
+interpolates linearly (see `MovePlan.samples`), those of a design with jumps are exact samples whose jumps such a
+drive smooths over one sample. `plan.minimax` is the design of the better of the two rows. With `"auto"` or False,
+the command space holds every candidate: each minimax row is the least worst blend (`jaxbelt.shaping.hull`: $\\sum_m
+w_m x_m(t)$, $w \\ge 0$, $\\sum w = 1$, within the same limits) of its design, the design with jumps where the table
+has it, every classic shaped move buildable at its time and the unshaped move, built whatever `include` shows and
+judged as executed: so at any classic shaper's own time and peaks the minimax row leaves no more than that shaper,
+by construction (its note names the blend). `smooth=True` keeps the continuous acceleration as a constraint (no
+blend with jumps), at its cost: the smooth row may leave more than a shaper, and its note then says so.
+
+**Certificates** (`certify_rtol`). The minimax row's note states its certificate: the LP's own gap (its command is
+the least residual of its command space: splines of its knots, or steps or ramps of its intervals) and, for a design
+with steps (no jerk limit; `smooth=False`, or the row `smooth="auto"` adds), a rigorous lower bound on the least
+worst residual *any* command within the same limits, distance and time can leave over the band
+(`jaxbelt.shaping.certify`; also `plan.continuous_bound`): the design is then proved within (worst - bound) of the
+best any command can do, smooth or not, classic shapers included. The smooth row's note states the same bound where
+the design with jumps is made beside it (how far the smooth command is from the best any command can do, in
+percentage points of the unshaped move's residual), or, where its worst is below `CERTIFY_ATOL`, that it is within
+that of the best (a residual is never below 0); otherwise it claims nothing beyond its own command space (the
+spline's own multipliers bound next to nothing; `certify_rtol` makes the bound).
+
+`certify_rtol` (with `smooth=False` or `"auto"`, and `j_max=None`; default None: no refinement; with `"auto"` the
+design with jumps is then always made beside the smooth one, at the smooth design's time where `move_time` is None,
+its note saying why): the design with jumps is refined until it is certified within this fraction of its own worst
+residual, (worst - bound) <= certify_rtol * worst, or within `CERTIFY_ATOL` = 0.01 % of the unshaped move's
+residual, absolute, whichever is larger (near a zero optimum the bound is 0 and no relative tolerance can be proved;
+the note says which one was met): first the modulus cuts and the frequency grid are refined (16 cuts let a residual
+exceed the LP's value by 2 %), then the number of steps doubles (up to 1024, `CERTIFY_MAX_STEPS`); the best bound
+met is kept. The row's note gives both numbers, and says so when the limit is reached first. Each refinement costs
+one more compiled LP (about 10 s for a 5.5 Hz mode within 1 %; a minute or more for several hundred steps).
+
+**The pipeline.** `design_move` composes one module per stage, each taking the checked request
+(`jaxbelt.shaping.request.MoveRequest`) and the previous stage's output: validate (`request`) → build the candidates
+(`candidates`; the shaped moves in `shaped`) → measure them the same way (`measure`) → the minimax rows
+(`minimax_rows`, designed in `minimax_solve`, the command space in `hull`) → rank (`rank`).
 """
 
 import csv
@@ -42,18 +109,20 @@ from .._display import Display, Table, fmt, fmt_list, require, with_unit
 from .._io import IMAGE_FORMATS, atomic_open, check_output_path, save_figure
 from .._threads import blas_limited
 from ..models.axis import ModalAxis
-from .candidates import classic_rows, pseudo_rows, unshaped_rows
+from .bands import _N_WIDE, _WIDE
+from .candidates import classic_commands, common_time, timed_commands
 from .far_modes import _far_modes as _far_modes  # noqa: E402
-from .measure import _N_WIDE, _WIDE, Candidate, _within_range, reference
 
 # names of the pipeline's stages that users and tests reach through this module
 from .measure import EXCURSION_RTOL as EXCURSION_RTOL  # noqa: E402
+from .measure import Candidate, _within_range, measure_rows, reference
 from .measure import _row as _row  # noqa: E402
-from .minimax_rows import CERTIFY_ATOL as CERTIFY_ATOL  # noqa: E402
-from .minimax_rows import CERTIFY_MAX_STEPS as CERTIFY_MAX_STEPS  # noqa: E402
 from .minimax_rows import JUMPS as JUMPS  # noqa: E402
 from .minimax_rows import _smooth_certificate as _smooth_certificate  # noqa: E402
-from .minimax_rows import minimax_rows, prepare_minimax
+from .minimax_rows import minimax_rows
+from .minimax_solve import CERTIFY_ATOL as CERTIFY_ATOL  # noqa: E402
+from .minimax_solve import CERTIFY_MAX_STEPS as CERTIFY_MAX_STEPS  # noqa: E402
+from .minimax_solve import prepare_minimax
 from .moves import (
     SplineMove,
     executable_samples,
@@ -440,82 +509,21 @@ def design_move(
     x_max=None,
 ) -> MovePlan:
     """Design the move of `distance` [m] on `axis` every way jaxbelt knows, under the same limits and move time,
-    and rank them (see the module docstring).
+    and rank them (see the module docstring: the candidates, the measure, damping ranges, execution and travel, the
+    minimax design's command space, certificates).
 
     - `axis`: a `ModalAxis` (`jb.ModalAxis([f1, f2], [z1, z2])`, `jb.identify_axis(t, y, 2)`,
-      `jb.BeltPlatform().to_axis()`);
-    - `distance` [m] (or rad: the units of the axis' command), finite and non-zero;
-    - `move_time` [s]: every candidate ends at this time (it must be at least the time-optimal move's, which an
-      error states); `None`: the shortest time at which the minimax design reaches the best classic shaper's
-      worst residual (each shaper at its own shortest time);
+      `jb.BeltPlatform().to_axis()`); `distance` [m] (or rad: the units of the axis' command), finite, non-zero;
+    - `move_time` [s]: every candidate ends at this time (at least the time-optimal move's, which an error states);
+      `None`: the shortest time at which the minimax design reaches the best classic shaper's worst residual;
     - `v_max` [m/s], `a_max` [m/s²], `j_max` [m/s³] (optional): limits every candidate respects;
-    - `uncertainty` u in [0, 0.9): the band $f_i(1 \\pm u)$ every residual is judged on (damping ratio kept);
-    - `include`: which candidates to build;
-    - `damping`: None (default): every mode at its own damping ratio. `(lo, hi)` (damping ratios,
-      0 <= lo <= hi < 1): every mode's damping ratio may be anywhere in [lo, hi]; the axis' own one, which must
-      lie in it, is then used only to design the classic shapers and the pseudo-polynomials. Each mode is judged
-      at `N_DAMPING` = 5 damping samples spanning the range (both ends; geometric spacing when lo > 0,
-      `damping_samples`), each against the unshaped move's worst residual at that damping, so `worst_percent` is
-      the worst over band × damping range and the minimax design minimises it. `"unknown"`: the range
-      (0.01, 0.1) (`UNKNOWN_DAMPING`), and the classic shapers and pseudo-polynomials are designed at damping
-      ratio 0.1 for every mode, as Klipper does for an axis whose damping is not measured (its `damping_ratio`
-      default). A mode's 5 % band is then where the residual stays within 5 % at every damping sample;
-      `plan.damping` records the range, `plan.axis` stays the user's axis. The minimax LP weighs 5 copies of each
-      mode: about 5 times its rows (a 1-mode design costs about what a 5-mode one does, compile included);
-    - `rate_hz` [Hz] (default 1000, as the CLI's export; at most `MAX_RATE_HZ`) and `interpolation` (`"linear"`):
-      how the user's drive executes the command, position setpoints at `rate_hz`, linear between them (what
-      `MovePlan.to_csv` writes). The minimax rows are chosen on the residual as executed so
-      (`jaxbelt.shaping.hull`); their notes state it;
-    - `x_min`, `x_max` [m, positions from the start] (optional): the axis' travel. A candidate whose positions, as
-      executed, leave it is marked not ok; any candidate that leaves the segment between its start and its end by
-      more than `EXCURSION_RTOL` (1 %) of the distance is noted so (a long move's design may back off behind its
-      start);
-    - `smooth`: the minimax design's command space. True: a continuous acceleration (cubic B-spline, continuous
-      jerk). False: an acceleration that is constant on each of N equal intervals and jumps between them, as a
-      shaped trapezoid's does; its limits are exact rather than a little conservative, so it can come closer to
-      the least residual any command can leave (a 40 Hz, damping 0.003 axis at ZV's own time and peaks: 2.3 %
-      against 32 % for the smooth design and 22 % for ZV). With `j_max` [m/s³], False gives an acceleration that
-      is continuous and linear on each of N equal intervals (piecewise-constant jerk that jumps between them, as a
-      shaped S-curve's does): |a| and |jerk| limits exact, |v| guaranteed everywhere through the velocity's
-      B-spline coefficients (conservative by at most j_max h²/8 [m/s], h = move time / N).
-      `"auto"` (default): the smooth design, and, at a given `move_time`, also the design with jumps (a second
-      row, `"minimax (jumps)"`, its note saying why) where the smooth one is not feasible or not converged, or
-      where a classic shaper of the table leaves no more than it: then the table always holds a minimax design
-      whose command space includes the shaped moves (measured: at most 0.81x each of Klipper's six shapers at
-      their own time and peaks). The smooth design costs that margin: on lightly damped high modes it can leave
-      more than ZV (1.45x on a 40 Hz, damping 0.003 axis at ZV's time and peaks); its exported samples are
-      corrected for a drive that interpolates linearly (see `MovePlan.samples`), those of a design with jumps are
-      exact samples whose jumps such a drive smooths over one sample. `plan.minimax` is the design of the better
-      of the two rows.
-      With `"auto"` or False, the command space holds every candidate: each minimax row is the least worst blend
-      (`jaxbelt.shaping.hull`: $\\sum_m w_m x_m(t)$, $w \\ge 0$, $\\sum w = 1$, within the same limits) of its
-      design, the design with jumps where the table has it, every classic shaped move buildable at its time and
-      the unshaped move, built whatever `include` shows and judged as executed: so at any classic shaper's own
-      time and peaks the minimax row leaves no more than that shaper, by construction (its note names the
-      blend). `smooth=True` keeps the continuous acceleration as a constraint (no blend with jumps), at its cost:
-      the smooth row may leave more than a shaper, and its note then says so.
-
-    The minimax row's note states its certificate: the LP's own gap (its command is the least residual of its
-    command space: splines of its knots, or steps or ramps of its intervals) and, for a design with steps (no jerk
-    limit; `smooth=False`, or the row `smooth="auto"` adds), a rigorous lower bound on the least worst residual
-    *any* command within the same limits, distance and time can leave over the band (`jaxbelt.shaping.certify`;
-    also `plan.continuous_bound`): the design is then proved within (worst - bound) of the best any command can
-    do, smooth or not, classic shapers included. The smooth row's note states the same bound where the design with
-    jumps is made beside it (how far the smooth command is from the best any command can do, in percentage points
-    of the unshaped move's residual), or, where its worst is below `CERTIFY_ATOL`, that it is within that of the
-    best (a residual is never below 0); otherwise it claims nothing beyond its own command space (the spline's
-    own multipliers bound next to nothing; `certify_rtol` makes the bound).
-
-    `certify_rtol` (with `smooth=False` or `"auto"`, and `j_max=None`; default None: no refinement; with `"auto"`
-    the design with jumps is then always made beside the smooth one, at the smooth design's time where `move_time`
-    is None, its note saying why): the design with jumps is refined until it is
-    certified within this fraction of its own worst residual, (worst - bound) <= certify_rtol * worst, or within
-    `CERTIFY_ATOL` = 0.01 % of the unshaped move's residual, absolute, whichever is larger (near a zero optimum the
-    bound is 0 and no relative tolerance can be proved; the note says which one was met): first the modulus
-    cuts and the frequency grid are refined (16 cuts let a residual exceed the LP's value by 2 %), then the number
-    of steps doubles (up to 1024, `CERTIFY_MAX_STEPS`); the best bound met is kept. The row's note gives both
-    numbers, and says so when the limit is reached first. Each refinement costs one more compiled LP (about 10 s
-    for a 5.5 Hz mode within 1 %; a minute or more for several hundred steps).
+    - `uncertainty` u in [0, 0.9): the band $f_i(1 \\pm u)$ every residual is judged on; `include`: which
+      candidates to build; `progress`: print the stages;
+    - `smooth`: True (cubic B-spline acceleration), False (steps, or ramps with `j_max`) or `"auto"` (default);
+      `certify_rtol` (None or in (0, 1)): refine the design with jumps until certified within it;
+    - `damping`: None, `(lo, hi)` or `"unknown"`: the damping range every residual is judged over;
+    - `rate_hz` [Hz] (default 1000, at most `MAX_RATE_HZ`), `interpolation` (`"linear"`): the drive's position
+      setpoints; `x_min`, `x_max` [m, positions from the start] (optional): the axis' travel.
 
     Returns a `MovePlan`: `plan.table` (ranked), `plan.best` (the recommendation: the least worst residual among
     the candidates that are feasible, converged and within the limits; a design the solver did not converge on
@@ -524,41 +532,18 @@ def design_move(
     req = validate(axis, distance, move_time, v_max=v_max, a_max=a_max, j_max=j_max, uncertainty=uncertainty,
                    include=include, progress=progress, smooth=smooth, certify_rtol=certify_rtol, damping=damping,
                    rate_hz=rate_hz, interpolation=interpolation, x_min=x_min, x_max=x_max)  # fmt: skip
-    far = prepare_minimax(req)  # the design's programs compile while the reference and the shapers are computed
-    ref_cmd, ref = reference(req)
-    rows = classic_rows(req, ref)
-    mm, bound = None, math.nan
-    if "minimax" in req.include:
-        minimax, mm, bound = minimax_rows(req, ref, rows, far)
-        rows += minimax
-    T = _common_time(req, mm, rows)
-    rows += pseudo_rows(req, ref, ref_cmd, T) + unshaped_rows(req, ref, ref_cmd, T)
-    table, best = rank([_within_range(r, req.distance, req.x_range, req.rate_hz) for r in rows])
-    user, per = req.user, req.per
-    return MovePlan(
-        axis=user,
-        distance=req.distance,
-        move_time=T,
-        v_max=req.v_max,
-        a_max=req.a_max,
-        j_max=req.j_max,
-        uncertainty=req.uncertainty,
-        reference_m=ref if per == 1 else ref.reshape(user.n_modes, per).max(axis=1),
-        table=table,
-        best=best,
-        minimax=mm,
-        continuous_bound=bound,
-        damping=req.damping,
-        measure_axis=None if req.damping is None else req.axis,
-        measure_reference_m=None if req.damping is None else ref,
-    )
-
-
-def _common_time(req, mm, rows) -> float:
-    """The move time of the pseudo-polynomials and the unshaped move [s]: the given one, else the minimax design's,
-    else the shortest classic shaper's (twice the time-optimal move's without one)."""
-    if req.move_time is not None:
-        return req.move_time
-    if mm is not None:
-        return float(mm.command.duration)
-    return min((r.move_time for r in rows if r.ok and r.name in SHAPERS), default=2 * req.t_min)
+    prepare_minimax(req)  # the design's programs compile while the reference and the shapers are computed
+    classic = classic_commands(req)
+    ref, ref_nominal = reference(req)
+    rows = measure_rows(req, ref, classic)
+    minimax, mm, bound = minimax_rows(req, ref, rows) if "minimax" in req.include else ([], None, math.nan)
+    T = common_time(req, mm, rows)
+    timed = timed_commands(req, ref_nominal, T)
+    rows += minimax + measure_rows(req, ref, timed)
+    rows = [_within_range(r, req.distance, req.x_range, req.rate_hz) for r in rows]  # as executed, on the travel
+    table, best = rank(rows)
+    user, per, damped = req.user, req.per, req.damping is not None
+    return MovePlan(axis=user, distance=req.distance, move_time=T, v_max=req.v_max, a_max=req.a_max, j_max=req.j_max,
+                    uncertainty=req.uncertainty, table=table, best=best, minimax=mm, continuous_bound=bound,
+                    reference_m=ref if per == 1 else ref.reshape(user.n_modes, per).max(axis=1), damping=req.damping,
+                    measure_axis=req.axis if damped else None, measure_reference_m=ref if damped else None)  # fmt: skip

@@ -6,7 +6,7 @@ import dataclasses
 import math
 import warnings
 
-from .minimax_rows import JUMPS
+from .bands import JUMPS
 
 
 def _not_beaten(ranked: list) -> list:

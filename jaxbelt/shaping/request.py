@@ -12,9 +12,13 @@ import numpy as np
 
 from .._checks import check_positive, check_range
 from ..models.axis import ModalAxis
+from .bands import band_factors
+from .far_modes import LPSetup, lp_setup
 from .hull import INTERPOLATIONS
 from .moves import (
+    PiecewiseMove,
     check_move_limits,
+    fastest_move,
     fastest_time,
 )
 from .shapers import SHAPERS
@@ -37,12 +41,18 @@ UNKNOWN_SHAPER_DAMPING = 0.1
 MAX_RATE_HZ = 1e6
 
 
-def _check_inputs(axis, distance, move_time, v_max, a_max, j_max, uncertainty, include):
-    o = "design_move"
+def _check_axis(axis) -> None:
+    """A `TypeError` naming `axis` unless it is a `ModalAxis`."""
     if not isinstance(axis, ModalAxis):
         raise TypeError(
-            f"{o}: `axis` must be a jaxbelt.ModalAxis (or BeltPlatform(...).to_axis()); got {type(axis).__name__}"
+            f"design_move: `axis` must be a jaxbelt.ModalAxis (or BeltPlatform(...).to_axis()); got "
+            f"{type(axis).__name__}"
         )
+
+
+def _check_inputs(distance, move_time, v_max, a_max, j_max, uncertainty, include):
+    """The move's arguments checked by name: `(distance [m], the time-optimal move's time [s])`."""
+    o = "design_move"
     check_move_limits(o, distance, v_max, a_max, j_max)
     d = float(np.asarray(distance))
     check_range("uncertainty", uncertainty, lo=0.0, hi=0.9, hi_open=True, owner=o)
@@ -119,18 +129,6 @@ def damping_samples(lo: float, hi: float, n: int = N_DAMPING) -> np.ndarray:
     return np.geomspace(lo, hi, n) if lo > 0 else np.linspace(lo, hi, n)
 
 
-def _damping_axis(axis: ModalAxis, zetas) -> ModalAxis:
-    """Each mode of `axis` once per damping ratio of `zetas` (frequency and gain kept), mode by mode: the copies
-    of mode i are i * len(zetas) ... (i + 1) * len(zetas) - 1."""
-    z = np.asarray(zetas, dtype=float)
-    n = z.size
-    return ModalAxis(
-        np.repeat(np.asarray(axis.frequencies, dtype=float), n),
-        np.tile(z, axis.n_modes),
-        np.repeat(np.asarray(axis.gains, dtype=float), n),
-    )
-
-
 def _check_range(x_min, x_max, d: float) -> tuple[float, float] | None:
     """`design_move`'s position range `(x_min, x_max)` [m, from the start], None where neither is given; a
     `ValueError` naming them unless x_min <= min(0, d) and x_max >= max(0, d) (the range holds the start and the
@@ -154,11 +152,14 @@ class MoveRequest:
     - `user`: the user's axis; `axis`: the axis every residual is judged on (with a damping range, each mode of
       `user` once per damping sample, `per` copies each); `nominal`: the axis the classic shapers and the
       pseudo-polynomials are designed on (the user's, or at Klipper's 0.1 with `damping="unknown"`);
-    - `distance` [m], `move_time` [s] or None, `t_min` [s]: the time-optimal move's; `v_max`, `a_max`, `j_max`;
-      `uncertainty`; `band`: the frequency factors of the band;
+    - `distance` [m], `move_time` [s] or None, `t_min` [s] and `ref_cmd`: the time-optimal unshaped move's time and
+      command (what a planner runs without shaping, `fastest_move`: every row's reference); `v_max`, `a_max`,
+      `j_max`; `uncertainty`; `band`: the frequency factors of the band;
     - `include`, `progress`; `auto` (`smooth="auto"`), `smooth` (the first minimax design is the spline),
       `smooth_arg` (as given), `certify_rtol`; `damping`: the range or None; `rate_hz`: the drive's setpoint
-      rate [Hz]; `x_range`: the travel [m] or None."""
+      rate [Hz]; `x_range`: the travel [m] or None;
+    - `lp`: at a given move time with "minimax" in `include`, the minimax LP's setup (`far_modes.lp_setup`: the
+      modes it leaves out, refused at once where it would weigh none; its options), else None."""
 
     user: ModalAxis
     axis: ModalAxis
@@ -167,6 +168,7 @@ class MoveRequest:
     distance: float
     move_time: float | None
     t_min: float
+    ref_cmd: PiecewiseMove
     v_max: float
     a_max: float
     j_max: float | None
@@ -181,6 +183,7 @@ class MoveRequest:
     damping: tuple[float, float] | None
     rate_hz: float
     x_range: tuple[float, float] | None
+    lp: LPSetup | None
 
     @property
     def limits(self):
@@ -227,28 +230,33 @@ def _check_smooth(smooth, progress, certify_rtol, j_max) -> float | None:
 
 
 def _judged_axes(axis: ModalAxis, damping, damp):
-    """`(axis judged on, nominal axis, damping copies per mode)` for the damping argument `damping` (checked: `damp`)."""
+    """`(axis judged on, nominal axis, damping copies per mode)` for the damping argument `damping` (checked: `damp`).
+
+    With a range, the axis judged on holds each mode of `axis` once per damping sample (`damping_samples`; frequency
+    and gain kept), mode by mode: the copies of mode i are i * n ... (i + 1) * n - 1."""
     if damp is None:
         return axis, axis, 1
-    nominal = axis
+    zs = np.asarray(axis.damping_ratios, dtype=float)
+    if not isinstance(damping, str) and (np.any(zs < damp[0]) or np.any(zs > damp[1])):
+        raise ValueError(
+            f"design_move: parameter `damping` {damp} must contain the axis' own damping ratios "
+            f"{np.round(zs, 6).tolist()} (the classic shapers are designed at them): widen the range, or give "
+            "damping='unknown' (0.01-0.1, the shapers at 0.1)"
+        )
+    z = np.asarray(damping_samples(*damp), dtype=float)
+    n = z.size
+    f, g = np.asarray(axis.frequencies, dtype=float), np.asarray(axis.gains, dtype=float)
+    judged = ModalAxis(np.repeat(f, n), np.tile(z, axis.n_modes), np.repeat(g, n))
     if isinstance(damping, str):  # "unknown": Klipper's practice
-        nominal = ModalAxis(axis.frequencies, np.full(axis.n_modes, UNKNOWN_SHAPER_DAMPING), axis.gains)
-    else:
-        zs = np.asarray(axis.damping_ratios, dtype=float)
-        if np.any(zs < damp[0]) or np.any(zs > damp[1]):
-            raise ValueError(
-                f"design_move: parameter `damping` {damp} must contain the axis' own damping ratios "
-                f"{np.round(zs, 6).tolist()} (the classic shapers are designed at them): widen the range, or give "
-                "damping='unknown' (0.01-0.1, the shapers at 0.1)"
-            )
-    zetas = damping_samples(*damp)
-    return _damping_axis(axis, zetas), nominal, int(zetas.size)
+        return judged, ModalAxis(axis.frequencies, np.full(axis.n_modes, UNKNOWN_SHAPER_DAMPING), axis.gains), n
+    return judged, axis, n
 
 
 def validate(axis, distance, move_time, *, v_max, a_max, j_max, uncertainty, include, progress, smooth, certify_rtol,
              damping, rate_hz, interpolation, x_min, x_max) -> MoveRequest:  # fmt: skip
     """`design_move`'s arguments checked by name (see its docstring) into a `MoveRequest`."""
-    d, t_min = _check_inputs(axis, distance, move_time, v_max, a_max, j_max, uncertainty, include)
+    _check_axis(axis)
+    d, t_min = _check_inputs(distance, move_time, v_max, a_max, j_max, uncertainty, include)
     rtol = _check_smooth(smooth, progress, certify_rtol, j_max)
     damp = _check_damping(damping)
     rate = _check_execution(rate_hz, interpolation)
@@ -256,19 +264,25 @@ def validate(axis, distance, move_time, *, v_max, a_max, j_max, uncertainty, inc
     judged, nominal, per = _judged_axes(axis, damping, damp)
     auto = isinstance(smooth, str)
     u = float(uncertainty)
+    T = None if move_time is None else float(move_time)
+    j = None if j_max is None else float(j_max)
+    lp = None
+    if "minimax" in include and T is not None:  # the modes the LP leaves out: refused here where it keeps none
+        lp = lp_setup(judged, T, u, j, True, auto or bool(smooth), per)
     return MoveRequest(
         user=axis,
         axis=judged,
         nominal=nominal,
         per=per,
         distance=d,
-        move_time=None if move_time is None else float(move_time),
+        move_time=T,
         t_min=t_min,
+        ref_cmd=fastest_move(d, float(v_max), float(a_max), j),
         v_max=float(v_max),
         a_max=float(a_max),
-        j_max=None if j_max is None else float(j_max),
+        j_max=j,
         uncertainty=u,
-        band=np.linspace(1 - u, 1 + u, _N_BAND) if u > 0 else np.ones(1),
+        band=band_factors(u),
         include=tuple(include),
         progress=bool(progress),
         auto=auto,
@@ -278,8 +292,5 @@ def validate(axis, distance, move_time, *, v_max, a_max, j_max, uncertainty, inc
         damping=damp,
         rate_hz=rate,
         x_range=x_range,
+        lp=lp,
     )
-
-
-#: frequency points of the band the table is computed on (`jaxbelt.shaping.measure` uses the same)
-_N_BAND = 401

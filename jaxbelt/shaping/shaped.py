@@ -1,0 +1,58 @@
+"""Shaped moves of a given end time: a classic shaper's impulses convolved with the gentlest base move that ends
+there, and the set of such moves (with the unshaped move) that the minimax design's command space holds.
+
+A lower-level module of the pipeline: it builds commands only (no measuring); the candidates and the minimax rows
+both take their shaped moves from here.
+"""
+
+import numpy as np
+
+from .moves import _trapezoid_move, peaks, shape_move
+from .shapers import SHAPERS, ShaperRangeError, shaper_for_axis
+
+
+def gentlest_shaped(name: str, axis, distance, T, t_min, v_max, a_max, j_max):
+    """The classic shaper `name` (`shapers.shaper_for_axis` on `axis`; its `ShaperRangeError` passes through) on the
+    gentlest base that ends at `T` [s], or, with `T` None, at its own shortest time $t_{min} + \tau_{end}$ (`t_min`
+    [s]: the time-optimal unshaped move's; built a relative 1e-12 later, so that the base is not refused by a
+    rounding): `(command or None, move time [s], shortest time [s])`.
+
+    The base is the gentlest within the limits; where none is, the gentlest whose *shaped* move is within them (a
+    shaper spreads the base's acceleration over its impulses: ZV halves the peak acceleration of a base whose
+    acceleration phase is shorter than its delay, so at a ZV-shaped move's own time and peaks the base exceeds
+    `a_max` while the shaped move does not)."""
+    A, tau = shaper_for_axis(name, axis.frequencies, axis.damping_ratios)
+    t_short = t_min + float(tau[-1])
+    T, T_build = (t_short, t_short * (1 + 1e-12)) if T is None else (T, T)
+    if not T_build > tau[-1]:
+        return None, T, t_short
+    base = _trapezoid_move(distance, T_build - tau[-1], v_max, a_max, j_max)
+    if base is not None:
+        return shape_move(base, A, tau), T, t_short
+    relax = 1.0 / float(np.min(np.asarray(A)))  # a shaped peak is at least min(A) times the base's
+    base = _trapezoid_move(distance, T_build - tau[-1], v_max, a_max * relax, None if j_max is None else j_max * relax)
+    if base is None:
+        return None, T, t_short
+    cmd = shape_move(base, A, tau)
+    pv, pa, pj = peaks(cmd)
+    tol = 1 + 1e-9
+    if pv > v_max * tol or pa > a_max * tol or (j_max is not None and pj > j_max * tol):
+        return None, T, t_short
+    return cmd, T, t_short
+
+
+def shaped_members(nominal, distance, T, v_max, a_max, j_max) -> dict:
+    """The moves the minimax design's command space holds at move time `T` [s]: every classic shaper buildable on
+    the axis `nominal` within the limits (`gentlest_shaped`), and the unshaped move: `{name: command}`."""
+    out = {}
+    for name in SHAPERS:
+        try:
+            cmd = gentlest_shaped(name, nominal, distance, T, 0.0, v_max, a_max, j_max)[0]
+        except ShaperRangeError:
+            continue
+        if cmd is not None:
+            out[name] = cmd
+    base = _trapezoid_move(distance, T, v_max, a_max * (1 + 1e-9), j_max)
+    if base is not None:
+        out["unshaped"] = base
+    return out
