@@ -16,15 +16,20 @@ results and the README table alone; `--update` writes them over the committed on
 A quick run checks that every benchmark works, and most of its time is XLA compiling: it compiles
 with XLA's quicker CPU settings (`jaxbelt._xla.FAST_COMPILE_FLAGS`; recorded in each JSON as
 `machine.xla_flags`), so its run times are slower than the library's (and two scripts share the cores).
-`--xla-defaults` keeps XLA's defaults; a full run always does.
+`--xla-defaults` keeps XLA's defaults; a full run always does. A quick run's scripts also share the programs they
+compile: JAX's persistent compilation cache in a temporary folder (removed at the end), set through JAX's environment
+variables for every script and every process a script starts, so that a program one of them compiled is loaded by
+the others (`--no-shared-cache`: each process compiles its own, as a user's first run does).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
@@ -75,6 +80,19 @@ def quick_scripts() -> list[str]:
     return sorted(names, key=lambda n: (-QUICK_COST.get(n, 10), n))
 
 
+def shared_cache_env(folder) -> dict[str, str]:
+    """The environment variables that turn on JAX's persistent compilation cache in `folder` for a process (read when
+    it imports JAX), every program written however fast it compiled: a quick run's scripts, and the fresh processes
+    they start, load the programs another one compiled with the same XLA flags instead of compiling them again.
+    A script that calls `jb.enable_compilation_cache` (the CLI, the cold-start measurements) uses its own folder."""
+    return {
+        "JAX_ENABLE_COMPILATION_CACHE": "true",
+        "JAX_COMPILATION_CACHE_DIR": str(folder),
+        "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0",
+        "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "-1",
+    }
+
+
 def _children_cpu() -> float:
     """CPU seconds (user + system) of this process's ended children and theirs; NaN where the OS does not say."""
     try:
@@ -119,6 +137,11 @@ def main(argv=None) -> int:
         help="with --quick: compile with XLA's default settings (default: its quicker CPU compilation)",
     )
     p.add_argument(
+        "--no-shared-cache",
+        action="store_true",
+        help="with --quick: no compilation cache shared by the scripts (default: a temporary one)",
+    )
+    p.add_argument(
         "--update",
         action="store_true",
         help="with --quick: overwrite the committed results and README table (default: scratch folder)",
@@ -154,18 +177,26 @@ def main(argv=None) -> int:
         if flags is not None:
             env["XLA_FLAGS"] = flags
             print(f"run_all: quick run compiled with XLA_FLAGS={flags} (run times slower than the library's)")
+    shared = tempfile.mkdtemp(prefix="jaxbelt-quick-cache-") if args.quick and not args.no_shared_cache else None
+    if shared is not None:
+        env.update(shared_cache_env(shared))
+        print(f"run_all: the scripts share compiled programs through a temporary cache folder {shared}")
     print(f"run_all: {len(scenes)} script(s), {jobs} at a time: {' '.join(scenes)}", flush=True)
     # each script's output is printed in one block when it ends (scripts running at once do not interleave)
-    with ThreadPoolExecutor(max_workers=jobs) as pool:
-        futures = [pool.submit(_run_script, s, args.quick, env, args.timeout) for s in scenes]
-        for fut in as_completed(futures):
-            name, rc, dt, out = fut.result()
-            print(f"=== {name}{' --quick' if args.quick else ''}", flush=True)
-            print(out.rstrip("\n"), flush=True)
-            status = "ok" if rc == 0 else f"FAILED ({rc})"
-            print(f"=== {name}: {status} in {dt:.1f} s", flush=True)
-            if rc != 0:
-                failed.append(name)
+    try:
+        with ThreadPoolExecutor(max_workers=jobs) as pool:
+            futures = [pool.submit(_run_script, s, args.quick, env, args.timeout) for s in scenes]
+            for fut in as_completed(futures):
+                name, rc, dt, out = fut.result()
+                print(f"=== {name}{' --quick' if args.quick else ''}", flush=True)
+                print(out.rstrip("\n"), flush=True)
+                status = "ok" if rc == 0 else f"FAILED ({rc})"
+                print(f"=== {name}: {status} in {dt:.1f} s", flush=True)
+                if rc != 0:
+                    failed.append(name)
+    finally:
+        if shared is not None:
+            shutil.rmtree(shared, ignore_errors=True)
     if scratch:
         print(
             f"run_all: quick results in {env['JAXBELT_BENCH_OUT']} (committed results untouched; --update to overwrite)"
