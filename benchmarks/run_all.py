@@ -30,6 +30,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
@@ -103,19 +104,50 @@ def _children_cpu() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-def _run_script(name: str, quick: bool, env: dict, timeout: float | None) -> tuple[str, object, float, str]:
-    """Run one script in its own process; (name, exit status or "timeout", seconds, its output)."""
+def _run_script(name: str, quick: bool, env: dict, timeout: float | None) -> tuple[str, object, float, float, str]:
+    """Run one script in its own process; (name, exit status or "timeout", seconds, CPU seconds, its output).
+
+    The CPU time (user + system) is the script's own and that of the processes it started and waited for
+    (`os.wait4`), so it holds on a loaded machine where the wall time does not; NaN where the OS does not say."""
     cmd = [sys.executable, str(HERE / f"{name}.py")] + (["--quick"] if quick else [])
     t = time.perf_counter()
+    if not hasattr(os, "wait4"):  # not on Windows: no CPU time
+        try:
+            run = subprocess.run(
+                cmd,
+                cwd=HERE.parent,
+                timeout=timeout,
+                env=env,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT,
+                text=True,
+            )
+            rc, out = run.returncode, run.stdout
+        except subprocess.TimeoutExpired as e:
+            rc = "timeout"
+            out = e.stdout.decode(errors="replace") if isinstance(e.stdout, bytes) else (e.stdout or "")
+        return name, rc, time.perf_counter() - t, float("nan"), out
+    proc = subprocess.Popen(cmd, cwd=HERE.parent, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    timed_out = threading.Event()
+
+    def stop():
+        timed_out.set()
+        proc.kill()
+
+    timer = threading.Timer(timeout, stop) if timeout is not None else None
+    if timer is not None:
+        timer.start()
     try:
-        run = subprocess.run(
-            cmd, cwd=HERE.parent, timeout=timeout, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
-        )
-        rc, out = run.returncode, run.stdout
-    except subprocess.TimeoutExpired as e:
-        rc = "timeout"
-        out = e.stdout.decode(errors="replace") if isinstance(e.stdout, bytes) else (e.stdout or "")
-    return name, rc, time.perf_counter() - t, out
+        assert proc.stdout is not None
+        out = proc.stdout.read()  # until the script ends (or is stopped)
+    finally:
+        if timer is not None:
+            timer.cancel()
+    _, status, usage = os.wait4(proc.pid, 0)
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    proc.stdout.close()
+    rc = "timeout" if timed_out.is_set() else proc.returncode
+    return name, rc, time.perf_counter() - t, usage.ru_utime + usage.ru_stime, out
 
 
 def main(argv=None) -> int:
@@ -187,11 +219,11 @@ def main(argv=None) -> int:
         with ThreadPoolExecutor(max_workers=jobs) as pool:
             futures = [pool.submit(_run_script, s, args.quick, env, args.timeout) for s in scenes]
             for fut in as_completed(futures):
-                name, rc, dt, out = fut.result()
+                name, rc, dt, cpu_s, out = fut.result()
                 print(f"=== {name}{' --quick' if args.quick else ''}", flush=True)
                 print(out.rstrip("\n"), flush=True)
                 status = "ok" if rc == 0 else f"FAILED ({rc})"
-                print(f"=== {name}: {status} in {dt:.1f} s", flush=True)
+                print(f"=== {name}: {status} in {dt:.1f} s ({cpu_s:.1f} s of CPU time)", flush=True)
                 if rc != 0:
                     failed.append(name)
     finally:
