@@ -46,19 +46,19 @@ HELPERS = {"run_all", "readme_table", "shortcuts"}
 #: hostile_probe (not a scene: one case per entry point), browser_view (needs JupyterLab, selenium and Chromium; a
 #: machine without them gets a one-line note and exit status 0)
 QUICK_ONLY = {"coldstart", "hostile_probe", "browser_view"}
-#: seconds of each script's --quick run, relative (a run under a load of about 9 on 2 cores, 2026-11-28, divided
-#: by 5), to start the longest first so that no long script starts last; a script not listed counts as 10 s
+#: seconds of each script's --quick run, relative (wall times of a run under a load of 10-17 on 2 cores, 2026-11-28,
+#: divided by 5), to start the longest first so that no long script starts last; a script not listed counts as 10 s
 QUICK_COST = {
-    "coldstart": 60,
-    "shaping_axis": 60,
-    "hostile_probe": 45,
-    "threads": 35,
-    "fourbar": 32,
-    "shaping_every_shaper": 30,
-    "firmware_shapers": 27,
+    "coldstart": 110,
+    "shaping_axis": 75,
+    "hostile_probe": 64,
+    "fourbar": 60,
+    "gpu": 41,
+    "threads": 37,
+    "firmware_shapers": 36,
+    "explore": 28,
+    "shaping_every_shaper": 26,
     "nonlinear": 25,
-    "explore": 25,
-    "gpu": 17,
     "identify_coverage": 12,
     "machinery": 10,
     "readme_table": 1,
