@@ -46,21 +46,27 @@ HELPERS = {"run_all", "readme_table", "shortcuts"}
 #: hostile_probe (not a scene: one case per entry point), browser_view (needs JupyterLab, selenium and Chromium; a
 #: machine without them gets a one-line note and exit status 0)
 QUICK_ONLY = {"coldstart", "hostile_probe", "browser_view"}
-#: seconds of each script's --quick run, relative (wall times of a run under a load of 10-17 on 2 cores, 2026-11-28,
-#: divided by 5), to start the longest first so that no long script starts last; a script not listed counts as 10 s
+#: seconds of each script's --quick run: its CPU time (run_all prints it) in a quick run of 2026-11-28 (543 s wall,
+#: 386 s of CPU time, 2 cores shared with a load of about 5), to start the longest first so that no long script
+#: starts last; a script not listed counts as 10 s
 QUICK_COST = {
-    "coldstart": 110,
-    "shaping_axis": 75,
-    "hostile_probe": 64,
-    "fourbar": 60,
-    "gpu": 41,
-    "threads": 37,
-    "firmware_shapers": 36,
-    "explore": 28,
-    "shaping_every_shaper": 26,
-    "nonlinear": 25,
-    "identify_coverage": 12,
-    "machinery": 10,
+    "coldstart": 65,
+    "shaping_axis": 50,
+    "hostile_probe": 32,
+    "nonlinear": 31,
+    "startup": 30,
+    "fourbar": 27,
+    "throughput": 26,
+    "shaping": 22,
+    "shaping_guarantee": 16,
+    "gpu": 16,
+    "threads": 15,
+    "machinery": 12,
+    "firmware_shapers": 11,
+    "shaping_every_shaper": 11,
+    "explore": 9,
+    "spans": 9,
+    "identify_coverage": 5,
     "readme_table": 1,
     "browser_view": 1,
 }
