@@ -7,10 +7,10 @@ Writes `benchmarks/results/coldstart.json` (+ `.png`). Every ratio is measured i
 
 Run: `python benchmarks/coldstart.py [--quick] [--cli startup fourbar ...]` (a full run is not part of
 `run_all.py`: the cold CLI runs alone take minutes; `run_all.py --quick` runs its quick form: fewer repeats, the
-start-up CLI command, closed-form batches of 10 000 (not 100 000) and 1000, a 40-gain sweep, the first entry
-point). `python benchmarks/coldstart.py --entry-points [NAME ...]` measures only the entry points (about 6 minutes
-on 2 cores), merges them into the existing JSON and
-regenerates the first-call tables of README.md and docs/benchmarks.md.
+start-up CLI command, a closed-form batch of 10 000 (not 100 000 and 1000), a 4-gain sweep on the devices (not again
+on one device), no warm-up import before the timed imports, the first entry point).
+`python benchmarks/coldstart.py --entry-points [NAME ...]` measures only the entry points (about 6 minutes on 2
+cores), merges them into the existing JSON and regenerates the first-call tables of README.md and docs/benchmarks.md.
 """
 
 from __future__ import annotations
@@ -57,10 +57,13 @@ def wall(cmd, env=ENV) -> float:
     return time.perf_counter() - t
 
 
-def imports(repeats: int) -> dict:
+def imports(repeats: int, warm_up: bool = True) -> dict:
+    """Median wall time of `import jax, diffrax, equinox, optax` and of `import jax, jaxbelt` in fresh processes,
+    `repeats` of each, after one import of jaxbelt that writes its bytecode cache (unless `warm_up` is False)."""
     base, ours = [], []
     # `import jaxbelt` alone no longer imports JAX (nothing to configure): a program imports both
-    wall([sys.executable, "-c", "import jax, jaxbelt"])  # writes jaxbelt's bytecode cache
+    if warm_up:
+        wall([sys.executable, "-c", "import jax, jaxbelt"])  # writes jaxbelt's bytecode cache
     for _ in range(repeats):  # interleaved, so that load changes hit both
         base.append(wall([sys.executable, "-c", "import jax, diffrax, equinox, optax"]))
         ours.append(wall([sys.executable, "-c", "import jax, jaxbelt"]))
@@ -208,7 +211,7 @@ def closed_form(quick: bool) -> dict:
     ts = jnp.linspace(0.0, 0.5, 501)
     res = {}
     big = 10_000 if quick else 100_000  # quick: a batch of 200 MB, not 2 GB
-    for n in (1000, big):
+    for n in (big,) if quick else (1000, big):  # quick: one compilation
         g = jnp.linspace(0.01, 0.1, n)
         c = jax.jit(lambda g: startup_gamma_batch(model, g, ts)).lower(g).compile()
         ma = c.memory_analysis()
@@ -322,7 +325,7 @@ def fourbar_sweep(quick: bool) -> dict:
     import jaxbelt as jb
 
     drive = jb.FourBarDrive()
-    n = 40 if quick else 1000
+    n = 4 if quick else 1000  # quick: 4 gain sets (2 per device with one device per core)
     rng = np.random.default_rng(0)
     gains = jnp.asarray(np.array([KP, KI, KD]) * np.exp(rng.uniform(-0.7, 0.7, size=(n, 3))))
     base = jb.PID(kp=KP, ki=KI, kd=KD, omega_ref=W0)
@@ -332,7 +335,7 @@ def fourbar_sweep(quick: bool) -> dict:
             drive, base.with_gains(g), 0.375, 0.5, smooth=False, method=method, **kw
         )
 
-    n_ref = 10 if quick else 20
+    n_ref = 4 if quick else 20
     ref = np.asarray(jax.jit(jax.vmap(chi("ode", rtol=1e-10, atol=1e-10)))(gains[:n_ref]))
     devices = jax.local_devices()
     out = {"n": n, "devices": len(devices)}
@@ -340,7 +343,7 @@ def fourbar_sweep(quick: bool) -> dict:
         ("diffrax Tsit5 rtol 1e-6", chi("ode", rtol=1e-6, atol=1e-6), devices),
         ("RK4 dt 1 ms (paper)", chi("rk4", dt=1e-3), devices),
     ]
-    if len(devices) > 1:
+    if len(devices) > 1 and not quick:  # quick: the same sweep call as above, on fewer devices
         runs.append(("diffrax Tsit5 rtol 1e-6, one device", chi("ode", rtol=1e-6, atol=1e-6), devices[:1]))
     for name, f, devs in runs:
         t, c, chis = time_jax(
@@ -693,7 +696,7 @@ def main(argv=None) -> int:
     p.add_argument(
         "--quick",
         action="store_true",
-        help="a check of the script: fewer repeats, one CLI command, one entry point, smaller batches, 40 gains",
+        help="a check of the script: fewer repeats, one CLI command, one entry point, smaller batches, 4 gains",
     )
     p.add_argument(
         "--cli",
@@ -756,7 +759,7 @@ def main(argv=None) -> int:
         "noisy; compare the ratios, each measured in the same run (medians of repeats)",
     }
     parts = {
-        "imports": lambda: imports(1 if args.quick else 5),
+        "imports": lambda: imports(1, warm_up=False) if args.quick else imports(5),
         "cli": lambda: cli(
             commands,
             args.cli_repeats or (1 if args.quick else 3),

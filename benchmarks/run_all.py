@@ -16,15 +16,21 @@ results and the README table alone; `--update` writes them over the committed on
 A quick run checks that every benchmark works, and most of its time is XLA compiling: it compiles
 with XLA's quicker CPU settings (`jaxbelt._xla.FAST_COMPILE_FLAGS`; recorded in each JSON as
 `machine.xla_flags`), so its run times are slower than the library's (and two scripts share the cores).
-`--xla-defaults` keeps XLA's defaults; a full run always does.
+`--xla-defaults` keeps XLA's defaults; a full run always does. A quick run's scripts also share the programs they
+compile: JAX's persistent compilation cache in a temporary folder (removed at the end), set through JAX's environment
+variables for every script and every process a script starts, so that a program one of them compiled is loaded by
+the others (`--no-shared-cache`: each process compiles its own, as a user's first run does).
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import subprocess
 import sys
+import tempfile
+import threading
 import time
 from concurrent.futures import ThreadPoolExecutor, as_completed
 from pathlib import Path
@@ -40,21 +46,27 @@ HELPERS = {"run_all", "readme_table", "shortcuts"}
 #: hostile_probe (not a scene: one case per entry point), browser_view (needs JupyterLab, selenium and Chromium; a
 #: machine without them gets a one-line note and exit status 0)
 QUICK_ONLY = {"coldstart", "hostile_probe", "browser_view"}
-#: seconds of each script's --quick run, relative (a run under a load of about 9 on 2 cores, 2026-11-28, divided
-#: by 5), to start the longest first so that no long script starts last; a script not listed counts as 10 s
+#: seconds of each script's --quick run: its CPU time (run_all prints it) in a quick run of 2026-11-28 (543 s wall,
+#: 386 s of CPU time, 2 cores shared with a load of about 5), to start the longest first so that no long script
+#: starts last; a script not listed counts as 10 s
 QUICK_COST = {
-    "coldstart": 60,
-    "shaping_axis": 60,
-    "hostile_probe": 45,
-    "threads": 35,
-    "fourbar": 32,
-    "shaping_every_shaper": 30,
-    "firmware_shapers": 27,
-    "nonlinear": 25,
-    "explore": 25,
-    "gpu": 17,
-    "identify_coverage": 12,
-    "machinery": 10,
+    "coldstart": 65,
+    "shaping_axis": 50,
+    "hostile_probe": 32,
+    "nonlinear": 31,
+    "startup": 30,
+    "fourbar": 27,
+    "throughput": 26,
+    "shaping": 22,
+    "shaping_guarantee": 16,
+    "gpu": 16,
+    "threads": 15,
+    "machinery": 12,
+    "firmware_shapers": 11,
+    "shaping_every_shaper": 11,
+    "explore": 9,
+    "spans": 9,
+    "identify_coverage": 5,
     "readme_table": 1,
     "browser_view": 1,
 }
@@ -75,6 +87,19 @@ def quick_scripts() -> list[str]:
     return sorted(names, key=lambda n: (-QUICK_COST.get(n, 10), n))
 
 
+def shared_cache_env(folder) -> dict[str, str]:
+    """The environment variables that turn on JAX's persistent compilation cache in `folder` for a process (read when
+    it imports JAX), every program written however fast it compiled: a quick run's scripts, and the fresh processes
+    they start, load the programs another one compiled with the same XLA flags instead of compiling them again.
+    A script that calls `jb.enable_compilation_cache` (the CLI, the cold-start measurements) uses its own folder."""
+    return {
+        "JAX_ENABLE_COMPILATION_CACHE": "true",
+        "JAX_COMPILATION_CACHE_DIR": str(folder),
+        "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0",
+        "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "-1",
+    }
+
+
 def _children_cpu() -> float:
     """CPU seconds (user + system) of this process's ended children and theirs; NaN where the OS does not say."""
     try:
@@ -85,19 +110,50 @@ def _children_cpu() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
-def _run_script(name: str, quick: bool, env: dict, timeout: float | None) -> tuple[str, object, float, str]:
-    """Run one script in its own process; (name, exit status or "timeout", seconds, its output)."""
+def _run_script(name: str, quick: bool, env: dict, timeout: float | None) -> tuple[str, object, float, float, str]:
+    """Run one script in its own process; (name, exit status or "timeout", seconds, CPU seconds, its output).
+
+    The CPU time (user + system) is the script's own and that of the processes it started and waited for
+    (`os.wait4`), so it holds on a loaded machine where the wall time does not; NaN where the OS does not say."""
     cmd = [sys.executable, str(HERE / f"{name}.py")] + (["--quick"] if quick else [])
     t = time.perf_counter()
+    if not hasattr(os, "wait4"):  # not on Windows: no CPU time
+        try:
+            run = subprocess.run(
+                cmd,
+                cwd=HERE.parent,
+                timeout=timeout,
+                env=env,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.STDOUT,
+                text=True,
+            )
+            rc, out = run.returncode, run.stdout
+        except subprocess.TimeoutExpired as e:
+            rc = "timeout"
+            out = e.stdout.decode(errors="replace") if isinstance(e.stdout, bytes) else (e.stdout or "")
+        return name, rc, time.perf_counter() - t, float("nan"), out
+    proc = subprocess.Popen(cmd, cwd=HERE.parent, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    timed_out = threading.Event()
+
+    def stop():
+        timed_out.set()
+        proc.kill()
+
+    timer = threading.Timer(timeout, stop) if timeout is not None else None
+    if timer is not None:
+        timer.start()
     try:
-        run = subprocess.run(
-            cmd, cwd=HERE.parent, timeout=timeout, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
-        )
-        rc, out = run.returncode, run.stdout
-    except subprocess.TimeoutExpired as e:
-        rc = "timeout"
-        out = e.stdout.decode(errors="replace") if isinstance(e.stdout, bytes) else (e.stdout or "")
-    return name, rc, time.perf_counter() - t, out
+        assert proc.stdout is not None
+        out = proc.stdout.read()  # until the script ends (or is stopped)
+    finally:
+        if timer is not None:
+            timer.cancel()
+    _, status, usage = os.wait4(proc.pid, 0)
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    proc.stdout.close()
+    rc = "timeout" if timed_out.is_set() else proc.returncode
+    return name, rc, time.perf_counter() - t, usage.ru_utime + usage.ru_stime, out
 
 
 def main(argv=None) -> int:
@@ -117,6 +173,11 @@ def main(argv=None) -> int:
         "--xla-defaults",
         action="store_true",
         help="with --quick: compile with XLA's default settings (default: its quicker CPU compilation)",
+    )
+    p.add_argument(
+        "--no-shared-cache",
+        action="store_true",
+        help="with --quick: no compilation cache shared by the scripts (default: a temporary one)",
     )
     p.add_argument(
         "--update",
@@ -154,18 +215,26 @@ def main(argv=None) -> int:
         if flags is not None:
             env["XLA_FLAGS"] = flags
             print(f"run_all: quick run compiled with XLA_FLAGS={flags} (run times slower than the library's)")
+    shared = tempfile.mkdtemp(prefix="jaxbelt-quick-cache-") if args.quick and not args.no_shared_cache else None
+    if shared is not None:
+        env.update(shared_cache_env(shared))
+        print(f"run_all: the scripts share compiled programs through a temporary cache folder {shared}")
     print(f"run_all: {len(scenes)} script(s), {jobs} at a time: {' '.join(scenes)}", flush=True)
     # each script's output is printed in one block when it ends (scripts running at once do not interleave)
-    with ThreadPoolExecutor(max_workers=jobs) as pool:
-        futures = [pool.submit(_run_script, s, args.quick, env, args.timeout) for s in scenes]
-        for fut in as_completed(futures):
-            name, rc, dt, out = fut.result()
-            print(f"=== {name}{' --quick' if args.quick else ''}", flush=True)
-            print(out.rstrip("\n"), flush=True)
-            status = "ok" if rc == 0 else f"FAILED ({rc})"
-            print(f"=== {name}: {status} in {dt:.1f} s", flush=True)
-            if rc != 0:
-                failed.append(name)
+    try:
+        with ThreadPoolExecutor(max_workers=jobs) as pool:
+            futures = [pool.submit(_run_script, s, args.quick, env, args.timeout) for s in scenes]
+            for fut in as_completed(futures):
+                name, rc, dt, cpu_s, out = fut.result()
+                print(f"=== {name}{' --quick' if args.quick else ''}", flush=True)
+                print(out.rstrip("\n"), flush=True)
+                status = "ok" if rc == 0 else f"FAILED ({rc})"
+                print(f"=== {name}: {status} in {dt:.1f} s ({cpu_s:.1f} s of CPU time)", flush=True)
+                if rc != 0:
+                    failed.append(name)
+    finally:
+        if shared is not None:
+            shutil.rmtree(shared, ignore_errors=True)
     if scratch:
         print(
             f"run_all: quick results in {env['JAXBELT_BENCH_OUT']} (committed results untouched; --update to overwrite)"

@@ -16,8 +16,10 @@ On axes drawn from a fixed seed (1 to 3 modes, 1-20 Hz, damping ratio 0.005-0.1)
 - **identification**: `identify_axis` on 2-mode records with 5 % noise: frequency and damping errors.
 
 Writes `benchmarks/results/shaping_axis.json` and `.png`. Run: `python benchmarks/shaping_axis.py [--quick]`
-(`--quick`, a check of the script: one drawn axis, the 2-mode scale test once, the speed of the 1-mode axis with one
-fresh process, one identification record).
+(`--quick`, a check of the script: one drawn axis against ZV alone, the speed of the 1-mode axis with one fresh
+process, the scale test once on one mode with the minimax design alone, one identification record; the fresh processes
+share the run's compiled programs through a temporary persistent compilation cache, so the quick run's fresh-process
+times are not cold starts).
 """
 
 from __future__ import annotations
@@ -121,20 +123,22 @@ def on_shaper_terms(axis, d, row, smooth: bool, jerk: bool = False):
     )
 
 
-def compare(f, z, d=D, label=None):
+def compare(f, z, d=D, label=None, classic=CLASSIC):
+    """One axis: the classic shapers `classic` at their own shortest times against the minimax design (the keys of
+    the returned dict are listed in the module docstring)."""
     axis = jb.ModalAxis(f, z)
     t0 = time.perf_counter()
-    own = jb.design_move(axis, d, None, v_max=V_MAX, a_max=A_MAX, uncertainty=U, include=("minimax", *CLASSIC))
+    own = jb.design_move(axis, d, None, v_max=V_MAX, a_max=A_MAX, uncertainty=U, include=("minimax", *classic))
     t_plan = time.perf_counter() - t0
     ref = own.reference_m  # the unshaped time-optimal move at the user's limits: every row's reference
     rows = {c.name: c for c in own.table}
-    shapers = [rows[n] for n in CLASSIC if rows[n].ok]
+    shapers = [rows[n] for n in classic if rows[n].ok]
     base = dict(
         label=label,
         distance=d,
         frequencies=[float(x) for x in f],
         damping=[float(x) for x in z],
-        not_built={n: rows[n].note for n in CLASSIC if not rows[n].ok},
+        not_built={n: rows[n].note for n in classic if not rows[n].ok},
         plan_s=t_plan,
     )
     if not shapers:  # no classic shaper can be built on this axis (too many modes): the minimax design alone, at the
@@ -182,9 +186,10 @@ def compare(f, z, d=D, label=None):
     )
 
 
-def speed(repeats: int, modes=(1, 2, 3), fresh_runs: int | None = None):
+def speed(repeats: int, modes=(1, 2, 3), fresh_runs: int | None = None, xla_defaults: bool = True):
     """`design_move` (minimax only) on the axes of `modes` modes: warm time (median of `repeats`) in this process,
-    and the first call in fresh processes with XLA's defaults (`fresh_runs` of them; default max(2, repeats // 3))."""
+    and the first call in fresh processes (`fresh_runs` of them; default max(2, repeats // 3)), with XLA's defaults
+    unless `xla_defaults` is False (then with this process's `XLA_FLAGS`)."""
     out = {}
     axes = {1: ([6.0], [0.02]), 2: ([7.3, 18.0], [0.015, 0.01]), 3: ([3.1, 9.7, 17.0], [0.03, 0.02, 0.01])}
     for m, (f, z) in ((m, axes[m]) for m in modes):
@@ -206,7 +211,8 @@ def speed(repeats: int, modes=(1, 2, 3), fresh_runs: int | None = None):
             "include=('minimax',)); print(time.perf_counter() - t0)"
         )
         env = dict(os.environ, PYTHONPATH=str(HERE.parent))
-        env.pop("XLA_FLAGS", None)
+        if xla_defaults:
+            env.pop("XLA_FLAGS", None)
         fresh = []
         for _ in range(fresh_runs or max(2, repeats // 3)):
             r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=600)
@@ -222,6 +228,16 @@ def speed(repeats: int, modes=(1, 2, 3), fresh_runs: int | None = None):
     return out
 
 
+def share_compilations(folder) -> None:
+    """A quick run's programs, compiled once: JAX's persistent compilation cache in `folder` for this process and,
+    through JAX's environment variables (`run_all.shared_cache_env`), for every fresh process it starts (a fresh
+    process then loads the programs this one compiled, with the same `XLA_FLAGS`, instead of compiling them again)."""
+    from run_all import shared_cache_env
+
+    jb.enable_compilation_cache(folder, programs=False)
+    os.environ.update(shared_cache_env(folder))
+
+
 def _fresh_process_result(code: str):
     """Run `code` in a fresh Python process (this checkout's jaxbelt first on the path) and return the JSON it
     prints after `RESULT `."""
@@ -231,16 +247,18 @@ def _fresh_process_result(code: str):
     return json.loads(line[len("RESULT ") :])
 
 
-def scale(mode_counts, repeats: int = 3):
-    """`design_move` (every candidate, fixed move time) on axes of many modes, each in a fresh process: warm time
-    (median of `repeats` after the first call) and the process's peak memory (resident set, VmHWM) [MB]."""
+def scale(mode_counts, repeats: int = 3, include=None):
+    """`design_move` (every candidate, or those of `include`; fixed move time) on axes of many modes, each in a fresh
+    process: warm time (median of `repeats` after the first call) and the process's peak memory (resident set,
+    VmHWM) [MB]."""
     out = {}
+    inc = "" if include is None else f", include={tuple(include)!r}"
     for m in mode_counts:
         code = (
             "import time; import numpy as np; import jax; jax.config.update('jax_enable_x64', True); "
             "import jaxbelt as jb; "
             f"ax = jb.ModalAxis(np.geomspace(3.0, 60.0, {m}), [0.02] * {m}); "
-            f"run = lambda: jb.design_move(ax, {D}, {FIXED_TIME}, v_max={V_MAX}, a_max={A_MAX}, uncertainty={U}); "
+            f"run = lambda: jb.design_move(ax, {D}, {FIXED_TIME}, v_max={V_MAX}, a_max={A_MAX}, uncertainty={U}{inc}); "
             "t0 = time.perf_counter(); run(); first = time.perf_counter() - t0; ts = []\n"
             f"for _ in range({repeats}):\n"
             "    t0 = time.perf_counter(); run(); ts.append(time.perf_counter() - t0)\n"
@@ -501,11 +519,19 @@ def main(argv=None):
         rerun_inverse()
         return
     n_axes = 1 if args.quick else 12  # quick: check that every part runs, in well under a minute
+    if args.quick and not os.environ.get("JAX_COMPILATION_CACHE_DIR"):  # run_all --quick shares one already
+        import atexit
+        import shutil
+        import tempfile
+
+        folder = tempfile.mkdtemp(prefix="jaxbelt-quick-cache-")
+        atexit.register(shutil.rmtree, folder, True)
+        share_compilations(folder)
     cases = []
     todo = [(f"axis {k}", f, z, D) for k, (f, z) in enumerate(draw_axes(n_axes))]
     todo += [(label, np.array(f), np.array(z), d) for label, f, z, d in NAMED_AXES[: 0 if args.quick else None]]
     for k, (label, f, z, d) in enumerate(todo):
-        c = compare(f, z, d, label=label if k >= n_axes else None)
+        c = compare(f, z, d, label=label if k >= n_axes else None, classic=("ZV",) if args.quick else CLASSIC)
         cases.append(c)
         if c["anchor"] is None:
             print(f"{label}: no classic shaper ({c['not_built']}); minimax {c['shortest_worst']:.3g} %", flush=True)
@@ -517,9 +543,10 @@ def main(argv=None):
             f"in x{c['time_ratio']:.3f} time; replay {c['replay_rel']:.1e}",
             flush=True,
         )
-    big = scale((6, 10)) if not args.quick else scale((2,), repeats=1)
-    # quick: the 1-mode axis, one fresh process (each fresh process compiles design_move with XLA's defaults)
-    sp = speed(1, modes=(1,), fresh_runs=1) if args.quick else speed(9)
+    # quick: the 1-mode axis, one fresh process with this run's XLA flags (it loads the programs this process compiled);
+    # then the scale test's fresh process on the same shapes (1 mode, the minimax design)
+    sp = speed(1, modes=(1,), fresh_runs=1, xla_defaults=False) if args.quick else speed(9)
+    big = scale((6, 10)) if not args.quick else scale((1,), repeats=1, include=("minimax",))
     ident = identification(range(1 if args.quick else 10))
     compared = [c for c in cases if c["anchor"] is not None]
     ratios = np.array([c["equal_time_ratio"] for c in compared])

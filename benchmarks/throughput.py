@@ -24,7 +24,7 @@ Gradient cost over forward cost is measured here for the start-up and belt-span 
 (shaping) and chi (four-bar) it is read from `benchmarks/results/shaping.json` and `fourbar.json`.
 
 `python benchmarks/throughput.py [--quick]` writes `benchmarks/results/throughput.json` and `.png`.
-`--quick`: size 10^2 only (compilation dominates), the whole script in about 15 s.
+`--quick`: size 10^2 only (compilation dominates), one repeat, the derivative cost of the start-up sweep alone.
 """
 
 from __future__ import annotations
@@ -223,7 +223,7 @@ def reps_for(scene: str, n: int, quick: bool) -> int:
     if scene == "pid" and n >= 1000:
         return 1
     if quick:
-        return 2
+        return 1
     return 3 if n > 1000 else 5
 
 
@@ -296,7 +296,7 @@ def measure_scene(scene: str, sizes, quick: bool, t_budget_end: float) -> list[d
 def gradient_costs(quick: bool) -> list[dict]:
     """Derivative over forward time for the start-up and belt-span sweeps (1000 elements; quick: 200)."""
     n = 200 if quick else 1000
-    reps = 2 if quick else 5
+    reps = 1 if quick else 5
     out = []
     model = jb.BeltStartup()
 
@@ -314,6 +314,8 @@ def gradient_costs(quick: bool) -> list[dict]:
         ("runout", "peak-to-peak response, d/dspeed", runout, random_inputs("runout", n)),
         ("span_freqs", "first natural frequency, d/dspeed", freqs, random_inputs("span_freqs", n)),
     ]
+    if quick:  # one case through the loop (two compilations each)
+        cases = cases[:1]
     for scene, what, f, x in cases:
         # elements are independent, so one forward-mode product with a tangent of ones is the batch of
         # element derivatives (reverse mode through the batched start-up closed form asked for 36 GB
