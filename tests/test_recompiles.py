@@ -207,3 +207,72 @@ def test_time_grids_of_any_spacing_are_data(method):
     for g, ys in zip(grids, out):
         ref = jb.simulate(jb.Scene(MODEL, cmd, ts=g, uniform=False), method="expm").ys
         np.testing.assert_allclose(ys, ref, rtol=1e-8, atol=1e-9 * float(np.max(np.abs(ref))))
+
+
+def _highs_minimax_value(problem, opts, scale):
+    """The minimax LP's optimal value by scipy's HiGHS (tight tolerances), in units of `scale`: independent of
+    jaxbelt's interior point method."""
+    from scipy.optimize import linprog
+
+    from jaxbelt.shaping import design as dsg
+
+    c, G, h, A, b = (np.asarray(x) for x in dsg.lp_data(problem, opts, scale))
+    ref = linprog(
+        c,
+        A_ub=G,
+        b_ub=h,
+        A_eq=A,
+        b_eq=b,
+        bounds=[(None, None)] * len(c),
+        method="highs",
+        options=dict(primal_feasibility_tolerance=1e-10, dual_feasibility_tolerance=1e-10),
+    )
+    assert ref.status == 0
+    return ref.fun * scale
+
+
+@pytest.mark.slow
+def test_minimax_designs_whose_starting_grids_differ_share_one_program():
+    # design_move's rule grows the starting grid with the move time: on a 6 Hz axis 15 points at 0.82 s, 17 at
+    # 0.83 s (and another exchange); both pad to the same rows, so the second design compiles nothing
+    from jaxbelt.shaping import design as dsg
+    from jaxbelt.shaping.residual import reference_residuals
+
+    axis = jb.ModalAxis([6.0], [0.02])
+    ref, _ = reference_residuals(axis, 0.1, 0.3, 1.2, None, 0.2)
+    designs = []
+    for k, T in enumerate((0.82, 0.83)):
+        opts = dsg.default_options(axis.frequencies, T, 0.2, False)
+        assert opts.n_freq == (15, 17)[k]
+        prob = dsg.make_problem(axis, 0.1, T, 0.3, 1.2, None, 0.2, ref, opts)
+        with count_compiles() as c:
+            designs.append((dsg.minimax_design(prob, opts), opts))
+        if k == 1:
+            assert c["n"] == 0
+    for des, opts in designs:
+        assert des.converged
+        # the padding rows (mask 0) are never active: the optimum is HiGHS's on the same LP
+        highs = _highs_minimax_value(des.problem, opts, float(des.worst))
+        assert abs(float(des.worst) - highs) <= max(2e-6, 2 * float(des.gap)) * highs
+        # the rows in use: the starting grid's n_freq points and those the exchange added, none in the padding
+        mask = np.asarray(des.problem.mask)
+        assert mask.shape[1] % dsg.GRID_BUCKET == 0 and not mask[:, opts.n_freq + opts.n_extra :].any()
+
+
+@pytest.mark.slow
+def test_shortest_move_time_warm_calls_with_other_targets_compile_nothing():
+    # the answers 0.830 s and 0.789 s re-make the design with starting grids of 17 and 15 points (the given design,
+    # at 0.8 s, has 15): one program for both
+    axis = jb.ModalAxis([6.0], [0.02])
+    lim = dict(v_max=0.3, a_max=1.2, uncertainty=0.2)
+    des = jb.design_move(axis, 0.1, 0.8, include=("minimax",), **lim).minimax
+    fw = float(des.fine_worst)
+    jb.shortest_move_time(axis, 0.8 * fw, des)
+    with count_compiles() as c:
+        times = [float(jb.shortest_move_time(axis, k * fw, des)) for k in (0.5, 1.5)]
+    assert c["n"] == 0
+    assert times[0] > 0.8 > times[1]
+    # each answer lands: design_move's own design there leaves the target within 1 % (fine grid)
+    for k, T in zip((0.5, 1.5), times):
+        again = jb.design_move(axis, 0.1, T, include=("minimax",), **lim).minimax
+        assert float(again.fine_worst) == pytest.approx(k * fw, rel=1e-2)
