@@ -276,3 +276,45 @@ def test_shortest_move_time_warm_calls_with_other_targets_compile_nothing():
     for k, T in zip((0.5, 1.5), times):
         again = jb.design_move(axis, 0.1, T, include=("minimax",), **lim).minimax
         assert float(again.fine_worst) == pytest.approx(k * fw, rel=1e-2)
+
+
+@pytest.mark.slow
+def test_residual_curves_of_pseudo_polynomials_of_any_order_up_to_8_share_one_program():
+    # design_move's pseudo-polynomial candidates change order with the distance and the limits: the residual's
+    # program pads the exponents, so a new order compiles nothing
+    from references import modal_residual_reference
+
+    from jaxbelt.shaping.residual import residual_curve
+
+    axis = jb.ModalAxis([6.0, 17.0], [0.02, 0.01])
+    factors = np.linspace(0.8, 1.2, 9)
+    D, T = 0.1, 0.8
+    orders = ([3.0, 4.0, 5.0], [3.2, 4.5, 5.1, 6.3], [8.0, 9.0, 10.2, 11.0, 12.5, 13.9, 15.0, 16.5])
+    cmds = [jb.PseudoPolynomial(jnp.array(g), D, T) for g in orders]
+    got = [np.asarray(residual_curve(axis, cmds[0], factors))]
+    with count_compiles() as c:
+        got += [np.asarray(residual_curve(axis, cmd, factors)) for cmd in cmds[1:]]
+    assert c["n"] == 0
+    for g, curve in zip(orders, got):
+        g = np.asarray(g)
+        # eq. (23) solved by numpy, the acceleration of phi = D (1 - sum C_i u^g_i), u = 1 - t / T
+        Z = np.stack([np.prod([g - r for r in range(k)], axis=0) if k else np.ones_like(g) for k in range(g.size)])
+        C = np.linalg.solve(Z, np.eye(g.size)[0])
+
+        def accel(t, g=g, C=C):
+            u = np.clip(1.0 - np.asarray(t)[..., None] / T, 0.0, 1.0)
+            return -D / T**2 * np.sum(C * g * (g - 1) * u ** (g - 2), axis=-1)
+
+        ref = modal_residual_reference([6.0, 17.0], [0.02, 0.01], [1.0, 1.0], accel, [], T, factors, nodes=16)
+        # the Gauss-Legendre rule's accuracy: 1e-8 of the curve's largest value (the 17 Hz mode's residual is
+        # 1e-4 of the 6 Hz mode's here)
+        np.testing.assert_allclose(curve, ref, rtol=1e-6, atol=1e-7 * float(np.max(ref)))
+    # and the padding changes nothing: the unpadded integral of the same rule (`residual_integral`)
+    from jaxbelt.shaping.residual import residual_integral
+
+    w = 2 * np.pi * np.array([6.0, 17.0])[:, None] * factors
+    z = np.array([0.02, 0.01])[:, None]
+    wd = w * np.sqrt(1 - z**2)
+    for cmd, curve in zip(cmds, got):
+        plain = np.abs(np.asarray(residual_integral(cmd, jnp.asarray(-z * w + 1j * wd)))) / wd
+        np.testing.assert_allclose(curve, plain, rtol=1e-12, atol=1e-13 * float(np.max(plain)))
