@@ -318,3 +318,27 @@ def test_residual_curves_of_pseudo_polynomials_of_any_order_up_to_8_share_one_pr
     for cmd, curve in zip(cmds, got):
         plain = np.abs(np.asarray(residual_integral(cmd, jnp.asarray(-z * w + 1j * wd)))) / wd
         np.testing.assert_allclose(curve, plain, rtol=1e-12, atol=1e-13 * float(np.max(plain)))
+
+
+def test_sampling_moves_of_other_durations_compiles_nothing():
+    # a move of another duration has another sample count (1 kHz: 801, 811, 1001 samples): the times are padded to
+    # a power of two, so the program that evaluates the command is compiled once
+    rng = np.random.default_rng(3)
+
+    def move(T):
+        times = np.sort(rng.uniform(0.0, 0.5 * T, 6))
+        return jb.PiecewiseMove(times, rng.normal(size=6), rng.normal(size=6), T)
+
+    moves = [move(T) for T in (0.8, 0.81, 1.0)]
+    got = [moves[0].sample(1000.0)]
+    with count_compiles() as c:
+        got += [m.sample(1000.0) for m in moves[1:]]
+    assert c["n"] == 0
+    for m, (t, x, v, a) in zip(moves, got):
+        assert t.size == round(float(m.duration) * 1000.0) + 1
+        # the steps and ramps summed by numpy: x = sum alpha d^2 / 2 + beta d^3 / 6, d = (min(t, T) - t_k)_+
+        d = np.maximum(np.minimum(t, float(m.duration))[:, None] - np.asarray(m.times), 0.0)
+        al, be = np.asarray(m.steps), np.asarray(m.ramps)
+        np.testing.assert_allclose(x, (al * d**2 / 2 + be * d**3 / 6).sum(1), rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(v, (al * d + be * d**2 / 2).sum(1), rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(a, (al * (d > 0) + be * d).sum(1), rtol=1e-12, atol=1e-14)
