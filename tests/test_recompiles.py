@@ -207,3 +207,138 @@ def test_time_grids_of_any_spacing_are_data(method):
     for g, ys in zip(grids, out):
         ref = jb.simulate(jb.Scene(MODEL, cmd, ts=g, uniform=False), method="expm").ys
         np.testing.assert_allclose(ys, ref, rtol=1e-8, atol=1e-9 * float(np.max(np.abs(ref))))
+
+
+def _highs_minimax_value(problem, opts, scale):
+    """The minimax LP's optimal value by scipy's HiGHS (tight tolerances), in units of `scale`: independent of
+    jaxbelt's interior point method."""
+    from scipy.optimize import linprog
+
+    from jaxbelt.shaping import design as dsg
+
+    c, G, h, A, b = (np.asarray(x) for x in dsg.lp_data(problem, opts, scale))
+    ref = linprog(
+        c,
+        A_ub=G,
+        b_ub=h,
+        A_eq=A,
+        b_eq=b,
+        bounds=[(None, None)] * len(c),
+        method="highs",
+        options=dict(primal_feasibility_tolerance=1e-10, dual_feasibility_tolerance=1e-10),
+    )
+    assert ref.status == 0
+    return ref.fun * scale
+
+
+@pytest.mark.slow
+def test_minimax_designs_whose_starting_grids_differ_share_one_program():
+    # design_move's rule grows the starting grid with the move time: on a 6 Hz axis 15 points at 0.82 s, 17 at
+    # 0.83 s (and another exchange); both pad to the same rows, so the second design compiles nothing
+    from jaxbelt.shaping import design as dsg
+    from jaxbelt.shaping.residual import reference_residuals
+
+    axis = jb.ModalAxis([6.0], [0.02])
+    ref, _ = reference_residuals(axis, 0.1, 0.3, 1.2, None, 0.2)
+    designs = []
+    for k, T in enumerate((0.82, 0.83)):
+        opts = dsg.default_options(axis.frequencies, T, 0.2, False)
+        assert opts.n_freq == (15, 17)[k]
+        prob = dsg.make_problem(axis, 0.1, T, 0.3, 1.2, None, 0.2, ref, opts)
+        with count_compiles() as c:
+            designs.append((dsg.minimax_design(prob, opts), opts))
+        if k == 1:
+            assert c["n"] == 0
+    for des, opts in designs:
+        assert des.converged
+        # the padding rows (mask 0) are never active: the optimum is HiGHS's on the same LP
+        highs = _highs_minimax_value(des.problem, opts, float(des.worst))
+        assert abs(float(des.worst) - highs) <= max(2e-6, 2 * float(des.gap)) * highs
+        # the rows in use: the starting grid's n_freq points and those the exchange added, none in the padding
+        mask = np.asarray(des.problem.mask)
+        assert mask.shape[1] % dsg.GRID_BUCKET == 0 and not mask[:, opts.n_freq + opts.n_extra :].any()
+
+
+@pytest.mark.slow
+def test_shortest_move_time_warm_calls_with_other_targets_compile_nothing():
+    # the answers 0.830 s and 0.789 s re-make the design with starting grids of 17 and 15 points (the given design,
+    # at 0.8 s, has 15): one program for both
+    axis = jb.ModalAxis([6.0], [0.02])
+    lim = dict(v_max=0.3, a_max=1.2, uncertainty=0.2)
+    des = jb.design_move(axis, 0.1, 0.8, include=("minimax",), **lim).minimax
+    fw = float(des.fine_worst)
+    jb.shortest_move_time(axis, 0.8 * fw, des)
+    with count_compiles() as c:
+        times = [float(jb.shortest_move_time(axis, k * fw, des)) for k in (0.5, 1.5)]
+    assert c["n"] == 0
+    assert times[0] > 0.8 > times[1]
+    # each answer lands: design_move's own design there leaves the target within 1 % (fine grid)
+    for k, T in zip((0.5, 1.5), times):
+        again = jb.design_move(axis, 0.1, T, include=("minimax",), **lim).minimax
+        assert float(again.fine_worst) == pytest.approx(k * fw, rel=1e-2)
+
+
+@pytest.mark.slow
+def test_residual_curves_of_pseudo_polynomials_of_any_order_up_to_8_share_one_program():
+    # design_move's pseudo-polynomial candidates change order with the distance and the limits: the residual's
+    # program pads the exponents, so a new order compiles nothing
+    from references import modal_residual_reference
+
+    from jaxbelt.shaping.residual import residual_curve
+
+    axis = jb.ModalAxis([6.0, 17.0], [0.02, 0.01])
+    factors = np.linspace(0.8, 1.2, 9)
+    D, T = 0.1, 0.8
+    orders = ([3.0, 4.0, 5.0], [3.2, 4.5, 5.1, 6.3], [8.0, 9.0, 10.2, 11.0, 12.5, 13.9, 15.0, 16.5])
+    cmds = [jb.PseudoPolynomial(jnp.array(g), D, T) for g in orders]
+    got = [np.asarray(residual_curve(axis, cmds[0], factors))]
+    with count_compiles() as c:
+        got += [np.asarray(residual_curve(axis, cmd, factors)) for cmd in cmds[1:]]
+    assert c["n"] == 0
+    for g, curve in zip(orders, got):
+        g = np.asarray(g)
+        # eq. (23) solved by numpy, the acceleration of phi = D (1 - sum C_i u^g_i), u = 1 - t / T
+        Z = np.stack([np.prod([g - r for r in range(k)], axis=0) if k else np.ones_like(g) for k in range(g.size)])
+        C = np.linalg.solve(Z, np.eye(g.size)[0])
+
+        def accel(t, g=g, C=C):
+            u = np.clip(1.0 - np.asarray(t)[..., None] / T, 0.0, 1.0)
+            return -D / T**2 * np.sum(C * g * (g - 1) * u ** (g - 2), axis=-1)
+
+        ref = modal_residual_reference([6.0, 17.0], [0.02, 0.01], [1.0, 1.0], accel, [], T, factors, nodes=16)
+        # the Gauss-Legendre rule's accuracy: 1e-8 of the curve's largest value (the 17 Hz mode's residual is
+        # 1e-4 of the 6 Hz mode's here)
+        np.testing.assert_allclose(curve, ref, rtol=1e-6, atol=1e-7 * float(np.max(ref)))
+    # and the padding changes nothing: the unpadded integral of the same rule (`residual_integral`)
+    from jaxbelt.shaping.residual import residual_integral
+
+    w = 2 * np.pi * np.array([6.0, 17.0])[:, None] * factors
+    z = np.array([0.02, 0.01])[:, None]
+    wd = w * np.sqrt(1 - z**2)
+    for cmd, curve in zip(cmds, got):
+        plain = np.abs(np.asarray(residual_integral(cmd, jnp.asarray(-z * w + 1j * wd)))) / wd
+        np.testing.assert_allclose(curve, plain, rtol=1e-12, atol=1e-13 * float(np.max(plain)))
+
+
+def test_sampling_moves_of_other_durations_compiles_nothing():
+    # a move of another duration has another sample count (1 kHz: 801, 811, 1001 samples): the times are padded to
+    # a power of two, so the program that evaluates the command is compiled once
+    rng = np.random.default_rng(3)
+
+    def move(T):
+        times = np.sort(rng.uniform(0.0, 0.5 * T, 6))
+        return jb.PiecewiseMove(times, rng.normal(size=6), rng.normal(size=6), T)
+
+    moves = [move(T) for T in (0.8, 0.81, 1.0)]
+    got = [moves[0].sample(1000.0)]
+    with count_compiles() as c:
+        got += [m.sample(1000.0) for m in moves[1:]]
+    assert c["n"] == 0
+    for m, (t, x, v, a) in zip(moves, got):
+        assert t.size == round(float(m.duration) * 1000.0) + 1
+        # the steps and ramps summed by numpy: x = sum alpha d^2 / 2 + beta d^3 / 6, d = (min(t, T) - t_k)_+
+        d = np.maximum(np.minimum(t, float(m.duration))[:, None] - np.asarray(m.times), 0.0)
+        al, be = np.asarray(m.steps), np.asarray(m.ramps)
+        np.testing.assert_allclose(x, (al * d**2 / 2 + be * d**3 / 6).sum(1), rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(v, (al * d + be * d**2 / 2).sum(1), rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(a, (al * (d > 0) + be * d).sum(1), rtol=1e-12, atol=1e-14)

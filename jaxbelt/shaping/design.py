@@ -349,7 +349,15 @@ _solve_round_top = host_checked(_solve_round_impl, store=True, compiler_options=
 _solve_round_nested = eqx.filter_jit(_solve_round_impl)
 
 
+def _program_options(opts: DesignOptions) -> DesignOptions:
+    """The options as the compiled programs see them: `n_freq` only sizes the starting grid on the host
+    (`_initial_grid`, whose padded width `grid_slots` the problem's arrays carry), so it is left out of the
+    programs' static key: a starting grid of 15 or 17 points (it follows the move time) runs the same program."""
+    return opts._replace(n_freq=0)
+
+
 def _solve_round(problem, opts, tau, tol, certify=True):
+    opts = _program_options(opts)
     # XLA options apply to top-level programs only: inside a caller's trace (grad, jit) the plain program.
     # `certify` as an array: one compiled program for the exchange's rounds and the final one (a Python bool is a
     # static argument of filter_jit: a second compilation of the whole interior point method)
@@ -359,8 +367,13 @@ def _solve_round(problem, opts, tau, tol, certify=True):
     return _solve_round_nested(problem, opts, tau, tol, certify)
 
 
-@stored_jit  # called in the exchange loop: XLA's default options
 def _fine_ratios(problem: MinimaxProblem, opts: DesignOptions, coef):
+    """Residual over reference of every mode on the fine grid: (fine factors (F,), ratios (n_modes, F))."""
+    return _fine_ratios_program(problem, _program_options(opts), coef)
+
+
+@stored_jit  # called in the exchange loop: XLA's default options
+def _fine_ratios_program(problem: MinimaxProblem, opts: DesignOptions, coef):
     """Residual over reference of every mode on the fine grid: (fine factors (F,), ratios (n_modes, F))."""
     u = problem.uncertainty
     fine = 1.0 + u * jnp.linspace(-1.0, 1.0, opts.n_fine)
@@ -410,8 +423,23 @@ class MinimaxDesign(eqx.Module):
         return certified(self.worst, self.lower_bound)
 
 
-def _initial_grid(opts: DesignOptions, n_modes: int, uncertainty: float):
+#: the frequency grid's rows per mode (`n_freq + n_extra`) are padded to a multiple of this with unused rows (mask
+#: 0: `0 <= 1`, never active), so that designs whose starting grids differ by a few points (`default_options`: the
+#: grid grows with the move time, 15 to 17 points between 0.82 and 0.83 s on a 6 Hz axis) share one compiled LP
+GRID_BUCKET = 8
+
+
+def grid_slots(opts: DesignOptions) -> int:
+    """Columns of the problem's `factors` and `mask`: `n_freq + n_extra` rounded up to a multiple of
+    `GRID_BUCKET` (1 without a band)."""
     K = opts.n_freq + opts.n_extra
+    return K if K <= 1 else -(-K // GRID_BUCKET) * GRID_BUCKET
+
+
+def _initial_grid(opts: DesignOptions, n_modes: int, uncertainty: float):
+    """`(factors, mask)` of shape (n_modes, `grid_slots(opts)`): the `n_freq` uniform factors on $[1 - u, 1 + u]$
+    in use, the `n_extra` slots the exchange fills after them, then the padding (factor 1, never used)."""
+    K = grid_slots(opts)
     base = np.linspace(-1.0, 1.0, opts.n_freq) if opts.n_freq > 1 else np.zeros(1)
     factors = np.ones((n_modes, K))
     factors[:, : opts.n_freq] = 1.0 + uncertainty * base
@@ -452,7 +480,7 @@ def minimax_design(problem: MinimaxProblem, opts: DesignOptions, tol=1e-9, per_r
             break
         added = 0
         for i in range(n_modes):
-            free = np.where(mask[i] == 0)[0]
+            free = np.where(mask[i, : opts.n_freq + opts.n_extra] == 0)[0]  # the padding stays unused
             peaks_i = _local_maxima(fine, ratios[i])
             peaks_i = peaks_i[ratios[i, peaks_i] > worst * (1 + opts.exchange_tol)]
             peaks_i = peaks_i[np.argsort(-ratios[i, peaks_i])][: min(per_round, len(free))]
@@ -500,12 +528,14 @@ def prepare_design(problem: MinimaxProblem, opts: DesignOptions, tol=1e-9):
     for the caller to prepare the programs that measure the command; None (and nothing started) otherwise."""
     factors, mask = _initial_grid(opts, problem.axis.n_modes, float(problem.uncertainty))
     problem = _on_grid(problem, factors, mask)
-    types = prepare(_solve_round_top, problem, opts, device_array(-1.0), _round_tol(tol), device_array(False))
+    types = prepare(
+        _solve_round_top, problem, _program_options(opts), device_array(-1.0), _round_tol(tol), device_array(False)
+    )
     if types is None:
         return None
     coef = types[2][0]
     if _exchanges(opts, float(problem.uncertainty)):
-        prepare(_fine_ratios, problem, opts, coef)
+        prepare(_fine_ratios_program, problem, _program_options(opts), coef)
     return coef
 
 
@@ -534,6 +564,7 @@ _max_distance_top = LazyJit(eqx.filter_jit, _max_distance_impl, _LP_COMPILE)
 
 
 def _max_distance(problem, opts):
+    opts = _program_options(opts)
     if is_concrete(problem):
         return _max_distance_top(problem, opts)
     return eqx.filter_jit(_max_distance_impl)(problem, opts)

@@ -1015,8 +1015,9 @@ _SAMPLE_ELEMENTS = 1 << 20
 def derivatives_at(cmd: AbstractMotionCommand, times, orders=(0, 1, 2)) -> list:
     """`[cmd.derivative(times, k) for k in orders]` as numpy arrays, evaluated over blocks of `times` so that the
     (times x terms) arrays of a `PiecewiseMove` or a `SplineMove` stay within `_SAMPLE_ELEMENTS` elements (a
-    shaped move at 40 kHz: 80001 x 500); every block is padded to one size (one compiled program per operation).
-    The values are those of one call on all the times."""
+    shaped move at 40 kHz: 80001 x 500); every block is padded to one size, a power of two (one compiled program
+    per command structure and size: a move of another duration runs the same one). The values are those of one
+    call on all the times."""
     t = np.asarray(times, dtype=float)
     if isinstance(cmd, PiecewiseMove):
         terms = int(cmd.times.shape[0])
@@ -1025,18 +1026,28 @@ def derivatives_at(cmd: AbstractMotionCommand, times, orders=(0, 1, 2)) -> list:
     else:
         terms = 1
     block = 1 << max((_SAMPLE_ELEMENTS // max(terms, 1)).bit_length() - 1, 8)  # a power of two >= 256
-    if t.size <= block:
-        tj = jnp.asarray(t)
-        return [np.asarray(jax.device_get(cmd.derivative(tj, k))) for k in orders]
-    n_blocks = -(-t.size // block)
-    padded_t = np.concatenate([t, np.full(n_blocks * block - t.size, t[-1])])
+    orders = tuple(int(k) for k in orders)
+    if t.size == 0:
+        return [np.empty(0) for _ in orders]
+    # fewer times than a block: padded to the next power of two (>= 256), so that a move of another duration
+    # (another sample count) runs the same program: one compiled program per command structure and padded size,
+    # not one eager operation per sample count (50 compilations for a design at a new move time)
+    size = min(block, 1 << max((t.size - 1).bit_length(), 8))
+    n_blocks = -(-t.size // size)
+    padded_t = np.concatenate([t, np.full(n_blocks * size - t.size, t[-1])])
     out = [np.empty(t.size) for _ in orders]
     for b in range(n_blocks):
-        lo, hi = b * block, min((b + 1) * block, t.size)
-        tj = jnp.asarray(padded_t[b * block : (b + 1) * block])
-        for o, k in zip(out, orders):
-            o[lo:hi] = np.asarray(jax.device_get(cmd.derivative(tj, k)))[: hi - lo]
+        lo, hi = b * size, min((b + 1) * size, t.size)
+        vals = np.asarray(jax.device_get(_derivatives(cmd, jnp.asarray(padded_t[lo : lo + size]), orders)))
+        for o, v in zip(out, vals):
+            o[lo:hi] = v[: hi - lo]
     return out
+
+
+@stored_jit
+def _derivatives(cmd, t, orders: tuple):
+    """`cmd.derivative(t, k)` for each of `orders`, stacked: one program (`derivatives_at`)."""
+    return jnp.stack([cmd.derivative(t, k) for k in orders])
 
 
 def _sample(cmd: AbstractMotionCommand, rate_hz: float):

@@ -15,13 +15,14 @@ base's for a `ShapedCommand`, and by an ODE solve (diffrax) for any other motion
 
 import math
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import gammaln
 from jax.typing import ArrayLike
 
-from .._checks import atleast_1d, check_fits, check_positive, check_range, collecting, device_array
+from .._checks import atleast_1d, check_fits, check_positive, check_range, collecting, device_array, is_concrete
 from .._guard import checked, prepare, reraising, stored_jit
 from .._threads import blas_limited
 from .._xla import QUICK_COMPILE
@@ -52,7 +53,7 @@ def _nodes_for(cmd, s) -> int:
 _DAMPED_AWAY = 700.0
 
 
-def _pseudo_polynomial_w(cmd: PseudoPolynomial, s, n_nodes: int):
+def _pseudo_polynomial_w(cmd, s, n_nodes: int):
     """W(s) by the Gauss-Legendre rule, or, where $p = -sT$ has Re p > `_DAMPED_AWAY`, in closed form:
     $\\int_0^1 u^{\\gamma-2}e^{-pu}du = \\Gamma(\\gamma - 1)p^{1-\\gamma} - \\Gamma(\\gamma - 1, p)p^{1-\\gamma}$, whose last
     term is below $|p|^{\\gamma}e^{-\\mathrm{Re}\\,p}$ (the vibration from the start of the move, damped away): the rule
@@ -145,8 +146,80 @@ def residual_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors: ArrayLi
     check_positive("atol", atol, owner="residual_curve")
     if not _has_closed_form(cmd):
         return checked(_residual_ode(axis, cmd, r, rtol, atol), axis, cmd, checks=found)
-    n_nodes = _nodes_for(cmd, _poles(axis, r)[0]) if isinstance(cmd, PseudoPolynomial) else 0
-    return checked(_closed_form_curve(axis, cmd, r, n_nodes), axis, cmd, checks=found)
+    pseudo = cmd.base if isinstance(cmd, ShapedCommand) else cmd
+    if isinstance(pseudo, PseudoPolynomial):
+        shaper = (cmd.times, cmd.amplitudes) if isinstance(cmd, ShapedCommand) else None
+        n_nodes = _nodes_for(pseudo, _poles(axis, r)[0])
+        curve = _pseudo_curve(axis, _padded_terms(pseudo), shaper, r, n_nodes)
+        return checked(curve, axis, cmd, checks=found)
+    return checked(_closed_form_curve(axis, cmd, r, 0), axis, cmd, checks=found)
+
+
+#: a pseudo-polynomial's exponents are padded to a multiple of this for its residual's program (inactive terms,
+#: coefficient 0), so that the orders `design_move`'s candidates pick (3 to 8: they follow the distance and the
+#: limits) share one compiled program
+TERMS_BUCKET = 8
+#: the exponent of a padding term: any value the rule evaluates finitely (its coefficient is 0)
+_PAD_EXPONENT = 3.0
+
+
+class _Terms(eqx.Module):
+    """A pseudo-polynomial's terms padded to `TERMS_BUCKET` (`active`: the real ones, first), with what
+    `_pseudo_polynomial_w` reads of it; `coefficients` comes from `padded_coefficients`."""
+
+    gammas: jax.Array
+    active: jax.Array
+    displacement: jax.Array
+    duration: jax.Array
+
+    @property
+    def coefficients(self):
+        return padded_coefficients(self.gammas, self.active)
+
+
+def _padded_terms(cmd: PseudoPolynomial) -> _Terms:
+    n = int(cmd.gammas.shape[0])
+    size = -(-n // TERMS_BUCKET) * TERMS_BUCKET
+    pad = np.full((size - n,), _PAD_EXPONENT)
+    if is_concrete(cmd.gammas):  # on the host: an eager concatenation would compile once per order
+        g = device_array(np.concatenate([np.asarray(cmd.gammas, dtype=float), pad]))
+    else:
+        g = jnp.concatenate([jnp.asarray(cmd.gammas, dtype=float), jnp.asarray(pad)])
+    return _Terms(
+        g,
+        device_array(np.arange(size) < n),
+        jnp.asarray(cmd.displacement, dtype=float),
+        jnp.asarray(cmd.duration, dtype=float),
+    )
+
+
+def padded_coefficients(gammas, active):
+    """The coefficients $C_i$ of eq. (23) ($\\bar Z \\bar c = \\bar u$, row k of $\\bar Z$ holding $P(\\gamma_i, k)$,
+    k = 0..n: `PseudoPolynomial.coefficients`) of the `active` exponents (the first n + 1 of `gammas`), 0 for the
+    others: the same solve, the system padded by an identity block (the elimination never mixes the blocks)."""
+    S = gammas.shape[0]
+    r = jnp.arange(S, dtype=gammas.dtype)
+    # P(gamma_i, k) = prod_{r < k} (gamma_i - r), as `falling_factorial` multiplies it out
+    rows = [jnp.ones_like(gammas)]
+    for k in range(1, S):
+        rows.append(rows[-1] * (gammas - r[k - 1]))
+    Z = jnp.stack(rows)
+    both = active[:, None] & active[None, :]
+    Z = jnp.where(both, Z, jnp.eye(S, dtype=gammas.dtype))
+    rhs = jnp.zeros((S,), dtype=gammas.dtype).at[0].set(1.0)
+    return jnp.where(active, jnp.linalg.solve(Z, rhs), 0.0)
+
+
+@stored_jit(compiler_options=QUICK_COMPILE)
+def _pseudo_curve(axis, terms: _Terms, shaper, r, n_nodes: int):
+    """`residual_curve` of a pseudo-polynomial (`terms`, padded), shaped by the impulses `shaper` = (times,
+    amplitudes) where not None."""
+    s, wd = _poles(axis, r)
+    W = _pseudo_polynomial_w(terms, s, n_nodes)
+    if shaper is not None:
+        times, amplitudes = shaper
+        W = W * jnp.sum(amplitudes * jnp.exp(s[..., None] * (times[-1] - times)), axis=-1)
+    return jnp.abs(axis.gains)[:, None] / wd * jnp.abs(W)
 
 
 def prepare_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors) -> None:
@@ -162,16 +235,9 @@ def prepare_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors) -> None:
 @stored_jit(compiler_options=QUICK_COMPILE)
 def _closed_form_curve(axis, cmd, r, n_nodes: int):
     s, wd = _poles(axis, r)
-    if isinstance(cmd, PseudoPolynomial):
-        W = _pseudo_polynomial_w(cmd, s, n_nodes)
-    elif isinstance(cmd, ShapedCommand) and isinstance(cmd.base, PseudoPolynomial):
-        lag = cmd.times[-1] - cmd.times
-        fac = jnp.sum(cmd.amplitudes * jnp.exp(s[..., None] * lag), axis=-1)
-        W = _pseudo_polynomial_w(cmd.base, s, n_nodes) * fac
-    else:
-        W = residual_integral(cmd, s)
-        if W is None:  # `residual_curve` calls this for closed-form commands only
-            raise TypeError(f"residual_curve: {type(cmd).__name__} has no closed-form residual")
+    W = residual_integral(cmd, s)
+    if W is None:  # `residual_curve` calls this for closed-form commands only
+        raise TypeError(f"residual_curve: {type(cmd).__name__} has no closed-form residual")
     return jnp.abs(axis.gains)[:, None] / wd * jnp.abs(W)
 
 
