@@ -48,13 +48,14 @@ def test_ramps_kernel_is_the_integral_of_the_hat():
     _, G, _, _, _ = dsg.lp_data(problem, opts)
     G = np.asarray(G)
     J, P = N - 1, opts.n_angles
-    MK = 2 * 3
-    # row p * MK + g is Re(e^{-i theta_p} k_g), theta_p = 2 pi p / P: p = 0 gives Re k, p = P/4 gives Im k
+    K = dsg.grid_slots(opts)  # the 3 factors in use, then the padding slots (never used) up to GRID_BUCKET
+    MK = 2 * K
+    # row p * MK + i K + k is Re(e^{-i theta_p} k_ik), theta_p = 2 pi p / P: p = 0 gives Re k, p = P/4 gives Im k
     kern = G[:MK, :J] + 1j * G[(P // 4) * MK : (P // 4 + 1) * MK, :J]
     gains = np.abs(np.asarray(axis.gains, float))
-    g = 0
     for i, (f, z) in enumerate(((40.0, 0.003), (7.0, 0.1))):
-        for r in (0.8, 1.0, 1.2):
+        for k, r in enumerate((0.8, 1.0, 1.2)):
+            g = i * K + k
             w = 2 * np.pi * f * r
             wd = w * np.sqrt(1 - z * z)
             s = -z * w + 1j * wd
@@ -62,7 +63,6 @@ def test_ramps_kernel_is_the_integral_of_the_hat():
             for j in (0, 6, J - 1):
                 want = weight * _hat_integral(s, j * h, h, T)
                 assert abs(kern[g, j] - want) <= 1e-10 * abs(want), (f, r, j, kern[g, j], want)
-            g += 1
 
 
 def _worst_m(axis, cmd: PiecewiseMove, factors):

@@ -419,7 +419,8 @@ def test_design_move_prepares_its_programs_once_with_the_calls_types(tmp_path, m
         "_closed_form_curve",  # the reference (time-optimal) move's residual
         "_closed_form_curve",  # the design's residual on the band
         "_closed_form_curve",  # and on the wide range
-        "_fine_ratios",
+        "_derivatives",  # the command sampled at the drive's rate (every order in one program)
+        "_fine_ratios_program",
         "_peaks",
         "_solve_round_impl",
     ]
