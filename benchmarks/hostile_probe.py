@@ -1709,6 +1709,19 @@ def cases():
             bt("equal_time"),
         )
     )
+    # scenes: output times bounded before converting them, an RK4 step beyond the budget, a linkage's lengths
+    _su = (jb.BeltStartup(), jb.ExponentialVoltage())
+    add(Case("scene-ts-1e9", "Scene", lambda: jb.Scene(*_su, ts=np.broadcast_to(0.0, (10**9,))), bt("ts")))
+    add(
+        Case(
+            "sim-rk4-dt-1e-300",
+            "simulate",
+            lambda: jb.simulate(jb.Scene(*_su, ts=np.linspace(0.0, 0.1, 11)), method="rk4", dt=1e-300),
+            bt("dt"),
+        )
+    )
+    add(Case("fourbar-a-1e300", "FourBarDrive", lambda: jb.FourBarDrive(a=1e300), bt("a")))
+    add(Case("fourbar-hx-neg-1e300", "FourBarDrive", lambda: jb.FourBarDrive(hx=-1e300), bt("hx")))
     return C
 
 

@@ -531,3 +531,39 @@ def test_shape_move_traced_valid_impulses_match_the_concrete_move_and_differenti
     g = jax.grad(lambda x: _shaped_residual(A, jnp.stack([0.0, x])))(d)
     fd = (_shaped_residual([0.5, 0.5], [0.0, d + 1e-6]) - _shaped_residual([0.5, 0.5], [0.0, d - 1e-6])) / 2e-6
     assert float(g) == pytest.approx(float(fd), rel=1e-5)  # central difference, step 1e-6 s
+
+
+# --- scenes: output times bounded before allocating, an RK4 step refused when it overruns the step budget ------
+_STARTUP = dict(model=jb.BeltStartup(), input=jb.ExponentialVoltage())
+
+
+def test_scene_refuses_output_times_that_would_not_fit_before_converting_them():
+    ts = np.broadcast_to(0.0, (10**9,))  # a view: nothing allocated yet (simulate used to run > 40 s on it)
+    t = time.perf_counter()
+    with pytest.raises(ValueError, match=r"Scene: parameter `ts` makes 1e\+09 saved times of about 192 GB"):
+        jb.Scene(_STARTUP["model"], _STARTUP["input"], ts=ts)  # 5 states + the time, float64, 4 copies: 192 B each
+    assert time.perf_counter() - t < 3.0
+
+
+def test_rk4_step_beyond_the_step_budget_is_refused_at_the_call():
+    scene = jb.Scene(_STARTUP["model"], _STARTUP["input"], ts=np.linspace(0.0, 0.1, 11))
+    t = time.perf_counter()
+    with pytest.raises(ValueError, match=r"simulate: parameter `dt` = 1e-300 s \(RK4 step\) needs 1e\+299 steps"):
+        jb.simulate(scene, method="rk4", dt=1e-300)  # was a SolveError after stepping 1e5 times (10 s)
+    assert time.perf_counter() - t < 3.0
+    # the bound is exact: 0.1 s / 1e-6 s = 1e5 steps is within max_steps = 1e5, 1e-7 s is not
+    with pytest.raises(ValueError, match=r"give `dt` >= 1e-06 s, or raise max_steps to at least 1e\+06"):
+        jb.simulate(scene, method="rk4", dt=1e-7, max_steps=100_000)
+
+
+@pytest.mark.parametrize(
+    "kw, message",
+    [
+        (dict(a=1e300), r"FourBarDrive: parameter `a` must lie in \[1e-06, 1000\] m; got 1e\+300"),  # was OverflowError
+        (dict(b=1e-300), r"FourBarDrive: parameter `b` must lie in \[1e-06, 1000\] m; got 1e-300"),
+        (dict(hx=-1e300), r"FourBarDrive: parameter `hx` must lie in \[-1000, 1000\] m; got -1e\+300"),
+    ],
+)
+def test_fourbar_lengths_beyond_a_kilometre_or_below_a_micrometre_are_refused_by_name(kw, message):
+    with pytest.raises(ValueError, match=message):
+        jb.FourBarDrive(**kw)
