@@ -1722,6 +1722,39 @@ def cases():
     )
     add(Case("fourbar-a-1e300", "FourBarDrive", lambda: jb.FourBarDrive(a=1e300), bt("a")))
     add(Case("fourbar-hx-neg-1e300", "FourBarDrive", lambda: jb.FourBarDrive(hx=-1e300), bt("hx")))
+    sp5 = np.linspace(1.0, 20.0, 5)
+    add(
+        Case(
+            "cross-nmodes-1e9",
+            "crossing_diagram",
+            lambda: jb.crossing_diagram(jb.RunoutRig(), sp5, n_modes=10**9),  # XLA aborted the process
+            bt("n_modes"),
+        )
+    )
+    add(
+        Case(
+            "cross-harmonics-1e9",
+            "crossing_diagram",
+            lambda: jb.crossing_diagram(jb.RunoutRig(), sp5, harmonics=10**9),
+            bt("harmonics"),
+        )
+    )
+    add(
+        Case(
+            "crossing-speeds-nmodes-1e9",
+            "crossing_speeds",
+            lambda: jb.crossing_speeds(jb.RunoutRig(), n_modes=10**9),
+            bt("n_modes"),
+        )
+    )
+    add(
+        Case(
+            "linear-runout-nmodes-1e9",
+            "linear_runout_response",
+            lambda: jb.linear_runout_response(jb.RunoutRig(), 5.0, n_modes=10**9),
+            bt("n_modes"),
+        )
+    )
     return C
 
 

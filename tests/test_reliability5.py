@@ -567,3 +567,38 @@ def test_rk4_step_beyond_the_step_budget_is_refused_at_the_call():
 def test_fourbar_lengths_beyond_a_kilometre_or_below_a_micrometre_are_refused_by_name(kw, message):
     with pytest.raises(ValueError, match=message):
         jb.FourBarDrive(**kw)
+
+
+# --- the run-out rig's grids bounded before allocating (crossing_diagram with n_modes=1e9 aborted the process) ----
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (
+            lambda: jb.crossing_diagram(jb.RunoutRig(), np.linspace(1.0, 20.0, 5), n_modes=10**9),
+            r"crossing_diagram: parameter `n_modes` makes loci of 5e\+09 terms",  # 5 speeds x (1e9 + 1 x 2) loci
+        ),
+        (
+            lambda: jb.crossing_diagram(jb.RunoutRig(), np.linspace(1.0, 20.0, 5), harmonics=10**9),
+            r"crossing_diagram: parameter `harmonics` makes loci of 1e\+10 terms",
+        ),
+        (
+            lambda: jb.crossing_speeds(jb.RunoutRig(), n_modes=10**9),
+            r"crossing_speeds: parameter `n_modes` makes crossings of 2e\+09 terms",  # 1e9 modes x 2 pulleys
+        ),
+        (
+            lambda: jb.linear_runout_response(jb.RunoutRig(), 5.0, n_modes=10**9),
+            r"runout_phasors: parameter `n_modes` makes modal sums of 1e\+09 terms",
+        ),
+    ],
+)
+def test_runout_grids_that_would_not_fit_are_refused_before_allocating(call, message):
+    t = time.perf_counter()
+    with pytest.raises(ValueError, match=message):
+        call()
+    assert time.perf_counter() - t < 3.0
+
+
+def test_runout_grids_of_ordinary_size_keep_moon_and_wickerts_crossings():
+    # Moon & Wickert (1997), Fig. 5: mode 1 meets the first harmonic at 8.98 m/s, mode 2 at 16.00 m/s
+    v = np.asarray(jb.crossing_speeds(jb.RunoutRig()))[:, 0, 0]
+    np.testing.assert_allclose(v, [8.98, 16.00], atol=0.005)

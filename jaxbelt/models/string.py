@@ -40,6 +40,7 @@ from jax.typing import ArrayLike
 from .._checks import as_float_array as _arr
 from .._checks import (
     check_finite,
+    check_fits,
     check_int,
     check_nonnegative,
     check_positive,
@@ -469,6 +470,28 @@ def _positive_int(value, name, owner) -> int:
     return int(value)
 
 
+def _harmonic_count(harmonics) -> int:
+    """How many harmonic orders `harmonics` asks for (an int K: K; a sequence: its length), read before
+    anything is built; 1 where it is not a valid count (`_harmonics` then says why)."""
+    if np.ndim(harmonics) != 0:
+        return int(np.size(harmonics))
+    if isinstance(harmonics, bool | str | bytes) or not is_concrete(harmonics):
+        return 1
+    try:
+        v = float(harmonics)
+    except (TypeError, ValueError):
+        return 1
+    return int(v) if np.isfinite(v) and v >= 1 else 1
+
+
+def _check_grid_fits(owner, total: float, counts: dict, nbytes_per_term: float, what: str) -> None:
+    """Refuse a grid of `total` terms of `nbytes_per_term` bytes each that would not fit in half the memory
+    available, naming the parameter of the largest count in `counts` ({name: count}): said before allocating
+    (crossing_diagram with n_modes = 1e9 made XLA abort the process)."""
+    name = max(counts, key=lambda k: counts[k])
+    check_fits(owner, name, nbytes_per_term * total, f"{what} of {total:.3g} terms")
+
+
 def _harmonics(harmonics, owner):
     if np.ndim(harmonics) == 0 and is_concrete(harmonics):
         return jnp.arange(1, _positive_int(harmonics, "harmonics", owner) + 1, dtype=float)
@@ -502,6 +525,12 @@ def crossing_speeds(rig: RunoutRig, n_modes: int = 2, harmonics=1):
     if not isinstance(rig, RunoutRig):
         raise TypeError(f"{o}: `rig` must be a RunoutRig; got {type(rig).__name__}")
     n_modes = _positive_int(n_modes, "n_modes", o)
+    n_pulleys = int(np.size(rig.pulley_radii))
+    # Newton's iterates and their Jacobians for every (mode, pulley, harmonic): 16 float64 each
+    n_harmonics = _harmonic_count(harmonics)
+    _check_grid_fits(
+        o, float(n_modes) * n_harmonics * n_pulleys, {"n_modes": n_modes, "harmonics": n_harmonics}, 128.0, "crossings"
+    )
     with collecting() as checks:  # concrete: raise now; traced: recorded, attached to the result below
         ks = _harmonics(harmonics, o)
     checks = checks + traced_checks(rig)
@@ -530,6 +559,11 @@ def crossing_diagram(rig: RunoutRig, speed, n_modes: int = 2, harmonics=1):
     if not isinstance(rig, RunoutRig):
         raise TypeError(f"{o}: `rig` must be a RunoutRig; got {type(rig).__name__}")
     n_modes = _positive_int(n_modes, "n_modes", o)
+    n_speeds, n_pulleys = int(np.size(speed)), int(np.size(rig.pulley_radii))
+    # the loci (float64) and their temporaries, four copies, at every speed
+    n_harmonics = _harmonic_count(harmonics)
+    total = float(n_speeds) * (n_modes + n_harmonics * n_pulleys)
+    _check_grid_fits(o, total, {"speed": n_speeds, "n_modes": n_modes, "harmonics": n_harmonics}, 32.0, "loci")
     with collecting() as checks:
         ks = _harmonics(harmonics, o)
     checks = checks + traced_checks(rig)
@@ -602,6 +636,11 @@ def runout_phasors(rig: RunoutRig, speed, n_modes: int = 64):
     Arguments as in `linear_runout_response`.
     """
     n_modes = check_int("runout_phasors", "n_modes", n_modes)
+    # complex modal terms at every speed, two pulleys, about eight temporaries each (complex128)
+    n_speeds = int(np.size(speed))
+    _check_grid_fits(
+        "runout_phasors", float(n_speeds) * n_modes, {"speed": n_speeds, "n_modes": n_modes}, 256.0, "modal sums"
+    )
     speed = _check_response_inputs("runout_phasors", rig, speed)
     out = _phasors(
         speed,
