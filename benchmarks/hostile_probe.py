@@ -1755,6 +1755,39 @@ def cases():
             bt("n_modes"),
         )
     )
+    nb1 = jb.NonlinearBelt()
+    add(
+        Case(
+            "sweep-steps-1e9",
+            "speed_sweep",
+            lambda: jb.speed_sweep(nb1, np.array([9.0]), steps_per_period=10**9),  # XLA's OOM after 6 s
+            bt("steps_per_period"),
+        )
+    )
+    add(
+        Case(
+            "sweep-chunk-1e9",
+            "speed_sweep",
+            lambda: jb.speed_sweep(nb1, np.array([9.0]), periods_per_chunk=10**9),
+            bt("periods_per_chunk"),
+        )
+    )
+    add(
+        Case(
+            "trajectory-periods-1e12",
+            "nonlinear_trajectory",
+            lambda: jb.nonlinear_trajectory(nb1, 9.0, periods=10**12),
+            bt("periods"),
+        )
+    )
+    add(
+        Case(
+            "basins-z0s-1e9",
+            "nonlinear_basins",
+            lambda: jb.nonlinear_basins(nb1, 9.0, np.broadcast_to(0.0, (10**9, 2))),
+            bt("z0s"),
+        )
+    )
     return C
 
 

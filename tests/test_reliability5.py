@@ -602,3 +602,32 @@ def test_runout_grids_of_ordinary_size_keep_moon_and_wickerts_crossings():
     # Moon & Wickert (1997), Fig. 5: mode 1 meets the first harmonic at 8.98 m/s, mode 2 at 16.00 m/s
     v = np.asarray(jb.crossing_speeds(jb.RunoutRig()))[:, 0, 0]
     np.testing.assert_allclose(v, [8.98, 16.00], atol=0.005)
+
+
+# --- the non-linear belt's saved steps bounded before allocating (XLA's out-of-memory error after 6-10 s) ---------
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (
+            lambda: jb.speed_sweep(jb.NonlinearBelt(), np.array([9.0]), steps_per_period=10**9),
+            r"speed_sweep: parameter `steps_per_period` makes 1e\+09 saved steps of about 96 GB",  # 1 mode: 3 x 8 B x 4
+        ),
+        (
+            lambda: jb.nonlinear_steady_state(jb.NonlinearBelt(), 9.0, periods_per_chunk=10**9),
+            r"nonlinear_steady_state: parameter `periods_per_chunk` makes 6.4e\+10 saved steps",
+        ),
+        (
+            lambda: jb.nonlinear_trajectory(jb.NonlinearBelt(), 9.0, periods=10**12),
+            r"nonlinear_trajectory: parameter `periods` makes 6.4e\+13 saved steps",
+        ),
+        (
+            lambda: jb.nonlinear_basins(jb.NonlinearBelt(), 9.0, np.broadcast_to(0.0, (10**9, 2))),
+            r"nonlinear_basins: parameter `z0s` makes 6.4e\+10 saved steps",
+        ),
+    ],
+)
+def test_nonlinear_buffers_that_would_not_fit_are_refused_before_allocating(call, message):
+    t = time.perf_counter()
+    with pytest.raises(ValueError, match=message):
+        call()
+    assert time.perf_counter() - t < 3.0
