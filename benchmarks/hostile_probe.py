@@ -1788,6 +1788,8 @@ def cases():
             bt("z0s"),
         )
     )
+    add(Case("jumps-points-1e9", "jumps", lambda: jb.jumps(nb1, max_points=10**9), bt("max_points")))
+    add(Case("folds-points-1e9", "fold_speeds", lambda: jb.fold_speeds(nb1, max_points=10**9), bt("max_points")))
     return C
 
 

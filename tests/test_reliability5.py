@@ -631,3 +631,14 @@ def test_nonlinear_buffers_that_would_not_fit_are_refused_before_allocating(call
     with pytest.raises(ValueError, match=message):
         call()
     assert time.perf_counter() - t < 3.0
+
+
+@pytest.mark.parametrize("fold_search", [jb.jumps, jb.fold_speeds])
+def test_fold_search_points_that_would_not_fit_are_refused_before_allocating(fold_search):
+    # 1 mode, 3 harmonics: 2 x 1 x 7 + 1 = 15 unknowns, 8 copies of 8 B each per point: 960 B (was XLA's OOM, 17 s)
+    t = time.perf_counter()
+    with pytest.raises(
+        ValueError, match=r"parameter `max_points` makes a continuation of 1e\+09 points of about 960 GB"
+    ):
+        fold_search(jb.NonlinearBelt(), max_points=10**9)
+    assert time.perf_counter() - t < 3.0
