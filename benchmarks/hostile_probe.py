@@ -1790,6 +1790,8 @@ def cases():
     )
     add(Case("jumps-points-1e9", "jumps", lambda: jb.jumps(nb1, max_points=10**9), bt("max_points")))
     add(Case("folds-points-1e9", "fold_speeds", lambda: jb.fold_speeds(nb1, max_points=10**9), bt("max_points")))
+    add(Case("fig4-t1-1e300", "simulate_fig4", lambda: jb.simulate_fig4(t1=1e300), bt("t1")))
+    add(Case("startup-t-end-1e-300", "startup_curves", lambda: jb.startup_curves(t_end=1e-300), bt("t_end")))
     return C
 
 

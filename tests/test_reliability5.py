@@ -642,3 +642,25 @@ def test_fold_search_points_that_would_not_fit_are_refused_before_allocating(fol
     ):
         fold_search(jb.NonlinearBelt(), max_points=10**9)
     assert time.perf_counter() - t < 3.0
+
+
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (
+            lambda: jb.simulate_fig4(t1=1e300),
+            r"simulate_fig4: parameter `t1` must lie in \[1e-06, 1000\] s; got 1e\+300",
+        ),
+        (lambda: jb.simulate_fig4(t1=0.0), r"simulate_fig4: parameter `t1` must lie in \[1e-06, 1000\] s; got 0.0"),
+        (
+            lambda: jb.startup_curves(t_end=1e-300),
+            r"startup_curves: parameter `t_end` must lie in \[1e-06, 1000\] s; got 1e-300",
+        ),
+    ],
+)
+def test_run_spans_beyond_the_scenes_time_scales_are_refused_at_the_call(call, message):
+    # simulate_fig4(t1=1e300) ran the ODE to its step budget: a SolveError after 6 s naming max_steps, not t1
+    t = time.perf_counter()
+    with pytest.raises(ValueError, match=message):
+        call()
+    assert time.perf_counter() - t < 3.0
