@@ -1792,6 +1792,11 @@ def cases():
     add(Case("folds-points-1e9", "fold_speeds", lambda: jb.fold_speeds(nb1, max_points=10**9), bt("max_points")))
     add(Case("fig4-t1-1e300", "simulate_fig4", lambda: jb.simulate_fig4(t1=1e300), bt("t1")))
     add(Case("startup-t-end-1e-300", "startup_curves", lambda: jb.startup_curves(t_end=1e-300), bt("t_end")))
+    t_rec = np.arange(2000) / 1000.0
+    y_rec = np.exp(-0.5 * t_rec) * np.sin(2 * np.pi * 20.0 * t_rec)
+    add(Case("idaxis-t-1e-300", "identify_axis", lambda: jb.identify_axis(t_rec * 1e-300, y_rec, 1), bt("t")))
+    add(Case("idaxis-y-1e300", "identify_axis", lambda: jb.identify_axis(t_rec, y_rec * 1e300, 1), bt("y")))
+    add(Case("idaxis-y-1e-300", "identify_axis", lambda: jb.identify_axis(t_rec, y_rec * 1e-300, 1), bt("y")))
     return C
 
 

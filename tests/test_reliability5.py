@@ -664,3 +664,33 @@ def test_run_spans_beyond_the_scenes_time_scales_are_refused_at_the_call(call, m
     with pytest.raises(ValueError, match=message):
         call()
     assert time.perf_counter() - t < 3.0
+
+
+# --- identify_axis: records whose times or values no fit resolves are refused naming `t` or `y` ------------------
+_T_REC = np.arange(2000) / 1000.0
+_Y_REC = np.exp(-0.5 * _T_REC) * np.sin(2 * np.pi * 20.0 * _T_REC)  # 20 Hz, a decay of 0.5 1/s
+
+
+@pytest.mark.parametrize(
+    "t, y, message",
+    [
+        # the time column in the wrong unit: was the ModalAxis' refusal of a fitted 2e301 Hz, after 6 s
+        (_T_REC * 1e-300, _Y_REC, r"identify_axis: parameter `t` \(times, s\) resolves no frequency of an axis' range"),
+        (_T_REC * 1e300, _Y_REC, r"identify_axis: parameter `t` \(times, s\) resolves no frequency of an axis' range"),
+        # was numpy's LinAlgError ("infs or NaNs", "Singular matrix")
+        (_T_REC, _Y_REC * 1e300, r"identify_axis: parameter `y` must have a peak-to-peak within \[1e-50, 1e\+50\]"),
+        (_T_REC, _Y_REC * 1e-300, r"identify_axis: parameter `y` must have a peak-to-peak within \[1e-50, 1e\+50\]"),
+    ],
+)
+def test_identify_axis_refuses_records_no_fit_resolves_by_name(t, y, message):
+    start = time.perf_counter()
+    with pytest.raises(ValueError, match=message):
+        jb.identify_axis(t, y, 1)
+    assert time.perf_counter() - start < 3.0
+
+
+@pytest.mark.parametrize("scale", [1e-45, 1e45])
+def test_identify_axis_keeps_the_frequency_at_the_ends_of_its_value_range(scale):
+    # the record's own frequency, 20 Hz damped at 0.5 1/s: f_d = 20 Hz, f_n = sqrt(20^2 + (0.5 / 2 pi)^2)
+    f_n = math.hypot(20.0, 0.5 / (2 * math.pi))
+    np.testing.assert_allclose(float(jb.identify_axis(_T_REC, _Y_REC * scale, 1).frequencies[0]), f_n, rtol=1e-9)
