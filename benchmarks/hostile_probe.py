@@ -1797,6 +1797,14 @@ def cases():
     add(Case("idaxis-t-1e-300", "identify_axis", lambda: jb.identify_axis(t_rec * 1e-300, y_rec, 1), bt("t")))
     add(Case("idaxis-y-1e300", "identify_axis", lambda: jb.identify_axis(t_rec, y_rec * 1e300, 1), bt("y")))
     add(Case("idaxis-y-1e-300", "identify_axis", lambda: jb.identify_axis(t_rec, y_rec * 1e-300, 1), bt("y")))
+    add(
+        Case(
+            "contact-friction-1e300",
+            "BeltPulleyContact",
+            lambda: jb.BeltPulleyContact(0.05, friction=1e300),  # its slip limit and margin were inf, "no slip"
+            bt("friction"),
+        )
+    )
     return C
 
 

@@ -694,3 +694,15 @@ def test_identify_axis_keeps_the_frequency_at_the_ends_of_its_value_range(scale)
     # the record's own frequency, 20 Hz damped at 0.5 1/s: f_d = 20 Hz, f_n = sqrt(20^2 + (0.5 / 2 pi)^2)
     f_n = math.hypot(20.0, 0.5 / (2 * math.pi))
     np.testing.assert_allclose(float(jb.identify_axis(_T_REC, _Y_REC * scale, 1).frequencies[0]), f_n, rtol=1e-9)
+
+
+@pytest.mark.parametrize("bad", [1e300, 10.5, 0.0, -0.2])
+def test_contact_friction_outside_physical_coefficients_is_refused_by_name(bad):
+    # friction = 1e300 gave an infinite slip limit and margin (e^(mu theta) overflowed) reported as "no slip"
+    with pytest.raises(ValueError, match=r"BeltPulleyContact: parameter `friction` must lie in \(0, 10\]"):
+        jb.BeltPulleyContact(0.05, friction=bad)
+
+
+def test_contact_friction_at_the_end_of_its_range_keeps_eytelweins_limit():
+    contact = jb.BeltPulleyContact(0.05, friction=10.0)  # the limit is e^(mu theta), Euler-Eytelwein
+    np.testing.assert_allclose(float(contact.slip_limit()), math.exp(10.0 * 2.094), rtol=1e-12)

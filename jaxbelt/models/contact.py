@@ -89,7 +89,11 @@ class BeltPulleyContact(Parametrised):
     slack_tension: FloatParam = param(120.0, unit="N", symbol="$T_1$", doc="slack-side tension")
     tight_tension: FloatParam = param(140.0, unit="N", symbol="$T_2$", doc="tight-side tension")
     density: FloatParam = param(0.05, unit="kg/m", symbol="$\\rho$", doc="belt mass per length")
-    friction: FloatParam = param(0.2, unit="–", symbol="$\\mu$", doc="friction coefficient")
+    # (0, 10]: belts on pulleys hold 0.1-1.5 (rubber on steel); beyond, e^(mu theta) over a full wrap
+    # (e^62.8 at 10) is no physical tension ratio, and at 1e300 it overflowed to an infinite slip limit and margin
+    friction: FloatParam = param(
+        0.2, unit="–", check="range", lo=0.0, hi=10.0, lo_open=True, symbol="$\\mu$", doc="friction coefficient"
+    )
     wrap_angle: FloatParam = param(
         2.094,
         unit="rad",
