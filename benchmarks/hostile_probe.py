@@ -1805,6 +1805,41 @@ def cases():
             bt("friction"),
         )
     )
+    ts5 = jnp.linspace(0.0, 0.1, 5)
+    add(
+        Case(
+            "sim-vmap-k-negative",
+            "simulate",
+            lambda: jax.vmap(lambda k: jb.simulate(jb.Scene(jb.BeltStartup(k=k), jb.ExponentialVoltage(), ts=ts5)).ys)(
+                jnp.array([1.2e5, -1.0])
+            ),
+            bt("k"),
+        )
+    )
+    add(
+        Case(
+            "crossing-vmap-length-nan",
+            "crossing_speeds",
+            lambda: jax.vmap(lambda L: jb.crossing_speeds(jb.RunoutRig(length=L)))(jnp.array([0.86, nan])),
+            bt("length"),
+        )
+    )
+    add(
+        Case(
+            "exciting-vmap-radius-negative",
+            "exciting_speeds",
+            lambda: jax.vmap(lambda r: jb.exciting_speeds(jb.MovingString(), r))(jnp.array([0.1, -0.1])),
+            bt("pulley_radius"),
+        )
+    )
+    add(
+        Case(
+            "backbone-grad-speed-nan",
+            "backbone_amplitude",
+            lambda: jax.grad(lambda v: jb.backbone_amplitude(jb.NonlinearBelt(), v))(nan),
+            bt("speed"),
+        )
+    )
     return C
 
 

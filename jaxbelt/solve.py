@@ -43,6 +43,7 @@ from ._guard import (
     has_host_callbacks,
     host_checked,
     nan_where,
+    reraising,
     traced_checks,
     validated_inputs,
 )
@@ -487,6 +488,7 @@ def forward_sensitivities(
     return ys, s, success
 
 
+@reraising("simulate")
 @blas_limited
 def simulate(
     scene: Scene,

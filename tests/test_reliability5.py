@@ -706,3 +706,55 @@ def test_contact_friction_outside_physical_coefficients_is_refused_by_name(bad):
 def test_contact_friction_at_the_end_of_its_range_keeps_eytelweins_limit():
     contact = jb.BeltPulleyContact(0.05, friction=10.0)  # the limit is e^(mu theta), Euler-Eytelwein
     np.testing.assert_allclose(float(contact.slip_limit()), math.exp(10.0 * 2.094), rtol=1e-12)
+
+
+# --- eager vmap/grad: the scene functions re-raise a failed run-time check naming the parameter, not JAX's banner --
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (
+            lambda: jax.vmap(
+                lambda k: (
+                    jb.simulate(jb.Scene(jb.BeltStartup(k=k), jb.ExponentialVoltage(), ts=jnp.linspace(0.0, 0.1, 5))).ys
+                )
+            )(jnp.array([1.2e5, -1.0])),
+            r"simulate: BeltStartup: parameter `k` must be finite and > 0 N/m \(element 1 of the batch\)",
+        ),
+        (
+            lambda: jax.vmap(lambda L: jb.crossing_speeds(jb.RunoutRig(length=L)))(jnp.array([0.86, jnp.nan])),
+            r"crossing_speeds: RunoutRig: parameter `length` must be finite and > 0 m \(element 1 of the batch\)",
+        ),
+        (
+            lambda: jax.vmap(lambda r: jb.exciting_speeds(jb.MovingString(), r))(jnp.array([0.1, -0.1])),
+            r"exciting_speeds: parameter `pulley_radius` must be finite and > 0 m \(element 1 of the batch\)",
+        ),
+        (
+            lambda: jax.vmap(lambda v: jb.crossing_diagram(jb.RunoutRig(), v)[0])(jnp.array([5.0, jnp.nan])),
+            r"crossing_diagram: `speed` must be below the critical speed",
+        ),
+        (
+            lambda: jax.grad(lambda v: jb.backbone_amplitude(jb.NonlinearBelt(), v))(jnp.nan),
+            r"backbone_amplitude: NonlinearBelt: parameter `speed` \(running speed\) must lie in \[0, wave_speed\)",
+        ),
+        pytest.param(
+            lambda: jax.vmap(lambda v: jb.kbm_coefficients(jb.NonlinearBelt(), v))(jnp.array([9.0, jnp.nan])),
+            r"kbm_coefficients: NonlinearBelt: parameter `speed` \(running speed\) must lie in \[0, wave_speed\)",
+            marks=pytest.mark.slow,  # ~6 s of compilation
+        ),
+    ],
+)
+def test_scene_functions_name_the_parameter_under_eager_vmap_and_grad(call, message):
+    # was equinox's EquinoxRuntimeError, whose first line is "Above is the stack outside of JIT"
+    with pytest.raises(ValueError, match=message) as e:
+        call()
+    assert "Above is the stack" not in str(e.value).splitlines()[0]
+
+
+def test_simulate_under_vmap_keeps_the_eager_values():
+    def run(k):
+        return jb.simulate(jb.Scene(jb.BeltStartup(k=k), jb.ExponentialVoltage(), ts=jnp.linspace(0.0, 0.1, 5))).ys
+
+    ks = jnp.array([1.2e5, 0.9e5])
+    batched = jax.vmap(run)(ks)
+    for i, k in enumerate(np.asarray(ks)):
+        np.testing.assert_allclose(np.asarray(batched[i]), np.asarray(run(float(k))), rtol=1e-10, atol=1e-12)

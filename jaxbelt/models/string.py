@@ -50,7 +50,7 @@ from .._checks import (
     is_concrete,
     record,
 )
-from .._guard import all_ok, checked, error_if, guard, host_checked, stored_jit, traced_checks
+from .._guard import all_ok, checked, error_if, guard, host_checked, reraising, stored_jit, traced_checks
 from .._params import FloatParam, Parametrised, document, param
 from .._threads import blas_limited
 
@@ -291,6 +291,7 @@ def _first_order(M, G, K):
 
 
 # --- exciting speeds and crossings ---------------------------------------------------------------
+@reraising("exciting_speeds")
 @blas_limited
 def exciting_speeds(span: MovingString, pulley_radius, n=1, m=1):
     """Pulley angular speeds [rad/s] at which harmonic `m` of its rotation excites mode `n` (eq. 55).
@@ -504,6 +505,7 @@ def _harmonics(harmonics, owner):
     return ks
 
 
+@reraising("crossing_speeds")
 @blas_limited
 def crossing_speeds(rig: RunoutRig, n_modes: int = 2, harmonics=1):
     """Belt speeds [m/s] where the pulley load lines cross the natural-frequency loci (Moon & Wickert, 1997, Fig. 5).
@@ -546,6 +548,7 @@ def crossing_speeds(rig: RunoutRig, n_modes: int = 2, harmonics=1):
     return guard(out, checks, throw=True)[0]
 
 
+@reraising("crossing_diagram")
 @blas_limited
 def crossing_diagram(rig: RunoutRig, speed, n_modes: int = 2, harmonics=1):
     """Loci of the crossing diagram at belt speeds `speed` [m/s] (Moon & Wickert, 1997, Fig. 5a).
@@ -627,6 +630,7 @@ def _check_response_inputs(o, rig: RunoutRig, speed):
     return _check_subcritical(speed, rig.wave_speed, o)
 
 
+@reraising("runout_phasors")
 @blas_limited
 def runout_phasors(rig: RunoutRig, speed, n_modes: int = 64):
     """Complex amplitudes [m] of the steady response at the rig's `position` to each pulley's run-out.
@@ -676,6 +680,7 @@ def _phasors(speed, L, vt, radii, runouts, phase, zeta, position, nm):
     return W0.reshape(speed.shape), W1.reshape(speed.shape)
 
 
+@reraising("linear_runout_response")
 @blas_limited
 def linear_runout_response(rig: RunoutRig, speed, n_modes: int = 64):
     """Steady peak-to-peak transverse displacement [m] of the linear span driven by eccentric pulleys.
