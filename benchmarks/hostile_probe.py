@@ -1840,6 +1840,22 @@ def cases():
             bt("speed"),
         )
     )
+    add(
+        Case(
+            "span-vmap-tension-negative",
+            "MovingString.natural_frequencies",
+            lambda: jax.vmap(lambda T: jb.MovingString(tension=T).natural_frequencies(10.0))(jnp.array([140.0, -1.0])),
+            bt("tension"),
+        )
+    )
+    add(
+        Case(
+            "contact-vmap-omega-nan",
+            "BeltPulleyContact.slip_margin",
+            lambda: jax.vmap(lambda w: jb.BeltPulleyContact(0.05).slip_margin(w))(jnp.array([100.0, nan])),
+            bt("omega"),
+        )
+    )
     return C
 
 

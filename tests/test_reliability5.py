@@ -758,3 +758,32 @@ def test_simulate_under_vmap_keeps_the_eager_values():
     batched = jax.vmap(run)(ks)
     for i, k in enumerate(np.asarray(ks)):
         np.testing.assert_allclose(np.asarray(batched[i]), np.asarray(run(float(k))), rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (
+            lambda: jax.vmap(lambda T: jb.MovingString(tension=T).natural_frequencies(10.0))(jnp.array([140.0, -1.0])),
+            r"MovingString.natural_frequencies: MovingString: parameter `tension` must be finite and > 0 N "
+            r"\(element 1 of the batch\)",
+        ),
+        (
+            lambda: jax.vmap(lambda w: jb.BeltPulleyContact(0.05).slip_margin(w))(jnp.array([100.0, jnp.nan])),
+            r"BeltPulleyContact.slip_margin: parameter `omega` must be finite \(element 1 of the batch\)",
+        ),
+    ],
+)
+def test_span_and_contact_methods_name_the_parameter_under_eager_vmap(call, message):
+    with pytest.raises(ValueError, match=message):
+        call()
+
+
+def test_span_frequencies_under_vmap_keep_the_closed_form():
+    # omega_n = n pi c (1 - (V/c)^2) / L [rad/s], c = sqrt(T / rho): the moving string's closed form
+    span = jb.MovingString()
+    c = math.sqrt(140.0 / 0.05)
+    got = np.asarray(jax.vmap(lambda v: span.natural_frequencies(v))(jnp.array([10.0, 20.0])))
+    for row, v in zip(got, (10.0, 20.0), strict=True):
+        ref = [n * math.pi * c * (1 - (v / c) ** 2) / 0.2621 for n in (1, 2, 3)]
+        np.testing.assert_allclose(row, ref, rtol=1e-12)

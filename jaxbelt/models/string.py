@@ -186,6 +186,7 @@ class MovingString(Parametrised):
             check_positive("pulley_radius", pulley_radius, "m", "MovingString.critical_rotor_speed")
         return checked(self.critical_speed / jnp.asarray(pulley_radius, dtype=float), self, checks=found)
 
+    @reraising("MovingString.natural_frequencies")
     def natural_frequencies(self, speed: ArrayLike = 0.0, n_modes: int = 3):
         """$\\omega_n(V) = (n\\pi/L) V_{cr} (1 - V^2/V_{cr}^2)$ [rad/s] (eq. 39), $n = 1..n\\_modes$.
 
@@ -199,6 +200,7 @@ class MovingString(Parametrised):
         base = (jnp.pi / self.length) * vc * (1.0 - (speed / vc) ** 2)
         return checked(base[..., None] * n, self)
 
+    @reraising("MovingString.mode_shape")
     def mode_shape(self, x, t, speed, n: int = 1, b1=1.0, b2=0.0):
         """Free vibration of mode `n` at belt speed `speed`, eq. (49) with the sign of eq. (28)-(31) fixed.
 
@@ -257,6 +259,7 @@ class MovingString(Parametrised):
         K = jnp.diag((vc**2 - speed**2) * (k * jnp.pi / L) ** 2 * 0.5 * L)
         return M, G, K
 
+    @reraising("MovingString.galerkin_frequencies")
     def galerkin_frequencies(self, speed, n_basis: int, n_modes: int = 3):
         """The $n\\_modes$ lowest natural frequencies [rad/s] of the $N$-mode Galerkin model.
 
