@@ -1856,6 +1856,14 @@ def cases():
             bt("omega"),
         )
     )
+    add(
+        Case(
+            "cli-shaping-revolutions-1e300",
+            "cli shaping",
+            cli("shaping", "--revolutions", "1e300"),  # named the command's `displacement`
+            opt("--revolutions"),
+        )
+    )
     return C
 
 

@@ -787,3 +787,20 @@ def test_span_frequencies_under_vmap_keep_the_closed_form():
     for row, v in zip(got, (10.0, 20.0), strict=True):
         ref = [n * math.pi * c * (1 - (v / c) ** 2) / 0.2621 for n in (1, 2, 3)]
         np.testing.assert_allclose(row, ref, rtol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        # was "PseudoPolynomial: parameter `displacement` must lie in [-1e+09, 1e+09] rad" after 3 s
+        (["--revolutions", "1e300"], "argument --revolutions: must lie in (0, 1.59155e+08], got 1e300"),
+        (["--duration", "1e300"], "argument --duration: must lie in [1e-06, 1e+06], got 1e300"),
+    ],
+)
+def test_cli_shaping_names_the_option_of_a_degenerate_command(argv, message, capsys):
+    from jaxbelt.cli import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["--no-cache", "shaping", *argv])
+    assert e.value.code == 2
+    assert message in capsys.readouterr().err
