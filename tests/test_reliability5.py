@@ -720,9 +720,10 @@ def test_contact_friction_at_the_end_of_its_range_keeps_eytelweins_limit():
             )(jnp.array([1.2e5, -1.0])),
             r"simulate: BeltStartup: parameter `k` must be finite and > 0 N/m \(element 1 of the batch\)",
         ),
-        (
+        pytest.param(
             lambda: jax.vmap(lambda L: jb.crossing_speeds(jb.RunoutRig(length=L)))(jnp.array([0.86, jnp.nan])),
             r"crossing_speeds: RunoutRig: parameter `length` must be finite and > 0 m \(element 1 of the batch\)",
+            marks=pytest.mark.slow,  # 2-6 s of compiling the batched root finder
         ),
         (
             lambda: jax.vmap(lambda r: jb.exciting_speeds(jb.MovingString(), r))(jnp.array([0.1, -0.1])),
