@@ -319,6 +319,11 @@ _M593 = 'M593 P"custom" H0.5 T{}'
             r"shaped_commands: parameter `equal_time` must be True or False",  # "no" was read as True
         ),
         (
+            lambda: jb.tune_pid(jb.FourBarDrive(), jb.PID(), steps=10**12, progress=False),  # ran without end
+            ValueError,
+            r"tune_pid: parameter `steps` must lie in \[1, 100000\]",
+        ),
+        (
             lambda: jb.welch(np.zeros(100), 1e300),
             ValueError,
             r"shorter than half a second at parameter `rate` = 1e\+300 Hz",
@@ -805,3 +810,11 @@ def test_cli_shaping_names_the_option_of_a_degenerate_command(argv, message, cap
         main(["--no-cache", "shaping", *argv])
     assert e.value.code == 2
     assert message in capsys.readouterr().err
+
+
+def test_fluctuation_index_of_an_inverted_window_names_t0_and_t1():
+    sol = jb.simulate(jb.Scene(jb.FourBarDrive(), jb.PID(), ts=np.linspace(0.0, 0.5, 101)))
+    with pytest.raises(ValueError, match=r"window \[t0, t1\] must contain at least two output times \(parameters `t0`"):
+        jb.fluctuation_index(sol, 0.4, 0.2)
+    with pytest.raises(ValueError, match=r"parameter `t0` \(a bound of the window \[t0, t1\]\) must lie within"):
+        jb.fluctuation_objective(jb.FourBarDrive(), jb.PID(), 0.4, 0.2)  # its grid ends at t1
