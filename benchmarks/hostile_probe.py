@@ -1709,6 +1709,161 @@ def cases():
             bt("equal_time"),
         )
     )
+    # scenes: output times bounded before converting them, an RK4 step beyond the budget, a linkage's lengths
+    _su = (jb.BeltStartup(), jb.ExponentialVoltage())
+    add(Case("scene-ts-1e9", "Scene", lambda: jb.Scene(*_su, ts=np.broadcast_to(0.0, (10**9,))), bt("ts")))
+    add(
+        Case(
+            "sim-rk4-dt-1e-300",
+            "simulate",
+            lambda: jb.simulate(jb.Scene(*_su, ts=np.linspace(0.0, 0.1, 11)), method="rk4", dt=1e-300),
+            bt("dt"),
+        )
+    )
+    add(Case("fourbar-a-1e300", "FourBarDrive", lambda: jb.FourBarDrive(a=1e300), bt("a")))
+    add(Case("fourbar-hx-neg-1e300", "FourBarDrive", lambda: jb.FourBarDrive(hx=-1e300), bt("hx")))
+    sp5 = np.linspace(1.0, 20.0, 5)
+    add(
+        Case(
+            "cross-nmodes-1e9",
+            "crossing_diagram",
+            lambda: jb.crossing_diagram(jb.RunoutRig(), sp5, n_modes=10**9),  # XLA aborted the process
+            bt("n_modes"),
+        )
+    )
+    add(
+        Case(
+            "cross-harmonics-1e9",
+            "crossing_diagram",
+            lambda: jb.crossing_diagram(jb.RunoutRig(), sp5, harmonics=10**9),
+            bt("harmonics"),
+        )
+    )
+    add(
+        Case(
+            "crossing-speeds-nmodes-1e9",
+            "crossing_speeds",
+            lambda: jb.crossing_speeds(jb.RunoutRig(), n_modes=10**9),
+            bt("n_modes"),
+        )
+    )
+    add(
+        Case(
+            "linear-runout-nmodes-1e9",
+            "linear_runout_response",
+            lambda: jb.linear_runout_response(jb.RunoutRig(), 5.0, n_modes=10**9),
+            bt("n_modes"),
+        )
+    )
+    nb1 = jb.NonlinearBelt()
+    add(
+        Case(
+            "sweep-steps-1e9",
+            "speed_sweep",
+            lambda: jb.speed_sweep(nb1, np.array([9.0]), steps_per_period=10**9),  # XLA's OOM after 6 s
+            bt("steps_per_period"),
+        )
+    )
+    add(
+        Case(
+            "sweep-chunk-1e9",
+            "speed_sweep",
+            lambda: jb.speed_sweep(nb1, np.array([9.0]), periods_per_chunk=10**9),
+            bt("periods_per_chunk"),
+        )
+    )
+    add(
+        Case(
+            "trajectory-periods-1e12",
+            "nonlinear_trajectory",
+            lambda: jb.nonlinear_trajectory(nb1, 9.0, periods=10**12),
+            bt("periods"),
+        )
+    )
+    add(
+        Case(
+            "basins-z0s-1e9",
+            "nonlinear_basins",
+            lambda: jb.nonlinear_basins(nb1, 9.0, np.broadcast_to(0.0, (10**9, 2))),
+            bt("z0s"),
+        )
+    )
+    add(Case("jumps-points-1e9", "jumps", lambda: jb.jumps(nb1, max_points=10**9), bt("max_points")))
+    add(Case("folds-points-1e9", "fold_speeds", lambda: jb.fold_speeds(nb1, max_points=10**9), bt("max_points")))
+    add(Case("fig4-t1-1e300", "simulate_fig4", lambda: jb.simulate_fig4(t1=1e300), bt("t1")))
+    add(Case("startup-t-end-1e-300", "startup_curves", lambda: jb.startup_curves(t_end=1e-300), bt("t_end")))
+    t_rec = np.arange(2000) / 1000.0
+    y_rec = np.exp(-0.5 * t_rec) * np.sin(2 * np.pi * 20.0 * t_rec)
+    add(Case("idaxis-t-1e-300", "identify_axis", lambda: jb.identify_axis(t_rec * 1e-300, y_rec, 1), bt("t")))
+    add(Case("idaxis-y-1e300", "identify_axis", lambda: jb.identify_axis(t_rec, y_rec * 1e300, 1), bt("y")))
+    add(Case("idaxis-y-1e-300", "identify_axis", lambda: jb.identify_axis(t_rec, y_rec * 1e-300, 1), bt("y")))
+    add(
+        Case(
+            "contact-friction-1e300",
+            "BeltPulleyContact",
+            lambda: jb.BeltPulleyContact(0.05, friction=1e300),  # its slip limit and margin were inf, "no slip"
+            bt("friction"),
+        )
+    )
+    ts5 = jnp.linspace(0.0, 0.1, 5)
+    add(
+        Case(
+            "sim-vmap-k-negative",
+            "simulate",
+            lambda: jax.vmap(lambda k: jb.simulate(jb.Scene(jb.BeltStartup(k=k), jb.ExponentialVoltage(), ts=ts5)).ys)(
+                jnp.array([1.2e5, -1.0])
+            ),
+            bt("k"),
+        )
+    )
+    add(
+        Case(
+            "crossing-vmap-length-nan",
+            "crossing_speeds",
+            lambda: jax.vmap(lambda L: jb.crossing_speeds(jb.RunoutRig(length=L)))(jnp.array([0.86, nan])),
+            bt("length"),
+        )
+    )
+    add(
+        Case(
+            "exciting-vmap-radius-negative",
+            "exciting_speeds",
+            lambda: jax.vmap(lambda r: jb.exciting_speeds(jb.MovingString(), r))(jnp.array([0.1, -0.1])),
+            bt("pulley_radius"),
+        )
+    )
+    add(
+        Case(
+            "backbone-grad-speed-nan",
+            "backbone_amplitude",
+            lambda: jax.grad(lambda v: jb.backbone_amplitude(jb.NonlinearBelt(), v))(nan),
+            bt("speed"),
+        )
+    )
+    add(
+        Case(
+            "span-vmap-tension-negative",
+            "MovingString.natural_frequencies",
+            lambda: jax.vmap(lambda T: jb.MovingString(tension=T).natural_frequencies(10.0))(jnp.array([140.0, -1.0])),
+            bt("tension"),
+        )
+    )
+    add(
+        Case(
+            "contact-vmap-omega-nan",
+            "BeltPulleyContact.slip_margin",
+            lambda: jax.vmap(lambda w: jb.BeltPulleyContact(0.05).slip_margin(w))(jnp.array([100.0, nan])),
+            bt("omega"),
+        )
+    )
+    add(
+        Case(
+            "cli-shaping-revolutions-1e300",
+            "cli shaping",
+            cli("shaping", "--revolutions", "1e300"),  # named the command's `displacement`
+            opt("--revolutions"),
+        )
+    )
     return C
 
 

@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import check_fits, check_int, check_positive, check_scalar
+from ._checks import check_fits, check_int, check_positive, check_range, check_scalar
 from ._threads import blas_limited
 from .commands import ConstantVoltage, ExponentialVoltage
 from .models.fourbar import FourBarDrive
@@ -33,6 +33,11 @@ STARTUP_OUTPUTS = (
     "alpha2",
 )
 
+
+#: the span [s] of a start-up or four-bar run: the start-up's electrical time constant is ~1 ms and its transient
+#: ~0.1 s, the four-bar's window ~0.5 s; 1 us to 1000 s reaches three decades beyond each (t1 = 1e300 s ran the ODE
+#: to its step budget, a `SolveError` after 6 s naming `max_steps`, not the span)
+RUN_SPAN_RANGE_S = (1e-6, 1e3)
 
 #: bytes a run holds per saved time, an upper estimate: the state and the observed outputs (about 16 columns of
 #: float64) in the solver's output, its host copy and the result's arrays
@@ -57,7 +62,7 @@ def startup_curves(model=None, gammas=(0.02, 0.04, 0.06), v_max=24.0, t_end=0.5,
     n_points = check_int("startup_curves", "n_points", n_points, 2)
     check_fits("startup_curves", "n_points", BYTES_PER_SAVED_POINT * n_points, f"{n_points:.3g} saved times")
     check_scalar("t_end", t_end, "s", "startup_curves")
-    check_positive("t_end", t_end, "s", "startup_curves")
+    check_range("t_end", t_end, *RUN_SPAN_RANGE_S, unit="s", owner="startup_curves")
     model = BeltStartup() if model is None else model
     ts = np.linspace(0.0, float(t_end), n_points)
     observe = tuple(n for n in STARTUP_OUTPUTS if n not in model.state_names)
@@ -85,7 +90,7 @@ def simulate_fig4(drive=None, pid=None, *, voltage: float = 25.0, t1: float = 1.
     """
 
     check_scalar("t1", t1, "s", "simulate_fig4")
-    check_positive("t1", t1, "s", "simulate_fig4")
+    check_range("t1", t1, *RUN_SPAN_RANGE_S, unit="s", owner="simulate_fig4")
     n = check_int("simulate_fig4", "n", n, 2)
     check_fits("simulate_fig4", "n", 2 * BYTES_PER_SAVED_POINT * n, f"{n:.3g} saved times of two runs")
     drive = FourBarDrive() if drive is None else drive

@@ -13,7 +13,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from ._checks import as_float_array, check_real, is_concrete
+from ._checks import as_float_array, check_fits, check_real, is_concrete
 from ._model import AbstractModel
 from .commands import AbstractInput
 
@@ -120,6 +120,12 @@ class Scene(eqx.Module):
             if unknown:
                 raise ValueError(f"Scene: {type(model).__name__} has no output {unknown[0]!r}; available: {known}")
         self.state = bool(state)
+        if ts is not None and np.ndim(ts) == 1:
+            # bounded before anything is converted or allocated: each saved time holds the state and the observed
+            # outputs (float64) in the solver's buffer, its host copy, the result's arrays and the time itself
+            n_times = int(np.shape(ts)[0])
+            columns = int(getattr(model, "n_states", 8)) + len(observe or ()) + 1
+            check_fits("Scene", "ts", 4 * 8.0 * columns * n_times, f"{n_times:.3g} saved times")
         for name, v, unit in (("ts", ts, "s"), ("t0", t0, "s"), ("t1", t1, "s"), ("y0", y0, "")):
             _check_real(name, v, unit)
         if y0 is None:

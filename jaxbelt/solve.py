@@ -43,6 +43,7 @@ from ._guard import (
     has_host_callbacks,
     host_checked,
     nan_where,
+    reraising,
     traced_checks,
     validated_inputs,
 )
@@ -487,6 +488,7 @@ def forward_sensitivities(
     return ys, s, success
 
 
+@reraising("simulate")
 @blas_limited
 def simulate(
     scene: Scene,
@@ -540,6 +542,8 @@ def simulate(
     for name, flag in (("throw", throw), ("progress", progress)):
         if not isinstance(flag, bool | np.bool_):
             raise TypeError(f"simulate: parameter `{name}` must be True or False; got {flag!r}")
+    if method == "rk4":
+        _check_rk4_budget(scene, dt, max_steps)
     sol = _simulate_concrete(scene, method, solver, rtol, atol, dt0, dt, max_steps, progress, adjoint)
     if sol is not None:
         if throw and not isinstance(sol.success, Tracer) and bool(np.all(np.asarray(sol.success))):
@@ -623,6 +627,25 @@ def _structure(scene: Scene, method: str, adjoint):
 def _check_fixed_step(method: str, solver, dt0) -> None:
     if method == "ode" and dt0 is None and not _is_diffrax(solver, "AbstractAdaptiveSolver"):
         raise ValueError(f"simulate: fixed-step solver {type(solver).__name__} needs `dt0` (step, s)")
+
+
+def _check_rk4_budget(scene: Scene, dt, max_steps) -> None:
+    """Refuse at the call a fixed RK4 step `dt` [s] that needs more than `max_steps` steps over the scene's span,
+    $\\lceil (t_1 - t_0) / dt \\rceil > $ `max_steps`, when all three are concrete: the run would stop at the budget
+    after stepping through all of it (seconds to minutes for dt = 1e-300 s) and say the same thing then."""
+    if not (_number(dt) and isinstance(max_steps, (int, np.integer)) and not isinstance(max_steps, bool)):
+        return  # traced or malformed: the recorded checks and `_check_max_steps` answer
+    if not (_positive_number(dt) and max_steps >= 1 and is_concrete((scene.start_time, scene.times))):
+        return
+    t0, t1 = float(scene.start_time), float(np.asarray(scene.times)[-1])
+    span, step = t1 - t0, float(dt)
+    need = span / step
+    if need > max_steps and math.ceil(need - 1e-9) > max_steps:
+        raise ValueError(
+            f"simulate: parameter `dt` = {step:g} s (RK4 step) needs {need:.3g} steps over the scene's span "
+            f"{span:g} s, more than `max_steps` = {max_steps}: give `dt` >= {span / max_steps:.3g} s, or raise "
+            f"max_steps to at least {need:.3g}"
+        )
 
 
 def _check_max_steps(max_steps, owner: str = "simulate") -> None:

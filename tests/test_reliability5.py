@@ -319,6 +319,11 @@ _M593 = 'M593 P"custom" H0.5 T{}'
             r"shaped_commands: parameter `equal_time` must be True or False",  # "no" was read as True
         ),
         (
+            lambda: jb.tune_pid(jb.FourBarDrive(), jb.PID(), steps=10**12, progress=False),  # ran without end
+            ValueError,
+            r"tune_pid: parameter `steps` must lie in \[1, 100000\]",
+        ),
+        (
             lambda: jb.welch(np.zeros(100), 1e300),
             ValueError,
             r"shorter than half a second at parameter `rate` = 1e\+300 Hz",
@@ -531,3 +536,285 @@ def test_shape_move_traced_valid_impulses_match_the_concrete_move_and_differenti
     g = jax.grad(lambda x: _shaped_residual(A, jnp.stack([0.0, x])))(d)
     fd = (_shaped_residual([0.5, 0.5], [0.0, d + 1e-6]) - _shaped_residual([0.5, 0.5], [0.0, d - 1e-6])) / 2e-6
     assert float(g) == pytest.approx(float(fd), rel=1e-5)  # central difference, step 1e-6 s
+
+
+# --- scenes: output times bounded before allocating, an RK4 step refused when it overruns the step budget ------
+_STARTUP = dict(model=jb.BeltStartup(), input=jb.ExponentialVoltage())
+
+
+def test_scene_refuses_output_times_that_would_not_fit_before_converting_them():
+    ts = np.broadcast_to(0.0, (10**9,))  # a view: nothing allocated yet (simulate used to run > 40 s on it)
+    t = time.perf_counter()
+    with pytest.raises(ValueError, match=r"Scene: parameter `ts` makes 1e\+09 saved times of about 192 GB"):
+        jb.Scene(_STARTUP["model"], _STARTUP["input"], ts=ts)  # 5 states + the time, float64, 4 copies: 192 B each
+    assert time.perf_counter() - t < 3.0
+
+
+def test_rk4_step_beyond_the_step_budget_is_refused_at_the_call():
+    scene = jb.Scene(_STARTUP["model"], _STARTUP["input"], ts=np.linspace(0.0, 0.1, 11))
+    t = time.perf_counter()
+    with pytest.raises(ValueError, match=r"simulate: parameter `dt` = 1e-300 s \(RK4 step\) needs 1e\+299 steps"):
+        jb.simulate(scene, method="rk4", dt=1e-300)  # was a SolveError after stepping 1e5 times (10 s)
+    assert time.perf_counter() - t < 3.0
+    # the bound is exact: 0.1 s / 1e-6 s = 1e5 steps is within max_steps = 1e5, 1e-7 s is not
+    with pytest.raises(ValueError, match=r"give `dt` >= 1e-06 s, or raise max_steps to at least 1e\+06"):
+        jb.simulate(scene, method="rk4", dt=1e-7, max_steps=100_000)
+
+
+@pytest.mark.parametrize(
+    "kw, message",
+    [
+        (dict(a=1e300), r"FourBarDrive: parameter `a` must lie in \[1e-06, 1000\] m; got 1e\+300"),  # was OverflowError
+        (dict(b=1e-300), r"FourBarDrive: parameter `b` must lie in \[1e-06, 1000\] m; got 1e-300"),
+        (dict(hx=-1e300), r"FourBarDrive: parameter `hx` must lie in \[-1000, 1000\] m; got -1e\+300"),
+    ],
+)
+def test_fourbar_lengths_beyond_a_kilometre_or_below_a_micrometre_are_refused_by_name(kw, message):
+    with pytest.raises(ValueError, match=message):
+        jb.FourBarDrive(**kw)
+
+
+# --- the run-out rig's grids bounded before allocating (crossing_diagram with n_modes=1e9 aborted the process) ----
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (
+            lambda: jb.crossing_diagram(jb.RunoutRig(), np.linspace(1.0, 20.0, 5), n_modes=10**9),
+            r"crossing_diagram: parameter `n_modes` makes loci of 5e\+09 terms",  # 5 speeds x (1e9 + 1 x 2) loci
+        ),
+        (
+            lambda: jb.crossing_diagram(jb.RunoutRig(), np.linspace(1.0, 20.0, 5), harmonics=10**9),
+            r"crossing_diagram: parameter `harmonics` makes loci of 1e\+10 terms",
+        ),
+        (
+            lambda: jb.crossing_speeds(jb.RunoutRig(), n_modes=10**9),
+            r"crossing_speeds: parameter `n_modes` makes crossings of 2e\+09 terms",  # 1e9 modes x 2 pulleys
+        ),
+        (
+            lambda: jb.linear_runout_response(jb.RunoutRig(), 5.0, n_modes=10**9),
+            r"runout_phasors: parameter `n_modes` makes modal sums of 1e\+09 terms",
+        ),
+    ],
+)
+def test_runout_grids_that_would_not_fit_are_refused_before_allocating(call, message):
+    t = time.perf_counter()
+    with pytest.raises(ValueError, match=message):
+        call()
+    assert time.perf_counter() - t < 3.0
+
+
+def test_runout_grids_of_ordinary_size_keep_moon_and_wickerts_crossings():
+    # Moon & Wickert (1997), Fig. 5: mode 1 meets the first harmonic at 8.98 m/s, mode 2 at 16.00 m/s
+    v = np.asarray(jb.crossing_speeds(jb.RunoutRig()))[:, 0, 0]
+    np.testing.assert_allclose(v, [8.98, 16.00], atol=0.005)
+
+
+# --- the non-linear belt's saved steps bounded before allocating (XLA's out-of-memory error after 6-10 s) ---------
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (
+            lambda: jb.speed_sweep(jb.NonlinearBelt(), np.array([9.0]), steps_per_period=10**9),
+            r"speed_sweep: parameter `steps_per_period` makes 1e\+09 saved steps of about 96 GB",  # 1 mode: 3 x 8 B x 4
+        ),
+        (
+            lambda: jb.nonlinear_steady_state(jb.NonlinearBelt(), 9.0, periods_per_chunk=10**9),
+            r"nonlinear_steady_state: parameter `periods_per_chunk` makes 6.4e\+10 saved steps",
+        ),
+        (
+            lambda: jb.nonlinear_trajectory(jb.NonlinearBelt(), 9.0, periods=10**12),
+            r"nonlinear_trajectory: parameter `periods` makes 6.4e\+13 saved steps",
+        ),
+        (
+            lambda: jb.nonlinear_basins(jb.NonlinearBelt(), 9.0, np.broadcast_to(0.0, (10**9, 2))),
+            r"nonlinear_basins: parameter `z0s` makes 6.4e\+10 saved steps",
+        ),
+    ],
+)
+def test_nonlinear_buffers_that_would_not_fit_are_refused_before_allocating(call, message):
+    t = time.perf_counter()
+    with pytest.raises(ValueError, match=message):
+        call()
+    assert time.perf_counter() - t < 3.0
+
+
+@pytest.mark.parametrize("fold_search", [jb.jumps, jb.fold_speeds])
+def test_fold_search_points_that_would_not_fit_are_refused_before_allocating(fold_search):
+    # 1 mode, 3 harmonics: 2 x 1 x 7 + 1 = 15 unknowns, 8 copies of 8 B each per point: 960 B (was XLA's OOM, 17 s)
+    t = time.perf_counter()
+    with pytest.raises(
+        ValueError, match=r"parameter `max_points` makes a continuation of 1e\+09 points of about 960 GB"
+    ):
+        fold_search(jb.NonlinearBelt(), max_points=10**9)
+    assert time.perf_counter() - t < 3.0
+
+
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (
+            lambda: jb.simulate_fig4(t1=1e300),
+            r"simulate_fig4: parameter `t1` must lie in \[1e-06, 1000\] s; got 1e\+300",
+        ),
+        (lambda: jb.simulate_fig4(t1=0.0), r"simulate_fig4: parameter `t1` must lie in \[1e-06, 1000\] s; got 0.0"),
+        (
+            lambda: jb.startup_curves(t_end=1e-300),
+            r"startup_curves: parameter `t_end` must lie in \[1e-06, 1000\] s; got 1e-300",
+        ),
+    ],
+)
+def test_run_spans_beyond_the_scenes_time_scales_are_refused_at_the_call(call, message):
+    # simulate_fig4(t1=1e300) ran the ODE to its step budget: a SolveError after 6 s naming max_steps, not t1
+    t = time.perf_counter()
+    with pytest.raises(ValueError, match=message):
+        call()
+    assert time.perf_counter() - t < 3.0
+
+
+# --- identify_axis: records whose times or values no fit resolves are refused naming `t` or `y` ------------------
+_T_REC = np.arange(2000) / 1000.0
+_Y_REC = np.exp(-0.5 * _T_REC) * np.sin(2 * np.pi * 20.0 * _T_REC)  # 20 Hz, a decay of 0.5 1/s
+
+
+@pytest.mark.parametrize(
+    "t, y, message",
+    [
+        # the time column in the wrong unit: was the ModalAxis' refusal of a fitted 2e301 Hz, after 6 s
+        (_T_REC * 1e-300, _Y_REC, r"identify_axis: parameter `t` \(times, s\) resolves no frequency of an axis' range"),
+        (_T_REC * 1e300, _Y_REC, r"identify_axis: parameter `t` \(times, s\) resolves no frequency of an axis' range"),
+        # was numpy's LinAlgError ("infs or NaNs", "Singular matrix")
+        (_T_REC, _Y_REC * 1e300, r"identify_axis: parameter `y` must have a peak-to-peak within \[1e-50, 1e\+50\]"),
+        (_T_REC, _Y_REC * 1e-300, r"identify_axis: parameter `y` must have a peak-to-peak within \[1e-50, 1e\+50\]"),
+    ],
+)
+def test_identify_axis_refuses_records_no_fit_resolves_by_name(t, y, message):
+    start = time.perf_counter()
+    with pytest.raises(ValueError, match=message):
+        jb.identify_axis(t, y, 1)
+    assert time.perf_counter() - start < 3.0
+
+
+@pytest.mark.parametrize("scale", [1e-45, 1e45])
+def test_identify_axis_keeps_the_frequency_at_the_ends_of_its_value_range(scale):
+    # the record's own frequency, 20 Hz damped at 0.5 1/s: f_d = 20 Hz, f_n = sqrt(20^2 + (0.5 / 2 pi)^2)
+    f_n = math.hypot(20.0, 0.5 / (2 * math.pi))
+    np.testing.assert_allclose(float(jb.identify_axis(_T_REC, _Y_REC * scale, 1).frequencies[0]), f_n, rtol=1e-9)
+
+
+@pytest.mark.parametrize("bad", [1e300, 10.5, 0.0, -0.2])
+def test_contact_friction_outside_physical_coefficients_is_refused_by_name(bad):
+    # friction = 1e300 gave an infinite slip limit and margin (e^(mu theta) overflowed) reported as "no slip"
+    with pytest.raises(ValueError, match=r"BeltPulleyContact: parameter `friction` must lie in \(0, 10\]"):
+        jb.BeltPulleyContact(0.05, friction=bad)
+
+
+def test_contact_friction_at_the_end_of_its_range_keeps_eytelweins_limit():
+    contact = jb.BeltPulleyContact(0.05, friction=10.0)  # the limit is e^(mu theta), Euler-Eytelwein
+    np.testing.assert_allclose(float(contact.slip_limit()), math.exp(10.0 * 2.094), rtol=1e-12)
+
+
+# --- eager vmap/grad: the scene functions re-raise a failed run-time check naming the parameter, not JAX's banner --
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (
+            lambda: jax.vmap(
+                lambda k: (
+                    jb.simulate(jb.Scene(jb.BeltStartup(k=k), jb.ExponentialVoltage(), ts=jnp.linspace(0.0, 0.1, 5))).ys
+                )
+            )(jnp.array([1.2e5, -1.0])),
+            r"simulate: BeltStartup: parameter `k` must be finite and > 0 N/m \(element 1 of the batch\)",
+        ),
+        pytest.param(
+            lambda: jax.vmap(lambda L: jb.crossing_speeds(jb.RunoutRig(length=L)))(jnp.array([0.86, jnp.nan])),
+            r"crossing_speeds: RunoutRig: parameter `length` must be finite and > 0 m \(element 1 of the batch\)",
+            marks=pytest.mark.slow,  # 2-6 s of compiling the batched root finder
+        ),
+        (
+            lambda: jax.vmap(lambda r: jb.exciting_speeds(jb.MovingString(), r))(jnp.array([0.1, -0.1])),
+            r"exciting_speeds: parameter `pulley_radius` must be finite and > 0 m \(element 1 of the batch\)",
+        ),
+        (
+            lambda: jax.vmap(lambda v: jb.crossing_diagram(jb.RunoutRig(), v)[0])(jnp.array([5.0, jnp.nan])),
+            r"crossing_diagram: `speed` must be below the critical speed",
+        ),
+        (
+            lambda: jax.grad(lambda v: jb.backbone_amplitude(jb.NonlinearBelt(), v))(jnp.nan),
+            r"backbone_amplitude: NonlinearBelt: parameter `speed` \(running speed\) must lie in \[0, wave_speed\)",
+        ),
+        pytest.param(
+            lambda: jax.vmap(lambda v: jb.kbm_coefficients(jb.NonlinearBelt(), v))(jnp.array([9.0, jnp.nan])),
+            r"kbm_coefficients: NonlinearBelt: parameter `speed` \(running speed\) must lie in \[0, wave_speed\)",
+            marks=pytest.mark.slow,  # ~6 s of compilation
+        ),
+    ],
+)
+def test_scene_functions_name_the_parameter_under_eager_vmap_and_grad(call, message):
+    # was equinox's EquinoxRuntimeError, whose first line is "Above is the stack outside of JIT"
+    with pytest.raises(ValueError, match=message) as e:
+        call()
+    assert "Above is the stack" not in str(e.value).splitlines()[0]
+
+
+def test_simulate_under_vmap_keeps_the_eager_values():
+    def run(k):
+        return jb.simulate(jb.Scene(jb.BeltStartup(k=k), jb.ExponentialVoltage(), ts=jnp.linspace(0.0, 0.1, 5))).ys
+
+    ks = jnp.array([1.2e5, 0.9e5])
+    batched = jax.vmap(run)(ks)
+    for i, k in enumerate(np.asarray(ks)):
+        np.testing.assert_allclose(np.asarray(batched[i]), np.asarray(run(float(k))), rtol=1e-10, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (
+            lambda: jax.vmap(lambda T: jb.MovingString(tension=T).natural_frequencies(10.0))(jnp.array([140.0, -1.0])),
+            r"MovingString.natural_frequencies: MovingString: parameter `tension` must be finite and > 0 N "
+            r"\(element 1 of the batch\)",
+        ),
+        (
+            lambda: jax.vmap(lambda w: jb.BeltPulleyContact(0.05).slip_margin(w))(jnp.array([100.0, jnp.nan])),
+            r"BeltPulleyContact.slip_margin: parameter `omega` must be finite \(element 1 of the batch\)",
+        ),
+    ],
+)
+def test_span_and_contact_methods_name_the_parameter_under_eager_vmap(call, message):
+    with pytest.raises(ValueError, match=message):
+        call()
+
+
+def test_span_frequencies_under_vmap_keep_the_closed_form():
+    # omega_n = n pi c (1 - (V/c)^2) / L [rad/s], c = sqrt(T / rho): the moving string's closed form
+    span = jb.MovingString()
+    c = math.sqrt(140.0 / 0.05)
+    got = np.asarray(jax.vmap(lambda v: span.natural_frequencies(v))(jnp.array([10.0, 20.0])))
+    for row, v in zip(got, (10.0, 20.0), strict=True):
+        ref = [n * math.pi * c * (1 - (v / c) ** 2) / 0.2621 for n in (1, 2, 3)]
+        np.testing.assert_allclose(row, ref, rtol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        # was "PseudoPolynomial: parameter `displacement` must lie in [-1e+09, 1e+09] rad" after 3 s
+        (["--revolutions", "1e300"], "argument --revolutions: must lie in (0, 1.59155e+08], got 1e300"),
+        (["--duration", "1e300"], "argument --duration: must lie in [1e-06, 1e+06], got 1e300"),
+    ],
+)
+def test_cli_shaping_names_the_option_of_a_degenerate_command(argv, message, capsys):
+    from jaxbelt.cli import main
+
+    with pytest.raises(SystemExit) as e:
+        main(["--no-cache", "shaping", *argv])
+    assert e.value.code == 2
+    assert message in capsys.readouterr().err
+
+
+def test_fluctuation_index_of_an_inverted_window_names_t0_and_t1():
+    sol = jb.simulate(jb.Scene(jb.FourBarDrive(), jb.PID(), ts=np.linspace(0.0, 0.5, 101)))
+    with pytest.raises(ValueError, match=r"window \[t0, t1\] must contain at least two output times \(parameters `t0`"):
+        jb.fluctuation_index(sol, 0.4, 0.2)
+    with pytest.raises(ValueError, match=r"parameter `t0` \(a bound of the window \[t0, t1\]\) must lie within"):
+        jb.fluctuation_objective(jb.FourBarDrive(), jb.PID(), 0.4, 0.2)  # its grid ends at t1

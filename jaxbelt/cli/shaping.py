@@ -10,6 +10,8 @@ command of the belt-driven platform, its Fig. 3, and the comparison with shapers
 
 from __future__ import annotations
 
+import math
+
 from ._args import csv_or_image_path, fill_defaults, finite_float, float_in, positive_float, refuse_unused
 
 #: the options of the paper's figure (without an axis) and their defaults (None on the parser: an option given
@@ -25,6 +27,8 @@ PAPER_DEFAULTS = {
     "spread": 0.3,
 }
 #: the options of the overview figure only (the profiles figure is the paper's Fig. 2, fixed)
+#: the most revolutions `--revolutions` takes: PseudoPolynomial's `displacement` is at most 1e9 rad
+MAX_REVOLUTIONS = 1e9 / (2 * math.pi)
 OVERVIEW_ONLY = ("gammas", "duration", "revolutions", "robust_order", "robust_mode", "band", "spread")
 #: the options of a design on the user's axis and their defaults
 AXIS_DEFAULTS = {"uncertainty": 0.2, "rate": 1000.0, "smooth": "auto"}
@@ -144,8 +148,17 @@ def register(subparsers):
         default=None,
         help="start exponents (default 3 4 5)",
     )
-    p.add_argument("--duration", type=positive_float, default=None, help="motion time T [s] (default 1)")
-    p.add_argument("--revolutions", type=positive_float, default=None, help="motor displacement [rev] (default 15)")
+    # the ranges of PseudoPolynomial's `duration` [1e-6, 1e6] s and `displacement` |phi| <= 1e9 rad, said as the
+    # options the user typed (1e300 named the command's `displacement`, not --revolutions)
+    p.add_argument(
+        "--duration", type=float_in(1e-6, 1e6), default=None, help="motion time T [s], in [1e-6, 1e6] (default 1)"
+    )
+    p.add_argument(
+        "--revolutions",
+        type=float_in(0.0, MAX_REVOLUTIONS, lo_open=True),
+        default=None,
+        help=f"motor displacement [rev], in (0, {MAX_REVOLUTIONS:.4g}] (default 15)",
+    )
     p.add_argument(
         "--robust-order",
         type=int,

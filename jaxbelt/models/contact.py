@@ -20,7 +20,7 @@ import numpy as np
 
 from .._checks import as_float_array as _arr
 from .._checks import check_finite, check_range, collecting, is_concrete, record
-from .._guard import checked
+from .._guard import checked, reraising
 from .._params import FloatParam, Parametrised, document, param
 
 __all__ = ["BeltPulleyContact", "SlipError", "SlipReport"]
@@ -89,7 +89,11 @@ class BeltPulleyContact(Parametrised):
     slack_tension: FloatParam = param(120.0, unit="N", symbol="$T_1$", doc="slack-side tension")
     tight_tension: FloatParam = param(140.0, unit="N", symbol="$T_2$", doc="tight-side tension")
     density: FloatParam = param(0.05, unit="kg/m", symbol="$\\rho$", doc="belt mass per length")
-    friction: FloatParam = param(0.2, unit="–", symbol="$\\mu$", doc="friction coefficient")
+    # (0, 10]: belts on pulleys hold 0.1-1.5 (rubber on steel); beyond, e^(mu theta) over a full wrap
+    # (e^62.8 at 10) is no physical tension ratio, and at 1e300 it overflowed to an infinite slip limit and margin
+    friction: FloatParam = param(
+        0.2, unit="–", check="range", lo=0.0, hi=10.0, lo_open=True, symbol="$\\mu$", doc="friction coefficient"
+    )
     wrap_angle: FloatParam = param(
         2.094,
         unit="rad",
@@ -111,6 +115,7 @@ class BeltPulleyContact(Parametrised):
     def _tc(self, omega):
         return self.density * self.radius**2 * _arr(omega) ** 2
 
+    @reraising("BeltPulleyContact.centrifugal_tension")
     def centrifugal_tension(self, omega):
         """$T_c = \\rho R^2\\omega^2$ [N] (eq. 5-6), pulley speed `omega` [rad/s]."""
         found = self._omega_checks("BeltPulleyContact.centrifugal_tension", omega)
@@ -123,6 +128,7 @@ class BeltPulleyContact(Parametrised):
         """$e^{\\mu\\vartheta}$, the largest tension ratio friction can hold (eq. 8)."""
         return checked(self._limit(), self)
 
+    @reraising("BeltPulleyContact.slip_margin")
     def slip_margin(self, omega):
         """$(T_1 - T_c)e^{\\mu\\vartheta} - (T_2 - T_c)$ [N]: eq. (8) as a margin (>= 0: no slip).
 
@@ -161,6 +167,7 @@ class BeltPulleyContact(Parametrised):
             raise SlipError(f"BeltPulleyContact: {rep}")
         return rep
 
+    @reraising("BeltPulleyContact.pressure")
     def pressure(self, alpha, omega):
         """Contact pressure $p(\\alpha)$ [N/m] (force per unit belt length on the pulley), eq. (10).
 
@@ -182,6 +189,7 @@ class BeltPulleyContact(Parametrised):
         t = (self.tight_tension - self.slack_tension) / self.wrap_angle * alpha + self.slack_tension
         return checked((t - self._tc(omega)) / self.radius, self, checks=found)
 
+    @reraising("BeltPulleyContact.separation_speed")
     def separation_speed(self):
         """Pulley speed [rad/s] at which $p$ first reaches 0: $\\omega_s = \\sqrt{\\min(T_1, T_2)/\\rho}/R$.
 
@@ -189,6 +197,7 @@ class BeltPulleyContact(Parametrised):
         """
         return checked(jnp.sqrt(jnp.minimum(self.slack_tension, self.tight_tension) / self.density) / self.radius, self)
 
+    @reraising("BeltPulleyContact.separation_angle")
     def separation_angle(self):
         """Wrap position $\\alpha$ [rad] where separation starts (0 if $T_1 \\le T_2$, else $\\vartheta$)."""
         return checked(jnp.where(self.slack_tension <= self.tight_tension, 0.0, self.wrap_angle), self)

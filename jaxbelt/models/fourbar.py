@@ -55,6 +55,9 @@ IDENTIFIED_PARAMETERS = {"a": 0.0884, "R": 0.886}
 IDENTIFIED_STDERR = {"a": 0.0002, "R": 0.005}
 
 # Crank angles at which the construction checks look for a gap or a dead point.
+#: link lengths [m] a linkage may have: 1 µm to 1 km (pivot coordinates within ±1 km)
+LENGTH_RANGE_M = (1e-6, 1e3)
+
 _N_CHECK = 4096
 # Smallest |sin(transmission angle)| accepted: below this the velocity ratios Q, R blow up.
 _DEAD_TOL = 1e-3
@@ -113,13 +116,57 @@ class FourBarDrive(AbstractModel):
     when a length, inductance, resistance or inertia is not positive.
     """
 
-    a: FloatParam = param(0.0884, unit="m", symbol="$a$", default_note="*identified*; assumed 0.10", doc="crank length")
-    b: FloatParam = param(0.30, unit="m", symbol="$b$", default_note="*assumed*", doc="coupler length")
-    c: FloatParam = param(0.30, unit="m", symbol="$c$", default_note="*assumed*", doc="rocker length")
-    hx: FloatParam = param(
-        0.30, unit="m", check="finite", symbol="$h_x$", default_note="*assumed*", doc="abscissa of the rocker pivot D"
+    # lengths within [1 µm, 1 km] (pivot coordinates within ±1 km): beyond, the squares of the closure equation
+    # (Appendix A) overflow float64 (a = 1e300 m raised Python's OverflowError) or lose every digit of the others
+    a: FloatParam = param(
+        0.0884,
+        unit="m",
+        check="range",
+        lo=LENGTH_RANGE_M[0],
+        hi=LENGTH_RANGE_M[1],
+        symbol="$a$",
+        default_note="*identified*; assumed 0.10",
+        doc="crank length",
     )
-    hy: FloatParam = param(0.05, unit="m", check="finite", symbol="$h_y$", doc="ordinate of the rocker pivot D")
+    b: FloatParam = param(
+        0.30,
+        unit="m",
+        check="range",
+        lo=LENGTH_RANGE_M[0],
+        hi=LENGTH_RANGE_M[1],
+        symbol="$b$",
+        default_note="*assumed*",
+        doc="coupler length",
+    )
+    c: FloatParam = param(
+        0.30,
+        unit="m",
+        check="range",
+        lo=LENGTH_RANGE_M[0],
+        hi=LENGTH_RANGE_M[1],
+        symbol="$c$",
+        default_note="*assumed*",
+        doc="rocker length",
+    )
+    hx: FloatParam = param(
+        0.30,
+        unit="m",
+        check="range",
+        lo=-LENGTH_RANGE_M[1],
+        hi=LENGTH_RANGE_M[1],
+        symbol="$h_x$",
+        default_note="*assumed*",
+        doc="abscissa of the rocker pivot D",
+    )
+    hy: FloatParam = param(
+        0.05,
+        unit="m",
+        check="range",
+        lo=-LENGTH_RANGE_M[1],
+        hi=LENGTH_RANGE_M[1],
+        symbol="$h_y$",
+        doc="ordinate of the rocker pivot D",
+    )
     f1: FloatParam = param(
         0.05, unit="m", check="nonnegative", symbol="$f_1$", default_note="*assumed*", doc="distance of $G_1$ from A"
     )

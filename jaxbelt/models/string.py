@@ -40,6 +40,7 @@ from jax.typing import ArrayLike
 from .._checks import as_float_array as _arr
 from .._checks import (
     check_finite,
+    check_fits,
     check_int,
     check_nonnegative,
     check_positive,
@@ -49,7 +50,7 @@ from .._checks import (
     is_concrete,
     record,
 )
-from .._guard import all_ok, checked, error_if, guard, host_checked, stored_jit, traced_checks
+from .._guard import all_ok, checked, error_if, guard, host_checked, reraising, stored_jit, traced_checks
 from .._params import FloatParam, Parametrised, document, param
 from .._threads import blas_limited
 
@@ -185,6 +186,7 @@ class MovingString(Parametrised):
             check_positive("pulley_radius", pulley_radius, "m", "MovingString.critical_rotor_speed")
         return checked(self.critical_speed / jnp.asarray(pulley_radius, dtype=float), self, checks=found)
 
+    @reraising("MovingString.natural_frequencies")
     def natural_frequencies(self, speed: ArrayLike = 0.0, n_modes: int = 3):
         """$\\omega_n(V) = (n\\pi/L) V_{cr} (1 - V^2/V_{cr}^2)$ [rad/s] (eq. 39), $n = 1..n\\_modes$.
 
@@ -198,6 +200,7 @@ class MovingString(Parametrised):
         base = (jnp.pi / self.length) * vc * (1.0 - (speed / vc) ** 2)
         return checked(base[..., None] * n, self)
 
+    @reraising("MovingString.mode_shape")
     def mode_shape(self, x, t, speed, n: int = 1, b1=1.0, b2=0.0):
         """Free vibration of mode `n` at belt speed `speed`, eq. (49) with the sign of eq. (28)-(31) fixed.
 
@@ -256,6 +259,7 @@ class MovingString(Parametrised):
         K = jnp.diag((vc**2 - speed**2) * (k * jnp.pi / L) ** 2 * 0.5 * L)
         return M, G, K
 
+    @reraising("MovingString.galerkin_frequencies")
     def galerkin_frequencies(self, speed, n_basis: int, n_modes: int = 3):
         """The $n\\_modes$ lowest natural frequencies [rad/s] of the $N$-mode Galerkin model.
 
@@ -290,6 +294,7 @@ def _first_order(M, G, K):
 
 
 # --- exciting speeds and crossings ---------------------------------------------------------------
+@reraising("exciting_speeds")
 @blas_limited
 def exciting_speeds(span: MovingString, pulley_radius, n=1, m=1):
     """Pulley angular speeds [rad/s] at which harmonic `m` of its rotation excites mode `n` (eq. 55).
@@ -469,6 +474,28 @@ def _positive_int(value, name, owner) -> int:
     return int(value)
 
 
+def _harmonic_count(harmonics) -> int:
+    """How many harmonic orders `harmonics` asks for (an int K: K; a sequence: its length), read before
+    anything is built; 1 where it is not a valid count (`_harmonics` then says why)."""
+    if np.ndim(harmonics) != 0:
+        return int(np.size(harmonics))
+    if isinstance(harmonics, bool | str | bytes) or not is_concrete(harmonics):
+        return 1
+    try:
+        v = float(harmonics)
+    except (TypeError, ValueError):
+        return 1
+    return int(v) if np.isfinite(v) and v >= 1 else 1
+
+
+def _check_grid_fits(owner, total: float, counts: dict, nbytes_per_term: float, what: str) -> None:
+    """Refuse a grid of `total` terms of `nbytes_per_term` bytes each that would not fit in half the memory
+    available, naming the parameter of the largest count in `counts` ({name: count}): said before allocating
+    (crossing_diagram with n_modes = 1e9 made XLA abort the process)."""
+    name = max(counts, key=lambda k: counts[k])
+    check_fits(owner, name, nbytes_per_term * total, f"{what} of {total:.3g} terms")
+
+
 def _harmonics(harmonics, owner):
     if np.ndim(harmonics) == 0 and is_concrete(harmonics):
         return jnp.arange(1, _positive_int(harmonics, "harmonics", owner) + 1, dtype=float)
@@ -481,6 +508,7 @@ def _harmonics(harmonics, owner):
     return ks
 
 
+@reraising("crossing_speeds")
 @blas_limited
 def crossing_speeds(rig: RunoutRig, n_modes: int = 2, harmonics=1):
     """Belt speeds [m/s] where the pulley load lines cross the natural-frequency loci (Moon & Wickert, 1997, Fig. 5).
@@ -502,6 +530,12 @@ def crossing_speeds(rig: RunoutRig, n_modes: int = 2, harmonics=1):
     if not isinstance(rig, RunoutRig):
         raise TypeError(f"{o}: `rig` must be a RunoutRig; got {type(rig).__name__}")
     n_modes = _positive_int(n_modes, "n_modes", o)
+    n_pulleys = int(np.size(rig.pulley_radii))
+    # Newton's iterates and their Jacobians for every (mode, pulley, harmonic): 16 float64 each
+    n_harmonics = _harmonic_count(harmonics)
+    _check_grid_fits(
+        o, float(n_modes) * n_harmonics * n_pulleys, {"n_modes": n_modes, "harmonics": n_harmonics}, 128.0, "crossings"
+    )
     with collecting() as checks:  # concrete: raise now; traced: recorded, attached to the result below
         ks = _harmonics(harmonics, o)
     checks = checks + traced_checks(rig)
@@ -517,6 +551,7 @@ def crossing_speeds(rig: RunoutRig, n_modes: int = 2, harmonics=1):
     return guard(out, checks, throw=True)[0]
 
 
+@reraising("crossing_diagram")
 @blas_limited
 def crossing_diagram(rig: RunoutRig, speed, n_modes: int = 2, harmonics=1):
     """Loci of the crossing diagram at belt speeds `speed` [m/s] (Moon & Wickert, 1997, Fig. 5a).
@@ -530,6 +565,11 @@ def crossing_diagram(rig: RunoutRig, speed, n_modes: int = 2, harmonics=1):
     if not isinstance(rig, RunoutRig):
         raise TypeError(f"{o}: `rig` must be a RunoutRig; got {type(rig).__name__}")
     n_modes = _positive_int(n_modes, "n_modes", o)
+    n_speeds, n_pulleys = int(np.size(speed)), int(np.size(rig.pulley_radii))
+    # the loci (float64) and their temporaries, four copies, at every speed
+    n_harmonics = _harmonic_count(harmonics)
+    total = float(n_speeds) * (n_modes + n_harmonics * n_pulleys)
+    _check_grid_fits(o, total, {"speed": n_speeds, "n_modes": n_modes, "harmonics": n_harmonics}, 32.0, "loci")
     with collecting() as checks:
         ks = _harmonics(harmonics, o)
     checks = checks + traced_checks(rig)
@@ -593,6 +633,7 @@ def _check_response_inputs(o, rig: RunoutRig, speed):
     return _check_subcritical(speed, rig.wave_speed, o)
 
 
+@reraising("runout_phasors")
 @blas_limited
 def runout_phasors(rig: RunoutRig, speed, n_modes: int = 64):
     """Complex amplitudes [m] of the steady response at the rig's `position` to each pulley's run-out.
@@ -602,6 +643,11 @@ def runout_phasors(rig: RunoutRig, speed, n_modes: int = 64):
     Arguments as in `linear_runout_response`.
     """
     n_modes = check_int("runout_phasors", "n_modes", n_modes)
+    # complex modal terms at every speed, two pulleys, about eight temporaries each (complex128)
+    n_speeds = int(np.size(speed))
+    _check_grid_fits(
+        "runout_phasors", float(n_speeds) * n_modes, {"speed": n_speeds, "n_modes": n_modes}, 256.0, "modal sums"
+    )
     speed = _check_response_inputs("runout_phasors", rig, speed)
     out = _phasors(
         speed,
@@ -637,6 +683,7 @@ def _phasors(speed, L, vt, radii, runouts, phase, zeta, position, nm):
     return W0.reshape(speed.shape), W1.reshape(speed.shape)
 
 
+@reraising("linear_runout_response")
 @blas_limited
 def linear_runout_response(rig: RunoutRig, speed, n_modes: int = 64):
     """Steady peak-to-peak transverse displacement [m] of the linear span driven by eccentric pulleys.

@@ -42,7 +42,7 @@ from ..solution import Solution
 from ..solve import forward_sensitivities, simulate
 
 _O = "fluctuation index"
-_WINDOW_MSG = f"{_O}: the window [t0, t1] must contain at least two output times"
+_WINDOW_MSG = f"{_O}: the window [t0, t1] must contain at least two output times (parameters `t0` < `t1` [s])"
 
 
 #: a sample belongs to the window [t0, t1] within this fraction of max(|last time|, 1 s)
@@ -389,6 +389,10 @@ def _check_window_on_grid(ts, t0, t1, owner: str = _O, hint: str = "`dt_save`, o
     tol = _WINDOW_RTOL * max(abs(float(ts[-1])), 1.0)
     lo = ts[0] if t0 is None else float(t0)
     hi = ts[-1] if t1 is None else float(t1)
+    if not lo < hi:
+        raise ValueError(
+            f"{owner}: parameters `t0` and `t1` must satisfy t0 < t1 [s]; got the window [{lo:g}, {hi:g}] s"
+        )
     inside = (ts >= lo - tol) & (ts <= hi + tol)
     if int(np.sum(inside)) < 2:
         step = ts[1] - ts[0] if ts.size > 1 else 0.0

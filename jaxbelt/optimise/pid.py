@@ -91,6 +91,10 @@ class PIDTuneResult:
         return self._display().text()
 
 
+#: the most optimiser steps `tune_pid` takes (each a simulation and its gradient: 1e5 steps are hours)
+MAX_TUNE_STEPS = 100_000
+
+
 def tune_pid(
     drive,
     pid: PID,
@@ -258,7 +262,8 @@ def _check_tune_arguments(drive, pid, t0, t1, steps, learning_rate, optimizer, t
             raise ValueError(
                 f"{o}: starting gain `{name}` must be > 0 (the tuner works on log-gains); got {float(getattr(pid, name))}"
             )
-    check_int(o, "steps", steps, 1)
+    if check_int(o, "steps", steps, 1) > MAX_TUNE_STEPS:  # each step is a simulation and its gradient
+        raise ValueError(f"{o}: parameter `steps` must lie in [1, {MAX_TUNE_STEPS}]; got {steps}")
     if not (isinstance(method, str) and method in _METHODS):
         raise ValueError(f"{o}: parameter `method` must be one of {_METHODS}; got {method!r}")
     for name, value in (("learning_rate", learning_rate), ("rtol", rtol), ("atol", atol), ("dt", dt)):

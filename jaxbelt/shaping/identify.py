@@ -45,6 +45,7 @@ import optimistix as optx
 
 from .._checks import check_int, device_array
 from .._threads import blas_limited
+from ..models.axis import FREQUENCY_RANGE_HZ
 from .readers import is_spectrum_file as is_spectrum_file
 from .readers import load_record as load_record
 from .readers import load_spectrum as load_spectrum
@@ -56,6 +57,11 @@ _OWNER = "identify_axis"
 UNIFORM_RTOL = 1e-3
 #: samples needed per fitted parameter
 SAMPLES_PER_PARAMETER = 10
+#: the peak-to-peak of a record (its units) the fit accepts: the pencil and the least squares form products of
+#: powers of the samples; a decay of 20 Hz is identified to 1e-15 from 1e-60 to 1e60 and fails beyond 1e80 (numpy's
+#: LinAlgError, "infs or NaNs" or "Singular matrix"); 1e-50 to 1e50 keeps a margin (metres to nanometres, or
+#: counts, lie far inside)
+Y_RANGE = (1e-50, 1e50)
 #: periods of the lowest mode the record must hold
 MIN_PERIODS = 2.0
 #: a mode's amplitude must exceed this many of its standard errors (a fit to noise does not)
@@ -182,6 +188,21 @@ def _check_record(t, y, n_modes, offset):
         )
     if np.ptp(y) == 0.0:
         raise ValueError(f"{_OWNER}: parameter `y` is constant ({y[0]!r}): the record holds no vibration to identify")
+    lo_hz, hi_hz = FREQUENCY_RANGE_HZ
+    span = float(t[-1] - t[0])
+    if 0.5 / dt < lo_hz or 1.0 / span > hi_hz:
+        # the cause named here, not the ModalAxis' refusal of the frequency fitted from it (after seconds of work)
+        raise ValueError(
+            f"{_OWNER}: parameter `t` (times, s) resolves no frequency of an axis' range [{lo_hz:g}, {hi_hz:g}] Hz: "
+            f"its step dt = {dt:.3g} s and span {span:.3g} s resolve {1.0 / span:.3g} to {0.5 / dt:.3g} Hz "
+            "(from one cycle over the record to the Nyquist frequency); are the times in seconds?"
+        )
+    size = float(np.ptp(y))
+    if not Y_RANGE[0] <= size <= Y_RANGE[1]:
+        raise ValueError(
+            f"{_OWNER}: parameter `y` must have a peak-to-peak within [{Y_RANGE[0]:g}, {Y_RANGE[1]:g}] (its units); "
+            f"got {size:.3g}: the fit's products of samples would over- or underflow float64"
+        )
     return t, y, float(dt), n, p
 
 

@@ -22,7 +22,7 @@ from .moves import (
     peaks,
 )
 from .request import MoveRequest
-from .residual import residual_curve, tolerance_band
+from .residual import measured_curve, tolerance_band
 
 
 @dataclasses.dataclass(frozen=True)
@@ -78,9 +78,9 @@ def _measure(axis, cmd, ref, u, limits, per: int = 1, size: int = 0) -> tuple[An
         cmd = padded(cmd, size)
     pv, pa, pj = peaks(cmd)
     band, wide = measure_grids(u)
-    res = np.asarray(residual_curve(axis, cmd, band))  # (modes, K)
+    res = np.asarray(measured_curve(axis, cmd, band))  # (modes, K)
     ratio = res / ref[:, None]
-    wr = np.asarray(residual_curve(axis, cmd, wide)) / ref[:, None]
+    wr = np.asarray(measured_curve(axis, cmd, wide)) / ref[:, None]
     f = np.asarray(axis.frequencies)
     bands = []
     for i in range(0, axis.n_modes, per):
@@ -143,7 +143,7 @@ def design_row(name: str, mm, T: float, note: str, ok: bool, far, req: MoveReque
     if row.command is None or not far.left_out:
         return row
     band = measure_grids(u)[0]
-    ratio = np.asarray(residual_curve(axis, row.command, band)) / np.asarray(ref)[:, None]
+    ratio = np.asarray(measured_curve(axis, row.command, band)) / np.asarray(ref)[:, None]
     f = np.asarray(axis.frequencies, dtype=float)
     parts = [
         f"{mode_label(axis, i, per)} ({f[i]:.6g} Hz; {why}): {100.0 * float(np.max(ratio[i])):.2g} % (exact)"
@@ -221,7 +221,7 @@ def reference(req: MoveRequest):
     (`req.ref_cmd`, what a planner runs without shaping) leaves: every row's reference; and, with damping copies
     (`req.per` > 1) and "pseudo-polynomial" in `req.include`, the same on the nominal axis the pseudo-polynomials are
     designed on (else the references themselves): `(references, nominal references)`."""
-    ref = np.max(np.asarray(residual_curve(req.axis, req.ref_cmd, req.band)), axis=1)
+    ref = np.max(np.asarray(measured_curve(req.axis, req.ref_cmd, req.band)), axis=1)
     if req.per == 1 or "pseudo-polynomial" not in req.include:
         return ref, ref
-    return ref, np.max(np.asarray(residual_curve(req.nominal, req.ref_cmd, req.band)), axis=1)
+    return ref, np.max(np.asarray(measured_curve(req.nominal, req.ref_cmd, req.band)), axis=1)

@@ -144,15 +144,26 @@ def residual_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors: ArrayLi
         check_range("factors", r, lo=0.0, hi=MAX_FACTOR, lo_open=True, owner="residual_curve")
     check_positive("rtol", rtol, owner="residual_curve")
     check_positive("atol", atol, owner="residual_curve")
+    return checked(_curve(axis, cmd, r, rtol, atol), axis, cmd, checks=found)
+
+
+def measured_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors) -> jax.Array:
+    """`residual_curve(axis, cmd, factors)` [m] for arguments already checked: the design pipeline's (its request
+    validated the axis and the limits once, its band grids are built in range), the same numbers without the
+    checks, which each stage would otherwise repeat on every candidate."""
+    return _curve(axis, cmd, np.atleast_1d(np.asarray(factors, dtype=float)), 1e-10, 1e-14)
+
+
+def _curve(axis, cmd, r, rtol, atol):
+    """The residual amplitudes of every mode at the factors `r` (1-D): closed form, quadrature or ODE."""
     if not _has_closed_form(cmd):
-        return checked(_residual_ode(axis, cmd, r, rtol, atol), axis, cmd, checks=found)
+        return _residual_ode(axis, cmd, r, rtol, atol)
     pseudo = cmd.base if isinstance(cmd, ShapedCommand) else cmd
     if isinstance(pseudo, PseudoPolynomial):
         shaper = (cmd.times, cmd.amplitudes) if isinstance(cmd, ShapedCommand) else None
         n_nodes = _nodes_for(pseudo, _poles(axis, r)[0])
-        curve = _pseudo_curve(axis, _padded_terms(pseudo), shaper, r, n_nodes)
-        return checked(curve, axis, cmd, checks=found)
-    return checked(_closed_form_curve(axis, cmd, r, 0), axis, cmd, checks=found)
+        return _pseudo_curve(axis, _padded_terms(pseudo), shaper, r, n_nodes)
+    return _closed_form_curve(axis, cmd, r, 0)
 
 
 #: a pseudo-polynomial's exponents are padded to a multiple of this for its residual's program (inactive terms,

@@ -512,6 +512,10 @@ def _fold_options(owner, belt, speed_range, n_harmonics, n_folds, max_points):
     _check_equal_radii(belt)
     n_folds = check_int(owner, "n_folds", n_folds)
     max_points = check_int(owner, "max_points", max_points, 2)
+    # the continuation's buffers: the solution and the tangent, 2N(2H+1) + 1 float64 each per point, and their
+    # copies through the loop (max_points=1e9 was XLA's out-of-memory error after 17 s)
+    per_point = 8 * 8.0 * (2.0 * belt.n_modes * (2 * H + 1) + 1)
+    check_fits(owner, "max_points", per_point * max_points, f"a continuation of {max_points:.3g} points")
     v0, v1 = _check_range_speeds(owner, belt, speed_range)
     return H, n_folds, max_points, v0, v1
 

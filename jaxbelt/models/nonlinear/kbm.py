@@ -48,7 +48,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._checks import check_int, check_nonnegative, check_range, collecting, is_concrete, require_x64
-from ..._guard import guard, traced_checks
+from ..._guard import guard, reraising, traced_checks
 from .model import NonlinearBelt, _gauss, mode_shapes
 
 
@@ -94,6 +94,7 @@ def _backbone_frequency(v, a, v_l, n: int = 1):
     return n * jnp.pi * (1 - jnp.asarray(v) ** 2) + kappa(v, v_l, n) * jnp.asarray(a) ** 2
 
 
+@reraising("backbone_amplitude")
 def backbone_amplitude(belt: NonlinearBelt, speed, n: int = 1):
     """Modal amplitude $a$ on the backbone at running speed `speed` [m/s], driven by pulley 0:
     $a = \\sqrt{(\\Omega_0 - \\omega_n)/\\kappa_n}$ above the linear crossing, 0 below it (where the
@@ -109,6 +110,7 @@ def backbone_amplitude(belt: NonlinearBelt, speed, n: int = 1):
     return guard(a, checks, throw=True)[0]
 
 
+@reraising("backbone_speed")
 def backbone_speed(belt: NonlinearBelt, a, n: int = 1):
     """Running speed [m/s] at which the drive-pulley rate meets the backbone at amplitude `a`
     (bisection in $v \\in (0, 1)$; `a` >= 0 may be an array). Raises `ValueError` for an amplitude
@@ -171,6 +173,7 @@ def forcing_coefficient(belt: NonlinearBelt, speed, n: int = 1):
     return om / (2 * mu) * jnp.sum(pb * F)
 
 
+@reraising("kbm_coefficients")
 def kbm_coefficients(belt: NonlinearBelt, speed, n: int = 1):
     """$(C_3, C_2, C_1, C_0)$ of eq. (31), $\\sum_i C_i (a^2)^i = 0$, with modal damping kept."""
     checks = _checks("kbm_coefficients", belt, n, speed)

@@ -41,7 +41,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..._checks import check_int, check_nonnegative, check_real, check_scalar, is_concrete
+from ..._checks import check_fits, check_int, check_nonnegative, check_real, check_scalar, is_concrete
 from ..._guard import guard, reraising, traced_checks
 from ..._threads import blas_limited
 from .model import ModalSystem, NonlinearBelt, _gauss, mode_shapes
@@ -273,15 +273,28 @@ def _z0(owner, belt, z0, name="z0", batch=False):
     return z0
 
 
-def _options(owner, min_periods, max_periods, steps_per_period, periods_per_chunk=1):
+def _check_saved_steps(owner, belt: NonlinearBelt, counts: dict, n_runs: int = 1) -> None:
+    """Refuse, before anything is allocated, a buffer of prod(`counts`) saved steps per run (`n_runs` runs at
+    once) that would not fit in half the memory available, naming the parameter of the largest count: each saved
+    step holds the 2N modal states and the time (float64) in the solver's buffer and its temporaries, about four
+    copies (steps_per_period=1e9 was XLA's out-of-memory error after 6 s)."""
+    total = float(n_runs) * float(np.prod([float(c) for c in counts.values()]))
+    name = max(counts, key=lambda k: counts[k])
+    check_fits(owner, name, 4 * 8.0 * (2 * belt.n_modes + 1) * total, f"{total:.3g} saved steps")
+
+
+def _options(owner, min_periods, max_periods, steps_per_period, periods_per_chunk=1, belt=None, n_runs: int = 1):
     """The integer options of the steady-state solves, checked (a float or bool is refused, not truncated;
-    `min_periods` <= `max_periods`, else no solve could end converged)."""
+    `min_periods` <= `max_periods`, else no solve could end converged); with `belt`, the buffer of one chunk
+    (`periods_per_chunk` x `steps_per_period` saved steps, `n_runs` runs at once) must fit in memory."""
     out = (
         check_int(owner, "min_periods", min_periods),
         check_int(owner, "max_periods", max_periods),
         check_int(owner, "steps_per_period", steps_per_period),
         check_int(owner, "periods_per_chunk", periods_per_chunk),
     )
+    if belt is not None:
+        _check_saved_steps(owner, belt, {"steps_per_period": out[2], "periods_per_chunk": out[3]}, n_runs)
     if out[0] > out[1]:
         raise ValueError(
             f"{owner}: parameter `min_periods` must be <= `max_periods` (a steady state is accepted after at least "
@@ -330,7 +343,7 @@ def nonlinear_steady_state(
     check_scalar("speed", speed, "m/s", o)
     _check_common(o, belt, speed, at)
     min_periods, max_periods, steps_per_period, periods_per_chunk = _options(
-        o, min_periods, max_periods, steps_per_period, periods_per_chunk
+        o, min_periods, max_periods, steps_per_period, periods_per_chunk, belt
     )
     _tolerances(o, rtol, atol)
     check_scalar("theta0", theta0, "rad", o)
@@ -415,7 +428,7 @@ def _nonlinear_sweep(
         )
     _check_common(o, belt, speeds, at, "speeds")
     min_periods, max_periods, steps_per_period, periods_per_chunk = _options(
-        o, min_periods, max_periods, steps_per_period, periods_per_chunk
+        o, min_periods, max_periods, steps_per_period, periods_per_chunk, belt
     )
     _tolerances(o, rtol, atol)
     check_scalar("theta0", theta0, "rad", o)
@@ -532,8 +545,10 @@ def nonlinear_basins(
     _check_common(o, belt, speed, at)
     if z0s is None:
         raise TypeError(f"{o}: parameter `z0s` (initial modal states, shape (K, {2 * belt.n_modes})) is required")
-    z0s = _z0(o, belt, z0s, "z0s", batch=True)
     min_periods, max_periods, steps_per_period, _ = _options(o, min_periods, max_periods, steps_per_period)
+    if np.ndim(z0s) == 2:  # the runs' buffers (vmap: all at once), bounded before the initial states are converted
+        _check_saved_steps(o, belt, {"z0s": int(np.shape(z0s)[0]), "steps_per_period": steps_per_period})
+    z0s = _z0(o, belt, z0s, "z0s", batch=True)
     _tolerances(o, rtol, atol)
 
     def f(z):
@@ -574,6 +589,7 @@ def nonlinear_trajectory(belt: NonlinearBelt, speed, z0=None, periods: int = 200
     _check_common(o, belt, speed, None)
     periods = check_int(o, "periods", periods)
     steps_per_period = check_int(o, "steps_per_period", steps_per_period)
+    _check_saved_steps(o, belt, {"periods": periods, "steps_per_period": steps_per_period})
     ts, zs, _ = _trajectory_jit(
         belt, jnp.asarray(speed, dtype=float), _z0(o, belt, z0), periods=periods, steps_per_period=steps_per_period
     )
