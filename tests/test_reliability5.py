@@ -723,11 +723,11 @@ def test_contact_friction_at_the_end_of_its_range_keeps_eytelweins_limit():
                     jb.simulate(jb.Scene(jb.BeltStartup(k=k), jb.ExponentialVoltage(), ts=jnp.linspace(0.0, 0.1, 5))).ys
                 )
             )(jnp.array([1.2e5, -1.0])),
-            r"simulate: BeltStartup: parameter `k` must be finite and > 0 N/m \(element 1 of the batch\)",
+            r"simulate: BeltStartup: parameter `k` must lie in \[0\.001, 1e\+12\] N/m \(element 1 of the batch\)",
         ),
         pytest.param(
             lambda: jax.vmap(lambda L: jb.crossing_speeds(jb.RunoutRig(length=L)))(jnp.array([0.86, jnp.nan])),
-            r"crossing_speeds: RunoutRig: parameter `length` must be finite and > 0 m \(element 1 of the batch\)",
+            r"crossing_speeds: RunoutRig: parameter `length` must lie in \[0\.0001, 1000\] m \(element 1 of the batch\)",
             marks=pytest.mark.slow,  # 2-6 s of compiling the batched root finder
         ),
         (
@@ -771,7 +771,7 @@ def test_simulate_under_vmap_keeps_the_eager_values():
     [
         (
             lambda: jax.vmap(lambda T: jb.MovingString(tension=T).natural_frequencies(10.0))(jnp.array([140.0, -1.0])),
-            r"MovingString.natural_frequencies: MovingString: parameter `tension` must be finite and > 0 N "
+            r"MovingString.natural_frequencies: MovingString: parameter `tension` must lie in \[0\.001, 1e\+07\] N "
             r"\(element 1 of the batch\)",
         ),
         (

@@ -53,6 +53,8 @@ from .._checks import (
 from .._guard import all_ok, checked, error_if, guard, host_checked, reraising, stored_jit, traced_checks
 from .._params import FloatParam, Parametrised, document, param
 from .._threads import blas_limited
+from . import _ranges as _r
+from ._ranges import ranged
 
 __all__ = [
     "MovingString",
@@ -157,14 +159,25 @@ class MovingString(Parametrised):
     Speeds are belt speeds $V$ [m/s]; frequencies are angular [rad/s].
     """
 
-    tension: FloatParam = param(
-        140.0, unit="N", symbol="$T$", default_note="belt-vibration report, tight side", doc="span tension"
+    tension: FloatParam = ranged(
+        140.0,
+        _r.TENSION_N,
+        unit="N",
+        symbol="$T$",
+        default_note="belt-vibration report, tight side",
+        doc="span tension",
     )
-    density: FloatParam = param(
-        0.05, unit="kg/m", symbol="$\\rho$", default_note="belt-vibration report", doc="mass per unit length"
+    density: FloatParam = ranged(
+        0.05,
+        _r.LINEAR_DENSITY_KG_PER_M,
+        unit="kg/m",
+        symbol="$\\rho$",
+        default_note="belt-vibration report",
+        doc="mass per unit length",
     )
-    length: FloatParam = param(
+    length: FloatParam = ranged(
         0.2621,
+        _r.SPAN_M,
         unit="m",
         symbol="$L$",
         default_note="fitted to the belt-vibration report, Table 2; not in the text",
@@ -349,37 +362,40 @@ class RunoutRig(Parametrised):
     wave speed is identified from the measured jump speeds (37.94 m/s).
     """
 
-    length: FloatParam = param(
-        0.86, unit="m", symbol="$L$", default_note="Moon & Wickert, 1997, test stand", doc="free span length"
+    length: FloatParam = ranged(
+        0.86, _r.SPAN_M, unit="m", symbol="$L$", default_note="Moon & Wickert, 1997, test stand", doc="free span length"
     )
-    pulley_radii: FloatParam = param(
+    pulley_radii: FloatParam = ranged(
         (0.063, 0.063),
+        _r.RADIUS_M,
         unit="m",
         shape=None,
         symbol="$(r_0, r_1)$",
         default_note="test stand",
         doc="pulley pitch radii (one value per pulley, 1-D)",
     )
-    wave_speed: FloatParam = param(
+    wave_speed: FloatParam = ranged(
         41.0,
+        _r.WAVE_SPEED_M_S,
         unit="m/s",
         symbol="$v_t$",
         default_note="ASSUMED: not in the text; puts the first crossing at 9.0 m/s",
         doc="transverse wave speed $v_t = \\sqrt{P/\\rho A}$",
     )
-    runouts: FloatParam = param(
+    runouts: FloatParam = ranged(
         (0.355e-3, 0.21e-3),
+        _r.RUNOUT_M,
         unit="m",
-        check="nonnegative",
         shape=(2,),
         symbol="$(e_0, e_1)$",
         default_note="test stand: 0.71 and 0.42 mm peak-to-peak",
         doc="run-out amplitudes, half the peak-to-peak",
     )
-    phase: FloatParam = param(
+    phase: FloatParam = ranged(
         4.18879,
+        _r.ANGLE_RAD,
+        signed=True,
         unit="rad",
-        check="finite",
         symbol="$\\phi$",
         default_note="240°, test stand; its sign is ASSUMED",
         doc="phase of pulley 1's run-out",
