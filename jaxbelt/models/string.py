@@ -207,7 +207,7 @@ class MovingString(Parametrised):
         if any $|V| \\ge V_{cr}$ (under `jit`: `eqx.error_if`).
         """
         n_modes = check_int("MovingString.natural_frequencies", "n_modes", n_modes)
-        vc = self.critical_speed
+        vc = checked(self.critical_speed, self)  # a bad tension is named first, not the speed it makes critical
         speed = _check_subcritical(speed, vc, "MovingString.natural_frequencies")
         n = jnp.arange(1, n_modes + 1, dtype=float)
         base = (jnp.pi / self.length) * vc * (1.0 - (speed / vc) ** 2)
@@ -230,7 +230,7 @@ class MovingString(Parametrised):
         longer a displacement of the belt).
         """
         n = check_int("MovingString.mode_shape", "n", n)
-        vc = self.critical_speed
+        vc = checked(self.critical_speed, self)  # a bad tension is named first, not the speed it makes critical
         speed = _check_subcritical(speed, vc, "MovingString.mode_shape")
         w = (n * jnp.pi / self.length) * vc * (1.0 - (speed / vc) ** 2)
         a = w / (speed - vc)
@@ -254,7 +254,7 @@ class MovingString(Parametrised):
         $K = (T/\\rho - V^2)(k\\pi/L)^2 (L/2)\\,\\delta_{jk}$ (per unit $\\rho$).
         """
         nb = check_int("MovingString.galerkin_matrices", "n_basis", n_basis)
-        speed = _check_subcritical(speed, self.critical_speed, "MovingString.galerkin_matrices")
+        speed = _check_subcritical(speed, checked(self.critical_speed, self), "MovingString.galerkin_matrices")
         return checked(self._galerkin_matrices(speed, nb), self)
 
     def _galerkin_matrices(self, speed, nb: int):
@@ -284,7 +284,7 @@ class MovingString(Parametrised):
         n_basis, n_modes = check_int(o, "n_basis", n_basis), check_int(o, "n_modes", n_modes)
         if n_modes > n_basis:
             raise ValueError(f"{o}: `n_modes` ({n_modes}) must not exceed `n_basis` ({n_basis})")
-        speed = _check_subcritical(speed, self.critical_speed, o)
+        speed = _check_subcritical(speed, checked(self.critical_speed, self), o)
         return checked(_galerkin_frequencies(self, speed, n_basis, n_modes), self)
 
 
@@ -589,7 +589,7 @@ def crossing_diagram(rig: RunoutRig, speed, n_modes: int = 2, harmonics=1):
     with collecting() as checks:
         ks = _harmonics(harmonics, o)
     checks = checks + traced_checks(rig)
-    vt = rig.wave_speed
+    vt = checked(rig.wave_speed, rig)  # a bad rig is named first, not the speed it makes supercritical
     speed = _check_subcritical(speed, vt, o)
     r = jnp.atleast_1d(rig.pulley_radii)
     n = jnp.arange(1, n_modes + 1, dtype=float)
@@ -646,7 +646,7 @@ def _check_response_inputs(o, rig: RunoutRig, speed):
             f"{o}: the rig's `pulley_radii` and `runouts` must each hold two values (pulley 0 at x = 0, pulley 1 "
             f"at x = length); got shapes {np.shape(rig.pulley_radii)} and {np.shape(rig.runouts)}"
         )
-    return _check_subcritical(speed, rig.wave_speed, o)
+    return _check_subcritical(speed, checked(rig.wave_speed, rig), o)
 
 
 @reraising("runout_phasors")
