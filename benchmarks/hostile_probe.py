@@ -1864,6 +1864,56 @@ def cases():
             opt("--revolutions"),
         )
     )
+    # models' parameters within physical ranges: degenerate magnitudes refused at construction, also traced
+    add(Case("startup-k-1e300", "BeltStartup", lambda: jb.BeltStartup(k=1e300), bt("k")))  # a SolveError after 7.6 s
+    add(Case("startup-L-1e300", "BeltStartup", lambda: jb.BeltStartup(L=1e300), bt("L")))
+    add(Case("span-tension-1e300", "MovingString", lambda: jb.MovingString(tension=1e300), bt("tension")))
+    add(Case("span-density-1e-300", "MovingString", lambda: jb.MovingString(density=1e-300), bt("density")))
+    add(Case("rig-length-1e300", "RunoutRig", lambda: jb.RunoutRig(length=1e300), bt("length")))
+    add(Case("platform-J-1e300", "BeltPlatform", lambda: jb.BeltPlatform(J=1e300), bt("J")))  # residual 0.0
+    add(Case("pid-omega-ref-1e300", "PID", lambda: jb.PID(omega_ref=1e300), bt("omega_ref")))
+    add(Case("fourbar-jm-1e-300", "FourBarDrive", lambda: jb.FourBarDrive(jm=1e-300), bt("jm")))
+    add(Case("fourbar-R-1e300", "FourBarDrive", lambda: jb.FourBarDrive(R=1e300), bt("R")))
+    add(Case("nl-wave-speed-1e300", "NonlinearBelt", lambda: jb.NonlinearBelt(wave_speed=1e300), bt("wave_speed")))
+    add(
+        Case(
+            "contact-tight-below-slack",
+            "BeltPulleyContact",
+            lambda: jb.BeltPulleyContact(0.05, slack_tension=150.0, tight_tension=140.0),
+            bt("tight_tension"),
+        )
+    )
+    # traced (under the caller's own jit the same message follows equinox's stack banner: tests/test_reliability5.py)
+    add(
+        Case(
+            "contact-vmap-tight-below-slack",
+            "BeltPulleyContact.slip_margin",
+            lambda: jax.vmap(lambda t1: jb.BeltPulleyContact(0.05, slack_tension=t1).slip_margin(100.0))(
+                jnp.array([120.0, 150.0])
+            ),
+            bt("tight_tension"),
+        )
+    )
+    add(
+        Case(
+            "span-vmap-tension-1e-300",
+            "MovingString.natural_frequencies",
+            lambda: jax.vmap(lambda T: jb.MovingString(tension=T).natural_frequencies(10.0))(
+                jnp.array([140.0, 1e-300])
+            ),
+            bt("tension"),  # named the speed it made supercritical
+        )
+    )
+    add(
+        Case(
+            "nl-vmap-wave-speed-1e300",
+            "backbone_amplitude",
+            lambda: jax.vmap(lambda c: jb.backbone_amplitude(jb.NonlinearBelt(wave_speed=c), 9.0))(
+                jnp.array([37.94, 1e300])
+            ),
+            bt("wave_speed"),
+        )
+    )
     return C
 
 

@@ -212,7 +212,7 @@ def test_identify_invalid_start_inside_predict_leads_with_the_parameter():
     with pytest.raises(ValueError) as e:
         jb.identify(predict, {"T": -140.0}, np.array([300.0, 600.0]), 1.0)
     first = str(e.value).splitlines()[0]
-    assert first.startswith("identify: MovingString: parameter `tension` must be finite and > 0"), first
+    assert first.startswith("identify: MovingString: parameter `tension` must lie in [0.001, 1e+07] N"), first
     assert "start values {'T': -140.0}" in first and "Above is the stack" not in str(e.value)
 
 
@@ -380,7 +380,7 @@ def test_cli_failure_of_a_check_inside_a_program_is_its_message():
     with pytest.raises(RUNTIME) as e:
         jax.block_until_ready(f(-1.0))
     message, code = _failure(e.value)
-    assert code == 1 and message == "MovingString: parameter `tension` must be finite and > 0 N"
+    assert code == 1 and message == "MovingString: parameter `tension` must lie in [0.001, 1e+07] N"
     assert _failure(KeyError("x")) is None  # a bug keeps its traceback
 
 

@@ -60,14 +60,14 @@ def test_the_docstring_table_lists_every_declared_field(cls):
 
 def test_the_table_says_default_unit_range_and_shape():
     table = _params.parameter_table(jb.NonlinearBelt)
-    assert "| `pulley_radii` | $(r_d, r_i)$ | m | (0.063, 0.063) | > 0; shape (2,) |" in table
+    assert "| `pulley_radii` | $(r_d, r_i)$ | m | (0.063, 0.063) | [0.0001, 10]; shape (2,) |" in table
     assert "| `damping` | $\\xi$ | – | (0.01219, 0.02713) (identified) | [0, 1); an array |" in table
     assert '| `sensor_pulley` | – | – | `"idle"` | one of `"drive"`, `"idle"` (static) |' in table
     assert "| `n_modes` | $N$ | – | 1 | integer >= 1 (static) |" in table
     assert "| `gamma` | $\\gamma$ | s | 0.02 | [1e-06, inf); or a 1-D batch | time constant (" in (
         _params.parameter_table(jb.ExponentialVoltage)
     )
-    assert "| `v_limit` | $V_{lim}$ | V | None | > 0; or None |" in _params.parameter_table(jb.PID)
+    assert "| `v_limit` | $V_{lim}$ | V | None | [1e-06, 1e+06]; or None |" in _params.parameter_table(jb.PID)
     assert "| `position` | $x_m$ | m | 0.01" in _params.parameter_table(jb.RunoutRig)
     assert "[0, `length`]" in _params.parameter_table(jb.RunoutRig)
     assert "| `radius` | $R$ | m | required" in _params.parameter_table(jb.BeltPulleyContact)

@@ -22,6 +22,7 @@ class at module level, so the examples share them.
 """
 
 import dataclasses
+import math
 import re
 
 import jax
@@ -107,9 +108,16 @@ def bad_values(p):
     if p.check == "range":
         outside = [NONFINITE]
         if p.lo is not None:
-            outside.append(st.just(p.lo) if p.lo_open else st.floats(min_value=p.lo - 1e6, max_value=p.lo - 1e-9))
+            # the next float beyond the end: `hi + 1e-9` rounds back to `hi` itself from about 1e7 on (a range to 1e12)
+            below = math.nextafter(p.lo, -math.inf)
+            outside.append(
+                st.just(p.lo) if p.lo_open else st.floats(min_value=below - 1e6 - abs(p.lo), max_value=below)
+            )
         if p.hi is not None:
-            outside.append(st.just(p.hi) if p.hi_open else st.floats(min_value=p.hi + 1e-9, max_value=p.hi + 1e6))
+            above = math.nextafter(p.hi, math.inf)
+            outside.append(
+                st.just(p.hi) if p.hi_open else st.floats(min_value=above, max_value=above + 1e6 + abs(p.hi))
+            )
         return st.one_of(*outside)
     return st.nothing()
 

@@ -51,7 +51,7 @@ def test_identify_refuses_an_invalid_start_value_before_compiling(monkeypatch):
     with count_compiles() as box, pytest.raises(ValueError) as e:
         jb.identify(_startup, {"k": -80e3, "c": 30.0, "R": 0.2}, np.zeros((31, 2)), sigma=1.0)
     line = first_line(e)
-    assert line.startswith("identify: BeltStartup: parameter `k` must be finite and > 0 N/m; got -80000.0"), line
+    assert line.startswith("identify: BeltStartup: parameter `k` must lie in [0.001, 1e+12] N/m; got -80000.0"), line
     assert "start values {'k': -80000.0, 'c': 30.0, 'R': 0.2}" in line
     assert box["n"] == 0, box  # refused before compiling anything
     # a prediction of the wrong shape: refused at the call too
@@ -77,7 +77,7 @@ def test_residual_energy_under_vmap_names_the_platform_parameter_first():
     with pytest.raises(ValueError) as e:
         jax.vmap(lambda k: jb.residual_energy(jb.BeltPlatform(k=k), cmd))(jnp.array([9e4, -1.0]))
     line = first_line(e)
-    assert line.startswith("residual_energy: BeltPlatform: parameter `k` must be finite and > 0 N/m"), line
+    assert line.startswith("residual_energy: BeltPlatform: parameter `k` must lie in [0.001, 1e+12] N/m"), line
     assert "(element 1 of the batch)" in line, line  # the invalid element's index
     assert "Above is the stack" not in str(e.value)
 

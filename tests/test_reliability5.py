@@ -723,11 +723,11 @@ def test_contact_friction_at_the_end_of_its_range_keeps_eytelweins_limit():
                     jb.simulate(jb.Scene(jb.BeltStartup(k=k), jb.ExponentialVoltage(), ts=jnp.linspace(0.0, 0.1, 5))).ys
                 )
             )(jnp.array([1.2e5, -1.0])),
-            r"simulate: BeltStartup: parameter `k` must be finite and > 0 N/m \(element 1 of the batch\)",
+            r"simulate: BeltStartup: parameter `k` must lie in \[0\.001, 1e\+12\] N/m \(element 1 of the batch\)",
         ),
         pytest.param(
             lambda: jax.vmap(lambda L: jb.crossing_speeds(jb.RunoutRig(length=L)))(jnp.array([0.86, jnp.nan])),
-            r"crossing_speeds: RunoutRig: parameter `length` must be finite and > 0 m \(element 1 of the batch\)",
+            r"crossing_speeds: RunoutRig: parameter `length` must lie in \[0\.0001, 1000\] m \(element 1 of the batch\)",
             marks=pytest.mark.slow,  # 2-6 s of compiling the batched root finder
         ),
         (
@@ -771,7 +771,7 @@ def test_simulate_under_vmap_keeps_the_eager_values():
     [
         (
             lambda: jax.vmap(lambda T: jb.MovingString(tension=T).natural_frequencies(10.0))(jnp.array([140.0, -1.0])),
-            r"MovingString.natural_frequencies: MovingString: parameter `tension` must be finite and > 0 N "
+            r"MovingString.natural_frequencies: MovingString: parameter `tension` must lie in \[0\.001, 1e\+07\] N "
             r"\(element 1 of the batch\)",
         ),
         (
@@ -818,3 +818,139 @@ def test_fluctuation_index_of_an_inverted_window_names_t0_and_t1():
         jb.fluctuation_index(sol, 0.4, 0.2)
     with pytest.raises(ValueError, match=r"parameter `t0` \(a bound of the window \[t0, t1\]\) must lie within"):
         jb.fluctuation_objective(jb.FourBarDrive(), jb.PID(), 0.4, 0.2)  # its grid ends at t1
+
+
+# ---- round 5, held out (2): the models' parameters within physical ranges (jaxbelt.models._ranges) ----------------
+_CONTACT = dict(radius=0.05)
+_MAGNITUDES = [
+    # (class, fixed arguments, parameter, the message's range and unit)
+    (jb.BeltStartup, {}, "k", r"\[0\.001, 1e\+12\] N/m"),  # 1e300: a SolveError after 7.6 s
+    (jb.BeltStartup, {}, "L", r"\[1e-12, 10\] H"),
+    (jb.MovingString, {}, "tension", r"\[0\.001, 1e\+07\] N"),  # 1e300: modes at ~1e151 Hz
+    (jb.MovingString, {}, "density", r"\[1e-06, 10000\] kg/m"),
+    (jb.RunoutRig, {}, "length", r"\[0\.0001, 1000\] m"),
+    (jb.RunoutRig, {}, "wave_speed", r"\[0\.001, 100000\] m/s"),
+    (jb.BeltPlatform, {}, "J", r"\[1e-12, 1e\+06\] kg m²"),  # 1e300: a residual of 0.0, silently
+    (jb.BeltPlatform, {}, "r", r"\[0\.0001, 10\] m"),
+    (jb.FourBarDrive, {}, "jm", r"\[1e-12, 1e\+06\] kg m²"),
+    (jb.FourBarDrive, {}, "R", r"\[1e-06, 1e\+06\] Ω"),
+    (jb.FourBarDrive, {}, "km", r"\[1e-06, 1000\] N m/A"),
+    (jb.PID, {}, "v_smooth", r"\[1e-06, 1e\+06\] V"),
+    (jb.NonlinearBelt, {}, "span", r"\[0\.0001, 1000\] m"),
+    (jb.NonlinearBelt, {}, "pulley_radii", r"\[0\.0001, 10\] m"),
+    (jb.BeltPulleyContact, _CONTACT, "slack_tension", r"\[0\.001, 1e\+07\] N"),
+    (jb.BeltPulleyContact, {}, "radius", r"\[0\.0001, 10\] m"),
+]
+
+
+@pytest.mark.parametrize("bad", [1e300, 1e-300])
+@pytest.mark.parametrize(
+    "cls, fixed, name, valid", _MAGNITUDES, ids=[f"{c.__name__}-{n}" for c, _, n, _ in _MAGNITUDES]
+)
+def test_degenerate_magnitude_of_a_model_parameter_is_refused_at_construction(cls, fixed, name, valid, bad):
+    kw = {**fixed, name: bad}
+    if cls is jb.BeltPulleyContact and name == "slack_tension":
+        kw["tight_tension"] = max(bad, 140.0)  # the relation holds: the range alone is what is refused
+    t0 = time.perf_counter()
+    with pytest.raises(ValueError, match=rf"^{cls.__name__}: parameter `{name}` must lie in {valid}; got "):
+        cls(**kw)
+    assert time.perf_counter() - t0 < 3.0
+
+
+@pytest.mark.parametrize(
+    "cls, kw, name, valid",
+    [
+        (jb.PID, {}, "omega_ref", r"\[-100000, 100000\] rad/s"),  # signed: 0 and tiny set points are valid
+        (jb.PID, {}, "kp", r"\[-1e\+09, 1e\+09\] V/rad"),
+        (jb.FourBarDrive, {}, "alpha0", r"\[-1e\+06, 1e\+06\] rad"),
+        (jb.BeltStartup, {}, "tau_r0", r"\[-1e\+07, 1e\+07\] N m"),
+        (jb.NonlinearBelt, {}, "runout", r"\[0, 10\] m"),
+    ],
+)
+def test_signed_and_nonnegative_parameters_refuse_the_huge_magnitudes(cls, kw, name, valid):
+    for bad in (1e300, -1e300):
+        with pytest.raises(ValueError, match=rf"^{cls.__name__}: parameter `{name}` must lie in {valid}; got "):
+            cls(**{**kw, name: bad})
+
+
+def test_the_ends_of_a_range_keep_the_closed_form():
+    # omega_1 = pi c / L [rad/s], c = sqrt(T / rho) (eq. 51 at V = 0), at the largest tension and the shortest span
+    span = jb.MovingString(tension=1e7, density=0.05, length=1e-4)
+    np.testing.assert_allclose(
+        float(span.natural_frequencies(0.0, 1)[0]), math.pi * math.sqrt(1e7 / 0.05) / 1e-4, rtol=1e-13
+    )
+    # the platform's natural frequency omega_n = sqrt(2 k R^2 / J) at the smallest inertia and largest stiffness
+    plat = jb.BeltPlatform(J=1e-12, k=1e12, c=0.0, R=0.18)
+    np.testing.assert_allclose(float(plat.omega_n), math.sqrt(2 * 1e12 * 0.18**2 / 1e-12), rtol=1e-13)
+
+
+def test_contact_tight_side_below_the_slack_side_is_refused_eagerly_and_traced():
+    # eq. (8) is written for T2 >= T1: the reversed contact reported a positive slip margin (no slip), silently
+    msg = r"BeltPulleyContact: parameter `tight_tension` must be >= `slack_tension`"
+    with pytest.raises(ValueError, match=msg + r".*got tight_tension = 140\.0, slack_tension = 150\.0"):
+        jb.BeltPulleyContact(0.05, slack_tension=150.0, tight_tension=140.0)
+    margin = jb.BeltPulleyContact(0.05, slack_tension=140.0, tight_tension=140.0).slip_margin(0.0)  # equal: valid
+    np.testing.assert_allclose(float(margin), 140.0 * (math.exp(0.2 * 2.094) - 1.0), rtol=1e-13)
+
+    def margin_at(t1):
+        return jb.BeltPulleyContact(0.05, slack_tension=t1, tight_tension=140.0).slip_margin(100.0)
+
+    with pytest.raises(ValueError, match=msg + r".*\(element 1 of the batch\)"):
+        jax.vmap(margin_at)(jnp.array([120.0, 150.0]))
+    with pytest.raises(Exception, match=msg):
+        jax.block_until_ready(jax.jit(margin_at)(150.0))
+
+
+_TS = jnp.linspace(0.0, 0.05, 6)
+_PP = jb.PseudoPolynomial(jnp.array([3.0, 4.0, 5.0]))
+_TRACED = [
+    # (id, function of one traced value, a valid value, the parameter, slow)
+    ("string", lambda T: jb.MovingString(tension=T).natural_frequencies(10.0), 140.0, "MovingString", "tension", False),
+    (
+        "nonlinear",
+        lambda c: jb.backbone_amplitude(jb.NonlinearBelt(wave_speed=c), 9.0),
+        37.94,
+        "NonlinearBelt",
+        "wave_speed",
+        False,
+    ),
+    ("contact", lambda r: jb.BeltPulleyContact(r).slip_margin(100.0), 0.05, "BeltPulleyContact", "radius", False),
+    ("platform", lambda J: jb.residual_energy(jb.BeltPlatform(J=J), _PP), 6.0, "BeltPlatform", "J", False),
+    ("rig", lambda L: jb.runout_phasors(jb.RunoutRig(length=L), 5.0), 0.86, "RunoutRig", "length", True),
+    (
+        "startup",
+        lambda k: jb.simulate(jb.Scene(jb.BeltStartup(k=k), jb.ExponentialVoltage(), ts=_TS)).ys,
+        1.2e5,
+        "BeltStartup",
+        "k",
+        True,
+    ),
+    (
+        "fourbar",
+        lambda j: jb.simulate(jb.Scene(jb.FourBarDrive(jm=j), jb.ConstantVoltage(24.0), ts=_TS)).ys,
+        13e-4,
+        "FourBarDrive",
+        "jm",
+        True,
+    ),
+    (
+        "pid",
+        lambda w: jb.simulate(jb.Scene(jb.FourBarDrive(), jb.PID(omega_ref=w), ts=_TS)).ys,
+        30.0,
+        "PID",
+        "omega_ref",
+        True,
+    ),
+]
+
+
+@pytest.mark.parametrize(
+    "f, good, owner, name",
+    [pytest.param(*c[1:5], id=c[0], marks=[pytest.mark.slow] if c[5] else []) for c in _TRACED],
+)
+def test_traced_degenerate_magnitude_names_the_parameter_under_jit_and_vmap(f, good, owner, name):
+    message = rf"{owner}: parameter `{name}` must lie in \["
+    with pytest.raises(ValueError, match=message + r".*\(element 1 of the batch\)"):
+        jax.vmap(f)(jnp.array([good, 1e300]))
+    with pytest.raises(Exception, match=message):  # under the user's own jit: JAX's runtime error holds the message
+        jax.block_until_ready(jax.jit(f)(-1e300 if owner == "PID" else 1e-300))  # a set point may be ~0

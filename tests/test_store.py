@@ -634,6 +634,6 @@ def test_a_users_function_that_fails_raises_its_own_error_through_the_store(tmp_
                 jb.sweep(bad, ks)
             _store.forget()
         for _ in range(2):  # exported, then loaded: the check's message travels with the program
-            with pytest.raises(ValueError, match=r"parameter `k` must be finite and > 0 N/m \(in 'negative'\)"):
+            with pytest.raises(ValueError, match=r"parameter `k` must lie in \[0\.001, 1e\+12\] N/m \(in 'negative'\)"):
                 jb.sweep(negative, ks)
             _store.forget()

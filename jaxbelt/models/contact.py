@@ -22,6 +22,8 @@ from .._checks import as_float_array as _arr
 from .._checks import check_finite, check_range, collecting, is_concrete, record
 from .._guard import checked, reraising
 from .._params import FloatParam, Parametrised, document, param
+from . import _ranges as _r
+from ._ranges import ranged
 
 __all__ = ["BeltPulleyContact", "SlipError", "SlipReport"]
 
@@ -80,15 +82,18 @@ class BeltPulleyContact(Parametrised):
     Pulley speeds `omega` are angular [rad/s].
     """
 
-    radius: FloatParam = param(
+    radius: FloatParam = ranged(
+        rng=_r.RADIUS_M,
         unit="m",
         symbol="$R$",
         default_note="the motor pulley's is not in the belt-vibration report",
         doc="pulley radius",
     )
-    slack_tension: FloatParam = param(120.0, unit="N", symbol="$T_1$", doc="slack-side tension")
-    tight_tension: FloatParam = param(140.0, unit="N", symbol="$T_2$", doc="tight-side tension")
-    density: FloatParam = param(0.05, unit="kg/m", symbol="$\\rho$", doc="belt mass per length")
+    slack_tension: FloatParam = ranged(120.0, _r.TENSION_N, unit="N", symbol="$T_1$", doc="slack-side tension")
+    tight_tension: FloatParam = ranged(140.0, _r.TENSION_N, unit="N", symbol="$T_2$", doc="tight-side tension")
+    density: FloatParam = ranged(
+        0.05, _r.LINEAR_DENSITY_KG_PER_M, unit="kg/m", symbol="$\\rho$", doc="belt mass per length"
+    )
     # (0, 10]: belts on pulleys hold 0.1-1.5 (rubber on steel); beyond, e^(mu theta) over a full wrap
     # (e^62.8 at 10) is no physical tension ratio, and at 1e300 it overflowed to an infinite slip limit and margin
     friction: FloatParam = param(
@@ -106,6 +111,18 @@ class BeltPulleyContact(Parametrised):
         default_note="120°",
         doc="wrap angle",
     )
+
+    def _check_relations(self, host):
+        # eq. (8) and the pressure of eq. (10) are written for the tight side carrying the larger tension:
+        # a contact with T2 < T1 would report the slack side's excess as a margin (no slip, silently)
+        o = "BeltPulleyContact"
+        msg = f"{o}: parameter `tight_tension` must be >= `slack_tension` (T2 >= T1: the tight side carries the larger tension) [N]"
+        if "tight_tension" in host and "slack_tension" in host:
+            t1, t2 = np.asarray(host["slack_tension"]), np.asarray(host["tight_tension"])
+            if not np.all(t2 >= t1):
+                raise ValueError(f"{msg}; got tight_tension = {t2.tolist()}, slack_tension = {t1.tolist()}")
+        else:
+            record(jnp.all(self.tight_tension >= self.slack_tension), msg)
 
     def _omega_checks(self, owner, omega) -> list:
         with collecting() as found:  # concrete: raises now; traced: returned, attached to the result

@@ -32,6 +32,8 @@ from .._checks import record
 from .._model import AbstractModel, integrand, observable
 from .._params import FloatParam, document, option, param
 from ..commands import AbstractVoltageSource, MotorState
+from . import _ranges as _r
+from ._ranges import ranged
 
 #: The first, assumed set of the values lost with Table I (not from the paper); see the module docstring.
 ASSUMED_PARAMETERS = {
@@ -167,54 +169,72 @@ class FourBarDrive(AbstractModel):
         symbol="$h_y$",
         doc="ordinate of the rocker pivot D",
     )
-    f1: FloatParam = param(
-        0.05, unit="m", check="nonnegative", symbol="$f_1$", default_note="*assumed*", doc="distance of $G_1$ from A"
+    f1: FloatParam = ranged(
+        0.05, _r.DISTANCE_M, unit="m", symbol="$f_1$", default_note="*assumed*", doc="distance of $G_1$ from A"
     )
-    f2: FloatParam = param(
-        0.15, unit="m", check="nonnegative", symbol="$f_2$", default_note="*assumed*", doc="distance of $G_2$ from B"
+    f2: FloatParam = ranged(
+        0.15, _r.DISTANCE_M, unit="m", symbol="$f_2$", default_note="*assumed*", doc="distance of $G_2$ from B"
     )
-    f3: FloatParam = param(
-        0.15, unit="m", check="nonnegative", symbol="$f_3$", default_note="*assumed*", doc="distance of $G_3$ from D"
+    f3: FloatParam = ranged(
+        0.15, _r.DISTANCE_M, unit="m", symbol="$f_3$", default_note="*assumed*", doc="distance of $G_3$ from D"
     )
-    theta1: FloatParam = param(
-        0.0, unit="rad", check="finite", symbol="$\\vartheta_1$", doc="angle of $G_1$ off the crank line"
+    theta1: FloatParam = ranged(
+        0.0, _r.ANGLE_RAD, unit="rad", symbol="$\\vartheta_1$", doc="angle of $G_1$ off the crank line", signed=True
     )
-    theta2: FloatParam = param(
-        0.0, unit="rad", check="finite", symbol="$\\vartheta_2$", doc="angle of $G_2$ off the coupler line"
+    theta2: FloatParam = ranged(
+        0.0, _r.ANGLE_RAD, unit="rad", symbol="$\\vartheta_2$", doc="angle of $G_2$ off the coupler line", signed=True
     )
-    theta3: FloatParam = param(
-        0.0, unit="rad", check="finite", symbol="$\\vartheta_3$", doc="angle of $G_3$ off the rocker line"
+    theta3: FloatParam = ranged(
+        0.0, _r.ANGLE_RAD, unit="rad", symbol="$\\vartheta_3$", doc="angle of $G_3$ off the rocker line", signed=True
     )
-    m1: FloatParam = param(
-        0.40, unit="kg", check="nonnegative", symbol="$m_1$", default_note="*assumed*", doc="crank mass"
+    m1: FloatParam = ranged(
+        0.40, _r.MASS_KG, unit="kg", symbol="$m_1$", default_note="*assumed*", doc="crank mass", zero=True
     )
-    m2: FloatParam = param(
-        0.38, unit="kg", check="nonnegative", symbol="$m_2$", default_note="*assumed*", doc="coupler mass"
+    m2: FloatParam = ranged(
+        0.38, _r.MASS_KG, unit="kg", symbol="$m_2$", default_note="*assumed*", doc="coupler mass", zero=True
     )
-    m3: FloatParam = param(
-        0.38, unit="kg", check="nonnegative", symbol="$m_3$", default_note="*assumed*", doc="rocker mass"
+    m3: FloatParam = ranged(
+        0.38, _r.MASS_KG, unit="kg", symbol="$m_3$", default_note="*assumed*", doc="rocker mass", zero=True
     )
-    jg1: FloatParam = param(3.5e-4, unit="kg m²", symbol="$J_{G1}$", doc="crank inertia about $G_1$")
-    jg2: FloatParam = param(1.7e-2, unit="kg m²", symbol="$J_{G2}$", doc="coupler inertia about $G_2$")
-    jg3: FloatParam = param(1.7e-2, unit="kg m²", symbol="$J_{G3}$", doc="rocker inertia about $G_3$")
-    g: FloatParam = param(9.81, unit="m/s²", check="nonnegative", symbol="$g$", doc="gravity")
-    R: FloatParam = param(
-        0.886, unit="Ω", symbol="$R$", default_note="*identified*; assumed 1.5", doc="armature resistance"
+    jg1: FloatParam = ranged(3.5e-4, _r.INERTIA_KG_M2, unit="kg m²", symbol="$J_{G1}$", doc="crank inertia about $G_1$")
+    jg2: FloatParam = ranged(
+        1.7e-2, _r.INERTIA_KG_M2, unit="kg m²", symbol="$J_{G2}$", doc="coupler inertia about $G_2$"
     )
-    L: FloatParam = param(9e-3, unit="H", symbol="$L$", doc="armature inductance")
-    km: FloatParam = param(0.48, unit="N m/A", symbol="$k_m$", doc="torque / back-emf constant")
-    jm: FloatParam = param(13e-4, unit="kg m²", symbol="$J_m$", doc="motor inertia")
-    ja: FloatParam = param(9.8e-5, unit="kg m²", symbol="$J_a$", doc="inertia of gear a (motor side)")
-    jb: FloatParam = param(9.8e-5, unit="kg m²", symbol="$J_b$", doc="inertia of gear b (crank side)")
-    z: FloatParam = param(1.0, unit="–", symbol="$z$", doc="gear ratio $\\dot\\varphi/\\dot\\alpha$")
-    T0: FloatParam = param(
-        0.0, unit="N m", check="nonnegative", symbol="$T_0$", doc="constant friction torque on the motor shaft"
+    jg3: FloatParam = ranged(
+        1.7e-2, _r.INERTIA_KG_M2, unit="kg m²", symbol="$J_{G3}$", doc="rocker inertia about $G_3$"
     )
-    lam: FloatParam = param(
-        0.08, unit="N m s/rad", check="nonnegative", symbol="$\\lambda$", doc="viscous friction on the motor shaft"
+    g: FloatParam = ranged(9.81, _r.GRAVITY_M_S2, unit="m/s²", symbol="$g$", doc="gravity")
+    R: FloatParam = ranged(
+        0.886,
+        _r.RESISTANCE_OHM,
+        unit="Ω",
+        symbol="$R$",
+        default_note="*identified*; assumed 1.5",
+        doc="armature resistance",
     )
-    alpha0: FloatParam = param(
-        0.0, unit="rad", check="finite", symbol="$\\alpha_0$", doc="crank angle at the scene start (rest state)"
+    L: FloatParam = ranged(9e-3, _r.INDUCTANCE_H, unit="H", symbol="$L$", doc="armature inductance")
+    km: FloatParam = ranged(0.48, _r.MOTOR_CONSTANT, unit="N m/A", symbol="$k_m$", doc="torque / back-emf constant")
+    jm: FloatParam = ranged(13e-4, _r.INERTIA_KG_M2, unit="kg m²", symbol="$J_m$", doc="motor inertia")
+    ja: FloatParam = ranged(
+        9.8e-5, _r.INERTIA_KG_M2, unit="kg m²", symbol="$J_a$", doc="inertia of gear a (motor side)"
+    )
+    jb: FloatParam = ranged(
+        9.8e-5, _r.INERTIA_KG_M2, unit="kg m²", symbol="$J_b$", doc="inertia of gear b (crank side)"
+    )
+    z: FloatParam = ranged(1.0, _r.GEAR_RATIO, unit="–", symbol="$z$", doc="gear ratio $\\dot\\varphi/\\dot\\alpha$")
+    T0: FloatParam = ranged(
+        0.0, _r.TORQUE_N_M, unit="N m", symbol="$T_0$", doc="constant friction torque on the motor shaft"
+    )
+    lam: FloatParam = ranged(
+        0.08, _r.VISCOUS_N_M_S, unit="N m s/rad", symbol="$\\lambda$", doc="viscous friction on the motor shaft"
+    )
+    alpha0: FloatParam = ranged(
+        0.0,
+        _r.ANGLE_RAD,
+        unit="rad",
+        symbol="$\\alpha_0$",
+        doc="crank angle at the scene start (rest state)",
+        signed=True,
     )
     assembly: int = option(1, choices=(1, -1), symbol="$k$", doc="the assembly mode of Appendix A (*assumed*)")
 

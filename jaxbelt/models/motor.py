@@ -15,8 +15,10 @@ import jax.numpy as jnp
 from jax.typing import ArrayLike
 
 from .._checks import check_nonnegative
-from .._params import FloatParam, OptionalFloatParam, document, option, param
+from .._params import FloatParam, OptionalFloatParam, document, option
 from ..commands import AbstractController, MotorState
+from . import _ranges as _r
+from ._ranges import ranged
 
 _LIMITERS = ("hard", "smooth")
 _GAINS = ("ramped", "constant")
@@ -58,17 +60,19 @@ class PID(AbstractController):
     `kp` is in V/rad for the ramped gain (it multiplies $t$) and in V s/rad for the constant one.
     """
 
-    kp: FloatParam = param(
-        80.0, unit="V/rad", check="finite", symbol="$K_p$", doc="proportional gain (ramped: multiplies $t$)"
+    kp: FloatParam = ranged(
+        80.0, _r.GAIN, unit="V/rad", symbol="$K_p$", doc="proportional gain (ramped: multiplies $t$)", signed=True
     )
-    ki: FloatParam = param(32.0, unit="V/rad", check="finite", symbol="$K_i$", doc="integral gain")
-    kd: FloatParam = param(0.015, unit="V s²/rad", check="finite", symbol="$K_d$", doc="derivative gain")
-    omega_ref: FloatParam = param(30.0, unit="rad/s", check="finite", symbol="$\\omega_0$", doc="motor speed set point")
-    v_limit: OptionalFloatParam = param(
-        None, unit="V", optional=True, symbol="$V_{lim}$", doc="voltage limit (None: no limiter; Fig. 3)"
+    ki: FloatParam = ranged(32.0, _r.GAIN, unit="V/rad", symbol="$K_i$", doc="integral gain", signed=True)
+    kd: FloatParam = ranged(0.015, _r.GAIN, unit="V s²/rad", symbol="$K_d$", doc="derivative gain", signed=True)
+    omega_ref: FloatParam = ranged(
+        30.0, _r.MOTOR_SPEED_RAD_S, unit="rad/s", symbol="$\\omega_0$", doc="motor speed set point", signed=True
+    )
+    v_limit: OptionalFloatParam = ranged(
+        None, _r.VOLTAGE_V, unit="V", optional=True, symbol="$V_{lim}$", doc="voltage limit (None: no limiter; Fig. 3)"
     )
     limiter: str = option("hard", choices=_LIMITERS, doc="the limiter's shape: clip or smooth")
-    v_smooth: FloatParam = param(0.5, unit="V", symbol="$s$", doc="width of the smooth limiter")
+    v_smooth: FloatParam = ranged(0.5, _r.VOLTAGE_V, unit="V", symbol="$s$", doc="width of the smooth limiter")
     gain: str = option("ramped", choices=_GAINS, doc="proportional gain $K_p t$ (eq. 16) or $K_p$ (eq. 14)")
 
     def proportional_gain(self, t):

@@ -17,8 +17,10 @@ import numpy as np
 
 from .._checks import check_positive, is_concrete, record, xp
 from .._model import AbstractModel, observable
-from .._params import FloatParam, document, param, recheck
+from .._params import FloatParam, document, recheck
 from ..commands import AbstractMotionCommand
+from . import _ranges as _r
+from ._ranges import ranged
 
 
 @document
@@ -47,12 +49,18 @@ class BeltPlatform(AbstractModel):
     `to_axis()` gives the same dynamics as a one-mode `ModalAxis` (command: the motor angle).
     """
 
-    J: FloatParam = param(6.0, unit="kg m²", symbol="$J$", doc="platform moment of inertia", default_note="Table III")
-    k: FloatParam = param(9e4, unit="N/m", symbol="$k$", doc="stiffness of each belt branch")
-    c: FloatParam = param(150.0, unit="N s/m", symbol="$c$", check="nonnegative", doc="damping constant of each branch")
-    r: FloatParam = param(0.060, unit="m", symbol="$r$", doc="radius of the driving pulley (1)")
-    R: FloatParam = param(0.180, unit="m", symbol="$R$", doc="radius of the platform pulley (2)")
-    z: FloatParam = param(0.1, unit="–", symbol="$z$", doc="gear ratio of the reducer, $\\varphi = z\\varphi_m$ (1:10)")
+    J: FloatParam = ranged(
+        6.0, _r.INERTIA_KG_M2, unit="kg m²", symbol="$J$", doc="platform moment of inertia", default_note="Table III"
+    )
+    k: FloatParam = ranged(9e4, _r.STIFFNESS_N_PER_M, unit="N/m", symbol="$k$", doc="stiffness of each belt branch")
+    c: FloatParam = ranged(
+        150.0, _r.DAMPING_N_S_PER_M, unit="N s/m", symbol="$c$", doc="damping constant of each branch"
+    )
+    r: FloatParam = ranged(0.060, _r.RADIUS_M, unit="m", symbol="$r$", doc="radius of the driving pulley (1)")
+    R: FloatParam = ranged(0.180, _r.RADIUS_M, unit="m", symbol="$R$", doc="radius of the platform pulley (2)")
+    z: FloatParam = ranged(
+        0.1, _r.GEAR_RATIO, unit="–", symbol="$z$", doc="gear ratio of the reducer, $\\varphi = z\\varphi_m$ (1:10)"
+    )
 
     input_types: ClassVar[tuple[type, ...]] = (AbstractMotionCommand,)
 

@@ -20,6 +20,8 @@ from .._checks import is_concrete
 from .._model import AbstractLinearModel, integrand, observable, observable_family
 from .._params import FloatParam, document, param
 from ..commands import AbstractVoltageCommand
+from . import _ranges as _r
+from ._ranges import ranged
 
 
 def chain_matrices(jm, inertias, k, c, r_drive, r_driven, z, mu, R, L, km):
@@ -213,31 +215,31 @@ class AbstractBeltDrive(AbstractLinearModel):
 
 # The motor, load and belt parameters that both drives declare (written once, here).
 def _jm():
-    return param(4e-4, unit="kg m²", symbol="$J_m$", doc="motor inertia", default_note="Table I")
+    return ranged(4e-4, _r.INERTIA_KG_M2, unit="kg m²", symbol="$J_m$", doc="motor inertia", default_note="Table I")
 
 
 def _tau_r0():
-    return param(0.0, unit="N m", symbol="$\\tau_{r0}$", check="finite", doc="constant load torque")
+    return ranged(0.0, _r.TORQUE_N_M, unit="N m", symbol="$\\tau_{r0}$", doc="constant load torque", signed=True)
 
 
 def _mu():
-    return param(5.0, unit="N m s/rad", symbol="$\\mu$", check="nonnegative", doc="viscous load coefficient")
+    return ranged(5.0, _r.VISCOUS_N_M_S, unit="N m s/rad", symbol="$\\mu$", doc="viscous load coefficient")
 
 
 def _z():
-    return param(15.0, unit="–", symbol="$z$", doc="gear ratio $\\vartheta_m = z\\vartheta_1$")
+    return ranged(15.0, _r.GEAR_RATIO, unit="–", symbol="$z$", doc="gear ratio $\\vartheta_m = z\\vartheta_1$")
 
 
 def _R():
-    return param(0.15, unit="Ω", symbol="$R$", doc="armature resistance")
+    return ranged(0.15, _r.RESISTANCE_OHM, unit="Ω", symbol="$R$", doc="armature resistance")
 
 
 def _L():
-    return param(0.2e-3, unit="H", symbol="$L$", doc="armature inductance")
+    return ranged(0.2e-3, _r.INDUCTANCE_H, unit="H", symbol="$L$", doc="armature inductance")
 
 
 def _km():
-    return param(0.09, unit="N m/A", symbol="$k_m$", doc="torque / back-emf constant")
+    return ranged(0.09, _r.MOTOR_CONSTANT, unit="N m/A", symbol="$k_m$", doc="torque / back-emf constant")
 
 
 @document
@@ -262,12 +264,12 @@ class BeltStartup(AbstractBeltDrive):
     """
 
     jm: jnp.ndarray = _jm()
-    j1: FloatParam = param(0.018, unit="kg m²", symbol="$J_1$", doc="driving pulley inertia")
-    j2: FloatParam = param(0.25, unit="kg m²", symbol="$J_2$", doc="driven pulley + load inertia")
-    k: FloatParam = param(120e3, unit="N/m", symbol="$k$", doc="stiffness of each belt branch")
-    c: FloatParam = param(20.0, unit="N s/m", symbol="$c$", check="nonnegative", doc="damping of each belt branch")
-    r1: FloatParam = param(0.08, unit="m", symbol="$r_1$", doc="driving pulley radius")
-    r2: FloatParam = param(0.16, unit="m", symbol="$r_2$", doc="driven pulley radius")
+    j1: FloatParam = ranged(0.018, _r.INERTIA_KG_M2, unit="kg m²", symbol="$J_1$", doc="driving pulley inertia")
+    j2: FloatParam = ranged(0.25, _r.INERTIA_KG_M2, unit="kg m²", symbol="$J_2$", doc="driven pulley + load inertia")
+    k: FloatParam = ranged(120e3, _r.STIFFNESS_N_PER_M, unit="N/m", symbol="$k$", doc="stiffness of each belt branch")
+    c: FloatParam = ranged(20.0, _r.DAMPING_N_S_PER_M, unit="N s/m", symbol="$c$", doc="damping of each belt branch")
+    r1: FloatParam = ranged(0.08, _r.RADIUS_M, unit="m", symbol="$r_1$", doc="driving pulley radius")
+    r2: FloatParam = ranged(0.16, _r.RADIUS_M, unit="m", symbol="$r_2$", doc="driven pulley radius")
     tau_r0: jnp.ndarray = _tau_r0()
     mu: jnp.ndarray = _mu()
     z: jnp.ndarray = _z()

@@ -53,6 +53,8 @@ from .._checks import (
 from .._guard import all_ok, checked, error_if, guard, host_checked, reraising, stored_jit, traced_checks
 from .._params import FloatParam, Parametrised, document, param
 from .._threads import blas_limited
+from . import _ranges as _r
+from ._ranges import ranged
 
 __all__ = [
     "MovingString",
@@ -157,14 +159,25 @@ class MovingString(Parametrised):
     Speeds are belt speeds $V$ [m/s]; frequencies are angular [rad/s].
     """
 
-    tension: FloatParam = param(
-        140.0, unit="N", symbol="$T$", default_note="belt-vibration report, tight side", doc="span tension"
+    tension: FloatParam = ranged(
+        140.0,
+        _r.TENSION_N,
+        unit="N",
+        symbol="$T$",
+        default_note="belt-vibration report, tight side",
+        doc="span tension",
     )
-    density: FloatParam = param(
-        0.05, unit="kg/m", symbol="$\\rho$", default_note="belt-vibration report", doc="mass per unit length"
+    density: FloatParam = ranged(
+        0.05,
+        _r.LINEAR_DENSITY_KG_PER_M,
+        unit="kg/m",
+        symbol="$\\rho$",
+        default_note="belt-vibration report",
+        doc="mass per unit length",
     )
-    length: FloatParam = param(
+    length: FloatParam = ranged(
         0.2621,
+        _r.SPAN_M,
         unit="m",
         symbol="$L$",
         default_note="fitted to the belt-vibration report, Table 2; not in the text",
@@ -194,7 +207,7 @@ class MovingString(Parametrised):
         if any $|V| \\ge V_{cr}$ (under `jit`: `eqx.error_if`).
         """
         n_modes = check_int("MovingString.natural_frequencies", "n_modes", n_modes)
-        vc = self.critical_speed
+        vc = checked(self.critical_speed, self)  # a bad tension is named first, not the speed it makes critical
         speed = _check_subcritical(speed, vc, "MovingString.natural_frequencies")
         n = jnp.arange(1, n_modes + 1, dtype=float)
         base = (jnp.pi / self.length) * vc * (1.0 - (speed / vc) ** 2)
@@ -217,7 +230,7 @@ class MovingString(Parametrised):
         longer a displacement of the belt).
         """
         n = check_int("MovingString.mode_shape", "n", n)
-        vc = self.critical_speed
+        vc = checked(self.critical_speed, self)  # a bad tension is named first, not the speed it makes critical
         speed = _check_subcritical(speed, vc, "MovingString.mode_shape")
         w = (n * jnp.pi / self.length) * vc * (1.0 - (speed / vc) ** 2)
         a = w / (speed - vc)
@@ -241,7 +254,7 @@ class MovingString(Parametrised):
         $K = (T/\\rho - V^2)(k\\pi/L)^2 (L/2)\\,\\delta_{jk}$ (per unit $\\rho$).
         """
         nb = check_int("MovingString.galerkin_matrices", "n_basis", n_basis)
-        speed = _check_subcritical(speed, self.critical_speed, "MovingString.galerkin_matrices")
+        speed = _check_subcritical(speed, checked(self.critical_speed, self), "MovingString.galerkin_matrices")
         return checked(self._galerkin_matrices(speed, nb), self)
 
     def _galerkin_matrices(self, speed, nb: int):
@@ -271,7 +284,7 @@ class MovingString(Parametrised):
         n_basis, n_modes = check_int(o, "n_basis", n_basis), check_int(o, "n_modes", n_modes)
         if n_modes > n_basis:
             raise ValueError(f"{o}: `n_modes` ({n_modes}) must not exceed `n_basis` ({n_basis})")
-        speed = _check_subcritical(speed, self.critical_speed, o)
+        speed = _check_subcritical(speed, checked(self.critical_speed, self), o)
         return checked(_galerkin_frequencies(self, speed, n_basis, n_modes), self)
 
 
@@ -349,37 +362,40 @@ class RunoutRig(Parametrised):
     wave speed is identified from the measured jump speeds (37.94 m/s).
     """
 
-    length: FloatParam = param(
-        0.86, unit="m", symbol="$L$", default_note="Moon & Wickert, 1997, test stand", doc="free span length"
+    length: FloatParam = ranged(
+        0.86, _r.SPAN_M, unit="m", symbol="$L$", default_note="Moon & Wickert, 1997, test stand", doc="free span length"
     )
-    pulley_radii: FloatParam = param(
+    pulley_radii: FloatParam = ranged(
         (0.063, 0.063),
+        _r.RADIUS_M,
         unit="m",
         shape=None,
         symbol="$(r_0, r_1)$",
         default_note="test stand",
         doc="pulley pitch radii (one value per pulley, 1-D)",
     )
-    wave_speed: FloatParam = param(
+    wave_speed: FloatParam = ranged(
         41.0,
+        _r.WAVE_SPEED_M_S,
         unit="m/s",
         symbol="$v_t$",
         default_note="ASSUMED: not in the text; puts the first crossing at 9.0 m/s",
         doc="transverse wave speed $v_t = \\sqrt{P/\\rho A}$",
     )
-    runouts: FloatParam = param(
+    runouts: FloatParam = ranged(
         (0.355e-3, 0.21e-3),
+        _r.RUNOUT_M,
         unit="m",
-        check="nonnegative",
         shape=(2,),
         symbol="$(e_0, e_1)$",
         default_note="test stand: 0.71 and 0.42 mm peak-to-peak",
         doc="run-out amplitudes, half the peak-to-peak",
     )
-    phase: FloatParam = param(
+    phase: FloatParam = ranged(
         4.18879,
+        _r.ANGLE_RAD,
+        signed=True,
         unit="rad",
-        check="finite",
         symbol="$\\phi$",
         default_note="240°, test stand; its sign is ASSUMED",
         doc="phase of pulley 1's run-out",
@@ -573,7 +589,7 @@ def crossing_diagram(rig: RunoutRig, speed, n_modes: int = 2, harmonics=1):
     with collecting() as checks:
         ks = _harmonics(harmonics, o)
     checks = checks + traced_checks(rig)
-    vt = rig.wave_speed
+    vt = checked(rig.wave_speed, rig)  # a bad rig is named first, not the speed it makes supercritical
     speed = _check_subcritical(speed, vt, o)
     r = jnp.atleast_1d(rig.pulley_radii)
     n = jnp.arange(1, n_modes + 1, dtype=float)
@@ -630,7 +646,7 @@ def _check_response_inputs(o, rig: RunoutRig, speed):
             f"{o}: the rig's `pulley_radii` and `runouts` must each hold two values (pulley 0 at x = 0, pulley 1 "
             f"at x = length); got shapes {np.shape(rig.pulley_radii)} and {np.shape(rig.runouts)}"
         )
-    return _check_subcritical(speed, rig.wave_speed, o)
+    return _check_subcritical(speed, checked(rig.wave_speed, rig), o)
 
 
 @reraising("runout_phasors")

@@ -61,7 +61,7 @@ def _checks(owner: str, belt, n, speed=None) -> list:
     with collecting() as found:
         if speed is not None:
             belt.check_speed(speed)
-    return found + traced_checks(belt)
+    return traced_checks(belt) + found  # a bad belt is named first, not the speed it makes supercritical
 
 
 def kappa(v, v_l, n: int = 1):

@@ -76,6 +76,8 @@ from ..._guard import all_ok, nan_where, traced_checks
 from ..._model import AbstractModel, observable
 from ..._params import FloatParam, document, option, param
 from ...commands import AbstractRunningSpeed
+from .. import _ranges as _r
+from .._ranges import ranged
 
 
 def _pair(x):
@@ -260,38 +262,45 @@ class NonlinearBelt(AbstractModel):
     1 cm from the sensor pulley; `"speed"` [m/s].
     """
 
-    span: FloatParam = param(0.86, unit="m", symbol="$L$", doc="free span length")
-    wave_speed: FloatParam = param(
-        37.94, unit="m/s", symbol="$v_t$", default_note="identified", doc="transverse wave speed $\\sqrt{P/\\rho A}$"
+    span: FloatParam = ranged(0.86, _r.SPAN_M, unit="m", symbol="$L$", doc="free span length")
+    wave_speed: FloatParam = ranged(
+        37.94,
+        _r.WAVE_SPEED_M_S,
+        unit="m/s",
+        symbol="$v_t$",
+        default_note="identified",
+        doc="transverse wave speed $\\sqrt{P/\\rho A}$",
     )
-    v_l: FloatParam = param(
-        50.0, unit="–", check="nonnegative", symbol="$v_l$", doc="longitudinal / transverse wave speed ratio"
+    v_l: FloatParam = ranged(
+        50.0, _r.SPEED_RATIO, unit="–", symbol="$v_l$", doc="longitudinal / transverse wave speed ratio"
     )
-    pulley_radii: FloatParam = param(
+    pulley_radii: FloatParam = ranged(
         (0.063, 0.063),
+        _r.RADIUS_M,
         unit="m",
         shape=(2,),
         converter=_pair,
         symbol="$(r_d, r_i)$",
         doc="drive and idle pulley radii (one value: both)",
     )
-    runout: FloatParam = param(
+    runout: FloatParam = ranged(
         (0.355e-3, 0.21e-3),
+        _r.RUNOUT_M,
         unit="m",
-        check="nonnegative",
         shape=(2,),
         converter=_pair,
         symbol="$(\\varepsilon_d, \\varepsilon_i)$",
         default_note="0.71, 0.42 mm p-p",
         doc="eccentricities, half the peak-to-peak run-out; < 0.1 `span`",
     )
-    phase: FloatParam = param(
+    phase: FloatParam = ranged(
         float(np.deg2rad(240.0)),
+        _r.ANGLE_RAD,
         unit="rad",
-        check="range",
         symbol="$\\phi$",
         default_note="+240°",
         doc="phase of the idle pulley's run-out, $\\theta_i = \\theta_d + \\phi$",
+        signed=True,
     )
     damping: FloatParam = param(
         (0.01219, 0.02713),
