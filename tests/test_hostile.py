@@ -396,10 +396,11 @@ def test_solve_error_says_which_cause_and_the_time_reached():
         jb.simulate(final, "ode", max_steps=10)
     sol = jb.simulate(final, "ode", max_steps=10, throw=False)
     assert int(sol.stats["result"]) == 1 and 0.0 < float(sol.stats["t_final"]) < 0.5
-    # RK4: an exhausted budget is not blamed on the step size; an unstable step is
-    with pytest.raises(jb.SolveError, match=r"`max_steps` = 10 was reached at t = 0\.001 s.* 5000 steps") as e:
+    # RK4: a budget that cannot cover the span is refused at the call (steps needed against max_steps, the dt that
+    # fits), not blamed on the step's stability; an unstable step is
+    with pytest.raises(ValueError, match=r"`dt` = 0\.0001 s \(RK4 step\) needs 5e\+03 steps .* `max_steps` = 10") as e:
         jb.simulate(scene, "rk4", max_steps=10)
-    assert "stability" not in str(e.value) and "smaller `dt`" not in str(e.value)
+    assert "stability" not in str(e.value) and "dt` >= 0.05 s" in str(e.value)
     with pytest.raises(jb.SolveError, match=r"RK4 step dt = 1 s is too large .*spectral radius"):
         jb.simulate(scene, "rk4", dt=1.0)
     # under jit the message is fixed when the program is traced: the possible causes
