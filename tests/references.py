@@ -149,6 +149,23 @@ def piecewise_move_reference(times, steps, ramps, duration):
     return acc, vel, pos, tk
 
 
+def highs_lp_value(c, G, h, A, b) -> float:
+    """The optimal value of min c x s.t. G x <= h, A x = b (x free) by scipy's HiGHS at tight tolerances: the
+    independent reference of jaxbelt's interior point method on the same LP."""
+    ref = linprog(
+        np.asarray(c),
+        A_ub=np.asarray(G),
+        b_ub=np.asarray(h),
+        A_eq=np.asarray(A),
+        b_eq=np.asarray(b),
+        bounds=[(None, None)] * len(c),
+        method="highs",
+        options=dict(primal_feasibility_tolerance=1e-10, dual_feasibility_tolerance=1e-10),
+    )
+    assert ref.status == 0, ref.message
+    return float(ref.fun)
+
+
 def highs_steps_lp(design, cells: int) -> float:
     """The least worst residual over `design`'s own frequencies and cuts of a piecewise-constant acceleration on
     `cells` equal intervals, within the design's |a| and |v| limits (exact: |v| at the interval ends), distance and

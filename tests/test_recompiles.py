@@ -210,25 +210,13 @@ def test_time_grids_of_any_spacing_are_data(method):
 
 
 def _highs_minimax_value(problem, opts, scale):
-    """The minimax LP's optimal value by scipy's HiGHS (tight tolerances), in units of `scale`: independent of
-    jaxbelt's interior point method."""
-    from scipy.optimize import linprog
+    """The minimax LP's optimal value by scipy's HiGHS, in units of `scale`: independent of jaxbelt's interior point
+    method (`references.highs_lp_value`)."""
+    from references import highs_lp_value
 
     from jaxbelt.shaping import design as dsg
 
-    c, G, h, A, b = (np.asarray(x) for x in dsg.lp_data(problem, opts, scale))
-    ref = linprog(
-        c,
-        A_ub=G,
-        b_ub=h,
-        A_eq=A,
-        b_eq=b,
-        bounds=[(None, None)] * len(c),
-        method="highs",
-        options=dict(primal_feasibility_tolerance=1e-10, dual_feasibility_tolerance=1e-10),
-    )
-    assert ref.status == 0
-    return ref.fun * scale
+    return highs_lp_value(*dsg.lp_data(problem, opts, scale)) * scale
 
 
 @pytest.mark.slow

@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from references import highs_lp_value
 from scipy.integrate import solve_ivp
 from scipy.optimize import linprog
 
@@ -219,21 +220,8 @@ def _design(axis, T, u=0.2, D=0.1, jerk=None):
 
 
 def _highs_value(problem, opts, scale=1e-4):
-    """The minimax LP's optimal value by scipy's HiGHS (tight tolerances), posed in units of `scale`: the
-    independent reference."""
-    c, G, h, A, b = (np.asarray(x) for x in dsg.lp_data(problem, opts, scale))
-    ref = linprog(
-        c,
-        A_ub=G,
-        b_ub=h,
-        A_eq=A,
-        b_eq=b,
-        bounds=[(None, None)] * len(c),
-        method="highs",
-        options=dict(primal_feasibility_tolerance=1e-10, dual_feasibility_tolerance=1e-10),
-    )
-    assert ref.status == 0
-    return ref.fun * scale
+    """The minimax LP's optimal value by scipy's HiGHS, posed in units of `scale`: the independent reference."""
+    return highs_lp_value(*dsg.lp_data(problem, opts, scale)) * scale
 
 
 @pytest.mark.parametrize("jerk", [None, 40.0])

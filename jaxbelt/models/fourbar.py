@@ -30,7 +30,7 @@ import numpy as np
 
 from .._checks import record
 from .._model import AbstractModel, integrand, observable
-from .._params import FloatParam, document, option, param
+from .._params import FloatParam, document, option
 from ..commands import AbstractVoltageSource, MotorState
 from . import _ranges as _r
 from ._ranges import ranged
@@ -120,54 +120,22 @@ class FourBarDrive(AbstractModel):
 
     # lengths within [1 µm, 1 km] (pivot coordinates within ±1 km): beyond, the squares of the closure equation
     # (Appendix A) overflow float64 (a = 1e300 m raised Python's OverflowError) or lose every digit of the others
-    a: FloatParam = param(
-        0.0884,
-        unit="m",
-        check="range",
-        lo=LENGTH_RANGE_M[0],
-        hi=LENGTH_RANGE_M[1],
-        symbol="$a$",
-        default_note="*identified*; assumed 0.10",
-        doc="crank length",
+    a: FloatParam = ranged(
+        0.0884, LENGTH_RANGE_M, unit="m", symbol="$a$", default_note="*identified*; assumed 0.10", doc="crank length"
     )
-    b: FloatParam = param(
+    b: FloatParam = ranged(0.30, LENGTH_RANGE_M, unit="m", symbol="$b$", default_note="*assumed*", doc="coupler length")
+    c: FloatParam = ranged(0.30, LENGTH_RANGE_M, unit="m", symbol="$c$", default_note="*assumed*", doc="rocker length")
+    hx: FloatParam = ranged(
         0.30,
+        LENGTH_RANGE_M,
+        signed=True,
         unit="m",
-        check="range",
-        lo=LENGTH_RANGE_M[0],
-        hi=LENGTH_RANGE_M[1],
-        symbol="$b$",
-        default_note="*assumed*",
-        doc="coupler length",
-    )
-    c: FloatParam = param(
-        0.30,
-        unit="m",
-        check="range",
-        lo=LENGTH_RANGE_M[0],
-        hi=LENGTH_RANGE_M[1],
-        symbol="$c$",
-        default_note="*assumed*",
-        doc="rocker length",
-    )
-    hx: FloatParam = param(
-        0.30,
-        unit="m",
-        check="range",
-        lo=-LENGTH_RANGE_M[1],
-        hi=LENGTH_RANGE_M[1],
         symbol="$h_x$",
         default_note="*assumed*",
         doc="abscissa of the rocker pivot D",
     )
-    hy: FloatParam = param(
-        0.05,
-        unit="m",
-        check="range",
-        lo=-LENGTH_RANGE_M[1],
-        hi=LENGTH_RANGE_M[1],
-        symbol="$h_y$",
-        doc="ordinate of the rocker pivot D",
+    hy: FloatParam = ranged(
+        0.05, LENGTH_RANGE_M, signed=True, unit="m", symbol="$h_y$", doc="ordinate of the rocker pivot D"
     )
     f1: FloatParam = ranged(
         0.05, _r.DISTANCE_M, unit="m", symbol="$f_1$", default_note="*assumed*", doc="distance of $G_1$ from A"
