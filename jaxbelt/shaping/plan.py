@@ -100,11 +100,10 @@ one more compiled LP (about 10 s for a 5.5 Hz mode within 1 %; a minute or more 
 import csv
 import dataclasses
 import math
-import os
 
 import numpy as np
 
-from .._checks import check_positive
+from .._checks import available_bytes, check_positive
 from .._display import Display, Table, fmt, fmt_list, require, with_unit
 from .._io import IMAGE_FORMATS, atomic_open, check_output_path, save_figure
 from .._threads import blas_limited
@@ -456,20 +455,12 @@ def nyquist_hz(frequencies, uncertainty: float) -> float:
 BYTES_PER_SAMPLE = 512
 
 
-def _available_bytes() -> int:
-    """The memory available to this process now [bytes] (Linux `sysconf`; 8 GiB where it cannot be read)."""
-    try:
-        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
-    except (ValueError, OSError, AttributeError):  # pragma: no cover - not Linux
-        return 8 << 30
-
-
 def check_sample_count(rate_hz, duration: float, owner: str) -> None:
     """A `ValueError` naming `rate_hz` [Hz] where the samples of a `duration` [s] move would need more than half the
     memory available (`BYTES_PER_SAMPLE` each), stating the rates that fit, before anything is allocated."""
     check_positive("rate_hz", rate_hz, "Hz", owner)
     n = float(duration) * float(rate_hz) + 1.0
-    avail = _available_bytes()
+    avail = available_bytes()
     if n * BYTES_PER_SAMPLE > avail / 2:
         top = (avail / 2 / BYTES_PER_SAMPLE - 1.0) / max(float(duration), 1e-300)
         raise ValueError(
