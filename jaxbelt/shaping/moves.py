@@ -401,11 +401,14 @@ def trapezoid_move(distance, duration, v_max, a_max, j_max=None) -> PiecewiseMov
     $\\pm a$ in steps; with `j_max` [m/s³]: the S-curve whose acceleration ramps at $\\pm j$. "Gentlest": the
     least peak acceleration of that family. Returns None when no such move respects `v_max` [m/s] and
     `a_max` [m/s²] (the duration is too short). `ValueError` naming the parameter for a distance or limit that
-    `fastest_move` refuses, or a `duration` that is not finite or longer than `MOVE_TIME_RANGE_S` allows."""
+    `fastest_move` refuses, or a `duration` that is not finite, not > 0 or longer than `MOVE_TIME_RANGE_S`
+    allows."""
     check_move_limits("trapezoid_move", distance, v_max, a_max, j_max)
-    if not (math.isfinite(float(duration)) and float(duration) <= MOVE_TIME_RANGE_S[1]):
+    check_scalar("duration", duration, "s", "trapezoid_move")
+    if not (math.isfinite(float(duration)) and 0.0 < float(duration) <= MOVE_TIME_RANGE_S[1]):
         raise ValueError(
-            f"trapezoid_move: parameter `duration` must be finite and at most {MOVE_TIME_RANGE_S[1]:g} s; got {duration!r}"
+            f"trapezoid_move: parameter `duration` must be finite, > 0 and at most {MOVE_TIME_RANGE_S[1]:g} s; "
+            f"got {duration!r}"
         )
     return _trapezoid_move(distance, duration, v_max, a_max, j_max)
 
