@@ -61,7 +61,7 @@ jax.config.update("jax_enable_x64", True)
 import jaxbelt as jb
 from jaxbelt import _compat, _guard, _xla
 _xla.QUICK_COMPILE["xla_no_such_option_in_any_xla"] = True  # refused by every XLA: left out, no error
-jb.enable_compilation_cache(tempfile.mkdtemp())
+jb.enable_compilation_cache(os.environ.get("PROBE_CACHE_DIR") or tempfile.mkdtemp())
 out = {"private": _compat.private_apis(), "lean": None}
 res = jb.optimise_command(jb.BeltPlatform(), jb.PseudoPolynomial(gammas=jnp.array([3.0, 4.0, 5.0])), progress=False)
 out["optimise_command"] = [float(g) for g in res.command.gammas]
@@ -87,9 +87,11 @@ def _probe(**env) -> dict:
 
 
 @pytest.mark.slow
-def test_entry_points_agree_with_and_without_private_internals():
-    fast = _probe()
-    slow = _probe(JAXBELT_PRIVATE_APIS="0")
+def test_entry_points_agree_with_and_without_private_internals(tmp_path):
+    # the two runs share one persistent cache: a program whose HLO is the same either way compiles once (its key
+    # is the HLO), a program that differs compiles in each run
+    fast = _probe(PROBE_CACHE_DIR=str(tmp_path))
+    slow = _probe(JAXBELT_PRIVATE_APIS="0", PROBE_CACHE_DIR=str(tmp_path))
     assert slow["private"] is False and slow["lean"] is False
     if fast["private"]:
         assert fast["lean"] is True
