@@ -13,6 +13,7 @@ ORDER = (
     "hull",
     "far_modes",
     "request",
+    "certificate",
     "minimax_solve",
     "candidates",
     "measure",
