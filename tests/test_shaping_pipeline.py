@@ -13,6 +13,7 @@ ORDER = (
     "hull",
     "far_modes",
     "request",
+    "certificate",
     "minimax_solve",
     "candidates",
     "measure",
@@ -53,3 +54,66 @@ def test_design_move_only_composes_the_stages():
     fn = next(n for n in tree.body if isinstance(n, ast.FunctionDef) and n.name == "design_move")
     assert fn.end_lineno is not None
     assert fn.end_lineno - fn.lineno + 1 <= 60
+
+
+#: the stages after `request.validate`: they take plain data from the request
+_AFTER_VALIDATE = ("bands", "shaped", "hull", "certificate", "minimax_solve", "candidates", "measure", "minimax_rows")
+
+
+def test_no_stage_after_validate_re_enters_the_checks_or_the_axis_constructor():
+    """Validate once: no later stage imports `jaxbelt._checks` or builds a `ModalAxis(...)` (they take the request's
+    checked arrays; `far_modes.modes_axis` makes an axis of them without checking them again)."""
+    for name in (*_AFTER_VALIDATE, "rank", "far_modes"):
+        tree = ast.parse((SHAPING / f"{name}.py").read_text())
+        for node in ast.walk(tree):
+            if isinstance(node, ast.ImportFrom):
+                assert node.module != "_checks", f"jaxbelt/shaping/{name}.py imports jaxbelt._checks"
+            if isinstance(node, ast.Call) and isinstance(node.func, ast.Name):
+                assert node.func.id != "ModalAxis", (
+                    f"jaxbelt/shaping/{name}.py builds a ModalAxis at line {node.lineno}"
+                )
+
+
+def test_modes_axis_is_the_checked_constructor_without_its_checks():
+    """`far_modes.modes_axis` holds what `ModalAxis(f, z, g)` holds (float64 device arrays, no standard errors), and
+    its residuals are those of the constructed axis (closed form), to the last bit."""
+    import jax
+    import numpy as np
+
+    import jaxbelt as jb
+    from jaxbelt.shaping.far_modes import _sub_axis, modes_axis
+    from jaxbelt.shaping.moves import fastest_move
+    from jaxbelt.shaping.residual import measured_curve
+
+    axis = jb.ModalAxis([7.3, 18.0], [0.015, 0.01], [1.0, -0.5], frequency_std=[0.1, 0.2], damping_std=[1e-3, 1e-3])
+    f, z, g = np.array([7.3, 7.3, 18.0]), np.array([0.01, 0.1, 0.01]), np.array([1.0, 1.0, -0.5])
+    made, built = modes_axis(axis, f, z, g), jb.ModalAxis(f, z, g)
+    for name in ("frequencies", "damping_ratios", "gains"):
+        got, want = getattr(made, name), getattr(built, name)
+        assert isinstance(got, jax.Array) and got.dtype == want.dtype == np.float64
+        np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+    assert made.frequency_std is None and made.damping_std is None
+    cmd, factors = fastest_move(0.1, 0.5, 3.0), np.linspace(0.8, 1.2, 9)
+    np.testing.assert_array_equal(
+        np.asarray(measured_curve(made, cmd, factors)), np.asarray(measured_curve(built, cmd, factors))
+    )
+    sub = _sub_axis(axis, [1])
+    np.testing.assert_array_equal(np.asarray(sub.frequencies), [18.0])
+    np.testing.assert_array_equal(np.asarray(sub.gains), [-0.5])
+
+
+def test_convolved_is_shape_move_without_its_checks():
+    """`moves.convolved` (the shaped moves of `design_move`'s candidates) is `moves.shape_move`'s move exactly; the
+    checks stay with `shape_move` (a sum of amplitudes other than 1 is refused by name)."""
+    import numpy as np
+    import pytest
+
+    from jaxbelt.shaping.moves import _trapezoid_move, convolved, shape_move
+
+    base = _trapezoid_move(0.1, 0.4, 0.5, 3.0, None)
+    A, tau = np.array([0.6, 0.4]), np.array([0.0, 0.05])
+    a, b = convolved(base, A, tau), shape_move(base, A, tau)
+    for name in ("times", "steps", "ramps", "duration"):
+        np.testing.assert_array_equal(np.asarray(getattr(a, name)), np.asarray(getattr(b, name)))
+    with pytest.raises(ValueError, match="amplitudes"):
+        shape_move(base, np.array([0.6, 0.6]), tau)

@@ -7,11 +7,9 @@ Each builder returns `(name, command or None, move time [s], note, ok)` per row,
 
 import math
 
-import jax.numpy as jnp
 import numpy as np
 
 from .far_modes import _far_modes, _sub_axis
-from .moves import _trapezoid_move
 from .request import MoveRequest
 from .shaped import gentlest_shaped
 from .shapers import SHAPERS, ShaperRangeError
@@ -52,7 +50,7 @@ def timed_commands(req: MoveRequest, ref_nominal, T: float) -> list:
         return out
     if req.move_time is None:
         return [*out, ("unshaped (time-optimal)", req.ref_cmd, float(req.ref_cmd.duration), "", True)]
-    return [*out, ("unshaped", _trapezoid_move(req.distance, T, req.v_max, req.a_max, req.j_max), T, "", True)]
+    return [*out, ("unshaped", req.unshaped, T, "", True)]
 
 
 def pseudo_commands(req: MoveRequest, ref_nominal, T: float) -> list:
@@ -62,7 +60,7 @@ def pseudo_commands(req: MoveRequest, ref_nominal, T: float) -> list:
     if "pseudo-polynomial" not in req.include:
         return []
     try:
-        from .pseudo import pseudo_polynomial_designs
+        from .pseudo import designs_for
     except ImportError:  # pragma: no cover - the module is part of the package
         return []
     axis = req.nominal
@@ -75,17 +73,8 @@ def pseudo_commands(req: MoveRequest, ref_nominal, T: float) -> list:
     if far.kept and far.far:
         without = f"exponents optimised without mode(s) {', '.join(str(i + 1) for i in far.far)}"
         axis = _sub_axis(axis, kept)
-    designs = pseudo_polynomial_designs(
-        axis,
-        req.distance,
-        T,
-        v_max=req.v_max,
-        a_max=req.a_max,
-        j_max=req.j_max,
-        uncertainty=req.uncertainty,
-        reference=jnp.asarray(np.asarray(ref_nominal)[kept]),
-        progress=req.progress,
-    )
+    limits = (req.v_max, req.a_max, req.j_max)
+    designs = designs_for(axis, req.distance, T, limits, np.asarray(ref_nominal)[kept], req.uncertainty, req.progress)
     out = []
     for name, pd in designs.items():
         ok = bool(pd.converged) and bool(pd.within_limits)

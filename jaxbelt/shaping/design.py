@@ -518,7 +518,8 @@ def _round_tol(tol):
 
 
 def _on_grid(problem: MinimaxProblem, factors, mask) -> MinimaxProblem:
-    return eqx.tree_at(lambda p: (p.factors, p.mask), problem, (device_array(factors), device_array(mask)))
+    grid = (jax.device_put(np.asarray(factors)), jax.device_put(np.asarray(mask)))  # host arrays, no program
+    return eqx.tree_at(lambda p: (p.factors, p.mask), problem, grid)
 
 
 def prepare_design(problem: MinimaxProblem, opts: DesignOptions, tol=1e-9):
@@ -628,3 +629,74 @@ def make_problem(axis, distance, move_time, v_max, a_max, j_max, uncertainty, re
 def command_peaks(design: MinimaxDesign):
     """`(peak |v|, peak |a|, peak |jerk|)` of the design's command on a fine grid (64 points per knot interval)."""
     return peaks(design.command, n=64 * design.options.n_knots + 1)
+
+
+class MinimaxSolver:
+    """The convex design of one axis, distance, limits, band, references and options (`DesignOptions`): at a move
+    time, with its feasibility (`max_distance`), at the least feasible time, and at the least time that reaches a
+    target; one problem structure per axis size. `jaxbelt.shaping.minimax_solve` certifies its designs."""
+
+    def __init__(self, axis, distance, v_max, a_max, j_max, u, ref, opts):
+        self.args = (axis, distance, v_max, a_max, j_max, u, ref)
+        self.opts = opts
+
+    def problem(self, T):
+        axis, distance, v_max, a_max, j_max, u, ref = self.args
+        return make_problem(axis, distance, T, v_max, a_max, j_max, u, ref, self.opts)
+
+    def feasible(self, T) -> bool:
+        problem = self.problem(T)
+        return max_distance(problem, self.opts) >= 1.0
+
+    def shortest_feasible(self, t_min):
+        """The least time at which the spline can move the distance within the limits (bisection)."""
+        lo, hi = t_min, t_min * 1.05
+        while not self.feasible(hi):
+            lo, hi = hi, hi * 1.2
+        for _ in range(30):
+            if hi - lo <= 1e-4 * hi:
+                break
+            mid = 0.5 * (lo + hi)
+            lo, hi = (lo, mid) if self.feasible(mid) else (mid, hi)
+        return hi
+
+    def design(self, T):
+        problem = self.problem(T)
+        return minimax_design(problem, self.opts)
+
+    def at(self, T: float, t_min: float, clearly: bool):
+        """The design at move time `T` [s], and NaN; or None and the shortest move time its basis can make
+        (bisection) where it cannot make this one. A smooth (B-spline) move needs a little more time than the
+        time-optimal one (`t_min`): well above that (`clearly`), the feasibility LP (its program costs a compile) is
+        skipped unless the design then fails to converge."""
+        mm = self.design(T) if clearly else None
+        if (mm is None or not mm.converged) and not self.feasible(T):
+            return None, self.shortest_feasible(t_min)
+        return (self.design(T) if mm is None else mm), math.nan
+
+    def shortest(self, t_min, target):
+        """The minimax design at the least move time whose worst residual (fine grid) reaches `target` (%):
+        bisection between the least feasible time and a time where the target is met."""
+        if not math.isfinite(target):
+            return None
+        lo = self.shortest_feasible(t_min)
+        d_lo = self.design(lo)
+        if 100 * float(d_lo.fine_worst) <= target:
+            return d_lo
+        hi = lo * 1.25
+        d_hi = self.design(hi)
+        while 100 * float(d_hi.fine_worst) > target:
+            lo, hi = hi, hi * 1.25
+            if hi > 20 * t_min:
+                return d_hi
+            d_hi = self.design(hi)
+        for _ in range(12):
+            if hi - lo <= 2e-3 * hi:
+                break
+            mid = 0.5 * (lo + hi)
+            d_mid = self.design(mid)
+            if 100 * float(d_mid.fine_worst) <= target:
+                hi, d_hi = mid, d_mid
+            else:
+                lo = mid
+        return d_hi

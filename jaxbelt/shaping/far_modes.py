@@ -1,14 +1,19 @@
 """The modes far above what the minimax design resolves at a move time: which the LP leaves out, and why
-(`_far_modes`); the pseudo-polynomials' design leaves them out the same way.
+(`_far_modes`); the pseudo-polynomials' design leaves them out the same way. The LP's setup that follows (`lp_setup`),
+and its programs started compiling early (`prepare_lp`).
 """
 
 import dataclasses
 
+import equinox as eqx
+import jax
 import numpy as np
 
 from ..models.axis import ModalAxis
 from . import design as _design
-from .bands import mode_label
+from .bands import measure_grids, mode_label
+from .moves import prepare_peaks
+from .residual import prepare_curve
 
 
 def _minimax_options(freqs, T_guess: float, u: float, j_max, fixed_time: bool, smooth: bool = True):
@@ -41,12 +46,23 @@ class _FarModes:
     nyquist_hz: float
 
 
-def _sub_axis(axis: ModalAxis, idx) -> ModalAxis:
-    """The `ModalAxis` of the modes `idx` of `axis` (frequencies, damping ratios and gains kept)."""
-    idx = np.asarray(idx, dtype=int)
-    return ModalAxis(
-        np.asarray(axis.frequencies)[idx], np.asarray(axis.damping_ratios)[idx], np.asarray(axis.gains)[idx]
+def modes_axis(axis: ModalAxis, frequencies, damping_ratios, gains) -> ModalAxis:
+    """A `ModalAxis` of the given modes (frequencies [Hz], damping ratios, gains: arrays of one length, taken from
+    the already checked `axis`), made without checking them again: `axis`'s own arrays replaced (its standard
+    errors dropped), so that the pipeline's stages, past `request.validate`, never re-enter the axis' checks."""
+    arrays = tuple(jax.device_put(np.asarray(q, dtype=float)) for q in (frequencies, damping_ratios, gains))
+    return eqx.tree_at(
+        lambda a: (a.frequencies, a.damping_ratios, a.gains, a.frequency_std, a.damping_std),
+        axis,
+        (*arrays, None, None),
+        is_leaf=lambda x: x is None,
     )
+
+
+def _sub_axis(axis: ModalAxis, idx) -> ModalAxis:
+    """The `ModalAxis` of the modes `idx` of `axis` (frequencies, damping ratios and gains kept; `modes_axis`)."""
+    idx = np.asarray(idx, dtype=int)
+    return modes_axis(axis, *(np.asarray(q)[idx] for q in (axis.frequencies, axis.damping_ratios, axis.gains)))
 
 
 def _far_modes(axis: ModalAxis, T: float, u: float, j_max, fixed_time: bool, smooth: bool) -> _FarModes:
@@ -121,8 +137,7 @@ def lp_setup(
     opts = _design.default_options(knots, T, u, j_max is not None, 6.0 if fixed_time else 12.0, basis)
     if not far.left_out:
         return LPSetup(far, axis, idx, opts)
-    f, z, g = (np.asarray(q)[idx] for q in (axis.frequencies, axis.damping_ratios, axis.gains))
-    return LPSetup(far, ModalAxis(f, z, g), idx, opts)  # the modes it keeps (`_sub_axis`)
+    return LPSetup(far, _sub_axis(axis, idx), idx, opts)  # the modes it keeps
 
 
 def _knots_modes(n_modes: int, far: _FarModes) -> np.ndarray:
@@ -145,3 +160,21 @@ def _refuse_all_far(axis: ModalAxis, T: float, u: float, far: _FarModes, per: in
         + ". Leave 'minimax' out of `include` (the classic shapers still apply), give a longer `move_time`, or "
         "check the frequencies' unit (Hz)"
     )
+
+
+def prepare_lp(setup: LPSetup, d: float, v_max: float, a_max: float, j_max, u: float, T: float) -> None:
+    """While the program store is on: start compiling, in the background, the programs the minimax design of `setup`
+    at move time `T` [s] runs (distance `d` [m], limits, band ±`u`; a stand-in reference of the right shape) and
+    those `measure._measure` runs on its command, each traced while the ones before compile (on two cores the LP's
+    compilation, the longest, overlaps the others' tracing and compiling, and the reference's and the candidates'
+    work). Nothing otherwise."""
+    stand_in = np.ones(np.asarray(setup.kept).size)
+    solver = _design.MinimaxSolver(setup.lp_axis, d, v_max, a_max, j_max, u, stand_in, setup.opts)
+    problem = solver.problem(T)
+    coef = _design.prepare_design(problem, setup.opts)
+    if coef is None:
+        return
+    cmd = _design.design_command(jax.device_put(np.zeros(coef.shape, coef.dtype)), problem.move_time, setup.opts)
+    for factors in measure_grids(u):
+        prepare_curve(setup.lp_axis, cmd, factors)
+    prepare_peaks(cmd)

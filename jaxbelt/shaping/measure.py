@@ -71,9 +71,10 @@ class Candidate:
         return d
 
 
-def _measure(axis, cmd, ref, u, limits, per: int = 1, size: int = 0) -> tuple[Any, dict[str, Any], bool]:
+def _measure(axis, cmd, ref, u, limits, per: int = 1, size: int = 0) -> tuple[Any, dict[str, Any], bool, Any]:
     """The table's numbers for one command (`per`: damping copies of each user mode in `axis`), a `PiecewiseMove`
-    padded to `size` terms first: `(command, numbers, within the limits)`."""
+    padded to `size` terms first: `(command, numbers, within the limits, worst ratio over the band per mode of
+    `axis`)`."""
     if isinstance(cmd, PiecewiseMove):  # shaped on the user's modes: padded to their size
         cmd = padded(cmd, size)
     pv, pa, pj = peaks(cmd)
@@ -105,6 +106,7 @@ def _measure(axis, cmd, ref, u, limits, per: int = 1, size: int = 0) -> tuple[An
             peak_j=pj,
         ),
         within,
+        ratio.max(axis=1),
     )
 
 
@@ -117,8 +119,10 @@ def _pad_size(n_modes: int, jerk: bool, terms: int) -> int:
     return 1 << max(int(terms) - 1, 1).bit_length()
 
 
-def _row(name, axis, cmd, T, ref, u, limits, note="", ok=True, per: int = 1):
-    """One candidate measured on `axis` (with `per` damping copies of each of the user's modes)."""
+def _row(name, axis, cmd, T, ref, u, limits, note="", ok=True, per: int = 1, left_out=()):
+    """One candidate measured on `axis` (with `per` damping copies of each of the user's modes); its note then
+    names the modes `left_out` (`(index, why)` pairs: those a minimax design's LP left out) with their residual,
+    computed exactly for this command."""
     n_user = axis.n_modes // per
     size = _pad_size(n_user, limits[2] is not None, cmd.times.shape[0]) if isinstance(cmd, PiecewiseMove) else 0
     if cmd is None:
@@ -126,31 +130,26 @@ def _row(name, axis, cmd, T, ref, u, limits, note="", ok=True, per: int = 1):
         return Candidate(
             name, None, T, nan, nan, nan, tuple((nan, nan) for _ in range(n_user)), nan, nan, nan, False, note
         )
-    cmd, m, within = _measure(axis, cmd, ref, u, limits, per, size)
+    cmd, m, within, mode_worst = _measure(axis, cmd, ref, u, limits, per, size)
     if not within:
         ok = False
         note = (note + "; " if note else "") + "exceeds the limits"
+    if left_out:
+        f = np.asarray(axis.frequencies, dtype=float)
+        parts = [
+            f"{mode_label(axis, i, per)} ({f[i]:.6g} Hz; {why}): {100.0 * float(mode_worst[i]):.2g} % (exact)"
+            for i, why in left_out
+        ]
+        note += "; left out of the LP, their residual computed for this command: " + "; ".join(parts)
     return Candidate(name, cmd, float(T), ok=ok, note=note, **m)
 
 
 def design_row(name: str, mm, T: float, note: str, ok: bool, far, req: MoveRequest, ref) -> Candidate:
-    """The table row of a minimax design `mm` (`note`, `ok`: its certificate, `minimax_solve.certificate`; None: no
+    """The table row of a minimax design `mm` (`note`, `ok`: its certificate, `certificate.certificate`; None: no
     design at move time `T` [s], `note` says why), measured as every candidate is (`_row`), its note then naming the
     modes its LP left out (`far`, a `far_modes._FarModes`) with their residual, computed exactly for this command."""
-    axis, u, per = req.axis, req.uncertainty, req.per
     cmd, T = (None, T) if mm is None else (mm.command, float(mm.command.duration))
-    row = _row(name, axis, cmd, T, ref, u, req.limits, note=note, ok=ok, per=per)
-    if row.command is None or not far.left_out:
-        return row
-    band = measure_grids(u)[0]
-    ratio = np.asarray(measured_curve(axis, row.command, band)) / np.asarray(ref)[:, None]
-    f = np.asarray(axis.frequencies, dtype=float)
-    parts = [
-        f"{mode_label(axis, i, per)} ({f[i]:.6g} Hz; {why}): {100.0 * float(np.max(ratio[i])):.2g} % (exact)"
-        for i, why in far.left_out
-    ]
-    words = "left out of the LP, their residual computed for this command: " + "; ".join(parts)
-    return dataclasses.replace(row, note=row.note + "; " + words)
+    return _row(name, req.axis, cmd, T, ref, req.uncertainty, req.limits, note, ok, req.per, far.left_out)
 
 
 def blended_rows(req: MoveRequest, ref, rows: list, space: dict) -> list:
@@ -214,14 +213,3 @@ def measure_rows(req: MoveRequest, ref, built) -> list:
     `built` holds `(name, command or None, move time [s], note, ok)` (`jaxbelt.shaping.candidates`)."""
     axis, u, limits, per = req.axis, req.uncertainty, req.limits, req.per
     return [_row(name, axis, cmd, T, ref, u, limits, note, ok, per) for name, cmd, T, note, ok in built]
-
-
-def reference(req: MoveRequest):
-    """The worst residual over the band of each mode of `req.axis` [m] that the time-optimal unshaped move
-    (`req.ref_cmd`, what a planner runs without shaping) leaves: every row's reference; and, with damping copies
-    (`req.per` > 1) and "pseudo-polynomial" in `req.include`, the same on the nominal axis the pseudo-polynomials are
-    designed on (else the references themselves): `(references, nominal references)`."""
-    ref = np.max(np.asarray(measured_curve(req.axis, req.ref_cmd, req.band)), axis=1)
-    if req.per == 1 or "pseudo-polynomial" not in req.include:
-        return ref, ref
-    return ref, np.max(np.asarray(measured_curve(req.nominal, req.ref_cmd, req.band)), axis=1)

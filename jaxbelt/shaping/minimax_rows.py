@@ -1,10 +1,10 @@
 """The minimax rows: the convex design (`jaxbelt.shaping.design`) at the move time, with its far modes, its certificate
-(`jaxbelt.shaping.minimax_solve`, `jaxbelt.shaping.certify`), the design with jumps `smooth="auto"` adds, and the
+(`jaxbelt.shaping.certificate`, `jaxbelt.shaping.certify`), the design with jumps `smooth="auto"` adds, and the
 command space that holds every candidate (`jaxbelt.shaping.hull`, `jaxbelt.shaping.measure.blended_rows`).
 
-This stage composes lower modules only, in this order: the LP's setup (`far_modes`), the design and its certificate
-(`minimax_solve`), its row (`measure`), the shaped moves of the command space (`shaped`), the comparison as executed
-(`hull`), the design with jumps (the same three), and the blends (`measure`).
+This stage composes lower modules only, in this order: the design with its LP's setup and its certificate, in one
+call (`minimax_solve.solve`), its row (`measure`), the shaped moves of the command space (`shaped`), the comparison
+as executed (`hull`), the design with jumps (the same two calls), and the blends (`measure`).
 """
 
 import dataclasses
@@ -13,16 +13,16 @@ import math
 import numpy as np
 
 from .bands import JUMPS as JUMPS
-from .far_modes import lp_setup
+from .certificate import smooth_certificate
 from .hull import jumps_reason
 from .measure import blended_rows, design_row
-from .minimax_solve import minimax_solver, smooth_certificate, solved
-from .request import SURELY_FEASIBLE, MoveRequest
+from .minimax_solve import solve
+from .request import MoveRequest
 from .shaped import shaped_members
 
 
 def _smooth_certificate(row, bound: float) -> str:
-    """`minimax_solve.smooth_certificate` of a row (its `worst_percent`)."""
+    """`certificate.smooth_certificate` of a row (its `worst_percent`)."""
     return smooth_certificate(row.worst_percent, bound)
 
 
@@ -35,15 +35,11 @@ def minimax_rows(req: MoveRequest, ref, classic: list):
     The design with jumps (steps; with `j_max`, ramps whose jerk may jump), as `smooth=False` designs it: its command
     space holds what a classic shaper makes of the time-optimal move (a shaped trapezoid or S-curve), so at equal
     time and limits it leaves no more than the shapers (measured: `benchmarks/shaping_every_shaper.py`)."""
-    ref, T, u, d = np.asarray(ref), req.move_time, req.uncertainty, req.distance
+    ref, T, d = np.asarray(ref), req.move_time, req.distance
     usable = [r for r in classic if r.ok]
     target = min((r.worst_percent for r in usable), default=math.nan)
-    setup = req.lp
-    if setup is None:  # the shortest time is searched: the LP set up near the best classic shaper's time
-        T_guess = min((r.move_time for r in usable), default=2 * req.t_min)
-        setup = lp_setup(req.axis, T_guess, u, req.j_max, False, req.smooth, req.per)
-    solver = minimax_solver(setup, d, req.v_max, req.a_max, req.j_max, u, ref)
-    mm, bound, note, ok = solved(solver, req, T, req.clearly, target)
+    T_guess = min((r.move_time for r in usable), default=2 * req.t_min)  # where the shortest time is searched
+    setup, _, (mm, bound, note, ok) = solve(req, ref, T, T_guess=T_guess, target=target)
     if T is None:  # at the shortest time that reaches the best classic shaper (no design where none is usable)
         if mm is None:
             return [], None, math.nan
@@ -59,10 +55,7 @@ def minimax_rows(req: MoveRequest, ref, classic: list):
         why = why or "added: `certify_rtol` asks for the continuous certificate, which the design with jumps carries"
         if req.progress:
             print(f"design_move: {why}; designing the minimax command with jumps ...", flush=True)
-        # keeps every mode the spline's LP keeps (refused there where it keeps none)
-        j_setup = lp_setup(req.axis, T, u, req.j_max, True, False, refuse=False)
-        j_solver = minimax_solver(j_setup, d, req.v_max, req.a_max, req.j_max, u, ref)
-        jmm, jbound, note, ok = solved(j_solver, req, T, T >= SURELY_FEASIBLE * req.t_min)
+        j_setup, j_solver, (jmm, jbound, note, ok) = solve(req, ref, T, jumps=True)
         note = note if jmm is not None else f"infeasible with {j_solver.opts.n_knots} equal steps: {note}"
         jrow = design_row(JUMPS, jmm, T, note, ok, j_setup.far, req, ref)
         rows.append(dataclasses.replace(jrow, note=why + "; " + jrow.note))

@@ -551,13 +551,19 @@ def shape_move(base: PiecewiseMove, amplitudes, delays) -> PiecewiseMove:
     jit/vmap/grad) are checked at run time: the returned move carries the checks, and an invalid impulse raises,
     naming the parameter, where the move is used (never a silently longer or NaN move)."""
     found = _check_impulses("shape_move", amplitudes, delays)
+    move = convolved(base, amplitudes, delays)
+    return checked(move, checks=found) if found else move
+
+
+def convolved(base: PiecewiseMove, amplitudes, delays) -> PiecewiseMove:
+    """`shape_move` for an impulse sequence already known to be one (a shaper's, `shapers.shaper_for_axis`):
+    the same move, without the checks."""
     A = jnp.asarray(amplitudes, dtype=float)
     tau = jnp.asarray(delays, dtype=float)
     times = (base.times[None, :] + tau[:, None]).ravel()
     steps = (base.steps[None, :] * A[:, None]).ravel()
     ramps = (base.ramps[None, :] * A[:, None]).ravel()
-    move = PiecewiseMove(times, steps, ramps, base.duration + tau[-1])
-    return checked(move, checks=found) if found else move
+    return PiecewiseMove(times, steps, ramps, base.duration + tau[-1])
 
 
 @stored_jit  # its run time counts in a warm design (20001 samples): XLA's default options

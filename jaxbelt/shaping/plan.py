@@ -92,9 +92,12 @@ met is kept. The row's note gives both numbers, and says so when the limit is re
 one more compiled LP (about 10 s for a 5.5 Hz mode within 1 %; a minute or more for several hundred steps).
 
 **The pipeline.** `design_move` composes one module per stage, each taking the checked request
-(`jaxbelt.shaping.request.MoveRequest`) and the previous stage's output: validate (`request`) → build the candidates
-(`candidates`; the shaped moves in `shaped`) → measure them the same way (`measure`) → the minimax rows
-(`minimax_rows`, designed in `minimax_solve`, the command space in `hull`) → rank (`rank`).
+(`jaxbelt.shaping.request.MoveRequest`) and the previous stage's output: validate (`request`: every check, and every
+quantity derived from the arguments once: the judged and nominal axes as checked arrays, the minimax LP's setup with
+its programs started compiling, the unshaped moves and their references) → build the candidates (`candidates`; the
+shaped moves in `shaped`) → measure them the same way (`measure`) → the minimax rows (`minimax_rows`: solved and
+certified in one call of `minimax_solve`, the command space in `hull`) → rank (`rank`). The stages take plain data
+from the request: none re-enters the axis' checks or an earlier stage.
 """
 
 import csv
@@ -110,18 +113,17 @@ from .._threads import blas_limited
 from ..models.axis import ModalAxis
 from .bands import _N_WIDE, _WIDE
 from .candidates import classic_commands, common_time, timed_commands
+from .certificate import CERTIFY_ATOL as CERTIFY_ATOL  # noqa: E402
+from .certificate import CERTIFY_MAX_STEPS as CERTIFY_MAX_STEPS  # noqa: E402
 from .far_modes import _far_modes as _far_modes  # noqa: E402
 
 # names of the pipeline's stages that users and tests reach through this module
 from .measure import EXCURSION_RTOL as EXCURSION_RTOL  # noqa: E402
-from .measure import Candidate, _within_range, measure_rows, reference
+from .measure import Candidate, _within_range, measure_rows
 from .measure import _row as _row  # noqa: E402
 from .minimax_rows import JUMPS as JUMPS  # noqa: E402
 from .minimax_rows import _smooth_certificate as _smooth_certificate  # noqa: E402
 from .minimax_rows import minimax_rows
-from .minimax_solve import CERTIFY_ATOL as CERTIFY_ATOL  # noqa: E402
-from .minimax_solve import CERTIFY_MAX_STEPS as CERTIFY_MAX_STEPS  # noqa: E402
-from .minimax_solve import prepare_minimax
 from .moves import (
     SplineMove,
     executable_samples,
@@ -523,9 +525,8 @@ def design_move(
     req = validate(axis, distance, move_time, v_max=v_max, a_max=a_max, j_max=j_max, uncertainty=uncertainty,
                    include=include, progress=progress, smooth=smooth, certify_rtol=certify_rtol, damping=damping,
                    rate_hz=rate_hz, interpolation=interpolation, x_min=x_min, x_max=x_max)  # fmt: skip
-    prepare_minimax(req)  # the design's programs compile while the reference and the shapers are computed
     classic = classic_commands(req)
-    ref, ref_nominal = reference(req)
+    ref, ref_nominal = req.ref, req.ref_nominal
     rows = measure_rows(req, ref, classic)
     minimax, mm, bound = minimax_rows(req, ref, rows) if "minimax" in req.include else ([], None, math.nan)
     T = common_time(req, mm, rows)

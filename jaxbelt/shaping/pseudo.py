@@ -789,6 +789,13 @@ def pseudo_polynomial_designs(
         from .residual import reference_residuals
 
         reference = reference_residuals(axis, D, *limits, uncertainty=u)[0]
+    return designs_for(axis, D, T, limits, reference, u, progress)
+
+
+def designs_for(axis: ModalAxis, D: float, T: float, limits, reference, u: float, progress: bool = False):
+    """`pseudo_polynomial_designs` for arguments already checked (`design_move`'s request validated the axis, the
+    move and the limits once): distance `D` [m], move time `T` [s], `limits` = (v_max, a_max, j_max or None),
+    `reference` (m,) [m] given, band ±`u`; the same designs without the checks."""
     reference = np.asarray(reference, dtype=float)
     wT = float(np.max(np.asarray(axis.omega))) * (1 + u) * T
     n_nodes = n_nodes_for(wT)

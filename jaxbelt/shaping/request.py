@@ -1,7 +1,10 @@
-"""Validate: `design_move`'s arguments checked, by name, into one `MoveRequest` (the first stage of the pipeline).
+"""Validate: `design_move`'s arguments checked, by name, into one `MoveRequest` (the first stage of the pipeline),
+with every quantity the later stages share derived from them once.
 
 Every refusal names the parameter and its valid range; a damping range expands the axis the residuals are judged on
-(each mode once per damping sample).
+(each mode once per damping sample). The later stages take their data from the request and never re-enter these
+checks: the axes are made from the checked arrays (`far_modes.modes_axis`), the minimax LP is set up here (its
+programs started compiling, `far_modes.prepare_lp`), and the references of "% of the unshaped move" are computed here.
 """
 
 import dataclasses
@@ -13,14 +16,16 @@ import numpy as np
 from .._checks import check_positive, check_range
 from ..models.axis import ModalAxis
 from .bands import band_factors
-from .far_modes import LPSetup, lp_setup
+from .far_modes import LPSetup, lp_setup, modes_axis, prepare_lp
 from .hull import INTERPOLATIONS
 from .moves import (
     PiecewiseMove,
+    _trapezoid_move,
     check_move_limits,
     fastest_move,
     fastest_time,
 )
+from .residual import measured_curve
 from .shapers import SHAPERS
 
 #: damping samples per mode with `design_move(..., damping=(lo, hi))`: the worst residual of a design over the damping
@@ -153,7 +158,10 @@ class MoveRequest:
       `user` once per damping sample, `per` copies each); `nominal`: the axis the classic shapers and the
       pseudo-polynomials are designed on (the user's, or at Klipper's 0.1 with `damping="unknown"`);
     - `distance` [m], `move_time` [s] or None, `t_min` [s] and `ref_cmd`: the time-optimal unshaped move's time and
-      command (what a planner runs without shaping, `fastest_move`: every row's reference); `v_max`, `a_max`,
+      command (what a planner runs without shaping, `fastest_move`); `ref` [m]: per mode of `axis`, the worst
+      residual over the band that this move leaves (every row's reference), and `ref_nominal` the same on `nominal`
+      where the pseudo-polynomials are designed there with damping copies (else `ref`); `unshaped`: at a given
+      move time, the gentlest trapezoid (S-curve) that ends there (the table's unshaped row), else None; `v_max`, `a_max`,
       `j_max`; `uncertainty`; `band`: the frequency factors of the band;
     - `include`, `progress`; `auto` (`smooth="auto"`), `smooth` (the first minimax design is the spline),
       `smooth_arg` (as given), `certify_rtol`; `damping`: the range or None; `rate_hz`: the drive's setpoint
@@ -169,6 +177,9 @@ class MoveRequest:
     move_time: float | None
     t_min: float
     ref_cmd: PiecewiseMove
+    ref: np.ndarray
+    ref_nominal: np.ndarray
+    unshaped: PiecewiseMove | None
     v_max: float
     a_max: float
     j_max: float | None
@@ -246,9 +257,9 @@ def _judged_axes(axis: ModalAxis, damping, damp):
     z = np.asarray(damping_samples(*damp), dtype=float)
     n = z.size
     f, g = np.asarray(axis.frequencies, dtype=float), np.asarray(axis.gains, dtype=float)
-    judged = ModalAxis(np.repeat(f, n), np.tile(z, axis.n_modes), np.repeat(g, n))
+    judged = modes_axis(axis, np.repeat(f, n), np.tile(z, axis.n_modes), np.repeat(g, n))
     if isinstance(damping, str):  # "unknown": Klipper's practice
-        return judged, ModalAxis(axis.frequencies, np.full(axis.n_modes, UNKNOWN_SHAPER_DAMPING), axis.gains), n
+        return judged, modes_axis(axis, f, np.full(axis.n_modes, UNKNOWN_SHAPER_DAMPING), g), n
     return judged, axis, n
 
 
@@ -269,6 +280,12 @@ def validate(axis, distance, move_time, *, v_max, a_max, j_max, uncertainty, inc
     lp = None
     if "minimax" in include and T is not None:  # the modes the LP leaves out: refused here where it keeps none
         lp = lp_setup(judged, T, u, j, True, auto or bool(smooth), per)
+        if T >= SURELY_FEASIBLE * t_min:  # its programs compile while the reference and the candidates are computed
+            prepare_lp(lp, d, float(v_max), float(a_max), j, u, T)
+    ref_cmd, band = fastest_move(d, float(v_max), float(a_max), j), band_factors(u)
+    both = per > 1 and "pseudo-polynomial" in include  # the pseudo-polynomials' references at the nominal damping
+    curves = [measured_curve(axis, ref_cmd, band) for axis in (judged, nominal)[: 1 + both]]
+    ref, ref_nominal = (np.max(np.asarray(curves[k]), axis=1) for k in (0, -1))
     return MoveRequest(
         user=axis,
         axis=judged,
@@ -277,12 +294,15 @@ def validate(axis, distance, move_time, *, v_max, a_max, j_max, uncertainty, inc
         distance=d,
         move_time=T,
         t_min=t_min,
-        ref_cmd=fastest_move(d, float(v_max), float(a_max), j),
+        ref_cmd=ref_cmd,
+        ref=ref,
+        ref_nominal=ref_nominal,
+        unshaped=None if T is None else _trapezoid_move(d, T, float(v_max), float(a_max), j),
         v_max=float(v_max),
         a_max=float(a_max),
         j_max=j,
         uncertainty=u,
-        band=band_factors(u),
+        band=band,
         include=tuple(include),
         progress=bool(progress),
         auto=auto,

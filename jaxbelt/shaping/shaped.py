@@ -7,7 +7,7 @@ both take their shaped moves from here.
 
 import numpy as np
 
-from .moves import _trapezoid_move, peaks, shape_move
+from .moves import _trapezoid_move, convolved, peaks
 from .shapers import SHAPERS, ShaperRangeError, shaper_for_axis
 
 
@@ -28,12 +28,12 @@ def gentlest_shaped(name: str, axis, distance, T, t_min, v_max, a_max, j_max):
         return None, T, t_short
     base = _trapezoid_move(distance, T_build - tau[-1], v_max, a_max, j_max)
     if base is not None:
-        return shape_move(base, A, tau), T, t_short
+        return convolved(base, A, tau), T, t_short
     relax = 1.0 / float(np.min(np.asarray(A)))  # a shaped peak is at least min(A) times the base's
     base = _trapezoid_move(distance, T_build - tau[-1], v_max, a_max * relax, None if j_max is None else j_max * relax)
     if base is None:
         return None, T, t_short
-    cmd = shape_move(base, A, tau)
+    cmd = convolved(base, A, tau)
     pv, pa, pj = peaks(cmd)
     tol = 1 + 1e-9
     if pv > v_max * tol or pa > a_max * tol or (j_max is not None and pj > j_max * tol):
