@@ -203,6 +203,8 @@ def main(argv=None) -> int:
     cpu0 = _children_cpu()
     scratch = args.quick and not args.update
     env = dict(os.environ)
+    # this checkout's jaxbelt first for every script and the processes they start (not another installed copy)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(HERE.parent), env.get("PYTHONPATH", "")) if p)
     if scratch:
         env["JAXBELT_BENCH_OUT"] = str(HERE / "results" / "quick")
     else:
