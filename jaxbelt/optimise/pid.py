@@ -123,7 +123,7 @@ def tune_pid(
 
     - `pid`: starting gains, set point and limiter. With a hard clip (`limiter="hard"`, the default), the
       tuner simulates the smooth limiter of `pid.v_smooth` (gradients through saturation) and reports with
-      the clip itself, simulated as the clip's smooth limit (width 1 nV: the same voltage to 1e-9 V) at a
+      the clip itself, simulated as the clip's smooth limit (width 1 µV: the same voltage to 7e-7 V) at a
       hundredth of `rtol`/`atol` in the steps' own compiled program.
     - `v_max` [V], `i_max` [A]: bounds on peak |voltage| and |current| over [0, t1], imposed by
       the quadratic penalty of weight `penalty` (default `v_max`: none; with a limiter the voltage
