@@ -7,8 +7,10 @@ Writes `benchmarks/results/coldstart.json` (+ `.png`). Every ratio is measured i
 
 Run: `python benchmarks/coldstart.py [--quick] [--cli startup fourbar ...]` (a full run is not part of
 `run_all.py`: the cold CLI runs alone take minutes; `run_all.py --quick` runs its quick form: fewer repeats, the
-start-up CLI command, a closed-form batch of 10 000 (not 100 000 and 1000), a 4-gain sweep on the devices (not again
-on one device), no warm-up import before the timed imports, the first entry point).
+start-up CLI command cold and warm (no --no-cache run), a closed-form batch of 10 000 (not 100 000 and 1000) without
+its fresh-process memory check, a 4-gain Tsit5 sweep on the devices (not again on one device, no RK4 sweep), the scipy
+loop at rtol 1e-6 only, no warm-up import before the timed imports, the first entry point in a cold process only;
+tune_pid 2 steps and optimise_command 5).
 `python benchmarks/coldstart.py --entry-points [NAME ...]` measures only the entry points (about 6 minutes on 2
 cores), merges them into the existing JSON and regenerates the first-call tables of README.md and docs/benchmarks.md.
 """
@@ -71,12 +73,12 @@ def imports(repeats: int, warm_up: bool = True) -> dict:
     return {"deps_s": b, "jaxbelt_s": o, "ratio": o / b, "repeats": repeats}
 
 
-def cli(commands, repeats: int, budget_s: float = 0.0) -> dict:
+def cli(commands, repeats: int, budget_s: float = 0.0, no_cache: bool = True) -> dict:
     """Each repeat: a cold run (empty cache folder), a warm run (the same folder) and a --no-cache run, back
     to back, so that the two runs of a ratio see about the same load; `warm_over_cold` is the median of the
     per-repeat ratios. A command is repeated `repeats` times, and more (up to 25) until its repeats have
     taken `budget_s`: the short commands, whose ratios scatter most with the machine's load (+-0.1 for a
-    5 s repeat), get more of them."""
+    5 s repeat), get more of them. `no_cache=False` (a quick run): no --no-cache run (`no_cache_s` None)."""
     out = {}
     for name in commands:
         cold, warm, nocache = [], [], []
@@ -88,10 +90,12 @@ def cli(commands, repeats: int, budget_s: float = 0.0) -> dict:
                 cmd = [sys.executable, "-m", "jaxbelt", name, *CLI_ARGS[name], "--out", png]
                 cold.append(wall(cmd, env))  # empty cache: compiles and writes
                 warm.append(wall(cmd, env))  # same cache folder: loads
-                nocache.append(
-                    wall([sys.executable, "-m", "jaxbelt", "--no-cache", name, *CLI_ARGS[name], "--out", png], env)
-                )
-        c, w, n = (float(np.median(x)) for x in (cold, warm, nocache))
+                if no_cache:
+                    nocache.append(
+                        wall([sys.executable, "-m", "jaxbelt", "--no-cache", name, *CLI_ARGS[name], "--out", png], env)
+                    )
+        c, w = (float(np.median(x)) for x in (cold, warm))
+        n = float(np.median(nocache)) if nocache else None
         r = float(np.median(np.array(warm) / np.array(cold)))
         out[name] = {
             "cold_s": c,
@@ -102,7 +106,8 @@ def cli(commands, repeats: int, budget_s: float = 0.0) -> dict:
             "ratios": (np.array(warm) / np.array(cold)).tolist(),
         }
         print(
-            f"cli {name}: cold {c:.1f} s, warm {w:.1f} s ({r:.2f}x, {len(cold)} repeats), --no-cache {n:.1f} s",
+            f"cli {name}: cold {c:.1f} s, warm {w:.1f} s ({r:.2f}x, {len(cold)} repeats)"
+            + (f", --no-cache {n:.1f} s" if n is not None else ""),
             flush=True,
         )
     return out
@@ -142,7 +147,7 @@ def compile_once(quick: bool) -> dict:
 
     res = {}
     drive, pid = jb.FourBarDrive(), jb.PID(v_limit=40.0)
-    steps = 4 if quick else 12
+    steps = 2 if quick else 12
     t = time.perf_counter()
     jb.tune_pid(drive, pid, steps=steps, progress=False)
     first = time.perf_counter() - t
@@ -164,10 +169,11 @@ def compile_once(quick: bool) -> dict:
     res["residual_energy"] = {"eager_s": t_e, "jit_s": t_j, "ratio": t_e / t_j}
 
     t = time.perf_counter()
-    jb.optimise_command(plat, cmd, progress=False, max_steps=30)
+    max_steps = 5 if quick else 30
+    jb.optimise_command(plat, cmd, progress=False, max_steps=max_steps)
     first = time.perf_counter() - t
     t = time.perf_counter()
-    jb.optimise_command(plat, jb.PseudoPolynomial(jnp.array([3.2, 4.1, 5.3])), progress=False, max_steps=30)
+    jb.optimise_command(plat, jb.PseudoPolynomial(jnp.array([3.2, 4.1, 5.3])), progress=False, max_steps=max_steps)
     res["optimise_command"] = {"first_s": first, "second_s": time.perf_counter() - t}
     res["optimise_command"]["ratio"] = res["optimise_command"]["second_s"] / first
     return res
@@ -230,8 +236,13 @@ def closed_form(quick: bool) -> dict:
         "r0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss; y = c(g).block_until_ready();"
         "print(r0, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)"
     )
-    out = subprocess.run([sys.executable, "-c", code.format(n=big)], env=ENV, capture_output=True, text=True)
-    if out.returncode == 0:
+    # quick: no fresh process (its RSS figures stay out of the quick JSON)
+    out = (
+        None
+        if quick
+        else subprocess.run([sys.executable, "-c", code.format(n=big)], env=ENV, capture_output=True, text=True)
+    )
+    if out is not None and out.returncode == 0:
         r0, r1 = (int(x) * 1024 for x in out.stdout.split())
         res[f"batch_{big}"].update(
             rss_before_bytes=r0,
@@ -339,10 +350,9 @@ def fourbar_sweep(quick: bool) -> dict:
     ref = np.asarray(jax.jit(jax.vmap(chi("ode", rtol=1e-10, atol=1e-10)))(gains[:n_ref]))
     devices = jax.local_devices()
     out = {"n": n, "devices": len(devices)}
-    runs = [
-        ("diffrax Tsit5 rtol 1e-6", chi("ode", rtol=1e-6, atol=1e-6), devices),
-        ("RK4 dt 1 ms (paper)", chi("rk4", dt=1e-3), devices),
-    ]
+    runs = [("diffrax Tsit5 rtol 1e-6", chi("ode", rtol=1e-6, atol=1e-6), devices)]
+    if not quick:  # quick: one sweep (the RK4 path runs in fourbar.py's quick run)
+        runs.append(("RK4 dt 1 ms (paper)", chi("rk4", dt=1e-3), devices))
     if len(devices) > 1 and not quick:  # quick: the same sweep call as above, on fewer devices
         runs.append(("diffrax Tsit5 rtol 1e-6, one device", chi("ode", rtol=1e-6, atol=1e-6), devices[:1]))
     for name, f, devs in runs:
@@ -355,7 +365,7 @@ def fourbar_sweep(quick: bool) -> dict:
     rhs = np_rhs_factory(drive)
     ts = np.linspace(0.0, 0.5, 1001)
     n_timed = n_ref if quick else 100  # scipy loop: timed on the first n_timed gain sets, scaled to n
-    for rtol in (1e-6, 1e-8):
+    for rtol in (1e-6,) if quick else (1e-6, 1e-8):  # quick: the matched-error loop
         t0 = time.perf_counter()
         chis = []
         for g in np.asarray(gains[:n_timed]):
@@ -570,12 +580,13 @@ def _note(repeats: int, budget_s: float, fewer: list) -> str:
 QUICK_ENTRY_POINTS = ("simulate_startup",)
 
 
-def entry_points(repeats: int, names=None, budget_s: float = 780.0) -> dict:
+def entry_points(repeats: int, names=None, budget_s: float = 780.0, warm_runs: bool = True) -> dict:
     """First call of each public entry point (ENTRY_POINTS) in a fresh process: "cold" (an empty cache folder),
     "warm" (a fresh process on the folder the cold one filled) and "second" (the same call again in the cold
     process), medians of `repeats` cold/warm pairs, each pair with a new folder; entries are interleaved within a
     repeat, so that a change of load hits all of them. After the first repeat, the most expensive entries get
-    fewer repeats when all of them would take longer than `budget_s` (each entry records its own count)."""
+    fewer repeats when all of them would take longer than `budget_s` (each entry records its own count).
+    `warm_runs=False` (a quick run): the cold process alone (the CLI's warm run checks the cache)."""
     names = list(ENTRY_POINTS) if not names else list(names)
     start = time.perf_counter()
     runs = {n: [] for n in names}
@@ -604,17 +615,22 @@ def entry_points(repeats: int, names=None, budget_s: float = 780.0) -> dict:
                     with tempfile.TemporaryDirectory() as cache_dir:
                         env = _entry_env(cache_dir)
                         cold = _child(name, env, data_dir)
-                        warm = _child(name, env, data_dir)
+                        warm = _child(name, env, data_dir) if warm_runs else None
                 except (RuntimeError, subprocess.TimeoutExpired) as e:
                     errors[name] = str(e)[-2000:]
                     print(f"entry {name}: FAILED {str(e)[-500:]}", flush=True)
                     continue
                 cost[name] = time.perf_counter() - t
                 runs[name].append({"cold": cold, "warm": warm})
+                warm_text = (
+                    f"warm {warm['first']['s']:.2f} s ({warm['first']['compiles']} compiles, "
+                    f"{warm['first']['cache_hits']} cache hits), "
+                    if warm is not None
+                    else ""
+                )
                 print(
                     f"entry {name} [{r + 1}/{repeats}]: cold {cold['first']['s']:.2f} s "
-                    f"({cold['first']['compiles']} compiles), warm {warm['first']['s']:.2f} s "
-                    f"({warm['first']['compiles']} compiles, {warm['first']['cache_hits']} cache hits), second "
+                    f"({cold['first']['compiles']} compiles), {warm_text}second "
                     f"{cold['second']['s'] * 1e3:.1f} ms ({cold['second']['compiles']} compiles)",
                     flush=True,
                 )
@@ -629,20 +645,21 @@ def entry_points(repeats: int, names=None, budget_s: float = 780.0) -> dict:
             row["error"] = errors.get(name, "not measured")
             entries[name] = row
             continue
-        colds, warms = [x["cold"] for x in rs], [x["warm"] for x in rs]
+        colds, warms = [x["cold"] for x in rs], [x["warm"] for x in rs if x["warm"] is not None]
         row.update(
             repeats=len(rs),
             cold=_summary(colds, "first"),
-            warm=_summary(warms, "first"),
             second=_summary(colds, "second"),
-            second_warm=_summary(warms, "second"),
             setup=dict(_summary(colds, "setup"), code=spec.get("setup", "")),
             import_s=float(np.median([x["import_s"] for x in colds + warms])),
         )
+        if warms:
+            row.update(warm=_summary(warms, "first"), second_warm=_summary(warms, "second"))
         if name in errors:
             row["error"] = errors[name]
         row["meets_cold"] = row["cold"]["median_s"] <= TARGET_COLD_S
-        row["meets_warm"] = row["warm"]["median_s"] <= TARGET_WARM_S
+        if warms:
+            row["meets_warm"] = row["warm"]["median_s"] <= TARGET_WARM_S
         entries[name] = row
     done = [e["repeats"] for e in entries.values() if "repeats" in e]
     fewer = [n for n, e in entries.items() if e.get("repeats", repeats) < repeats]
@@ -669,7 +686,7 @@ def plot(data, path):
     names = list(cli_d)
     x = np.arange(len(names))
     ax = axes[0]
-    ax.bar(x - 0.25, [cli_d[k]["no_cache_s"] for k in names], 0.25, label="--no-cache")
+    ax.bar(x - 0.25, [cli_d[k]["no_cache_s"] or 0.0 for k in names], 0.25, label="--no-cache")
     ax.bar(x, [cli_d[k]["cold_s"] for k in names], 0.25, label="cold cache")
     ax.bar(x + 0.25, [cli_d[k]["warm_s"] for k in names], 0.25, label="warm cache")
     ax.set_xticks(x, names)
@@ -764,6 +781,7 @@ def main(argv=None) -> int:
             commands,
             args.cli_repeats or (1 if args.quick else 3),
             args.cli_budget if args.cli_budget is not None else (0.0 if args.quick else 90.0),
+            no_cache=not args.quick,
         ),
         "compile_once": lambda: compile_once(args.quick),
         "construction": construction,
@@ -773,6 +791,7 @@ def main(argv=None) -> int:
             args.entry_repeats or (1 if args.quick else 3),
             names=QUICK_ENTRY_POINTS if args.quick else None,
             budget_s=args.entry_budget,
+            warm_runs=not args.quick,
         ),
     }
 
@@ -898,15 +917,16 @@ def main(argv=None) -> int:
                     "target": None,
                 }
             )
-        head.append(
-            {
-                "what": f"four-bar {fs['n']}-gain sweep, paper's RK4 1 ms (chi error "
-                f"{fs['RK4 dt 1 ms (paper)']['chi_abs_error']:.0e}): scipy LSODA rtol 1e-6 / RK4",
-                "unit": "x",
-                "value": sp / fs["RK4 dt 1 ms (paper)"]["time_s"],
-                "target": None,
-            }
-        )
+        if "RK4 dt 1 ms (paper)" in fs:
+            head.append(
+                {
+                    "what": f"four-bar {fs['n']}-gain sweep, paper's RK4 1 ms (chi error "
+                    f"{fs['RK4 dt 1 ms (paper)']['chi_abs_error']:.0e}): scipy LSODA rtol 1e-6 / RK4",
+                    "unit": "x",
+                    "value": sp / fs["RK4 dt 1 ms (paper)"]["time_s"],
+                    "target": None,
+                }
+            )
     data["headline"] = head
 
     out_dir = results_dir(args.quick)

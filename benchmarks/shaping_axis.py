@@ -17,9 +17,9 @@ On axes drawn from a fixed seed (1 to 3 modes, 1-20 Hz, damping ratio 0.005-0.1)
 
 Writes `benchmarks/results/shaping_axis.json` and `.png`. Run: `python benchmarks/shaping_axis.py [--quick]`
 (`--quick`, a check of the script: one drawn axis against ZV alone, the speed of the 1-mode axis with one fresh
-process, the scale test once on one mode with the minimax design alone, one identification record; the fresh processes
-share the run's compiled programs through a temporary persistent compilation cache, so the quick run's fresh-process
-times are not cold starts).
+process, whose warm times and peak memory stand for the scale test's, one identification record; the fresh process
+shares the run's compiled programs through a temporary persistent compilation cache, so the quick run's fresh-process
+time is not a cold start).
 """
 
 from __future__ import annotations
@@ -208,16 +208,23 @@ def speed(repeats: int, modes=(1, 2, 3), fresh_runs: int | None = None, xla_defa
             "import time; t0 = time.perf_counter(); import jax; jax.config.update('jax_enable_x64', True); "
             "import jaxbelt as jb; "
             f"jb.design_move(jb.ModalAxis({f}, {z}), {D}, 1.0, v_max={V_MAX}, a_max={A_MAX}, uncertainty={U}, "
-            "include=('minimax',)); print(time.perf_counter() - t0)"
+            "include=('minimax',)); t1 = time.perf_counter() - t0; "
+            # the peak resident set of this process (VmHWM): a quick run takes the scale check's from here
+            "hwm = next(ln for ln in open('/proc/self/status') if ln.startswith('VmHWM')); "
+            "print(t1, int(hwm.split()[1]) / 1024)"
         )
         env = dict(os.environ, PYTHONPATH=str(HERE.parent))
         if xla_defaults:
             env.pop("XLA_FLAGS", None)
-        fresh = []
+        fresh, peak = [], []
         for _ in range(fresh_runs or max(2, repeats // 3)):
             r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=600)
-            fresh.append(float(r.stdout.split()[-1]))
+            if r.returncode != 0:
+                raise RuntimeError(f"design_move in a fresh process failed: {r.stderr[-2000:]}")
+            fresh.append(float(r.stdout.split()[-2]))
+            peak.append(float(r.stdout.split()[-1]))
         out[m] = dict(
+            fresh_peak_mb=float(np.max(peak)),
             warm_median_s=float(np.median(ts)),
             warm_min_s=float(np.min(ts)),
             warm_max_s=float(np.max(ts)),
@@ -546,7 +553,12 @@ def main(argv=None):
     # quick: the 1-mode axis, one fresh process with this run's XLA flags (it loads the programs this process compiled);
     # then the scale test's fresh process on the same shapes (1 mode, the minimax design)
     sp = speed(1, modes=(1,), fresh_runs=1, xla_defaults=False) if args.quick else speed(9)
-    big = scale((6, 10)) if not args.quick else scale((1,), repeats=1, include=("minimax",))
+    if args.quick:  # the scale check's numbers from the speed check's fresh process (one fresh process in all)
+        s1 = sp[1]
+        big = {1: dict(first_s=s1["fresh_median_s"], peak_mb=s1["fresh_peak_mb"])}
+        big[1].update({k: s1[k] for k in ("warm_median_s", "warm_min_s", "warm_max_s")})
+    else:
+        big = scale((6, 10))
     ident = identification(range(1 if args.quick else 10))
     compared = [c for c in cases if c["anchor"] is not None]
     ratios = np.array([c["equal_time_ratio"] for c in compared])

@@ -53,6 +53,25 @@ def _controller():
     return _state["controller"]
 
 
+def _release_openblas() -> None:
+    """Let the next thread's OpenBLAS limit take effect.
+
+    threadpoolctl (3.6 and later) lets one thread only set OpenBLAS's process-wide thread count: the first that
+    sets it, until a `with` block of its own ends; the calls of every other thread do nothing. jaxbelt's limit is
+    set by the first thread to enter and lifted by the last to leave, which may be another thread (an explorer's
+    background thread, a user's thread pool), and it is not a `with` block: without this release the thread that
+    set the limit first (the main thread) kept that right for good, and the limit of every later computation in
+    another thread was silently not set (the explorer's background `design_move` ran 2-4x slower than in the main
+    thread, its OpenBLAS workers spinning on the busy cores). Called under `_lock`, around each set."""
+    try:
+        from threadpoolctl import OpenBLASController
+    except ImportError:  # threadpoolctl without OpenBLAS support, or before 3.6: nothing holds the right
+        return
+    clear = getattr(OpenBLASController, "clear_controlling_thread", None)
+    if clear is not None:
+        clear(force=True)
+
+
 def _enter() -> None:
     limit = blas_thread_limit()
     with _lock:
@@ -60,15 +79,22 @@ def _enter() -> None:
         if _state["depth"] > 1:
             return
         controller = _controller() if limit else None
-        _state["limiter"] = None if controller is None else controller.limit(limits=limit, user_api="blas")
+        if controller is None:
+            _state["limiter"] = None
+            return
+        _release_openblas()
+        _state["limiter"] = controller.limit(limits=limit, user_api="blas")
+        _release_openblas()
 
 
 def _exit() -> None:
     with _lock:
         _state["depth"] -= 1
         if _state["depth"] == 0 and _state["limiter"] is not None:
+            _release_openblas()
             _state["limiter"].restore_original_limits()
             _state["limiter"] = None
+            _release_openblas()
 
 
 class limited_blas:

@@ -334,11 +334,10 @@ def test_tune_pid_first_call_compiles_each_program_once(tmp_path):
     # A fresh process, an empty cache folder (the README's cold first call): the step's two programs (the run with
     # its sensitivities, the update) are compiled once each (not again for the committed arrays the step feeds
     # itself), the report takes the step's, no small eager programs around the loop; two tiny programs inside
-    # diffrax's set-up remain. It was 15 compilations.
-    # Since round 5's held-out checks a fifth, small program (`checked_fun`) compiles once on the first call: an open
-    # item (see the closing note), bounded here so that no further one slips in.
+    # diffrax's set-up remain. It was 15 compilations. A fifth (the checked report program, 11 s of compilation on a
+    # busy machine) compiled while the report's stand-in for the hard clip had a width below `PID.v_smooth`'s range.
     first, second = map(int, _subprocess(_FIRST_TUNE, JAXBELT_CACHE_DIR=str(tmp_path)).split())
-    assert first <= 5, first
+    assert first <= 4, first
     assert second == 0
 
 
@@ -374,7 +373,7 @@ def test_tune_pid_report_with_a_non_finite_value_reruns_the_checked_program(monk
 
 
 def test_tune_pid_reports_a_hard_clip_with_the_steps_program():
-    # a hard clip is reported through the steps' own program (its smooth limit, 1 nV wide, at a hundredth of the
+    # a hard clip is reported through the steps' own program (its smooth limit, 1 uV wide, at a hundredth of the
     # tolerances): no second program, and the clip's metrics within 1e-6 of a rtol-1e-12 solve of the clip itself
     # (measured <= 1.3e-7 for chi; the tuning's own rtol-1e-7 solve of the clip is off by up to 3e-6)
     from jaxbelt.objectives.fluctuation import closed_loop_metrics
@@ -394,8 +393,8 @@ def test_tune_pid_reports_a_hard_clip_with_the_steps_program():
         ref = closed_loop_metrics(drive, pid.with_gains(gains), rtol=1e-12, atol=1e-12, **TUNE_WINDOW)
         np.testing.assert_allclose(chi, float(ref["chi"]), rtol=1e-6)
         if v_peak is not None:
-            # the clip's peak: 25 V; the stand-in's within its width, 1 nV
-            assert abs(v_peak - 25.0) < 1e-8 and float(ref["v_peak"]) == pytest.approx(25.0, rel=1e-12)
+            # the clip's peak: 25 V; the stand-in's within its width times log 2 (0.7 uV)
+            assert abs(v_peak - 25.0) < 7e-7 and float(ref["v_peak"]) == pytest.approx(25.0, rel=1e-12)
             np.testing.assert_allclose(i_peak, float(ref["i_peak"]), rtol=1e-7)
 
 

@@ -271,3 +271,54 @@ def test_axis_design_move_is_the_librarys():
 def test_bad_time_grid_is_refused_by_name(scene, kw, message):
     with pytest.raises(ValueError, match=message):
         jb.explore(scene, **kw)
+
+
+def test_blas_limit_holds_in_the_background_thread_after_the_main_threads():
+    """The explorer's background thread computes inside jaxbelt's BLAS limit (one OpenBLAS thread) also after the
+    main thread has set and lifted it: threadpoolctl lets only the thread that set OpenBLAS's count first set it
+    again, so before the fix the main thread kept that right and the background `design_move` ran with every
+    OpenBLAS thread spinning on the busy cores (2-4x the main thread's time)."""
+    threadpoolctl = pytest.importorskip("threadpoolctl")
+    from jaxbelt import _threads
+
+    def blas_threads():
+        return {i["num_threads"] for i in threadpoolctl.threadpool_info() if i["internal_api"] == "openblas"}
+
+    if not blas_threads() or _threads.blas_thread_limit() != 1:
+        pytest.skip("no OpenBLAS loaded, or JAXBELT_BLAS_THREADS set")
+    outside = blas_threads()
+    with _threads.limited_blas():  # the main thread sets and lifts the limit first
+        assert blas_threads() == {1}
+    assert blas_threads() == outside
+    seen = []
+
+    def background():
+        with _threads.limited_blas():
+            seen.append(blas_threads())
+        seen.append(blas_threads())
+
+    t = threading.Thread(target=background)
+    t.start()
+    t.join()
+    assert seen == [{1}, outside]  # set inside, the caller's count restored outside
+    with _threads.limited_blas():  # and the main thread sets it again after the background thread
+        assert blas_threads() == {1}
+
+
+@pytest.mark.slow
+def test_axis_view_reuses_the_main_threads_design_move():
+    """After `design_move` in the main thread, `explore(axis)` (its first result computed in the background thread)
+    compiles only the two programs that sample the drawn accelerations (and the staging of their padded time grid),
+    no design program: before, 41 eager operations compiled there (27 s of CPU time on a busy machine)."""
+    axis = jb.ModalAxis([7.3], [0.015])
+    include = ("minimax", "ZV", "ZVD", "EI", "unshaped")
+    plan = jb.design_move(axis, 0.1, 0.8, v_max=0.3, a_max=1.2, uncertainty=0.2, include=include)
+    plan.curves(np.linspace(0.5, 1.5, 201))
+    with count_compiles() as c:
+        ex = jb.explore(axis, include=include)
+    assert c["n"] <= 3, c
+    assert ex.values["worst_percent"] == pytest.approx(plan.best.worst_percent, rel=1e-9)
+    with count_compiles() as c:
+        ex.update(zeta1=0.03)  # another damping ratio: the same programs
+    assert c["n"] == 0, c
+    ex.close()

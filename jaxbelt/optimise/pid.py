@@ -26,6 +26,7 @@ from .._display import Display, Table
 from .._guard import host_checked, prepare
 from .._params import declared
 from .._xla import QUICK_COMPILE
+from ..models._ranges import VOLTAGE_V
 from ..models.motor import PID, check_pid_nonnegative
 from ..objectives.fluctuation import closed_loop_metrics, linearisation_run, linearised_metrics
 
@@ -122,7 +123,7 @@ def tune_pid(
 
     - `pid`: starting gains, set point and limiter. With a hard clip (`limiter="hard"`, the default), the
       tuner simulates the smooth limiter of `pid.v_smooth` (gradients through saturation) and reports with
-      the clip itself, simulated as the clip's smooth limit (width 1 nV: the same voltage to 1e-9 V) at a
+      the clip itself, simulated as the clip's smooth limit (width 1 µV: the same voltage to 7e-7 V) at a
       hundredth of `rtol`/`atol` in the steps' own compiled program.
     - `v_max` [V], `i_max` [A]: bounds on peak |voltage| and |current| over [0, t1], imposed by
       the quadratic penalty of weight `penalty` (default `v_max`: none; with a limiter the voltage
@@ -459,15 +460,17 @@ def _finite(m: dict) -> bool:
 
 
 #: the width [V] of the smooth limiter that stands in for a hard clip in the report: the clip is the smooth
-#: limiter's limit as the width goes to 0, the two voltages differ by at most width * log 2
-_CLIP_WIDTH = 1e-9
+#: limiter's limit as the width goes to 0, the two voltages differ by at most width * log 2 (7e-7 V). The least width
+#: `PID.v_smooth` accepts (its declared range, checked inside the programs too): a width below it (1e-9 V) made the
+#: step's program return NaN metrics, and every report fell back to compiling the checked report program
+_CLIP_WIDTH = VOLTAGE_V[0]
 #: the report's tolerances, relative to the tuning's (and at least 1e-12): the stand-in's steps differ from the
 #: clip's where the limiter acts, and a tighter solve makes either's error negligible
 _REPORT_TOL = 1e-2
 
 
 def _clip_stand_in(pid: PID) -> PID:
-    """`pid` with its hard clip replaced by the smooth limiter of width `_CLIP_WIDTH` (the same voltage to 1e-9 V):
+    """`pid` with its hard clip replaced by the smooth limiter of width `_CLIP_WIDTH` (the same voltage to 7e-7 V):
     the structure of the regulator the steps simulate, so that the report runs the steps' own compiled program."""
     return eqx.tree_at(lambda q: q.v_smooth, pid.with_limiter("smooth"), jax.device_put(np.float64(_CLIP_WIDTH)))
 
