@@ -248,6 +248,22 @@ def test_minimax_designs_whose_starting_grids_differ_share_one_program():
 
 
 @pytest.mark.slow
+def test_best_residual_after_design_move_runs_the_designs_own_program():
+    # the LP's value at another move time runs the program the design compiled (its scalars typed alike: a weakly
+    # typed tolerance keyed a second compilation of the interior point method, 17-30 s on two cores)
+    from jaxbelt.shaping.codesign import _problem
+
+    axis = jb.ModalAxis([6.0], [0.02])
+    des = jb.design_move(axis, 0.1, 0.8, include=("minimax",), v_max=0.3, a_max=1.2, uncertainty=0.2).minimax
+    with count_compiles() as c:
+        v = float(jb.best_residual(axis, 0.82, des))
+    assert c["n"] == 0
+    # the value is the optimum of the LP on the design's grid at 0.82 s: HiGHS's on the same LP
+    highs = _highs_minimax_value(_problem(des, axis, 0.82), des.options, float(des.worst))
+    assert v == pytest.approx(highs, rel=1e-6)
+
+
+@pytest.mark.slow
 def test_shortest_move_time_warm_calls_with_other_targets_compile_nothing():
     # the answers 0.830 s and 0.789 s re-make the design with starting grids of 17 and 15 points (the given design,
     # at 0.8 s, has 15): one program for both

@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_real, is_concrete
+from .._checks import check_real, device_array, is_concrete
 from .._guard import all_ok, checked, reraising, traced_checks
 from .._params import recheck
 from .._threads import blas_limited
@@ -100,7 +100,9 @@ def _traced_time_checks(owner: str, name: str, move_time, t_min: float, what: st
 
 def _problem(design: MinimaxDesign, axis, move_time):
     p = design.problem
-    return eqx.tree_at(lambda q: (q.axis, q.move_time), p, (axis, jnp.asarray(move_time, dtype=float)))
+    # on the host where concrete: an eager `jnp.asarray` compiles a small program in each process
+    T = device_array(move_time, dtype=float) if is_concrete(move_time) else jnp.asarray(move_time, dtype=float)
+    return eqx.tree_at(lambda q: (q.axis, q.move_time), p, (axis, T))
 
 
 #: below this multiple of the time-optimal move time, `best_residual` checks that the design's spline covers the
