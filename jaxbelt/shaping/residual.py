@@ -28,7 +28,7 @@ from .._threads import blas_limited
 from .._xla import QUICK_COMPILE
 from ..commands import AbstractMotionCommand, PseudoPolynomial, ShapedCommand, falling_factorial
 from ..models.axis import ModalAxis
-from .moves import BlendMove, PiecewiseMove, SplineMove, fastest_move
+from .moves import _PAD_EXPONENT, TERMS_BUCKET, BlendMove, PiecewiseMove, SplineMove, fastest_move, padded_coefficients
 
 _P = 4  # substitution power u = v**p of the pseudo-polynomial rule (as in jaxbelt.objectives.residual)
 
@@ -238,14 +238,6 @@ def _grid_curve(axis, cmd, r0, dr, n: int):
     return jnp.abs(axis.gains)[:, None] / wd * jnp.abs(_grid_integral(cmd, s[:, 0], r0, dr, n))
 
 
-#: a pseudo-polynomial's exponents are padded to a multiple of this for its residual's program (inactive terms,
-#: coefficient 0), so that the orders `design_move`'s candidates pick (3 to 8: they follow the distance and the
-#: limits) share one compiled program
-TERMS_BUCKET = 8
-#: the exponent of a padding term: any value the rule evaluates finitely (its coefficient is 0)
-_PAD_EXPONENT = 3.0
-
-
 class _Terms(eqx.Module):
     """A pseudo-polynomial's terms padded to `TERMS_BUCKET` (`active`: the real ones, first), with what
     `_pseudo_polynomial_w` reads of it; `coefficients` comes from `padded_coefficients`."""
@@ -274,23 +266,6 @@ def _padded_terms(cmd: PseudoPolynomial) -> _Terms:
         jnp.asarray(cmd.displacement, dtype=float),
         jnp.asarray(cmd.duration, dtype=float),
     )
-
-
-def padded_coefficients(gammas, active):
-    """The coefficients $C_i$ of eq. (23) ($\\bar Z \\bar c = \\bar u$, row k of $\\bar Z$ holding $P(\\gamma_i, k)$,
-    k = 0..n: `PseudoPolynomial.coefficients`) of the `active` exponents (the first n + 1 of `gammas`), 0 for the
-    others: the same solve, the system padded by an identity block (the elimination never mixes the blocks)."""
-    S = gammas.shape[0]
-    r = jnp.arange(S, dtype=gammas.dtype)
-    # P(gamma_i, k) = prod_{r < k} (gamma_i - r), as `falling_factorial` multiplies it out
-    rows = [jnp.ones_like(gammas)]
-    for k in range(1, S):
-        rows.append(rows[-1] * (gammas - r[k - 1]))
-    Z = jnp.stack(rows)
-    both = active[:, None] & active[None, :]
-    Z = jnp.where(both, Z, jnp.eye(S, dtype=gammas.dtype))
-    rhs = jnp.zeros((S,), dtype=gammas.dtype).at[0].set(1.0)
-    return jnp.where(active, jnp.linalg.solve(Z, rhs), 0.0)
 
 
 @stored_jit(compiler_options=QUICK_COMPILE)
