@@ -1010,6 +1010,8 @@ def executable_samples(
 
 #: elements of the (times x terms) arrays a command's `derivative` builds at once when it is sampled (8 MB each)
 _SAMPLE_ELEMENTS = 1 << 20
+#: the most times per block of `derivatives_at` (every block padded to one size)
+_SAMPLE_BLOCK = 1024
 
 
 def derivatives_at(cmd: AbstractMotionCommand, times, orders=(0, 1, 2)) -> list:
@@ -1029,17 +1031,19 @@ def derivatives_at(cmd: AbstractMotionCommand, times, orders=(0, 1, 2)) -> list:
     orders = tuple(int(k) for k in orders)
     if t.size == 0:
         return [np.empty(0) for _ in orders]
-    # fewer times than a block: padded to the next power of two (>= 256), so that a move of another duration
-    # (another sample count) runs the same program: one compiled program per command structure and padded size,
-    # not one eager operation per sample count (50 compilations for a design at a new move time)
-    size = min(block, 1 << max((t.size - 1).bit_length(), 8))
+    # every block of one size, at most `_SAMPLE_BLOCK` (the last padded), so that a move of another duration
+    # (another sample count) runs the same program: one compiled program per command structure, not one eager
+    # operation per sample count (50 compilations for a design at a new move time), nor one per power of two (a
+    # design at 1.03 s, 1031 samples at 1 kHz, compiled the 2048-sample program that 1001 samples did not need)
+    size = min(block, _SAMPLE_BLOCK)
     n_blocks = -(-t.size // size)
     padded_t = np.concatenate([t, np.full(n_blocks * size - t.size, t[-1])])
     out = [np.empty(t.size) for _ in orders]
     run = _padded_pseudo(cmd)  # a pseudo-polynomial: one program for the orders up to `TERMS_BUCKET`
     for b in range(n_blocks):
         lo, hi = b * size, min((b + 1) * size, t.size)
-        vals = np.asarray(jax.device_get(_derivatives(run, jnp.asarray(padded_t[lo : lo + size]), orders)))
+        # `jax.device_put`: `jnp.asarray` of a host array compiles a small program per new shape
+        vals = np.asarray(jax.device_get(_derivatives(run, jax.device_put(padded_t[lo : lo + size]), orders)))
         for o, v in zip(out, vals):
             o[lo:hi] = v[: hi - lo]
     return out
