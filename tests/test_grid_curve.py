@@ -31,7 +31,7 @@ def _shaped(name):
     return shape_move(fastest_move(0.1, 0.3, 1.2), amps, delays)
 
 
-@pytest.mark.parametrize("factors", [np.linspace(0.8, 1.2, 401), np.linspace(0.5, 1.5, 501)])
+@pytest.mark.parametrize("factors", [np.linspace(0.8, 1.2, 401), np.linspace(0.5, 1.5, 51)])
 def test_grid_curve_of_shaped_moves_and_their_blend_matches_duhamel_quadrature(factors):
     zv, ei = _shaped("ZV"), _shaped("EI")
     moves = [zv, ei, blend_moves([zv, ei], [0.3, 0.7])]
