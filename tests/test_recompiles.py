@@ -248,6 +248,22 @@ def test_minimax_designs_whose_starting_grids_differ_share_one_program():
 
 
 @pytest.mark.slow
+def test_best_residual_after_design_move_runs_the_designs_own_program():
+    # the LP's value at another move time runs the program the design compiled (its scalars typed alike: a weakly
+    # typed tolerance keyed a second compilation of the interior point method, 17-30 s on two cores)
+    from jaxbelt.shaping.codesign import _problem
+
+    axis = jb.ModalAxis([6.0], [0.02])
+    des = jb.design_move(axis, 0.1, 0.8, include=("minimax",), v_max=0.3, a_max=1.2, uncertainty=0.2).minimax
+    with count_compiles() as c:
+        v = float(jb.best_residual(axis, 0.82, des))
+    assert c["n"] == 0
+    # the value is the optimum of the LP on the design's grid at 0.82 s: HiGHS's on the same LP
+    highs = _highs_minimax_value(_problem(des, axis, 0.82), des.options, float(des.worst))
+    assert v == pytest.approx(highs, rel=1e-6)
+
+
+@pytest.mark.slow
 def test_shortest_move_time_warm_calls_with_other_targets_compile_nothing():
     # the answers 0.830 s and 0.789 s re-make the design with starting grids of 17 and 15 points (the given design,
     # at 0.8 s, has 15): one program for both
@@ -330,3 +346,35 @@ def test_sampling_moves_of_other_durations_compiles_nothing():
         np.testing.assert_allclose(x, (al * d**2 / 2 + be * d**3 / 6).sum(1), rtol=1e-12, atol=1e-15)
         np.testing.assert_allclose(v, (al * d + be * d**2 / 2).sum(1), rtol=1e-12, atol=1e-15)
         np.testing.assert_allclose(a, (al * (d > 0) + be * d).sum(1), rtol=1e-12, atol=1e-14)
+
+
+def test_peaks_and_samples_of_pseudo_polynomials_of_any_order_up_to_8_share_one_program():
+    # design_move's pseudo-polynomials change order with the move time: their peaks and samples pad the exponents,
+    # so a new order compiles nothing
+    from jaxbelt.shaping.moves import derivatives_at, peaks
+
+    D, T = 0.1, 0.8
+    orders = ([3.0, 4.0, 5.0], [3.2, 4.5, 5.1, 6.3], [8.0, 9.0, 10.2, 11.0, 12.5, 13.9, 15.0, 16.5])
+    cmds = [jb.PseudoPolynomial(jnp.array(g), D, T) for g in orders]
+    t = np.linspace(0.0, T, 801)
+    got = [(peaks(cmds[0]), derivatives_at(cmds[0], t))]
+    with count_compiles() as c:
+        got += [(peaks(m), derivatives_at(m, t)) for m in cmds[1:]]
+    assert c["n"] == 0
+    # the exponents (3, 4, 5) are the quintic x = D (10 s^3 - 15 s^4 + 6 s^5), s = t / T: peak |v| 15 D / (8 T) at
+    # s = 1/2, |a| 10 D / (sqrt(3) T^2) at s = 1/2 -+ sqrt(3)/6, |jerk| 60 D / T^3 at both ends
+    (pv, pa, pj), (x, v, a) = got[0]
+    s = t / T
+    # (eq. 17 forms D (1 - sum C u^g): rounding of 1e-16 D near the start)
+    np.testing.assert_allclose(x, D * (10 * s**3 - 15 * s**4 + 6 * s**5), rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(v, D / T * (30 * s**2 - 60 * s**3 + 30 * s**4), rtol=1e-11, atol=1e-13)
+    np.testing.assert_allclose(a, D / T**2 * (60 * s - 180 * s**2 + 120 * s**3), rtol=1e-10, atol=1e-12)
+    assert pv == pytest.approx(15 * D / (8 * T), rel=1e-12)
+    assert pa == pytest.approx(10 * D / (np.sqrt(3) * T**2), rel=1e-7)  # 20001 samples: within h^2 of the peak
+    assert pj == pytest.approx(60 * D / T**3, rel=1e-12)
+    # every order: the unpadded command's own derivatives (eq. 18-19), to the rounding of eq. (23)'s solve (its
+    # condition number grows with the order: 1e-11 of the largest value at order 8)
+    for m, (_, vals) in zip(cmds, got):
+        for k, val in enumerate(vals):
+            ref = np.asarray(m.derivative(jnp.asarray(t), k))
+            np.testing.assert_allclose(val, ref, rtol=1e-9, atol=1e-10 * float(np.max(np.abs(ref))))

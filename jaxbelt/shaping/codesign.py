@@ -14,13 +14,14 @@ discretised optimum, which the tests check against central finite differences.
 """
 
 import math
+import weakref
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._checks import check_real, is_concrete
+from .._checks import check_real, device_array, is_concrete
 from .._guard import all_ok, checked, reraising, traced_checks
 from .._params import recheck
 from .._threads import blas_limited
@@ -100,7 +101,9 @@ def _traced_time_checks(owner: str, name: str, move_time, t_min: float, what: st
 
 def _problem(design: MinimaxDesign, axis, move_time):
     p = design.problem
-    return eqx.tree_at(lambda q: (q.axis, q.move_time), p, (axis, jnp.asarray(move_time, dtype=float)))
+    # on the host where concrete: an eager `jnp.asarray` compiles a small program in each process
+    T = device_array(move_time, dtype=float) if is_concrete(move_time) else jnp.asarray(move_time, dtype=float)
+    return eqx.tree_at(lambda q: (q.axis, q.move_time), p, (axis, T))
 
 
 #: below this multiple of the time-optimal move time, `best_residual` checks that the design's spline covers the
@@ -309,6 +312,9 @@ def _root_time(value, target, lo, hi, start, feasible, known, *, rtol: float, ow
     def g(v_):
         return math.log(v_ / target)
 
+    for T_k, v_k in known[::-1]:  # a value found before (an earlier call's, `_Memo`) may already meet the goal
+        if lo <= T_k <= hi and abs(v_k - target) <= rtol * target:
+            return T_k, v_k
     for T_k, v_k in known:
         if v_k > target:
             lo = max(lo, T_k)
@@ -415,6 +421,55 @@ def _same_axis(axis, design) -> bool:
     )
 
 
+#: pairs kept per design and axis by `_Memo` (the oldest dropped first)
+MEMO_SIZE = 64
+
+
+class _Memo:
+    """What earlier calls of `shortest_move_time` on one design and one axis found, pure functions of the design, the
+    axis and the move time: the LP's values on the design's grid `grid` [(T [s], value)], and the designs re-made
+    `remade` {T: (value on the design's grid at T, the re-made design)}. A later call with another target starts
+    its bracket, its secant and its calibration level from them (a warm call solved 3-5 LPs on the grid before its
+    re-made design; it needs 1-2 where an earlier call passed near its root)."""
+
+    def __init__(self):
+        self.grid: list[tuple[float, float]] = []
+        self.remade: dict[float, tuple[float, MinimaxDesign]] = {}
+
+    def keep(self, pairs) -> None:
+        seen = set(self.grid)
+        self.grid += [p for p in pairs if p not in seen]
+        del self.grid[:-MEMO_SIZE]
+
+
+#: `_Memo`s by design (the entry goes with the design) and by the axis' values
+_MEMOS: dict[int, dict[bytes, _Memo]] = {}
+
+
+def _memo(design: MinimaxDesign, axis) -> _Memo:
+    key = id(design)
+    if key not in _MEMOS:
+        _MEMOS[key] = {}
+        weakref.finalize(design, _MEMOS.pop, key, None)
+    values = b"".join(
+        np.asarray(getattr(axis, k), dtype=float).tobytes() for k in ("frequencies", "damping_ratios", "gains")
+    )
+    return _MEMOS[key].setdefault(values, _Memo())
+
+
+def _secant_last(known: list, goal: float) -> list:
+    """`known` (T, value) pairs reordered for `_root_time`, whose secant starts from the last two: the nearest pair
+    on each side of `goal` (the largest T whose value is above it, the least T whose value is at or below it), else
+    the two values nearest it."""
+    above = [p for p in known if p[1] > goal]
+    below = [p for p in known if p[1] <= goal]
+    if above and below:
+        last = [max(above), min(below)]
+    else:
+        last = sorted(known, key=lambda p: -abs(math.log(p[1] / goal)))[-2:]
+    return [p for p in known if p not in last] + last
+
+
 def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, refine: bool) -> float:
     """The shortest move time: the root of the LP's value on `design`'s grid, `V(T) = c target` (to `ROOT_RTOL`).
 
@@ -437,9 +492,12 @@ def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, r
         return True
 
     tau = jax.lax.stop_gradient(design.worst)
-    known: list[tuple[float, float]] = []  # the LP's values on the design's grid evaluated so far
-    if start == float(design.command.duration) and _same_axis(axis, design):
-        # the design's own LP value at its own time: known without a solve (the secant's first point)
+    memo = _memo(design, axis)
+    # the LP's values on the design's grid known so far: an earlier call's within the bracket (`_Memo`), and the
+    # design's own value at its own time, known without a solve
+    known: list[tuple[float, float]] = [(T_, v_) for T_, v_ in memo.grid if lo <= T_ <= hi]
+    own = start == float(design.command.duration) and _same_axis(axis, design)
+    if own and (start, float(design.worst)) not in known:
         known.append((start, float(design.worst)))
 
     def on_grid(T_):
@@ -447,19 +505,37 @@ def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, r
 
     def root(goal, start_, rtol):
         # the pairs known are values of the same function: re-used for the bracket and the secant at a new level
-        T_, v_ = _root_time(on_grid, goal, lo, hi, start_, feasible, known, rtol=rtol, owner=o)
+        known[:] = _secant_last(known, goal) if len(known) > 1 else known
+        try:
+            T_, v_ = _root_time(on_grid, goal, lo, hi, start_, feasible, known, rtol=rtol, owner=o)
+        finally:
+            memo.keep(known)
         if user_bracket and abs(v_ - goal) > 1e-3 * goal:
             raise _not_in_bracket(o, target, v_, T_)
-        return T_
+        return T_, v_
 
     if not refine:
-        return root(target, start, ROOT_RTOL)
-    c = float(design.worst) / float(design.fine_worst)
+        return root(target, start, ROOT_RTOL)[0]
+    # the level's first guess: the ratio of the grid's value to the re-made design's fine worst where that fine worst
+    # was nearest the target (the design itself, or a design re-made by an earlier call)
+    ratios = [(v_, float(d_.fine_worst)) for v_, d_ in memo.remade.values()]
+    if own:
+        ratios.append((float(design.worst), float(design.fine_worst)))
+    if not ratios:
+        ratios.append((float(design.worst), float(design.fine_worst)))
+    v0, f0 = min(ratios, key=lambda r: abs(math.log(r[1] / target)))
+    c = v0 / f0
     T, best = start, (start, math.inf, c)
     tried: list[tuple[float, float]] = []  # (log c, log f) of the re-made designs
     for _ in range(6):
-        T = root(c * target, T, CALIBRATION_RTOL)
-        d = _redesign(axis, design, T)
+        T, v_T = root(c * target, T, CALIBRATION_RTOL)
+        if T in memo.remade:
+            d = memo.remade[T][1]
+        else:
+            d = _redesign(axis, design, T)
+            memo.remade[T] = (v_T, d)
+            for old_T in list(memo.remade)[:-16]:
+                del memo.remade[old_T]
         if not d.converged:
             raise ValueError(
                 f"{o}: the design re-made at move time {T:.6g} s did not converge (gap {float(d.gap):.1e}); pass "

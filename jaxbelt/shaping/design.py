@@ -544,7 +544,11 @@ def minimax_value(problem: MinimaxProblem, opts: DesignOptions, tau=None):
     """The optimal value of the minimax LP on `problem`'s grid (`factors`, `mask`): a differentiable function of
     the problem's arrays (axis, move time, limits; envelope theorem). `tau`: the objective's scale (default: a
     coarse first solve). Use it for gradients at a design's final grid: `minimax_value(design.problem, ...)`."""
-    return _solve_round(problem, opts, jnp.asarray(-1.0 if tau is None else tau), jnp.asarray(1e-9))[2][1]
+    tau = -1.0 if tau is None else tau
+    # the scalars typed as `minimax_design` passes them (`tau` weakly typed, `tol` float64): a scalar of the other
+    # weak type keys another compiled program of the interior point method (17-30 s on two cores)
+    tau = device_array(float(tau)) if is_concrete(tau) else jnp.asarray(tau)
+    return _solve_round(problem, opts, tau, device_array(1e-9, dtype=float))[2][1]
 
 
 def _distance_lp(problem: MinimaxProblem, opts: DesignOptions):

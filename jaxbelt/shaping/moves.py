@@ -25,7 +25,7 @@ The $\\varphi$ functions are evaluated by their Taylor series near 0 (no cancell
 """
 
 import math
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import equinox as eqx
 import jax
@@ -36,7 +36,7 @@ from jaxtyping import Array, Float
 from .._checks import as_float_array, check_positive, check_real, check_scalar, is_concrete
 from .._guard import checked, prepare, reraising, stored_jit
 from .._threads import blas_limited
-from ..commands import AbstractMotionCommand
+from ..commands import AbstractMotionCommand, PseudoPolynomial, _safe_pow, falling_factorial
 
 # --------------------------------------------------------------------------------------------
 # phi functions (complex, stable at 0)
@@ -612,14 +612,14 @@ def peaks(cmd: AbstractMotionCommand, n: int = 20001):
     (`piecewise_peaks`), else on `n` equally spaced times (one compiled program per command structure and shape)."""
     if isinstance(cmd, PiecewiseMove):
         return piecewise_peaks(cmd)
-    return tuple(float(x) for x in np.asarray(_peaks(cmd, int(n))))
+    return tuple(float(x) for x in np.asarray(_peaks(_padded_pseudo(cmd), int(n))))
 
 
 def prepare_peaks(cmd: AbstractMotionCommand, n: int = 20001) -> None:
     """Start compiling the program of `peaks(cmd, n)` in the background while the program store is on
     (`jaxbelt._guard.prepare`); else nothing. `cmd` stands for commands of its structure and shapes."""
     if not isinstance(cmd, PiecewiseMove):
-        prepare(_peaks, cmd, int(n))
+        prepare(_peaks, _padded_pseudo(cmd), int(n))
 
 
 def padded(move: PiecewiseMove, size: int) -> PiecewiseMove:
@@ -1019,6 +1019,8 @@ def executable_samples(
 
 #: elements of the (times x terms) arrays a command's `derivative` builds at once when it is sampled (8 MB each)
 _SAMPLE_ELEMENTS = 1 << 20
+#: the most times per block of `derivatives_at` (every block padded to one size)
+_SAMPLE_BLOCK = 1024
 
 
 def derivatives_at(cmd: AbstractMotionCommand, times, orders=(0, 1, 2)) -> list:
@@ -1038,19 +1040,87 @@ def derivatives_at(cmd: AbstractMotionCommand, times, orders=(0, 1, 2)) -> list:
     orders = tuple(int(k) for k in orders)
     if t.size == 0:
         return [np.empty(0) for _ in orders]
-    # fewer times than a block: padded to the next power of two (>= 256), so that a move of another duration
-    # (another sample count) runs the same program: one compiled program per command structure and padded size,
-    # not one eager operation per sample count (50 compilations for a design at a new move time)
-    size = min(block, 1 << max((t.size - 1).bit_length(), 8))
+    # every block of one size, at most `_SAMPLE_BLOCK` (the last padded), so that a move of another duration
+    # (another sample count) runs the same program: one compiled program per command structure, not one eager
+    # operation per sample count (50 compilations for a design at a new move time), nor one per power of two (a
+    # design at 1.03 s, 1031 samples at 1 kHz, compiled the 2048-sample program that 1001 samples did not need)
+    size = min(block, _SAMPLE_BLOCK)
     n_blocks = -(-t.size // size)
     padded_t = np.concatenate([t, np.full(n_blocks * size - t.size, t[-1])])
     out = [np.empty(t.size) for _ in orders]
+    run = _padded_pseudo(cmd)  # a pseudo-polynomial: one program for the orders up to `TERMS_BUCKET`
     for b in range(n_blocks):
         lo, hi = b * size, min((b + 1) * size, t.size)
-        vals = np.asarray(jax.device_get(_derivatives(cmd, jnp.asarray(padded_t[lo : lo + size]), orders)))
+        # `jax.device_put`: `jnp.asarray` of a host array compiles a small program per new shape
+        vals = np.asarray(jax.device_get(_derivatives(run, jax.device_put(padded_t[lo : lo + size]), orders)))
         for o, v in zip(out, vals):
             o[lo:hi] = v[: hi - lo]
     return out
+
+
+#: a pseudo-polynomial's exponents are padded to a multiple of this for its residual's program (inactive terms,
+#: coefficient 0), so that the orders `design_move`'s candidates pick (3 to 8: they follow the distance and the
+#: limits) share one compiled program
+TERMS_BUCKET = 8
+#: the exponent of a padding term: any value the rule evaluates finitely (its coefficient is 0)
+_PAD_EXPONENT = 3.0
+
+
+def padded_coefficients(gammas, active):
+    """The coefficients $C_i$ of eq. (23) ($\\bar Z \\bar c = \\bar u$, row k of $\\bar Z$ holding $P(\\gamma_i, k)$,
+    k = 0..n: `PseudoPolynomial.coefficients`) of the `active` exponents (the first n + 1 of `gammas`), 0 for the
+    others: the same solve, the system padded by an identity block (the elimination never mixes the blocks)."""
+    S = gammas.shape[0]
+    r = jnp.arange(S, dtype=gammas.dtype)
+    # P(gamma_i, k) = prod_{r < k} (gamma_i - r), as `falling_factorial` multiplies it out
+    rows = [jnp.ones_like(gammas)]
+    for k in range(1, S):
+        rows.append(rows[-1] * (gammas - r[k - 1]))
+    Z = jnp.stack(rows)
+    both = active[:, None] & active[None, :]
+    Z = jnp.where(both, Z, jnp.eye(S, dtype=gammas.dtype))
+    rhs = jnp.zeros((S,), dtype=gammas.dtype).at[0].set(1.0)
+    return jnp.where(active, jnp.linalg.solve(Z, rhs), 0.0)
+
+
+class _PaddedPseudo(eqx.Module):
+    """A `PseudoPolynomial` with its exponents padded to a multiple of `TERMS_BUCKET` (`active`: its own, first; the
+    others' coefficients 0): the same derivatives (eq. 18-19), in a program shared by every order up to the bucket
+    (`peaks` and `derivatives_at`: `design_move`'s pseudo-polynomials change order with the move time)."""
+
+    gammas: jax.Array
+    active: jax.Array
+    displacement: jax.Array
+    duration: jax.Array
+
+    @property
+    def end_time(self):
+        return self.duration
+
+    def derivative(self, t, k: int = 0):
+        """$\\varphi_m^{(k)}(t)$ as `PseudoPolynomial.derivative` (the padding terms add 0)."""
+        t = jnp.asarray(t, dtype=float)
+        T = self.duration
+        u = jnp.clip(1.0 - t / T, 0.0, 1.0)
+        terms = falling_factorial(self.gammas, k) * padded_coefficients(self.gammas, self.active)
+        terms = terms * _safe_pow(u[..., None], self.gammas - k)
+        s = jnp.sum(terms, axis=-1)
+        val = self.displacement * (1.0 - s) if k == 0 else (-1.0) ** (k + 1) * self.displacement / T**k * s
+        return jnp.where(t < 0, 0.0, val)
+
+
+def _padded_pseudo(cmd) -> Any:
+    """`cmd` as a `_PaddedPseudo` where it is a `PseudoPolynomial` with concrete exponents, else `cmd`."""
+    if not isinstance(cmd, PseudoPolynomial) or not is_concrete(cmd):
+        return cmd
+    g = np.asarray(cmd.gammas, dtype=float)
+    size = -(-g.size // TERMS_BUCKET) * TERMS_BUCKET
+    return _PaddedPseudo(
+        jax.device_put(np.concatenate([g, np.full(size - g.size, _PAD_EXPONENT)])),
+        jax.device_put(np.arange(size) < g.size),
+        jax.device_put(np.asarray(cmd.displacement, dtype=float)),
+        jax.device_put(np.asarray(cmd.duration, dtype=float)),
+    )
 
 
 @stored_jit

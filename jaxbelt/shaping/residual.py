@@ -28,7 +28,7 @@ from .._threads import blas_limited
 from .._xla import QUICK_COMPILE
 from ..commands import AbstractMotionCommand, PseudoPolynomial, ShapedCommand, falling_factorial
 from ..models.axis import ModalAxis
-from .moves import BlendMove, PiecewiseMove, SplineMove, fastest_move
+from .moves import _PAD_EXPONENT, TERMS_BUCKET, BlendMove, PiecewiseMove, SplineMove, fastest_move, padded_coefficients
 
 _P = 4  # substitution power u = v**p of the pseudo-polynomial rule (as in jaxbelt.objectives.residual)
 
@@ -163,15 +163,79 @@ def _curve(axis, cmd, r, rtol, atol):
         shaper = (cmd.times, cmd.amplitudes) if isinstance(cmd, ShapedCommand) else None
         n_nodes = _nodes_for(pseudo, _poles(axis, r)[0])
         return _pseudo_curve(axis, _padded_terms(pseudo), shaper, r, n_nodes)
+    grid = _uniform_grid(axis, cmd, r)
+    if grid is not None:
+        return _grid_curve(axis, cmd, *grid)
     return _closed_form_curve(axis, cmd, r, 0)
 
 
-#: a pseudo-polynomial's exponents are padded to a multiple of this for its residual's program (inactive terms,
-#: coefficient 0), so that the orders `design_move`'s candidates pick (3 to 8: they follow the distance and the
-#: limits) share one compiled program
-TERMS_BUCKET = 8
-#: the exponent of a padding term: any value the rule evaluates finitely (its coefficient is 0)
-_PAD_EXPONENT = 3.0
+#: the least number of frequency factors of a uniform grid that `_grid_curve` evaluates by blocks of phasors
+GRID_MIN = 16
+#: the least $|s|T$ (phase and decay over the move at the grid's lowest factor) of every mode for `_grid_curve`: its
+#: sums $\sum_k \alpha_k (e^{sL_k} - 1)/s$ lose $\varepsilon K / (|s|T)^2$ of the residual to cancellation (the
+#: residual of a rest-to-rest move is $O(sD)$ for small s), 5e-14 here for K = 500 terms; below it the direct form
+GRID_MIN_ST = 1.0
+
+
+def _has_piecewise(cmd) -> bool:
+    if isinstance(cmd, BlendMove):
+        return any(_has_piecewise(m) for m in cmd.members)
+    return isinstance(cmd, PiecewiseMove)
+
+
+def _uniform_grid(axis, cmd, r):
+    """`(r0, dr, n)` where the factors `r` (1-D) are a uniform grid of at least `GRID_MIN` points (to round-off: the
+    grid $r_0 + j\\,dr$ is within 1e-14 of them), the command holds a `PiecewiseMove` and every value is concrete,
+    with $|s|T \\ge$ `GRID_MIN_ST` for every mode at the lowest factor; else None (the direct form)."""
+    if not _has_piecewise(cmd) or not is_concrete((axis, cmd, r)):
+        return None
+    r = np.asarray(r, dtype=float)
+    n = r.shape[0]
+    if n < GRID_MIN or r[0] <= 0:
+        return None
+    r0, dr = float(r[0]), float(r[-1] - r[0]) / (n - 1)
+    if not dr > 0 or np.max(np.abs(r0 + dr * np.arange(n) - r)) > 1e-14 * float(r[-1]):
+        return None
+    s_T = np.asarray(axis.omega, dtype=float) * r0 * float(np.asarray(cmd.end_time))  # |s| = omega r
+    if not np.all(s_T >= GRID_MIN_ST):
+        return None
+    return device_array(r0, dtype=float), device_array(dr, dtype=float), int(n)
+
+
+def _grid_integral(cmd, s, r0, dr, n: int):
+    """$W(r_j s)$ [m/s] of `cmd` for the poles `s` (modes,) scaled by the uniform factors $r_j = r_0 + j\\,dr$, j < n:
+    shape (modes, n). A `PiecewiseMove`'s sums $\\sum_k c_k e^{r_j s L_k}$ ($L_k = T - t_k$) are taken in blocks,
+    $j = qB + p$: $e^{r_j s L} = e^{(r_0 + qB\\,dr) sL}\\, e^{p\\,dr\\, sL}$, so that $(n/B + B)K$ exponentials and one
+    complex matrix product per mode replace nK exponentials; then
+    $W = \\sum_k \\alpha_k (e^{sL_k} - 1)/s + \\beta_k (e^{sL_k} - 1 - sL_k)/s^2$ (the closed form of
+    `PiecewiseMove.residual_integral`). Other commands (a blend's spline member): their own closed form."""
+    r = r0 + dr * jnp.arange(n, dtype=float)
+    if isinstance(cmd, BlendMove):
+        return sum(w * _grid_integral(m, s, r0, dr, n) for w, m in zip(cmd.weights, cmd.members))
+    full = s[:, None] * r[None, :]
+    if not isinstance(cmd, PiecewiseMove):
+        return cmd.residual_integral(full)
+    B = int(math.ceil(math.sqrt(n)))
+    Q = -(-n // B)
+    L = jnp.maximum(cmd.duration - cmd.times, 0.0)  # (K,)
+    sL = s[:, None] * L[None, :]  # (modes, K)
+    outer = jnp.exp((r0 + dr * B * jnp.arange(Q, dtype=float))[None, :, None] * sL[:, None, :])  # (modes, Q, K)
+    inner = jnp.exp((dr * jnp.arange(B, dtype=float))[None, :, None] * sL[:, None, :])  # (modes, B, K)
+    coef = jnp.stack([cmd.steps, cmd.ramps]).astype(outer.dtype)  # (2, K)
+    sums = jnp.einsum("mqk,ck,mpk->cmqp", outer, coef, inner).reshape(2, s.shape[0], Q * B)[:, :, :n]
+    sa, sb = jnp.sum(cmd.steps), jnp.sum(cmd.ramps)
+    sbl = jnp.sum(cmd.ramps * L)
+    return (sums[0] - sa) / full + (sums[1] - sb - full * sbl) / full**2
+
+
+# kept by the program store while the compilation cache is on; XLA's quicker options: its run time is small
+@stored_jit(compiler_options=QUICK_COMPILE)
+def _grid_curve(axis, cmd, r0, dr, n: int):
+    """The residual amplitudes [m] of every mode at the uniform factors $r_0 + j\\,dr$, j < n (`_grid_integral`)."""
+    s, _ = _poles(axis, 1.0)
+    r = r0 + dr * jnp.arange(n, dtype=float)
+    wd = axis.omega[:, None] * r[None, :] * jnp.sqrt(1.0 - axis.damping_ratios[:, None] ** 2)
+    return jnp.abs(axis.gains)[:, None] / wd * jnp.abs(_grid_integral(cmd, s[:, 0], r0, dr, n))
 
 
 class _Terms(eqx.Module):
@@ -204,23 +268,6 @@ def _padded_terms(cmd: PseudoPolynomial) -> _Terms:
     )
 
 
-def padded_coefficients(gammas, active):
-    """The coefficients $C_i$ of eq. (23) ($\\bar Z \\bar c = \\bar u$, row k of $\\bar Z$ holding $P(\\gamma_i, k)$,
-    k = 0..n: `PseudoPolynomial.coefficients`) of the `active` exponents (the first n + 1 of `gammas`), 0 for the
-    others: the same solve, the system padded by an identity block (the elimination never mixes the blocks)."""
-    S = gammas.shape[0]
-    r = jnp.arange(S, dtype=gammas.dtype)
-    # P(gamma_i, k) = prod_{r < k} (gamma_i - r), as `falling_factorial` multiplies it out
-    rows = [jnp.ones_like(gammas)]
-    for k in range(1, S):
-        rows.append(rows[-1] * (gammas - r[k - 1]))
-    Z = jnp.stack(rows)
-    both = active[:, None] & active[None, :]
-    Z = jnp.where(both, Z, jnp.eye(S, dtype=gammas.dtype))
-    rhs = jnp.zeros((S,), dtype=gammas.dtype).at[0].set(1.0)
-    return jnp.where(active, jnp.linalg.solve(Z, rhs), 0.0)
-
-
 @stored_jit(compiler_options=QUICK_COMPILE)
 def _pseudo_curve(axis, terms: _Terms, shaper, r, n_nodes: int):
     """`residual_curve` of a pseudo-polynomial (`terms`, padded), shaped by the impulses `shaper` = (times,
@@ -239,7 +286,12 @@ def prepare_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors) -> None:
     else nothing. `cmd` stands for commands of its structure and shapes (its values are not read)."""
     if isinstance(cmd, (PseudoPolynomial, ShapedCommand)) or not _has_closed_form(cmd):
         return
-    prepare(_closed_form_curve, axis, cmd, atleast_1d(device_array(factors, dtype=float)), 0)
+    r = atleast_1d(device_array(factors, dtype=float))
+    grid = _uniform_grid(axis, cmd, r)
+    if grid is not None:
+        prepare(_grid_curve, axis, cmd, *grid)
+        return
+    prepare(_closed_form_curve, axis, cmd, r, 0)
 
 
 # kept by the program store while the compilation cache is on; XLA's quicker options: its run time is small
