@@ -12,6 +12,7 @@ from jaxbelt.fast import exp_input_batch, startup_gamma_batch
 
 # one compilation per shape, shared by the tests (the model is a pytree argument)
 gamma_batch = jax.jit(startup_gamma_batch, static_argnames=("n_fix", "chunk"))
+exp_input_batch_jit = jax.jit(exp_input_batch)
 TS = jnp.linspace(0.0, 0.3, 61)
 
 
@@ -98,7 +99,7 @@ def test_fallbacks_match_reference(A, s_var):
     x0 = np.array([0.2, 0.1])
     ts = np.linspace(0.0, 1.0, 21)
     xs = np.asarray(
-        exp_input_batch(
+        exp_input_batch_jit(  # one program for both cases (as `simulate` runs it), not ~hundreds of eager ops
             jnp.asarray(A),
             jnp.asarray(F),
             jnp.asarray(s),
