@@ -1,5 +1,6 @@
 """The batched closed form of `jaxbelt.fast` against scipy's matrix exponential (independent)."""
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -11,6 +12,7 @@ from jaxbelt.fast import exp_input_batch, startup_gamma_batch
 
 # one compilation per shape, shared by the tests (the model is a pytree argument)
 gamma_batch = jax.jit(startup_gamma_batch, static_argnames=("n_fix", "chunk"))
+exp_input_batch_jit = jax.jit(exp_input_batch)
 TS = jnp.linspace(0.0, 0.3, 61)
 
 
@@ -97,7 +99,7 @@ def test_fallbacks_match_reference(A, s_var):
     x0 = np.array([0.2, 0.1])
     ts = np.linspace(0.0, 1.0, 21)
     xs = np.asarray(
-        exp_input_batch(
+        exp_input_batch_jit(  # one program for both cases (as `simulate` runs it), not ~hundreds of eager ops
             jnp.asarray(A),
             jnp.asarray(F),
             jnp.asarray(s),
@@ -134,7 +136,8 @@ def test_batched_command_scene_equals_vmapped_simulate():
 
     model = jb.BeltStartup()
     gammas = jnp.array([0.02, 0.04, 0.06])
-    sol = batched_exponential_scene(
+    # compiled as `simulate` compiles it (eqx.filter_jit): one program instead of ~220 eager operations
+    sol = eqx.filter_jit(batched_exponential_scene)(
         jb.Scene(model, jb.ExponentialVoltage(24.0, gammas), ts=TS, observe=("electric_power", "alpha2"))
     )
     ref = jax.vmap(
@@ -231,13 +234,23 @@ def test_one_output_gradient_matches_finite_differences():
         scene = jb.Scene(model, jb.ExponentialVoltage(24.0, gs), ts=TS, observe=("electric_power",), state=False)
         return jnp.sum(jb.simulate(scene)["electric_power"][:, 10])
 
-    gs = jnp.array([0.02, 0.03])
-    g = jax.grad(f)(gs)
+    # one program gives the gradient and the values the differences take (f's own value, the same function)
+    value_and_grad = jax.jit(jax.value_and_grad(f))
+    gs = np.array([0.02, 0.03])
+    g = value_and_grad(gs)[1]
     h = 1e-6
     for i in range(2):
-        e = jnp.zeros(2).at[i].set(h)
-        fd = (f(gs + e) - f(gs - e)) / (2 * h)
+        e = np.zeros(2)
+        e[i] = h
+        fd = (value_and_grad(gs + e)[0] - value_and_grad(gs - e)[0]) / (2 * h)
         assert abs(g[i] - fd) < 1e-6 * abs(fd)
+
+
+def _second_state_scaled(xs, a, em1):
+    return {"y": xs[..., 1] * a[:, None], "em1": em1}
+
+
+exp_input_batch_post = jax.jit(exp_input_batch, static_argnames="post")
 
 
 @pytest.mark.parametrize(
@@ -252,9 +265,7 @@ def test_fallbacks_apply_post_to_their_states(A, s_var):
     F, s, f, x0 = np.array([[1.0], [0.5]]), np.array([0.0]), np.array([0.3, -1.0]), np.array([0.2, 0.1])
     ts = np.linspace(0.0, 1.0, 21)
     args = [jnp.asarray(a) for a in (A, F, s, x0)] + [0.0, jnp.asarray(ts), jnp.asarray(f), jnp.asarray(s_var)]
-    got = exp_input_batch(
-        *args, post=lambda xs, a, em1: {"y": xs[..., 1] * a[:, None], "em1": em1}, post_args=2 * s_var
-    )
+    got = exp_input_batch_post(*args, post=_second_state_scaled, post_args=2 * s_var)  # one program for both cases
     for i, sv in enumerate(s_var):
         ref = expm_reference(A, np.concatenate([F, f[:, None]], axis=1), np.array([0.0, sv]), x0, ts)
         np.testing.assert_allclose(got["y"][i], 2 * sv * ref[:, 1], rtol=0, atol=1e-10 * np.max(np.abs(ref)))

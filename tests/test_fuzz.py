@@ -940,15 +940,14 @@ def test_bug_running_speed_throw_false_raises(bad):
     assert bool(good.success) and np.all(np.isfinite(np.asarray(good.ys)))
 
 
-_belt_runout = jax.jit(lambda r: jb.simulate(jb.Scene(jb.NonlinearBelt(runout=r), jb.RunningSpeed(8.0), ts=TS)).ys)
-
-
 # fixed: NonlinearBelt `runout` >= 0.1 span was only checked when concrete (under jit: finite values)
 def test_bug_traced_large_runout_is_not_refused():
     with pytest.raises(ValueError, match=named("runout")):
         jb.NonlinearBelt(runout=0.5)  # concrete: refused
+    p = NL_DEFAULT.copy()
+    p[NL_NAMES.index("runout")] = 0.5  # 0.58 span; the other parameters valid
     with pytest.raises(RUNTIME, match=named("runout")):
-        run(_belt_runout, 0.5)
+        run(_belt_ys, p)  # the program of section 6: every parameter of the belt and the speed traced
 
 
 _rk4_throw = jax.jit(lambda dt: jb.simulate(SCENE, "rk4", dt=dt).ys)

@@ -205,6 +205,8 @@ def test_quadrature_h_accepted_only_when_accurate(gammas):
     the rule with itself and returned 31 763 015 for H = 10 438.7 (3-4-5 move of 1 s)."""
     from jaxbelt.objectives.residual import quadrature_error
 
+    # compiled once per node count, as `residual_energy` evaluates it (not ~27 eager operations per count)
+    quadrature_error = eqx.filter_jit(quadrature_error)
     plat = jb.BeltPlatform()
     for T in (0.5, 2.0):
         move = jb.PseudoPolynomial(gammas, duration=T)

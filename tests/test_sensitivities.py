@@ -66,14 +66,15 @@ def test_sensitivities_of_a_failed_run_are_nan():
 def test_linearised_metrics_value_and_derivative():
     kw = dict(rtol=1e-11, atol=1e-11)
     linear = linearised_closed_loop_metrics(jb.FourBarDrive(), pid_of, jnp.asarray(P), **kw)
-    at_p = jax.device_get(linear(jnp.asarray(P)))
+    # `linear` evaluated as tune_pid's step evaluates it, compiled (one program, not ~100 eager operations)
+    at_p = jax.device_get(jax.jit(linear)(jnp.asarray(P)))
     ref = jax.device_get(closed_loop_metrics(jb.FourBarDrive(), pid_of(jnp.asarray(P)), **kw))
     assert at_p.keys() == ref.keys()
     for name in ref:  # the same metrics of two solves to 1e-11: equal to ~1e-9 relative
         np.testing.assert_allclose(at_p[name], ref[name], rtol=1e-8, err_msg=name)
     # the derivative at p (what tune_pid's step takes) against central differences of the exact metrics
     names = ("chi_smooth", "v_peak_smooth", "i_peak_smooth", "mean_speed")
-    jac = jax.jacfwd(lambda q: jnp.stack([linear(q)[n] for n in names]))(jnp.asarray(P))
+    jac = jax.jit(jax.jacfwd(lambda q: jnp.stack([linear(q)[n] for n in names])))(jnp.asarray(P))
 
     def exact(q):
         m = closed_loop_metrics(jb.FourBarDrive(), pid_of(jnp.asarray(q)), **kw)
