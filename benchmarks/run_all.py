@@ -8,8 +8,8 @@ scene's compile caches and memory do not affect the next), and finally calls
 Run: `python benchmarks/run_all.py [--quick] [--only startup fourbar] [--jobs N]` (also `jaxbelt bench`).
 `--quick` is the CI size: it runs *every* script here with `--quick` (the scenes, `coldstart`, `hostile_probe`,
 `browser_view` and `readme_table --quick`, which prints the tables), two at a time, longest first. Its target is
-2 minutes on 2 idle cores; measured on 2026-11-29: 404 s of CPU time in all (about 3.5 minutes on 2 idle cores; 883 s
-with other jobs on the cores), most of it XLA compiling and each script's imports (`QUICK_COST`). A script that fails
+2 minutes on 2 idle cores, not met yet: measured on 2026-11-29, 211 s on 2 nearly idle cores (398 s of CPU time in
+all; 883 s with other jobs on the cores), most of it XLA compiling and each script's imports (`QUICK_COST`). A script that fails
 or runs past `--timeout` fails the run (exit status 1, its name and output printed). `browser_view` on a machine without JupyterLab, selenium or Chromium
 prints one line saying what is missing and counts as run (it is a check of the browser, not of jaxbelt).
 A quick run's figures go to the git-ignored scratch folder `benchmarks/results/quick/` and leave the committed
