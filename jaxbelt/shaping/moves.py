@@ -1083,10 +1083,11 @@ def padded_coefficients(gammas, active):
     return jnp.where(active, jnp.linalg.solve(Z, rhs), 0.0)
 
 
-class _PaddedPseudo(eqx.Module):
+class PaddedPseudo(eqx.Module):
     """A `PseudoPolynomial` with its exponents padded to a multiple of `TERMS_BUCKET` (`active`: its own, first; the
-    others' coefficients 0): the same derivatives (eq. 18-19), in a program shared by every order up to the bucket
-    (`peaks` and `derivatives_at`: `design_move`'s pseudo-polynomials change order with the move time)."""
+    others' coefficients 0): the same derivatives (eq. 18-19) and residual, in programs shared by every order up to
+    the bucket (`peaks`, `derivatives_at` and the residual curves: `design_move`'s pseudo-polynomials change order
+    with the move time). Made by `padded_pseudo`."""
 
     gammas: jax.Array
     active: jax.Array
@@ -1097,30 +1098,46 @@ class _PaddedPseudo(eqx.Module):
     def end_time(self):
         return self.duration
 
+    @property
+    def coefficients(self):
+        """The coefficients of eq. (23), 0 for the padding terms (`padded_coefficients`)."""
+        return padded_coefficients(self.gammas, self.active)
+
     def derivative(self, t, k: int = 0):
         """$\\varphi_m^{(k)}(t)$ as `PseudoPolynomial.derivative` (the padding terms add 0)."""
         t = jnp.asarray(t, dtype=float)
         T = self.duration
         u = jnp.clip(1.0 - t / T, 0.0, 1.0)
-        terms = falling_factorial(self.gammas, k) * padded_coefficients(self.gammas, self.active)
+        terms = falling_factorial(self.gammas, k) * self.coefficients
         terms = terms * _safe_pow(u[..., None], self.gammas - k)
         s = jnp.sum(terms, axis=-1)
         val = self.displacement * (1.0 - s) if k == 0 else (-1.0) ** (k + 1) * self.displacement / T**k * s
         return jnp.where(t < 0, 0.0, val)
 
 
+def padded_pseudo(cmd: PseudoPolynomial) -> PaddedPseudo:
+    """`cmd` padded to a multiple of `TERMS_BUCKET` exponents; concrete exponents are padded on the host (an eager
+    concatenation would compile once per order), traced ones in the trace."""
+    n = int(cmd.gammas.shape[0])
+    size = -(-n // TERMS_BUCKET) * TERMS_BUCKET
+    pad = np.full((size - n,), _PAD_EXPONENT)
+    if is_concrete(cmd.gammas):
+        g = jax.device_put(np.concatenate([np.asarray(cmd.gammas, dtype=float), pad]))
+    else:
+        g = jnp.concatenate([jnp.asarray(cmd.gammas, dtype=float), jnp.asarray(pad)])
+    return PaddedPseudo(
+        g,
+        jax.device_put(np.arange(size) < n),
+        jnp.asarray(cmd.displacement, dtype=float),
+        jnp.asarray(cmd.duration, dtype=float),
+    )
+
+
 def _padded_pseudo(cmd) -> Any:
-    """`cmd` as a `_PaddedPseudo` where it is a `PseudoPolynomial` with concrete exponents, else `cmd`."""
+    """`cmd` as a `PaddedPseudo` where it is a `PseudoPolynomial` with concrete values, else `cmd`."""
     if not isinstance(cmd, PseudoPolynomial) or not is_concrete(cmd):
         return cmd
-    g = np.asarray(cmd.gammas, dtype=float)
-    size = -(-g.size // TERMS_BUCKET) * TERMS_BUCKET
-    return _PaddedPseudo(
-        jax.device_put(np.concatenate([g, np.full(size - g.size, _PAD_EXPONENT)])),
-        jax.device_put(np.arange(size) < g.size),
-        jax.device_put(np.asarray(cmd.displacement, dtype=float)),
-        jax.device_put(np.asarray(cmd.duration, dtype=float)),
-    )
+    return padded_pseudo(cmd)
 
 
 @stored_jit

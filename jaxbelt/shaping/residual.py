@@ -15,7 +15,6 @@ base's for a `ShapedCommand`, and by an ODE solve (diffrax) for any other motion
 
 import math
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -28,7 +27,7 @@ from .._threads import blas_limited
 from .._xla import QUICK_COMPILE
 from ..commands import AbstractMotionCommand, PseudoPolynomial, ShapedCommand, falling_factorial
 from ..models.axis import ModalAxis
-from .moves import _PAD_EXPONENT, TERMS_BUCKET, BlendMove, PiecewiseMove, SplineMove, fastest_move, padded_coefficients
+from .moves import BlendMove, PaddedPseudo, PiecewiseMove, SplineMove, fastest_move, padded_pseudo
 
 _P = 4  # substitution power u = v**p of the pseudo-polynomial rule (as in jaxbelt.objectives.residual)
 
@@ -162,7 +161,7 @@ def _curve(axis, cmd, r, rtol, atol):
     if isinstance(pseudo, PseudoPolynomial):
         shaper = (cmd.times, cmd.amplitudes) if isinstance(cmd, ShapedCommand) else None
         n_nodes = _nodes_for(pseudo, _poles(axis, r)[0])
-        return _pseudo_curve(axis, _padded_terms(pseudo), shaper, r, n_nodes)
+        return _pseudo_curve(axis, padded_pseudo(pseudo), shaper, r, n_nodes)
     grid = _uniform_grid(axis, cmd, r)
     if grid is not None:
         return _grid_curve(axis, cmd, *grid)
@@ -238,38 +237,8 @@ def _grid_curve(axis, cmd, r0, dr, n: int):
     return jnp.abs(axis.gains)[:, None] / wd * jnp.abs(_grid_integral(cmd, s[:, 0], r0, dr, n))
 
 
-class _Terms(eqx.Module):
-    """A pseudo-polynomial's terms padded to `TERMS_BUCKET` (`active`: the real ones, first), with what
-    `_pseudo_polynomial_w` reads of it; `coefficients` comes from `padded_coefficients`."""
-
-    gammas: jax.Array
-    active: jax.Array
-    displacement: jax.Array
-    duration: jax.Array
-
-    @property
-    def coefficients(self):
-        return padded_coefficients(self.gammas, self.active)
-
-
-def _padded_terms(cmd: PseudoPolynomial) -> _Terms:
-    n = int(cmd.gammas.shape[0])
-    size = -(-n // TERMS_BUCKET) * TERMS_BUCKET
-    pad = np.full((size - n,), _PAD_EXPONENT)
-    if is_concrete(cmd.gammas):  # on the host: an eager concatenation would compile once per order
-        g = device_array(np.concatenate([np.asarray(cmd.gammas, dtype=float), pad]))
-    else:
-        g = jnp.concatenate([jnp.asarray(cmd.gammas, dtype=float), jnp.asarray(pad)])
-    return _Terms(
-        g,
-        device_array(np.arange(size) < n),
-        jnp.asarray(cmd.displacement, dtype=float),
-        jnp.asarray(cmd.duration, dtype=float),
-    )
-
-
 @stored_jit(compiler_options=QUICK_COMPILE)
-def _pseudo_curve(axis, terms: _Terms, shaper, r, n_nodes: int):
+def _pseudo_curve(axis, terms: PaddedPseudo, shaper, r, n_nodes: int):
     """`residual_curve` of a pseudo-polynomial (`terms`, padded), shaped by the impulses `shaper` = (times,
     amplitudes) where not None."""
     s, wd = _poles(axis, r)
