@@ -519,9 +519,7 @@ def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, r
     # the level's first guess: the ratio of the grid's value to the re-made design's fine worst where that fine worst
     # was nearest the target (the design itself, or a design re-made by an earlier call)
     ratios = [(v_, float(d_.fine_worst)) for v_, d_ in memo.remade.values()]
-    if own:
-        ratios.append((float(design.worst), float(design.fine_worst)))
-    if not ratios:
+    if own or not ratios:
         ratios.append((float(design.worst), float(design.fine_worst)))
     v0, f0 = min(ratios, key=lambda r: abs(math.log(r[1] / target)))
     c = v0 / f0
