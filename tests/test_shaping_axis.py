@@ -20,7 +20,7 @@ from scipy.optimize import linprog
 import jaxbelt as jb
 from jaxbelt.shaping import design as dsg
 from jaxbelt.shaping.lp import solve_lp
-from jaxbelt.shaping.moves import SplineMove, fastest_time, peaks, shape_move, trapezoid_move
+from jaxbelt.shaping.moves import PiecewiseMove, SplineMove, fastest_time, peaks, shape_move, trapezoid_move
 from jaxbelt.shaping.residual import reference_residuals, residual_curve
 from jaxbelt.shaping.shapers import shaper_for_axis, shaper_impulses, shaper_response
 
@@ -35,27 +35,73 @@ def _jitted(cmd):
     return lambda t: float(f(cmd, t))
 
 
+class _Piecewise:
+    """A `PiecewiseMove`'s acceleration from its definition, $a(t) = \\sum_k \\alpha_k H(t - t_k) + \\beta_k
+    (t - t_k)_+$ for $t \\le T$, 0 after (numpy, independent of jaxbelt's evaluation). `piece(a)` is the linear
+    function that holds from the breakpoint `a` to the next one, both ends included (the solver evaluates the ends
+    too, where the acceleration may jump); `breaks` are the terms' times and T."""
+
+    def __init__(self, cmd):
+        self.tk, self.al, self.be = (np.asarray(x, dtype=float) for x in (cmd.times, cmd.steps, cmd.ramps))
+        self.duration = float(cmd.duration)
+        self.breaks = np.r_[self.tk, self.duration]
+
+    def on_grid(self, t):
+        """The acceleration at the times `t` (an array), from the same definition."""
+        t = np.asarray(t, dtype=float)[:, None]
+        a = np.sum(self.al * (t >= self.tk) + self.be * np.maximum(t - self.tk, 0.0), axis=1)
+        return np.where(t[:, 0] <= self.duration, a, 0.0)
+
+    def piece(self, a):
+        if a >= self.duration:  # at rest after the move
+            return lambda t: 0.0
+        on = self.tk <= a
+        tk, be, step = self.tk[on], self.be[on], float(np.sum(self.al[on]))
+        return lambda t: step + float(np.dot(be, t - tk))
+
+
 def _scipy_residual(axis, accel, T, n_modes, breaks=()):
     """Residual amplitude of each mode after a move with acceleration `accel(t)` ending at T, by solve_ivp.
 
     `breaks`: the times in (0, T) where `accel` has a kink or a jump (the samples of a linearly interpolated
     command). The integration restarts there, each piece with the same method and tolerances: the solver never
-    steps across a kink (where it would reject step after step), and the result is the same to its tolerance."""
+    steps across a kink (where it would reject step after step), and the result is the same to its tolerance.
+    A `_Piecewise` acceleration gives its breaks and, on each interval, its own linear piece."""
     w = np.asarray(axis.omega)
     z = np.asarray(axis.damping_ratios)
     g = np.asarray(axis.gains)
+    if isinstance(accel, _Piecewise):
+        breaks, piece = accel.breaks, accel.piece
+    else:
+        piece = lambda a: accel  # noqa: E731
 
-    def f(t, y):
-        q, qd = y[:n_modes], y[n_modes:]
-        return np.r_[qd, -2 * z * w * qd - w**2 * q - g * accel(t)]
+    def rhs(fa):
+        def f(t, y):
+            q, qd = y[:n_modes], y[n_modes:]
+            return np.r_[qd, -2 * z * w * qd - w**2 * q - g * fa(t)]
+
+        return f
 
     edges = np.unique(np.r_[0.0, [b for b in breaks if 0.0 < b < T], T])
     y = np.zeros(2 * n_modes)
     for a, b in zip(edges[:-1], edges[1:]):
-        y = solve_ivp(f, (a, b), y, method="DOP853", rtol=1e-12, atol=1e-15, max_step=T / 400).y[:, -1]
+        y = solve_ivp(rhs(piece(a)), (a, b), y, method="DOP853", rtol=1e-12, atol=1e-15, max_step=T / 400).y[:, -1]
     q, qd = y[:n_modes], y[n_modes:]
     sigma, wd = np.asarray(axis.sigma), np.asarray(axis.omega_d)
     return np.sqrt(q**2 + ((qd + sigma * q) / wd) ** 2)
+
+
+def _accel(cmd):
+    """The reference's acceleration of `cmd`: a piecewise move's from its definition (checked here against the
+    command's own `acceleration` on a grid that avoids its breakpoints, to 1e-12), any other's compiled."""
+    if not isinstance(cmd, PiecewiseMove):
+        return _jitted(cmd)
+    ref = _Piecewise(cmd)
+    t = np.linspace(0.0, 1.05 * ref.duration, 4001)
+    t = t[np.min(np.abs(t[:, None] - ref.breaks), axis=1) > 1e-9]
+    expected = ref.on_grid(t)
+    np.testing.assert_allclose(np.asarray(cmd.acceleration(t)), expected, rtol=0, atol=1e-12 * np.max(np.abs(expected)))
+    return ref
 
 
 # --------------------------------------------------------------------------------------------
@@ -116,7 +162,7 @@ def test_closed_form_residual_matches_scipy(name):
     ax = jb.ModalAxis(**AXIS2, gains=[1.0, 0.4])
     cmd = _moves()[name]
     T = float(cmd.end_time)
-    ref = _scipy_residual(ax, _jitted(cmd), T, 2)
+    ref = _scipy_residual(ax, _accel(cmd), T, 2)
     got = np.asarray(jb.residual_amplitudes(ax, cmd))
     # the ZVD-shaped move cancels both modes at their nominal frequencies: compare absolutely there
     np.testing.assert_allclose(got, ref, rtol=2e-7, atol=1e-13)
@@ -375,7 +421,7 @@ def test_plan_at_equal_move_time_beats_every_classic_shaper(plan_08):
             assert c.peak_v <= 0.3 * (1 + 1e-6) and c.peak_a <= 1.2 * (1 + 1e-6)
     # the table's residual of a shaper equals an independent solve_ivp of its acceleration at 1 +- 20 %
     zvd = rows["ZVD"].command
-    accel = _jitted(zvd)
+    accel = _accel(zvd)
     for factor in (0.8, 1.0, 1.2):
         ax = jb.ModalAxis(np.array(AXIS2["frequencies"]) * factor, AXIS2["damping_ratios"])
         ref = _scipy_residual(ax, accel, 0.8, 2)
