@@ -94,15 +94,18 @@ _GROUPS = {
     # the shortest-time design on the same two-mode axis (test_shaping_axis.py's shortest-time plan): with its
     # programs compiled, the two-mode case compiles 6 instead of 40 programs (9 s against 44 s, measured under load)
     "tests/test_reliability5.py::test_a_design_re_made_by_design_move_at_the_shortest_time": "tests/test_shaping_axis.py",
+    # its `solved` fixture is the same design, and its best_residual programs are shortest_move_time's: 77 instead of
+    # 118 compiles, 44 s instead of 63 s (measured under load)
+    "tests/test_property_shaping.py": "tests/test_shaping_axis.py",
 }
 
 #: seconds of one core per group, measured: the mean of two full runs under `-n 2` (2026-11-29, the junit
 #: durations summed per group, notebooks with their scene's file); a group not named costs 0.2 s per test. Only the
 #: order matters (heaviest first): re-measure when a group's cost changes by a large factor
 _COST = {
-    # 236 s alone, with test_readme.py (27 s) and reliability5's shortest-time tests (96 s) less what they share and
-    # the quicker scipy references (estimated)
-    "tests/test_shaping_axis.py": 280,
+    # 236 s alone, with test_readme.py (27 s), test_property_shaping.py (35 s) and reliability5's shortest-time tests
+    # (96 s), less what they share and the quicker scipy references (estimated)
+    "tests/test_shaping_axis.py": 305,
     "tests/test_store.py": 173,
     "tests/test_reliability5.py": 69,  # 165 s less its shortest-time tests, in test_shaping_axis.py's group
     "tests/test_fourbar.py": 144,
@@ -127,7 +130,6 @@ _COST = {
     "tests/test_import_graph.py": 39,
     "tests/test_certify.py": 38,
     "tests/test_coldstart.py": 35,
-    "tests/test_property_shaping.py": 35,
     "tests/test_xla_flags.py": 32,
     "tests/test_identify.py": 31,
     "tests/test_property.py": 29,
