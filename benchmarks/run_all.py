@@ -26,8 +26,10 @@ the others (`--no-shared-cache`: each process compiles its own, as a user's firs
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -157,6 +159,102 @@ def _run_script(name: str, quick: bool, env: dict, timeout: float | None) -> tup
     return name, rc, time.perf_counter() - t, usage.ru_utime + usage.ru_stime, out
 
 
+WORKER = Path(__file__).resolve().parent / "_quick_worker.py"
+
+
+class _Worker:
+    """A `_quick_worker.py` process (in a session of its own, so that stopping it stops what it started too)."""
+
+    def __init__(self, env: dict, cwd: Path):
+        self.proc = subprocess.Popen(
+            [sys.executable, str(WORKER)],
+            cwd=cwd,
+            env=env,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+            start_new_session=True,
+        )
+
+    def run(self, name: str, script: Path, argv: list, timeout: float | None) -> tuple[str, object, float, float, str]:
+        """Run one script in the worker; (name, exit status or "timeout" or "worker died (...)", seconds, CPU
+        seconds, its output). A worker past `timeout` is stopped (with what it started); one that died is not used again."""
+        stdin, stdout = self.proc.stdin, self.proc.stdout
+        assert stdin is not None and stdout is not None
+        t = time.perf_counter()
+        with tempfile.NamedTemporaryFile("r", prefix=f"jaxbelt-quick-{name}-", suffix=".txt") as out:
+            answer: list = []
+            reader = threading.Thread(target=lambda: answer.append(stdout.readline()), daemon=True)
+            try:
+                stdin.write(json.dumps({"script": str(script), "argv": argv, "out": out.name}) + "\n")
+                stdin.flush()
+            except OSError:
+                pass  # a dead worker: its empty answer says so below
+            reader.start()
+            reader.join(timeout)
+            text = out.read()
+            if reader.is_alive():
+                self.stop()
+                return name, "timeout", time.perf_counter() - t, float("nan"), text
+            if not answer or not answer[0].strip():
+                self.stop()
+                return name, f"worker died ({self.proc.returncode})", time.perf_counter() - t, float("nan"), text
+            res = json.loads(answer[0])
+            return name, res["rc"], res["wall_s"], res["cpu_s"], text
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def stop(self) -> None:
+        """End the worker and the processes it started (its whole session), and wait for it."""
+        if self.proc.poll() is None:
+            try:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+            except (ProcessLookupError, PermissionError):
+                self.proc.kill()
+        self.proc.wait()
+
+    def close(self) -> None:
+        """Ask the worker to end (an empty line), stop it if it does not within 60 s."""
+        try:
+            assert self.proc.stdin is not None
+            self.proc.stdin.write("\n")
+            self.proc.stdin.close()
+            self.proc.wait(60)
+        except (OSError, subprocess.TimeoutExpired):
+            self.stop()
+
+
+def _run_in_workers(scripts: list[str], jobs: int, env: dict, timeout: float | None, report) -> None:
+    """Run `scripts` (each with `--quick`) in `jobs` worker processes that take them in order, `report(result)`
+    as each ends; a worker that timed out or died is replaced by a fresh one for the scripts left."""
+    todo = list(scripts)
+    lock = threading.Lock()
+
+    def lane():
+        worker = None
+        try:
+            while True:
+                with lock:
+                    if not todo:
+                        return
+                    name = todo.pop(0)
+                if worker is None or not worker.alive():
+                    worker = _Worker(env, HERE.parent)
+                res = worker.run(name, HERE / f"{name}.py", ["--quick"], timeout)
+                with lock:
+                    report(res)
+        finally:
+            if worker is not None:
+                worker.close()
+
+    threads = [threading.Thread(target=lane) for _ in range(min(jobs, len(scripts)))]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="every script, CI-sized (target: 2 minutes on 2 idle cores)")
@@ -179,6 +277,11 @@ def main(argv=None) -> int:
         "--no-shared-cache",
         action="store_true",
         help="with --quick: no compilation cache shared by the scripts (default: a temporary one)",
+    )
+    p.add_argument(
+        "--fresh-processes",
+        action="store_true",
+        help="with --quick: each script in a process of its own (default: in --jobs worker processes, one after another)",
     )
     p.add_argument(
         "--update",
@@ -223,18 +326,25 @@ def main(argv=None) -> int:
         env.update(shared_cache_env(shared))
         print(f"run_all: the scripts share compiled programs through a temporary cache folder {shared}")
     print(f"run_all: {len(scenes)} script(s), {jobs} at a time: {' '.join(scenes)}", flush=True)
+
     # each script's output is printed in one block when it ends (scripts running at once do not interleave)
+    def report(result) -> None:
+        name, rc, dt, cpu_s, out = result
+        print(f"=== {name}{' --quick' if args.quick else ''}", flush=True)
+        print(out.rstrip("\n"), flush=True)
+        status = "ok" if rc == 0 else f"FAILED ({rc})"
+        print(f"=== {name}: {status} in {dt:.1f} s ({cpu_s:.1f} s of CPU time)", flush=True)
+        if rc != 0:
+            failed.append(name)
+
     try:
-        with ThreadPoolExecutor(max_workers=jobs) as pool:
-            futures = [pool.submit(_run_script, s, args.quick, env, args.timeout) for s in scenes]
-            for fut in as_completed(futures):
-                name, rc, dt, cpu_s, out = fut.result()
-                print(f"=== {name}{' --quick' if args.quick else ''}", flush=True)
-                print(out.rstrip("\n"), flush=True)
-                status = "ok" if rc == 0 else f"FAILED ({rc})"
-                print(f"=== {name}: {status} in {dt:.1f} s ({cpu_s:.1f} s of CPU time)", flush=True)
-                if rc != 0:
-                    failed.append(name)
+        if args.quick and not args.fresh_processes:
+            _run_in_workers(scenes, jobs, env, args.timeout, report)
+        else:
+            with ThreadPoolExecutor(max_workers=jobs) as pool:
+                futures = [pool.submit(_run_script, s, args.quick, env, args.timeout) for s in scenes]
+                for fut in as_completed(futures):
+                    report(fut.result())
     finally:
         if shared is not None:
             shutil.rmtree(shared, ignore_errors=True)
