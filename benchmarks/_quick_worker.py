@@ -37,30 +37,35 @@ def _cpu() -> float:
     return own.ru_utime + own.ru_stime + kids.ru_utime + kids.ru_stime
 
 
+#: JAX's persistent compilation cache settings, put back after each script
+CACHE_KEYS = (
+    "jax_enable_compilation_cache",
+    "jax_compilation_cache_dir",
+    "jax_persistent_cache_min_compile_time_secs",
+    "jax_persistent_cache_min_entry_size_bytes",
+)
+
+
 def _cache_settings() -> dict:
     if "jax" not in sys.modules:
         return {}
     import jax
 
-    keys = ("jax_enable_compilation_cache", "jax_compilation_cache_dir")
-    return {k: jax.config.values[k] for k in keys}
+    return {k: jax.config.values[k] for k in CACHE_KEYS}
 
 
 def _restore_cache(before: dict) -> None:
-    """JAX's persistent cache back to the run's shared folder (`$JAX_COMPILATION_CACHE_DIR`) when a script moved it
-    (`jb.enable_compilation_cache` on a folder of its own), jaxbelt's program store off, as the worker started."""
+    """JAX's persistent cache as it was before the script (a script may turn it on in a folder of its own, e.g.
+    through `jb.enable_compilation_cache`): the settings put back, and JAX made to open the cache again (or not at
+    all) at its next compilation."""
     if not before or _cache_settings() == before:
         return
-    import jaxbelt as jb
+    import jax
+    from jax.experimental.compilation_cache import compilation_cache
 
-    folder = before.get("jax_compilation_cache_dir")
-    if before.get("jax_enable_compilation_cache") and folder:
-        jb.enable_compilation_cache(folder, min_compile_time=0.0, programs=False)
-    else:
-        import jax
-
-        for k, v in before.items():
-            jax.config.update(k, v)
+    for k, v in before.items():
+        jax.config.update(k, v)
+    compilation_cache.reset_cache()
 
 
 def run_one(script: str, argv: list, out: str) -> dict:

@@ -7,7 +7,7 @@ Writes `benchmarks/results/coldstart.json` (+ `.png`). Every ratio is measured i
 
 Run: `python benchmarks/coldstart.py [--quick] [--cli startup fourbar ...]` (a full run is not part of
 `run_all.py`: the cold CLI runs alone take minutes; `run_all.py --quick` runs its quick form: fewer repeats, a
-closed-form batch of 10 000 (not 100 000 and 1000) without its fresh-process memory check, a 4-gain Tsit5 sweep on the
+closed-form batch of 1000 (not 100 000 and 1000) without its fresh-process memory check, a 4-gain Tsit5 sweep on the
 devices (not again on one device, no RK4 sweep), the scipy loop at rtol 1e-6 only, the first entry point in a cold
 process only, the one fresh process a quick run starts (the imports and the CLI, each in fresh processes, are left
 out: `--skip` names what to leave out); tune_pid 2 steps and optimise_command 5).
@@ -216,7 +216,7 @@ def closed_form(quick: bool) -> dict:
     model = jb.BeltStartup()
     ts = jnp.linspace(0.0, 0.5, 501)
     res = {}
-    big = 10_000 if quick else 100_000  # quick: a batch of 200 MB, not 2 GB
+    big = 1000 if quick else 100_000  # quick: a batch of 20 MB, not 2 GB
     for n in (big,) if quick else (1000, big):  # quick: one compilation
         g = jnp.linspace(0.01, 0.1, n)
         c = jax.jit(lambda g: startup_gamma_batch(model, g, ts)).lower(g).compile()
@@ -860,7 +860,7 @@ def main(argv=None) -> int:
         )
     if "closed_form" in data:
         cf = data["closed_form"]
-        big = max(int(k[len("batch_") :]) for k in cf if k.startswith("batch_"))  # 100 000 (quick: 10 000)
+        big = max(int(k[len("batch_") :]) for k in cf if k.startswith("batch_"))  # 100 000 (quick: 1000)
         head.append(
             {
                 "what": f"start-up batch of {big:,}: peak / output (XLA)".replace(",", " "),

@@ -7,20 +7,24 @@ scene's compile caches and memory do not affect the next), and finally calls
 
 Run: `python benchmarks/run_all.py [--quick] [--only startup fourbar] [--jobs N]` (also `jaxbelt bench`).
 `--quick` is the CI size: it runs *every* script here with `--quick` (the scenes, `coldstart`, `hostile_probe`,
-`browser_view` and `readme_table --quick`, which prints the tables), two at a time, longest first. Its target is
-2 minutes on 2 idle cores, not met yet: measured on 2026-11-29, 211 s on 2 nearly idle cores (398 s of CPU time in
-all; 883 s with other jobs on the cores), most of it XLA compiling and each script's imports (`QUICK_COST`). A script that fails
-or runs past `--timeout` fails the run (exit status 1, its name and output printed). `browser_view` on a machine without JupyterLab, selenium or Chromium
-prints one line saying what is missing and counts as run (it is a check of the browser, not of jaxbelt).
-A quick run's figures go to the git-ignored scratch folder `benchmarks/results/quick/` and leave the committed
-results and the README table alone; `--update` writes them over the committed ones (and regenerates the table).
-A quick run checks that every benchmark works, and most of its time is XLA compiling: it compiles
-with XLA's quicker CPU settings (`jaxbelt._xla.FAST_COMPILE_FLAGS`; recorded in each JSON as
-`machine.xla_flags`), so its run times are slower than the library's (and two scripts share the cores).
-`--xla-defaults` keeps XLA's defaults; a full run always does. A quick run's scripts also share the programs they
-compile: JAX's persistent compilation cache in a temporary folder (removed at the end), set through JAX's environment
-variables for every script and every process a script starts, so that a program one of them compiled is loaded by
-the others (`--no-shared-cache`: each process compiles its own, as a user's first run does).
+`browser_view` and `readme_table --quick`, which prints the tables) in two long-lived worker processes
+(`_quick_worker.py`, `--jobs`), each running its scripts one after another in itself (as `__main__`, with its own
+`sys.argv`): JAX and jaxbelt are imported once per worker, and a program one script compiled is found in memory by the
+next script of its worker (`QUICK_LANE` puts the scripts that share programs in one worker; `QUICK_COST` orders each
+worker's scripts longest first, and a worker whose scripts are done takes the shortest left of the other's). Its
+target is 2 minutes on 2 idle cores: MEASURED_HERE. A script that raises, exits non-zero, kills its worker or runs
+past `--timeout` fails the run (exit status 1, its name and output printed; a fresh worker runs the scripts left).
+`--fresh-processes` runs each script in a process of its own instead. `browser_view` on a machine without JupyterLab,
+selenium or Chromium prints one line saying what is missing and counts as run (it is a check of the browser, not of
+jaxbelt). A quick run's figures go to the git-ignored scratch folder `benchmarks/results/quick/` and leave the
+committed results and the README table alone; `--update` writes them over the committed ones (and regenerates the
+table). A quick run checks that every benchmark works, and most of its time is XLA compiling: it compiles with XLA's
+quicker CPU settings (`jaxbelt._xla.FAST_COMPILE_FLAGS`; recorded in each JSON as `machine.xla_flags`), so its run
+times are slower than the library's (and two scripts share the cores). `--xla-defaults` keeps XLA's defaults; a full
+run always does. `--shared-cache` also turns on JAX's persistent compilation cache in a temporary folder for every
+script and every process a script starts (JAX's environment variables; removed at the end); it is off by default:
+measured on 2026-11-29 in the worker processes, a quick run took 420 s of CPU time with it and 269 s without (the
+cache writes every program it compiles, and the workers already share theirs in memory).
 """
 
 from __future__ import annotations
@@ -49,27 +53,53 @@ HELPERS = {"run_all", "readme_table", "shortcuts"}
 #: hostile_probe (not a scene: one case per entry point), browser_view (needs JupyterLab, selenium and Chromium; a
 #: machine without them gets a one-line note and exit status 0)
 QUICK_ONLY = {"coldstart", "hostile_probe", "browser_view"}
-#: seconds of each script's --quick run: its CPU time (run_all prints it) in a quick run of 2026-11-29 (883 s wall,
-#: 404 s of CPU time, 2 cores shared with a load of about 6), to start the longest first so that no long script
-#: starts last; a script not listed counts as 10 s
+#: seconds of each script's --quick run: its CPU time (run_all prints it) in a quick run in the worker processes of
+#: 2026-11-29 (2 cores shared with a load of 7-9), to start the longest first in each worker; a script not listed
+#: counts as 10 s
 QUICK_COST = {
-    "coldstart": 59,
-    "shaping_axis": 44,
-    "fourbar": 36,
-    "nonlinear": 36,
-    "throughput": 36,
-    "startup": 33,
-    "shaping_guarantee": 22,
-    "shaping": 20,
-    "threads": 20,
-    "gpu": 17,
-    "firmware_shapers": 14,
-    "hostile_probe": 14,
-    "machinery": 14,
-    "shaping_every_shaper": 11,
-    "explore": 10,
-    "spans": 10,
-    "identify_coverage": 5,
+    "coldstart": 43,
+    "shaping_axis": 37,
+    "fourbar": 28,
+    "startup": 24,
+    "throughput": 24,
+    "nonlinear": 23,
+    "shaping": 14,
+    "gpu": 10,
+    "shaping_guarantee": 9,
+    "firmware_shapers": 9,
+    "hostile_probe": 7,
+    "spans": 7,
+    "threads": 7,
+    "machinery": 5,
+    "explore": 4,
+    "identify_coverage": 2,
+    "shaping_every_shaper": 1,
+    "browser_view": 0.1,
+    "readme_table": 0.1,
+}
+
+#: the worker (lane) of each script in a quick run: the scripts that compile the same programs in one worker, so that
+#: the later ones find them in memory (lane 0: the simulations, the four-bar's tuning and sweeps, the start-up's
+#: closed form; lane 1: the command shaping, and the rest, about as many CPU seconds in all); a script not listed
+#: goes to lane 0
+QUICK_LANE = {
+    "coldstart": 0,
+    "fourbar": 0,
+    "startup": 0,
+    "throughput": 0,
+    "gpu": 0,
+    "shaping_axis": 1,
+    "nonlinear": 1,
+    "shaping": 1,
+    "shaping_guarantee": 1,
+    "firmware_shapers": 1,
+    "hostile_probe": 1,
+    "spans": 1,
+    "explore": 1,
+    "machinery": 1,
+    "threads": 1,
+    "shaping_every_shaper": 1,
+    "identify_coverage": 1,
     "browser_view": 1,
     "readme_table": 1,
 }
@@ -226,19 +256,29 @@ class _Worker:
 
 
 def _run_in_workers(scripts: list[str], jobs: int, env: dict, timeout: float | None, report) -> None:
-    """Run `scripts` (each with `--quick`) in `jobs` worker processes that take them in order, `report(result)`
-    as each ends; a worker that timed out or died is replaced by a fresh one for the scripts left."""
-    todo = list(scripts)
+    """Run `scripts` (each with `--quick`) in `jobs` worker processes, `report(result)` as each ends. Worker k takes
+    the scripts of lane k % jobs (`QUICK_LANE`; a script not listed goes to lane 0) in the order given, then, its
+    lane done, the last script left in another lane (the shortest, in a longest-first order). A worker that timed
+    out or died is replaced by a fresh one for the scripts left."""
+    lanes: list[list[str]] = [[] for _ in range(jobs)]
+    for name in scripts:
+        lanes[QUICK_LANE.get(name, 0) % jobs].append(name)
     lock = threading.Lock()
 
-    def lane():
+    def take(k: int) -> str | None:
+        with lock:
+            if lanes[k]:
+                return lanes[k].pop(0)
+            others = [lane for lane in lanes if lane]
+            return max(others, key=len).pop() if others else None
+
+    def lane(k: int):
         worker = None
         try:
             while True:
-                with lock:
-                    if not todo:
-                        return
-                    name = todo.pop(0)
+                name = take(k)
+                if name is None:
+                    return
                 if worker is None or not worker.alive():
                     worker = _Worker(env, HERE.parent)
                 res = worker.run(name, HERE / f"{name}.py", ["--quick"], timeout)
@@ -248,7 +288,7 @@ def _run_in_workers(scripts: list[str], jobs: int, env: dict, timeout: float | N
             if worker is not None:
                 worker.close()
 
-    threads = [threading.Thread(target=lane) for _ in range(min(jobs, len(scripts)))]
+    threads = [threading.Thread(target=lane, args=(k,)) for k in range(jobs)]
     for th in threads:
         th.start()
     for th in threads:
@@ -274,10 +314,12 @@ def main(argv=None) -> int:
         help="with --quick: compile with XLA's default settings (default: its quicker CPU compilation)",
     )
     p.add_argument(
-        "--no-shared-cache",
+        "--shared-cache",
         action="store_true",
-        help="with --quick: no compilation cache shared by the scripts (default: a temporary one)",
+        help="with --quick: a temporary persistent compilation cache shared by the scripts and the processes they "
+        "start (default: none; measured slower, see above)",
     )
+    p.add_argument("--no-shared-cache", action="store_true", help="with --quick: no shared cache (the default)")
     p.add_argument(
         "--fresh-processes",
         action="store_true",
@@ -321,7 +363,11 @@ def main(argv=None) -> int:
         if flags is not None:
             env["XLA_FLAGS"] = flags
             print(f"run_all: quick run compiled with XLA_FLAGS={flags} (run times slower than the library's)")
-    shared = tempfile.mkdtemp(prefix="jaxbelt-quick-cache-") if args.quick and not args.no_shared_cache else None
+    shared = (
+        tempfile.mkdtemp(prefix="jaxbelt-quick-cache-")
+        if args.quick and args.shared_cache and not args.no_shared_cache
+        else None
+    )
     if shared is not None:
         env.update(shared_cache_env(shared))
         print(f"run_all: the scripts share compiled programs through a temporary cache folder {shared}")
