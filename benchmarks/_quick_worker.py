@@ -5,7 +5,11 @@ their dependencies are imported once per worker rather than once per script, and
 found in memory by the next (jaxbelt's jitted functions keep their compiled programs). Between scripts the worker
 puts back what a script may change for the next one: `sys.argv`, `sys.path`, `os.environ`, the working folder, the
 warning filters, the signal handlers, JAX's persistent compilation cache settings (a script may call
-`jb.enable_compilation_cache`) and matplotlib's open figures.
+`jb.enable_compilation_cache`) and matplotlib's open figures. JAX's backend starts with the worker, with its default
+devices, so that every script sees the same ones (coldstart's `jb.cpu_devices()`, one device per core, then runs on
+them); after each script the objects left are frozen out of the garbage collector's scans (`gc.freeze`), so that the
+worker's growing heap does not slow the next script's collections. What a script registers with `atexit` runs when
+its worker ends.
 
 Protocol (one JSON object per line): run_all writes `{"script": path, "argv": [...], "out": file}` on the worker's
 standard input; the worker runs the script with its standard output and error (file descriptors 1 and 2, so that
