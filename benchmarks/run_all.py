@@ -10,8 +10,8 @@ Run: `python benchmarks/run_all.py [--quick] [--only startup fourbar] [--jobs N]
 `browser_view` and `readme_table --quick`, which prints the tables) in two long-lived worker processes
 (`_quick_worker.py`, `--jobs`), each running its scripts one after another in itself (as `__main__`, with its own
 `sys.argv`): JAX and jaxbelt are imported once per worker, and a program one script compiled is found in memory by the
-next script of its worker (`QUICK_LANE` puts the scripts that share programs in one worker; `QUICK_COST` orders each
-worker's scripts longest first, and a worker whose scripts are done takes the shortest left of the other's). Its
+next script of its worker (`QUICK_LANES` puts the scripts that share programs in one worker, in an order where the
+earlier ones compile what the later ones use; a worker whose scripts are done takes the shortest left of the other's). Its
 target is 2 minutes on 2 idle cores: MEASURED_HERE. A script that raises, exits non-zero, kills its worker or runs
 past `--timeout` fails the run (exit status 1, its name and output printed; a fresh worker runs the scripts left).
 `--fresh-processes` runs each script in a process of its own instead. `browser_view` on a machine without JupyterLab,
@@ -54,55 +54,53 @@ HELPERS = {"run_all", "readme_table", "shortcuts"}
 #: machine without them gets a one-line note and exit status 0)
 QUICK_ONLY = {"coldstart", "hostile_probe", "browser_view"}
 #: seconds of each script's --quick run: its CPU time (run_all prints it) in a quick run in the worker processes of
-#: 2026-11-29 (2 cores shared with a load of 7-9), to start the longest first in each worker; a script not listed
-#: counts as 10 s
+#: 2026-11-29 (2 cores shared with a load of 7-9), to start the longest first with `--fresh-processes` (and order
+#: the scripts `QUICK_LANES` does not list); a script not listed counts as 10 s
 QUICK_COST = {
-    "coldstart": 43,
-    "shaping_axis": 37,
-    "fourbar": 28,
+    "shaping_axis": 39,
+    "coldstart": 37,
+    "nonlinear": 25,
     "startup": 24,
-    "throughput": 24,
-    "nonlinear": 23,
-    "shaping": 14,
-    "gpu": 10,
+    "fourbar": 21,
+    "throughput": 17,
+    "shaping": 13,
     "shaping_guarantee": 9,
-    "firmware_shapers": 9,
+    "firmware_shapers": 8,
     "hostile_probe": 7,
-    "spans": 7,
     "threads": 7,
-    "machinery": 5,
+    "gpu": 7,
+    "spans": 6,
     "explore": 4,
-    "identify_coverage": 2,
+    "machinery": 4,
+    "identify_coverage": 1,
     "shaping_every_shaper": 1,
     "browser_view": 0.1,
     "readme_table": 0.1,
 }
 
-#: the worker (lane) of each script in a quick run: the scripts that compile the same programs in one worker, so that
-#: the later ones find them in memory (lane 0: the simulations, the four-bar's tuning and sweeps, the start-up's
-#: closed form; lane 1: the command shaping, and the rest, about as many CPU seconds in all); a script not listed
-#: goes to lane 0
-QUICK_LANE = {
-    "coldstart": 0,
-    "fourbar": 0,
-    "startup": 0,
-    "throughput": 0,
-    "gpu": 0,
-    "shaping_axis": 1,
-    "nonlinear": 1,
-    "shaping": 1,
-    "shaping_guarantee": 1,
-    "firmware_shapers": 1,
-    "hostile_probe": 1,
-    "spans": 1,
-    "explore": 1,
-    "machinery": 1,
-    "threads": 1,
-    "shaping_every_shaper": 1,
-    "identify_coverage": 1,
-    "browser_view": 1,
-    "readme_table": 1,
-}
+#: the two workers' scripts in a quick run, in order: the scripts that compile the same programs in one worker, an
+#: earlier one compiling what a later one finds in memory (measured: `startup` after `throughput` takes 24 s of CPU
+#: time, before it 45 s); worker 0 the simulations (the four-bar's tuning and sweeps, the start-up's closed form),
+#: worker 1 the command shaping and the rest, about as many CPU seconds each. A script not listed goes to the end of
+#: worker 0's list; with `--jobs` other than 2, list k goes to worker k % jobs.
+QUICK_LANES = (
+    ("coldstart", "fourbar", "throughput", "startup", "threads", "gpu"),
+    (
+        "shaping_axis",
+        "shaping_guarantee",
+        "shaping_every_shaper",
+        "firmware_shapers",
+        "nonlinear",
+        "shaping",
+        "hostile_probe",
+        "spans",
+        "machinery",
+        "explore",
+        "identify_coverage",
+        "browser_view",
+        "readme_table",
+    ),
+)
 
 
 def discover() -> list[str]:
@@ -257,12 +255,13 @@ class _Worker:
 
 def _run_in_workers(scripts: list[str], jobs: int, env: dict, timeout: float | None, report) -> None:
     """Run `scripts` (each with `--quick`) in `jobs` worker processes, `report(result)` as each ends. Worker k takes
-    the scripts of lane k % jobs (`QUICK_LANE`; a script not listed goes to lane 0) in the order given, then, its
-    lane done, the last script left in another lane (the shortest, in a longest-first order). A worker that timed
-    out or died is replaced by a fresh one for the scripts left."""
+    its scripts of `QUICK_LANES` in their order (then those listed nowhere, worker 0, in the order of `scripts`),
+    then, its own done, the last script left in the longest other list (its shortest). A worker that timed out or
+    died is replaced by a fresh one for the scripts left."""
     lanes: list[list[str]] = [[] for _ in range(jobs)]
-    for name in scripts:
-        lanes[QUICK_LANE.get(name, 0) % jobs].append(name)
+    for k, listed in enumerate(QUICK_LANES):
+        lanes[k % jobs] += [name for name in listed if name in scripts]
+    lanes[0] += [name for name in scripts if not any(name in listed for listed in QUICK_LANES)]
     lock = threading.Lock()
 
     def take(k: int) -> str | None:

@@ -129,3 +129,14 @@ def test_run_all_quick_survives_a_worker_that_dies_or_hangs(tmp_path, monkeypatc
             break
         time.sleep(0.1)
     assert not running()
+
+
+def test_run_all_quick_places_every_script_once():
+    """Every script of a quick run is in exactly one worker's list (`QUICK_LANES`) and has a measured cost, so that a
+    script added to benchmarks/ is placed on purpose; the two lists hold about as many CPU seconds (within 25 %)."""
+    scripts = set(run_all.quick_scripts())
+    listed = [name for lane in run_all.QUICK_LANES for name in lane]
+    assert sorted(listed) == sorted(scripts)
+    assert set(run_all.QUICK_COST) == scripts
+    cost = [sum(run_all.QUICK_COST[n] for n in lane) for lane in run_all.QUICK_LANES]
+    assert max(cost) <= 1.25 * min(cost), cost
