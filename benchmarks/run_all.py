@@ -11,8 +11,8 @@ Run: `python benchmarks/run_all.py [--quick] [--only startup fourbar] [--jobs N]
 (`_quick_worker.py`, `--jobs`), each running its scripts one after another in itself (as `__main__`, with its own
 `sys.argv`): JAX and jaxbelt are imported once per worker, and a program one script compiled is found in memory by the
 next script of its worker (`QUICK_LANES` puts the scripts that share programs in one worker, in an order where the
-earlier ones compile what the later ones use; a worker whose scripts are done takes the shortest left of the other's). Its
-target is 2 minutes on 2 idle cores: MEASURED_HERE. A script that raises, exits non-zero, kills its worker or runs
+earlier ones compile what the later ones use; a worker whose scripts are done takes the shortest left of the
+other's). Its target is 2 minutes on 2 idle cores: MEASURED_HERE. A script that raises, exits non-zero, kills its worker or runs
 past `--timeout` fails the run (exit status 1, its name and output printed; a fresh worker runs the scripts left).
 `--fresh-processes` runs each script in a process of its own instead. `browser_view` on a machine without JupyterLab,
 selenium or Chromium prints one line saying what is missing and counts as run (it is a check of the browser, not of
@@ -23,8 +23,8 @@ quicker CPU settings (`jaxbelt._xla.FAST_COMPILE_FLAGS`; recorded in each JSON a
 times are slower than the library's (and two scripts share the cores). `--xla-defaults` keeps XLA's defaults; a full
 run always does. `--shared-cache` also turns on JAX's persistent compilation cache in a temporary folder for every
 script and every process a script starts (JAX's environment variables; removed at the end); it is off by default:
-measured on 2026-11-29 in the worker processes, a quick run took 420 s of CPU time with it and 269 s without (the
-cache writes every program it compiles, and the workers already share theirs in memory).
+measured on 2026-11-29 (the same scripts in the worker processes, load 7-9), a quick run took 285 s of CPU time with
+it and 257 s without (the cache writes every program compiled; the workers already share theirs in memory).
 """
 
 from __future__ import annotations
@@ -79,9 +79,9 @@ QUICK_COST = {
 }
 
 #: the two workers' scripts in a quick run, in order: the scripts that compile the same programs in one worker, an
-#: earlier one compiling what a later one finds in memory (measured: `startup` after `throughput` takes 24 s of CPU
-#: time, before it 45 s); worker 0 the simulations (the four-bar's tuning and sweeps, the start-up's closed form),
-#: worker 1 the command shaping and the rest, about as many CPU seconds each. A script not listed goes to the end of
+#: earlier one compiling what a later one finds in memory (`shaping_every_shaper` after the other shaping scripts: 1 s
+#: of CPU time, 12 s in a process of its own); worker 0 the simulations (the four-bar's tuning and sweeps, the
+#: start-up's closed form), worker 1 the command shaping and the rest, about as many CPU seconds each. A script not listed goes to the end of
 #: worker 0's list; with `--jobs` other than 2, list k goes to worker k % jobs.
 QUICK_LANES = (
     ("coldstart", "fourbar", "throughput", "startup", "threads", "gpu"),
@@ -206,7 +206,8 @@ class _Worker:
 
     def run(self, name: str, script: Path, argv: list, timeout: float | None) -> tuple[str, object, float, float, str]:
         """Run one script in the worker; (name, exit status or "timeout" or "worker died (...)", seconds, CPU
-        seconds, its output). A worker past `timeout` is stopped (with what it started); one that died is not used again."""
+        seconds, its output). A worker past `timeout` is stopped (with what it started); one that died is not used
+        again."""
         stdin, stdout = self.proc.stdin, self.proc.stdout
         assert stdin is not None and stdout is not None
         t = time.perf_counter()
@@ -322,7 +323,8 @@ def main(argv=None) -> int:
     p.add_argument(
         "--fresh-processes",
         action="store_true",
-        help="with --quick: each script in a process of its own (default: in --jobs worker processes, one after another)",
+        help="with --quick: each script in a process of its own (default: in --jobs worker processes, one after "
+        "another)",
     )
     p.add_argument(
         "--update",
