@@ -12,7 +12,10 @@ Run: `python benchmarks/run_all.py [--quick] [--only startup fourbar] [--jobs N]
 `sys.argv`): JAX and jaxbelt are imported once per worker, and a program one script compiled is found in memory by the
 next script of its worker (`QUICK_LANES` puts the scripts that share programs in one worker, in an order where the
 earlier ones compile what the later ones use; a worker whose scripts are done takes the shortest left of the
-other's). Its target is 2 minutes on 2 idle cores: MEASURED_HERE. A script that raises, exits non-zero, kills its worker or runs
+other's). Its target is 2 minutes on 2 idle cores: measured on 2026-11-29 with other jobs on the 2 cores (a load of
+about 4-5 besides this run), 154 s and 152 s (208 s and 209 s of CPU time, the two workers about 100 s each); the
+cores were never idle to measure there (before: 211 s and 398 s of CPU time on nearly idle cores, each script in
+a fresh process). A script that raises, exits non-zero, kills its worker or runs
 past `--timeout` fails the run (exit status 1, its name and output printed; a fresh worker runs the scripts left).
 `--fresh-processes` runs each script in a process of its own instead. `browser_view` on a machine without JupyterLab,
 selenium or Chromium prints one line saying what is missing and counts as run (it is a check of the browser, not of
@@ -53,26 +56,26 @@ HELPERS = {"run_all", "readme_table", "shortcuts"}
 #: hostile_probe (not a scene: one case per entry point), browser_view (needs JupyterLab, selenium and Chromium; a
 #: machine without them gets a one-line note and exit status 0)
 QUICK_ONLY = {"coldstart", "hostile_probe", "browser_view"}
-#: seconds of each script's --quick run: its CPU time (run_all prints it) in a quick run in the worker processes of
-#: 2026-11-29 (2 cores shared with a load of 7-9), to start the longest first with `--fresh-processes` (and order
-#: the scripts `QUICK_LANES` does not list); a script not listed counts as 10 s
+#: seconds of each script's --quick run: its CPU time (run_all prints it) in the worker processes, the mean of two
+#: quick runs of 2026-11-29 (2 cores shared with a load of about 4-5), to start the longest first with
+#: `--fresh-processes` (and order the scripts `QUICK_LANES` does not list); a script not listed counts as 10 s
 QUICK_COST = {
-    "shaping_axis": 39,
-    "coldstart": 37,
-    "nonlinear": 25,
-    "startup": 24,
-    "fourbar": 21,
-    "throughput": 17,
-    "shaping": 13,
-    "shaping_guarantee": 9,
+    "coldstart": 32,
+    "shaping_axis": 31,
+    "nonlinear": 21,
+    "startup": 19,
+    "fourbar": 18,
+    "throughput": 13,
+    "shaping": 12,
     "firmware_shapers": 8,
     "hostile_probe": 7,
+    "shaping_guarantee": 7,
     "threads": 7,
-    "gpu": 7,
+    "gpu": 6,
     "spans": 6,
+    "machinery": 5,
     "explore": 4,
-    "machinery": 4,
-    "identify_coverage": 1,
+    "identify_coverage": 3,
     "shaping_every_shaper": 1,
     "browser_view": 0.1,
     "readme_table": 0.1,
