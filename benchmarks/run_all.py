@@ -206,32 +206,46 @@ class _Worker:
             text=True,
             start_new_session=True,
         )
+        self.ready = False
+
+    def _readline(self, timeout: float | None) -> str | None:
+        """The worker's next answer line ("" at its end), or None when none came within `timeout` seconds."""
+        stdout = self.proc.stdout
+        assert stdout is not None
+        answer: list = []
+        reader = threading.Thread(target=lambda: answer.append(stdout.readline()), daemon=True)
+        reader.start()
+        reader.join(timeout)
+        return None if reader.is_alive() else answer[0]
 
     def run(self, name: str, script: Path, argv: list, timeout: float | None) -> tuple[str, object, float, float, str]:
         """Run one script in the worker; (name, exit status or "timeout" or "worker died (...)", seconds, CPU
         seconds, its output). A worker past `timeout` is stopped (with what it started); one that died is not used
         again."""
-        stdin, stdout = self.proc.stdin, self.proc.stdout
-        assert stdin is not None and stdout is not None
+        stdin = self.proc.stdin
+        assert stdin is not None
+        if not self.ready:  # the worker's own start (its imports) is not the script's time: up to 600 s for it
+            line = self._readline(600.0)
+            if not line or not line.strip():
+                self.stop()
+                return name, f"worker died ({self.proc.returncode}) before it started", 0.0, float("nan"), ""
+            self.ready = True
         t = time.perf_counter()
         with tempfile.NamedTemporaryFile("r", prefix=f"jaxbelt-quick-{name}-", suffix=".txt") as out:
-            answer: list = []
-            reader = threading.Thread(target=lambda: answer.append(stdout.readline()), daemon=True)
             try:
                 stdin.write(json.dumps({"script": str(script), "argv": argv, "out": out.name}) + "\n")
                 stdin.flush()
             except OSError:
                 pass  # a dead worker: its empty answer says so below
-            reader.start()
-            reader.join(timeout)
+            line = self._readline(timeout)
             text = out.read()
-            if reader.is_alive():
+            if line is None:
                 self.stop()
                 return name, "timeout", time.perf_counter() - t, float("nan"), text
-            if not answer or not answer[0].strip():
+            if not line.strip():
                 self.stop()
                 return name, f"worker died ({self.proc.returncode})", time.perf_counter() - t, float("nan"), text
-            res = json.loads(answer[0])
+            res = json.loads(line)
             return name, res["rc"], res["wall_s"], res["cpu_s"], text
 
     def alive(self) -> bool:
