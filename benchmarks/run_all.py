@@ -12,11 +12,11 @@ Run: `python benchmarks/run_all.py [--quick] [--only startup fourbar] [--jobs N]
 `sys.argv`): JAX and jaxbelt are imported once per worker, and a program one script compiled is found in memory by the
 next script of its worker (`QUICK_LANES` puts the scripts that share programs in one worker, in an order where the
 earlier ones compile what the later ones use; a worker whose scripts are done takes the shortest left of the
-other's). Its target is 2 minutes on 2 idle cores: measured on 2026-11-29 with other jobs on the 2 cores (a load of
-about 4-5 besides this run), 154 s and 152 s (208 s and 209 s of CPU time, the two workers about 100 s each); the
-cores were never idle to measure there (before: 211 s and 398 s of CPU time on nearly idle cores, each script in
-a fresh process). A script that raises, exits non-zero, kills its worker or runs
-past `--timeout` fails the run (exit status 1, its name and output printed; a fresh worker runs the scripts left).
+other's). Its target is 2 minutes on 2 idle cores: measured on 2026-11-29 with the cores nearly idle besides the run
+(1-minute load 1.7 and 1.3 at the start), 113 s and 95 s (193 s and 183 s of CPU time, the two workers about 95 s
+each); with other jobs on the cores (a load of 4-5 besides the run) 154 s and 152 s (208 s and 209 s of CPU time).
+Before: 211 s and 398 s of CPU time on nearly idle cores, each script in a fresh process. A script that raises,
+exits non-zero, kills its worker or runs past `--timeout` fails the run (exit status 1, its name and output printed; a fresh worker runs the scripts left).
 `--fresh-processes` runs each script in a process of its own instead. `browser_view` on a machine without JupyterLab,
 selenium or Chromium prints one line saying what is missing and counts as run (it is a check of the browser, not of
 jaxbelt). A quick run's figures go to the git-ignored scratch folder `benchmarks/results/quick/` and leave the
