@@ -11,8 +11,8 @@ them); after each script the objects left are frozen out of the garbage collecto
 worker's growing heap does not slow the next script's collections. What a script registers with `atexit` runs when
 its worker ends.
 
-Protocol (one JSON object per line): the worker says `{"ready": true}` once started; then run_all writes `{"script": path, "argv": [...], "out": file}` on the worker's
-standard input; the worker runs the script with its standard output and error (file descriptors 1 and 2, so that
+Protocol (one JSON object per line): the worker says `{"ready": true}` once started; then run_all writes
+`{"script": path, "argv": [...], "out": file}` on the worker's standard input; the worker runs the script with its standard output and error (file descriptors 1 and 2, so that
 what the processes it starts print is caught too) sent to `out`, and answers on its own standard output
 `{"rc": int, "wall_s": float, "cpu_s": float}`: `rc` 0 when the script returned or called `sys.exit(0)`, its
 exit status, or 1 when it raised (the traceback is in `out`). `cpu_s` is this process's CPU time (user + system)

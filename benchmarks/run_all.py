@@ -16,8 +16,8 @@ other's). Its target is 2 minutes on 2 idle cores: measured on 2026-11-29 with t
 (1-minute load 1.7 and 1.3 at the start), 113 s and 95 s (193 s and 183 s of CPU time, the two workers about 95 s
 each); with other jobs on the cores (a load of 4-5 besides the run) 154 s and 152 s (208 s and 209 s of CPU time).
 Before: 211 s and 398 s of CPU time on nearly idle cores, each script in a fresh process. A script that raises,
-exits non-zero, kills its worker or runs past `--timeout` fails the run (exit status 1, its name and output printed; a fresh worker runs the scripts left).
-`--fresh-processes` runs each script in a process of its own instead. `browser_view` on a machine without JupyterLab,
+exits non-zero, kills its worker or runs past `--timeout` fails the run (exit status 1, its name and output printed;
+a fresh worker runs the scripts left). `--fresh-processes` runs each script in a process of its own instead. `browser_view` on a machine without JupyterLab,
 selenium or Chromium prints one line saying what is missing and counts as run (it is a check of the browser, not of
 jaxbelt). A quick run's figures go to the git-ignored scratch folder `benchmarks/results/quick/` and leave the
 committed results and the README table alone; `--update` writes them over the committed ones (and regenerates the
@@ -84,8 +84,8 @@ QUICK_COST = {
 #: the two workers' scripts in a quick run, in order: the scripts that compile the same programs in one worker, an
 #: earlier one compiling what a later one finds in memory (`shaping_every_shaper` after the other shaping scripts: 1 s
 #: of CPU time, 12 s in a process of its own); worker 0 the simulations (the four-bar's tuning and sweeps, the
-#: start-up's closed form), worker 1 the command shaping and the rest, about as many CPU seconds each. A script not listed goes to the end of
-#: worker 0's list; with `--jobs` other than 2, list k goes to worker k % jobs.
+#: start-up's closed form), worker 1 the command shaping and the rest, about as many CPU seconds each. A script not
+#: listed goes to the end of worker 0's list; with `--jobs` other than 2, list k goes to worker k % jobs.
 QUICK_LANES = (
     ("coldstart", "fourbar", "throughput", "startup", "threads", "gpu"),
     (
