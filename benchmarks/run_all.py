@@ -11,23 +11,23 @@ Run: `python benchmarks/run_all.py [--quick] [--only startup fourbar] [--jobs N]
 (`_quick_worker.py`, `--jobs`), each running its scripts one after another in itself (as `__main__`, with its own
 `sys.argv`): JAX and jaxbelt are imported once per worker, and a program one script compiled is found in memory by the
 next script of its worker (`QUICK_LANES` puts the scripts that share programs in one worker, in an order where the
-earlier ones compile what the later ones use; a worker whose scripts are done takes the shortest left of the
-other's). Its target is 2 minutes on 2 idle cores: measured on 2026-11-29 with the cores nearly idle besides the run
-(1-minute load 1.7 and 1.3 at the start), 113 s and 95 s (193 s and 183 s of CPU time, the two workers about 95 s
-each); with other jobs on the cores (a load of 4-5 besides the run) 154 s and 152 s (208 s and 209 s of CPU time).
-Before: 211 s and 398 s of CPU time on nearly idle cores, each script in a fresh process. A script that raises,
-exits non-zero, kills its worker or runs past `--timeout` fails the run (exit status 1, its name and output printed;
-a fresh worker runs the scripts left). `--fresh-processes` runs each script in a process of its own instead. `browser_view` on a machine without JupyterLab,
-selenium or Chromium prints one line saying what is missing and counts as run (it is a check of the browser, not of
-jaxbelt). A quick run's figures go to the git-ignored scratch folder `benchmarks/results/quick/` and leave the
+earlier ones compile what the later ones use; a worker whose scripts are done takes the shortest left of the other's).
+Its target is 2 minutes on 2 idle cores: measured on 2026-11-29 with the cores nearly idle besides the run (1-minute
+load 1.7 and 1.3 at the start), 113 s and 95 s (193 s and 183 s of CPU time, the two workers about 95 s each); with
+other jobs on the cores (a load of 4-5 besides the run) 154 s and 152 s (208 s and 209 s of CPU time). Before: 211 s and
+398 s of CPU time on nearly idle cores, each script in a fresh process. A script that raises, exits non-zero, kills its
+worker or runs past `--timeout` fails the run (exit status 1, its name and output printed; a fresh worker runs the
+scripts left). `--fresh-processes` runs each script in a process of its own instead. `browser_view` on a machine without
+JupyterLab, selenium or Chromium prints one line saying what is missing and counts as run (it is a check of the browser,
+not of jaxbelt). A quick run's figures go to the git-ignored scratch folder `benchmarks/results/quick/` and leave the
 committed results and the README table alone; `--update` writes them over the committed ones (and regenerates the
 table). A quick run checks that every benchmark works, and most of its time is XLA compiling: it compiles with XLA's
-quicker CPU settings (`jaxbelt._xla.FAST_COMPILE_FLAGS`; recorded in each JSON as `machine.xla_flags`), so its run
-times are slower than the library's (and two scripts share the cores). `--xla-defaults` keeps XLA's defaults; a full
-run always does. `--shared-cache` also turns on JAX's persistent compilation cache in a temporary folder for every
-script and every process a script starts (JAX's environment variables; removed at the end); it is off by default:
-measured on 2026-11-29 (the same scripts in the worker processes, load 7-9), a quick run took 285 s of CPU time with
-it and 257 s without (the cache writes every program compiled; the workers already share theirs in memory).
+quicker CPU settings (`jaxbelt._xla.FAST_COMPILE_FLAGS`; recorded in each JSON as `machine.xla_flags`), so its run times
+are slower than the library's (and two scripts share the cores). `--xla-defaults` keeps XLA's defaults; a full run
+always does. `--shared-cache` also turns on JAX's persistent compilation cache in a temporary folder for every script
+and every process a script starts (JAX's environment variables; removed at the end); it is off by default: measured on
+2026-11-29 (the same scripts in the worker processes, load 7-9), a quick run took 285 s of CPU time with it and 257 s
+without (the cache writes every program compiled; the workers already share theirs in memory).
 """
 
 from __future__ import annotations
