@@ -14,11 +14,11 @@ its worker ends.
 Protocol (one JSON object per line): the worker says `{"ready": true}` once started; then run_all writes
 `{"script": path, "argv": [...], "out": file}` on the worker's standard input; the worker runs the script with its
 standard output and error (file descriptors 1 and 2, so that what the processes it starts print is caught too) sent
-to `out`, and answers on its own standard output `{"rc": int, "wall_s": float, "cpu_s": float}`: `rc` 0 when the script returned or
-called `sys.exit(0)`, its exit status, or 1 when it raised (the traceback is in `out`). `cpu_s` is this process's CPU
-time (user + system) during the script, with that of the processes it started and waited for. An empty line or end of
-input ends the worker. run_all stops a worker that runs past its time limit (it starts a fresh one for the scripts
-left).
+to `out`, and answers on its own standard output `{"rc": int, "wall_s": float, "cpu_s": float}`: `rc` 0 when the
+script returned or called `sys.exit(0)`, its exit status, or 1 when it raised (the traceback is in `out`). `cpu_s` is
+this process's CPU time (user + system) during the script, with that of the processes it started and waited for. An
+empty line or end of input ends the worker. run_all stops a worker that runs past its time limit (it starts a fresh
+one for the scripts left).
 """
 
 from __future__ import annotations
