@@ -68,9 +68,10 @@ def time_jax(fn, *args, repeats: int = 7, min_time: float = 0.05):
     return float(np.median(samples)), float(compile_s), out
 
 
-def time_py(fn, *args, repeats: int = 5, min_time: float = 0.0):
-    """Median wall time [s] of a plain Python callable (e.g. scipy); returns (median_s, output)."""
-    out = fn(*args)
+def time_py(fn, *args, repeats: int = 5, min_time: float = 0.0, warm_up: bool = True):
+    """Median wall time [s] of a plain Python callable (e.g. scipy); returns (median_s, output). One call before the
+    timed ones unless `warm_up` is False (a quick run's check of a slow reference)."""
+    out = fn(*args) if warm_up else None
     samples = []
     for _ in range(repeats):
         t = time.perf_counter()

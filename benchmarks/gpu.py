@@ -17,7 +17,8 @@ be reset), and so does each first call. Writes `benchmarks/results/gpu.json` and
 - **`design_move`** (2 modes) and **`tune_pid`** (3 steps): first call in a fresh process (compilation included,
   no cache) and the warm call after it.
 
-`--quick`: small sizes (the suite's check of this script on a CPU), every section in one process.
+`--quick`: small sizes (the suite's check of this script on a CPU), every section of the default backend in this
+process (and those of the CPU beside a GPU in one fresh process).
 """
 
 from __future__ import annotations
@@ -174,12 +175,35 @@ def _run_in_one_process(jobs: list[tuple[str, tuple]], platform: str | None) -> 
     return found + [{"error": tail}] * (len(jobs) - len(found))
 
 
+def _run_here(jobs: list[tuple[str, tuple]]) -> list[dict]:
+    """Run each (code, args) of `jobs` in turn in this process (a quick run on the default backend: no fresh process);
+    one result per job. A job that raises or prints no result fails the run (a quick run checks the script)."""
+    import contextlib
+    import io
+
+    found, argv = [], sys.argv
+    for code, args in jobs:
+        buf = io.StringIO()
+        try:
+            sys.argv = ["-c", *map(str, args)]
+            with contextlib.redirect_stdout(buf):
+                exec(compile(code, "<gpu benchmark section>", "exec"), {"__name__": "__main__"})
+        finally:
+            sys.argv = argv
+        lines = [ln for ln in buf.getvalue().splitlines() if ln.startswith("RESULT ")]
+        if not lines:
+            raise RuntimeError(f"gpu: a section printed no result; its output: {buf.getvalue()[-2000:]}")
+        found.append(json.loads(lines[-1][len("RESULT ") :]))
+    return found
+
+
 def section(platform: str | None, quick: bool, repeats: int) -> dict:
     if quick:  # one process: the backend, a batch of 1000 (first, so that its memory peak is its own), a sweep of 64
         batches, sweeps = [(1000, False)], [64]
-        info, batch, sweep = _run_in_one_process(
-            [(INFO, ()), (BATCH, (1000, 0, repeats)), (SWEEP, (64, repeats))], platform
-        )
+        jobs = [(INFO, ()), (BATCH, (1000, 0, repeats)), (SWEEP, (64, repeats))]
+        # the default backend in this process (a quick run's check of the code; its memory peaks are not its own),
+        # another backend in a fresh one
+        info, batch, sweep = _run_here(jobs) if platform is None else _run_in_one_process(jobs, platform)
         done = {("batch", 1000): batch, ("sweep", 64): sweep}
     else:
         info, done = _backend_info(platform), {}
@@ -218,8 +242,10 @@ def section(platform: str | None, quick: bool, repeats: int) -> dict:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--quick", action="store_true", help="small sizes (a check of the script)")
-    parser.add_argument("--repeats", type=int, default=5)
+    parser.add_argument("--repeats", type=int, default=None, help="timed runs of each call (default 5; quick: 1)")
     args = parser.parse_args()
+    if args.repeats is None:
+        args.repeats = 1 if args.quick else 5
     default = section(None, args.quick, args.repeats)
     sections = {default.get("backend", "?"): default}
     if default.get("backend") not in (None, "cpu"):

@@ -11,7 +11,7 @@
    tolerances.
 
 Run: `python benchmarks/nonlinear.py [--quick]`; writes benchmarks/results/nonlinear.{json,png}. `--quick` (a check of
-the script): one mode, 8 speeds, one speed against a scipy reference at rtol 1e-9, jaxbelt at its defaults and at
+the script): one mode, 8 speeds, one speed against a scipy reference at rtol 1e-7, jaxbelt at its defaults and at
 rtol 1e-6 with 128 steps per period, scipy at rtol 1e-5 only, one repeat of each timing.
 """
 
@@ -146,10 +146,11 @@ def main(argv=None):
     check = [9.0] if quick else [8.0, 9.0, 9.6, 10.5]
     belt = jb.NonlinearBelt(damping=XI, n_modes=1, sensor_pulley="drive")
     refs = {}
-    ref_rtol = 1e-9 if quick else 1e-11
+    ref_rtol = 1e-7 if quick else 1e-11
     for s in check:
         t0 = time.perf_counter()
-        # quick: a reference at rtol 1e-9, still 100x below the error it judges (1e-3 at the defaults)
+        # quick: a reference at rtol 1e-7 (a check of the script: 8x fewer evaluations than 1e-9), still about 100x
+        # below the error it judges at the defaults (2.6e-5 measured)
         refs[s], nfev = scipy_pp(belt, s, ref_rtol, ref_rtol * 1e-3)
         print(
             f"scipy reference at {s} m/s: pp {refs[s] * 1e3:.6f} mm ({nfev} evaluations, {time.perf_counter() - t0:.1f} s)"
@@ -179,7 +180,9 @@ def main(argv=None):
         )
         print(f"jaxbelt rtol={rtol:g} steps/period={steps}: error {err:.2e}, {med:.3f} s for {len(check)} speeds")
     for rtol in (1e-5,) if quick else (1e-5, 1e-7):
-        med, out = time_py(lambda r=rtol: [scipy_pp(belt, s, r, r * 1e-3)[0] for s in check], repeats=1)
+        med, out = time_py(
+            lambda r=rtol: [scipy_pp(belt, s, r, r * 1e-3)[0] for s in check], repeats=1, warm_up=not quick
+        )
         err = max(abs(out[i] / refs[s] - 1) for i, s in enumerate(check))
         rows.append(
             {

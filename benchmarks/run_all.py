@@ -7,27 +7,36 @@ scene's compile caches and memory do not affect the next), and finally calls
 
 Run: `python benchmarks/run_all.py [--quick] [--only startup fourbar] [--jobs N]` (also `jaxbelt bench`).
 `--quick` is the CI size: it runs *every* script here with `--quick` (the scenes, `coldstart`, `hostile_probe`,
-`browser_view` and `readme_table --quick`, which prints the tables), two at a time, longest first. Its target is
-2 minutes on 2 idle cores, not met yet: measured on 2026-11-29, 211 s on 2 nearly idle cores (398 s of CPU time in
-all; 883 s with other jobs on the cores), most of it XLA compiling and each script's imports (`QUICK_COST`). A script that fails
-or runs past `--timeout` fails the run (exit status 1, its name and output printed). `browser_view` on a machine without JupyterLab, selenium or Chromium
-prints one line saying what is missing and counts as run (it is a check of the browser, not of jaxbelt).
-A quick run's figures go to the git-ignored scratch folder `benchmarks/results/quick/` and leave the committed
-results and the README table alone; `--update` writes them over the committed ones (and regenerates the table).
-A quick run checks that every benchmark works, and most of its time is XLA compiling: it compiles
-with XLA's quicker CPU settings (`jaxbelt._xla.FAST_COMPILE_FLAGS`; recorded in each JSON as
-`machine.xla_flags`), so its run times are slower than the library's (and two scripts share the cores).
-`--xla-defaults` keeps XLA's defaults; a full run always does. A quick run's scripts also share the programs they
-compile: JAX's persistent compilation cache in a temporary folder (removed at the end), set through JAX's environment
-variables for every script and every process a script starts, so that a program one of them compiled is loaded by
-the others (`--no-shared-cache`: each process compiles its own, as a user's first run does).
+`browser_view` and `readme_table --quick`, which prints the tables) in two long-lived worker processes
+(`_quick_worker.py`, `--jobs`), each running its scripts one after another in itself (as `__main__`, with its own
+`sys.argv`): JAX and jaxbelt are imported once per worker, and a program one script compiled is found in memory by the
+next script of its worker (`QUICK_LANES` puts the scripts that share programs in one worker, in an order where the
+earlier ones compile what the later ones use; a worker whose scripts are done takes the shortest left of the other's).
+Its target is 2 minutes on 2 idle cores: measured on 2026-11-29 with the cores nearly idle besides the run (1-minute
+load 1.7 and 1.3 at the start), 113 s and 95 s (193 s and 183 s of CPU time, the two workers about 95 s each); with
+other jobs on the cores (a load of 4-5 besides the run) 154 s and 152 s (208 s and 209 s of CPU time). Before: 211 s and
+398 s of CPU time on nearly idle cores, each script in a fresh process. A script that raises, exits non-zero, kills its
+worker or runs past `--timeout` fails the run (exit status 1, its name and output printed; a fresh worker runs the
+scripts left). `--fresh-processes` runs each script in a process of its own instead. `browser_view` on a machine without
+JupyterLab, selenium or Chromium prints one line saying what is missing and counts as run (it is a check of the browser,
+not of jaxbelt). A quick run's figures go to the git-ignored scratch folder `benchmarks/results/quick/` and leave the
+committed results and the README table alone; `--update` writes them over the committed ones (and regenerates the
+table). A quick run checks that every benchmark works, and most of its time is XLA compiling: it compiles with XLA's
+quicker CPU settings (`jaxbelt._xla.FAST_COMPILE_FLAGS`; recorded in each JSON as `machine.xla_flags`), so its run times
+are slower than the library's (and two scripts share the cores). `--xla-defaults` keeps XLA's defaults; a full run
+always does. `--shared-cache` also turns on JAX's persistent compilation cache in a temporary folder for every script
+and every process a script starts (JAX's environment variables; removed at the end); it is off by default: measured on
+2026-11-29 (the same scripts in the worker processes, load 7-9), a quick run took 285 s of CPU time with it and 257 s
+without (the cache writes every program compiled; the workers already share theirs in memory).
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import tempfile
@@ -47,30 +56,54 @@ HELPERS = {"run_all", "readme_table", "shortcuts"}
 #: hostile_probe (not a scene: one case per entry point), browser_view (needs JupyterLab, selenium and Chromium; a
 #: machine without them gets a one-line note and exit status 0)
 QUICK_ONLY = {"coldstart", "hostile_probe", "browser_view"}
-#: seconds of each script's --quick run: its CPU time (run_all prints it) in a quick run of 2026-11-29 (883 s wall,
-#: 404 s of CPU time, 2 cores shared with a load of about 6), to start the longest first so that no long script
-#: starts last; a script not listed counts as 10 s
+#: seconds of each script's --quick run: its CPU time (run_all prints it) in the worker processes, the mean of two
+#: quick runs of 2026-11-29 (2 cores shared with a load of about 4-5), to start the longest first with
+#: `--fresh-processes` (and order the scripts `QUICK_LANES` does not list); a script not listed counts as 10 s
 QUICK_COST = {
-    "coldstart": 59,
-    "shaping_axis": 44,
-    "fourbar": 36,
-    "nonlinear": 36,
-    "throughput": 36,
-    "startup": 33,
-    "shaping_guarantee": 22,
-    "shaping": 20,
-    "threads": 20,
-    "gpu": 17,
-    "firmware_shapers": 14,
-    "hostile_probe": 14,
-    "machinery": 14,
-    "shaping_every_shaper": 11,
-    "explore": 10,
-    "spans": 10,
-    "identify_coverage": 5,
-    "browser_view": 1,
-    "readme_table": 1,
+    "coldstart": 32,
+    "shaping_axis": 31,
+    "nonlinear": 21,
+    "startup": 19,
+    "fourbar": 18,
+    "throughput": 13,
+    "shaping": 12,
+    "firmware_shapers": 8,
+    "hostile_probe": 7,
+    "shaping_guarantee": 7,
+    "threads": 7,
+    "gpu": 6,
+    "spans": 6,
+    "machinery": 5,
+    "explore": 4,
+    "identify_coverage": 3,
+    "shaping_every_shaper": 1,
+    "browser_view": 0.1,
+    "readme_table": 0.1,
 }
+
+#: the two workers' scripts in a quick run, in order: the scripts that compile the same programs in one worker, an
+#: earlier one compiling what a later one finds in memory (`shaping_every_shaper` after the other shaping scripts: 1 s
+#: of CPU time, 12 s in a process of its own); worker 0 the simulations (the four-bar's tuning and sweeps, the
+#: start-up's closed form), worker 1 the command shaping and the rest, about as many CPU seconds each. A script not
+#: listed goes to the end of worker 0's list; with `--jobs` other than 2, list k goes to worker k % jobs.
+QUICK_LANES = (
+    ("coldstart", "fourbar", "throughput", "startup", "threads", "gpu"),
+    (
+        "shaping_axis",
+        "shaping_guarantee",
+        "shaping_every_shaper",
+        "firmware_shapers",
+        "nonlinear",
+        "shaping",
+        "hostile_probe",
+        "spans",
+        "machinery",
+        "explore",
+        "identify_coverage",
+        "browser_view",
+        "readme_table",
+    ),
+)
 
 
 def discover() -> list[str]:
@@ -157,6 +190,128 @@ def _run_script(name: str, quick: bool, env: dict, timeout: float | None) -> tup
     return name, rc, time.perf_counter() - t, usage.ru_utime + usage.ru_stime, out
 
 
+WORKER = Path(__file__).resolve().parent / "_quick_worker.py"
+
+
+class _Worker:
+    """A `_quick_worker.py` process (in a session of its own, so that stopping it stops what it started too)."""
+
+    def __init__(self, env: dict, cwd: Path):
+        self.proc = subprocess.Popen(
+            [sys.executable, str(WORKER)],
+            cwd=cwd,
+            env=env,
+            stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE,
+            text=True,
+            start_new_session=True,
+        )
+        self.ready = False
+
+    def _readline(self, timeout: float | None) -> str | None:
+        """The worker's next answer line ("" at its end), or None when none came within `timeout` seconds."""
+        stdout = self.proc.stdout
+        assert stdout is not None
+        answer: list = []
+        reader = threading.Thread(target=lambda: answer.append(stdout.readline()), daemon=True)
+        reader.start()
+        reader.join(timeout)
+        return None if reader.is_alive() else answer[0]
+
+    def run(self, name: str, script: Path, argv: list, timeout: float | None) -> tuple[str, object, float, float, str]:
+        """Run one script in the worker; (name, exit status or "timeout" or "worker died (...)", seconds, CPU
+        seconds, its output). A worker past `timeout` is stopped (with what it started); one that died is not used
+        again."""
+        stdin = self.proc.stdin
+        assert stdin is not None
+        if not self.ready:  # the worker's own start (its imports) is not the script's time: up to 600 s for it
+            line = self._readline(600.0)
+            if not line or not line.strip():
+                self.stop()
+                return name, f"worker died ({self.proc.returncode}) before it started", 0.0, float("nan"), ""
+            self.ready = True
+        t = time.perf_counter()
+        with tempfile.NamedTemporaryFile("r", prefix=f"jaxbelt-quick-{name}-", suffix=".txt") as out:
+            try:
+                stdin.write(json.dumps({"script": str(script), "argv": argv, "out": out.name}) + "\n")
+                stdin.flush()
+            except OSError:
+                pass  # a dead worker: its empty answer says so below
+            line = self._readline(timeout)
+            text = out.read()
+            if line is None:
+                self.stop()
+                return name, "timeout", time.perf_counter() - t, float("nan"), text
+            if not line.strip():
+                self.stop()
+                return name, f"worker died ({self.proc.returncode})", time.perf_counter() - t, float("nan"), text
+            res = json.loads(line)
+            return name, res["rc"], res["wall_s"], res["cpu_s"], text
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def stop(self) -> None:
+        """End the worker and the processes it started (its whole session), and wait for it."""
+        if self.proc.poll() is None:
+            try:
+                os.killpg(self.proc.pid, signal.SIGKILL)
+            except (ProcessLookupError, PermissionError):
+                self.proc.kill()
+        self.proc.wait()
+
+    def close(self) -> None:
+        """Ask the worker to end (an empty line), stop it if it does not within 60 s."""
+        try:
+            assert self.proc.stdin is not None
+            self.proc.stdin.write("\n")
+            self.proc.stdin.close()
+            self.proc.wait(60)
+        except (OSError, subprocess.TimeoutExpired):
+            self.stop()
+
+
+def _run_in_workers(scripts: list[str], jobs: int, env: dict, timeout: float | None, report) -> None:
+    """Run `scripts` (each with `--quick`) in `jobs` worker processes, `report(result)` as each ends. Worker k takes
+    its scripts of `QUICK_LANES` in their order (then those listed nowhere, worker 0, in the order of `scripts`),
+    then, its own done, the last script left in the longest other list (its shortest). A worker that timed out or
+    died is replaced by a fresh one for the scripts left."""
+    lanes: list[list[str]] = [[] for _ in range(jobs)]
+    for k, listed in enumerate(QUICK_LANES):
+        lanes[k % jobs] += [name for name in listed if name in scripts]
+    lanes[0] += [name for name in scripts if not any(name in listed for listed in QUICK_LANES)]
+    lock = threading.Lock()
+
+    def take(k: int) -> str | None:
+        with lock:
+            if lanes[k]:
+                return lanes[k].pop(0)
+            others = [lane for lane in lanes if lane]
+            return max(others, key=len).pop() if others else None
+
+    def lane(k: int):
+        worker = None
+        try:
+            while True:
+                name = take(k)
+                if name is None:
+                    return
+                if worker is None or not worker.alive():
+                    worker = _Worker(env, HERE.parent)
+                res = worker.run(name, HERE / f"{name}.py", ["--quick"], timeout)
+                with lock:
+                    report(res)
+        finally:
+            if worker is not None:
+                worker.close()
+
+    threads = [threading.Thread(target=lane, args=(k,)) for k in range(jobs)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true", help="every script, CI-sized (target: 2 minutes on 2 idle cores)")
@@ -176,9 +331,17 @@ def main(argv=None) -> int:
         help="with --quick: compile with XLA's default settings (default: its quicker CPU compilation)",
     )
     p.add_argument(
-        "--no-shared-cache",
+        "--shared-cache",
         action="store_true",
-        help="with --quick: no compilation cache shared by the scripts (default: a temporary one)",
+        help="with --quick: a temporary persistent compilation cache shared by the scripts and the processes they "
+        "start (default: none; measured slower, see above)",
+    )
+    p.add_argument("--no-shared-cache", action="store_true", help="with --quick: no shared cache (the default)")
+    p.add_argument(
+        "--fresh-processes",
+        action="store_true",
+        help="with --quick: each script in a process of its own (default: in --jobs worker processes, one after "
+        "another)",
     )
     p.add_argument(
         "--update",
@@ -218,23 +381,34 @@ def main(argv=None) -> int:
         if flags is not None:
             env["XLA_FLAGS"] = flags
             print(f"run_all: quick run compiled with XLA_FLAGS={flags} (run times slower than the library's)")
-    shared = tempfile.mkdtemp(prefix="jaxbelt-quick-cache-") if args.quick and not args.no_shared_cache else None
+    shared = (
+        tempfile.mkdtemp(prefix="jaxbelt-quick-cache-")
+        if args.quick and args.shared_cache and not args.no_shared_cache
+        else None
+    )
     if shared is not None:
         env.update(shared_cache_env(shared))
         print(f"run_all: the scripts share compiled programs through a temporary cache folder {shared}")
     print(f"run_all: {len(scenes)} script(s), {jobs} at a time: {' '.join(scenes)}", flush=True)
+
     # each script's output is printed in one block when it ends (scripts running at once do not interleave)
+    def report(result) -> None:
+        name, rc, dt, cpu_s, out = result
+        print(f"=== {name}{' --quick' if args.quick else ''}", flush=True)
+        print(out.rstrip("\n"), flush=True)
+        status = "ok" if rc == 0 else f"FAILED ({rc})"
+        print(f"=== {name}: {status} in {dt:.1f} s ({cpu_s:.1f} s of CPU time)", flush=True)
+        if rc != 0:
+            failed.append(name)
+
     try:
-        with ThreadPoolExecutor(max_workers=jobs) as pool:
-            futures = [pool.submit(_run_script, s, args.quick, env, args.timeout) for s in scenes]
-            for fut in as_completed(futures):
-                name, rc, dt, cpu_s, out = fut.result()
-                print(f"=== {name}{' --quick' if args.quick else ''}", flush=True)
-                print(out.rstrip("\n"), flush=True)
-                status = "ok" if rc == 0 else f"FAILED ({rc})"
-                print(f"=== {name}: {status} in {dt:.1f} s ({cpu_s:.1f} s of CPU time)", flush=True)
-                if rc != 0:
-                    failed.append(name)
+        if args.quick and not args.fresh_processes:
+            _run_in_workers(scenes, jobs, env, args.timeout, report)
+        else:
+            with ThreadPoolExecutor(max_workers=jobs) as pool:
+                futures = [pool.submit(_run_script, s, args.quick, env, args.timeout) for s in scenes]
+                for fut in as_completed(futures):
+                    report(fut.result())
     finally:
         if shared is not None:
             shutil.rmtree(shared, ignore_errors=True)

@@ -4,6 +4,7 @@ import importlib
 import json
 import os
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -57,3 +58,85 @@ def test_hostile_probe_quick_takes_the_fastest_case_of_each_entry_point(tmp_path
     quick = hp.quick_cases(every)
     assert len({c.entry for c in quick}) == len(quick)
     assert {c.entry for c in quick} == {c.entry for c in every} - set(hp.NEEDS_DESIGN)
+
+
+def _fake_benchmarks(tmp_path, scripts: dict) -> Path:
+    """A benchmarks folder of `scripts` (name: code) for run_all to run, beside an empty jaxbelt."""
+    (tmp_path / "jaxbelt").mkdir()
+    (tmp_path / "jaxbelt" / "__init__.py").write_text("")
+    bench = tmp_path / "benchmarks"
+    bench.mkdir()
+    for name, code in scripts.items():
+        (bench / f"{name}.py").write_text(code)
+    return bench
+
+
+def test_run_all_quick_fails_with_the_failing_scripts_names_and_isolates_the_scripts(tmp_path, monkeypatch, capsys):
+    """The quick run's scripts share a worker process: one that raises or exits non-zero fails the run (exit status
+    1, its name in the last line), the scripts after it still run, and what a script changes in the process (an
+    environment variable, the working folder, `sys.argv`) is put back for the next one."""
+    bench = _fake_benchmarks(
+        tmp_path,
+        {
+            "a_changes": "import os, sys\nos.environ['QUICK_LEAK'] = '1'\nos.chdir('/')\nsys.argv.append('x')\n",
+            "b_raises": "raise ValueError('b_raises broke on purpose')\n",
+            "c_exits": "import sys\nsys.exit(3)\n",
+            "d_checks": "import os, sys\nprint('SEES', os.environ.get('QUICK_LEAK'), os.getcwd(), sys.argv[1:])\n",
+        },
+    )
+    monkeypatch.setattr(run_all, "HERE", bench)
+    rc = run_all.main(["--quick", "--xla-defaults", "--no-shared-cache", "--jobs", "1", "--timeout", "120"])
+    out, err = capsys.readouterr()
+    assert rc == 1
+    assert "2/4 benchmarks ran" in err and err.rstrip().endswith("FAILED: b_raises c_exits (their output is above)")
+    assert "ValueError: b_raises broke on purpose" in out  # the traceback is in the script's output block
+    assert "=== c_exits: FAILED (3)" in out
+    assert f"SEES None {tmp_path} ['--quick']" in out
+
+
+@pytest.mark.slow  # three worker processes start (JAX imported in each) and one script runs into its 8 s limit
+def test_run_all_quick_survives_a_worker_that_dies_or_hangs(tmp_path, monkeypatch, capsys):
+    """A script that kills its worker, or runs past `--timeout`, fails the run with its name; a fresh worker runs the
+    scripts left, and a hanging script's own child processes are stopped with it."""
+    bench = _fake_benchmarks(
+        tmp_path,
+        {
+            "a_dies": "import os, signal\nprint('dying', flush=True)\nos.kill(os.getpid(), signal.SIGKILL)\n",
+            "b_hangs": "import subprocess, sys, time\n"
+            "p = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(600)'])\n"
+            "print('CHILD', p.pid, flush=True)\ntime.sleep(600)\n",
+            "c_ok": "print('c_ok ran')\n",
+        },
+    )
+    monkeypatch.setattr(run_all, "HERE", bench)
+    rc = run_all.main(["--quick", "--xla-defaults", "--no-shared-cache", "--jobs", "1", "--timeout", "8"])
+    out, err = capsys.readouterr()
+    assert rc == 1
+    assert err.rstrip().endswith("FAILED: a_dies b_hangs (their output is above)")
+    assert "=== a_dies: FAILED (worker died (-9))" in out and "dying" in out
+    assert "=== b_hangs: FAILED (timeout)" in out
+    assert "c_ok ran" in out and "=== c_ok: ok" in out
+    child = int(out.split("CHILD ")[1].split()[0])
+
+    def running() -> bool:  # neither gone nor a zombie waiting to be reaped
+        try:
+            return Path(f"/proc/{child}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+        except OSError:
+            return False
+
+    for _ in range(50):  # stopped with its worker's session (reaped by whoever inherits it)
+        if not running():
+            break
+        time.sleep(0.1)
+    assert not running()
+
+
+def test_run_all_quick_places_every_script_once():
+    """Every script of a quick run is in exactly one worker's list (`QUICK_LANES`) and has a measured cost, so that a
+    script added to benchmarks/ is placed on purpose; the two lists hold about as many CPU seconds (within 25 %)."""
+    scripts = set(run_all.quick_scripts())
+    listed = [name for lane in run_all.QUICK_LANES for name in lane]
+    assert sorted(listed) == sorted(scripts)
+    assert set(run_all.QUICK_COST) == scripts
+    cost = [sum(run_all.QUICK_COST[n] for n in lane) for lane in run_all.QUICK_LANES]
+    assert max(cost) <= 1.25 * min(cost), cost
