@@ -74,6 +74,8 @@ MIN_STEPS = 128
 #: the command spaces (`DesignOptions.basis`) and the degree d of their acceleration's B-splines on uniform knots:
 #: N - d of them lie inside [0, T]; each integrates against $e^{s(T-t)}$ as $h e^{s(T-t_j)}\\varphi_1(-sh)^{d+1}$
 _DEGREE = {"spline": 3, "steps": 0, "ramps": 1}
+#: the most points of the starting frequency grid per mode (`default_options`)
+MAX_FREQ = 41
 #: the largest certified relative optimality gap (rigorous dual bound) a design is accepted with
 CERTIFIED_GAP = 1e-2
 #: or the largest certified absolute gap, in units of the references (the unshaped move's worst residual, mode by
@@ -175,7 +177,7 @@ def default_options(
     if float(uncertainty) == 0.0:
         return DesignOptions(n_knots=n_knots, n_freq=1, n_extra=0, n_rounds=0, n_fine=1, jerk=jerk, basis=basis)
     span = 2.0 * float(uncertainty) * 2.0 * math.pi * fmax * float(move_time)
-    n_freq = int(min(41, max(9, 2 * (int(math.ceil(span)) // 2) + 1)))
+    n_freq = int(min(MAX_FREQ, max(9, 2 * (int(math.ceil(span)) // 2) + 1)))
     return DesignOptions(n_knots=n_knots, n_freq=n_freq, jerk=jerk, basis=basis)
 
 
@@ -521,17 +523,19 @@ class MinimaxDesign(eqx.Module):
         return certified(self.worst, self.lower_bound)
 
 
-#: the frequency grid's rows per mode (`n_freq + n_extra`) are padded to a multiple of this with unused rows (mask
-#: 0: `0 <= 1`, never active), so that designs whose starting grids differ by a few points (`default_options`: the
-#: grid grows with the move time, 15 to 17 points between 0.82 and 0.83 s on a 6 Hz axis) share one compiled LP
+#: the frequency grid's rows per mode (`n_freq + n_extra`) are padded with unused rows (mask 0: `0 <= 1`, never
+#: active) to those of the largest starting grid `default_options` makes (`MAX_FREQ` points), rounded up to a
+#: multiple of this, so that designs whose starting grids differ (`default_options`: the grid grows with the move
+#: time, 15 to 17 points between 0.82 and 0.83 s on a 6 Hz axis, 9 to 41 over the move times of one axis) share one
+#: compiled LP (an unused frequency costs its zero rows in each factorisation: 3 of a used one's cost, not P)
 GRID_BUCKET = 8
 
 
 def grid_slots(opts: DesignOptions) -> int:
-    """Columns of the problem's `factors` and `mask`: `n_freq + n_extra` rounded up to a multiple of
-    `GRID_BUCKET` (1 without a band)."""
+    """Columns of the problem's `factors` and `mask`: `max(n_freq, MAX_FREQ) + n_extra` rounded up to a multiple
+    of `GRID_BUCKET` (1 without a band)."""
     K = opts.n_freq + opts.n_extra
-    return K if K <= 1 else -(-K // GRID_BUCKET) * GRID_BUCKET
+    return K if K <= 1 else -(-(max(opts.n_freq, MAX_FREQ) + opts.n_extra) // GRID_BUCKET) * GRID_BUCKET
 
 
 def _initial_grid(opts: DesignOptions, n_modes: int, uncertainty: float):
