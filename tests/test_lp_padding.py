@@ -13,6 +13,7 @@ from jaxbelt.shaping.lp import solve_lp_data
 from jaxbelt.shaping.residual import reference_residuals
 
 
+@pytest.mark.slow  # the interior point method's compilation: 5-20 s on two cores
 def test_padded_columns_give_the_unpadded_lps_solution():
     # a random LP of 10 variables (bounded: a box and random cuts), its columns scattered among 16 with zero
     # columns between them (zero in c, G and A): the padded solve is HiGHS's optimum of the unpadded LP, its used
