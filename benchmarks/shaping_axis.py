@@ -13,6 +13,8 @@ On axes drawn from a fixed seed (1 to 3 modes, 1-20 Hz, damping ratio 0.005-0.1)
 - **export**: the minimax command sampled at 1 kHz, its acceleration replayed linearly between samples through
   scipy's `solve_ivp` (DOP853, rtol 1e-11): relative difference from the residual the table states (target 1 %);
 - **speed**: `design_move` at a fixed time, warm (median of repeats) and in a fresh process (1, 2, 3 modes);
+- **speed, every candidate** (`--speed-all`): the default `design_move` (1, 2, 3 modes) in a fresh process: first
+  call, warm calls at the same and at other move times (other knot counts), and what those warm calls compile;
 - **identification**: `identify_axis` on 2-mode records with 5 % noise: frequency and damping errors.
 
 Writes `benchmarks/results/shaping_axis.json` and `.png`. Run: `python benchmarks/shaping_axis.py [--quick]`
@@ -448,6 +450,81 @@ def rerun_inverse():
     _merge_into_results("inverse", res, "inverse_run", lambda h: not h["what"].startswith("shortest_move_time"), head)
 
 
+#: the move times of `speed_every_candidate`: the first call, then one warm call at each of the others (their knot
+#: counts differ: 48 to 256 intervals on the three axes)
+SPEED_TIMES = (1.0, 0.8, 1.3, 1.7)
+
+
+def speed_every_candidate(modes=(1, 2, 3), same_repeats: int = 3):
+    """`design_move` with every candidate (the default `include`) on the axes of `speed` (1, 2, 3 modes), each in a
+    fresh process: the first call (at `SPEED_TIMES[0]`), the warm calls at the same move time (median of
+    `same_repeats`), the warm calls at the other move times of `SPEED_TIMES` (median) and the XLA compilations
+    those made (a warm call should compile nothing; `jax.monitoring`'s compile events counted)."""
+    axes = {1: ([6.0], [0.02]), 2: ([7.3, 18.0], [0.015, 0.01]), 3: ([3.1, 9.7, 17.0], [0.03, 0.02, 0.01])}
+    out = {}
+    for m in modes:
+        f, z = axes[m]
+        code = (
+            "import time, json, warnings; import jax; jax.config.update('jax_enable_x64', True); import jax.monitoring; "
+            "import jaxbelt as jb; warnings.simplefilter('ignore'); n = [0]\n"
+            "jax.monitoring.register_event_duration_secs_listener("
+            "lambda k, d, **kw: n.__setitem__(0, n[0] + (k == '/jax/core/compile/backend_compile_duration')))\n"
+            f"ax = jb.ModalAxis({f!r}, {z!r})\n"
+            f"run = lambda T: jb.design_move(ax, {D}, T, v_max={V_MAX}, a_max={A_MAX}, uncertainty={U})\n"
+            "def timed(T):\n"
+            "    n[0] = 0; t0 = time.perf_counter(); run(T); return time.perf_counter() - t0, n[0]\n"
+            f"first = timed({SPEED_TIMES[0]})[0]\n"
+            f"same = [timed({SPEED_TIMES[0]}) for _ in range({same_repeats})]\n"
+            f"other = [timed(T) for T in {SPEED_TIMES[1:]!r}]\n"
+            "print('RESULT', json.dumps(dict(first=first, same=same, other=other)))"
+        )
+        vals = _fresh_process_result(code)
+        same = [t for t, _ in vals["same"]]
+        other = [t for t, _ in vals["other"]]
+        out[m] = dict(
+            first_s=vals["first"],
+            warm_same_time_median_s=float(np.median(same)),
+            warm_same_time_compiles=int(sum(c for _, c in vals["same"])),
+            warm_other_times_median_s=float(np.median(other)),
+            warm_other_times_max_s=float(np.max(other)),
+            warm_other_times_compiles=[int(c) for _, c in vals["other"]],
+            load=os.getloadavg()[0],
+        )
+        print(f"{m} mode(s), every candidate: {out[m]}", flush=True)
+    return out
+
+
+def rerun_speed_every_candidate():
+    """Run `speed_every_candidate` alone and write it into the committed results (`speed_every_candidate`, with
+    headline rows)."""
+    res = speed_every_candidate()
+    head = []
+    for m, v in res.items():
+        head.append(
+            dict(
+                what=f"design_move warm, every candidate, {m} mode(s), same move time, median",
+                value=v["warm_same_time_median_s"],
+                unit="s",
+                target="<= 1",
+            )
+        )
+        head.append(
+            dict(
+                what=f"design_move warm, every candidate, {m} mode(s), another move time per call, median",
+                value=v["warm_other_times_median_s"],
+                unit="s",
+                target="<= 1",
+            )
+        )
+    _merge_into_results(
+        "speed_every_candidate",
+        res,
+        "speed_every_candidate_run",
+        lambda h: not h["what"].startswith("design_move warm, every candidate"),
+        head,
+    )
+
+
 def _scale_headline(big):
     out = []
     for m, b in big.items():
@@ -512,6 +589,11 @@ def main(argv=None):
     )
     ap.add_argument("--far", action="store_true", help="only run the far-mode timings into the last results")
     ap.add_argument("--inverse", action="store_true", help="only run shortest_move_time's timings into the results")
+    ap.add_argument(
+        "--speed-all",
+        action="store_true",
+        help="only run design_move's timings with every candidate (fresh process, warm at other move times)",
+    )
     args = ap.parse_args(argv)
     if args.table:
         print("\n".join(map(str, update_shaping_blocks())))
@@ -524,6 +606,9 @@ def main(argv=None):
         return
     if args.inverse:
         rerun_inverse()
+        return
+    if args.speed_all:
+        rerun_speed_every_candidate()
         return
     n_axes = 1 if args.quick else 12  # quick: check that every part runs, in well under a minute
     if args.quick and not os.environ.get("JAX_COMPILATION_CACHE_DIR"):  # run_all --quick shares one already

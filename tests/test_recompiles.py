@@ -248,6 +248,42 @@ def test_minimax_designs_whose_starting_grids_differ_share_one_program():
 
 
 @pytest.mark.slow
+def test_minimax_designs_whose_knot_counts_differ_share_one_program():
+    # the knot count follows the move time (on a 6 Hz axis 48 intervals at 1.1 s, 64 at 1.3 s; the starting grids,
+    # 21 and 25 points, padded to `MAX_FREQ` = 41 and the extra rows): both LPs are padded to the slot of 64
+    # (`design.knot_slots`), so the second design (its LP, feasibility LP and fine-grid check) compiles nothing, and
+    # each is the optimum of its own unpadded LP. |a| <= 0.4 m/s^2: the time-optimal move takes 1 s, so the least
+    # residuals are well above the LP's resolution (HiGHS checks them)
+    from references import highs_lp_value
+
+    from jaxbelt.shaping import design as dsg
+    from jaxbelt.shaping.residual import reference_residuals
+
+    axis = jb.ModalAxis([6.0], [0.02])
+    ref, _ = reference_residuals(axis, 0.1, 0.3, 0.4, None, 0.2)
+    designs = []
+    for k, T in enumerate((1.1, 1.3)):
+        opts = dsg.default_options(axis.frequencies, T, 0.2, False)
+        assert (opts.n_knots, opts.n_freq) == ((48, 21), (64, 25))[k]
+        assert dsg.knot_slots(opts.n_knots) == 64 and dsg.grid_slots(opts) == 56
+        prob = dsg.make_problem(axis, 0.1, T, 0.3, 0.4, None, 0.2, ref, opts)
+        with count_compiles() as c:
+            assert dsg.max_distance(prob, opts) > 1.0
+            designs.append((dsg.minimax_design(prob, opts), opts))
+        if k == 1:
+            assert c["n"] == 0
+    for des, opts in designs:
+        assert des.converged and float(des.worst) > 1e-6
+        assert des.command.coefficients.shape == (opts.n_knots - 3,)
+        # the multipliers come back in the unpadded LP's rows: the cut rows, +-a, +-v of the design's own size
+        assert des.lp.z.shape == (opts.n_angles * des.problem.factors.size + 4 * (opts.n_knots - 3) - 2,)
+        # HiGHS on the design's own (unpadded) LP
+        scale = float(des.worst)
+        highs = highs_lp_value(*dsg.lp_data(des.problem, opts, scale)) * scale
+        assert abs(float(des.worst) - highs) <= max(2e-6, 2 * float(des.gap)) * highs
+
+
+@pytest.mark.slow
 def test_best_residual_after_design_move_runs_the_designs_own_program():
     # the LP's value at another move time runs the program the design compiled (its scalars typed alike: a weakly
     # typed tolerance keyed a second compilation of the interior point method, 17-30 s on two cores)

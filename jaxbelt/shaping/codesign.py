@@ -404,7 +404,7 @@ def _redesign_options(design: MinimaxDesign, T: float):
 
 def _redesign(axis, design: MinimaxDesign, T: float) -> MinimaxDesign:
     """A fresh design at move time `T` [s] with the discretisation `design_move` picks there (`_redesign_options`:
-    `design`'s own where it keeps its knots; one compilation per new knot count) and `design`'s references: its own
+    `design`'s own where it keeps its knots; a new knot count runs its slot's compiled LP, `design.knot_slots`) and `design`'s references: its own
     frequency grid, exchanged from the start."""
     return minimax_design(_problem(design, axis, T), _redesign_options(design, T))
 

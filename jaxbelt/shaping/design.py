@@ -35,7 +35,9 @@ most $j_{max}h^2/8$).
 mode, evaluates the residual on a fine grid, adds the worst new frequencies (local maxima above
 $t(1 + 3\\,\\%)$) to the LP and solves again, up to `n_rounds` times (a classical exchange method for
 semi-infinite programmes, Hettich and Kortanek, 1993, SIAM Rev. 35(3)). The LP keeps one shape: the added
-frequencies fill reserved rows, which are zero rows until used, so no round recompiles.
+frequencies fill reserved rows, which are zero rows until used, so no round recompiles. Likewise its variables are
+padded to the knot count's slot (`KNOT_SLOTS`: 48 and 64 intervals in one program, 96 and 128 in another) with zero
+columns held at exactly 0, so a move time whose knot count differs runs the same compiled LP.
 
 The LP of the last round has one optimum value, which `jaxbelt.shaping.lp.solve_lp` reaches and certifies
 (an optimal vertex, or a rigorous dual bound; the test suite checks it against scipy's HiGHS on the same LP).
@@ -56,7 +58,7 @@ from .._checks import as_float_array, device_array, is_concrete
 from .._guard import host_checked, prepare, stored_jit
 from .._xla import QUICK_COMPILE, LazyJit
 from ..models.axis import ModalAxis
-from .lp import LPResult, RowGroups, lp_value, solve_lp, solve_lp_data
+from .lp import LPResult, RowGroups, lp_value, solve_lp_data
 from .moves import PiecewiseMove, SplineMove, peaks, phi1
 
 #: XLA options of the programs that hold the interior point method: its loop is compiled 3-4x faster at LLVM level
@@ -64,7 +66,7 @@ from .moves import PiecewiseMove, SplineMove, peaks, phi1
 #: Cholesky factorisations that XLA calls into a library for, loses little (see benchmarks/shaping.py)
 _LP_COMPILE = QUICK_COMPILE
 
-#: knot counts the design chooses from (one compiled program per count and axis size)
+#: knot counts the design chooses from (one compiled LP per slot of them, `KNOT_SLOTS`, and axis size)
 KNOT_COUNTS = (32, 48, 64, 96, 128, 160, 192, 256)
 #: the least interval count of the steps and ramps bases: their accelerations only approach a bang-bang (or, with a
 #: jerk limit, bang-bang in jerk) optimum's switching times, so they need more intervals than the spline needs knots
@@ -72,6 +74,8 @@ MIN_STEPS = 128
 #: the command spaces (`DesignOptions.basis`) and the degree d of their acceleration's B-splines on uniform knots:
 #: N - d of them lie inside [0, T]; each integrates against $e^{s(T-t)}$ as $h e^{s(T-t_j)}\\varphi_1(-sh)^{d+1}$
 _DEGREE = {"spline": 3, "steps": 0, "ramps": 1}
+#: the most points of the starting frequency grid per mode (`default_options`)
+MAX_FREQ = 41
 #: the largest certified relative optimality gap (rigorous dual bound) a design is accepted with
 CERTIFIED_GAP = 1e-2
 #: or the largest certified absolute gap, in units of the references (the unshaped move's worst residual, mode by
@@ -93,7 +97,8 @@ def certified(worst, lower_bound) -> bool:
 
 
 class DesignOptions(NamedTuple):
-    """The discretisation of the minimax LP (all static: each combination is one compiled program).
+    """The discretisation of the minimax LP (static: each combination is one compiled program, the knot counts of one
+    `KNOT_SLOTS` slot and the starting grids of one `GRID_BUCKET` sharing theirs).
 
     - `n_knots`: N, knot intervals of the acceleration (N - 3 coefficients of the spline, N steps, N - 1 ramp
       nodes);
@@ -172,7 +177,7 @@ def default_options(
     if float(uncertainty) == 0.0:
         return DesignOptions(n_knots=n_knots, n_freq=1, n_extra=0, n_rounds=0, n_fine=1, jerk=jerk, basis=basis)
     span = 2.0 * float(uncertainty) * 2.0 * math.pi * fmax * float(move_time)
-    n_freq = int(min(41, max(9, 2 * (int(math.ceil(span)) // 2) + 1)))
+    n_freq = int(min(MAX_FREQ, max(9, 2 * (int(math.ceil(span)) // 2) + 1)))
     return DesignOptions(n_knots=n_knots, n_freq=n_freq, jerk=jerk, basis=basis)
 
 
@@ -192,20 +197,44 @@ class MinimaxProblem(eqx.Module):
     mask: jax.Array
 
 
-def lp_data(problem: MinimaxProblem, opts: DesignOptions, scale_t: float | jax.Array = 1.0):
+def lp_data(problem: MinimaxProblem, opts: DesignOptions, scale_t: float | jax.Array = 1.0, knots=None):
     """`(c, G, h, A, b)` of the minimax LP in the variables $(\\hat c, t/\\tau)$, $\\hat c = c / (D/T^2)$,
-    $\\tau$ = `scale_t` (the objective's expected size: solving in units of it keeps the LP well scaled)."""
-    c, G, hv, A, b, _ = lp_data_grouped(problem, opts, scale_t)
+    $\\tau$ = `scale_t` (the objective's expected size: solving in units of it keeps the LP well scaled).
+    `knots`: see `lp_data_grouped`."""
+    c, G, hv, A, b, _ = lp_data_grouped(problem, opts, scale_t, knots)
     return c, G, hv, A, b
 
 
-def lp_data_grouped(problem: MinimaxProblem, opts: DesignOptions, scale_t: float | jax.Array = 1.0):
+#: the knot counts' slots: the LP's variables of a design of N knot intervals are padded to those of the first slot
+#: >= N (beyond the last, to a multiple of 64), so that designs whose knot count follows the move time (48, 64, 96,
+#: 128 ... `KNOT_COUNTS`) share one compiled LP per slot: a padded variable is held at exactly 0 (`lp.solve_lp_data`'s
+#: `used`) and the design is the unpadded LP's. Each slot costs one compilation of the interior point method
+#: (7-11 s on two cores); a wider slot costs its factorisations (rows x columns squared) at every iteration.
+KNOT_SLOTS = (64, 128, 192, 256)
+
+
+def knot_slots(n_knots: int) -> int:
+    """The padded knot count of a design of `n_knots` intervals (`KNOT_SLOTS`)."""
+    return next((k for k in KNOT_SLOTS if k >= n_knots), -(-n_knots // 64) * 64)
+
+
+def lp_data_grouped(problem: MinimaxProblem, opts: DesignOptions, scale_t: float | jax.Array = 1.0, knots=None):
     """`lp_data` and the `RowGroups` of G (each frequency's P cuts span 3 columns; each limit is a pair of rows
-    $\\pm g$), for the interior point method's factorisation."""
+    $\\pm g$), for the interior point method's factorisation.
+
+    `knots`: the design's knot count N as a (traced) value, where `opts.n_knots` is its padded count
+    (`knot_slots`): the LP then has the padded number of columns, those beyond the design's N - d coefficients
+    (and the limit rows of those columns) zero, so that one compiled program serves every N of a slot (see
+    `_used_columns` for the columns in use). Default: N = `opts.n_knots`, no padding."""
     ax = problem.axis
-    N, J = opts.n_knots, n_coefficients(opts)
+    J = n_coefficients(opts)  # the LP's columns (padded where `knots` is given)
+    N = opts.n_knots if knots is None else knots
     T, D = problem.move_time, problem.distance
     h = T / N
+    # the columns in use (1.0) and the padding (0.0); the j-th limit rows of the velocity (J - 1 of them) and of the
+    # jerk (J + 1) are in use for j below N - d - 1 and N - d + 1
+    col = _used_columns(opts, knots).astype(T.dtype) if knots is not None else jnp.ones((J,), T.dtype)
+    n_used = jnp.sum(col)
     aref = D / T**2
     # --- residual rows: |g| / (omega_d R) |sum_j c_j k_j| <= t, as P cuts Re(e^{-i theta} .) <= t
     r = problem.factors
@@ -222,7 +251,7 @@ def lp_data_grouped(problem: MinimaxProblem, opts: DesignOptions, scale_t: float
     # <= 0 on the basis' support, so a heavily damped mode underflows to 0 instead of overflowing (inf * 0 = NaN)
     kern = h * jnp.exp(s[..., None] * (T - tj - power * h)) * phi1(s * h)[..., None] ** power  # (modes, K, J)
     weight = problem.mask * jnp.abs(ax.gains)[:, None] / (wd * jax.lax.stop_gradient(problem.reference)[:, None])
-    kern = kern * (weight * aref)[..., None]
+    kern = kern * (weight * aref)[..., None] * col
     theta = 2.0 * jnp.pi * jnp.arange(opts.n_angles) / opts.n_angles
     cuts = jnp.real(jnp.exp(-1j * theta)[:, None, None, None] * kern[None])  # (P, modes, K, J)
     cuts = cuts.reshape(-1, J)
@@ -236,10 +265,12 @@ def lp_data_grouped(problem: MinimaxProblem, opts: DesignOptions, scale_t: float
     # node accelerations (exact), the velocity's quadratic B-spline coefficients (the middle Bernstein coefficient
     # of each interval: above the velocity's peak there by at most |jerk| h^2 / 8) and the N interval jerks
     # (c_j - c_{j-1}) / h, c_{-1} = c_{N-1} = 0 (exact)
-    eye = jnp.eye(J)
-    blocks = [(eye * aref, problem.a_max), (jnp.tril(jnp.ones((J - 1, J))) * h * aref, problem.v_max)]
+    eye = jnp.eye(J) * col
+    rows_v = (jnp.arange(J - 1) < n_used - 1)[:, None] * col
+    blocks = [(eye * aref, problem.a_max), (jnp.tril(jnp.ones((J - 1, J))) * rows_v * h * aref, problem.v_max)]
     if opts.jerk and opts.basis != "steps":
-        diff = jnp.eye(J + 1, J) - jnp.eye(J + 1, J, k=-1)
+        rows_j = (jnp.arange(J + 1) < n_used + 1)[:, None] * col
+        diff = (jnp.eye(J + 1, J) - jnp.eye(J + 1, J, k=-1)) * rows_j
         blocks.append((diff * aref / h, problem.j_max))
     lim_rows, lim_rhs = [], []
     for mat, lim in blocks:
@@ -252,10 +283,8 @@ def lp_data_grouped(problem: MinimaxProblem, opts: DesignOptions, scale_t: float
     # in general x(T) = int (T - t) a = h^2 aref sum c_j (N - j - (d + 1)/2), the B-spline's centroid at
     # t_j + (d + 1)h/2: steps N - j - 1/2, ramps N - j - 1)
     j = jnp.arange(J, dtype=G.dtype)
-    lever = N - j - 0.5 * (_DEGREE[opts.basis] + 1)
-    A = jnp.stack(
-        [jnp.concatenate([jnp.ones((J,)), jnp.zeros((1,))]), jnp.concatenate([lever / N**2, jnp.zeros((1,))])]
-    )
+    lever = (N - j - 0.5 * (_DEGREE[opts.basis] + 1)) * col
+    A = jnp.stack([jnp.concatenate([col, jnp.zeros((1,))]), jnp.concatenate([lever / N**2, jnp.zeros((1,))])])
     b = jnp.array([0.0, 1.0])
     c = jnp.zeros((J + 1,)).at[-1].set(1.0)
     # row p * MK + g of the cuts is (cos theta_p, sin theta_p, 1) @ [[Re k_g, 0], [Im k_g, 0], [0, -used_g tau]]
@@ -277,25 +306,44 @@ def lp_data_grouped(problem: MinimaxProblem, opts: DesignOptions, scale_t: float
     return c, G, hv, A, b, tuple(out)
 
 
-def _x_bound(problem: MinimaxProblem, opts: DesignOptions, tau):
-    """Bounds on the LP variables at the optimum: |c_j| <= a_max / aref (its own constraints), 0 <= t <= 1."""
+def _used_columns(opts: DesignOptions, knots):
+    """(J,) booleans: the LP's coefficient columns in use for a design of `knots` intervals (traced) whose LP is
+    padded to `opts.n_knots` (the first N - d of them)."""
+    return jnp.arange(n_coefficients(opts)) < knots - _DEGREE[opts.basis]
+
+
+def _used_variables(opts: DesignOptions, knots):
+    """`_used_columns` and t (the last variable, always in use): `lp.solve_lp_data`'s `used`."""
+    return jnp.concatenate([_used_columns(opts, knots), jnp.ones((1,), dtype=bool)])
+
+
+def _x_bound(problem: MinimaxProblem, opts: DesignOptions, tau, knots=None):
+    """Bounds on the LP variables at the optimum: |c_j| <= a_max / aref (its own constraints; 0 for padding),
+    0 <= t <= 1."""
     J = n_coefficients(opts)
     aref = problem.distance / problem.move_time**2
-    return jnp.concatenate([jnp.full((J,), problem.a_max / jnp.abs(aref)), jnp.full((1,), 1.0 / tau)])
+    xb = jnp.full((J,), problem.a_max / jnp.abs(aref))
+    if knots is not None:
+        xb = jnp.where(_used_columns(opts, knots), xb, 0.0)
+    return jnp.concatenate([xb, jnp.full((1,), 1.0 / tau)])
 
 
-def _lower_bound(problem, opts, tau, res, data):
+def _lower_bound(problem, opts, tau, res, data, knots=None):
     """A rigorous lower bound of the LP's optimum from the dual iterate: weak duality on the box that holds the
     optimum (|c_j| <= a_max / aref from its own constraints, 0 <= t <= the feasible point's t)."""
     c, G, hv, A, b = data
     rd = c + G.T @ res.z + A.T @ res.y
-    xb = _x_bound(problem, opts, tau)
+    xb = _x_bound(problem, opts, tau, knots)
     lower = -(hv @ res.z) - (b @ res.y) - jnp.sum(jnp.abs(rd[:-1]) * xb[:-1]) + jnp.minimum(0.0, rd[-1] * res.x[-1])
     return jnp.where(res.vertex, res.value, jnp.minimum(jnp.maximum(lower, res.lower_bound), res.value))
 
 
-def _solve_round_impl(problem: MinimaxProblem, opts: DesignOptions, tau, tol, certify: bool | jax.Array = True):
-    """One LP of the exchange, in units of `tau` (<= 0: estimate it by a coarse first solve).
+def _solve_round_impl(
+    problem: MinimaxProblem, opts: DesignOptions, tau, tol, certify: bool | jax.Array = True, knots=None
+):
+    """One LP of the exchange, in units of `tau` (<= 0: estimate it by a coarse first solve); `knots`: the design's
+    knot count where `opts.n_knots` is its padded count (`lp_data_grouped`; the returned `res` and coefficients then
+    have the padded sizes, the padding exactly 0).
 
     Solving in units of the optimum's size makes the interior point method's relative tolerances mean relative
     accuracy of the worst residual, and its crossover to an optimal vertex more reliable: attempt 0 (when `tau`
@@ -307,22 +355,25 @@ def _solve_round_impl(problem: MinimaxProblem, opts: DesignOptions, tau, tol, ce
     prob_s = jax.tree_util.tree_map(lambda v: stop(v) if eqx.is_inexact_array(v) else v, problem)
     tau = stop(jnp.asarray(tau, dtype=float))
     certify = jnp.asarray(certify)
+    knots = None if knots is None else stop(jnp.asarray(knots, dtype=float))
+    used = None if knots is None else _used_variables(opts, knots)
 
     def attempt(state):
         k, tau, _, _ = state
         coarse = tau <= 0
         t_use = jnp.where(coarse, 1.0, tau)
-        c, G, hv, A, b, groups = lp_data_grouped(prob_s, opts, t_use)
+        c, G, hv, A, b, groups = lp_data_grouped(prob_s, opts, t_use, knots)
         res = solve_lp_data(
             c,
             G,
             hv,
             A,
             b,
-            _x_bound(prob_s, opts, t_use),
+            _x_bound(prob_s, opts, t_use, knots),
             jnp.where(coarse, 1e-5, tol),
             jnp.where(coarse, 60, 100),
             groups,
+            used,
         )
         # stop at a certified vertex, or when the LP posed in units of the value found before finds that value
         # again (a solve on an optimal face that is not a single vertex: a new scale changes nothing)
@@ -332,13 +383,16 @@ def _solve_round_impl(problem: MinimaxProblem, opts: DesignOptions, tau, tol, ce
         # on stopping, tau is the scale the returned LP was posed in
         return k + 1, jnp.where(stop_now, t_use, new_tau), res, stop_now
 
-    shapes = jax.eval_shape(lambda: solve_lp_data(*lp_data(prob_s, opts, 1.0), _x_bound(prob_s, opts, 1.0), tol, 1))
+    shapes = jax.eval_shape(
+        lambda: solve_lp_data(*lp_data(prob_s, opts, 1.0, knots), _x_bound(prob_s, opts, 1.0, knots), tol, 1)
+    )
     res0 = jax.tree_util.tree_map(lambda sd: jnp.zeros(sd.shape, sd.dtype), shapes)
     _, tau, res, _ = jax.lax.while_loop(lambda st: ~st[3], attempt, (jnp.asarray(0), tau, res0, jnp.asarray(False)))
-    data = lp_data(problem, opts, tau)
+    data = lp_data(problem, opts, tau, knots)
     value = lp_value(*data, stop(res.x), stop(res.z), stop(res.y))
     res = res._replace(value=value)
-    res = res._replace(lower_bound=stop(_lower_bound(prob_s, opts, tau, res, lp_data(prob_s, opts, tau))))
+    lower = _lower_bound(prob_s, opts, tau, res, lp_data(prob_s, opts, tau, knots), knots)
+    res = res._replace(lower_bound=stop(lower))
     # the command's coefficients [m/s^2], the worst residual and its bound in units of the references
     coef = stop(res.x[:-1]) * prob_s.distance / prob_s.move_time**2
     return res, tau, (coef, res.value * tau, res.lower_bound * tau)
@@ -352,37 +406,83 @@ _solve_round_nested = eqx.filter_jit(_solve_round_impl)
 def _program_options(opts: DesignOptions) -> DesignOptions:
     """The options as the compiled programs see them: `n_freq` only sizes the starting grid on the host
     (`_initial_grid`, whose padded width `grid_slots` the problem's arrays carry), so it is left out of the
-    programs' static key: a starting grid of 15 or 17 points (it follows the move time) runs the same program."""
-    return opts._replace(n_freq=0)
+    programs' static key: a starting grid of 15 or 17 points (it follows the move time) runs the same program; and
+    `n_knots` is its slot (`knot_slots`), the knot count itself an argument (`_knots`): a move time whose knot count
+    moves from 96 to 128 runs the same program."""
+    return opts._replace(n_freq=0, n_knots=knot_slots(opts.n_knots))
+
+
+def _knots(opts: DesignOptions):
+    """The knot count as the programs' argument (a float64 array: one type, one program)."""
+    return device_array(float(opts.n_knots), dtype=float)
 
 
 def _solve_round(problem, opts, tau, tol, certify=True):
+    """`_solve_round_impl` on the padded LP of `opts` (`_program_options`): `(res, tau, (coef, worst, lower))` with
+    `res` and `coef` of the padded sizes (`_unpadded`, `_coefficients` take the design's own)."""
+    knots = _knots(opts)
     opts = _program_options(opts)
     # XLA options apply to top-level programs only: inside a caller's trace (grad, jit) the plain program.
     # `certify` as an array: one compiled program for the exchange's rounds and the final one (a Python bool is a
     # static argument of filter_jit: a second compilation of the whole interior point method)
     certify = device_array(certify)
     if is_concrete((problem, tau, tol)):
-        return _solve_round_top(problem, opts, tau, tol, certify)
-    return _solve_round_nested(problem, opts, tau, tol, certify)
+        return _solve_round_top(problem, opts, tau, tol, certify, knots)
+    return _solve_round_nested(problem, opts, tau, tol, certify, knots)
+
+
+def _coefficients(coef, opts: DesignOptions):
+    """The design's `n_coefficients(opts)` coefficients of the padded ones (on the host: no program)."""
+    return jax.device_put(np.asarray(coef)[: n_coefficients(opts)])
+
+
+def _unpadded(res: LPResult, problem: MinimaxProblem, opts: DesignOptions) -> LPResult:
+    """The padded LP's result (`_solve_round`) as the unpadded LP's (`lp_data(problem, opts)`'s rows and columns;
+    on the host: no program): the used columns and t, the residual rows, and the first rows of each limit block
+    (the rows of the used columns)."""
+    slot = _program_options(opts)
+    J, Jp = n_coefficients(opts), n_coefficients(slot)
+    if J == Jp:
+        return res
+    n_res = opts.n_angles * int(np.size(problem.factors))
+    sizes = [(J, Jp), (J, Jp), (J - 1, Jp - 1), (J - 1, Jp - 1)]
+    if opts.jerk and opts.basis != "steps":
+        sizes += [(J + 1, Jp + 1)] * 2
+    rows, off = [np.arange(n_res)], n_res
+    for keep, size in sizes:
+        rows.append(off + np.arange(keep))
+        off += size
+    rows = np.concatenate(rows)
+    cols = np.r_[np.arange(J), Jp]
+    put = jax.device_put
+    return res._replace(x=put(np.asarray(res.x)[cols]), s=put(np.asarray(res.s)[rows]), z=put(np.asarray(res.z)[rows]))
 
 
 def _fine_ratios(problem: MinimaxProblem, opts: DesignOptions, coef):
-    """Residual over reference of every mode on the fine grid: (fine factors (F,), ratios (n_modes, F))."""
-    return _fine_ratios_program(problem, _program_options(opts), coef)
+    """Residual over reference of every mode on the fine grid: (fine factors (F,), ratios (n_modes, F)), of the
+    padded coefficients `coef` (`_solve_round`'s)."""
+    return _fine_ratios_program(problem, _program_options(opts), coef, _knots(opts))
 
 
 @stored_jit  # called in the exchange loop: XLA's default options
-def _fine_ratios_program(problem: MinimaxProblem, opts: DesignOptions, coef):
-    """Residual over reference of every mode on the fine grid: (fine factors (F,), ratios (n_modes, F))."""
+def _fine_ratios_program(problem: MinimaxProblem, opts: DesignOptions, coef, knots):
+    """Residual over reference of every mode on the fine grid: (fine factors (F,), ratios (n_modes, F)), of the
+    command of `knots` intervals whose coefficients `coef` are padded to `opts.n_knots`' (the padding 0): the
+    residual integral $W(s) = \\sum_j c_j\\,h\\,e^{s(T - t_j - (d+1)h)}\\varphi_1(sh)^{d+1}$ of `lp_data_grouped`."""
     u = problem.uncertainty
     fine = 1.0 + u * jnp.linspace(-1.0, 1.0, opts.n_fine)
-    move = design_command(coef, problem.move_time, opts)
     ax = problem.axis
     w = ax.omega[:, None] * fine[None, :]
     z = ax.damping_ratios[:, None]
     wd = w * jnp.sqrt(1.0 - z**2)
-    W = move.residual_integral(-z * w + 1j * wd)
+    s = -z * w + 1j * wd
+    T = problem.move_time
+    h = T / knots
+    power = _DEGREE[opts.basis] + 1
+    tj = jnp.arange(coef.shape[0]) * h
+    coef = jnp.where(_used_columns(opts, knots), coef, 0.0)
+    kern = jnp.exp(s[..., None] * (T - tj - power * h)) * (h * phi1(s * h)[..., None] ** power)
+    W = kern @ coef.astype(kern.dtype)
     return fine, jnp.abs(ax.gains)[:, None] / wd * jnp.abs(W) / problem.reference[:, None]
 
 
@@ -423,17 +523,19 @@ class MinimaxDesign(eqx.Module):
         return certified(self.worst, self.lower_bound)
 
 
-#: the frequency grid's rows per mode (`n_freq + n_extra`) are padded to a multiple of this with unused rows (mask
-#: 0: `0 <= 1`, never active), so that designs whose starting grids differ by a few points (`default_options`: the
-#: grid grows with the move time, 15 to 17 points between 0.82 and 0.83 s on a 6 Hz axis) share one compiled LP
+#: the frequency grid's rows per mode (`n_freq + n_extra`) are padded with unused rows (mask 0: `0 <= 1`, never
+#: active) to those of the largest starting grid `default_options` makes (`MAX_FREQ` points), rounded up to a
+#: multiple of this, so that designs whose starting grids differ (`default_options`: the grid grows with the move
+#: time, 15 to 17 points between 0.82 and 0.83 s on a 6 Hz axis, 9 to 41 over the move times of one axis) share one
+#: compiled LP (an unused frequency costs its zero rows in each factorisation: 3 of a used one's cost, not P)
 GRID_BUCKET = 8
 
 
 def grid_slots(opts: DesignOptions) -> int:
-    """Columns of the problem's `factors` and `mask`: `n_freq + n_extra` rounded up to a multiple of
-    `GRID_BUCKET` (1 without a band)."""
+    """Columns of the problem's `factors` and `mask`: `max(n_freq, MAX_FREQ) + n_extra` rounded up to a multiple
+    of `GRID_BUCKET` (1 without a band)."""
     K = opts.n_freq + opts.n_extra
-    return K if K <= 1 else -(-K // GRID_BUCKET) * GRID_BUCKET
+    return K if K <= 1 else -(-(max(opts.n_freq, MAX_FREQ) + opts.n_extra) // GRID_BUCKET) * GRID_BUCKET
 
 
 def _initial_grid(opts: DesignOptions, n_modes: int, uncertainty: float):
@@ -497,11 +599,11 @@ def minimax_design(problem: MinimaxProblem, opts: DesignOptions, tol=1e-9, per_r
         if _exchanges(opts, u):
             fine_worst = float(np.asarray(_fine_ratios(problem, opts, coef)[1]).max())
     return MinimaxDesign(
-        command=design_command(coef, problem.move_time, opts),
+        command=design_command(_coefficients(coef, opts), problem.move_time, opts),
         worst=worst_a,
         fine_worst=np.asarray(fine_worst),
         lower_bound=lower_a,
-        lp=res,
+        lp=_unpadded(res, problem, opts),
         problem=problem,
         rounds=rounds,
         options=opts,
@@ -529,15 +631,14 @@ def prepare_design(problem: MinimaxProblem, opts: DesignOptions, tol=1e-9):
     for the caller to prepare the programs that measure the command; None (and nothing started) otherwise."""
     factors, mask = _initial_grid(opts, problem.axis.n_modes, float(problem.uncertainty))
     problem = _on_grid(problem, factors, mask)
-    types = prepare(
-        _solve_round_top, problem, _program_options(opts), device_array(-1.0), _round_tol(tol), device_array(False)
-    )
+    slot, knots = _program_options(opts), _knots(opts)
+    types = prepare(_solve_round_top, problem, slot, device_array(-1.0), _round_tol(tol), device_array(False), knots)
     if types is None:
         return None
     coef = types[2][0]
     if _exchanges(opts, float(problem.uncertainty)):
-        prepare(_fine_ratios_program, problem, _program_options(opts), coef)
-    return coef
+        prepare(_fine_ratios_program, problem, slot, coef, knots)
+    return jax.ShapeDtypeStruct((n_coefficients(opts),), coef.dtype)
 
 
 def minimax_value(problem: MinimaxProblem, opts: DesignOptions, tau=None):
@@ -551,28 +652,33 @@ def minimax_value(problem: MinimaxProblem, opts: DesignOptions, tau=None):
     return _solve_round(problem, opts, tau, device_array(1e-9, dtype=float))[2][1]
 
 
-def _distance_lp(problem: MinimaxProblem, opts: DesignOptions):
-    """The LP of the largest distance the spline moves in T within the limits (rest to rest): feasibility of D."""
-    c, G, hv, A, b = lp_data(problem, opts)
+def _distance_lp(problem: MinimaxProblem, opts: DesignOptions, knots=None):
+    """The LP of the largest distance the spline moves in T within the limits (rest to rest): feasibility of D
+    (`knots`: see `lp_data_grouped`)."""
+    c, G, hv, A, b = lp_data(problem, opts, 1.0, knots)
     n_res = opts.n_angles * problem.factors.size
     G, hv = G[n_res:, :-1], hv[n_res:]
     # maximise sum c_j (N-2-j)/N^2 (the distance in units of D) at zero end velocity
     return -A[1, :-1], G, hv, A[:1, :-1], b[:1]
 
 
-def _max_distance_impl(problem: MinimaxProblem, opts: DesignOptions):
-    c, G, hv, A, b = _distance_lp(problem, opts)
-    return -solve_lp(c, G, hv, A, b, tol=1e-9, max_iter=100).value
+def _max_distance_impl(problem: MinimaxProblem, opts: DesignOptions, knots=None):
+    c, G, hv, A, b = _distance_lp(problem, opts, knots)
+    used = None if knots is None else _used_columns(opts, knots)
+    xb = jnp.full(c.shape, jnp.inf)
+    tol = jnp.asarray(1e-9, dtype=float)
+    return -solve_lp_data(c, G, hv, A, b, xb, tol, jnp.asarray(100), (), used).value
 
 
 _max_distance_top = LazyJit(eqx.filter_jit, _max_distance_impl, _LP_COMPILE)
 
 
 def _max_distance(problem, opts):
+    knots = _knots(opts)
     opts = _program_options(opts)
     if is_concrete(problem):
-        return _max_distance_top(problem, opts)
-    return eqx.filter_jit(_max_distance_impl)(problem, opts)
+        return _max_distance_top(problem, opts, knots)
+    return eqx.filter_jit(_max_distance_impl)(problem, opts, knots)
 
 
 def max_distance(problem: MinimaxProblem, opts: DesignOptions) -> float:

@@ -94,9 +94,11 @@ def _group_rows(groups, w, gs, cs):
     return out
 
 
-def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter, groups=()):
+def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter, groups=(), used=None):
     n = c.shape[0]
     m = G.shape[0]
+    # padded columns (`used` False: zero in c, G and A): held at exactly 0, outside the factorisation and the vertex
+    used = jnp.ones((n,), dtype=bool) if used is None else jnp.asarray(used, dtype=bool)
     grouped = np.concatenate([g.idx.ravel() for g in groups]) if groups else np.zeros(0, dtype=int)
     free = np.setdiff1d(np.arange(m), grouped)  # rows outside every group, factorised as they are
     # row scaling (each constraint to unit infinity norm); the multipliers are scaled back at the end
@@ -123,7 +125,8 @@ def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter, groups=()):
         d0 = jnp.sum(B * B, axis=0)
 
         def factorise(r):
-            Bq = jnp.concatenate([B, jnp.diag(jnp.sqrt(r * d0 + 1e-300))], axis=0)
+            # a padded column's normal matrix is the identity (its right-hand sides are zero: its step is 0)
+            Bq = jnp.concatenate([B, jnp.diag(jnp.where(used, jnp.sqrt(r * d0 + 1e-300), 1.0))], axis=0)
             L = jnp.linalg.qr(Bq, mode="r").T
             S = A @ jsl.cho_solve((L, True), A.T)
             return L, jnp.linalg.cholesky(S)
@@ -144,7 +147,7 @@ def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter, groups=()):
         Hr = jsl.cho_solve((L, True), r1)
         dy = jsl.cho_solve((Ls, True), A @ Hr - r2)
         dx = jsl.cho_solve((L, True), r1 - A.T @ dy)
-        return dx, dy
+        return jnp.where(used, dx, 0.0), dy
 
     # start (as in CVXOPT, Vandenberghe 2010): x minimises ||h - Gx|| subject to Ax = b, s = h - Gx; z = Gw has
     # the least norm with G^T z + A^T y + c = 0; both shifted into the positive orthant when they are not in it
@@ -171,16 +174,25 @@ def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter, groups=()):
 
     p = A.shape[0]
     k_act = n - p
+    # the vertex's rows are picked from G's and, for each padded column j, the row x_j = 0 (rows m + j: always
+    # picked, never left, their multipliers dropped), so the vertex of the used columns is the unpadded LP's
+    G_ext = jnp.concatenate([G, jnp.diag((~used).astype(G.dtype))], axis=0)
+    h_ext = jnp.concatenate([h, jnp.zeros((n,), h.dtype)])
+    pinned = jnp.where(used, -jnp.inf, jnp.inf)
 
     def vertex_at(act):
-        K = jnp.concatenate([G[act], A], axis=0)
+        extra = act >= m  # a padded column's row
+        K = jnp.concatenate([G_ext[act], A], axis=0)
         lu = jsl.lu_factor(K)  # one factorisation for both systems
-        xv = jsl.lu_solve(lu, jnp.concatenate([h[act], b]))
+        xv = jsl.lu_solve(lu, jnp.concatenate([h_ext[act], b]))
+        xv = jnp.where(used, xv, 0.0)
         mult = jsl.lu_solve(lu, -c, trans=1)
+        m_ineq = jnp.where(extra, 0.0, mult[:k_act])
+        mult = jnp.concatenate([m_ineq, mult[k_act:]])
         sv = h - G @ xv
         feas = jnp.min(sv) >= -tol * scale_h
-        dual_ok = jnp.min(mult[:k_act]) >= -tol * (1.0 + jnp.max(jnp.abs(mult)))
-        zv = jnp.zeros_like(z).at[act].set(jnp.maximum(mult[:k_act], 0.0))
+        dual_ok = jnp.min(m_ineq) >= -tol * (1.0 + jnp.max(jnp.abs(mult)))
+        zv = jnp.zeros((m + n,), z.dtype).at[act].set(jnp.maximum(m_ineq, 0.0))[:m]
         yv = mult[k_act:]
         vgap = jnp.abs(c @ xv + h @ zv + b @ yv) / (jnp.abs(c @ xv) + tol * scale_c)
         ok = feas & dual_ok & jnp.all(jnp.isfinite(xv)) & jnp.all(jnp.isfinite(mult)) & (vgap < tol)
@@ -193,9 +205,9 @@ def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter, groups=()):
         def step(carry):
             act, ok, vert, i = carry
             _, _, sv, mult = vertex_at(act)
-            inside = jnp.zeros((m,), dtype=bool).at[act].set(True)
+            inside = jnp.zeros((m + n,), dtype=bool).at[act].set(True)[:m]
             enter = jnp.argmin(jnp.where(inside, jnp.inf, sv))
-            leave = jnp.argmin(mult[:k_act])
+            leave = jnp.argmin(jnp.where(act >= m, jnp.inf, mult[:k_act]))
             act = act.at[leave].set(enter.astype(act.dtype))
             ok, vert, _, _ = vertex_at(act)
             return act, ok, vert, i + 1
@@ -212,7 +224,7 @@ def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter, groups=()):
         non-negative multipliers and a zero duality gap (to `tol`). Inside the iterations without repairs (one
         factorisation each: a repaired crossover at every iteration cost more than the iteration itself), with
         them once at the end."""
-        return repaired(jax.lax.top_k(z / s, k_act)[1], repairs)
+        return repaired(jax.lax.top_k(jnp.concatenate([z / s, pinned]), k_act)[1], repairs)
 
     # a rigorous lower bound of the optimum from any dual iterate (z >= 0, y), valid even where its residual
     # rd = c + G^T z + A^T y is not zero: for feasible x, c^T x >= rd^T x - h^T z - b^T y. Terms of variables
@@ -373,14 +385,20 @@ def solve_lp(c, G, h, A, b, *, x_bound=None, tol=1e-9, max_iter: int = 100) -> L
     return _solve_lp_program(c, G, h, A, b, xb, jnp.asarray(tol, dtype=float), jnp.asarray(max_iter))
 
 
-def solve_lp_data(c, G, h, A, b, x_bound, tol, max_iter, groups=()):
+def solve_lp_data(c, G, h, A, b, x_bound, tol, max_iter, groups=(), used=None):
     """`solve_lp` on arrays of the right shapes, with `tol` and `max_iter` as (traceable) values: the interior
     point method runs on the data with its derivatives stopped; `value` carries the envelope derivative.
-    `groups`: `RowGroups` of G's rows (the factorisation's shortcut; G itself holds every row)."""
+    `groups`: `RowGroups` of G's rows (the factorisation's shortcut; G itself holds every row).
+
+    `used` (n,) booleans (traceable; default all True): the columns in use. A column not in use is padding (zero
+    in `c`, `G` and `A`, so that LPs of different sizes share one compiled program): its value is exactly 0, its
+    normal equations are the identity, and the optimal vertex is picked among the rows of the used columns, so
+    the result is the LP without those columns (the same x, s, z, y, value and bound, to round-off)."""
     stop = jax.lax.stop_gradient
     c_, G_, h_, A_, b_, xb_ = (stop(v) for v in (c, G, h, A, b, x_bound))
     groups = tuple(RowGroups(g.idx, stop(g.U), stop(g.V)) for g in groups)
-    res = _solve_impl(c_, G_, h_, A_, b_, xb_, jnp.asarray(tol, dtype=float), max_iter, groups)
+    used = None if used is None else stop(jnp.asarray(used, dtype=bool))
+    res = _solve_impl(c_, G_, h_, A_, b_, xb_, jnp.asarray(tol, dtype=float), max_iter, groups, used)
     value = lp_value(c, G, h, A, b, stop(res.x), stop(res.z), stop(res.y))
     return res._replace(value=value, lower_bound=stop(res.lower_bound))
 
