@@ -5,11 +5,11 @@ their dependencies are imported once per worker rather than once per script, and
 found in memory by the next (jaxbelt's jitted functions keep their compiled programs). Between scripts the worker
 puts back what a script may change for the next one: `sys.argv`, `sys.path`, `os.environ`, the working folder, the
 warning filters, the signal handlers, JAX's persistent compilation cache settings (a script may call
-`jb.enable_compilation_cache`) and matplotlib's open figures. JAX's backend starts with the worker, with its default
-devices, so that every script sees the same ones (coldstart's `jb.cpu_devices()`, one device per core, then runs on
-them); after each script the objects left are frozen out of the garbage collector's scans (`gc.freeze`), so that the
-worker's growing heap does not slow the next script's collections. What a script registers with `atexit` runs when
-its worker ends.
+`jb.enable_compilation_cache`), jaxbelt's program store and matplotlib's open figures. JAX's backend starts with
+the worker, with its default devices, so that every script sees the same ones (coldstart's `jb.cpu_devices()`, one
+device per core, then runs on them); after each script the objects left are frozen out of the garbage collector's
+scans (`gc.freeze`), so that the worker's growing heap does not slow the next script's collections. What a script
+registers with `atexit` runs when its worker ends.
 
 Protocol (one JSON object per line): the worker says `{"ready": true}` once started; then run_all writes
 `{"script": path, "argv": [...], "out": file}` on the worker's standard input; the worker runs the script with its
@@ -73,6 +73,24 @@ def _restore_cache(before: dict) -> None:
     compilation_cache.reset_cache()
 
 
+def _store_folder():
+    """jaxbelt's program store folder (None: off; "absent": jaxbelt not imported yet)."""
+    store = sys.modules.get("jaxbelt._store")
+    return "absent" if store is None else store.folder()
+
+
+def _restore_store(before) -> None:
+    """jaxbelt's program store as it was before the script (`jb.enable_compilation_cache` /
+    `disable_compilation_cache` turn it on or off)."""
+    store = sys.modules.get("jaxbelt._store")
+    if store is None or store.folder() == before:
+        return
+    if before is None or before == "absent":
+        store.disable()
+    else:
+        store.enable(before)
+
+
 def run_one(script: str, argv: list, out: str) -> dict:
     """Run `script` as `__main__` with `sys.argv = [script, *argv]`, its output (fds 1 and 2) into the file `out`."""
     saved = {
@@ -82,6 +100,7 @@ def run_one(script: str, argv: list, out: str) -> dict:
         "cwd": os.getcwd(),
         "signals": {s: signal.getsignal(s) for s in (signal.SIGTERM, signal.SIGINT)},
         "cache": _cache_settings(),
+        "store": _store_folder(),
     }
     sys.stdout.flush()
     sys.stderr.flush()
@@ -115,6 +134,7 @@ def run_one(script: str, argv: list, out: str) -> dict:
             if "matplotlib.pyplot" in sys.modules:
                 sys.modules["matplotlib.pyplot"].close("all")
             _restore_cache(saved["cache"])
+            _restore_store(saved["store"])
         except Exception:  # noqa: BLE001 - a worker that cannot tidy up fails this script, not silently the next
             traceback.print_exc()
             rc = rc or 1

@@ -231,7 +231,7 @@ class _Worker:
                 return name, f"worker died ({self.proc.returncode}) before it started", 0.0, float("nan"), ""
             self.ready = True
         t = time.perf_counter()
-        with tempfile.NamedTemporaryFile("r", prefix=f"jaxbelt-quick-{name}-", suffix=".txt") as out:
+        with tempfile.NamedTemporaryFile("r", errors="replace", prefix=f"jaxbelt-quick-{name}-", suffix=".txt") as out:
             try:
                 stdin.write(json.dumps({"script": str(script), "argv": argv, "out": out.name}) + "\n")
                 stdin.flush()
@@ -296,9 +296,15 @@ def _run_in_workers(scripts: list[str], jobs: int, env: dict, timeout: float | N
                 name = take(k)
                 if name is None:
                     return
-                if worker is None or not worker.alive():
-                    worker = _Worker(env, HERE.parent)
-                res = worker.run(name, HERE / f"{name}.py", ["--quick"], timeout)
+                try:
+                    if worker is None or not worker.alive():
+                        worker = _Worker(env, HERE.parent)
+                    res = worker.run(name, HERE / f"{name}.py", ["--quick"], timeout)
+                except Exception as e:  # noqa: BLE001 - the runner's own failure fails this script, by name
+                    res = (name, f"runner error: {e!r}", float("nan"), float("nan"), "")
+                    if worker is not None:
+                        worker.stop()
+                    worker = None
                 with lock:
                     report(res)
         finally:
@@ -363,6 +369,7 @@ def main(argv=None) -> int:
             return 2
         scenes = [s for s in scenes if s in args.only]
     failed = []
+    reported: set = set()
     t0 = time.perf_counter()
     cpu0 = _children_cpu()
     scratch = args.quick and not args.update
@@ -394,6 +401,7 @@ def main(argv=None) -> int:
     # each script's output is printed in one block when it ends (scripts running at once do not interleave)
     def report(result) -> None:
         name, rc, dt, cpu_s, out = result
+        reported.add(name)
         print(f"=== {name}{' --quick' if args.quick else ''}", flush=True)
         print(out.rstrip("\n"), flush=True)
         status = "ok" if rc == 0 else f"FAILED ({rc})"
@@ -424,6 +432,10 @@ def main(argv=None) -> int:
     # the scripts' CPU time (user + system, their own subprocesses included): on a loaded machine the wall time
     # says little; on idle cores a run takes at least this divided by the cores
     cpu = _children_cpu() - cpu0
+    lost = sorted(set(scenes) - reported)  # a script never reported (a runner that broke) fails the run too
+    if lost:
+        print(f"run_all: no result from {' '.join(lost)}", file=sys.stderr)
+        failed += lost
     summary = (
         f"run_all: {len(scenes) - len(failed)}/{len(scenes)} benchmarks ran in {time.perf_counter() - t0:.1f} s "
         f"({cpu:.0f} s of CPU time)"

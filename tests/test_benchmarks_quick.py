@@ -94,6 +94,35 @@ def test_run_all_quick_fails_with_the_failing_scripts_names_and_isolates_the_scr
     assert f"SEES None {tmp_path} ['--quick']" in out
 
 
+def test_run_all_quick_fails_a_script_whose_runner_breaks(tmp_path, monkeypatch, capsys):
+    """Bytes that are not UTF-8 in a script's output are shown (replaced), not a crash of its runner; a runner that
+    breaks for one script (an error in run_all itself) fails that script by name, and the scripts after it run."""
+    bench = _fake_benchmarks(
+        tmp_path,
+        {
+            "a_bytes": "import sys\nsys.stdout.flush()\nsys.stdout.buffer.write(b'odd \\xff bytes\\n')\n",
+            "b_broken": "print('never run')\n",
+            "c_ok": "print('c_ok ran')\n",
+        },
+    )
+    monkeypatch.setattr(run_all, "HERE", bench)
+    real_run = run_all._Worker.run
+
+    def run(self, name, *args):
+        if name == "b_broken":
+            raise RuntimeError("the runner broke")
+        return real_run(self, name, *args)
+
+    monkeypatch.setattr(run_all._Worker, "run", run)
+    rc = run_all.main(["--quick", "--xla-defaults", "--no-shared-cache", "--jobs", "1", "--timeout", "120"])
+    out, err = capsys.readouterr()
+    assert rc == 1
+    assert err.rstrip().endswith("FAILED: b_broken (their output is above)")
+    assert "=== a_bytes: ok" in out and "odd \ufffd bytes" in out
+    assert "=== b_broken: FAILED (runner error: RuntimeError('the runner broke'))" in out
+    assert "c_ok ran" in out and "never run" not in out
+
+
 @pytest.mark.slow  # three worker processes start (JAX imported in each) and one script runs into its 8 s limit
 def test_run_all_quick_survives_a_worker_that_dies_or_hangs(tmp_path, monkeypatch, capsys):
     """A script that kills its worker, or runs past `--timeout`, fails the run with its name; a fresh worker runs the

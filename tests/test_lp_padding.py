@@ -93,3 +93,33 @@ def test_minimax_lp_padded_to_its_slot_is_the_unpadded_lp(basis, jerk):
     assert float(res.value) == pytest.approx(highs, rel=1e-7)
     # the padded LP's optimum is feasible for the unpadded one (to the solver's tolerance)
     assert np.max(G0 @ x[cols] - h0) <= 1e-8 and np.max(np.abs(A0 @ x[cols] - b0)) <= 1e-9
+
+
+@pytest.mark.slow  # the LP data's and the fine check's compilations: ~8 s on two cores
+def test_padded_lp_data_stay_finite_at_a_long_move_time():
+    # the padded columns' basis functions would lie beyond the move's end, where e^{s(T - t)} grows as
+    # e^{zeta omega (t - T)}: at T = 1e4 s on a 7.3 Hz mode that is e^{~1e4} (inf, and inf * 0 = NaN in the data).
+    # Their exponent is held at 0: the padded data are finite and hold the unpadded LP's data exactly (the unpadded
+    # LP, whose basis never leaves [0, T], is the reference), and the fine-grid check of padded coefficients is finite
+    # and equals the unpadded command's
+    ax = jb.ModalAxis([7.3, 18.0], [0.015, 0.01])
+    T = 1.0e4
+    opts = dsg.default_options(ax.frequencies, 0.8, 0.2, False)._replace(n_knots=96)
+    slot = dsg._program_options(opts)
+    assert slot.n_knots == 128
+    ref, _ = reference_residuals(ax, 0.1, 0.3, 1.2, None, 0.2)
+    prob = dsg.make_problem(ax, 0.1, T, 0.3, 1.2, None, 0.2, ref, opts)
+    knots = dsg._knots(opts)
+    G0 = np.asarray(dsg.lp_data(prob, opts, 0.05)[1])
+    G1 = np.asarray(dsg.lp_data_grouped(prob, slot, 0.05, knots)[1])
+    assert np.isfinite(G0).all() and np.isfinite(G1).all()
+    J, Jp = dsg.n_coefficients(opts), dsg.n_coefficients(slot)
+    n_res = opts.n_angles * prob.factors.size
+    np.testing.assert_array_equal(G1[:n_res, :J], G0[:n_res, :J])
+    assert not G1[:n_res, J:Jp].any()
+    coef = np.random.default_rng(3).normal(size=J)
+    padded = np.concatenate([coef, np.full(Jp - J, 7.0)])  # whatever the padding holds, it is not used
+    f1, r1 = dsg._fine_ratios_program(prob, slot, jnp.asarray(padded), knots)
+    f0, r0 = dsg._fine_ratios_program(prob, opts, jnp.asarray(coef), float(opts.n_knots))
+    assert np.isfinite(np.asarray(r1)).all()
+    np.testing.assert_allclose(np.asarray(r1), np.asarray(r0), rtol=1e-9, atol=0)  # sums of ~1e-12 terms: rounding

@@ -242,14 +242,8 @@ def lp_data_grouped(problem: MinimaxProblem, opts: DesignOptions, scale_t: float
     z = ax.damping_ratios[:, None]
     wd = w * jnp.sqrt(1.0 - z**2)
     s = -z * w + 1j * wd  # (modes, K)
-    tj = jnp.arange(J) * h
-    # the integral of e^{s(T - t)} over the j-th basis function, the degree-d B-spline on [t_j, t_j + (d + 1)h]:
-    # a cubic B-spline (d = 3), the indicator of [t_j, t_j + h] (steps, d = 0), or the hat on [t_j, t_j + 2h]
-    # (ramps, d = 1); the cardinal B-spline of degree d is d + 1 boxes convolved: phi1(-sh)^(d + 1)
     power = _DEGREE[opts.basis] + 1
-    # written as e^{s(T - t_j - power h)} phi1(sh)^power (phi1(-z) = e^{-z} phi1(z)): the exponent's real part is
-    # <= 0 on the basis' support, so a heavily damped mode underflows to 0 instead of overflowing (inf * 0 = NaN)
-    kern = h * jnp.exp(s[..., None] * (T - tj - power * h)) * phi1(s * h)[..., None] ** power  # (modes, K, J)
+    kern = _kernel(s, T, h, J, power, None if knots is None else _used_columns(opts, knots))  # (modes, K, J)
     weight = problem.mask * jnp.abs(ax.gains)[:, None] / (wd * jax.lax.stop_gradient(problem.reference)[:, None])
     kern = kern * (weight * aref)[..., None] * col
     theta = 2.0 * jnp.pi * jnp.arange(opts.n_angles) / opts.n_angles
@@ -304,6 +298,23 @@ def lp_data_grouped(problem: MinimaxProblem, opts: DesignOptions, scale_t: float
         out.append(RowGroups(idx, Up, Vp))
         off += 2 * r
     return c, G, hv, A, b, tuple(out)
+
+
+def _kernel(s, T, h, J: int, power: int, used=None):
+    """(modes, K, J): the integral of $e^{s(T - t)}$ over the j-th basis function of a command of J coefficients on
+    knots $t_j = jh$, the degree-d B-spline on $[t_j, t_j + (d + 1)h]$ (power = d + 1): a cubic B-spline (d = 3), the
+    indicator of $[t_j, t_j + h]$ (steps, d = 0) or the hat on $[t_j, t_j + 2h]$ (ramps, d = 1); the cardinal B-spline
+    of degree d is d + 1 boxes convolved: $h\\,e^{sT}e^{-st_j}\\varphi_1(-sh)^{d+1}$.
+
+    Written as $h\\,e^{s(T - t_j - (d+1)h)}\\varphi_1(sh)^{d+1}$ ($\\varphi_1(-z) = e^{-z}\\varphi_1(z)$): the
+    exponent's real part is <= 0 on the basis' support, so a heavily damped mode underflows to 0 instead of overflowing
+    (inf * 0 = NaN). `used` ((J,) booleans, padded LPs): a padded column's basis lies beyond T, where the exponent
+    would grow; its exponent is held at 0 (its column is zeroed by the caller), so a long move time cannot overflow
+    it into NaN."""
+    lag = T - jnp.arange(J) * h - power * h
+    if used is not None:
+        lag = jnp.where(used, lag, 0.0)
+    return h * jnp.exp(s[..., None] * lag) * phi1(s * h)[..., None] ** power
 
 
 def _used_columns(opts: DesignOptions, knots):
@@ -479,9 +490,9 @@ def _fine_ratios_program(problem: MinimaxProblem, opts: DesignOptions, coef, kno
     T = problem.move_time
     h = T / knots
     power = _DEGREE[opts.basis] + 1
-    tj = jnp.arange(coef.shape[0]) * h
-    coef = jnp.where(_used_columns(opts, knots), coef, 0.0)
-    kern = jnp.exp(s[..., None] * (T - tj - power * h)) * (h * phi1(s * h)[..., None] ** power)
+    used = _used_columns(opts, knots)
+    coef = jnp.where(used, coef, 0.0)
+    kern = _kernel(s, T, h, coef.shape[0], power, used)
     W = kern @ coef.astype(kern.dtype)
     return fine, jnp.abs(ax.gains)[:, None] / wd * jnp.abs(W) / problem.reference[:, None]
 
