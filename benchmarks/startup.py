@@ -419,6 +419,9 @@ def measure_shortcuts(model, ts, ref, reps, tsit5=None) -> dict:
         stepped = lambda g: tsit5(g, jnp.asarray(1e-12), jnp.asarray(1e-14))  # noqa: E731
     mc, _, yc = time_jax(closed, jnp.asarray(GAMMA), **reps)
     ms, _, ys = time_jax(stepped, jnp.asarray(GAMMA), **reps)
+    if tsit5 is not None and not (np.all(np.isfinite(yd)) and np.all(np.isfinite(ys))):
+        # the timed program runs with throw=False: a failed solve is NaN, which must fail the quick check
+        raise RuntimeError("startup --quick: a Tsit5 solve of the shortcuts failed (non-finite result)")
     out["closed_vs_stepping"] = {
         "closed_s": mc,
         "stepping_s": ms,
