@@ -71,22 +71,25 @@ def _fake_benchmarks(tmp_path, scripts: dict) -> Path:
     return bench
 
 
+def _quick_run(tmp_path, monkeypatch, capsys, scripts: dict, timeout: float) -> tuple[int, str, str]:
+    """`run_all.py --quick` in one worker on a fake benchmarks folder of `scripts`: (exit status, stdout, stderr)."""
+    monkeypatch.setattr(run_all, "HERE", _fake_benchmarks(tmp_path, scripts))
+    rc = run_all.main(["--quick", "--xla-defaults", "--no-shared-cache", "--jobs", "1", "--timeout", str(timeout)])
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
 def test_run_all_quick_fails_with_the_failing_scripts_names_and_isolates_the_scripts(tmp_path, monkeypatch, capsys):
     """The quick run's scripts share a worker process: one that raises or exits non-zero fails the run (exit status
     1, its name in the last line), the scripts after it still run, and what a script changes in the process (an
     environment variable, the working folder, `sys.argv`) is put back for the next one."""
-    bench = _fake_benchmarks(
-        tmp_path,
-        {
-            "a_changes": "import os, sys\nos.environ['QUICK_LEAK'] = '1'\nos.chdir('/')\nsys.argv.append('x')\n",
-            "b_raises": "raise ValueError('b_raises broke on purpose')\n",
-            "c_exits": "import sys\nsys.exit(3)\n",
-            "d_checks": "import os, sys\nprint('SEES', os.environ.get('QUICK_LEAK'), os.getcwd(), sys.argv[1:])\n",
-        },
-    )
-    monkeypatch.setattr(run_all, "HERE", bench)
-    rc = run_all.main(["--quick", "--xla-defaults", "--no-shared-cache", "--jobs", "1", "--timeout", "120"])
-    out, err = capsys.readouterr()
+    scripts = {
+        "a_changes": "import os, sys\nos.environ['QUICK_LEAK'] = '1'\nos.chdir('/')\nsys.argv.append('x')\n",
+        "b_raises": "raise ValueError('b_raises broke on purpose')\n",
+        "c_exits": "import sys\nsys.exit(3)\n",
+        "d_checks": "import os, sys\nprint('SEES', os.environ.get('QUICK_LEAK'), os.getcwd(), sys.argv[1:])\n",
+    }
+    rc, out, err = _quick_run(tmp_path, monkeypatch, capsys, scripts, 120)
     assert rc == 1
     assert "2/4 benchmarks ran" in err and err.rstrip().endswith("FAILED: b_raises c_exits (their output is above)")
     assert "ValueError: b_raises broke on purpose" in out  # the traceback is in the script's output block
@@ -97,15 +100,11 @@ def test_run_all_quick_fails_with_the_failing_scripts_names_and_isolates_the_scr
 def test_run_all_quick_fails_a_script_whose_runner_breaks(tmp_path, monkeypatch, capsys):
     """Bytes that are not UTF-8 in a script's output are shown (replaced), not a crash of its runner; a runner that
     breaks for one script (an error in run_all itself) fails that script by name, and the scripts after it run."""
-    bench = _fake_benchmarks(
-        tmp_path,
-        {
-            "a_bytes": "import sys\nsys.stdout.flush()\nsys.stdout.buffer.write(b'odd \\xff bytes\\n')\n",
-            "b_broken": "print('never run')\n",
-            "c_ok": "print('c_ok ran')\n",
-        },
-    )
-    monkeypatch.setattr(run_all, "HERE", bench)
+    scripts = {
+        "a_bytes": "import sys\nsys.stdout.flush()\nsys.stdout.buffer.write(b'odd \\xff bytes\\n')\n",
+        "b_broken": "print('never run')\n",
+        "c_ok": "print('c_ok ran')\n",
+    }
     real_run = run_all._Worker.run
 
     def run(self, name, *args):
@@ -114,8 +113,7 @@ def test_run_all_quick_fails_a_script_whose_runner_breaks(tmp_path, monkeypatch,
         return real_run(self, name, *args)
 
     monkeypatch.setattr(run_all._Worker, "run", run)
-    rc = run_all.main(["--quick", "--xla-defaults", "--no-shared-cache", "--jobs", "1", "--timeout", "120"])
-    out, err = capsys.readouterr()
+    rc, out, err = _quick_run(tmp_path, monkeypatch, capsys, scripts, 120)
     assert rc == 1
     assert err.rstrip().endswith("FAILED: b_broken (their output is above)")
     assert "=== a_bytes: ok" in out and "odd \ufffd bytes" in out
@@ -127,19 +125,14 @@ def test_run_all_quick_fails_a_script_whose_runner_breaks(tmp_path, monkeypatch,
 def test_run_all_quick_survives_a_worker_that_dies_or_hangs(tmp_path, monkeypatch, capsys):
     """A script that kills its worker, or runs past `--timeout`, fails the run with its name; a fresh worker runs the
     scripts left, and a hanging script's own child processes are stopped with it."""
-    bench = _fake_benchmarks(
-        tmp_path,
-        {
-            "a_dies": "import os, signal\nprint('dying', flush=True)\nos.kill(os.getpid(), signal.SIGKILL)\n",
-            "b_hangs": "import subprocess, sys, time\n"
-            "p = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(600)'])\n"
-            "print('CHILD', p.pid, flush=True)\ntime.sleep(600)\n",
-            "c_ok": "print('c_ok ran')\n",
-        },
-    )
-    monkeypatch.setattr(run_all, "HERE", bench)
-    rc = run_all.main(["--quick", "--xla-defaults", "--no-shared-cache", "--jobs", "1", "--timeout", "8"])
-    out, err = capsys.readouterr()
+    scripts = {
+        "a_dies": "import os, signal\nprint('dying', flush=True)\nos.kill(os.getpid(), signal.SIGKILL)\n",
+        "b_hangs": "import subprocess, sys, time\n"
+        "p = subprocess.Popen([sys.executable, '-c', 'import time; time.sleep(600)'])\n"
+        "print('CHILD', p.pid, flush=True)\ntime.sleep(600)\n",
+        "c_ok": "print('c_ok ran')\n",
+    }
+    rc, out, err = _quick_run(tmp_path, monkeypatch, capsys, scripts, 8)
     assert rc == 1
     assert err.rstrip().endswith("FAILED: a_dies b_hangs (their output is above)")
     assert "=== a_dies: FAILED (worker died (-9))" in out and "dying" in out

@@ -233,7 +233,8 @@ def lp_data_grouped(problem: MinimaxProblem, opts: DesignOptions, scale_t: float
     h = T / N
     # the columns in use (1.0) and the padding (0.0); the j-th limit rows of the velocity (J - 1 of them) and of the
     # jerk (J + 1) are in use for j below N - d - 1 and N - d + 1
-    col = _used_columns(opts, knots).astype(T.dtype) if knots is not None else jnp.ones((J,), T.dtype)
+    cols_used = None if knots is None else _used_columns(opts, knots)
+    col = jnp.ones((J,), T.dtype) if cols_used is None else cols_used.astype(T.dtype)
     n_used = jnp.sum(col)
     aref = D / T**2
     # --- residual rows: |g| / (omega_d R) |sum_j c_j k_j| <= t, as P cuts Re(e^{-i theta} .) <= t
@@ -243,7 +244,7 @@ def lp_data_grouped(problem: MinimaxProblem, opts: DesignOptions, scale_t: float
     wd = w * jnp.sqrt(1.0 - z**2)
     s = -z * w + 1j * wd  # (modes, K)
     power = _DEGREE[opts.basis] + 1
-    kern = _kernel(s, T, h, J, power, None if knots is None else _used_columns(opts, knots))  # (modes, K, J)
+    kern = _kernel(s, T, h, J, power, cols_used)  # (modes, K, J)
     weight = problem.mask * jnp.abs(ax.gains)[:, None] / (wd * jax.lax.stop_gradient(problem.reference)[:, None])
     kern = kern * (weight * aref)[..., None] * col
     theta = 2.0 * jnp.pi * jnp.arange(opts.n_angles) / opts.n_angles
