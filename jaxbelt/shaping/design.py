@@ -396,7 +396,6 @@ def _solve_round_impl(
             jnp.where(coarse, 60, 100),
             groups,
             used,
-            coarse | ~certify,  # the normal equations' Cholesky factor where 1e-5 or `ROUND_TOL` suffice
         )
         # stop at a certified vertex, or when the LP posed in units of the value found before finds that value
         # again (a solve on an optimal face that is not a single vertex: a new scale changes nothing)

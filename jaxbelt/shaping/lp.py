@@ -17,9 +17,7 @@ of $W^{1/2} G$, which keeps the accuracy that forming $H$ loses), solves the aff
 (predictor) step, takes the centring parameter $\\sigma = (\\mu_{aff}/\\mu)^3$, and solves the combined
 step with the second-order correction; primal and dual step lengths are taken separately (0.99 of the
 distance to the boundary). The equality constraints are eliminated through the Schur complement
-$A H^{-1} A^T$. Rows of G and A are scaled to unit infinity norm first. Where a tolerance of 1e-6 suffices
-(`solve_lp_data(..., normal=True)`: the minimax exchange's coarse and intermediate solves) H is formed and its
-Cholesky factor taken instead: 10-25x cheaper than the QR decomposition, its residuals stall near 1e-7.
+$A H^{-1} A^T$. Rows of G and A are scaled to unit infinity norm first.
 
 Stops when the relative primal and dual residuals and the relative duality gap are all below `tol`.
 `LPResult.converged` says whether it did; an infeasible or unbounded problem is not detected as such
@@ -96,7 +94,7 @@ def _group_rows(groups, w, gs, cs):
     return out
 
 
-def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter, groups=(), used=None, normal: bool | jax.Array = False):
+def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter, groups=(), used=None):
     n = c.shape[0]
     m = G.shape[0]
     # padded columns (`used` False: zero in c, G and A): held at exactly 0, outside the factorisation and the vertex
@@ -128,17 +126,8 @@ def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter, groups=(), used=None, nor
 
         def factorise(r):
             # a padded column's normal matrix is the identity (its right-hand sides are zero: its step is 0)
-            diag = jnp.where(used, jnp.sqrt(r * d0 + 1e-300), 1.0)
-
-            def by_qr(_):
-                return jnp.linalg.qr(jnp.concatenate([B, jnp.diag(diag)], axis=0), mode="r").T
-
-            def by_normal(_):
-                # the Cholesky factor of the formed H = B^T B + diag^2: one product and an n x n factorisation, 10-25x
-                # cheaper than the QR decomposition of B (rows x n^2) on two cores, accurate to ~1e-7 (`normal`)
-                return jnp.linalg.cholesky(B.T @ B + jnp.diag(diag * diag))
-
-            L = jax.lax.cond(normal, by_normal, by_qr, None)
+            Bq = jnp.concatenate([B, jnp.diag(jnp.where(used, jnp.sqrt(r * d0 + 1e-300), 1.0))], axis=0)
+            L = jnp.linalg.qr(Bq, mode="r").T
             S = A @ jsl.cho_solve((L, True), A.T)
             return L, jnp.linalg.cholesky(S)
 
@@ -396,7 +385,7 @@ def solve_lp(c, G, h, A, b, *, x_bound=None, tol=1e-9, max_iter: int = 100) -> L
     return _solve_lp_program(c, G, h, A, b, xb, jnp.asarray(tol, dtype=float), jnp.asarray(max_iter))
 
 
-def solve_lp_data(c, G, h, A, b, x_bound, tol, max_iter, groups=(), used=None, normal: bool | jax.Array = False):
+def solve_lp_data(c, G, h, A, b, x_bound, tol, max_iter, groups=(), used=None):
     """`solve_lp` on arrays of the right shapes, with `tol` and `max_iter` as (traceable) values: the interior
     point method runs on the data with its derivatives stopped; `value` carries the envelope derivative.
     `groups`: `RowGroups` of G's rows (the factorisation's shortcut; G itself holds every row).
@@ -404,19 +393,12 @@ def solve_lp_data(c, G, h, A, b, x_bound, tol, max_iter, groups=(), used=None, n
     `used` (n,) booleans (traceable; default all True): the columns in use. A column not in use is padding (zero
     in `c`, `G` and `A`, so that LPs of different sizes share one compiled program): its value is exactly 0, its
     normal equations are the identity, and the optimal vertex is picked among the rows of the used columns, so
-    the result is the LP without those columns (the same x, s, z, y, value and bound, to round-off).
-
-    `normal` (a traceable boolean; default False): factorise the normal matrix $H$ formed (its Cholesky factor)
-    in place of the QR decomposition of $W^{1/2}G$. Several times cheaper per iteration (on the minimax LP of 3 modes,
-    ~880 compressed rows x 127 columns: 1 ms against 11-30 ms on two cores), but the formed $H$ squares the condition
-    number: its residuals stall near 1e-7 (relative), so use it for tolerances of 1e-6 and looser. A certified
-    vertex (`vertex`) is exact either way: the crossover solves the active set itself."""
+    the result is the LP without those columns (the same x, s, z, y, value and bound, to round-off)."""
     stop = jax.lax.stop_gradient
     c_, G_, h_, A_, b_, xb_ = (stop(v) for v in (c, G, h, A, b, x_bound))
     groups = tuple(RowGroups(g.idx, stop(g.U), stop(g.V)) for g in groups)
     used = None if used is None else stop(jnp.asarray(used, dtype=bool))
-    normal = jnp.asarray(normal, dtype=bool)
-    res = _solve_impl(c_, G_, h_, A_, b_, xb_, jnp.asarray(tol, dtype=float), max_iter, groups, used, normal)
+    res = _solve_impl(c_, G_, h_, A_, b_, xb_, jnp.asarray(tol, dtype=float), max_iter, groups, used)
     value = lp_value(c, G, h, A, b, stop(res.x), stop(res.z), stop(res.y))
     return res._replace(value=value, lower_bound=stop(res.lower_bound))
 
