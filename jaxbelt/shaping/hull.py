@@ -57,13 +57,35 @@ def positions(cmd, t) -> np.ndarray:
     """The exact positions [m] of `cmd` at the times `t` [s] (numpy; a `PiecewiseMove` in closed form)."""
     t = np.asarray(t, dtype=float)
     if isinstance(cmd, PiecewiseMove):
-        T = float(cmd.duration)
-        tk, al, be = (np.asarray(q, dtype=float) for q in (cmd.times, cmd.steps, cmd.ramps))
-        d = np.maximum(np.minimum(t, T)[:, None] - tk, 0.0)
-        return (d**2 / 2) @ al + (d**3 / 6) @ be
+        return _piecewise_positions(cmd, t)
     if isinstance(cmd, BlendMove):
         return np.sum([float(w) * positions(m, t) for w, m in zip(np.asarray(cmd.weights), cmd.members)], axis=0)
     return derivatives_at(cmd, t, (0,))[0]
+
+
+def _piecewise_positions(move: PiecewiseMove, t) -> np.ndarray:
+    """$x(t) = \\sum_k \\alpha_k (t - t_k)_+^2/2 + \\beta_k (t - t_k)_+^3/6$ [m] of a `PiecewiseMove` at the times `t`
+    (held at the end after its duration T), in O((n + K) log K) for n times and K terms: the position, velocity,
+    acceleration and jerk carried from knot to knot (each interval's cubic expanded about its own left knot, so no
+    term cancels another's), then each time's cubic about the knot before it."""
+    T = float(move.duration)
+    tk, al, be = (np.asarray(q, dtype=float) for q in (move.times, move.steps, move.ramps))
+    knots, where = np.unique(tk, return_inverse=True)
+    A, B = np.bincount(where, al, knots.size), np.bincount(where, be, knots.size)  # the jumps at each knot
+    X, V, Acc, J = (np.zeros(knots.size) for _ in range(4))
+    x = v = a = j = 0.0
+    for m in range(knots.size):
+        if m:
+            h = knots[m] - knots[m - 1]
+            x, v, a = x + h * (v + h * (a / 2 + h * j / 6)), v + h * (a + h * j / 2), a + h * j
+        a, j = a + A[m], j + B[m]
+        X[m], V[m], Acc[m], J[m] = x, v, a, j
+    tc = np.minimum(t, T)
+    m = np.searchsorted(knots, tc, side="right") - 1
+    on = m >= 0
+    mi = np.maximum(m, 0)
+    d = tc - knots[mi]
+    return np.where(on, X[mi] + d * (V[mi] + d * (Acc[mi] / 2 + d * J[mi] / 6)), 0.0)
 
 
 def executed_integral(t, x, s) -> np.ndarray:

@@ -1,0 +1,88 @@
+"""The faster paths of the design pipeline against independent references: the positions of a piecewise move as
+executed (`hull.positions`) against the defining sum, the pseudo-polynomial peaks on the host (`pseudo._peaks_np`)
+against the command's own derivatives, the batched host evaluation (`pseudo._evaluate_np`) against a run-by-run
+computation from the definition, and the chained stages (`pseudo.run_chain`) against the stages run one by one."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import jaxbelt as jb
+from jaxbelt.shaping import hull
+from jaxbelt.shaping import pseudo as P
+from jaxbelt.shaping.moves import PiecewiseMove, fastest_time, padded
+from jaxbelt.shaping.shaped import gentlest_shaped
+
+jax.config.update("jax_enable_x64", True)
+
+
+def _direct_positions(move, t):
+    """$x(t) = \\sum_k \\alpha_k (t - t_k)_+^2/2 + \\beta_k (t - t_k)_+^3/6$ with t held at the duration: the definition,
+    term by term, summed with math.fsum (correctly rounded)."""
+    import math
+
+    T = float(move.duration)
+    tk, al, be = (np.asarray(q, dtype=float) for q in (move.times, move.steps, move.ramps))
+    out = []
+    for ti in np.minimum(np.asarray(t, dtype=float), T):
+        d = np.maximum(ti - tk, 0.0)
+        out.append(math.fsum(list(al * d**2 / 2) + list(be * d**3 / 6)))
+    return np.array(out)
+
+
+@pytest.mark.parametrize("jerk", [False, True])
+def test_piecewise_positions_match_the_defining_sum(jerk):
+    """A shaped trapezoid (ZVD on 7 Hz) and an S-curve (with a jerk limit), padded with zero terms at t = 0: the
+    knot-to-knot positions at 1 kHz setpoints, off-grid times and past the end agree with the defining sum (math.fsum)
+    to 1e-14 m (the distance 0.1 m; a relative 1e-13)."""
+    base = jb.ModalAxis([7.0], [0.02])
+    j_max = 40.0 if jerk else None
+    cmd, _, _ = gentlest_shaped("ZVD", base, 0.1, 1.2, fastest_time(0.1, 0.3, 1.2, j_max), 0.3, 1.2, j_max)
+    assert isinstance(cmd, PiecewiseMove)
+    cmd = padded(cmd, int(cmd.times.shape[0]) + 7)
+    T = float(cmd.duration)
+    t = np.concatenate([hull.sample_times(T, 1000.0), np.linspace(0.0, T, 37) + 1e-4, [T, T + 0.3]])
+    x = hull.positions(cmd, t)
+    ref = _direct_positions(cmd, t)
+    np.testing.assert_allclose(x, ref, rtol=0, atol=1e-14)
+    assert abs(x[-1] - 0.1) < 1e-14  # held at the distance after the end
+
+
+def test_host_peaks_match_the_commands_derivatives():
+    """`_peaks_np` (one power per instant and exponent) against `PseudoPolynomial.derivative` (the coefficients from
+    the linear solve of eq. 22) on the same 20001 instants: the 3-4-5 polynomial (closed form: peak v = 1.875 D/T,
+    a = 5.7735 D/T^2, jerk = 60 D/T^3) and a clustered robust-like set."""
+    D, T = 0.1, 0.8
+    pk = P._peaks_np(np.array([3.0, 4.0, 5.0]), D, T)
+    np.testing.assert_allclose(pk, [1.875 * D / T, 10 / np.sqrt(3) * D / T**2, 60 * D / T**3], rtol=1e-7)
+    g = np.array([4.19, 7.43, 7.93, 8.43, 8.93])
+    cmd = jb.PseudoPolynomial(jnp.asarray(g), D, T)
+    ts = jnp.linspace(0.0, T, 20001)
+    ref = [float(jnp.max(jnp.abs(cmd.derivative(ts, k)))) for k in (1, 2, 3)]
+    np.testing.assert_allclose(P._peaks_np(g, D, T), ref, rtol=1e-9)
+
+
+def test_batched_host_evaluation_matches_the_definition():
+    """`_evaluate_np` on a batch of padded exponents (two orders) against each run computed alone from the
+    definition: ratios $|\\sum_j \\kappa_j f_j|$ with $f_j = \\sum_l C_l\\gamma_l(\\gamma_l - 1)v_j^{4(\\gamma_l-1)}$
+    and the peaks' smooth maxima, to 1e-12 (relative to the largest ratio)."""
+    axis = jb.ModalAxis([3.1, 9.7], [0.03, 0.02])
+    n = 256
+    kern = P._kernels_np(axis, 1.0, np.linspace(0.8, 1.2, 9), np.array([1e-3, 2e-3]), n)
+    g = np.array([[3.0, 4.0, 5.0, 6.5, 8.0], [4.2, 7.4, 7.9, 8.4, 8.9]])
+    act = np.array([[1.0, 1.0, 1.0, 0.0, 0.0], [1.0, 1.0, 1.0, 1.0, 1.0]])
+    r, pk = P._evaluate_np(kern, 2, n, 0.1, 1.0, g, act)
+    v, _ = P._gauss_legendre(n)
+    for b in range(2):
+        gb = g[b][act[b] > 0]
+        C = np.array([np.prod([gj / (gj - gi) for gj in gb if gj != gi]) for gi in gb])
+        f = (v[:, None] ** (4 * (gb - 1))) @ (C * gb * (gb - 1))
+        y = (kern @ f).reshape(2, 2, -1)
+        ref = 0.1 * np.hypot(y[0], y[1])
+        np.testing.assert_allclose(r[b], ref, rtol=0, atol=1e-12 * ref.max())
+        u = np.arange(1, P.N_PEAK + 1) / P.N_PEAK
+        vel = (u[:, None] ** (gb - 1)) @ (C * gb)
+        q = np.abs(vel)
+        smooth = q.max() * np.sum((q / q.max()) ** P.PEAK_Q) ** (1 / P.PEAK_Q)
+        np.testing.assert_allclose(pk[b, 0], smooth * 0.1 / 1.0, rtol=1e-12)
