@@ -124,7 +124,7 @@ def test_chained_stages_reach_what_the_stages_one_by_one_reach():
     chain = P.make_chain(act, lower, gap, p=per, w_band=1.0, gtol=P.ROBUST_GTOL, gtol_loose=P.ROBUST_GTOL_LOOSE,
                          max_iter=it)  # fmt: skip
     zeros = P._f(np.zeros((2, N)))
-    out = P.run_chain(sh, chain, zeros, zeros, theta0, jnp.full((2,), 2, dtype=jnp.int32), P._f(np.full(2, np.nan)))
+    out = P.run_chain(sh, chain, zeros, theta0, jnp.full((2,), 2, dtype=jnp.int32), P._f(np.full(2, np.nan)))
     last = one_by_one[-1]
     np.testing.assert_allclose(np.asarray(out.value), np.asarray(last.value), rtol=1e-6)
     np.testing.assert_array_equal(np.asarray(out.reason), np.asarray(last.reason))

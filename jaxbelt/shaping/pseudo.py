@@ -35,10 +35,7 @@ rounding level with the gradient below a loose tolerance; otherwise it reports t
 not converged (`PseudoDesign.message`). The designs' stages run in one compiled while loop per call (`run_chain`:
 the feasibility stage, then the four powers), each run moving to its next stage on its own, so that a batch costs
 the most iterations one run takes over all its stages; the optimal design's objective is the same at every power,
-and a run of it that met its stopping test is not restarted at the next. A run of the optimal design also stops,
-stationary to the table's resolution (converged), when its objective fell by less than 1 % (its nominal residual by
-0.5 %) in 25 iterations: further iterations there moved the table's numbers by less than 0.3 % (measured on 1-3
-mode axes) at up to 300 iterations each.
+and a run of it that met its stopping test is not restarted at the next.
 
 **The exponent map, and why the paper's robust optimiser collapsed.** The optimiser works on unconstrained
 $\\theta$ with $\\gamma_0 = b + \\epsilon + s\\sin^2\\theta_0$ and $\\gamma_i = \\gamma_{i-1} + \\delta_{min} +
@@ -106,9 +103,6 @@ STAGE_STEPS = (60, 80, 100, 200)
 OPTIMAL_STEPS = (150, 150, 100, 100)
 OPTIMAL_GTOL = 1e-8
 OPTIMAL_GTOL_LOOSE = 1e-3
-#: the optimal design's stages stop, stationary to the table's resolution, when the objective (the nominal residual
-#: squared) fell by less than this fraction of itself in `WINDOW` iterations (0.5 % of the nominal residual)
-OPTIMAL_PROGRESS = 1e-2
 #: orders tried by the optimal design (m + 1 upward), and by the robust one (2 upward)
 N_ORDERS = 4
 N_ROBUST = 5
@@ -392,8 +386,6 @@ LINESEARCH_STEPS = 20
 ARMIJO = 1e-4
 #: successive iterations without decrease after which a stage stops
 STALL = 4
-#: iterations over which `run_chain`'s progress test compares the objective
-WINDOW = 25
 
 #: why a stage stopped (0, 1 and 3 count as converged)
 REASONS = {
@@ -404,10 +396,8 @@ REASONS = {
     "iterations, with the gradient below its loose tolerance",
     4: "the objective became non-finite",
     5: f"no decrease in {STALL} successive iterations with the gradient above its loose tolerance",
-    6: f"stationary to the table's resolution: the objective fell by less than its relative tolerance in "
-    f"{WINDOW} iterations",
 }
-CONVERGED = (0, 1, 3, 6)
+CONVERGED = (0, 1, 3)
 
 
 class StageOut(NamedTuple):
@@ -552,14 +542,12 @@ class ChainOut(NamedTuple):
     n_iter: jax.Array
 
 
-def _chain_one(opt, shared: Shared, chain: Run, settle, progress, theta, reason0, gmax0) -> ChainOut:
+def _chain_one(opt, shared: Shared, chain: Run, settle, theta, reason0, gmax0) -> ChainOut:
     """The stages of one run in one while loop: `chain` a `Run` whose fields other than `active`, `lower`, `gap` hold
     one value per stage slot (N,); each stage L-BFGS with the Armijo line search of `_stage_one`, from the best
     iterate of the stage before with a fresh memory, until its stopping test holds (the same tests, the same
-    reasons), and one more where `progress` (N,) > 0: the stage stops, stationary to that resolution (reason 6),
-    when its best objective fell by less than `progress` times itself in the last `WINDOW` iterations. A slot with
-    `max_iter` 0 is skipped, and so is one with `settle` > 0 when the last stage run met its stopping test
-    (`CONVERGED`; the objective is then the same as that stage's: nothing is left to do).
+    reasons). A slot with `max_iter` 0 is skipped, and so is one with `settle` > 0 when the last stage run met its
+    stopping test (`CONVERGED`; the objective is then the same as that stage's: nothing is left to do).
 
     Each run moves to its next stage on its own, so a batch (vmapped) costs the most iterations one run takes over
     every stage, not the sum over the stages of the most one run takes in each."""
@@ -585,15 +573,13 @@ def _chain_one(opt, shared: Shared, chain: Run, settle, progress, theta, reason0
     def fresh(s, theta, reason, gm, value, n_iter):
         return dict(stage=s, started=jnp.asarray(False), it=jnp.asarray(0), k=jnp.asarray(0), theta=theta, d=zero,
                     t=one, slope=-one, f=f_inf, g=zero, state=opt.init(theta), stall=jnp.asarray(0), bf=f_inf,
-                    bt=theta, bg=zero, reason=reason, gm=gm, value=value, n_iter=n_iter, wf=f_inf,
-                    wit=jnp.asarray(0), slow=jnp.asarray(False))  # fmt: skip
+                    bt=theta, bg=zero, reason=reason, gm=gm, value=value, n_iter=n_iter)  # fmt: skip
 
     def cond(c):
         return c["stage"] < n_st
 
     def body(c):
-        here = jnp.minimum(c["stage"], n_st - 1)
-        run = at(here)
+        run = at(jnp.minimum(c["stage"], n_st - 1))
         vg = jax.value_and_grad(lambda th: objective(shared, run, th))
         started, t, d, f, g, state, k = c["started"], c["t"], c["d"], c["f"], c["g"], c["state"], c["k"]
         trial = c["theta"] + t * d
@@ -621,24 +607,21 @@ def _chain_one(opt, shared: Shared, chain: Run, settle, progress, theta, reason0
         bt = jnp.where(better, new_theta, c["bt"])
         bg = jnp.where(better, new_g, c["bg"])
         bf = jnp.where(better, new_f, c["bf"])
-        # the progress test, every WINDOW iterations (from the first iterate's value on)
-        window = started & step_done & (it - c["wit"] >= WINDOW)
-        slow = window & (c["wf"] - bf <= progress[here] * jnp.abs(c["wf"]))
-        wf = jnp.where(~started | window, bf, c["wf"])
-        wit = jnp.where(window, it, c["wit"])
         stepped = dict(stage=c["stage"], started=jnp.asarray(True), it=it, k=jnp.where(step_done, 0, k + 1),
                        theta=new_theta, d=nd, t=jnp.where(step_done, 1.0, 0.5 * t), slope=s, f=new_f, g=new_g,
                        state=new_state, stall=stall, bf=bf, bt=bt, bg=bg, reason=c["reason"], gm=c["gm"],
-                       value=c["value"], n_iter=c["n_iter"], wf=wf, wit=wit, slow=slow)  # fmt: skip
+                       value=c["value"], n_iter=c["n_iter"])  # fmt: skip
         # the stage's stopping tests (`_stage_one`'s loop condition), on the state after this step
         finite = jnp.isfinite(new_f)
         done = (gmax(new_g) <= run.gtol) | (new_f <= run.ftol) | (it >= run.max_iter) | (stall >= STALL) | ~finite
-        done = done | slow
-        stalled = jnp.where(stall >= STALL, jnp.where(gmax(bg) <= run.gtol_loose, 3, 5), 2)
         reason = jnp.where(
             ~finite,
             4,
-            jnp.where(gmax(bg) <= run.gtol, 0, jnp.where(bf <= run.ftol, 1, jnp.where(slow, 6, stalled))),
+            jnp.where(
+                gmax(bg) <= run.gtol,
+                0,
+                jnp.where(bf <= run.ftol, 1, jnp.where(stall >= STALL, jnp.where(gmax(bg) <= run.gtol_loose, 3, 5), 2)),
+            ),
         )
         reason = reason.astype(c["reason"].dtype)
         moved = fresh(next_stage(c["stage"], reason), bt, reason, gmax(bg), bf, c["n_iter"] + it)
@@ -649,22 +632,21 @@ def _chain_one(opt, shared: Shared, chain: Run, settle, progress, theta, reason0
     return ChainOut(c["theta"], c["value"], c["gm"], c["reason"], c["n_iter"])
 
 
-def _run_chain(shared: Shared, chains: Run, settle, progress, thetas, reasons, gmaxs) -> ChainOut:
-    return jax.vmap(lambda ch, se, pr, t, r, g: _chain_one(LBFGS, shared, ch, se, pr, t, r, g))(
-        chains, settle, progress, thetas, reasons, gmaxs
+def _run_chain(shared: Shared, chains: Run, settle, thetas, reasons, gmaxs) -> ChainOut:
+    return jax.vmap(lambda ch, se, t, r, g: _chain_one(LBFGS, shared, ch, se, t, r, g))(
+        chains, settle, thetas, reasons, gmaxs
     )
 
 
 _run_chain_jit = _jit(_run_chain)
 
 
-def run_chain(shared: Shared, chains: Run, settle, progress, thetas, reasons, gmaxs) -> ChainOut:
+def run_chain(shared: Shared, chains: Run, settle, thetas, reasons, gmaxs) -> ChainOut:
     """Every stage of every run of the batch `chains` (a `Run` per run whose fields but `active`, `lower` and `gap`
     hold one value per stage slot, `make_chain`) from `thetas` (B, S) in one program call (`_chain_one`); `settle`
-    (B, N) marks the slots skipped after a stage that met its stopping test, `progress` (B, N) their progress
-    tolerance (0: none), `reasons`, `gmaxs` (B,) are reported for a run no stage of which runs. Through the program
-    store as `run_stage` (`jaxbelt._store`)."""
-    args = (shared, chains, settle, progress, thetas, reasons, gmaxs)
+    (B, N) marks the slots skipped after a stage that met its stopping test, `reasons`, `gmaxs` (B,) are reported
+    for a run no stage of which runs. Through the program store as `run_stage` (`jaxbelt._store`)."""
+    args = (shared, chains, settle, thetas, reasons, gmaxs)
     if _store.folder() is not None and eager():
         name = f"{__name__}._run_chain"
         return _store.call(name, _run_chain, args, _run_chain_jit, quick_compile(COMPILER_OPTIONS))
@@ -860,13 +842,7 @@ def _designs_batch(axis, D, T, limits, reference, u, n_nodes, bar):
         runs = make_chain(act, lower, gap, ftol=0.0, gtol=1e-12, gtol_loose=1e-3,
                           max_iter=np.where(over, FEASIBILITY_STEPS, 0))  # fmt: skip
         st = run_chain(
-            sh,
-            runs,
-            _f(np.zeros((len(orders), N_CHAIN))),
-            _f(np.zeros((len(orders), N_CHAIN))),
-            theta,
-            device_array(reason.astype(np.int32)),
-            _f(gmax),
+            sh, runs, _f(np.zeros((len(orders), N_CHAIN))), theta, device_array(reason.astype(np.int32)), _f(gmax)
         )
         theta, steps = st.theta, steps + np.asarray(st.n_iter)
         r0, pk1 = evaluated(np.asarray(theta))
@@ -901,9 +877,7 @@ def _designs_batch(axis, D, T, limits, reference, u, n_nodes, bar):
     )  # fmt: skip
     settle = np.zeros((len(orders), N_CHAIN))
     settle[:, 1:n] = (~rob)[:, None]
-    prog = np.zeros((len(orders), N_CHAIN))
-    prog[:, :n] = np.where(rob, 0.0, OPTIMAL_PROGRESS)[:, None]
-    st = run_chain(sh, runs, _f(settle), _f(prog), theta, device_array(reason.astype(np.int32)), _f(gmax))
+    st = run_chain(sh, runs, _f(settle), theta, device_array(reason.astype(np.int32)), _f(gmax))
     theta, steps = st.theta, steps + np.asarray(st.n_iter)
     reason, gmax = np.asarray(st.reason), np.asarray(st.gmax)  # as given where no stage ran (not feasible)
     if bar is not None:
