@@ -21,6 +21,7 @@ $W(s) = \\sum_k \\Delta v_k e^{s(t_n - t_k)}$ (`executed_integral`). Sampling is
 of a blend is again the blend of the members' executed residuals: `best_blend` ranks the blends as executed.
 """
 
+import collections
 import math
 
 import jax
@@ -128,11 +129,22 @@ def executed_ratios(axis: ModalAxis, cmd, reference, factors, rate_hz: float) ->
     """The complex residuals $g_i W(s)/(\\omega_d r_i)$ of `cmd` as executed at `rate_hz` (`executed_integral`), on
     every mode of `axis` at each frequency factor, in units of `reference` $r_i$ [m]: shape (n_modes, K); their
     modulus is the residual amplitude in units of the reference."""
-    s, wd = _poles(axis, factors)
+    ref, fac = np.asarray(reference, dtype=float), np.asarray(factors, dtype=float)
+    for c, a, r, f, h, out in _RECENT:  # the same command judged again (`jumps_reason`, then `best_blend`)
+        if c is cmd and a is axis and h == rate_hz and np.array_equal(r, ref) and np.array_equal(f, fac):
+            return out.copy()
+    s, wd = _poles(axis, fac)
     t = sample_times(float(cmd.end_time), rate_hz)
     W = executed_integral(t, positions(cmd, t), s)
     g = np.abs(np.asarray(axis.gains, dtype=float))[:, None]
-    return g * W / (wd * np.asarray(reference, dtype=float)[:, None])
+    out = g * W / (wd * ref[:, None])
+    _RECENT.append((cmd, axis, ref.copy(), fac.copy(), rate_hz, out.copy()))
+    return out
+
+
+#: the last `executed_ratios` results, with strong references to their commands and axes (so that `is` identifies
+#: them: neither can be freed and its id reused while here); commands are immutable
+_RECENT: collections.deque = collections.deque(maxlen=16)
 
 
 @jax.jit
