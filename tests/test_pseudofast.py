@@ -130,3 +130,25 @@ def test_chained_stages_reach_what_the_stages_one_by_one_reach():
     np.testing.assert_array_equal(np.asarray(out.reason), np.asarray(last.reason))
     total = sum(np.asarray(s.n_iter) for s in one_by_one)
     assert np.all(np.abs(np.asarray(out.n_iter) - total) <= 5), (out.n_iter, total)
+
+
+def test_executed_ratios_kept_are_those_of_the_same_command_and_reference():
+    """`executed_ratios` keeps its last results by identity of command and axis: the same call again returns the
+    same numbers, a doubled reference half of them (the ratio's definition), a rebuilt equal command the same, and a
+    new rate its own (against `executed_integral` of the positions, computed here)."""
+    axis = jb.ModalAxis([7.0, 18.0], [0.02, 0.01])
+    cmd, _, _ = gentlest_shaped("ZV", axis, 0.1, 1.0, fastest_time(0.1, 0.3, 1.2, None), 0.3, 1.2, None)
+    fac, ref = np.linspace(0.8, 1.2, 5), np.array([1e-3, 2e-3])
+    a = hull.executed_ratios(axis, cmd, ref, fac, 1000.0)
+    np.testing.assert_array_equal(hull.executed_ratios(axis, cmd, ref, fac, 1000.0), a)
+    np.testing.assert_allclose(hull.executed_ratios(axis, cmd, 2 * ref, fac, 1000.0), a / 2, rtol=1e-15)
+    twin = PiecewiseMove(cmd.times, cmd.steps, cmd.ramps, cmd.duration)
+    np.testing.assert_allclose(hull.executed_ratios(axis, twin, ref, fac, 1000.0), a, rtol=1e-15)
+    for rate in (1000.0, 250.0):
+        t = hull.sample_times(float(cmd.end_time), rate)
+        w = np.asarray(axis.omega)[:, None] * fac[None, :]
+        z = np.asarray(axis.damping_ratios)[:, None]
+        wd = w * np.sqrt(1 - z**2)
+        W = hull.executed_integral(t, _direct_positions(cmd, t), -z * w + 1j * wd)
+        ref_r = np.abs(np.asarray(axis.gains))[:, None] * W / (wd * ref[:, None])
+        np.testing.assert_allclose(hull.executed_ratios(axis, cmd, ref, fac, rate), ref_r, rtol=1e-9, atol=1e-12)
