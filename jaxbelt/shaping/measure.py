@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from ..commands import AbstractMotionCommand
+from ..commands import AbstractMotionCommand, PseudoPolynomial
 from .bands import _N_WIDE as _N_WIDE
 from .bands import _WIDE as _WIDE
 from .bands import JUMPS, measure_grids, mode_label
@@ -77,7 +77,12 @@ def _measure(axis, cmd, ref, u, limits, per: int = 1, size: int = 0) -> tuple[An
     `axis`)`."""
     if isinstance(cmd, PiecewiseMove):  # shaped on the user's modes: padded to their size
         cmd = padded(cmd, size)
-    pv, pa, pj = peaks(cmd)
+    if isinstance(cmd, PseudoPolynomial):  # the same 20001 instants on the host: no program call
+        from .pseudo import _peaks_np  # (not at import: it brings optax)
+
+        pv, pa, pj = (float(x) for x in _peaks_np(np.asarray(cmd.gammas), float(cmd.displacement), float(cmd.duration)))
+    else:
+        pv, pa, pj = peaks(cmd)
     band, wide = measure_grids(u)
     res = np.asarray(measured_curve(axis, cmd, band))  # (modes, K)
     ratio = res / ref[:, None]

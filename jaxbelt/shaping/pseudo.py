@@ -27,12 +27,15 @@ $\\delta$ = 0.2 %, and a start that breaks a limit is first moved inside them by
 Where that fails the design with the least violation is returned with `within_limits=False` and a message. The
 returned peaks are measured as `jaxbelt.shaping.moves.peaks` measures them (20001 instants).
 
-**The optimiser.** L-BFGS (optax's `scale_by_lbfgs` gives the direction) with an Armijo backtracking line search, in
-one compiled while loop per stage, vmapped over the runs (every order of both designs is one batch). A stage stops,
-converged, when the largest gradient component is below its tolerance (1e-4 on the log of the robust measure, 1e-8
-on the optimal design's objective relative to its start), when the residual is cancelled, or when no decrease is
-left at the objective's rounding level with the gradient below a loose tolerance; otherwise it reports the
-iteration limit or the stall, not converged (`PseudoDesign.message`).
+**The optimiser.** L-BFGS (optax's `scale_by_lbfgs` gives the direction) with an Armijo backtracking line search,
+vmapped over the runs (every order of both designs is one batch). A stage stops, converged, when the largest
+gradient component is below its tolerance (1e-4 on the log of the robust measure, 1e-8 on the optimal design's
+objective relative to its start), when the residual is cancelled, or when no decrease is left at the objective's
+rounding level with the gradient below a loose tolerance; otherwise it reports the iteration limit or the stall,
+not converged (`PseudoDesign.message`). The designs' stages run in one compiled while loop per call (`run_chain`:
+the feasibility stage, then the four powers), each run moving to its next stage on its own, so that a batch costs
+the most iterations one run takes over all its stages; the optimal design's objective is the same at every power,
+and a run of it that met its stopping test is not restarted at the next.
 
 **The exponent map, and why the paper's robust optimiser collapsed.** The optimiser works on unconstrained
 $\\theta$ with $\\gamma_0 = b + \\epsilon + s\\sin^2\\theta_0$ and $\\gamma_i = \\gamma_{i-1} + \\delta_{min} +
@@ -80,7 +83,7 @@ from .. import _store
 from .._checks import check_positive, check_range, device_array
 from .._guard import eager
 from .._xla import LazyJit, quick_compile
-from ..commands import PseudoPolynomial, _safe_pow
+from ..commands import PseudoPolynomial
 from ..models.axis import ModalAxis
 
 #: substitution power u = v**p of the Gauss-Legendre rule (as in `jaxbelt.shaping.residual`)
@@ -236,24 +239,25 @@ def _lagrange_np(g, active):
 
 
 def _evaluate_np(kern, n_modes, n_nodes, distance, move_time, gammas, active, n_peak: int = N_PEAK):
-    """`evaluate` on the host (numpy), for a batch of padded exponents (B, S): ratios (B, M, K), peaks (B, 3)."""
+    """`evaluate` on the host (numpy), for a batch of padded exponents (B, S): ratios (B, M, K), peaks (B, 3). The
+    batch in one product with the kernel (a pass over it for all runs, not one per run)."""
     v, _ = _gauss_legendre(n_nodes)
     u = np.arange(1, n_peak + 1) / n_peak
     x = np.concatenate([_P * np.log(v), np.log(u)])
-    out_r, out_p = [], []
-    for g, a in zip(np.atleast_2d(gammas), np.atleast_2d(active)):
-        C = _lagrange_np(g, a)
-        pw = np.exp(x[:, None] * (g - 1.0)[None, :])
-        c1 = C * g
-        c2 = c1 * (g - 1.0)
-        R = pw @ np.stack([c2, c1, c2, c2 * (g - 2.0)], axis=1)
-        y = (kern @ R[:n_nodes, 0]).reshape(2, n_modes, -1)
-        out_r.append(abs(distance) * np.hypot(y[0], y[1]))
-        inv = (1.0 / u)[:, None]
-        vaj = R[n_nodes:, 1:] * np.concatenate([np.ones_like(inv), inv, inv * inv], axis=1)
-        d = abs(distance)
-        out_p.append(_smooth_max(np, np.abs(vaj)) * np.array([d / move_time, d / move_time**2, d / move_time**3]))
-    return np.stack(out_r), np.stack(out_p)
+    g, a = np.atleast_2d(np.asarray(gammas, dtype=float)), np.atleast_2d(np.asarray(active, dtype=float))
+    C = np.stack([_lagrange_np(gi, ai) for gi, ai in zip(g, a)])
+    pw = np.exp(x[None, :, None] * (g - 1.0)[:, None, :])  # (B, N + P, S)
+    c1 = C * g
+    c2 = c1 * (g - 1.0)
+    y = kern @ (pw[:, :n_nodes] @ c2[:, :, None])[..., 0].T  # (2 M K, B)
+    y = y.T.reshape(g.shape[0], 2, n_modes, -1)
+    d = abs(distance)
+    ratios = d * np.hypot(y[:, 0], y[:, 1])
+    inv = 1.0 / u
+    vaj = pw[:, n_nodes:] @ np.stack([c1, c2, c2 * (g - 2.0)], axis=2)  # (B, P, 3): the u^(gamma-k) terms
+    vaj = vaj * np.stack([np.ones_like(inv), inv, inv * inv], axis=1)
+    scale = np.array([d / move_time, d / move_time**2, d / move_time**3])
+    return ratios, np.stack([_smooth_max(np, np.abs(q)) for q in vaj]) * scale
 
 
 class Shared(eqx.Module):
@@ -521,6 +525,154 @@ _run_stage_jit = _jit(_run_stage, static_argnums=(0, 4, 5))
 
 
 # --------------------------------------------------------------------------------------------
+# Every stage of a run in one loop: the designs' program
+# --------------------------------------------------------------------------------------------
+#: stage slots of `run_chain` (the feasibility stage or the four powers; a slot with no iterations is skipped)
+N_CHAIN = len(POWERS) + 1
+
+
+class ChainOut(NamedTuple):
+    """What `run_chain` returns per run: the best iterate `theta` of the last stage run and its `value`, `gmax` and
+    `reason` there (the ones given when no stage ran), `n_iter` (iterations over every stage)."""
+
+    theta: jax.Array
+    value: jax.Array
+    gmax: jax.Array
+    reason: jax.Array
+    n_iter: jax.Array
+
+
+def _chain_one(opt, shared: Shared, chain: Run, settle, theta, reason0, gmax0) -> ChainOut:
+    """The stages of one run in one while loop: `chain` a `Run` whose fields other than `active`, `lower`, `gap` hold
+    one value per stage slot (N,); each stage L-BFGS with the Armijo line search of `_stage_one`, from the best
+    iterate of the stage before with a fresh memory, until its stopping test holds (the same tests, the same
+    reasons). A slot with `max_iter` 0 is skipped, and so is one with `settle` > 0 when the last stage run met its
+    stopping test (`CONVERGED`; the objective is then the same as that stage's: nothing is left to do).
+
+    Each run moves to its next stage on its own, so a batch (vmapped) costs the most iterations one run takes over
+    every stage, not the sum over the stages of the most one run takes in each."""
+    n_st = chain.max_iter.shape[0]
+    zero = jnp.zeros_like(theta)
+    f_inf = jnp.asarray(jnp.inf, dtype=theta.dtype)
+    one = jnp.asarray(1.0, dtype=theta.dtype)
+    slots = jnp.arange(n_st)
+
+    def at(s):
+        return Run(active=chain.active, lower=chain.lower, gap=chain.gap, p=chain.p[s], w_band=chain.w_band[s],
+                   w_nom=chain.w_nom[s], w_guard=chain.w_guard[s], w_limits=chain.w_limits[s], gtol=chain.gtol[s],
+                   gtol_loose=chain.gtol_loose[s], ftol=chain.ftol[s], max_iter=chain.max_iter[s])  # fmt: skip
+
+    def next_stage(after, reason):
+        conv = (reason == 0) | (reason == 1) | (reason == 3)
+        runs = (slots > after) & (chain.max_iter > 0) & ~((settle > 0) & conv)
+        return jnp.where(jnp.any(runs), jnp.argmax(runs), n_st)
+
+    def gmax(g):
+        return jnp.max(jnp.abs(g))
+
+    def fresh(s, theta, reason, gm, value, n_iter):
+        return dict(stage=s, started=jnp.asarray(False), it=jnp.asarray(0), k=jnp.asarray(0), theta=theta, d=zero,
+                    t=one, slope=-one, f=f_inf, g=zero, state=opt.init(theta), stall=jnp.asarray(0), bf=f_inf,
+                    bt=theta, bg=zero, reason=reason, gm=gm, value=value, n_iter=n_iter)  # fmt: skip
+
+    def cond(c):
+        return c["stage"] < n_st
+
+    def body(c):
+        run = at(jnp.minimum(c["stage"], n_st - 1))
+        vg = jax.value_and_grad(lambda th: objective(shared, run, th))
+        started, t, d, f, g, state, k = c["started"], c["t"], c["d"], c["f"], c["g"], c["state"], c["k"]
+        trial = c["theta"] + t * d
+        f_t, g_t = vg(trial)
+        f_t = jnp.where(jnp.isnan(f_t), jnp.inf, f_t)
+        accept = ~started | (f_t <= f + ARMIJO * t * c["slope"])
+        failed = started & ~accept & (k + 1 >= LINESEARCH_STEPS)
+        new_theta = jnp.where(accept, trial, c["theta"])
+        new_f = jnp.where(accept, f_t, f)
+        new_g = jnp.where(accept, g_t, g)
+        upd, new_state = opt.update(new_g, state, new_theta)
+        new_state = jax.tree_util.tree_map(lambda a, b: jnp.where(accept, a, b), new_state, state)
+        new_state = jax.tree_util.tree_map(lambda a, b: jnp.where(failed, a, b), opt.init(new_theta), new_state)
+        nd = jnp.where(accept, upd, d)
+        s = jnp.vdot(new_g, nd)
+        steep = -new_g / jnp.maximum(jnp.linalg.norm(new_g), 1e-300)
+        bad = ~(s < 0) | failed
+        nd = jnp.where(bad, steep, nd)
+        s = jnp.where(bad, jnp.vdot(new_g, steep), s)
+        step_done = accept | failed
+        it = c["it"] + jnp.where(started & step_done, 1, 0)
+        better = accept & (new_f < c["bf"])
+        improved = new_f < c["bf"] - 1e-15 * jnp.abs(c["bf"])
+        stall = jnp.where(started & step_done, jnp.where(accept & improved, 0, c["stall"] + 1), c["stall"])
+        bt = jnp.where(better, new_theta, c["bt"])
+        bg = jnp.where(better, new_g, c["bg"])
+        bf = jnp.where(better, new_f, c["bf"])
+        stepped = dict(stage=c["stage"], started=jnp.asarray(True), it=it, k=jnp.where(step_done, 0, k + 1),
+                       theta=new_theta, d=nd, t=jnp.where(step_done, 1.0, 0.5 * t), slope=s, f=new_f, g=new_g,
+                       state=new_state, stall=stall, bf=bf, bt=bt, bg=bg, reason=c["reason"], gm=c["gm"],
+                       value=c["value"], n_iter=c["n_iter"])  # fmt: skip
+        # the stage's stopping tests (`_stage_one`'s loop condition), on the state after this step
+        finite = jnp.isfinite(new_f)
+        done = (gmax(new_g) <= run.gtol) | (new_f <= run.ftol) | (it >= run.max_iter) | (stall >= STALL) | ~finite
+        reason = jnp.where(
+            ~finite,
+            4,
+            jnp.where(
+                gmax(bg) <= run.gtol,
+                0,
+                jnp.where(bf <= run.ftol, 1, jnp.where(stall >= STALL, jnp.where(gmax(bg) <= run.gtol_loose, 3, 5), 2)),
+            ),
+        )
+        reason = reason.astype(c["reason"].dtype)
+        moved = fresh(next_stage(c["stage"], reason), bt, reason, gmax(bg), bf, c["n_iter"] + it)
+        return jax.tree_util.tree_map(lambda a, b: jnp.where(done, a, b), moved, stepped)
+
+    first = next_stage(-1, reason0)
+    c = jax.lax.while_loop(cond, body, fresh(first, theta, reason0, gmax0, f_inf, jnp.asarray(0)))
+    return ChainOut(c["theta"], c["value"], c["gm"], c["reason"], c["n_iter"])
+
+
+def _run_chain(shared: Shared, chains: Run, settle, thetas, reasons, gmaxs) -> ChainOut:
+    return jax.vmap(lambda ch, se, t, r, g: _chain_one(LBFGS, shared, ch, se, t, r, g))(
+        chains, settle, thetas, reasons, gmaxs
+    )
+
+
+_run_chain_jit = _jit(_run_chain)
+
+
+def run_chain(shared: Shared, chains: Run, settle, thetas, reasons, gmaxs) -> ChainOut:
+    """Every stage of every run of the batch `chains` (a `Run` per run whose fields but `active`, `lower` and `gap`
+    hold one value per stage slot, `make_chain`) from `thetas` (B, S) in one program call (`_chain_one`); `settle`
+    (B, N) marks the slots skipped after a stage that met its stopping test, `reasons`, `gmaxs` (B,) are reported
+    for a run no stage of which runs. Through the program store as `run_stage` (`jaxbelt._store`)."""
+    args = (shared, chains, settle, thetas, reasons, gmaxs)
+    if _store.folder() is not None and eager():
+        name = f"{__name__}._run_chain"
+        return _store.call(name, _run_chain, args, _run_chain_jit, quick_compile(COMPILER_OPTIONS))
+    return _run_chain_jit(*args)
+
+
+def make_chain(active, lower, gap, n_slots: int = N_CHAIN, **stages) -> Run:
+    """A batch of chained runs (`run_chain`): `active` (B, S); `lower`, `gap` scalars or (B,); the `make_runs`
+    keywords scalars, (B,) or (B, `n_slots`) (one value per stage slot; a slot not given has `max_iter` 0)."""
+    B = np.asarray(active).shape[0]
+    defaults = dict(p=1.0, w_band=0.0, w_nom=0.0, w_guard=0.0, w_limits=1.0, gtol=1e-9, gtol_loose=0.0,
+                    ftol=-np.inf, max_iter=0)  # fmt: skip
+
+    def cols(x, dtype: Any = float):
+        x = np.asarray(x, dtype=dtype)
+        x = x[:, None] if x.ndim == 1 else x
+        return device_array(np.broadcast_to(x, (B, n_slots)).copy())
+
+    def col(x):
+        return device_array(np.broadcast_to(np.asarray(x, dtype=float), (B,)).copy())
+
+    kw = {k: cols(stages.get(k, v), np.int32 if k == "max_iter" else float) for k, v in defaults.items()}
+    return Run(active=_f(active), lower=col(lower), gap=col(gap), **kw)
+
+
+# --------------------------------------------------------------------------------------------
 # The designs on a ModalAxis
 # --------------------------------------------------------------------------------------------
 class PseudoDesign(NamedTuple):
@@ -687,37 +839,49 @@ def _designs_batch(axis, D, T, limits, reference, u, n_nodes, bar):
     over = np.any(pk0 * inv > 1.0 - SLACK, axis=1)
     feasible = ~over
     if np.any(over):
-        runs = make_runs(act, lower, gap, ftol=0.0, gtol=1e-12, gtol_loose=1e-3,
-                         max_iter=np.where(over, FEASIBILITY_STEPS, 0))  # fmt: skip
-        st = run_stage(LBFGS, sh, runs, theta)
+        runs = make_chain(act, lower, gap, ftol=0.0, gtol=1e-12, gtol_loose=1e-3,
+                          max_iter=np.where(over, FEASIBILITY_STEPS, 0))  # fmt: skip
+        st = run_chain(
+            sh, runs, _f(np.zeros((len(orders), N_CHAIN))), theta, device_array(reason.astype(np.int32)), _f(gmax)
+        )
         theta, steps = st.theta, steps + np.asarray(st.n_iter)
         r0, pk1 = evaluated(np.asarray(theta))
         # The penalty is squared, so its gradient fades at the boundary: L-BFGS can stop (gradient below its
         # tolerance) with the penalty a rounding above zero, the peaks at 1 - SLACK of their limits plus ~1e-13
         # (seen on a GPU, whose sums round otherwise). Such a start is inside the limits with room to spare: the
         # peaks decide, at half the slack.
-        feasible = (np.asarray(st.value) <= 0.0) | np.all(pk1 * inv <= 1.0 - SLACK / 2, axis=1)
+        feasible = ~over | (np.asarray(st.value) <= 0.0) | np.all(pk1 * inv <= 1.0 - SLACK / 2, axis=1)
         reason = np.where(feasible, reason, np.asarray(st.reason))
         gmax = np.where(feasible, gmax, np.asarray(st.gmax))
     if bar is not None:
         bar.update(1)
     s0 = np.maximum(np.sum(r0[:, :, -1] ** 2, axis=1), 1e-300)
-    for s, (p, k) in enumerate(zip(POWERS, STAGE_STEPS)):
-        runs = make_runs(
-            act, lower, gap, p=np.where(rob, p, 1.0), w_band=np.where(rob, 1.0, 0.0),
-            w_nom=np.where(rob, 0.0, 1.0 / s0), gtol=np.where(rob, ROBUST_GTOL, OPTIMAL_GTOL),
-            gtol_loose=np.where(rob, ROBUST_GTOL_LOOSE, OPTIMAL_GTOL_LOOSE),
-            ftol=np.where(rob, -np.inf, ZERO**2 / s0),
-            # a run that cannot be brought inside the limits keeps the least violation stage 0 found
-            max_iter=np.where(feasible, np.where(rob, k, OPTIMAL_STEPS[s]), 0),
-        )  # fmt: skip
-        st = run_stage(LBFGS, sh, runs, theta)
-        theta, steps = st.theta, steps + np.asarray(st.n_iter)
-        live = (rob | (OPTIMAL_STEPS[s] > 0)) & feasible
-        reason = np.where(live, np.asarray(st.reason), reason)
-        gmax = np.where(live, np.asarray(st.gmax), gmax)
-        if bar is not None:
-            bar.update(1)
+    # the four powers as the first four stage slots of one chain per run (`run_chain`). The optimal design's
+    # objective is the same at every stage (the power is the robust design's): a run that met its stopping test is
+    # left where it is (`settle`), not restarted to meet it again (a restart at the rounding level only spends its
+    # stall iterations there, 4 line searches of 20 halvings each). A run that cannot be brought inside the limits
+    # keeps the least violation the feasibility stage found.
+    n = len(POWERS)
+
+    def per_slot(robust, optimal):
+        out = np.zeros((len(orders), N_CHAIN))
+        out[:, :n] = np.where(rob[:, None], np.asarray(robust, dtype=float), np.asarray(optimal, dtype=float))
+        return out
+
+    steps_rob, steps_opt = np.asarray(STAGE_STEPS), np.asarray(OPTIMAL_STEPS)
+    runs = make_chain(
+        act, lower, gap, p=per_slot(POWERS, 1.0), w_band=per_slot(1.0, 0.0), w_nom=per_slot(0.0, 1.0 / s0[:, None]),
+        gtol=per_slot(ROBUST_GTOL, OPTIMAL_GTOL), gtol_loose=per_slot(ROBUST_GTOL_LOOSE, OPTIMAL_GTOL_LOOSE),
+        ftol=per_slot(-np.inf, ZERO**2 / s0[:, None]),
+        max_iter=per_slot(steps_rob, steps_opt).astype(np.int32) * feasible[:, None],
+    )  # fmt: skip
+    settle = np.zeros((len(orders), N_CHAIN))
+    settle[:, 1:n] = (~rob)[:, None]
+    st = run_chain(sh, runs, _f(settle), theta, device_array(reason.astype(np.int32)), _f(gmax))
+    theta, steps = st.theta, steps + np.asarray(st.n_iter)
+    reason, gmax = np.asarray(st.reason), np.asarray(st.gmax)  # as given where no stage ran (not feasible)
+    if bar is not None:
+        bar.update(len(POWERS))
     gam = np.stack([_exponents_np(t, b, MARGIN, g, MAX_STEP) for t, b, g in zip(np.asarray(theta), lower, gap)])
     out = {}
     for kind in ("optimal", "robust"):
@@ -729,28 +893,22 @@ def _designs_batch(axis, D, T, limits, reference, u, n_nodes, bar):
     return out
 
 
-def _peaks_padded(gammas, active, distance, move_time, n: int = 20001):
-    """`(peak |v|, peak |a|, peak |jerk|)` (B, 3) of pseudo-polynomials given as padded exponents (B, S) with their
-    `active` masks, measured as `jaxbelt.shaping.moves.peaks` measures a command (n equally spaced instants over
-    the move, the derivatives of eq. 18): one program for every order."""
-    ts = jnp.linspace(0.0, 1.0, n) * move_time
-    u = jnp.clip(1.0 - ts / move_time, 0.0, 1.0)[:, None]
-
-    def one(g, a):
-        C = lagrange_coefficients(g, a)
-        out = []
-        for k in (1, 2, 3):
-            pk = jnp.ones_like(g)
-            for r in range(k):
-                pk = pk * (g - r)
-            val = jnp.sum(pk * C * _safe_pow(u, g - k), axis=-1) * jnp.abs(distance) / move_time**k
-            out.append(jnp.max(jnp.abs(val)))
-        return jnp.stack(out)
-
-    return jax.vmap(one)(gammas, active)
-
-
-_peaks_padded_jit = _jit(_peaks_padded)
+def _peaks_np(gammas, distance, move_time, n: int = 20001) -> np.ndarray:
+    """`(peak |v|, peak |a|, peak |jerk|)` of the pseudo-polynomial of exponents `gammas` (n + 1,), measured as
+    `jaxbelt.shaping.moves.peaks` measures it (`n` equally spaced instants over the move, the derivatives of
+    eq. 18, a term $u^{\\gamma - k}$ taken as 0 at u = 0), on the host: one power per instant and exponent,
+    $u^{\\gamma-3}$, the others from it."""
+    g = np.asarray(gammas, dtype=float)
+    C = _lagrange_np(g, np.ones_like(g))
+    u = np.clip(1.0 - np.linspace(0.0, 1.0, n), 0.0, 1.0)[1:-1]  # the instants with 0 < u < 1 (u = 1 below)
+    e3 = np.exp(np.log(u)[:, None] * (g - 3.0)[None, :])  # (n - 2, n + 1)
+    out = []
+    for k in (1, 2, 3):
+        pk = np.prod([g - r for r in range(k)], axis=0)
+        val = (e3 * u[:, None] ** (3 - k)) @ (pk * C)
+        ends = np.sum(pk * C)  # u = 1 (t = 0); u = 0 (t = T) contributes 0
+        out.append(max(float(np.max(np.abs(val))), abs(float(ends))) * abs(distance) / move_time**k)
+    return np.array(out)
 
 
 def _within(pk, limits):
@@ -811,40 +969,46 @@ def designs_for(axis: ModalAxis, D: float, T: float, limits, reference, u: float
             bar.close()
     fine = np.concatenate([np.linspace(1 - u, 1 + u, N_FINE), [1.0]])
     kern = _kernels_np(axis, T, fine, reference, n_nodes)
-    # the peaks of every run of both designs in one call (one program)
+    # every run of both designs judged on the fine grid in one product
     every = np.concatenate([res["optimal"]["gammas"], res["robust"]["gammas"]])
     acts = np.concatenate([res["optimal"]["active"], res["robust"]["active"]])
-    pk_all = np.asarray(_peaks_padded_jit(_f(every), _f(acts), _f(D), _f(T)))
+    ratio_all, _ = _evaluate_np(kern, axis.n_modes, n_nodes, D, T, every, acts)
     n_opt = res["optimal"]["gammas"].shape[0]
+    inv = np.array([0.0 if x is None else 1.0 / x for x in limits])
+    pks: dict[tuple[str, int], np.ndarray] = {}
     out = {}
     for kind, name in (("optimal", OPTIMAL), ("robust", ROBUST)):
         r = res[kind]
-        ratio, _ = _evaluate_np(kern, axis.n_modes, n_nodes, D, T, r["gammas"], r["active"])
-        pks = pk_all[:n_opt] if kind == "optimal" else pk_all[n_opt:]
+        ratio = ratio_all[:n_opt] if kind == "optimal" else ratio_all[n_opt:]
         worst = ratio[:, :, :-1].max(axis=(1, 2))
         nominal = ratio[:, :, -1]
-        ok_pk = np.array([_within(pk, limits) for pk in pks]) & r["feasible"]
-        inv = np.array([0.0 if x is None else 1.0 / x for x in limits])
-        if not np.any(ok_pk):  # none within the limits: the least violation
-            i = int(np.argmin(np.max(pks * inv, axis=1)))
-            score = np.sum(nominal**2, axis=1)
-            objective = float(score[i]) if kind == "optimal" else float(ratio[i, :, :-1][:, ::_STRIDE].max())
-        elif kind == "optimal":
-            score = np.sum(nominal**2, axis=1)
+        score = np.sum(nominal**2, axis=1)
+
+        # the runs in the order of preference: (optimal) the lowest order that cancels the residual, then the least
+        # score; (robust) the least worst residual. The first within the limits is the design; the peaks (20001
+        # instants) are measured run by run until it is found, and for every run where none is
+        def peaks_of(i, r=r, kind=kind):
+            if (kind, i) not in pks:
+                pks[kind, i] = _peaks_np(r["gammas"][i, : r["orders"][i] + 1], D, T)
+            return pks[kind, i]
+
+        def ok(i, r=r):
+            return bool(r["feasible"][i]) and _within(peaks_of(i), limits)
+
+        if kind == "optimal":
             zero = score <= (ZERO**2) * nominal.shape[1]
-            pick = [i for i in range(len(score)) if zero[i] and ok_pk[i]]  # the lowest order that cancels it
-            if not pick:
-                pick = sorted(range(len(score)), key=lambda i: (not ok_pk[i], score[i]))
-            i = pick[0]
-            objective = float(score[i])
+            prefer = [i for i in range(len(score)) if zero[i]] + sorted(range(len(score)), key=lambda i: score[i])
         else:
-            i = sorted(range(len(worst)), key=lambda i: (not ok_pk[i], worst[i]))[0]
-            objective = float(ratio[i, :, :-1][:, ::_STRIDE].max())
+            prefer = sorted(range(len(worst)), key=lambda i: worst[i])
+        i = next((i for i in prefer if ok(i)), None)
+        if i is None:  # none within the limits: the least violation
+            i = int(np.argmin([np.max(peaks_of(k) * inv) for k in range(len(score))]))
+        objective = float(score[i]) if kind == "optimal" else float(ratio[i, :, :-1][:, ::_STRIDE].max())
         n = r["orders"][i]
         g = r["gammas"][i, : n + 1]
         cmd = PseudoPolynomial(jnp.asarray(g), D, T)
-        pk = tuple(float(x) for x in pks[i])
-        within = bool(ok_pk[i])
+        pk = tuple(float(x) for x in peaks_of(i))
+        within = ok(i)
         reason = int(r["reason"][i])
         converged = reason in CONVERGED
         message = f"order {n}: {REASONS[reason]} (gradient {float(r['gmax'][i]):.1e})"
