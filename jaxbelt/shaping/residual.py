@@ -27,7 +27,16 @@ from .._threads import blas_limited
 from .._xla import QUICK_COMPILE
 from ..commands import AbstractMotionCommand, PseudoPolynomial, ShapedCommand, falling_factorial
 from ..models.axis import ModalAxis
-from .moves import BlendMove, PaddedPseudo, PiecewiseMove, SplineMove, fastest_move, padded_pseudo
+from .moves import (
+    BlendMove,
+    PaddedPseudo,
+    PaddedSpline,
+    PiecewiseMove,
+    SplineMove,
+    fastest_move,
+    padded_command,
+    padded_pseudo,
+)
 
 _P = 4  # substitution power u = v**p of the pseudo-polynomial rule (as in jaxbelt.objectives.residual)
 
@@ -78,7 +87,7 @@ def _pseudo_polynomial_w(cmd, s, n_nodes: int):
 
 def residual_integral(cmd: AbstractMotionCommand, s):
     """$W(s) = \\int_0^T a(\\tau)e^{s(T-\\tau)}d\\tau$ [m/s] of a move for complex `s` (any shape), T its end time."""
-    if isinstance(cmd, SplineMove | PiecewiseMove | BlendMove):
+    if isinstance(cmd, SplineMove | PiecewiseMove | BlendMove | PaddedSpline):
         return cmd.residual_integral(s)
     if isinstance(cmd, PseudoPolynomial):
         return _pseudo_polynomial_w(cmd, s, _nodes_for(cmd, s))
@@ -105,6 +114,21 @@ def _poles(axis: ModalAxis, factors):
     z = axis.damping_ratios[:, None]
     wd = w * jnp.sqrt(1.0 - z**2)
     return -z * w + 1j * wd, wd
+
+
+def _host_poles(axis: ModalAxis, r):
+    """The poles s of `_poles` (n_modes, K) in numpy where the axis and the factors are concrete (the host decision of
+    `_nodes_for`: eager operations compile a program each in a fresh process), else `_poles`'."""
+    if not is_concrete((axis, r)):
+        return _poles(axis, r)[0]
+    w = (
+        2.0
+        * np.pi
+        * np.asarray(axis.frequencies, dtype=float)[:, None]
+        * np.atleast_1d(np.asarray(r, dtype=float))[None, :]
+    )
+    z = np.asarray(axis.damping_ratios, dtype=float)[:, None]
+    return -z * w + 1j * (w * np.sqrt(1.0 - z**2))
 
 
 #: the largest frequency factor of `residual_curve`: a mode scaled a thousandfold is another axis, not an error of
@@ -160,8 +184,9 @@ def _curve(axis, cmd, r, rtol, atol):
     pseudo = cmd.base if isinstance(cmd, ShapedCommand) else cmd
     if isinstance(pseudo, PseudoPolynomial):
         shaper = (cmd.times, cmd.amplitudes) if isinstance(cmd, ShapedCommand) else None
-        n_nodes = _nodes_for(pseudo, _poles(axis, r)[0])
+        n_nodes = _nodes_for(pseudo, _host_poles(axis, r))
         return _pseudo_curve(axis, padded_pseudo(pseudo), shaper, r, n_nodes)
+    cmd = padded_command(cmd)  # a spline of any knot count of its slot: one program (`moves.INTERVAL_SLOT`)
     grid = _uniform_grid(axis, cmd, r)
     if grid is not None:
         return _grid_curve(axis, cmd, *grid)
@@ -256,6 +281,7 @@ def prepare_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors) -> None:
     if isinstance(cmd, (PseudoPolynomial, ShapedCommand)) or not _has_closed_form(cmd):
         return
     r = atleast_1d(device_array(factors, dtype=float))
+    cmd = padded_command(cmd)
     grid = _uniform_grid(axis, cmd, r)
     if grid is not None:
         prepare(_grid_curve, axis, cmd, *grid)
