@@ -61,18 +61,39 @@ def _nodes_for(cmd, s) -> int:
 _DAMPED_AWAY = 700.0
 
 
-def _pseudo_polynomial_w(cmd, s, n_nodes: int):
+#: `_pseudo_curve`'s rule is padded to at least this many nodes (zero weights): the node counts a design's
+#: pseudo-polynomials need (128 to 1024 on 1-3 modes, rising with the move time) share one compiled program
+NODE_SLOT = 1024
+
+
+def _rule(n_nodes: int, size: int = 0):
+    r"""The `n_nodes`-point Gauss-Legendre rule on [0, 1] in v as numpy arrays `(log v, u = v**_P, weights)`, padded
+    to `size` nodes by nodes at v = 1/2 of weight exactly 0 (they add 0 to every sum). log v on the host, as the
+    rule's constants were folded before it was data: the powers $v^{p(\gamma - 1) - 1}$ of an order-8
+    pseudo-polynomial (exponents to 16.5) cancel to 1e-9 in W, so their last bits show."""
+    x, w = np.polynomial.legendre.leggauss(n_nodes)
+    v, w = 0.5 * (x + 1.0), 0.5 * w
+    u, logv = v**_P, np.log(v)
+    extra = max(size - n_nodes, 0)
+    if extra:
+        logv = np.concatenate([logv, np.full(extra, np.log(0.5))])
+        u = np.concatenate([u, np.full(extra, 0.5**_P)])
+        w = np.concatenate([w, np.zeros(extra)])
+    return logv, u, w
+
+
+def _pseudo_polynomial_w(cmd, s, n_nodes):
     """W(s) by the Gauss-Legendre rule, or, where $p = -sT$ has Re p > `_DAMPED_AWAY`, in closed form:
     $\\int_0^1 u^{\\gamma-2}e^{-pu}du = \\Gamma(\\gamma - 1)p^{1-\\gamma} - \\Gamma(\\gamma - 1, p)p^{1-\\gamma}$, whose last
     term is below $|p|^{\\gamma}e^{-\\mathrm{Re}\\,p}$ (the vibration from the start of the move, damped away): the rule
-    would need about 2.5|s|T nodes (1e7 for a 1 MHz mode in 0.8 s)."""
-    x, w = np.polynomial.legendre.leggauss(n_nodes)
-    v, w = 0.5 * (x + 1.0), 0.5 * w
+    would need about 2.5|s|T nodes (1e7 for a 1 MHz mode in 0.8 s). `n_nodes`: the node count, or the rule
+    `(log v, u, weights)` itself (`_rule`, padded)."""
+    logv, u, w = _rule(n_nodes) if isinstance(n_nodes, int) else n_nodes
     T = cmd.duration
     coef = falling_factorial(cmd.gammas, 2) * cmd.coefficients  # phi'' = -Phi/T^2 sum_i a_i u^(g_i - 2)
     e = _P * (cmd.gammas - 1.0) - 1.0  # p v^(p(g-1)-1) dv = u^(g-2) du, u = v^p
-    powers = jnp.exp(jnp.log(jnp.asarray(v))[:, None] * e[None, :])  # (nodes, terms)
-    u = jnp.asarray(v**_P)
+    powers = jnp.exp(jnp.asarray(logv)[:, None] * e[None, :])  # (nodes, terms)
+    u = jnp.asarray(u)
     kern = _P * jnp.asarray(w) * jnp.exp(jnp.asarray(s)[..., None] * T * u)  # (..., nodes)
     moments = kern @ powers.astype(kern.dtype)  # (..., terms)
     quad = -(cmd.displacement / T) * (moments @ coef.astype(moments.dtype))
@@ -185,7 +206,8 @@ def _curve(axis, cmd, r, rtol, atol):
     if isinstance(pseudo, PseudoPolynomial):
         shaper = (cmd.times, cmd.amplitudes) if isinstance(cmd, ShapedCommand) else None
         n_nodes = _nodes_for(pseudo, _host_poles(axis, r))
-        return _pseudo_curve(axis, padded_pseudo(pseudo), shaper, r, n_nodes)
+        rule = tuple(jax.device_put(x) for x in _rule(n_nodes, NODE_SLOT))  # data: one program up to NODE_SLOT
+        return _pseudo_curve(axis, padded_pseudo(pseudo), shaper, r, rule)
     cmd = padded_command(cmd)  # a spline of any knot count of its slot: one program (`moves.INTERVAL_SLOT`)
     grid = _uniform_grid(axis, cmd, r)
     if grid is not None:
@@ -262,12 +284,14 @@ def _grid_curve(axis, cmd, r0, dr, n: int):
     return jnp.abs(axis.gains)[:, None] / wd * jnp.abs(_grid_integral(cmd, s[:, 0], r0, dr, n))
 
 
-@stored_jit(compiler_options=QUICK_COMPILE)
-def _pseudo_curve(axis, terms: PaddedPseudo, shaper, r, n_nodes: int):
+# XLA's default options: its run time counts in a warm design (modes x 401 factors x 1024 nodes, 4-5x slower at
+# `QUICK_COMPILE`'s level 0)
+@stored_jit
+def _pseudo_curve(axis, terms: PaddedPseudo, shaper, r, rule):
     """`residual_curve` of a pseudo-polynomial (`terms`, padded), shaped by the impulses `shaper` = (times,
-    amplitudes) where not None."""
+    amplitudes) where not None, by the quadrature `rule` = (log v, u, weights) (`_rule`, padded to `NODE_SLOT`)."""
     s, wd = _poles(axis, r)
-    W = _pseudo_polynomial_w(terms, s, n_nodes)
+    W = _pseudo_polynomial_w(terms, s, rule)
     if shaper is not None:
         times, amplitudes = shaper
         W = W * jnp.sum(amplitudes * jnp.exp(s[..., None] * (times[-1] - times)), axis=-1)
