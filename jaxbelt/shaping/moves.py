@@ -576,8 +576,11 @@ def convolved(base: PiecewiseMove, amplitudes, delays) -> PiecewiseMove:
     return PiecewiseMove(times, steps, ramps, base.duration + tau[-1])
 
 
-@stored_jit  # its run time counts in a warm design (20001 samples): XLA's default options
+@stored_jit
 def _peaks(cmd, n: int):
+    """The peaks of `cmd`'s |v|, |a|, |jerk| on `n` equally spaced times (a `PiecewiseMove`'s: with its breakpoints and
+    their neighbours), in one program: a fine-sampling check of `piecewise_peaks` (`peaks` samples by
+    `derivatives_at`)."""
     ts = jnp.linspace(0.0, cmd.end_time, n)
     if isinstance(cmd, PiecewiseMove):
         eps = 1e-12 * cmd.duration
@@ -619,18 +622,20 @@ def piecewise_peaks(move: PiecewiseMove) -> tuple[float, float, float]:
 
 def peaks(cmd: AbstractMotionCommand, n: int = 20001):
     """`(peak |v|, peak |a|, peak |jerk|)` of a move over its duration: exactly for a `PiecewiseMove`
-    (`piecewise_peaks`), else on `n` equally spaced times (one compiled program per command structure and padded
-    shape, `padded_command`)."""
+    (`piecewise_peaks`), else on `n` equally spaced times, by `derivatives_at` (the program that samples the command
+    at the drive's rate: one compiled program per command structure and padded shape, `padded_command`)."""
     if isinstance(cmd, PiecewiseMove):
         return piecewise_peaks(cmd)
-    return tuple(float(x) for x in np.asarray(_peaks(padded_command(cmd), int(n))))
+    ts = np.linspace(0.0, float(np.asarray(cmd.end_time)), int(n))
+    return tuple(float(np.max(np.abs(x))) for x in derivatives_at(cmd, ts, (1, 2, 3)))
 
 
 def prepare_peaks(cmd: AbstractMotionCommand, n: int = 20001) -> None:
-    """Start compiling the program of `peaks(cmd, n)` in the background while the program store is on
-    (`jaxbelt._guard.prepare`); else nothing. `cmd` stands for commands of its structure and shapes."""
+    """Start compiling the program of `peaks(cmd, n)` (`derivatives_at`'s) in the background while the program store
+    is on (`jaxbelt._guard.prepare`); else nothing. `cmd` stands for commands of its structure and shapes."""
     if not isinstance(cmd, PiecewiseMove):
-        prepare(_peaks, padded_command(cmd), int(n))
+        run, size, run_orders = _block_program(cmd, (1, 2, 3))
+        prepare(_derivatives, run, jax.device_put(np.zeros(size)), run_orders)
 
 
 def padded(move: PiecewiseMove, size: int) -> PiecewiseMove:
@@ -1049,6 +1054,36 @@ def derivatives_at(cmd: AbstractMotionCommand, times, orders=(0, 1, 2)) -> list:
     per command structure and size: a move of another duration runs the same one). The values are those of one
     call on all the times."""
     t = np.asarray(times, dtype=float)
+    orders = tuple(int(k) for k in orders)
+    run, size, run_orders = _block_program(cmd, orders)
+    rows = [run_orders.index(k) for k in orders]
+    if t.size == 0:
+        return [np.empty(0) for _ in orders]
+    n_blocks = -(-t.size // size)
+    padded_t = np.concatenate([t, np.full(n_blocks * size - t.size, t[-1])])
+    out = [np.empty(t.size) for _ in orders]
+    for b in range(n_blocks):
+        lo, hi = b * size, min((b + 1) * size, t.size)
+        # `jax.device_put`: `jnp.asarray` of a host array compiles a small program per new shape
+        vals = np.asarray(jax.device_get(_derivatives(run, jax.device_put(padded_t[lo : lo + size]), run_orders)))
+        for o, i in zip(out, rows):
+            o[lo:hi] = vals[i, : hi - lo]
+    return out
+
+
+#: the orders `_derivatives` evaluates for jaxbelt's own moves, whichever are asked for: the samples (0, 1, 2), the
+#: peaks (1, 2, 3) and the positions (0) of a command run one program
+_ALL_ORDERS = (0, 1, 2, 3)
+
+
+def _own(cmd) -> bool:
+    if isinstance(cmd, BlendMove):
+        return all(_own(m) for m in cmd.members)
+    return isinstance(cmd, PiecewiseMove | SplineMove | PaddedSpline | PaddedPseudo)
+
+
+def _block_program(cmd, orders: tuple):
+    """`(command padded, block size, orders evaluated)` of `derivatives_at`'s program for `cmd`."""
     # padded (`padded_command`): a pseudo-polynomial of any order up to `TERMS_BUCKET`, a spline of any knot count of
     # its slot, run one program
     cmd = padded_command(cmd)
@@ -1059,24 +1094,11 @@ def derivatives_at(cmd: AbstractMotionCommand, times, orders=(0, 1, 2)) -> list:
     else:
         terms = 1
     block = 1 << max((_SAMPLE_ELEMENTS // max(terms, 1)).bit_length() - 1, 8)  # a power of two >= 256
-    orders = tuple(int(k) for k in orders)
-    if t.size == 0:
-        return [np.empty(0) for _ in orders]
     # every block of one size, at most `_SAMPLE_BLOCK` (the last padded), so that a move of another duration
     # (another sample count) runs the same program: one compiled program per command structure, not one eager
     # operation per sample count (50 compilations for a design at a new move time), nor one per power of two (a
     # design at 1.03 s, 1031 samples at 1 kHz, compiled the 2048-sample program that 1001 samples did not need)
-    size = min(block, _SAMPLE_BLOCK)
-    n_blocks = -(-t.size // size)
-    padded_t = np.concatenate([t, np.full(n_blocks * size - t.size, t[-1])])
-    out = [np.empty(t.size) for _ in orders]
-    for b in range(n_blocks):
-        lo, hi = b * size, min((b + 1) * size, t.size)
-        # `jax.device_put`: `jnp.asarray` of a host array compiles a small program per new shape
-        vals = np.asarray(jax.device_get(_derivatives(cmd, jax.device_put(padded_t[lo : lo + size]), orders)))
-        for o, v in zip(out, vals):
-            o[lo:hi] = v[: hi - lo]
-    return out
+    return cmd, min(block, _SAMPLE_BLOCK), (_ALL_ORDERS if _own(cmd) else tuple(orders))
 
 
 #: a pseudo-polynomial's exponents are padded to a multiple of this for its residual's program (inactive terms,
