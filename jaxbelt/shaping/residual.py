@@ -191,11 +191,33 @@ def residual_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors: ArrayLi
     return checked(_curve(axis, cmd, r, rtol, atol), axis, cmd, checks=found)
 
 
-def measured_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors) -> jax.Array:
+def measured_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors) -> np.ndarray:
     """`residual_curve(axis, cmd, factors)` [m] for arguments already checked: the design pipeline's (its request
     validated the axis and the limits once, its band grids are built in range), the same numbers without the
-    checks, which each stage would otherwise repeat on every candidate."""
-    return _curve(axis, cmd, np.atleast_1d(np.asarray(factors, dtype=float)), 1e-10, 1e-14)
+    checks, which each stage would otherwise repeat on every candidate; a numpy array (n_modes, len(factors)),
+    computed on the factors padded to a multiple of `FACTOR_SLOT` (`padded_factors`: the band's 401 and the wide
+    range's 501 factors run one program per command kind)."""
+    r = np.atleast_1d(np.asarray(factors, dtype=float))
+    return np.asarray(_curve(axis, cmd, padded_factors(r), 1e-10, 1e-14))[:, : r.shape[0]]
+
+
+#: `measured_curve`'s factor grids of more than 64 factors are padded to a multiple of this
+FACTOR_SLOT = 256
+
+
+def padded_factors(r: np.ndarray) -> np.ndarray:
+    """The factors `r` (1-D, numpy) followed by more, to a multiple of `FACTOR_SLOT` where there are more than 64: a
+    uniform grid continued with its spacing (it stays one, for `_grid_curve`), any other repeating its last factor.
+    Each factor's residual is computed on its own (the extra ones are dropped), so only the rounding of a uniform
+    grid's blocked sums (`_grid_integral`) sees them."""
+    K = r.shape[0]
+    size = -(-K // FACTOR_SLOT) * FACTOR_SLOT
+    if K <= 64 or size == K:
+        return r
+    d = float(r[-1] - r[0]) / (K - 1)
+    uniform = d > 0 and float(np.max(np.abs(r[0] + d * np.arange(K) - r))) <= 1e-14 * float(r[-1])
+    extra = r[-1] + d * np.arange(1, size - K + 1) if uniform else np.full(size - K, r[-1])
+    return np.concatenate([r, extra])
 
 
 def _curve(axis, cmd, r, rtol, atol):
@@ -299,12 +321,12 @@ def _pseudo_curve(axis, terms: PaddedPseudo, shaper, r, rule):
 
 
 def prepare_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors) -> None:
-    """Start compiling the program of `residual_curve(axis, cmd, factors)` in the background, for a command with
+    """Start compiling the program of `measured_curve(axis, cmd, factors)` in the background, for a command with
     a closed-form residual other than a pseudo-polynomial, while the program store is on (`jaxbelt._guard.prepare`);
     else nothing. `cmd` stands for commands of its structure and shapes (its values are not read)."""
     if isinstance(cmd, (PseudoPolynomial, ShapedCommand)) or not _has_closed_form(cmd):
         return
-    r = atleast_1d(device_array(factors, dtype=float))
+    r = padded_factors(np.atleast_1d(np.asarray(factors, dtype=float)))  # as `measured_curve` computes it
     cmd = padded_command(cmd)
     grid = _uniform_grid(axis, cmd, r)
     if grid is not None:
