@@ -264,7 +264,9 @@ def _uniform_grid(axis, cmd, r):
     r0, dr = float(r[0]), float(r[-1] - r[0]) / (n - 1)
     if not dr > 0 or np.max(np.abs(r0 + dr * np.arange(n) - r)) > 1e-14 * float(r[-1]):
         return None
-    s_T = np.asarray(axis.omega, dtype=float) * r0 * float(np.asarray(cmd.end_time))  # |s| = omega r
+    s_T = (
+        2.0 * np.pi * np.asarray(axis.frequencies, dtype=float) * r0 * float(np.asarray(cmd.end_time))
+    )  # |s| = omega r
     if not np.all(s_T >= GRID_MIN_ST):
         return None
     return device_array(r0, dtype=float), device_array(dr, dtype=float), int(n)
