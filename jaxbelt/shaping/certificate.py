@@ -85,7 +85,7 @@ def certificate(solver: _design.MinimaxSolver, mm, certify_rtol, progress: bool)
     bound = math.nan
     note = f"certified gap {float(mm.gap):.1e}"
     if float(mm.gap) > _design.CERTIFIED_GAP:  # accepted by the absolute gap (an optimum near zero)
-        note = f"certified within {100 * float(mm.worst - mm.lower_bound):.1e} % of the optimum"
+        note = f"certified within {100 * (float(mm.worst) - float(mm.lower_bound)):.1e} % of the optimum"
     ok = mm.converged
     if not ok:
         lp = mm.lp

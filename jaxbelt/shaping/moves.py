@@ -557,7 +557,17 @@ def shape_move(base: PiecewiseMove, amplitudes, delays) -> PiecewiseMove:
 
 def convolved(base: PiecewiseMove, amplitudes, delays) -> PiecewiseMove:
     """`shape_move` for an impulse sequence already known to be one (a shaper's, `shapers.shaper_for_axis`):
-    the same move, without the checks."""
+    the same move, without the checks. Concrete values are convolved on the host (eager operations would compile a
+    program per impulse count: a shaper on three modes has 64 or 125 impulses), traced ones in the trace."""
+    if is_concrete((base, amplitudes, delays)):
+        A = np.asarray(amplitudes, dtype=float)
+        tau = np.asarray(delays, dtype=float)
+        return PiecewiseMove(
+            (np.asarray(base.times)[None, :] + tau[:, None]).ravel(),
+            (np.asarray(base.steps)[None, :] * A[:, None]).ravel(),
+            (np.asarray(base.ramps)[None, :] * A[:, None]).ravel(),
+            np.asarray(base.duration) + tau[-1],
+        )
     A = jnp.asarray(amplitudes, dtype=float)
     tau = jnp.asarray(delays, dtype=float)
     times = (base.times[None, :] + tau[:, None]).ravel()
@@ -566,8 +576,11 @@ def convolved(base: PiecewiseMove, amplitudes, delays) -> PiecewiseMove:
     return PiecewiseMove(times, steps, ramps, base.duration + tau[-1])
 
 
-@stored_jit  # its run time counts in a warm design (20001 samples): XLA's default options
+@stored_jit
 def _peaks(cmd, n: int):
+    """The peaks of `cmd`'s |v|, |a|, |jerk| on `n` equally spaced times (a `PiecewiseMove`'s: with its breakpoints and
+    their neighbours), in one program: a fine-sampling check of `piecewise_peaks` (`peaks` samples by
+    `derivatives_at`)."""
     ts = jnp.linspace(0.0, cmd.end_time, n)
     if isinstance(cmd, PiecewiseMove):
         eps = 1e-12 * cmd.duration
@@ -609,17 +622,20 @@ def piecewise_peaks(move: PiecewiseMove) -> tuple[float, float, float]:
 
 def peaks(cmd: AbstractMotionCommand, n: int = 20001):
     """`(peak |v|, peak |a|, peak |jerk|)` of a move over its duration: exactly for a `PiecewiseMove`
-    (`piecewise_peaks`), else on `n` equally spaced times (one compiled program per command structure and shape)."""
+    (`piecewise_peaks`), else on `n` equally spaced times, by `derivatives_at` (the program that samples the command
+    at the drive's rate: one compiled program per command structure and padded shape, `padded_command`)."""
     if isinstance(cmd, PiecewiseMove):
         return piecewise_peaks(cmd)
-    return tuple(float(x) for x in np.asarray(_peaks(_padded_pseudo(cmd), int(n))))
+    ts = np.linspace(0.0, float(np.asarray(cmd.end_time)), int(n))
+    return tuple(float(np.max(np.abs(x))) for x in derivatives_at(cmd, ts, (1, 2, 3)))
 
 
 def prepare_peaks(cmd: AbstractMotionCommand, n: int = 20001) -> None:
-    """Start compiling the program of `peaks(cmd, n)` in the background while the program store is on
-    (`jaxbelt._guard.prepare`); else nothing. `cmd` stands for commands of its structure and shapes."""
+    """Start compiling the program of `peaks(cmd, n)` (`derivatives_at`'s) in the background while the program store
+    is on (`jaxbelt._guard.prepare`); else nothing. `cmd` stands for commands of its structure and shapes."""
     if not isinstance(cmd, PiecewiseMove):
-        prepare(_peaks, _padded_pseudo(cmd), int(n))
+        run, size, run_orders = _block_program(cmd, (1, 2, 3))
+        prepare(_derivatives, run, jax.device_put(np.zeros(size)), run_orders)
 
 
 def padded(move: PiecewiseMove, size: int) -> PiecewiseMove:
@@ -628,6 +644,14 @@ def padded(move: PiecewiseMove, size: int) -> PiecewiseMove:
     k = int(move.times.shape[0])
     if k >= size:
         return move
+    if is_concrete(move):  # on the host: an eager concatenation compiles a program per size
+        z = np.zeros((size - k,))
+        return PiecewiseMove(
+            np.concatenate([np.asarray(move.times), z]),
+            np.concatenate([np.asarray(move.steps), z]),
+            np.concatenate([np.asarray(move.ramps), z]),
+            move.duration,
+        )
     z = jnp.zeros((size - k,))
     return PiecewiseMove(
         jnp.concatenate([move.times, z]),
@@ -1030,32 +1054,51 @@ def derivatives_at(cmd: AbstractMotionCommand, times, orders=(0, 1, 2)) -> list:
     per command structure and size: a move of another duration runs the same one). The values are those of one
     call on all the times."""
     t = np.asarray(times, dtype=float)
+    orders = tuple(int(k) for k in orders)
+    run, size, run_orders = _block_program(cmd, orders)
+    rows = [run_orders.index(k) for k in orders]
+    if t.size == 0:
+        return [np.empty(0) for _ in orders]
+    n_blocks = -(-t.size // size)
+    padded_t = np.concatenate([t, np.full(n_blocks * size - t.size, t[-1])])
+    out = [np.empty(t.size) for _ in orders]
+    for b in range(n_blocks):
+        lo, hi = b * size, min((b + 1) * size, t.size)
+        # `jax.device_put`: `jnp.asarray` of a host array compiles a small program per new shape
+        vals = np.asarray(jax.device_get(_derivatives(run, jax.device_put(padded_t[lo : lo + size]), run_orders)))
+        for o, i in zip(out, rows):
+            o[lo:hi] = vals[i, : hi - lo]
+    return out
+
+
+#: the orders `_derivatives` evaluates for jaxbelt's own moves, whichever are asked for: the samples (0, 1, 2), the
+#: peaks (1, 2, 3) and the positions (0) of a command run one program
+_ALL_ORDERS = (0, 1, 2, 3)
+
+
+def _own(cmd) -> bool:
+    if isinstance(cmd, BlendMove):
+        return all(_own(m) for m in cmd.members)
+    return isinstance(cmd, PiecewiseMove | SplineMove | PaddedSpline | PaddedPseudo)
+
+
+def _block_program(cmd, orders: tuple):
+    """`(command padded, block size, orders evaluated)` of `derivatives_at`'s program for `cmd`."""
+    # padded (`padded_command`): a pseudo-polynomial of any order up to `TERMS_BUCKET`, a spline of any knot count of
+    # its slot, run one program
+    cmd = padded_command(cmd)
     if isinstance(cmd, PiecewiseMove):
         terms = int(cmd.times.shape[0])
-    elif isinstance(cmd, SplineMove):
+    elif isinstance(cmd, SplineMove | PaddedSpline):
         terms = 6 * int(cmd.coefficients.shape[0])  # `bspline_basis` gathers 6 coefficients per B-spline
     else:
         terms = 1
     block = 1 << max((_SAMPLE_ELEMENTS // max(terms, 1)).bit_length() - 1, 8)  # a power of two >= 256
-    orders = tuple(int(k) for k in orders)
-    if t.size == 0:
-        return [np.empty(0) for _ in orders]
     # every block of one size, at most `_SAMPLE_BLOCK` (the last padded), so that a move of another duration
     # (another sample count) runs the same program: one compiled program per command structure, not one eager
     # operation per sample count (50 compilations for a design at a new move time), nor one per power of two (a
     # design at 1.03 s, 1031 samples at 1 kHz, compiled the 2048-sample program that 1001 samples did not need)
-    size = min(block, _SAMPLE_BLOCK)
-    n_blocks = -(-t.size // size)
-    padded_t = np.concatenate([t, np.full(n_blocks * size - t.size, t[-1])])
-    out = [np.empty(t.size) for _ in orders]
-    run = _padded_pseudo(cmd)  # a pseudo-polynomial: one program for the orders up to `TERMS_BUCKET`
-    for b in range(n_blocks):
-        lo, hi = b * size, min((b + 1) * size, t.size)
-        # `jax.device_put`: `jnp.asarray` of a host array compiles a small program per new shape
-        vals = np.asarray(jax.device_get(_derivatives(run, jax.device_put(padded_t[lo : lo + size]), orders)))
-        for o, v in zip(out, vals):
-            o[lo:hi] = v[: hi - lo]
-    return out
+    return cmd, min(block, _SAMPLE_BLOCK), (_ALL_ORDERS if _own(cmd) else tuple(orders))
 
 
 #: a pseudo-polynomial's exponents are padded to a multiple of this for its residual's program (inactive terms,
@@ -1133,11 +1176,96 @@ def padded_pseudo(cmd: PseudoPolynomial) -> PaddedPseudo:
     )
 
 
-def _padded_pseudo(cmd) -> Any:
-    """`cmd` as a `PaddedPseudo` where it is a `PseudoPolynomial` with concrete values, else `cmd`."""
-    if not isinstance(cmd, PseudoPolynomial) or not is_concrete(cmd):
+#: a `SplineMove`'s knot intervals, and the terms of a `PiecewiseMove` of more than this many, are padded to a
+#: multiple of this for their programs (the minimax LP's `KNOT_SLOTS` are multiples of it): a design at another move
+#: time (another knot count, 48 to 256) runs the programs of its slot
+INTERVAL_SLOT = 64
+
+
+def _slot(n: int) -> int:
+    return -(-n // INTERVAL_SLOT) * INTERVAL_SLOT
+
+
+class PaddedSpline(eqx.Module):
+    r"""A `SplineMove` of N knot intervals with its coefficients padded by zeros to the N' - 3 of its slot
+    (N' = N rounded up to a multiple of `INTERVAL_SLOT`), N (`intervals`) held as a float64 array: the same
+    acceleration $a(t) = \sum_{j < N - 3} c_j B_j(t)$, $h = T/N$, derivatives and residual integral, in programs
+    shared by every N of the slot. The padding is inert: its coefficients are exactly 0 and its residual kernels
+    masked (a B-spline starting past T would give $e^{s(T - t_j - 4h)}$ an overflowing argument). Made by
+    `padded_command`."""
+
+    coefficients: jax.Array
+    intervals: jax.Array
+    duration: jax.Array
+
+    @property
+    def end_time(self):
+        return self.duration
+
+    @property
+    def spacing(self):
+        return self.duration / self.intervals
+
+    def _j(self):
+        return jnp.arange(self.coefficients.shape[0], dtype=float)
+
+    @property
+    def distance(self):
+        r"""$x(T) = h^2 \sum_j c_j (N - 2 - j)$ [m]."""
+        return self.spacing**2 * jnp.sum(self.coefficients * (self.intervals - 2.0 - self._j()))
+
+    def derivative(self, t, k: int = 0):
+        """As `SplineMove.derivative` (the padding adds 0)."""
+        if k not in (0, 1, 2, 3):
+            raise ValueError(f"SplineMove.derivative: order `k` must be 0, 1, 2 or 3; got {k}")
+        t = jnp.asarray(t, dtype=float)
+        h = self.spacing
+        u = t[..., None] / h - self._j()
+        order = {0: -2, 1: -1, 2: 0, 3: 1}[k]
+        scale = {0: h**2, 1: h, 2: 1.0, 3: 1.0 / h}[k]
+        val = scale * jnp.sum(self.coefficients * bspline_basis(u, order), axis=-1)
+        if k == 0:
+            val = jnp.where(t >= self.duration, self.distance, val)
+        elif k == 1:
+            val = jnp.where(t >= self.duration, 0.0, val)
+        return jnp.where(t < 0, 0.0, val)
+
+    def residual_integral(self, s):
+        """As `SplineMove.residual_integral`; the padding's kernels are 0."""
+        s = jnp.asarray(s)
+        h = self.spacing
+        j = self._j()
+        used = j < self.intervals - 3.0
+        lag = jnp.where(used, self.duration - j * h - 4.0 * h, 0.0)
+        kern = h * jnp.exp(s[..., None] * lag) * phi1(s * h)[..., None] ** 4
+        return jnp.sum(jnp.where(used, kern * self.coefficients, 0.0), axis=-1)
+
+
+def padded_spline(cmd: SplineMove) -> PaddedSpline:
+    """`cmd` (concrete) padded to its slot (`PaddedSpline`), on the host."""
+    c = np.asarray(cmd.coefficients, dtype=float)
+    n = c.shape[0] + 3
+    full = np.concatenate([c, np.zeros(_slot(n) - n)])
+    return PaddedSpline(jax.device_put(full), jax.device_put(np.asarray(float(n))), cmd.duration)
+
+
+def padded_command(cmd) -> Any:
+    """`cmd` in the padded form its programs take (peaks, samples, residual curves), where its values are concrete:
+    a `PseudoPolynomial` to `TERMS_BUCKET` exponents (`padded_pseudo`), a `SplineMove` to its `INTERVAL_SLOT`
+    slot (`padded_spline`), a `PiecewiseMove` of more than `INTERVAL_SLOT` terms to a multiple of it (`padded`), a
+    `BlendMove`'s members each; the same values, shared programs. Anything else (or traced), as it is."""
+    if not is_concrete(cmd):
         return cmd
-    return padded_pseudo(cmd)
+    if isinstance(cmd, PseudoPolynomial):
+        return padded_pseudo(cmd)
+    if isinstance(cmd, SplineMove):
+        return padded_spline(cmd)
+    if isinstance(cmd, PiecewiseMove):
+        k = int(cmd.times.shape[0])
+        return padded(cmd, _slot(k)) if k > INTERVAL_SLOT else cmd
+    if isinstance(cmd, BlendMove):
+        return BlendMove(tuple(padded_command(m) for m in cmd.members), cmd.weights, cmd.duration)
+    return cmd
 
 
 @stored_jit

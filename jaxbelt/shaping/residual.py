@@ -27,7 +27,16 @@ from .._threads import blas_limited
 from .._xla import QUICK_COMPILE
 from ..commands import AbstractMotionCommand, PseudoPolynomial, ShapedCommand, falling_factorial
 from ..models.axis import ModalAxis
-from .moves import BlendMove, PaddedPseudo, PiecewiseMove, SplineMove, fastest_move, padded_pseudo
+from .moves import (
+    BlendMove,
+    PaddedPseudo,
+    PaddedSpline,
+    PiecewiseMove,
+    SplineMove,
+    fastest_move,
+    padded_command,
+    padded_pseudo,
+)
 
 _P = 4  # substitution power u = v**p of the pseudo-polynomial rule (as in jaxbelt.objectives.residual)
 
@@ -52,18 +61,39 @@ def _nodes_for(cmd, s) -> int:
 _DAMPED_AWAY = 700.0
 
 
-def _pseudo_polynomial_w(cmd, s, n_nodes: int):
+#: `_pseudo_curve`'s rule is padded to at least this many nodes (zero weights): the node counts a design's
+#: pseudo-polynomials need (128 to 1024 on 1-3 modes, rising with the move time) share one compiled program
+NODE_SLOT = 1024
+
+
+def _rule(n_nodes: int, size: int = 0):
+    r"""The `n_nodes`-point Gauss-Legendre rule on [0, 1] in v as numpy arrays `(log v, u = v**_P, weights)`, padded
+    to `size` nodes by nodes at v = 1/2 of weight exactly 0 (they add 0 to every sum). log v on the host, as the
+    rule's constants were folded before it was data: the powers $v^{p(\gamma - 1) - 1}$ of an order-8
+    pseudo-polynomial (exponents to 16.5) cancel to 1e-9 in W, so their last bits show."""
+    x, w = np.polynomial.legendre.leggauss(n_nodes)
+    v, w = 0.5 * (x + 1.0), 0.5 * w
+    u, logv = v**_P, np.log(v)
+    extra = max(size - n_nodes, 0)
+    if extra:
+        logv = np.concatenate([logv, np.full(extra, np.log(0.5))])
+        u = np.concatenate([u, np.full(extra, 0.5**_P)])
+        w = np.concatenate([w, np.zeros(extra)])
+    return logv, u, w
+
+
+def _pseudo_polynomial_w(cmd, s, n_nodes):
     """W(s) by the Gauss-Legendre rule, or, where $p = -sT$ has Re p > `_DAMPED_AWAY`, in closed form:
     $\\int_0^1 u^{\\gamma-2}e^{-pu}du = \\Gamma(\\gamma - 1)p^{1-\\gamma} - \\Gamma(\\gamma - 1, p)p^{1-\\gamma}$, whose last
     term is below $|p|^{\\gamma}e^{-\\mathrm{Re}\\,p}$ (the vibration from the start of the move, damped away): the rule
-    would need about 2.5|s|T nodes (1e7 for a 1 MHz mode in 0.8 s)."""
-    x, w = np.polynomial.legendre.leggauss(n_nodes)
-    v, w = 0.5 * (x + 1.0), 0.5 * w
+    would need about 2.5|s|T nodes (1e7 for a 1 MHz mode in 0.8 s). `n_nodes`: the node count, or the rule
+    `(log v, u, weights)` itself (`_rule`, padded)."""
+    logv, u, w = _rule(n_nodes) if isinstance(n_nodes, int) else n_nodes
     T = cmd.duration
     coef = falling_factorial(cmd.gammas, 2) * cmd.coefficients  # phi'' = -Phi/T^2 sum_i a_i u^(g_i - 2)
     e = _P * (cmd.gammas - 1.0) - 1.0  # p v^(p(g-1)-1) dv = u^(g-2) du, u = v^p
-    powers = jnp.exp(jnp.log(jnp.asarray(v))[:, None] * e[None, :])  # (nodes, terms)
-    u = jnp.asarray(v**_P)
+    powers = jnp.exp(jnp.asarray(logv)[:, None] * e[None, :])  # (nodes, terms)
+    u = jnp.asarray(u)
     kern = _P * jnp.asarray(w) * jnp.exp(jnp.asarray(s)[..., None] * T * u)  # (..., nodes)
     moments = kern @ powers.astype(kern.dtype)  # (..., terms)
     quad = -(cmd.displacement / T) * (moments @ coef.astype(moments.dtype))
@@ -78,7 +108,7 @@ def _pseudo_polynomial_w(cmd, s, n_nodes: int):
 
 def residual_integral(cmd: AbstractMotionCommand, s):
     """$W(s) = \\int_0^T a(\\tau)e^{s(T-\\tau)}d\\tau$ [m/s] of a move for complex `s` (any shape), T its end time."""
-    if isinstance(cmd, SplineMove | PiecewiseMove | BlendMove):
+    if isinstance(cmd, SplineMove | PiecewiseMove | BlendMove | PaddedSpline):
         return cmd.residual_integral(s)
     if isinstance(cmd, PseudoPolynomial):
         return _pseudo_polynomial_w(cmd, s, _nodes_for(cmd, s))
@@ -105,6 +135,21 @@ def _poles(axis: ModalAxis, factors):
     z = axis.damping_ratios[:, None]
     wd = w * jnp.sqrt(1.0 - z**2)
     return -z * w + 1j * wd, wd
+
+
+def _host_poles(axis: ModalAxis, r):
+    """The poles s of `_poles` (n_modes, K) in numpy where the axis and the factors are concrete (the host decision of
+    `_nodes_for`: eager operations compile a program each in a fresh process), else `_poles`'."""
+    if not is_concrete((axis, r)):
+        return _poles(axis, r)[0]
+    w = (
+        2.0
+        * np.pi
+        * np.asarray(axis.frequencies, dtype=float)[:, None]
+        * np.atleast_1d(np.asarray(r, dtype=float))[None, :]
+    )
+    z = np.asarray(axis.damping_ratios, dtype=float)[:, None]
+    return -z * w + 1j * (w * np.sqrt(1.0 - z**2))
 
 
 #: the largest frequency factor of `residual_curve`: a mode scaled a thousandfold is another axis, not an error of
@@ -146,11 +191,33 @@ def residual_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors: ArrayLi
     return checked(_curve(axis, cmd, r, rtol, atol), axis, cmd, checks=found)
 
 
-def measured_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors) -> jax.Array:
+def measured_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors) -> np.ndarray:
     """`residual_curve(axis, cmd, factors)` [m] for arguments already checked: the design pipeline's (its request
     validated the axis and the limits once, its band grids are built in range), the same numbers without the
-    checks, which each stage would otherwise repeat on every candidate."""
-    return _curve(axis, cmd, np.atleast_1d(np.asarray(factors, dtype=float)), 1e-10, 1e-14)
+    checks, which each stage would otherwise repeat on every candidate; a numpy array (n_modes, len(factors)),
+    computed on the factors padded to a multiple of `FACTOR_SLOT` (`padded_factors`: the band's 401 and the wide
+    range's 501 factors run one program per command kind)."""
+    r = np.atleast_1d(np.asarray(factors, dtype=float))
+    return np.asarray(_curve(axis, cmd, padded_factors(r), 1e-10, 1e-14))[:, : r.shape[0]]
+
+
+#: `measured_curve`'s factor grids of more than 64 factors are padded to a multiple of this
+FACTOR_SLOT = 256
+
+
+def padded_factors(r: np.ndarray) -> np.ndarray:
+    """The factors `r` (1-D, numpy) followed by more, to a multiple of `FACTOR_SLOT` where there are more than 64: a
+    uniform grid continued with its spacing (it stays one, for `_grid_curve`), any other repeating its last factor.
+    Each factor's residual is computed on its own (the extra ones are dropped), so only the rounding of a uniform
+    grid's blocked sums (`_grid_integral`) sees them."""
+    K = r.shape[0]
+    size = -(-K // FACTOR_SLOT) * FACTOR_SLOT
+    if K <= 64 or size == K:
+        return r
+    d = float(r[-1] - r[0]) / (K - 1)
+    uniform = d > 0 and float(np.max(np.abs(r[0] + d * np.arange(K) - r))) <= 1e-14 * float(r[-1])
+    extra = r[-1] + d * np.arange(1, size - K + 1) if uniform else np.full(size - K, r[-1])
+    return np.concatenate([r, extra])
 
 
 def _curve(axis, cmd, r, rtol, atol):
@@ -160,8 +227,10 @@ def _curve(axis, cmd, r, rtol, atol):
     pseudo = cmd.base if isinstance(cmd, ShapedCommand) else cmd
     if isinstance(pseudo, PseudoPolynomial):
         shaper = (cmd.times, cmd.amplitudes) if isinstance(cmd, ShapedCommand) else None
-        n_nodes = _nodes_for(pseudo, _poles(axis, r)[0])
-        return _pseudo_curve(axis, padded_pseudo(pseudo), shaper, r, n_nodes)
+        n_nodes = _nodes_for(pseudo, _host_poles(axis, r))
+        rule = tuple(jax.device_put(x) for x in _rule(n_nodes, NODE_SLOT))  # data: one program up to NODE_SLOT
+        return _pseudo_curve(axis, padded_pseudo(pseudo), shaper, r, rule)
+    cmd = padded_command(cmd)  # a spline of any knot count of its slot: one program (`moves.INTERVAL_SLOT`)
     grid = _uniform_grid(axis, cmd, r)
     if grid is not None:
         return _grid_curve(axis, cmd, *grid)
@@ -195,7 +264,9 @@ def _uniform_grid(axis, cmd, r):
     r0, dr = float(r[0]), float(r[-1] - r[0]) / (n - 1)
     if not dr > 0 or np.max(np.abs(r0 + dr * np.arange(n) - r)) > 1e-14 * float(r[-1]):
         return None
-    s_T = np.asarray(axis.omega, dtype=float) * r0 * float(np.asarray(cmd.end_time))  # |s| = omega r
+    s_T = (
+        2.0 * np.pi * np.asarray(axis.frequencies, dtype=float) * r0 * float(np.asarray(cmd.end_time))
+    )  # |s| = omega r
     if not np.all(s_T >= GRID_MIN_ST):
         return None
     return device_array(r0, dtype=float), device_array(dr, dtype=float), int(n)
@@ -237,12 +308,14 @@ def _grid_curve(axis, cmd, r0, dr, n: int):
     return jnp.abs(axis.gains)[:, None] / wd * jnp.abs(_grid_integral(cmd, s[:, 0], r0, dr, n))
 
 
-@stored_jit(compiler_options=QUICK_COMPILE)
-def _pseudo_curve(axis, terms: PaddedPseudo, shaper, r, n_nodes: int):
+# XLA's default options: its run time counts in a warm design (modes x 401 factors x 1024 nodes, 4-5x slower at
+# `QUICK_COMPILE`'s level 0)
+@stored_jit
+def _pseudo_curve(axis, terms: PaddedPseudo, shaper, r, rule):
     """`residual_curve` of a pseudo-polynomial (`terms`, padded), shaped by the impulses `shaper` = (times,
-    amplitudes) where not None."""
+    amplitudes) where not None, by the quadrature `rule` = (log v, u, weights) (`_rule`, padded to `NODE_SLOT`)."""
     s, wd = _poles(axis, r)
-    W = _pseudo_polynomial_w(terms, s, n_nodes)
+    W = _pseudo_polynomial_w(terms, s, rule)
     if shaper is not None:
         times, amplitudes = shaper
         W = W * jnp.sum(amplitudes * jnp.exp(s[..., None] * (times[-1] - times)), axis=-1)
@@ -250,12 +323,13 @@ def _pseudo_curve(axis, terms: PaddedPseudo, shaper, r, n_nodes: int):
 
 
 def prepare_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors) -> None:
-    """Start compiling the program of `residual_curve(axis, cmd, factors)` in the background, for a command with
+    """Start compiling the program of `measured_curve(axis, cmd, factors)` in the background, for a command with
     a closed-form residual other than a pseudo-polynomial, while the program store is on (`jaxbelt._guard.prepare`);
     else nothing. `cmd` stands for commands of its structure and shapes (its values are not read)."""
     if isinstance(cmd, (PseudoPolynomial, ShapedCommand)) or not _has_closed_form(cmd):
         return
-    r = atleast_1d(device_array(factors, dtype=float))
+    r = padded_factors(np.atleast_1d(np.asarray(factors, dtype=float)))  # as `measured_curve` computes it
+    cmd = padded_command(cmd)
     grid = _uniform_grid(axis, cmd, r)
     if grid is not None:
         prepare(_grid_curve, axis, cmd, *grid)
