@@ -485,13 +485,16 @@ def test_a_long_minimax_move_exports_at_40_khz_in_little_memory(plan, tmp_path):
     assert t.size == 80001 and sampled_peaks(t, v, a) == pytest.approx(peaks, rel=1e-12)
     assert peaks[0] <= LIMITS["v_max"] * (1 + LIMIT_RTOL) and peaks[1] <= LIMITS["a_max"] * (1 + LIMIT_RTOL)
     assert x[-1] == pytest.approx(0.05, rel=1e-12) and abs(v[-1]) < 1e-12
-    # the drive's residual over the band is the continuous command's, as at 1 kHz
+    # the drive's residual over the band is the continuous command's, as at 1 kHz, to 1 % or to 1e-8 of the
+    # unshaped move's residual (1e-6 %, below the table's last digit): this design leaves about 1e-9, where the
+    # jumps of a blend's shaped members, sampled at 1 kHz and interpolated linearly, add a few 1e-10
     args = (long.axis, long.reference_m, long.uncertainty)
     cmd = long.best.command
     t_1k, _, _, a_1k = long.samples(1000.0)
     for tt, aa in [(t, a), (t_1k, a_1k)]:
         executed = _executed_band_residual(*args, tt, aa)
-        np.testing.assert_allclose(executed, _executed_band_residual(*args, tt, aa, command=cmd), rtol=0.01)
+        continuous = _executed_band_residual(*args, tt, aa, command=cmd)
+        np.testing.assert_allclose(executed, continuous, rtol=0.01, atol=1e-8)
 
 
 def _reference_executable_samples(cmd, rate_hz, axis, reference, uncertainty, n_freq=61, limits=None):

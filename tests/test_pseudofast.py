@@ -152,3 +152,21 @@ def test_executed_ratios_kept_are_those_of_the_same_command_and_reference():
         W = hull.executed_integral(t, _direct_positions(cmd, t), -z * w + 1j * wd)
         ref_r = np.abs(np.asarray(axis.gains))[:, None] * W / (wd * ref[:, None])
         np.testing.assert_allclose(hull.executed_ratios(axis, cmd, ref, fac, rate), ref_r, rtol=1e-9, atol=1e-12)
+
+
+def test_a_one_stage_chain_runs_its_first_slot_only():
+    # `make_chain` with `max_iter` a scalar or one value per run is one stage (the feasibility stage's use): the
+    # other slots get 0 iterations, so a run that ends its stage is not restarted N_CHAIN - 1 more times
+    act = np.ones((3, 4))
+    for it in (200, np.array([200, 0, 50])):
+        got = np.asarray(P.make_chain(act, 0.0, 1.0, max_iter=it).max_iter)
+        assert got.shape == (3, P.N_CHAIN)
+        assert np.array_equal(got[:, 0], np.broadcast_to(it, (3,)))
+        assert not got[:, 1:].any()
+    per_slot = np.arange(3 * P.N_CHAIN).reshape(3, P.N_CHAIN)
+    assert np.array_equal(np.asarray(P.make_chain(act, 0.0, 1.0, max_iter=per_slot).max_iter), per_slot)
+
+
+def test_positions_of_a_move_without_terms_are_zero():
+    move = PiecewiseMove(jnp.zeros(0), jnp.zeros(0), jnp.zeros(0), 1.0)
+    assert np.array_equal(hull.positions(move, np.linspace(0.0, 1.5, 7)), np.zeros(7))

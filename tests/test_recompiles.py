@@ -537,3 +537,26 @@ def test_residual_curves_of_pseudo_polynomials_of_other_move_times_share_one_pro
     for cmd, curve in zip(cmds, got):
         plain = np.abs(np.asarray(residual_integral(cmd, jnp.asarray(s)))) / wd
         np.testing.assert_allclose(curve, plain, rtol=1e-11, atol=1e-13 * float(np.max(plain)))
+
+
+def test_a_blend_in_its_canonical_structure_is_the_same_move():
+    # `moves.padded_command` puts a blend's PiecewiseMoves into one (weights folded in, padded to INTERVAL_SLOT
+    # terms): blends of other shaped moves share one program. Checked against the blend itself, member by member
+    from jaxbelt.shaping.moves import BlendMove, PiecewiseMove, SplineMove, padded_command
+
+    T = 1.0
+    spline = SplineMove(jnp.asarray(np.sin(np.arange(20.0))), T)
+    a = PiecewiseMove([0.0, 0.25, 0.5, 0.75], [1.0, -1.0, -1.0, 1.0], [0.0] * 4, T)
+    b = PiecewiseMove([0.0, 0.1, 0.9, 1.0], [0.0] * 4, [2.0, -2.0, -2.0, 2.0], T)
+    blend = BlendMove((a, spline, b), jnp.asarray([0.2, 0.5, 0.3]), T)
+    canon = padded_command(blend)
+    assert [type(m).__name__ for m in canon.members][-1] == "PiecewiseMove" and len(canon.members) == 2
+    t = jnp.linspace(0.0, T, 257)
+    for k in range(4):
+        ref = sum(w * m.derivative(t, k) for w, m in zip((0.2, 0.5, 0.3), (a, spline, b)))
+        np.testing.assert_allclose(canon.derivative(t, k), ref, rtol=1e-12, atol=1e-12 * float(jnp.max(jnp.abs(ref))))
+    s = jnp.asarray([-0.3 + 40j, -1.0 + 90j])
+    ref = sum(w * m.residual_integral(s) for w, m in zip((0.2, 0.5, 0.3), (a, spline, b)))
+    np.testing.assert_allclose(canon.residual_integral(s), ref, rtol=1e-11)
+    only = padded_command(BlendMove((spline,), jnp.asarray([1.0]), T))  # no PiecewiseMove: zero terms added
+    np.testing.assert_allclose(only.derivative(t, 0), spline.derivative(t, 0), rtol=1e-13, atol=1e-15)

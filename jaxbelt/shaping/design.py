@@ -119,7 +119,8 @@ class DesignOptions(NamedTuple):
     - `n_angles`: P, cuts of the modulus constraint;
     - `jerk`: whether a jerk limit is imposed (the spline and ramps bases; the steps basis has none);
     - `exchange_tol`: the exchange stops when the worst ratio on the fine grid is within this fraction of the LP's
-      (`EXCHANGE_TOL` = 3 % by default; the certified designs of `design_move(..., certify_rtol=...)` use less);
+      (`EXCHANGE_TOL` = 3 % by default; the certified designs of `design_move(..., certify_rtol=...)` use less), or
+      once that worst is at most `EXCHANGE_ATOL` of the references (`minimax_design(..., atol=)`);
     - `basis`: the command space. `"spline"`: the acceleration is a cubic B-spline on N knot intervals (continuous
       acceleration and jerk; limits through the spline's coefficients, a little conservative); `"steps"`: the
       acceleration is constant on each of N equal intervals and may jump between them, as a shaped trapezoid's

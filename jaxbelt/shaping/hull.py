@@ -72,6 +72,8 @@ def _piecewise_positions(move: PiecewiseMove, t) -> np.ndarray:
     T = float(move.duration)
     tk, al, be = (np.asarray(q, dtype=float) for q in (move.times, move.steps, move.ramps))
     knots, where = np.unique(tk, return_inverse=True)
+    if knots.size == 0:  # no terms: at rest at 0
+        return np.zeros_like(t)
     A, B = np.bincount(where, al, knots.size), np.bincount(where, be, knots.size)  # the jumps at each knot
     X, V, Acc, J = (np.zeros(knots.size) for _ in range(4))
     x = v = a = j = 0.0

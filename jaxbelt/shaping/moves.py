@@ -1264,8 +1264,30 @@ def padded_command(cmd) -> Any:
         k = int(cmd.times.shape[0])
         return padded(cmd, _slot(k)) if k > INTERVAL_SLOT else cmd
     if isinstance(cmd, BlendMove):
-        return BlendMove(tuple(padded_command(m) for m in cmd.members), cmd.weights, cmd.duration)
+        return _canonical_blend(cmd)
     return cmd
+
+
+#: the least number of terms of a blend's merged `PiecewiseMove` (`_canonical_blend`): a blend of one mode's shaped
+#: moves (up to about 100 terms) and one of a few more share a program
+BLEND_TERMS = 2 * INTERVAL_SLOT
+
+
+def _canonical_blend(blend: "BlendMove") -> "BlendMove":
+    """A concrete `BlendMove` in one structure whatever members it blends: its splines (each `padded_spline`), then
+    all its `PiecewiseMove`s as one, their weights folded into the steps and ramps, padded to a multiple of
+    `INTERVAL_SLOT` terms, at least `BLEND_TERMS` (weight 1; zero terms where it has none): the same position,
+    derivatives and residual integral to rounding ($\\sum_m w_m \\sum_k \\alpha_{mk} (t - t_{mk})_+^2/2 = \\sum_{m,k} (w_m \\alpha_{mk})
+    (t - t_{mk})_+^2/2$), so blends of other shaped moves share their programs."""
+    w = np.asarray(blend.weights, dtype=float)
+    splines = [(float(wm), padded_command(m)) for wm, m in zip(w, blend.members) if not isinstance(m, PiecewiseMove)]
+    pieces = [(float(wm), m) for wm, m in zip(w, blend.members) if isinstance(m, PiecewiseMove)]
+    times = np.concatenate([np.zeros(0)] + [np.asarray(m.times, dtype=float) for _, m in pieces])
+    steps = np.concatenate([np.zeros(0)] + [wm * np.asarray(m.steps, dtype=float) for wm, m in pieces])
+    ramps = np.concatenate([np.zeros(0)] + [wm * np.asarray(m.ramps, dtype=float) for wm, m in pieces])
+    merged = padded(PiecewiseMove(times, steps, ramps, blend.duration), max(_slot(times.size), BLEND_TERMS))
+    members = tuple(m for _, m in splines) + (merged,)
+    return BlendMove(members, np.array([wm for wm, _ in splines] + [1.0]), blend.duration)
 
 
 @stored_jit

@@ -655,7 +655,8 @@ def run_chain(shared: Shared, chains: Run, settle, thetas, reasons, gmaxs) -> Ch
 
 def make_chain(active, lower, gap, n_slots: int = N_CHAIN, **stages) -> Run:
     """A batch of chained runs (`run_chain`): `active` (B, S); `lower`, `gap` scalars or (B,); the `make_runs`
-    keywords scalars, (B,) or (B, `n_slots`) (one value per stage slot; a slot not given has `max_iter` 0)."""
+    keywords scalars, (B,) or (B, `n_slots`) (one value per stage slot); `max_iter` given as a scalar or (B,) is
+    the first slot's, the other slots' 0 (one stage), and a slot not given has `max_iter` 0."""
     B = np.asarray(active).shape[0]
     defaults = dict(p=1.0, w_band=0.0, w_nom=0.0, w_guard=0.0, w_limits=1.0, gtol=1e-9, gtol_loose=0.0,
                     ftol=-np.inf, max_iter=0)  # fmt: skip
@@ -668,6 +669,11 @@ def make_chain(active, lower, gap, n_slots: int = N_CHAIN, **stages) -> Run:
     def col(x):
         return device_array(np.broadcast_to(np.asarray(x, dtype=float), (B,)).copy())
 
+    it = np.asarray(stages.get("max_iter", 0), dtype=np.int32)
+    if it.ndim < 2:  # one stage: the first slot's iterations only
+        stages["max_iter"] = np.concatenate(
+            [np.broadcast_to(it, (B,))[:, None], np.zeros((B, n_slots - 1), np.int32)], 1
+        )
     kw = {k: cols(stages.get(k, v), np.int32 if k == "max_iter" else float) for k, v in defaults.items()}
     return Run(active=_f(active), lower=col(lower), gap=col(gap), **kw)
 

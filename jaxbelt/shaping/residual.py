@@ -198,7 +198,9 @@ def measured_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors) -> np.n
     computed on the factors padded to a multiple of `FACTOR_SLOT` (`padded_factors`: the band's 401 and the wide
     range's 501 factors run one program per command kind)."""
     r = np.atleast_1d(np.asarray(factors, dtype=float))
-    return np.asarray(_curve(axis, cmd, padded_factors(r), 1e-10, 1e-14))[:, : r.shape[0]]
+    if not _has_closed_form(cmd):  # the ODE's vmapped batch would integrate the extra (stiffer) factors too
+        return np.asarray(_curve(axis, cmd, r, 1e-10, 1e-14))
+    return np.asarray(_curve(axis, cmd, padded_factors(r), 1e-10, 1e-14, n_used=r.shape[0]))[:, : r.shape[0]]
 
 
 #: `measured_curve`'s factor grids of more than 64 factors are padded to a multiple of this
@@ -220,14 +222,16 @@ def padded_factors(r: np.ndarray) -> np.ndarray:
     return np.concatenate([r, extra])
 
 
-def _curve(axis, cmd, r, rtol, atol):
-    """The residual amplitudes of every mode at the factors `r` (1-D): closed form, quadrature or ODE."""
+def _curve(axis, cmd, r, rtol, atol, n_used=None):
+    """The residual amplitudes of every mode at the factors `r` (1-D): closed form, quadrature or ODE. `n_used`:
+    the first factors that are asked for (`measured_curve`'s padding follows them): the quadrature's node count
+    follows those only."""
     if not _has_closed_form(cmd):
         return _residual_ode(axis, cmd, r, rtol, atol)
     pseudo = cmd.base if isinstance(cmd, ShapedCommand) else cmd
     if isinstance(pseudo, PseudoPolynomial):
         shaper = (cmd.times, cmd.amplitudes) if isinstance(cmd, ShapedCommand) else None
-        n_nodes = _nodes_for(pseudo, _host_poles(axis, r))
+        n_nodes = _nodes_for(pseudo, _host_poles(axis, r[:n_used]))
         rule = tuple(jax.device_put(x) for x in _rule(n_nodes, NODE_SLOT))  # data: one program up to NODE_SLOT
         return _pseudo_curve(axis, padded_pseudo(pseudo), shaper, r, rule)
     cmd = padded_command(cmd)  # a spline of any knot count of its slot: one program (`moves.INTERVAL_SLOT`)
