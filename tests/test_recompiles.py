@@ -539,6 +539,7 @@ def test_residual_curves_of_pseudo_polynomials_of_other_move_times_share_one_pro
         np.testing.assert_allclose(curve, plain, rtol=1e-11, atol=1e-13 * float(np.max(plain)))
 
 
+@pytest.mark.slow  # about 10 s: it compiles the programs of four commands
 def test_a_blend_in_its_canonical_structure_is_the_same_move():
     # `moves.padded_command` puts a blend's PiecewiseMoves into one (weights folded in, padded to INTERVAL_SLOT
     # terms): blends of other shaped moves share one program. Checked against the blend itself, member by member
