@@ -162,17 +162,7 @@ class SplineMove(AbstractMotionCommand):
         """k-th derivative of the position: k = 0 position [m], 1 velocity, 2 acceleration, 3 jerk."""
         if k not in (0, 1, 2, 3):
             raise ValueError(f"SplineMove.derivative: order `k` must be 0, 1, 2 or 3; got {k}")
-        t = jnp.asarray(t, dtype=float)
-        h = self.spacing
-        u = t[..., None] / h - jnp.arange(self.n_intervals - 3)
-        order = {0: -2, 1: -1, 2: 0, 3: 1}[k]
-        scale = {0: h**2, 1: h, 2: 1.0, 3: 1.0 / h}[k]
-        val = scale * jnp.sum(self.coefficients * bspline_basis(u, order), axis=-1)
-        if k == 0:  # after T the position holds (the sum continues linearly, by rest to rest exactly)
-            val = jnp.where(t >= self.duration, self.distance, val)
-        elif k == 1:
-            val = jnp.where(t >= self.duration, 0.0, val)
-        return jnp.where(t < 0, 0.0, val)
+        return _spline_derivative(self, jnp.arange(self.n_intervals - 3), t, k)
 
     def residual_integral(self, s):
         """$W(s) = \\int_0^T a(\\tau)e^{s(T-\\tau)}d\\tau$ for complex `s` (any shape) [m/s]."""
@@ -1186,6 +1176,23 @@ def _slot(n: int) -> int:
     return -(-n // INTERVAL_SLOT) * INTERVAL_SLOT
 
 
+def _spline_derivative(move, j, t, k: int):
+    """The k-th derivative (k = 0..3) at `t` [s] of a cubic B-spline acceleration $\\sum_j c_j B_j(t/h - j)$ (a
+    `SplineMove` or a `PaddedSpline`, its coefficient indices `j`): the position holds at the distance after T (the
+    sum continues linearly, by rest to rest exactly), the velocity at 0, everything is 0 before 0."""
+    t = jnp.asarray(t, dtype=float)
+    h = move.spacing
+    u = t[..., None] / h - j
+    order = {0: -2, 1: -1, 2: 0, 3: 1}[k]
+    scale = {0: h**2, 1: h, 2: 1.0, 3: 1.0 / h}[k]
+    val = scale * jnp.sum(move.coefficients * bspline_basis(u, order), axis=-1)
+    if k == 0:
+        val = jnp.where(t >= move.duration, move.distance, val)
+    elif k == 1:
+        val = jnp.where(t >= move.duration, 0.0, val)
+    return jnp.where(t < 0, 0.0, val)
+
+
 class PaddedSpline(eqx.Module):
     r"""A `SplineMove` of N knot intervals with its coefficients padded by zeros to the N' - 3 of its slot
     (N' = N rounded up to a multiple of `INTERVAL_SLOT`), N (`intervals`) held as a float64 array: the same
@@ -1218,17 +1225,7 @@ class PaddedSpline(eqx.Module):
         """As `SplineMove.derivative` (the padding adds 0)."""
         if k not in (0, 1, 2, 3):
             raise ValueError(f"SplineMove.derivative: order `k` must be 0, 1, 2 or 3; got {k}")
-        t = jnp.asarray(t, dtype=float)
-        h = self.spacing
-        u = t[..., None] / h - self._j()
-        order = {0: -2, 1: -1, 2: 0, 3: 1}[k]
-        scale = {0: h**2, 1: h, 2: 1.0, 3: 1.0 / h}[k]
-        val = scale * jnp.sum(self.coefficients * bspline_basis(u, order), axis=-1)
-        if k == 0:
-            val = jnp.where(t >= self.duration, self.distance, val)
-        elif k == 1:
-            val = jnp.where(t >= self.duration, 0.0, val)
-        return jnp.where(t < 0, 0.0, val)
+        return _spline_derivative(self, self._j(), t, k)
 
     def residual_integral(self, s):
         """As `SplineMove.residual_integral`; the padding's kernels are 0."""
