@@ -413,6 +413,65 @@ class StageOut(NamedTuple):
     history: jax.Array
 
 
+def _trial_step(opt, vg, started, theta, d, t, slope, f, g, state, k, linesearch: bool):
+    """One trial of `_stage_one`'s (and `_chain_one`'s) loop at `theta + t d`: with `linesearch`, accepted by the
+    Armijo condition (failed after `LINESEARCH_STEPS` halvings: the optimiser's memory restarts), the next direction
+    `opt`'s, or the steepest descent of unit length where that is not one of descent; without, every trial accepted
+    and `opt`'s update the next step. Returns `(accept, failed, theta, f, g, state, direction, slope)`."""
+    trial = theta + t * d
+    f_t, g_t = vg(trial)
+    f_t = jnp.where(jnp.isnan(f_t), jnp.inf, f_t)
+    if linesearch:
+        accept = ~started | (f_t <= f + ARMIJO * t * slope)
+        failed = started & ~accept & (k + 1 >= LINESEARCH_STEPS)
+    else:
+        accept = jnp.asarray(True)
+        failed = jnp.asarray(False)
+    new_theta = jnp.where(accept, trial, theta)
+    new_f = jnp.where(accept, f_t, f)
+    new_g = jnp.where(accept, g_t, g)
+    upd, new_state = opt.update(new_g, state, new_theta)
+    new_state = jax.tree_util.tree_map(lambda a, b: jnp.where(accept, a, b), new_state, state)
+    if not linesearch:
+        return accept, failed, new_theta, new_f, new_g, new_state, upd, jnp.asarray(0.0, dtype=f.dtype)
+    new_state = jax.tree_util.tree_map(lambda a, b: jnp.where(failed, a, b), opt.init(new_theta), new_state)
+    nd = jnp.where(accept, upd, d)
+    s = jnp.vdot(new_g, nd)
+    steep = -new_g / jnp.maximum(jnp.linalg.norm(new_g), 1e-300)
+    bad = ~(s < 0) | failed
+    nd = jnp.where(bad, steep, nd)
+    s = jnp.where(bad, jnp.vdot(new_g, steep), s)
+    return accept, failed, new_theta, new_f, new_g, new_state, nd, s
+
+
+def _step_kept(started, accept, failed, new_f, it, bf, stall):
+    """After a trial: `(step_done, iterations, better, stall)`: a step is done when its trial was accepted or its
+    search failed; `better` when the accepted value is below the best `bf`; `stall` counts the steps without an
+    improvement of more than a rounding of `bf`."""
+    step_done = accept | failed
+    it = it + jnp.where(started & step_done, 1, 0)
+    better = accept & (new_f < bf)
+    improved = new_f < bf - 1e-15 * jnp.abs(bf)
+    stall = jnp.where(started & step_done, jnp.where(accept & improved, 0, stall + 1), stall)
+    return step_done, it, better, stall
+
+
+def _reason(run, finite, bf, bg, stall):
+    """Why a stage stopped (a key of `REASONS`), from its last value's finiteness and its best value `bf` and
+    gradient `bg`: 4 not finite, 0 gradient test, 1 value test, 3 or 5 stalled (gradient within or above its loose
+    tolerance), 2 iteration limit."""
+    gm = jnp.max(jnp.abs(bg))
+    return jnp.where(
+        ~finite,
+        4,
+        jnp.where(
+            gm <= run.gtol,
+            0,
+            jnp.where(bf <= run.ftol, 1, jnp.where(stall >= STALL, jnp.where(gm <= run.gtol_loose, 3, 5), 2)),
+        ),
+    )
+
+
 def _stage_one(opt, shared, run, theta, n_hist: int, linesearch: bool) -> StageOut:
     """Iterations of `opt` from `theta` until a stopping test of `run` holds.
 
@@ -436,38 +495,15 @@ def _stage_one(opt, shared, run, theta, n_hist: int, linesearch: bool) -> StageO
 
     def body(c):
         started, it, k, theta, d, t, slope, f, g, state, stall, bf, bt, bg, hist = c
-        trial = theta + t * d
-        f_t, g_t = vg(trial)
-        f_t = jnp.where(jnp.isnan(f_t), jnp.inf, f_t)
+        accept, failed, new_theta, new_f, new_g, new_state, nd, s = _trial_step(
+            opt, vg, started, theta, d, t, slope, f, g, state, k, linesearch
+        )
         if linesearch:
-            accept = ~started | (f_t <= f + ARMIJO * t * slope)
-            failed = started & ~accept & (k + 1 >= LINESEARCH_STEPS)
-        else:
-            accept = jnp.asarray(True)
-            failed = jnp.asarray(False)
-        new_theta = jnp.where(accept, trial, theta)
-        new_f = jnp.where(accept, f_t, f)
-        new_g = jnp.where(accept, g_t, g)
-        upd, new_state = opt.update(new_g, state, new_theta)
-        new_state = jax.tree_util.tree_map(lambda a, b: jnp.where(accept, a, b), new_state, state)
-        if linesearch:
-            fresh = opt.init(new_theta)
-            new_state = jax.tree_util.tree_map(lambda a, b: jnp.where(failed, a, b), fresh, new_state)
-            nd = jnp.where(accept, upd, d)
-            s = jnp.vdot(new_g, nd)
-            steep = -new_g / jnp.maximum(jnp.linalg.norm(new_g), 1e-300)
-            bad = ~(s < 0) | failed
-            nd = jnp.where(bad, steep, nd)
-            s = jnp.where(bad, jnp.vdot(new_g, steep), s)
             t_next = jnp.where(accept | failed, 1.0, 0.5 * t)
             k_next = jnp.where(accept | failed, 0, k + 1)
         else:
-            nd, s, t_next, k_next = upd, jnp.asarray(0.0, dtype=f.dtype), jnp.asarray(1.0, dtype=f.dtype), k
-        step_done = accept | failed
-        it_next = it + jnp.where(started & step_done, 1, 0)
-        better = accept & (new_f < bf)
-        improved = new_f < bf - 1e-15 * jnp.abs(bf)
-        stall = jnp.where(started & step_done, jnp.where(accept & improved, 0, stall + 1), stall)
+            t_next, k_next = jnp.asarray(1.0, dtype=f.dtype), k
+        step_done, it_next, better, stall = _step_kept(started, accept, failed, new_f, it, bf, stall)
         bt = jnp.where(better, new_theta, bt)
         bg = jnp.where(better, new_g, bg)
         bf = jnp.where(better, new_f, bf)
@@ -482,15 +518,7 @@ def _stage_one(opt, shared, run, theta, n_hist: int, linesearch: bool) -> StageO
             jnp.asarray(0), f_inf, theta, zero, hist)  # fmt: skip
     c = jax.lax.while_loop(cond, body, init)
     _, it, _, _, _, _, _, f_last, _, _, stall, bf, bt, bg, hist = c
-    reason = jnp.where(
-        ~jnp.isfinite(f_last),
-        4,
-        jnp.where(
-            gmax(bg) <= run.gtol,
-            0,
-            jnp.where(bf <= run.ftol, 1, jnp.where(stall >= STALL, jnp.where(gmax(bg) <= run.gtol_loose, 3, 5), 2)),
-        ),
-    )
+    reason = _reason(run, jnp.isfinite(f_last), bf, bg, stall)
     return StageOut(bt, bf, gmax(bg), reason, it, hist)
 
 
@@ -582,28 +610,10 @@ def _chain_one(opt, shared: Shared, chain: Run, settle, theta, reason0, gmax0) -
         run = at(jnp.minimum(c["stage"], n_st - 1))
         vg = jax.value_and_grad(lambda th: objective(shared, run, th))
         started, t, d, f, g, state, k = c["started"], c["t"], c["d"], c["f"], c["g"], c["state"], c["k"]
-        trial = c["theta"] + t * d
-        f_t, g_t = vg(trial)
-        f_t = jnp.where(jnp.isnan(f_t), jnp.inf, f_t)
-        accept = ~started | (f_t <= f + ARMIJO * t * c["slope"])
-        failed = started & ~accept & (k + 1 >= LINESEARCH_STEPS)
-        new_theta = jnp.where(accept, trial, c["theta"])
-        new_f = jnp.where(accept, f_t, f)
-        new_g = jnp.where(accept, g_t, g)
-        upd, new_state = opt.update(new_g, state, new_theta)
-        new_state = jax.tree_util.tree_map(lambda a, b: jnp.where(accept, a, b), new_state, state)
-        new_state = jax.tree_util.tree_map(lambda a, b: jnp.where(failed, a, b), opt.init(new_theta), new_state)
-        nd = jnp.where(accept, upd, d)
-        s = jnp.vdot(new_g, nd)
-        steep = -new_g / jnp.maximum(jnp.linalg.norm(new_g), 1e-300)
-        bad = ~(s < 0) | failed
-        nd = jnp.where(bad, steep, nd)
-        s = jnp.where(bad, jnp.vdot(new_g, steep), s)
-        step_done = accept | failed
-        it = c["it"] + jnp.where(started & step_done, 1, 0)
-        better = accept & (new_f < c["bf"])
-        improved = new_f < c["bf"] - 1e-15 * jnp.abs(c["bf"])
-        stall = jnp.where(started & step_done, jnp.where(accept & improved, 0, c["stall"] + 1), c["stall"])
+        accept, failed, new_theta, new_f, new_g, new_state, nd, s = _trial_step(
+            opt, vg, started, c["theta"], d, t, c["slope"], f, g, state, k, True
+        )
+        step_done, it, better, stall = _step_kept(started, accept, failed, new_f, c["it"], c["bf"], c["stall"])
         bt = jnp.where(better, new_theta, c["bt"])
         bg = jnp.where(better, new_g, c["bg"])
         bf = jnp.where(better, new_f, c["bf"])
@@ -614,15 +624,7 @@ def _chain_one(opt, shared: Shared, chain: Run, settle, theta, reason0, gmax0) -
         # the stage's stopping tests (`_stage_one`'s loop condition), on the state after this step
         finite = jnp.isfinite(new_f)
         done = (gmax(new_g) <= run.gtol) | (new_f <= run.ftol) | (it >= run.max_iter) | (stall >= STALL) | ~finite
-        reason = jnp.where(
-            ~finite,
-            4,
-            jnp.where(
-                gmax(bg) <= run.gtol,
-                0,
-                jnp.where(bf <= run.ftol, 1, jnp.where(stall >= STALL, jnp.where(gmax(bg) <= run.gtol_loose, 3, 5), 2)),
-            ),
-        )
+        reason = _reason(run, finite, bf, bg, stall)
         reason = reason.astype(c["reason"].dtype)
         moved = fresh(next_stage(c["stage"], reason), bt, reason, gmax(bg), bf, c["n_iter"] + it)
         return jax.tree_util.tree_map(lambda a, b: jnp.where(done, a, b), moved, stepped)
