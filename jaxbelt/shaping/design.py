@@ -35,8 +35,9 @@ most $j_{max}h^2/8$).
 mode, evaluates the residual on a fine grid, adds the worst new frequencies (up to `PER_ROUND` local maxima per
 mode above $t(1 + 3\\,\\%)$) to the LP and solves again, up to `n_rounds` times (a classical exchange method for
 semi-infinite programmes, Hettich and Kortanek, 1993, SIAM Rev. 35(3)), and stops early once the fine grid's worst
-is within 3 % of $t$ or below `EXCHANGE_ATOL` (0.001 % of the unshaped move's residual: nothing left to refine). The LP keeps one shape: the added
-frequencies fill reserved rows, which are zero rows until used, so no round recompiles. Likewise its variables are
+is within 3 % of $t$ or below `EXCHANGE_ATOL` (0.001 % of the unshaped move's residual: nothing left to refine).
+The LP keeps one shape: the added frequencies fill reserved rows, which are zero rows until used, so no round
+recompiles. Likewise its variables are
 padded to the knot count's slot (`KNOT_SLOTS`: 48 and 64 intervals in one program, 96 and 128 in another) with zero
 columns held at exactly 0, so a move time whose knot count differs runs the same compiled LP.
 
