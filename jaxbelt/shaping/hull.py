@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import _xla
 from ..models.axis import ModalAxis
 from .moves import BlendMove, PiecewiseMove, derivatives_at
 
@@ -149,11 +150,11 @@ def executed_ratios(axis: ModalAxis, cmd, reference, factors, rate_hz: float) ->
 _RECENT: collections.deque = collections.deque(maxlen=16)
 
 
-@jax.jit
 def _blend_programme(C, tol):
     """$\\min t$ s.t. $C w \\le t$, $w \\ge 0$, $\\sum w = 1$ (`C` (m, n): the cut rows of the members' residuals) by
     jaxbelt's interior point LP (`lp.solve_lp_data`): `(w, converged)`. One compiled program per shape of `C` (a
-    module-level jit: the LP's loops, run op by op, would be traced and compiled anew at every call)."""
+    module-level jit: the LP's loops, run op by op, would be traced and compiled anew at every call), compiled with
+    `QUICK_COMPILE` (its run is milliseconds, its compilation at XLA's defaults was 4.3 s of a first call, 1.4 s)."""
     from .lp import solve_lp_data
 
     m, n = C.shape
@@ -172,6 +173,9 @@ def _blend_programme(C, tol):
     xb = jnp.concatenate([jnp.ones(n), jnp.maximum(jnp.max(jnp.abs(C)), 1.0)[None]])
     res = solve_lp_data(c, G, h, A, jnp.ones(1), xb, tol, 100)
     return jnp.clip(res.x[:n], 0.0, None), res.converged
+
+
+_blend_programme = _xla.LazyJit(jax.jit, _blend_programme, _xla.QUICK_COMPILE)
 
 
 def best_blend(axis: ModalAxis, members, reference, factors, rate_hz: float, blend: bool = True):

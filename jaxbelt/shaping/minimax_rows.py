@@ -7,6 +7,8 @@ call (`minimax_solve.solve`), its row (`measure`), the shaped moves of the comma
 as executed (`hull`), the design with jumps (the same two calls), and the blends (`measure`).
 """
 
+import concurrent.futures
+import contextlib
 import dataclasses
 import math
 
@@ -26,7 +28,31 @@ def _smooth_certificate(row, bound: float) -> str:
     return smooth_certificate(row.worst_percent, bound)
 
 
-def minimax_rows(req: MoveRequest, ref, classic: list):
+#: the thread the minimax LP at a given move time runs in, beside the other candidates (`solving`): the LP is the
+#: longest stage of a design and needs nothing they compute; XLA releases the GIL while it runs and compiles, so on
+#: two cores the two overlap (a warm 3-mode design 2.5 s -> 1.7 s, a first call 18 s -> 12 s). Created at import,
+#: its thread starts at the first submit.
+_WORKER = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="jaxbelt-minimax")
+
+
+@contextlib.contextmanager
+def solving(req: MoveRequest, ref):
+    """Inside the block, `solve(req, ref, req.move_time)` runs in the worker thread (`_WORKER`): yields its future,
+    for `minimax_rows(..., solved=)`, or None where the move time is not given or the minimax design is not asked
+    for (then `minimax_rows` solves it itself). On leaving the block (also on an error) the solve is cancelled if it
+    has not started, and waited for if it has: no LP outlives the call, none runs outside its BLAS limit."""
+    if req.move_time is None or "minimax" not in req.include:
+        yield None
+        return
+    fut = _WORKER.submit(solve, req, ref, req.move_time)
+    try:
+        yield fut
+    finally:
+        if not fut.cancel():
+            concurrent.futures.wait([fut])
+
+
+def minimax_rows(req: MoveRequest, ref, classic: list, solved=None):
     """The minimax rows (the design; with `smooth="auto"` the design with jumps where the smooth one does not win),
     each the least worst blend of the command space that holds every candidate (`measure.blended_rows`), the design
     of the better row and the continuous bound: `(rows, design or None, bound)`. `classic`: the classic rows (the
@@ -34,12 +60,18 @@ def minimax_rows(req: MoveRequest, ref, classic: list):
 
     The design with jumps (steps; with `j_max`, ramps whose jerk may jump), as `smooth=False` designs it: its command
     space holds what a classic shaper makes of the time-optimal move (a shaped trapezoid or S-curve), so at equal
-    time and limits it leaves no more than the shapers (measured: `benchmarks/shaping_every_shaper.py`)."""
+    time and limits it leaves no more than the shapers (measured: `benchmarks/shaping_every_shaper.py`).
+
+    `solved`: the future of `solving(req, ref)`, or None: solve here."""
     ref, T, d = np.asarray(ref), req.move_time, req.distance
     usable = [r for r in classic if r.ok]
     target = min((r.worst_percent for r in usable), default=math.nan)
     T_guess = min((r.move_time for r in usable), default=2 * req.t_min)  # where the shortest time is searched
-    setup, _, (mm, bound, note, ok) = solve(req, ref, T, T_guess=T_guess, target=target)
+    if solved is None:
+        solved_now = solve(req, ref, T, T_guess=T_guess, target=target)
+    else:  # `solving`'s: the same call, started earlier (`T` is the given move time)
+        solved_now = solved.result()
+    setup, _, (mm, bound, note, ok) = solved_now
     if T is None:  # at the shortest time that reaches the best classic shaper (no design where none is usable)
         if mm is None:
             return [], None, math.nan

@@ -123,7 +123,7 @@ from .measure import Candidate, _within_range, measure_rows
 from .measure import _row as _row  # noqa: E402
 from .minimax_rows import JUMPS as JUMPS  # noqa: E402
 from .minimax_rows import _smooth_certificate as _smooth_certificate  # noqa: E402
-from .minimax_rows import minimax_rows
+from .minimax_rows import minimax_rows, solving
 from .moves import (
     SplineMove,
     executable_samples,
@@ -527,11 +527,13 @@ def design_move(
                    rate_hz=rate_hz, interpolation=interpolation, x_min=x_min, x_max=x_max)  # fmt: skip
     classic = classic_commands(req)
     ref, ref_nominal = req.ref, req.ref_nominal
-    rows = measure_rows(req, ref, classic)
-    minimax, mm, bound = minimax_rows(req, ref, rows) if "minimax" in req.include else ([], None, math.nan)
+    with solving(req, ref) as solved:  # the minimax LP at a given move time runs beside the other candidates
+        rows = measure_rows(req, ref, classic)
+        T0 = req.move_time
+        timed = None if T0 is None else measure_rows(req, ref, timed_commands(req, ref_nominal, T0))
+        minimax, mm, bound = minimax_rows(req, ref, rows, solved) if "minimax" in req.include else ([], None, math.nan)
     T = common_time(req, mm, rows)
-    timed = timed_commands(req, ref_nominal, T)
-    rows += minimax + measure_rows(req, ref, timed)
+    rows += minimax + (timed if timed is not None else measure_rows(req, ref, timed_commands(req, ref_nominal, T)))
     rows = [_within_range(r, req.distance, req.x_range, req.rate_hz) for r in rows]  # as executed, on the travel
     table, best = rank(rows)
     user, per, damped = req.user, req.per, req.damping is not None
