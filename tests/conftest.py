@@ -97,6 +97,8 @@ _GROUPS = {
     # its `solved` fixture is the same design, and its best_residual programs are shortest_move_time's: 77 instead of
     # 118 compiles, 44 s instead of 63 s (measured under load)
     "tests/test_property_shaping.py": "tests/test_shaping_axis.py",
+    # the same one-mode axis and limits as test_recompiles.py's warm designs: its programs, compiled once
+    "tests/test_minimax_worker.py": "tests/test_recompiles.py",
 }
 
 #: seconds of one core per group, measured: the mean of two full runs under `-n 2` (2026-11-29, the junit
@@ -118,7 +120,7 @@ _COST = {
     "tests/test_nonlinear.py": 70,
     "tests/test_shortcuts.py": 69,
     "tests/test_fast.py": 66,
-    "tests/test_recompiles.py": 64,
+    "tests/test_recompiles.py": 74,  # with test_minimax_worker.py (~10 s once the programs are compiled)
     "tests/test_lp_padding.py": 50,  # first measured under load 5 (68 s): three slow LP tests
     "tests/test_string.py": 58,
     "tests/test_compat.py": 56,

@@ -1,0 +1,88 @@
+"""`design_move` at a given move time solves the minimax LP in a worker thread beside the other candidates
+(`jaxbelt.shaping.minimax_rows.solving`). The table must be the one the same call makes with the LP solved in line,
+an error in either thread must reach the caller, and no LP may outlive the call."""
+
+import contextlib
+
+import numpy as np
+import pytest
+
+import jaxbelt as jb
+from jaxbelt.shaping import minimax_rows as mr
+from jaxbelt.shaping import plan
+
+pytestmark = pytest.mark.slow  # a first design_move compiles its programs (~10 s)
+
+AXIS = ([6.0], [0.02])
+KW = dict(v_max=0.3, a_max=1.2, uncertainty=0.2)
+
+
+@contextlib.contextmanager
+def _in_line(req, ref):
+    """`solving` that starts nothing: `minimax_rows` then solves the LP itself, in the caller's thread."""
+    yield None
+
+
+def _table(p):
+    return [(r.name, r.worst_percent, r.move_time, r.ok) for r in p.table]
+
+
+def test_the_worker_makes_the_table_of_the_lp_solved_in_line(monkeypatch):
+    """Every row (name, worst residual, move time, status) and the recommendation equal those of the same call with
+    the LP solved in the caller's thread: the worker changes when the LP runs, not what it computes (the same
+    programs on the same inputs: equal to the last bit)."""
+    ax = jb.ModalAxis(*AXIS)
+    threaded = jb.design_move(ax, 0.1, 1.0, **KW)
+    monkeypatch.setattr(plan, "solving", _in_line)
+    in_line = jb.design_move(ax, 0.1, 1.0, **KW)
+    assert _table(threaded) == _table(in_line)
+    assert threaded.best.name == in_line.best.name
+    np.testing.assert_array_equal(np.asarray(threaded.minimax.lp.x), np.asarray(in_line.minimax.lp.x))
+
+
+def _recording_submit(monkeypatch):
+    """Record the futures the worker is given."""
+    futures = []
+    submit = mr._WORKER.submit
+
+    def record(*args, **kwargs):
+        fut = submit(*args, **kwargs)
+        futures.append(fut)
+        return fut
+
+    monkeypatch.setattr(mr._WORKER, "submit", record)
+    return futures
+
+
+def test_an_error_in_the_worker_reaches_the_caller(monkeypatch):
+    """A failure of the LP in the worker is raised by `design_move` itself, with its own type and message."""
+
+    def failing(*args, **kwargs):
+        raise RuntimeError("the LP failed here")
+
+    futures = _recording_submit(monkeypatch)
+    monkeypatch.setattr(mr, "solve", failing)
+    with pytest.raises(RuntimeError, match="the LP failed here"):
+        jb.design_move(jb.ModalAxis(*AXIS), 0.1, 1.0, **KW)
+    assert len(futures) == 1 and futures[0].done()
+
+
+def test_an_error_beside_the_worker_waits_for_it(monkeypatch):
+    """When the caller's thread fails while the LP runs, the error is raised after the LP has finished (or was
+    cancelled): no LP runs on after `design_move` has returned."""
+    futures = _recording_submit(monkeypatch)
+
+    def failing(*args, **kwargs):
+        raise ValueError("a candidate failed here")
+
+    monkeypatch.setattr(plan, "measure_rows", failing)
+    with pytest.raises(ValueError, match="a candidate failed here"):
+        jb.design_move(jb.ModalAxis(*AXIS), 0.1, 1.0, **KW)
+    assert len(futures) == 1 and futures[0].done()
+
+
+def test_no_worker_without_a_move_time_or_the_minimax_row(monkeypatch):
+    """The shortest-time search (move_time None) and a table without the minimax row start no worker."""
+    futures = _recording_submit(monkeypatch)
+    p = jb.design_move(jb.ModalAxis(*AXIS), 0.1, 1.0, include=("ZV", "unshaped"), **KW)
+    assert futures == [] and {r.name for r in p.table} == {"ZV", "unshaped"}
