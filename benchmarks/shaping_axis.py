@@ -459,7 +459,8 @@ def speed_every_candidate(modes=(1, 2, 3), same_repeats: int = 3):
     """`design_move` with every candidate (the default `include`) on the axes of `speed` (1, 2, 3 modes), each in a
     fresh process: the first call (at `SPEED_TIMES[0]`), the warm calls at the same move time (median of
     `same_repeats`), the warm calls at the other move times of `SPEED_TIMES` (median) and the XLA compilations
-    those made (a warm call should compile nothing; `jax.monitoring`'s compile events counted)."""
+    those made (a warm call should compile nothing; `jax.monitoring`'s compile events counted); and the first call
+    of a fresh process whose compilation cache an earlier one filled (`_first_call_cached`)."""
     axes = {1: ([6.0], [0.02]), 2: ([7.3, 18.0], [0.015, 0.01]), 3: ([3.1, 9.7, 17.0], [0.03, 0.02, 0.01])}
     out = {}
     for m in modes:
@@ -481,8 +482,12 @@ def speed_every_candidate(modes=(1, 2, 3), same_repeats: int = 3):
         vals = _fresh_process_result(code)
         same = [t for t, _ in vals["same"]]
         other = [t for t, _ in vals["other"]]
+        cached = _first_call_cached(f, z)
         out[m] = dict(
             first_s=vals["first"],
+            first_cached_s=cached["call"],
+            import_cached_s=cached["import"],
+            first_cached_compiles=cached["compiles"],
             warm_same_time_median_s=float(np.median(same)),
             warm_same_time_compiles=int(sum(c for _, c in vals["same"])),
             warm_other_times_median_s=float(np.median(other)),
@@ -492,6 +497,29 @@ def speed_every_candidate(modes=(1, 2, 3), same_repeats: int = 3):
         )
         print(f"{m} mode(s), every candidate: {out[m]}", flush=True)
     return out
+
+
+def _first_call_cached(f, z) -> dict:
+    """The first `design_move` (every candidate, `SPEED_TIMES[0]`) of a fresh process whose compilation cache
+    (`jb.enable_compilation_cache`, on by default in the CLI) an earlier process on this axis filled: the import and
+    the call [s] and the programs the cache did not hold (compiled anew). The cache in a temporary folder: a user's
+    is not touched."""
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as folder:
+        code = (
+            "import time; t0 = time.perf_counter(); import json, warnings; import jax; "
+            "jax.config.update('jax_enable_x64', True); import jax.monitoring; import jaxbelt as jb; "
+            f"jb.enable_compilation_cache({folder!r}); warnings.simplefilter('ignore'); n = [0]\n"
+            "jax.monitoring.register_event_listener("
+            "lambda k, **kw: n.__setitem__(0, n[0] + (k == '/jax/compilation_cache/cache_misses')))\n"
+            f"ax = jb.ModalAxis({f!r}, {z!r}); t1 = time.perf_counter()\n"
+            f"jb.design_move(ax, {D}, {SPEED_TIMES[0]}, v_max={V_MAX}, a_max={A_MAX}, uncertainty={U})\n"
+            "print('RESULT', json.dumps(dict(call=time.perf_counter() - t1, imp=t1 - t0, compiles=n[0])))"
+        )
+        _fresh_process_result(code)  # fills the cache
+        vals = _fresh_process_result(code)
+    return {"call": vals["call"], "import": vals["imp"], "compiles": vals["compiles"]}
 
 
 def rerun_speed_every_candidate():
@@ -512,11 +540,23 @@ def rerun_speed_every_candidate():
                     target="<= 1",
                 )
             )
+        for key, when in (
+            ("first_s", "no compilation cache"),
+            ("first_cached_s", "compilation cache filled by an earlier process (the CLI's default), import apart"),
+        ):
+            head.append(
+                dict(
+                    what=f"design_move first call in a fresh process, every candidate, {m} mode(s), {when}",
+                    value=v[key],
+                    unit="s",
+                    target="<= 5",
+                )
+            )
     _merge_into_results(
         "speed_every_candidate",
         res,
         "speed_every_candidate_run",
-        lambda h: not h["what"].startswith("design_move warm, every candidate"),
+        lambda h: not h["what"].startswith(("design_move warm, every candidate", "design_move first call in a fresh")),
         head,
     )
 
