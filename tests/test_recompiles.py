@@ -251,7 +251,7 @@ def test_minimax_designs_whose_starting_grids_differ_share_one_program():
 @pytest.mark.slow
 def test_minimax_designs_whose_knot_counts_differ_share_one_program():
     # the knot count follows the move time (on a 6 Hz axis 48 intervals at 1.1 s, 64 at 1.3 s; the starting grids,
-    # 21 and 25 points, padded to `MAX_FREQ` = 41 and the extra rows): both LPs are padded to the slot of 64
+    # 21 and 25 points, padded to `MAX_FREQ` = 41 and the extra rows): both LPs are padded to the slot of 128
     # (`design.knot_slots`), so the second design (its LP, feasibility LP and fine-grid check) compiles nothing, and
     # each is the optimum of its own unpadded LP. |a| <= 0.4 m/s^2: the time-optimal move takes 1 s, so the least
     # residuals are well above the LP's resolution (HiGHS checks them)
@@ -266,7 +266,7 @@ def test_minimax_designs_whose_knot_counts_differ_share_one_program():
     for k, T in enumerate((1.1, 1.3)):
         opts = dsg.default_options(axis.frequencies, T, 0.2, False)
         assert (opts.n_knots, opts.n_freq) == ((48, 21), (64, 25))[k]
-        assert dsg.knot_slots(opts.n_knots) == 64 and dsg.grid_slots(opts) == 56
+        assert dsg.knot_slots(opts.n_knots) == 128 and dsg.grid_slots(opts) == 56
         prob = dsg.make_problem(axis, 0.1, T, 0.3, 0.4, None, 0.2, ref, opts)
         with count_compiles() as c:
             assert dsg.max_distance(prob, opts) > 1.0

@@ -38,7 +38,7 @@ semi-infinite programmes, Hettich and Kortanek, 1993, SIAM Rev. 35(3)), and stop
 is within 3 % of $t$ or below `EXCHANGE_ATOL` (0.001 % of the unshaped move's residual: nothing left to refine).
 The LP keeps one shape: the added frequencies fill reserved rows, which are zero rows until used, so no round
 recompiles. Likewise its variables are
-padded to the knot count's slot (`KNOT_SLOTS`: 48 and 64 intervals in one program, 96 and 128 in another) with zero
+padded to the knot count's slot (`KNOT_SLOTS`: 48 to 128 intervals in one program, 160 and 192 in another) with zero
 columns held at exactly 0, so a move time whose knot count differs runs the same compiled LP.
 
 The LP of the last round has one optimum value, which `jaxbelt.shaping.lp.solve_lp` reaches and certifies
@@ -175,7 +175,10 @@ def default_options(
 ) -> DesignOptions:
     """Knots and frequency points that resolve the band (host decision from concrete values): `knots_per_cycle`
     knots per period of the highest frequency of the band over the move (at least 48; the steps and ramps bases at
-    least `MIN_STEPS` intervals); `basis`: "spline", "steps" or "ramps" (`DesignOptions`); a starting grid of about
+    least `MIN_STEPS` intervals), but no more than the least of `KNOT_SLOTS` that gives `KNOT_FILL` x
+    `knots_per_cycle` per period (so that the knot count, padded to its slot, keeps one compiled LP over a wide range
+    of move times: 128 knots from 0.8 to 1.7 s on a 20 Hz band; where the optimum is 0.5 % of the unshaped move, 96
+    knots instead of 128 leave 5 % more, 128 instead of 160 or 256 at 1.3-1.7 s move residuals below 1e-5 of it); `basis`: "spline", "steps" or "ramps" (`DesignOptions`); a starting grid of about
     one point per radian of $2u\\omega T$ (the residual's own scale in frequency is $1/T$), 9 to 41 points.
 
     Near the shortest feasible time more knots pay: a finer spline comes closer to the time-optimal
@@ -184,6 +187,9 @@ def default_options(
     cycles = fmax * float(move_time)
     need = max(48, int(math.ceil(knots_per_cycle * cycles)))
     n_knots = next((n for n in KNOT_COUNTS if n >= need), KNOT_COUNTS[-1])
+    # no more than the least slot that still gives `KNOT_FILL` x `knots_per_cycle` per cycle: one slot (one compiled LP)
+    # serves move times in a ratio of about 1 / KNOT_FILL (0.8 to 1.7 s on the axes of benchmarks/shaping_axis.py)
+    n_knots = min(n_knots, knot_slots(int(math.ceil(KNOT_FILL * knots_per_cycle * cycles))))
     if basis in ("steps", "ramps"):
         n_knots = max(n_knots, MIN_STEPS)
     if float(uncertainty) == 0.0:
@@ -222,7 +228,13 @@ def lp_data(problem: MinimaxProblem, opts: DesignOptions, scale_t: float | jax.A
 #: 128 ... `KNOT_COUNTS`) share one compiled LP per slot: a padded variable is held at exactly 0 (`lp.solve_lp_data`'s
 #: `used`) and the design is the unpadded LP's. Each slot costs one compilation of the interior point method
 #: (7-11 s on two cores); a wider slot costs its factorisations (rows x columns squared) at every iteration.
-KNOT_SLOTS = (64, 128, 192, 256)
+KNOT_SLOTS = (128, 192, 256)
+#: the least fraction of `default_options`' knots per cycle a design keeps where its slot holds fewer knots than those:
+#: a 6-knots-per-cycle design keeps at least 3.36 per cycle of the band's highest frequency before it takes the next
+#: slot, so one slot serves move times in a ratio of about 1 / KNOT_FILL = 1.8 (a design at another time of the same
+#: axis compiles no LP); measured on benchmarks/shaping_axis.py's 3-mode axis at 1.7 s, 128 knots (3.7 per cycle)
+#: instead of 256 leave 3.7e-6 of the unshaped move's residual instead of 2.9e-6 (both below `EXCHANGE_ATOL`)
+KNOT_FILL = 0.56
 
 
 def knot_slots(n_knots: int) -> int:
@@ -260,8 +272,11 @@ def lp_data_grouped(problem: MinimaxProblem, opts: DesignOptions, scale_t: float
     weight = problem.mask * jnp.abs(ax.gains)[:, None] / (wd * jax.lax.stop_gradient(problem.reference)[:, None])
     kern = kern * (weight * aref)[..., None] * col
     theta = 2.0 * jnp.pi * jnp.arange(opts.n_angles) / opts.n_angles
-    cuts = jnp.real(jnp.exp(-1j * theta)[:, None, None, None] * kern[None])  # (P, modes, K, J)
-    cuts = cuts.reshape(-1, J)
+    # Re(e^{-i theta} k) = cos(theta) Re k + sin(theta) Im k: one matrix product (P, 2) x (2, modes K J) of the kernel
+    # made once (written elementwise, XLA fuses the kernel's complex exponentials into each of the P products: 16 times
+    # the work, at the LP programs' compiler options 0.05-0.09 s of each LP, more than a few interior point iterations)
+    trig = jnp.stack([jnp.cos(theta), jnp.sin(theta)], axis=1)
+    cuts = (trig @ jnp.stack([jnp.real(kern).reshape(-1), jnp.imag(kern).reshape(-1)])).reshape(-1, J)
     used = jnp.broadcast_to(problem.mask[None], (opts.n_angles, *problem.mask.shape)).reshape(-1)
     res_rows = jnp.concatenate([cuts, -used[:, None] * scale_t], axis=1)
     res_rhs = 1.0 - used  # an unused row reads 0 <= 1: never active
