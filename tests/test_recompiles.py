@@ -561,3 +561,19 @@ def test_a_blend_in_its_canonical_structure_is_the_same_move():
     np.testing.assert_allclose(canon.residual_integral(s), ref, rtol=1e-11)
     only = padded_command(BlendMove((spline,), jnp.asarray([1.0]), T))  # no PiecewiseMove: zero terms added
     np.testing.assert_allclose(only.derivative(t, 0), spline.derivative(t, 0), rtol=1e-13, atol=1e-15)
+
+
+@pytest.mark.slow
+def test_design_move_at_0_8_to_1_7_s_after_1_s_compiles_no_lp():
+    # issue 54 item 5: on the 3-mode axis of benchmarks/shaping_axis.py the knot count at 0.8, 1.3 and 1.7 s (6 per
+    # period of 20.4 Hz: 128, 160 and 256 intervals) is capped at the slot of 128 (`design.KNOT_FILL`), so after a
+    # first call at 1.0 s the minimax design (its LP, fine-grid check, measuring) compiles nothing
+    axis = jb.ModalAxis([3.1, 9.7, 17.0], [0.03, 0.02, 0.01])
+    lim = dict(v_max=0.3, a_max=1.2, uncertainty=0.2, include=("minimax",))
+    jb.design_move(axis, 0.1, 1.0, **lim)
+    for T in (0.8, 1.3, 1.7):
+        with count_compiles() as c:
+            plan = jb.design_move(axis, 0.1, T, **lim)
+        assert c["n"] == 0, T
+        assert plan.minimax is not None and plan.minimax.converged
+        assert plan.minimax.options.n_knots == 128
