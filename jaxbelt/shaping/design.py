@@ -179,14 +179,17 @@ def default_options(
 ) -> DesignOptions:
     """Knots and frequency points that resolve the band (host decision from concrete values): `knots_per_cycle`
     knots per period of the highest frequency of the band over the move (at least 48; the steps and ramps bases at
-    least `MIN_STEPS` intervals), but (spline) no more than the least of `KNOT_SLOTS` that gives `KNOT_FILL` x
-    `knots_per_cycle` per period (so that the knot count, padded to its slot, keeps one compiled LP over a wide range
-    of move times: 128 knots from 0.8 to 1.7 s on a 20 Hz band; where the optimum is 0.5 % of the unshaped move, 96
-    knots instead of 128 leave 5 % more, 128 instead of 160 or 256 at 1.3-1.7 s move residuals below 1e-5 of it); `basis`: "spline", "steps" or "ramps" (`DesignOptions`); a starting grid of about
+    least `MIN_STEPS` intervals); `basis`: "spline", "steps" or "ramps" (`DesignOptions`); a starting grid of about
     one point per radian of $2u\\omega T$ (the residual's own scale in frequency is $1/T$), 9 to 41 points.
 
+    The spline at a given move time (at most `FIXED_TIME_KNOTS` per cycle) takes no more knots than the least of
+    `KNOT_SLOTS` that gives `KNOT_FILL` x `knots_per_cycle` per period, so that its knot count, padded to its slot,
+    keeps one compiled LP over a wide range of move times (128 knots from 0.8 to 1.7 s on a 20 Hz band). Measured on
+    the 3-mode axis of benchmarks/shaping_axis.py: where the optimum is 0.5 % of the unshaped move's residual (1 s),
+    96 knots instead of 128 would leave 5 % more; at 1.3-1.7 s, 128 knots instead of 160-256 leave below 1e-5 of it.
+
     Near the shortest feasible time more knots pay: a finer spline comes closer to the time-optimal
-    (bang-bang) move, so the shortest-time search uses twice as many."""
+    (bang-bang) move, so the shortest-time search uses twice as many (and no cap)."""
     fmax = float(np.max(np.asarray(axis_freqs))) * (1.0 + float(uncertainty))
     cycles = fmax * float(move_time)
     need = max(48, int(math.ceil(knots_per_cycle * cycles)))
@@ -194,8 +197,9 @@ def default_options(
     # the spline: no more than the least slot that still gives `KNOT_FILL` x `knots_per_cycle` per cycle, so one slot
     # (one compiled LP) serves move times in a ratio of about 1 / KNOT_FILL (0.8 to 1.7 s on the axes of
     # benchmarks/shaping_axis.py). The steps and ramps keep their count: their duals make the continuous bound
-    # (`jaxbelt.shaping.certify`), which needs the finer steps (a 40 Hz axis at ZV's time: 0 with 128 steps)
-    if basis == "spline":
+    # (`jaxbelt.shaping.certify`), which needs the finer steps (a 40 Hz axis at ZV's time: 0 with 128 steps); so does
+    # the shortest-time search (more than `FIXED_TIME_KNOTS` per cycle): near the time-optimal move more knots pay
+    if basis == "spline" and knots_per_cycle <= FIXED_TIME_KNOTS:
         n_knots = min(n_knots, knot_slots(int(math.ceil(KNOT_FILL * knots_per_cycle * cycles))))
     if basis in ("steps", "ramps"):
         n_knots = max(n_knots, MIN_STEPS)
@@ -242,6 +246,9 @@ KNOT_SLOTS = (128, 192, 256)
 #: axis compiles no LP); measured on benchmarks/shaping_axis.py's 3-mode axis at 1.7 s, 128 knots (3.7 per cycle)
 #: instead of 256 leave 3.7e-6 of the unshaped move's residual instead of 2.9e-6 (both below `EXCHANGE_ATOL`)
 KNOT_FILL = 0.56
+#: the knots per cycle of `default_options` at a given move time (`design_move`; the shortest-time search takes twice as
+#: many): the spline's designs of at most this many are capped by `KNOT_FILL`
+FIXED_TIME_KNOTS = 6.0
 
 
 def finer_options(opts: DesignOptions) -> DesignOptions | None:
