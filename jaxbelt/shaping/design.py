@@ -184,9 +184,10 @@ def default_options(
 
     The spline at a given move time (at most `FIXED_TIME_KNOTS` per cycle) takes no more knots than the least of
     `KNOT_SLOTS` that gives `KNOT_FILL` x `knots_per_cycle` per period, so that its knot count, padded to its slot,
-    keeps one compiled LP over a wide range of move times (128 knots from 0.8 to 1.7 s on a 20 Hz band). Measured on
-    the 3-mode axis of benchmarks/shaping_axis.py: where the optimum is 0.5 % of the unshaped move's residual (1 s),
-    96 knots instead of 128 would leave 5 % more; at 1.3-1.7 s, 128 knots instead of 160-256 leave below 1e-5 of it.
+    keeps one compiled LP over a wide range of move times (128 knots from 0.8 to 1.7 s on a 20 Hz band). Its cost,
+    measured on the 3-mode axis of benchmarks/shaping_axis.py (worst residual on a 10x finer grid, in units of the
+    unshaped move's): at 1.3 s 128 knots instead of 160 leave 1.79e-4 instead of 1.49e-4 (20 % more), at 1.7 s 128
+    instead of 256 leave 3.7e-6 instead of 2.9e-6; `KNOT_FILL` = 1 restores the uncapped count.
 
     Near the shortest feasible time more knots pay: a finer spline comes closer to the time-optimal
     (bang-bang) move, so the shortest-time search uses twice as many (and no cap)."""
@@ -243,8 +244,7 @@ KNOT_SLOTS = (128, 192, 256)
 #: the least fraction of `default_options`' knots per cycle a design keeps where its slot holds fewer knots than those:
 #: a 6-knots-per-cycle design keeps at least 3.36 per cycle of the band's highest frequency before it takes the next
 #: slot, so one slot serves move times in a ratio of about 1 / KNOT_FILL = 1.8 (a design at another time of the same
-#: axis compiles no LP); measured on benchmarks/shaping_axis.py's 3-mode axis at 1.7 s, 128 knots (3.7 per cycle)
-#: instead of 256 leave 3.7e-6 of the unshaped move's residual instead of 2.9e-6 (both below `EXCHANGE_ATOL`)
+#: axis compiles no LP); what it costs: `default_options` (20 % more residual at 1.3 s on a 3-mode axis)
 KNOT_FILL = 0.56
 #: the knots per cycle of `default_options` at a given move time (`design_move`; the shortest-time search takes twice as
 #: many): the spline's designs of at most this many are capped by `KNOT_FILL`
