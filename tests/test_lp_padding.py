@@ -123,3 +123,20 @@ def test_padded_lp_data_stay_finite_at_a_long_move_time():
     f0, r0 = dsg._fine_ratios_program(prob, opts, jnp.asarray(coef), float(opts.n_knots))
     assert np.isfinite(np.asarray(r1)).all()
     np.testing.assert_allclose(np.asarray(r1), np.asarray(r0), rtol=1e-9, atol=0)  # sums of ~1e-12 terms: rounding
+
+
+@pytest.mark.parametrize(
+    "freqs", [[6.0], [7.3, 18.0], [3.1, 9.7, 17.0]], ids=["1 mode", "2 modes", "3 modes"]
+)  # benchmarks/shaping_axis.py's axes
+def test_knot_count_keeps_one_slot_from_0_8_to_1_7_s(freqs):
+    # issue 54 item 5: a design at another move time of the same axis runs the LP compiled before. The rule's knot count
+    # (6 per period of the band's top frequency, 20 % band) of the spline is capped at the least slot that keeps
+    # KNOT_FILL of them: from 0.8 to 1.7 s every smooth design of these axes is posed in the slot of 128 intervals, with
+    # at least 0.56 x 6 = 3.36 knots per period (the smallest here: 128 intervals over 1.7 s of 21.6 Hz, 3.49)
+    for T in (0.8, 1.0, 1.3, 1.7):
+        for jerk in (False, True):
+            opts = dsg.default_options(freqs, T, 0.2, jerk)
+            assert dsg.knot_slots(opts.n_knots) == 128, (T, jerk)
+            assert opts.n_knots / (max(freqs) * 1.2 * T) >= 3.36
+    # the knot count of the rule before the cap, where it fits: 6 per period rounded up to `KNOT_COUNTS`
+    assert dsg.default_options(freqs, 0.8, 0.2, False).n_knots == (48 if len(freqs) == 1 else 128)

@@ -251,7 +251,7 @@ def test_minimax_designs_whose_starting_grids_differ_share_one_program():
 @pytest.mark.slow
 def test_minimax_designs_whose_knot_counts_differ_share_one_program():
     # the knot count follows the move time (on a 6 Hz axis 48 intervals at 1.1 s, 64 at 1.3 s; the starting grids,
-    # 21 and 25 points, padded to `MAX_FREQ` = 41 and the extra rows): both LPs are padded to the slot of 64
+    # 21 and 25 points, padded to `MAX_FREQ` = 41 and the extra rows): both LPs are padded to the slot of 128
     # (`design.knot_slots`), so the second design (its LP, feasibility LP and fine-grid check) compiles nothing, and
     # each is the optimum of its own unpadded LP. |a| <= 0.4 m/s^2: the time-optimal move takes 1 s, so the least
     # residuals are well above the LP's resolution (HiGHS checks them)
@@ -266,7 +266,7 @@ def test_minimax_designs_whose_knot_counts_differ_share_one_program():
     for k, T in enumerate((1.1, 1.3)):
         opts = dsg.default_options(axis.frequencies, T, 0.2, False)
         assert (opts.n_knots, opts.n_freq) == ((48, 21), (64, 25))[k]
-        assert dsg.knot_slots(opts.n_knots) == 64 and dsg.grid_slots(opts) == 56
+        assert dsg.knot_slots(opts.n_knots) == 128 and dsg.grid_slots(opts) == 56
         prob = dsg.make_problem(axis, 0.1, T, 0.3, 0.4, None, 0.2, ref, opts)
         with count_compiles() as c:
             assert dsg.max_distance(prob, opts) > 1.0
@@ -561,3 +561,19 @@ def test_a_blend_in_its_canonical_structure_is_the_same_move():
     np.testing.assert_allclose(canon.residual_integral(s), ref, rtol=1e-11)
     only = padded_command(BlendMove((spline,), jnp.asarray([1.0]), T))  # no PiecewiseMove: zero terms added
     np.testing.assert_allclose(only.derivative(t, 0), spline.derivative(t, 0), rtol=1e-13, atol=1e-15)
+
+
+@pytest.mark.slow
+def test_design_move_at_0_8_to_1_7_s_after_1_s_compiles_no_lp():
+    # issue 54 item 5: on the 3-mode axis of benchmarks/shaping_axis.py the knot count at 0.8, 1.3 and 1.7 s (6 per
+    # period of 20.4 Hz: 128, 160 and 256 intervals) is capped at the slot of 128 (`design.KNOT_FILL`), so after a
+    # first call at 1.0 s the minimax design (its LP, fine-grid check, measuring) compiles nothing
+    axis = jb.ModalAxis([3.1, 9.7, 17.0], [0.03, 0.02, 0.01])
+    lim = dict(v_max=0.3, a_max=1.2, uncertainty=0.2, include=("minimax",))
+    jb.design_move(axis, 0.1, 1.0, **lim)
+    for T in (0.8, 1.3, 1.7):
+        with count_compiles() as c:
+            plan = jb.design_move(axis, 0.1, T, **lim)
+        assert c["n"] == 0, T
+        assert plan.minimax is not None and plan.minimax.converged
+        assert plan.minimax.options.n_knots == 128

@@ -38,7 +38,7 @@ semi-infinite programmes, Hettich and Kortanek, 1993, SIAM Rev. 35(3)), and stop
 is within 3 % of $t$ or below `EXCHANGE_ATOL` (0.001 % of the unshaped move's residual: nothing left to refine).
 The LP keeps one shape: the added frequencies fill reserved rows, which are zero rows until used, so no round
 recompiles. Likewise its variables are
-padded to the knot count's slot (`KNOT_SLOTS`: 48 and 64 intervals in one program, 96 and 128 in another) with zero
+padded to the knot count's slot (`KNOT_SLOTS`: 48 to 128 intervals in one program, 160 and 192 in another) with zero
 columns held at exactly 0, so a move time whose knot count differs runs the same compiled LP.
 
 The LP of the last round has one optimum value, which `jaxbelt.shaping.lp.solve_lp` reaches and certifies
@@ -87,6 +87,10 @@ CERTIFIED_ABS = 1e-5
 #: the interior point tolerance of the exchange's intermediate rounds (their LP only picks the next frequencies;
 #: the final round is solved to `tol`)
 ROUND_TOL = 1e-6
+#: an exchange round's coarse solve (posed in units of 1, `_solve_round_impl`) that brackets the optimum within this
+#: (relative, by its rigorous dual bound) is the round's answer: the round only picks frequencies (a three-mode design
+#: at 1 s: 86 -> 62 interior point iterations)
+ROUGH_GAP = 1e-2
 #: how far (relative) the fine-grid worst residual may exceed the LP's bound before a frequency is added
 EXCHANGE_TOL = 0.03
 #: or once the fine-grid worst residual itself is at most this (units of the references: 0.001 % of the unshaped
@@ -178,12 +182,26 @@ def default_options(
     least `MIN_STEPS` intervals); `basis`: "spline", "steps" or "ramps" (`DesignOptions`); a starting grid of about
     one point per radian of $2u\\omega T$ (the residual's own scale in frequency is $1/T$), 9 to 41 points.
 
+    The spline at a given move time (at most `FIXED_TIME_KNOTS` per cycle) takes no more knots than the least of
+    `KNOT_SLOTS` that gives `KNOT_FILL` x `knots_per_cycle` per period, so that its knot count, padded to its slot,
+    keeps one compiled LP over a wide range of move times (128 knots from 0.8 to 1.7 s on a 20 Hz band). Its cost,
+    measured on the 3-mode axis of benchmarks/shaping_axis.py (worst residual on a 10x finer grid, in units of the
+    unshaped move's): at 1.3 s 128 knots instead of 160 leave 1.79e-4 instead of 1.49e-4 (20 % more), at 1.7 s 128
+    instead of 256 leave 3.7e-6 instead of 2.9e-6; `KNOT_FILL` = 1 restores the uncapped count.
+
     Near the shortest feasible time more knots pay: a finer spline comes closer to the time-optimal
-    (bang-bang) move, so the shortest-time search uses twice as many."""
+    (bang-bang) move, so the shortest-time search uses twice as many (and no cap)."""
     fmax = float(np.max(np.asarray(axis_freqs))) * (1.0 + float(uncertainty))
     cycles = fmax * float(move_time)
     need = max(48, int(math.ceil(knots_per_cycle * cycles)))
     n_knots = next((n for n in KNOT_COUNTS if n >= need), KNOT_COUNTS[-1])
+    # the spline: no more than the least slot that still gives `KNOT_FILL` x `knots_per_cycle` per cycle, so one slot
+    # (one compiled LP) serves move times in a ratio of about 1 / KNOT_FILL (0.8 to 1.7 s on the axes of
+    # benchmarks/shaping_axis.py). The steps and ramps keep their count: their duals make the continuous bound
+    # (`jaxbelt.shaping.certify`), which needs the finer steps (a 40 Hz axis at ZV's time: 0 with 128 steps); so does
+    # the shortest-time search (more than `FIXED_TIME_KNOTS` per cycle): near the time-optimal move more knots pay
+    if basis == "spline" and knots_per_cycle <= FIXED_TIME_KNOTS:
+        n_knots = min(n_knots, knot_slots(int(math.ceil(KNOT_FILL * knots_per_cycle * cycles))))
     if basis in ("steps", "ramps"):
         n_knots = max(n_knots, MIN_STEPS)
     if float(uncertainty) == 0.0:
@@ -222,7 +240,22 @@ def lp_data(problem: MinimaxProblem, opts: DesignOptions, scale_t: float | jax.A
 #: 128 ... `KNOT_COUNTS`) share one compiled LP per slot: a padded variable is held at exactly 0 (`lp.solve_lp_data`'s
 #: `used`) and the design is the unpadded LP's. Each slot costs one compilation of the interior point method
 #: (7-11 s on two cores); a wider slot costs its factorisations (rows x columns squared) at every iteration.
-KNOT_SLOTS = (64, 128, 192, 256)
+KNOT_SLOTS = (128, 192, 256)
+#: the least fraction of `default_options`' knots per cycle a design keeps where its slot holds fewer knots than those:
+#: a 6-knots-per-cycle design keeps at least 3.36 per cycle of the band's highest frequency before it takes the next
+#: slot, so one slot serves move times in a ratio of about 1 / KNOT_FILL = 1.8 (a design at another time of the same
+#: axis compiles no LP); what it costs: `default_options` (20 % more residual at 1.3 s on a 3-mode axis)
+KNOT_FILL = 0.56
+#: the knots per cycle of `default_options` at a given move time (`design_move`; the shortest-time search takes twice as
+#: many): the spline's designs of at most this many are capped by `KNOT_FILL`
+FIXED_TIME_KNOTS = 6.0
+
+
+def finer_options(opts: DesignOptions) -> DesignOptions | None:
+    """`opts` with the knot count of the next slot (`KNOT_SLOTS`; up to `KNOT_COUNTS[-1]`), or None beyond it: where
+    the count `default_options` caps (`KNOT_FILL`) cannot move the distance in the time."""
+    n = knot_slots(opts.n_knots + 1)
+    return opts._replace(n_knots=n) if n <= KNOT_COUNTS[-1] else None
 
 
 def knot_slots(n_knots: int) -> int:
@@ -260,8 +293,11 @@ def lp_data_grouped(problem: MinimaxProblem, opts: DesignOptions, scale_t: float
     weight = problem.mask * jnp.abs(ax.gains)[:, None] / (wd * jax.lax.stop_gradient(problem.reference)[:, None])
     kern = kern * (weight * aref)[..., None] * col
     theta = 2.0 * jnp.pi * jnp.arange(opts.n_angles) / opts.n_angles
-    cuts = jnp.real(jnp.exp(-1j * theta)[:, None, None, None] * kern[None])  # (P, modes, K, J)
-    cuts = cuts.reshape(-1, J)
+    # Re(e^{-i theta} k) = cos(theta) Re k + sin(theta) Im k: one matrix product (P, 2) x (2, modes K J) of the kernel
+    # made once (written elementwise, XLA fuses the kernel's complex exponentials into each of the P products: 16 times
+    # the work, at the LP programs' compiler options 0.05-0.09 s of each LP, more than a few interior point iterations)
+    trig = jnp.stack([jnp.cos(theta), jnp.sin(theta)], axis=1)
+    cuts = (trig @ jnp.stack([jnp.real(kern).reshape(-1), jnp.imag(kern).reshape(-1)])).reshape(-1, J)
     used = jnp.broadcast_to(problem.mask[None], (opts.n_angles, *problem.mask.shape)).reshape(-1)
     res_rows = jnp.concatenate([cuts, -used[:, None] * scale_t], axis=1)
     res_rhs = 1.0 - used  # an unused row reads 0 <= 1: never active
@@ -373,7 +409,8 @@ def _solve_round_impl(
     accuracy of the worst residual, and its crossover to an optimal vertex more reliable: attempt 0 (when `tau`
     is not given) is a coarse solve for the size; then up to three solves, each in units of the value the
     previous one found, until one certifies its vertex (`certify`, a traced flag: False stops after the first
-    solve, for the exchange's intermediate rounds). One interior point method in the program (a loop over the
+    solve, for the exchange's intermediate rounds, or, for those, already after the coarse solve where it brackets the
+    optimum within `ROUGH_GAP`: then the returned `rough` is True and `tau` 1). One interior point method in the program (a loop over the
     attempts); the value's derivative comes from the envelope theorem outside the loop."""
     stop = jax.lax.stop_gradient
     prob_s = jax.tree_util.tree_map(lambda v: stop(v) if eqx.is_inexact_array(v) else v, problem)
@@ -383,7 +420,7 @@ def _solve_round_impl(
     used = None if knots is None else _used_variables(opts, knots)
 
     def attempt(state):
-        k, tau, _, _ = state
+        k, tau, _, _, _ = state
         coarse = tau <= 0
         t_use = jnp.where(coarse, 1.0, tau)
         c, G, hv, A, b, groups = lp_data_grouped(prob_s, opts, t_use, knots)
@@ -402,16 +439,21 @@ def _solve_round_impl(
         # stop at a certified vertex, or when the LP posed in units of the value found before finds that value
         # again (a solve on an optimal face that is not a single vertex: a new scale changes nothing)
         settled = jnp.abs(res.value - 1.0) < 1e-7
-        stop_now = (~coarse & (res.vertex | ~certify | settled)) | (k >= 3)
+        # an exchange round (`certify` False) whose coarse solve already brackets its optimum within `ROUGH_GAP`
+        # (rigorous dual bound) stops there: the round only picks the next frequencies and tests the fine grid against
+        # the value (3 %), and the design's last LP is solved again to `tol` (`minimax_design`)
+        rough = coarse & ~certify & (res.value > 0) & (res.value - res.lower_bound <= ROUGH_GAP * res.value)
+        stop_now = (~coarse & (res.vertex | ~certify | settled)) | rough | (k >= 3)
         new_tau = jnp.maximum(res.value * t_use, 1e-12)
         # on stopping, tau is the scale the returned LP was posed in
-        return k + 1, jnp.where(stop_now, t_use, new_tau), res, stop_now
+        return k + 1, jnp.where(stop_now, t_use, new_tau), res, stop_now, rough
 
     shapes = jax.eval_shape(
         lambda: solve_lp_data(*lp_data(prob_s, opts, 1.0, knots), _x_bound(prob_s, opts, 1.0, knots), tol, 1)
     )
     res0 = jax.tree_util.tree_map(lambda sd: jnp.zeros(sd.shape, sd.dtype), shapes)
-    _, tau, res, _ = jax.lax.while_loop(lambda st: ~st[3], attempt, (jnp.asarray(0), tau, res0, jnp.asarray(False)))
+    init = (jnp.asarray(0), tau, res0, jnp.asarray(False), jnp.asarray(False))
+    _, tau, res, _, rough = jax.lax.while_loop(lambda st: ~st[3], attempt, init)
     data = lp_data(problem, opts, tau, knots)
     value = lp_value(*data, stop(res.x), stop(res.z), stop(res.y))
     res = res._replace(value=value)
@@ -419,7 +461,7 @@ def _solve_round_impl(
     res = res._replace(lower_bound=stop(lower))
     # the command's coefficients [m/s^2], the worst residual and its bound in units of the references
     coef = stop(res.x[:-1]) * prob_s.distance / prob_s.move_time**2
-    return res, tau, (coef, res.value * tau, res.lower_bound * tau)
+    return res, tau, (coef, res.value * tau, res.lower_bound * tau), rough
 
 
 # kept by the program store while the compilation cache is on: a later process neither traces nor lowers it
@@ -442,8 +484,9 @@ def _knots(opts: DesignOptions):
 
 
 def _solve_round(problem, opts, tau, tol, certify=True):
-    """`_solve_round_impl` on the padded LP of `opts` (`_program_options`): `(res, tau, (coef, worst, lower))` with
-    `res` and `coef` of the padded sizes (`_unpadded`, `_coefficients` take the design's own)."""
+    """`_solve_round_impl` on the padded LP of `opts` (`_program_options`): `(res, tau, (coef, worst, lower), rough)`
+    with `res` and `coef` of the padded sizes (`_unpadded`, `_coefficients` take the design's own); `rough`: the answer
+    is the coarse solve's (`ROUGH_GAP`; an exchange round only)."""
     knots = _knots(opts)
     opts = _program_options(opts)
     # XLA options apply to top-level programs only: inside a caller's trace (grad, jit) the plain program.
@@ -599,7 +642,7 @@ def minimax_design(
     rounds = 0
     while True:
         problem = _on_grid(problem, factors, mask)
-        res, tau, (coef, worst_a, lower_a) = _solve_round(problem, opts, tau, tol_round, False)
+        res, tau, (coef, worst_a, lower_a), rough = _solve_round(problem, opts, tau, tol_round, False)
         worst = float(worst_a)
         if not _exchanges(opts, u):
             fine_worst = worst
@@ -622,8 +665,8 @@ def minimax_design(
             break
         rounds += 1
         tau = device_array(worst)
-    if not (bool(res.vertex) or certified(worst_a, lower_a)):  # the final LP to `tol`, certified where it can be
-        res, tau, (coef, worst_a, lower_a) = _solve_round(problem, opts, device_array(worst), tol_a, True)
+    if bool(rough) or not (bool(res.vertex) or certified(worst_a, lower_a)):  # the final LP to `tol`, certified
+        res, tau, (coef, worst_a, lower_a), _ = _solve_round(problem, opts, device_array(worst), tol_a, True)
         if _exchanges(opts, u):
             fine_worst = float(np.asarray(_fine_ratios(problem, opts, coef)[1]).max())
     return MinimaxDesign(
@@ -808,8 +851,16 @@ class MinimaxSolver:
         time-optimal one (`t_min`): well above that (`clearly`), the feasibility LP (its program costs a compile) is
         skipped unless the design then fails to converge."""
         mm = self.design(T) if clearly else None
-        if (mm is None or not mm.converged) and not self.feasible(T):
-            return None, self.shortest_feasible(t_min)
+        own = self.opts
+        while (mm is None or not mm.converged) and not self.feasible(T):
+            # near the time-optimal move a spline needs more knots than `default_options`' cap (`KNOT_FILL`) leaves it
+            # (a 40 Hz axis at ZV's time and peaks: 128 knots cannot move the distance, 192 can): the next slots' knot
+            # counts, each a compiled LP of its own, before the time is refused
+            finer = finer_options(self.opts)
+            if finer is None:
+                self.opts = own  # the shortest time at which the rule's own knot count moves the distance
+                return None, self.shortest_feasible(t_min)
+            self.opts, mm = finer, None
         return (self.design(T) if mm is None else mm), math.nan
 
     def shortest(self, t_min, target):
