@@ -49,3 +49,33 @@ def test_design_nodes_one_program_for_the_benchmark_axes():
         ax = jb.ModalAxis(f, z)
         w = float(np.max(np.asarray(ax.omega))) * (1 + U)
         assert {P.design_nodes(w * T) for T in (0.8, 1.0, 1.3, 1.7)} == {512}
+
+
+@pytest.mark.slow  # the designs' program and the curve's compile first: ~15 s
+def test_pseudo_candidates_at_other_move_times_compile_nothing():
+    # the pseudo-polynomial candidates of a 3-mode axis (`pseudo.designs_for`, then their rows' curves on the band
+    # and the wide grid, as `measure._measure` computes them) at 0.8, 1.3 and 1.7 s after 1.0 s: no program compiles
+    # (the designs' 512-node rule, the curve's `_curve_nodes`, the commands' exponents put on the device)
+    from compiles import count_compiles
+
+    from jaxbelt.shaping.bands import measure_grids
+    from jaxbelt.shaping.residual import measured_curve, reference_residuals
+
+    ax = jb.ModalAxis(*AXES[3])
+    ref = np.asarray(reference_residuals(ax, 0.1, 0.3, 1.2, None, U)[0])
+    grids = measure_grids(U)
+
+    def candidates(T):
+        designs = P.designs_for(ax, 0.1, T, (0.3, 1.2, None), ref, U)
+        return {k: [measured_curve(ax, d.command, g) for g in grids] for k, d in designs.items()}, designs
+
+    candidates(1.0)
+    for T in (0.8, 1.3, 1.7):
+        with count_compiles() as c:
+            curves, designs = candidates(T)
+        assert c["n"] == 0, T
+        # the curves are the designs' own: the robust design's worst over the band (its 401 factors) is the one
+        # the designs report, computed by another rule (the designs' kernels, another node count), to 1e-6: the
+        # rounding of its clustered exponents' cancelling terms (measured 6e-8 at 1.3 s)
+        band = curves[P.ROBUST][0] / ref[:, None]
+        assert abs(float(band.max()) - designs[P.ROBUST].worst) <= 1e-6 * designs[P.ROBUST].worst

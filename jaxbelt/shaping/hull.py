@@ -199,7 +199,8 @@ def best_blend(axis: ModalAxis, members, reference, factors, rate_hz: float, ble
         if M > _LP_COLUMNS:
             raise ValueError(f"best_blend: at most {_LP_COLUMNS} members; got {M}")
         padded = np.hstack([rows, np.repeat(rows[:, -1:], _LP_COLUMNS - M, axis=1)])  # copies of the last member
-        xp, converged = _blend_programme(jnp.asarray(padded), jnp.asarray(1e-9))
+        # `jax.device_put`: `jnp.asarray` of a host array compiles a small program per shape
+        xp, converged = _blend_programme(jax.device_put(padded), jax.device_put(np.float64(1e-9)))
         xp = np.asarray(xp)
         x = np.r_[xp[: M - 1], xp[M - 1 :].sum()]  # the copies' weights added back
         if bool(converged):  # else: the least member, as without a blend
