@@ -45,10 +45,11 @@ def test_design_nodes_accurate_at_the_top_of_each_bucket(n_nodes):
 
 def test_design_nodes_one_program_for_the_benchmark_axes():
     # the quadrature size is the designs' program's only shape that follows the move time: one size for 0.8-1.7 s
+    # (256 nodes on 1 mode, 512 on 2-3 modes; `n_nodes_for` asked 1024 at 1.7 s there)
     for f, z in AXES.values():
         ax = jb.ModalAxis(f, z)
         w = float(np.max(np.asarray(ax.omega))) * (1 + U)
-        assert {P.design_nodes(w * T) for T in (0.8, 1.0, 1.3, 1.7)} == {512}
+        assert len({P.design_nodes(w * T) for T in (0.8, 1.0, 1.3, 1.7)}) == 1
 
 
 @pytest.mark.slow  # the designs' program and the curve's compile first: ~15 s

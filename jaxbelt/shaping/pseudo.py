@@ -209,21 +209,21 @@ DESIGN_NODES_EXTRA = 64
 
 
 def design_nodes(max_omega_t: float) -> int:
-    """The Gauss-Legendre nodes of the designs' rule (`designs_for`): $0.75\\,\\omega T + 64$ rounded up to a power of
-    two, at least 512 (a host decision). Measured against a 4096-node rule, the ratios of `_evaluate_np` (orders 2 to
-    8, 401 factors) agree to 5e-13 wherever about $0.55\\,\\omega T$ nodes are given (256 nodes at $\\omega T$ = 385,
-    384 at 603, 512 at 905; 192 at 385: 5e-6), so this rule keeps a margin of 1.35 or more. It is 3x leaner than
-    `n_nodes_for`'s $2.5\\,\\omega T + 64$: one program (512 nodes) serves every move up to $\\omega T$ = 597 (a 17 Hz
-    mode, band +20 %, up to 4.6 s), where the earlier rule's 256, 512 and 1024-node programs compiled anew as the move
-    time crossed a bucket (a 3-mode axis at 1.0 s, then 1.7 s: 3 s). The floor of 512 nodes keeps the designs those
-    programs gave: on the 1-3 mode benchmark axes at 0.8-1.7 s every design's worst residual, iteration count and
-    convergence are the same as with the earlier rule (fewer nodes move the optimiser's path at the rounding level,
-    which can turn a converged stage into a stalled one)."""
+    """The Gauss-Legendre nodes of the designs' rule (`designs_for`, a host decision): `n_nodes_for`'s
+    $2.5\\,\\omega T + 64$, capped at $0.75\\,\\omega T + 64$ rounded up to a power of two, at least 512. Measured
+    against a 4096-node rule, the ratios of `_evaluate_np` (orders 2 to 8, 401 factors) agree to 5e-13 wherever
+    about $0.55\\,\\omega T$ nodes are given (256 nodes at $\\omega T$ = 385, 384 at 603, 512 at 905; 192 at 385:
+    5e-6), so the cap keeps a margin of 1.35 or more. Below 512 nodes the designs are those of `n_nodes_for` (fewer
+    nodes move the optimiser's path at the rounding level, which can turn a converged stage into a stalled one);
+    above, one program of 512 nodes serves every move up to $\\omega T$ = 597 (a 17 Hz mode, band +20 %, up to
+    4.6 s), where `n_nodes_for`'s 1024-node program compiled anew as the move time crossed its bucket (a 3-mode axis
+    at 1.0 s, then 1.7 s: 3 s). On the 1-3 mode benchmark axes at 0.8-1.7 s every design's worst residual, iteration
+    count and convergence are those of `n_nodes_for`'s rule (measured)."""
     need = int(DESIGN_NODES_PER_RAD * float(max_omega_t) + DESIGN_NODES_EXTRA)
-    for n in (512, 1024, 2048):
-        if n >= need:
-            return n
-    return 4096
+    cap = 512
+    while cap < need and cap < 4096:
+        cap *= 2
+    return min(n_nodes_for(max_omega_t), cap)
 
 
 def residual_kernels(axis: ModalAxis, move_time, factors, reference, n_nodes: int):
