@@ -28,7 +28,8 @@ def _batch():
 
 @pytest.mark.parametrize("n_nodes", [512, 1024])
 def test_design_nodes_accurate_at_the_top_of_each_bucket(n_nodes):
-    # the largest omega T a bucket takes, on one mode: the ratios against a 2048-node rule (a finer solve), 1e-11
+    # the largest omega T a bucket takes, on one mode: the ratios against a rule of twice the nodes (a finer solve),
+    # 1e-11
     wT = (n_nodes - P.DESIGN_NODES_EXTRA) / P.DESIGN_NODES_PER_RAD
     assert P.design_nodes(wT) == n_nodes
     assert P.design_nodes(wT * 1.01) == 2 * n_nodes
@@ -39,7 +40,7 @@ def test_design_nodes_accurate_at_the_top_of_each_bucket(n_nodes):
     ref = np.array([1e-3])
     G, A = _batch()
     got, _ = P._evaluate_np(P._kernels_np(ax, T, factors, ref, n_nodes), 1, n_nodes, 0.1, T, G, A)
-    fine, _ = P._evaluate_np(P._kernels_np(ax, T, factors, ref, 2048), 1, 2048, 0.1, T, G, A)
+    fine, _ = P._evaluate_np(P._kernels_np(ax, T, factors, ref, 2 * n_nodes), 1, 2 * n_nodes, 0.1, T, G, A)
     assert np.max(np.abs(got - fine)) <= 1e-11 * np.max(fine)
 
 
