@@ -30,7 +30,7 @@ import numpy as np
 
 from .. import _xla
 from ..models.axis import ModalAxis
-from .moves import BlendMove, PiecewiseMove, derivatives_at
+from .moves import BlendMove, PiecewiseMove, derivatives_at, piecewise_derivatives
 
 #: angles of the modulus' polygon in the blend's programme (|r| <= t to within 1/cos(pi/32) - 1 = 0.5 %)
 _ANGLES = 32
@@ -67,29 +67,8 @@ def positions(cmd, t) -> np.ndarray:
 
 def _piecewise_positions(move: PiecewiseMove, t) -> np.ndarray:
     """$x(t) = \\sum_k \\alpha_k (t - t_k)_+^2/2 + \\beta_k (t - t_k)_+^3/6$ [m] of a `PiecewiseMove` at the times `t`
-    (held at the end after its duration T), in O((n + K) log K) for n times and K terms: the position, velocity,
-    acceleration and jerk carried from knot to knot (each interval's cubic expanded about its own left knot, so no
-    term cancels another's), then each time's cubic about the knot before it."""
-    T = float(move.duration)
-    tk, al, be = (np.asarray(q, dtype=float) for q in (move.times, move.steps, move.ramps))
-    knots, where = np.unique(tk, return_inverse=True)
-    if knots.size == 0:  # no terms: at rest at 0
-        return np.zeros_like(t)
-    A, B = np.bincount(where, al, knots.size), np.bincount(where, be, knots.size)  # the jumps at each knot
-    X, V, Acc, J = (np.zeros(knots.size) for _ in range(4))
-    x = v = a = j = 0.0
-    for m in range(knots.size):
-        if m:
-            h = knots[m] - knots[m - 1]
-            x, v, a = x + h * (v + h * (a / 2 + h * j / 6)), v + h * (a + h * j / 2), a + h * j
-        a, j = a + A[m], j + B[m]
-        X[m], V[m], Acc[m], J[m] = x, v, a, j
-    tc = np.minimum(t, T)
-    m = np.searchsorted(knots, tc, side="right") - 1
-    on = m >= 0
-    mi = np.maximum(m, 0)
-    d = tc - knots[mi]
-    return np.where(on, X[mi] + d * (V[mi] + d * (Acc[mi] / 2 + d * J[mi] / 6)), 0.0)
+    (held at the end after its duration T), in O((n + K) log K) (`moves.piecewise_derivatives`)."""
+    return piecewise_derivatives(move, t, (0,))[0]
 
 
 def executed_integral(t, x, s) -> np.ndarray:
@@ -199,7 +178,8 @@ def best_blend(axis: ModalAxis, members, reference, factors, rate_hz: float, ble
         if M > _LP_COLUMNS:
             raise ValueError(f"best_blend: at most {_LP_COLUMNS} members; got {M}")
         padded = np.hstack([rows, np.repeat(rows[:, -1:], _LP_COLUMNS - M, axis=1)])  # copies of the last member
-        xp, converged = _blend_programme(jnp.asarray(padded), jnp.asarray(1e-9))
+        # `jax.device_put`: `jnp.asarray` of a host array compiles a small program per shape
+        xp, converged = _blend_programme(jax.device_put(padded), jax.device_put(np.float64(1e-9)))
         xp = np.asarray(xp)
         x = np.r_[xp[: M - 1], xp[M - 1 :].sum()]  # the copies' weights added back
         if bool(converged):  # else: the least member, as without a blend

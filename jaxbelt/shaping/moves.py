@@ -613,11 +613,73 @@ def piecewise_peaks(move: PiecewiseMove) -> tuple[float, float, float]:
 def peaks(cmd: AbstractMotionCommand, n: int = 20001):
     """`(peak |v|, peak |a|, peak |jerk|)` of a move over its duration: exactly for a `PiecewiseMove`
     (`piecewise_peaks`), else on `n` equally spaced times, by `derivatives_at` (the program that samples the command
-    at the drive's rate: one compiled program per command structure and padded shape, `padded_command`)."""
+    at the drive's rate: one compiled program per command structure and padded shape, `padded_command`); a
+    `BlendMove` member by member (`blend_derivatives`: no program of its own)."""
     if isinstance(cmd, PiecewiseMove):
         return piecewise_peaks(cmd)
     ts = np.linspace(0.0, float(np.asarray(cmd.end_time)), int(n))
+    if isinstance(cmd, BlendMove):
+        return tuple(float(np.max(np.abs(x))) for x in blend_derivatives(cmd, ts, (1, 2, 3)))
     return tuple(float(np.max(np.abs(x))) for x in derivatives_at(cmd, ts, (1, 2, 3)))
+
+
+def blend_derivatives(blend: "BlendMove", t, orders) -> list:
+    """`[blend.derivative(t, k) for k in orders]` as numpy arrays, the weighted sum of the members': a `PiecewiseMove`
+    on the host (`piecewise_derivatives`), another member by its own program (`derivatives_at`, the one its own row
+    ran). A blend (of a design and the shaped moves of its move time, `jaxbelt.shaping.hull`) then compiles no program
+    of its own: its structure (which members, how many terms) follows the move time, so its program compiled anew
+    at another move time (0.8-2.4 s)."""
+    t = np.asarray(t, dtype=float)
+    out = [np.zeros(t.shape) for _ in orders]
+    for w, m in zip(np.asarray(blend.weights, dtype=float), blend.members):
+        if w == 0.0:
+            continue
+        vals = piecewise_derivatives(m, t, orders) if isinstance(m, PiecewiseMove) else derivatives_at(m, t, orders)
+        for o, v in zip(out, vals):
+            o += w * np.asarray(v)
+    return out
+
+
+def piecewise_derivatives(move: PiecewiseMove, t, orders=(0, 1, 2, 3)) -> list:
+    """`[move.derivative(t, k) for k in orders]` on the host (numpy), in O((n + K) log K) for n times and K terms:
+    the position, velocity, acceleration and jerk carried from knot to knot (each interval's cubic expanded about
+    its own left knot, so no term cancels another's), then each time's cubic about the knot at or before it (a step
+    at $t_k$ counts from $t_k$ on, as `PiecewiseMove.derivative`'s $H(0) = 1$); held at the end after the duration T
+    (the derivatives 0 there), 0 before 0."""
+    T = float(move.duration)
+    t = np.asarray(t, dtype=float)
+    tk, al, be = (np.asarray(q, dtype=float) for q in (move.times, move.steps, move.ramps))
+    knots, where = np.unique(tk, return_inverse=True)
+    if knots.size == 0:  # no terms: at rest at 0
+        return [np.zeros_like(t) for _ in orders]
+    A, B = np.bincount(where, al, knots.size), np.bincount(where, be, knots.size)  # the jumps at each knot
+    X, V, Acc, J = (np.zeros(knots.size) for _ in range(4))
+    x = v = a = j = 0.0
+    for m in range(knots.size):
+        if m:
+            h = knots[m] - knots[m - 1]
+            x, v, a = x + h * (v + h * (a / 2 + h * j / 6)), v + h * (a + h * j / 2), a + h * j
+        a, j = a + A[m], j + B[m]
+        X[m], V[m], Acc[m], J[m] = x, v, a, j
+    tc = np.minimum(t, T)
+    m = np.searchsorted(knots, tc, side="right") - 1
+    on = (m >= 0) & (t >= 0)
+    mi = np.maximum(m, 0)
+    d = tc - knots[mi]
+    X, V, Acc, J = X[mi], V[mi], Acc[mi], J[mi]
+    forms = {
+        0: lambda: X + d * (V + d * (Acc / 2 + d * J / 6)),
+        1: lambda: V + d * (Acc + d * J / 2),
+        2: lambda: Acc + d * J,
+        3: lambda: J,
+    }
+    out = []
+    for k in orders:
+        if k not in forms:
+            raise ValueError(f"piecewise_derivatives: order `k` must be 0, 1, 2 or 3; got {k}")
+        ok = on if k == 0 else on & (t <= T)
+        out.append(np.where(ok, forms[k](), 0.0))
+    return out
 
 
 def prepare_peaks(cmd: AbstractMotionCommand, n: int = 20001) -> None:

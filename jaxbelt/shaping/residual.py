@@ -13,6 +13,7 @@ substitution of Incerti's eq. 30 integrals, `jaxbelt.objectives.residual`), as t
 base's for a `ShapedCommand`, and by an ODE solve (diffrax) for any other motion command.
 """
 
+import functools
 import math
 
 import jax
@@ -56,21 +57,43 @@ def _nodes_for(cmd, s) -> int:
     return 4096
 
 
+def _curve_nodes(cmd, s) -> int:
+    """The nodes of `_curve`'s rule for a pseudo-polynomial (host decision): $0.75\\,\\omega T + 64$ rounded up to a
+    power of two, at least `NODE_SLOT` (the designs' rule, `jaxbelt.shaping.pseudo.design_nodes`, where it is
+    measured: 5e-13 of the curve against a 4096-node rule wherever $0.55\\,\\omega T$ nodes are given), $\\omega T$
+    the largest $|s|T$ of the modes the quadrature takes. `_nodes_for`'s $2.5\\,\\omega T + 64$ asked twice the
+    nodes on the benchmarks' axes (1024 at a 1.0 s move of a 17 Hz mode over 0.5-1.5 of its frequency): a
+    pseudo-polynomial's row cost twice the time."""
+    try:
+        sT = np.asarray(s) * float(cmd.duration)
+    except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
+        return NODE_SLOT
+    quad = -sT.real <= _DAMPED_AWAY  # the others take the closed form (`_pseudo_polynomial_w`)
+    wT = float(np.max(np.abs(sT[quad]))) if np.any(quad) else 0.0
+    need = int(0.75 * wT + 64)
+    n = NODE_SLOT
+    while n < need and n < 4096:
+        n *= 2
+    return n
+
+
 #: a mode with zeta omega T above this (the start of the move damped by e^-700 at its end: a 2 kHz or a 1 MHz mode in a
 #: 0.8 s move) takes the closed form of `_pseudo_polynomial_w`, exact to that factor, instead of the quadrature
 _DAMPED_AWAY = 700.0
 
 
-#: `_pseudo_curve`'s rule is padded to at least this many nodes (zero weights): the node counts a design's
-#: pseudo-polynomials need (128 to 1024 on 1-3 modes, rising with the move time) share one compiled program
-NODE_SLOT = 1024
+#: `_pseudo_curve`'s rule has at least this many nodes (`_curve_nodes`): the pseudo-polynomials of a design (1-3
+#: modes, moves of 0.3 to 4 s) share one compiled program
+NODE_SLOT = 512
 
 
+@functools.lru_cache(maxsize=16)
 def _rule(n_nodes: int, size: int = 0):
     r"""The `n_nodes`-point Gauss-Legendre rule on [0, 1] in v as numpy arrays `(log v, u = v**_P, weights)`, padded
     to `size` nodes by nodes at v = 1/2 of weight exactly 0 (they add 0 to every sum). log v on the host, as the
     rule's constants were folded before it was data: the powers $v^{p(\gamma - 1) - 1}$ of an order-8
-    pseudo-polynomial (exponents to 16.5) cancel to 1e-9 in W, so their last bits show."""
+    pseudo-polynomial (exponents to 16.5) cancel to 1e-9 in W, so their last bits show. Kept per size, read-only
+    (numpy's `leggauss` solves an eigenproblem: 0.14 s a call at 1024 nodes, four calls a design)."""
     x, w = np.polynomial.legendre.leggauss(n_nodes)
     v, w = 0.5 * (x + 1.0), 0.5 * w
     u, logv = v**_P, np.log(v)
@@ -79,6 +102,8 @@ def _rule(n_nodes: int, size: int = 0):
         logv = np.concatenate([logv, np.full(extra, np.log(0.5))])
         u = np.concatenate([u, np.full(extra, 0.5**_P)])
         w = np.concatenate([w, np.zeros(extra)])
+    for q in (logv, u, w):
+        q.setflags(write=False)
     return logv, u, w
 
 
@@ -231,8 +256,8 @@ def _curve(axis, cmd, r, rtol, atol, n_used=None):
     pseudo = cmd.base if isinstance(cmd, ShapedCommand) else cmd
     if isinstance(pseudo, PseudoPolynomial):
         shaper = (cmd.times, cmd.amplitudes) if isinstance(cmd, ShapedCommand) else None
-        n_nodes = _nodes_for(pseudo, _host_poles(axis, r[:n_used]))
-        rule = tuple(jax.device_put(x) for x in _rule(n_nodes, NODE_SLOT))  # data: one program up to NODE_SLOT
+        n_nodes = _curve_nodes(pseudo, _host_poles(axis, r[:n_used]))
+        rule = tuple(jax.device_put(x) for x in _rule(n_nodes))  # data: one program per node count
         return _pseudo_curve(axis, padded_pseudo(pseudo), shaper, r, rule)
     cmd = padded_command(cmd)  # a spline of any knot count of its slot: one program (`moves.INTERVAL_SLOT`)
     grid = _uniform_grid(axis, cmd, r)
@@ -317,7 +342,7 @@ def _grid_curve(axis, cmd, r0, dr, n: int):
 @stored_jit
 def _pseudo_curve(axis, terms: PaddedPseudo, shaper, r, rule):
     """`residual_curve` of a pseudo-polynomial (`terms`, padded), shaped by the impulses `shaper` = (times,
-    amplitudes) where not None, by the quadrature `rule` = (log v, u, weights) (`_rule`, padded to `NODE_SLOT`)."""
+    amplitudes) where not None, by the quadrature `rule` = (log v, u, weights) (`_rule`, `_curve_nodes`)."""
     s, wd = _poles(axis, r)
     W = _pseudo_polynomial_w(terms, s, rule)
     if shaper is not None:
