@@ -496,7 +496,7 @@ class _Memo:
         self.grid: list[tuple[float, float]] = []
         self.refined: list[tuple[float, float]] = []
         self.remade: dict[float, MinimaxDesign] = {}
-        self.predicted: dict[float, float] = {}  # T: the grid's value there as predicted (an unevaluated step)
+        self.on_remade: dict[float, list[tuple[float, float]]] = {}  # the LP's values on a re-made design's grid
 
 
 def _keep(pairs: list, new) -> None:
@@ -539,12 +539,15 @@ def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, r
     `ROOT_RTOL`); `refine=True`, a time at which the design re-made there (`_redesign`: its own frequency exchange,
     the discretisation `design_move` picks) leaves a fine-grid worst within `REDESIGN_RTOL` of the target.
 
-    `refine=True` steps on the re-made designs themselves: the log of their fine worst is near-linear in T between
-    the steps of their discretisation, so a secant through two of one discretisation (`_predicted_time`) lands
-    within `REDESIGN_RTOL` in 1-2 steps. Where fewer than two are known (a first call), the root on `design`'s
-    grid at the level c target (c: the grid's value over the fine worst of the known design nearest the target,
-    `_level`; forward LPs, ~1/3 of a re-made design each) gives the time to re-make at. At most `MAX_REDESIGNS`
-    re-made designs; the designs and the grid's values are kept for later calls (`_Memo`)."""
+    `refine=True`: each step re-makes the design at the root of the LP's value on the final grid of the known
+    design whose fine worst is nearest the target (`design` itself, or one re-made before: `_grid_of`, with the
+    knots `design_move` picks at each T) at the level c target, c that design's LP value over its fine worst
+    (known without a solve): a design re-made nearby exchanges to nearly the same grid, so the step lands within
+    `REDESIGN_RTOL` once or twice. The root starts from the re-made designs' log worst extrapolated in T
+    (`_extrapolated`) and stops evaluating within `PREDICT_WITHIN` (`_root_time`); 1-3 forward LPs, each ~1/4 of a
+    re-made design. Without a known design of this axis (another axis, a `bracket` that leaves out the design's
+    time) the first step is the root on `design`'s grid at its own level. At most `MAX_REDESIGNS` re-made designs;
+    the designs and the LP values are kept for later calls (`_Memo`)."""
     o = "shortest_move_time"
     feasible_from = [float(design.command.duration)]  # the design exists there: feasible at and above it
 
@@ -576,12 +579,12 @@ def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, r
         opts = _redesign_options(design, T_) if refine else design.options
         return minimax_value(_problem(design, axis, T_), opts, tau=tau)
 
-    def root(goal, start_, rtol, predict=0.0, first=None):
+    def root(goal, start_, rtol, predict=0.0, first=None, fn=on_grid, known=known, pairs=pairs):
         # the pairs known are values of the same function: re-used for the bracket and the secant at a new level
         known[:] = _secant_last(known, goal) if len(known) > 1 else known
         try:
             T_, v_ = _root_time(
-                on_grid, goal, lo, hi, start_, feasible, known, rtol=rtol, owner=o, predict_within=predict, first=first
+                fn, goal, lo, hi, start_, feasible, known, rtol=rtol, owner=o, predict_within=predict, first=first
             )
         finally:
             _keep(pairs, known)
@@ -604,21 +607,21 @@ def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, r
     for _ in range(MAX_REDESIGNS):
         # the level c: the grid's value over the fine worst at the known design nearest the target (the ratio moves
         # with T by the re-made designs' own frequency exchange: 1-3 % over the range of a call)
-        guess = None
         if made:
+            # the LP on the final grid of the known design nearest the target (the design itself or a re-made one),
+            # with the knots of each T: a design re-made near it exchanges to nearly the same grid, so the level c,
+            # that design's LP value over its fine worst (known without a solve), holds to ~0.5 %; on `design`'s own
+            # grid it drifted 1-2 % within 1 % of T
             near = min(made, key=lambda T_: abs(math.log(made[T_] / target)))
-            v_near = next((v_ for T_, v_ in known if T_ == near), memo.predicted.get(near))
-            if v_near is None:
-                v_near = float(on_grid(near))
-                known.append((near, v_near))
-                _keep(pairs, known)
-            c, T = v_near / made[near], near
+            src: MinimaxDesign = memo.remade[near] if near in memo.remade else design
+            on_src = _grid_of(src, axis, design)
+            ks = memo.on_remade.setdefault(near, [(near, float(src.worst))])
             guess = _extrapolated(made, near, target)
-        else:
+            c = float(src.worst) / made[near]
+            T = root(c * target, near, CALIBRATION_RTOL, PREDICT_WITHIN, guess, on_src, ks, ks)[0]
+        else:  # no design of this axis known: `design`'s grid at its own level
             c = float(design.worst) / float(design.fine_worst)
-        T, v_T = root(c * target, T, CALIBRATION_RTOL, PREDICT_WITHIN, guess)
-        if all(T != T_ for T_, _ in known):
-            memo.predicted[T] = v_T  # an unevaluated step: its value, to within its second-order error
+            T = root(c * target, T, CALIBRATION_RTOL, PREDICT_WITHIN)[0]
         if T in made:
             break  # the level returns to a time already tried: the re-made designs cannot come closer
         d = _remade(axis, design, memo, T)
@@ -670,12 +673,24 @@ def _extrapolated(made: dict, near: float, target: float) -> float | None:
     return min(max(T, near / 1.3), near * 1.3)
 
 
+def _grid_of(src: MinimaxDesign, axis, design: MinimaxDesign):
+    """T [s] -> the minimax LP's value on the final frequency grid of `src` (with `design`'s references), with the
+    discretisation `design_move` picks at T (`_redesign_options`)."""
+    tau = jax.lax.stop_gradient(src.worst)
+
+    def value(T_):
+        return minimax_value(_problem(src, axis, T_), _redesign_options(design, T_), tau=tau)
+
+    return value
+
+
 def _remade(axis, design: MinimaxDesign, memo: "_Memo", T: float) -> MinimaxDesign:
     """The design re-made at `T` [s] (`_redesign`), kept in `memo` (its 16 latest)."""
     if T not in memo.remade:
         memo.remade[T] = _redesign(axis, design, T)
         for old_T in list(memo.remade)[:-16]:
             del memo.remade[old_T]
+            memo.on_remade.pop(old_T, None)
     return memo.remade[T]
 
 
@@ -685,11 +700,15 @@ def shortest_move_time(axis: ModalAxis, target, design: MinimaxDesign, *, bracke
     fraction of the references; e.g. `design.fine_worst`, the worst on the fine grid, which `design_move`'s table
     reports as a percentage).
 
-    - `refine=True` (default): the time at which a design *re-made there* with `design`'s discretisation (its
-      knots, cuts and grid sizes: `minimax_design(problem at T, design.options)`, which is what `design_move`
-      runs when it picks the same options) leaves a worst residual on its fine grid within `REDESIGN_RTOL` =
-      0.5 % of `target` (where the re-made designs cannot get that close, the closest found). It is the root of
-      the LP's value on `design`'s grid at a level c `target`, c calibrated by 1-3 re-made designs.
+    - `refine=True` (default): the time at which a design *re-made there* with the discretisation `design_move`
+      picks at that time (`minimax_design(problem at T, options)`: its knots follow T) leaves a worst residual on
+      its fine grid within `REDESIGN_RTOL` = 0.5 % of `target` (where the re-made designs cannot get that close,
+      the closest found, within `MEETS_RTOL`). The time to re-make at is the root of the LP's value on `design`'s
+      grid (with the knots of that time) at a level c `target`, c the grid's value over the fine worst of the
+      known design nearest the target; the root starts from the re-made designs' own log worst extrapolated in
+      T. A warm call usually re-makes one design (2 where its level is off by the re-made designs' own exchange,
+      ~1 %) after 1-3 forward LPs; the designs re-made and the LP values found are kept for later calls with
+      the same design and axis.
     - `refine=False`: the root on `design`'s own frequency grid at the level `target` itself, to a relative
       `ROOT_RTOL` = 1e-8 of the LP's value (`best_residual(axis, T, design) = target`). Exact for that grid; a
       design re-made at that time exchanges its own grid and lands 1-4 % above the target.
