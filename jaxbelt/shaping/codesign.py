@@ -602,7 +602,8 @@ def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, r
     for T_, f_ in sorted(made.items()):
         if abs(f_ - target) <= REDESIGN_RTOL * target:
             return T_  # an earlier call's re-made design (or the design itself) meets this target already
-    best = (start, math.inf)
+    # the closest known so far (an earlier call's re-made design may be the closest this call finds)
+    best = min(made.items(), key=lambda p: abs(p[1] - target)) if made else (start, math.inf)
     T = start
     for _ in range(MAX_REDESIGNS):
         # the level c: the grid's value over the fine worst at the known design nearest the target (the ratio moves
