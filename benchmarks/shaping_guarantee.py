@@ -16,8 +16,9 @@
    under the same limits), worst over modes. Target: recommended / shaped <= 1.0 in every cell, both calls; the
    replayed worst within 2 % of the worst the table states for the recommended row.
 2. **shortest_move_time** (1, 2, 3 modes; each axis in a fresh process): from a design at 0.8 s, targets 0.8, 0.5,
-   1.5 and 0.3 times its worst; a first call (compilation) and the warm calls' median; at each answer `design_move`
-   re-makes the design (`include=("minimax",)`) and its table's worst is compared with the target (within 1 %).
+   1.5 and 0.3 times its worst; a first call (compilation) and the warm calls' median (wall and CPU time); at each
+   answer `design_move` re-makes the design (`include=("minimax",)`) and its table's worst is compared with the
+   target (within 1 %).
 3. **Speed** (unless `--quick`): `design_move` with every candidate at a fixed move time, each mode count in a fresh
    process: first call (import included and apart), warm median of 3; 1-3 modes (targets: warm <= 1 s, first call
    <= 5 s) and 10 modes (warm <= 30 s, peak resident memory <= 2 GB from `resource.getrusage` and VmHWM). No thread
@@ -222,9 +223,10 @@ def inverse(axes=INVERSE_AXES):
             "rows = []\n"
             f"for k in {INVERSE_FACTORS!r}:\n"
             "    goal = k * float(des.fine_worst); load = os.getloadavg()[0]\n"
-            "    t0 = time.perf_counter(); T = float(jb.shortest_move_time(ax, goal, des)); dt = time.perf_counter() - t0\n"
+            "    t0, c0 = time.perf_counter(), time.process_time()\n"
+            "    T = float(jb.shortest_move_time(ax, goal, des)); dt, cpu = time.perf_counter() - t0, time.process_time() - c0\n"
             f"    again = jb.design_move(ax, {D}, T, include=('minimax',), **lim).candidate('minimax')\n"
-            "    rows.append(dict(factor=k, target=goal, time_s=dt, load=load, move_time=T, ok=bool(again.ok),"
+            "    rows.append(dict(factor=k, target=goal, time_s=dt, cpu_s=cpu, load=load, move_time=T, ok=bool(again.ok),"
             " remade_worst=again.worst_percent / 100, remade_over_target=again.worst_percent / 100 / goal))\n"
             "print('RESULT', json.dumps(rows))"
         )
@@ -235,6 +237,8 @@ def inverse(axes=INVERSE_AXES):
             first_s=rows[0]["time_s"],
             warm_median_s=float(np.median(warm)),
             warm_max_s=float(np.max(warm)),
+            # the process's CPU time (all its threads): less sensitive to the other processes of a shared machine
+            warm_median_cpu_s=float(np.median([r["cpu_s"] for r in rows[1:]])),
             load=float(np.mean([r["load"] for r in rows])),
             max_miss=float(max(abs(r["remade_over_target"] - 1.0) for r in rows)),
         )

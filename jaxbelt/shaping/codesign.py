@@ -300,14 +300,63 @@ def _first_step(T: float, v: float, target: float) -> float:
     return T * (1.01 if v > target else 0.99)
 
 
-def _root_time(value, target, lo, hi, start, feasible, known, *, rtol: float, owner: str, iters: int = 60):
+def _interpolated(seen, lo: float, hi: float) -> float | None:
+    """Inverse quadratic interpolation (as in Brent's method) of the root of g(T), from the three `(T, g)` of `seen`
+    nearest the root (least |g|, distinct g): the T at which the quadratic T(g) through them reaches g = 0, where it
+    lies strictly inside the bracket (lo, hi), where `seen` holds values on both sides of the root; else None (the
+    caller steps by a secant or bisects). log V is not linear in T over a call's range (its slope halves or doubles
+    within 5 %)."""
+    if not (any(q[1] > 0 for q in seen) and any(q[1] <= 0 for q in seen)):
+        return None  # no bracket: the quadratic extrapolates poorly (its slope changes within 5 % of T)
+    pts: list[tuple[float, float]] = []
+    for T_k, g_k in sorted(seen, key=lambda p: abs(p[1])):
+        if all(g_k != q[1] and T_k != q[0] for q in pts):
+            pts.append((T_k, g_k))
+        if len(pts) == 3:
+            break
+    if len(pts) < 3:
+        return None
+    (t0, g0), (t1, g1), (t2, g2) = pts
+    T = (
+        t0 * g1 * g2 / ((g0 - g1) * (g0 - g2))
+        + t1 * g0 * g2 / ((g1 - g0) * (g1 - g2))
+        + t2 * g0 * g1 / ((g2 - g0) * (g2 - g1))
+    )
+    if not (math.isfinite(T) and lo < T < hi):
+        return None
+    # a quadratic step far beyond the nearest point (more than twice the secant's): not trusted
+    sec = t0 - g0 * (t1 - t0) / (g1 - g0)
+    if abs(T - t0) > 2.0 * abs(sec - t0) + 1e-12 * abs(t0):
+        return None
+    return T
+
+
+def _root_time(
+    value,
+    target,
+    lo,
+    hi,
+    start,
+    feasible,
+    known,
+    *,
+    rtol: float,
+    owner: str,
+    iters: int = 60,
+    predict_within=0.0,
+    first: float | None = None,
+):
     """Host root of `value(T) = target` (`value` decreasing in T, > 0): secant steps on log(value) against T, kept
     inside a bracket [lo, hi] that shrinks as the signs of value - target are learnt; `hi` may be inf (the bracket
     then grows by steps of 1.5 up to `MAX_EXPANSION` times `start`). `feasible(T)` False (a move time too short
     for the design's command) counts as above the target. `known`: the `(T, value)` pairs evaluated so far (the
     bracket and the first secant start from them; each evaluation is appended; a single known pair at `start` is its
     value there, so the search steps away from it at once). Stops at |value - target| <= rtol
-    target. Returns `(T, value(T))`. Forward solves only: no derivative program is compiled."""
+    target. Returns `(T, value(T))`; with `predict_within` > 0, once an evaluation is within that relative distance
+    of the target (log scale), the next interpolated step unevaluated, as `(T, target)` (the caller checks it
+    otherwise: `shortest_move_time(refine=True)` re-makes the design there). `first`: the first move time to
+    evaluate, where it lies inside the bracket (default: the secant of the known pairs). Forward solves only: no
+    derivative program is compiled."""
 
     def g(v_):
         return math.log(v_ / target)
@@ -321,8 +370,15 @@ def _root_time(value, target, lo, hi, start, feasible, known, *, rtol: float, ow
         else:
             hi = min(hi, T_k)
     pts = [(T_k, g(v_k)) for T_k, v_k in known[-2:]]  # (T, log(v / target)) of the last two evaluations
+    if not (math.isfinite(hi) and lo > 0) and len(known) > 2:  # extrapolating: from the two nearest the target
+        pts = sorted(pts + [(T_k, g(v_k)) for T_k, v_k in known[:-2]], key=lambda p: -abs(p[1]))[-2:]
+    seen = [(T_k, g(v_k)) for T_k, v_k in known]  # every (T, log(v / target)) known: `_interpolated`
     T = float(start)
-    if len(pts) == 2 and pts[0][1] != pts[1][1]:
+    if first is not None and lo < first < hi and all(first != T_k for T_k, _ in known):
+        T = float(first)  # the caller's guess
+    elif (step := _interpolated(seen, lo, hi)) is not None:
+        T = step
+    elif len(pts) == 2 and pts[0][1] != pts[1][1]:
         (t0, g0), (t1, g1) = pts
         step = t1 - g1 * (t1 - t0) / (g1 - g0)
         T = step if lo < step < hi else T
@@ -356,13 +412,17 @@ def _root_time(value, target, lo, hi, start, feasible, known, *, rtol: float, ow
         if math.isfinite(hi) and hi - lo <= 1e-12 * hi:
             break
         pts = [*pts[-1:], (T, g(v))]
-        step = math.nan
-        if len(pts) == 2 and pts[0][1] != pts[1][1]:
+        seen.append((T, g(v)))
+        step = _interpolated(seen, lo, hi)
+        step = math.nan if step is None else step
+        if math.isnan(step) and len(pts) == 2 and pts[0][1] != pts[1][1]:
             (t0, g0), (t1, g1) = pts
             step = t1 - g1 * (t1 - t0) / (g1 - g0)
         if len(pts) == 1:  # no slope yet
             step = _first_step(T, v, target)
         if math.isfinite(step) and lo < step < hi:
+            if abs(g(v)) <= predict_within and len(pts) == 2:
+                return step, target  # close enough to trust the interpolated step without its LP
             T = step
         elif math.isfinite(hi):
             T = 0.5 * (lo + hi)
@@ -427,19 +487,23 @@ MEMO_SIZE = 64
 
 class _Memo:
     """What earlier calls of `shortest_move_time` on one design and one axis found, pure functions of the design, the
-    axis and the move time: the LP's values on the design's grid `grid` [(T [s], value)], and the designs re-made
-    `remade` {T: (value on the design's grid at T, the re-made design)}. A later call with another target starts
-    its bracket, its secant and its calibration level from them (a warm call solved 3-5 LPs on the grid before its
-    re-made design; it needs 1-2 where an earlier call passed near its root)."""
+    axis and the move time: the LP's values on the design's grid `grid` [(T [s], value)] (with the design's options:
+    `refine=False`) and `refined` (with the options `design_move` picks at T: `refine=True`), and the designs re-made
+    `remade` {T: the re-made design}. A later call with another target starts its bracket, its secant and its level
+    from them."""
 
     def __init__(self):
         self.grid: list[tuple[float, float]] = []
-        self.remade: dict[float, tuple[float, MinimaxDesign]] = {}
+        self.refined: list[tuple[float, float]] = []
+        self.remade: dict[float, MinimaxDesign] = {}
+        self.on_remade: dict[float, list[tuple[float, float]]] = {}  # the LP's values on a re-made design's grid
 
-    def keep(self, pairs) -> None:
-        seen = set(self.grid)
-        self.grid += [p for p in pairs if p not in seen]
-        del self.grid[:-MEMO_SIZE]
+
+def _keep(pairs: list, new) -> None:
+    """Add the `(T, value)` pairs `new` to the memo's list `pairs` (the latest `MEMO_SIZE`)."""
+    seen = set(pairs)
+    pairs += [p for p in new if p not in seen]
+    del pairs[:-MEMO_SIZE]
 
 
 #: `_Memo`s by design (the entry goes with the design) and by the axis' values
@@ -471,13 +535,19 @@ def _secant_last(known: list, goal: float) -> list:
 
 
 def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, refine: bool) -> float:
-    """The shortest move time: the root of the LP's value on `design`'s grid, `V(T) = c target` (to `ROOT_RTOL`).
+    """The shortest move time: `refine=False`, the root of the LP's value on `design`'s grid, `V(T) = target` (to
+    `ROOT_RTOL`); `refine=True`, a time at which the design re-made there (`_redesign`: its own frequency exchange,
+    the discretisation `design_move` picks) leaves a fine-grid worst within `REDESIGN_RTOL` of the target.
 
-    `refine=False`: c = 1, to `ROOT_RTOL`. `refine=True`: c is calibrated so that a fresh design at the root
-    (`_redesign`: its own frequency exchange) leaves a fine-grid worst within `REDESIGN_RTOL` of the target (`_next_level`): c <- c
-    target / (fresh design's fine worst), from c = LP value / fine worst of `design` itself (usually 1-2 fresh
-    designs), each root to `CALIBRATION_RTOL`. The answer stays a root on `design`'s grid at a fixed level, so its derivative is
-    the implicit one on that grid."""
+    `refine=True`: each step re-makes the design at the root of the LP's value on the final grid of the known
+    design whose fine worst is nearest the target (`design` itself, or one re-made before: `_grid_of`, with the
+    knots `design_move` picks at each T) at the level c target, c that design's LP value over its fine worst
+    (known without a solve): a design re-made nearby exchanges to nearly the same grid, so the step lands within
+    `REDESIGN_RTOL` once or twice. The root starts from the re-made designs' log worst extrapolated in T
+    (`_extrapolated`) and stops evaluating within `PREDICT_WITHIN` (`_root_time`); 1-3 forward LPs, each ~1/4 of a
+    re-made design. Without a known design of this axis (another axis, a `bracket` that leaves out the design's
+    time) the first step is the root on `design`'s grid at its own level. At most `MAX_REDESIGNS` re-made designs;
+    the designs and the LP values are kept for later calls (`_Memo`)."""
     o = "shortest_move_time"
     feasible_from = [float(design.command.duration)]  # the design exists there: feasible at and above it
 
@@ -493,61 +563,82 @@ def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, r
 
     tau = jax.lax.stop_gradient(design.worst)
     memo = _memo(design, axis)
-    # the LP's values on the design's grid known so far: an earlier call's within the bracket (`_Memo`), and the
-    # design's own value at its own time, known without a solve
-    known: list[tuple[float, float]] = [(T_, v_) for T_, v_ in memo.grid if lo <= T_ <= hi]
     own = start == float(design.command.duration) and _same_axis(axis, design)
-    if own and (start, float(design.worst)) not in known:
+    # refine=False: the LP on the design's grid with its options; refine=True: on the design's grid with the options
+    # `design_move` picks at T (`_redesign_options`: the knots follow T), so that the ratio of the grid's value to a
+    # re-made design's fine worst does not jump where the knot count does (4 % on a three-mode axis at 0.82 s)
+    pairs = memo.refined if refine else memo.grid
+    # the values known so far: an earlier call's within the bracket (`_Memo`), and the design's own value at its own
+    # time, known without a solve
+    known: list[tuple[float, float]] = [(T_, v_) for T_, v_ in pairs if lo <= T_ <= hi]
+    mine = own and (not refine or _redesign_options(design, start) == design.options)
+    if mine and (start, float(design.worst)) not in known:
         known.append((start, float(design.worst)))
 
     def on_grid(T_):
-        return minimax_value(_problem(design, axis, T_), design.options, tau=tau)
+        opts = _redesign_options(design, T_) if refine else design.options
+        return minimax_value(_problem(design, axis, T_), opts, tau=tau)
 
-    def root(goal, start_, rtol):
+    def root(goal, start_, rtol, predict=0.0, first=None, fn=on_grid, known=known, pairs=pairs):
         # the pairs known are values of the same function: re-used for the bracket and the secant at a new level
         known[:] = _secant_last(known, goal) if len(known) > 1 else known
         try:
-            T_, v_ = _root_time(on_grid, goal, lo, hi, start_, feasible, known, rtol=rtol, owner=o)
+            T_, v_ = _root_time(
+                fn, goal, lo, hi, start_, feasible, known, rtol=rtol, owner=o, predict_within=predict, first=first
+            )
         finally:
-            memo.keep(known)
+            _keep(pairs, known)
         if user_bracket and abs(v_ - goal) > 1e-3 * goal:
             raise _not_in_bracket(o, target, v_, T_)
         return T_, v_
 
     if not refine:
         return root(target, start, ROOT_RTOL)[0]
-    # the level's first guess: the ratio of the grid's value to the re-made design's fine worst where that fine worst
-    # was nearest the target (the design itself, or a design re-made by an earlier call)
-    ratios = [(v_, float(d_.fine_worst)) for v_, d_ in memo.remade.values()]
-    if own or not ratios:
-        ratios.append((float(design.worst), float(design.fine_worst)))
-    v0, f0 = min(ratios, key=lambda r: abs(math.log(r[1] / target)))
-    c = v0 / f0
-    T, best = start, (start, math.inf, c)
-    tried: list[tuple[float, float]] = []  # (log c, log f) of the re-made designs
-    for _ in range(6):
-        T, v_T = root(c * target, T, CALIBRATION_RTOL)
-        if T in memo.remade:
-            d = memo.remade[T][1]
-        else:
-            d = _redesign(axis, design, T)
-            memo.remade[T] = (v_T, d)
-            for old_T in list(memo.remade)[:-16]:
-                del memo.remade[old_T]
+    # the re-made designs known: an earlier call's (`_Memo`), and the design itself where it is the one `design_move`
+    # makes at its own time (same axis, the options its rule picks there)
+    made: dict[float, float] = {T_: float(d_.fine_worst) for T_, d_ in memo.remade.items() if lo <= T_ <= hi}
+    if own and _redesign_options(design, start) == design.options:
+        made.setdefault(start, float(design.fine_worst))
+    for T_, f_ in sorted(made.items()):
+        if abs(f_ - target) <= REDESIGN_RTOL * target:
+            return T_  # an earlier call's re-made design (or the design itself) meets this target already
+    # the closest known so far (an earlier call's re-made design may be the closest this call finds)
+    best = min(made.items(), key=lambda p: abs(p[1] - target)) if made else (start, math.inf)
+    T = start
+    for _ in range(MAX_REDESIGNS):
+        # the level c: the grid's value over the fine worst at the known design nearest the target (the ratio moves
+        # with T by the re-made designs' own frequency exchange: 1-3 % over the range of a call)
+        if made:
+            # the LP on the final grid of the known design nearest the target (the design itself or a re-made one),
+            # with the knots of each T: a design re-made near it exchanges to nearly the same grid, so the level c,
+            # that design's LP value over its fine worst (known without a solve), holds to ~0.5 %; on `design`'s own
+            # grid it drifted 1-2 % within 1 % of T
+            near = min(made, key=lambda T_: abs(math.log(made[T_] / target)))
+            src: MinimaxDesign = memo.remade[near] if near in memo.remade else design
+            on_src = _grid_of(src, axis, design)
+            ks = memo.on_remade.setdefault(near, [(near, float(src.worst))])
+            guess = _extrapolated(made, near, target)
+            c = float(src.worst) / made[near]
+            T = root(c * target, near, CALIBRATION_RTOL, PREDICT_WITHIN, guess, on_src, ks, ks)[0]
+        else:  # no design of this axis known: `design`'s grid at its own level
+            c = float(design.worst) / float(design.fine_worst)
+            T = root(c * target, T, CALIBRATION_RTOL, PREDICT_WITHIN)[0]
+        if T in made:
+            break  # the level returns to a time already tried: the re-made designs cannot come closer
+        d = _remade(axis, design, memo, T)
         if not d.converged:
             raise ValueError(
                 f"{o}: the design re-made at move time {T:.6g} s did not converge (gap {float(d.gap):.1e}); pass "
                 "`refine=False` for the root on the design's own grid"
             )
         f = float(d.fine_worst)
+        made[T] = f
         if abs(f - target) < abs(best[1] - target):
-            best = (T, f, c)
+            best = (T, f)
         if abs(f - target) <= REDESIGN_RTOL * target:
-            return T  # a root of the calibrated level: the re-made design there meets the target
+            return T  # the re-made design there meets the target
         if f < target and not feasible(T * (1 - 1e-3)):
             return T  # the shortest move the design's spline makes already leaves less than the target
-        tried.append((math.log(c), math.log(f)))
-        c = _next_level(tried, target)
     if abs(best[1] - target) > MEETS_RTOL * target:
         raise ValueError(
             f"{o}: the target {target:g} is not resolved: the designs re-made at the move times tried leave at best "
@@ -555,19 +646,53 @@ def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, r
             f"{best[0]:.6g} s), not within {100 * MEETS_RTOL:g} %; give a larger `target`, or pass `refine=False` for "
             "the root on the design's own grid"
         )
-    return best[0]  # a root of the level best[2] target: its re-made design comes within MEETS_RTOL of the target
+    return best[0]  # its re-made design comes within MEETS_RTOL of the target
 
 
-def _next_level(tried, target: float) -> float:
-    """The next level factor c of the calibration from the re-made designs' `(log c, log f)`: f ~ c at first
-    (c <- c target / f), then a secant of log f against log c (the re-made design's worst grows faster than the
-    level where a longer move time adds knots: the proportional step alone oscillated, 5 re-made designs at a
-    target of 1e-6), its slope kept within [0.25, 4]."""
-    lc, lf = tried[-1]
-    slope = 1.0
-    if len(tried) >= 2 and tried[-2][0] != lc:
-        slope = min(4.0, max(0.25, (lf - tried[-2][1]) / (lc - tried[-2][0])))
-    return math.exp(lc + (math.log(target) - lf) / slope)
+#: `shortest_move_time(refine=True)`'s root on the grid stops evaluating once an LP's value is within this (log scale)
+#: of its level: the next interpolated step is re-made at unevaluated (the re-made design checks it; the step's own
+#: error is second order, ~0.1 % at 2 %)
+PREDICT_WITHIN = 0.02
+#: the most designs `shortest_move_time(refine=True)` re-makes in one call (1-2 where its prediction lands)
+MAX_REDESIGNS = 6
+
+
+def _extrapolated(made: dict, near: float, target: float) -> float | None:
+    """The move time [s] at which the re-made designs' fine worst `made` {T: f} reaches `target`, extrapolated from
+    the known design `near` along the secant of log f to the nearest other at least 0.5 % of T away (over such
+    spans the re-made designs' log f is near-linear in T, while the grid's value on the design's fixed grid bends:
+    its slope halved or doubled within 5 %; closer than 0.5 % the exchange's own steps, ~1 %, swamp the slope).
+    None where no such design is known or the slope is not negative."""
+    far = [T_ for T_ in made if abs(T_ - near) >= 5e-3 * near]
+    if not far:
+        return None
+    other = min(far, key=lambda T_: abs(T_ - near))
+    slope = math.log(made[near] / made[other]) / (near - other)
+    if not slope < 0:
+        return None
+    T = near + math.log(target / made[near]) / slope
+    return min(max(T, near / 1.3), near * 1.3)
+
+
+def _grid_of(src: MinimaxDesign, axis, design: MinimaxDesign):
+    """T [s] -> the minimax LP's value on the final frequency grid of `src` (with `design`'s references), with the
+    discretisation `design_move` picks at T (`_redesign_options`)."""
+    tau = jax.lax.stop_gradient(src.worst)
+
+    def value(T_):
+        return minimax_value(_problem(src, axis, T_), _redesign_options(design, T_), tau=tau)
+
+    return value
+
+
+def _remade(axis, design: MinimaxDesign, memo: "_Memo", T: float) -> MinimaxDesign:
+    """The design re-made at `T` [s] (`_redesign`), kept in `memo` (its 16 latest)."""
+    if T not in memo.remade:
+        memo.remade[T] = _redesign(axis, design, T)
+        for old_T in list(memo.remade)[:-16]:
+            del memo.remade[old_T]
+            memo.on_remade.pop(old_T, None)
+    return memo.remade[T]
 
 
 @blas_limited
@@ -576,11 +701,15 @@ def shortest_move_time(axis: ModalAxis, target, design: MinimaxDesign, *, bracke
     fraction of the references; e.g. `design.fine_worst`, the worst on the fine grid, which `design_move`'s table
     reports as a percentage).
 
-    - `refine=True` (default): the time at which a design *re-made there* with `design`'s discretisation (its
-      knots, cuts and grid sizes: `minimax_design(problem at T, design.options)`, which is what `design_move`
-      runs when it picks the same options) leaves a worst residual on its fine grid within `REDESIGN_RTOL` =
-      0.5 % of `target` (where the re-made designs cannot get that close, the closest found). It is the root of
-      the LP's value on `design`'s grid at a level c `target`, c calibrated by 1-3 re-made designs.
+    - `refine=True` (default): the time at which a design *re-made there* with the discretisation `design_move`
+      picks at that time (`minimax_design(problem at T, options)`: its knots follow T) leaves a worst residual on
+      its fine grid within `REDESIGN_RTOL` = 0.5 % of `target` (where the re-made designs cannot get that close,
+      the closest found, within `MEETS_RTOL`). The time to re-make at is the root of the LP's value on `design`'s
+      grid (with the knots of that time) at a level c `target`, c the grid's value over the fine worst of the
+      known design nearest the target; the root starts from the re-made designs' own log worst extrapolated in
+      T. A warm call usually re-makes one design (2 where its level is off by the re-made designs' own exchange,
+      ~1 %) after 1-3 forward LPs; the designs re-made and the LP values found are kept for later calls with
+      the same design and axis.
     - `refine=False`: the root on `design`'s own frequency grid at the level `target` itself, to a relative
       `ROOT_RTOL` = 1e-8 of the LP's value (`best_residual(axis, T, design) = target`). Exact for that grid; a
       design re-made at that time exchanges its own grid and lands 1-4 % above the target.
