@@ -175,15 +175,17 @@ def design_command(coef, move_time, opts: DesignOptions):
 
 
 def default_options(
-    axis_freqs, move_time, uncertainty, jerk: bool, knots_per_cycle: float = 6.0, basis: str = "spline"
-) -> DesignOptions:
+    axis_freqs, move_time, uncertainty, jerk: bool, knots_per_cycle: float = 6.0, basis: str = "spline",
+    cap: bool = True,
+) -> DesignOptions:  # fmt: skip
     """Knots and frequency points that resolve the band (host decision from concrete values): `knots_per_cycle`
     knots per period of the highest frequency of the band over the move (at least 48; the steps and ramps bases at
     least `MIN_STEPS` intervals); `basis`: "spline", "steps" or "ramps" (`DesignOptions`); a starting grid of about
     one point per radian of $2u\\omega T$ (the residual's own scale in frequency is $1/T$), 9 to 41 points.
 
     The spline at a given move time (at most `FIXED_TIME_KNOTS` per cycle) takes no more knots than the least of
-    `KNOT_SLOTS` that gives `KNOT_FILL` x `knots_per_cycle` per period, so that its knot count, padded to its slot,
+    `KNOT_SLOTS` that gives `KNOT_FILL` x `knots_per_cycle` per period (unless `cap` is False: `design_move` near the
+    time-optimal move, `minimax_solve.solve`), so that its knot count, padded to its slot,
     keeps one compiled LP over a wide range of move times (128 knots from 0.8 to 1.7 s on a 20 Hz band). Its cost,
     measured on the 3-mode axis of benchmarks/shaping_axis.py (worst residual on a 10x finer grid, in units of the
     unshaped move's): at 1.3 s 128 knots instead of 160 leave 1.79e-4 instead of 1.49e-4 (20 % more), at 1.7 s 128
@@ -200,7 +202,7 @@ def default_options(
     # benchmarks/shaping_axis.py). The steps and ramps keep their count: their duals make the continuous bound
     # (`jaxbelt.shaping.certify`), which needs the finer steps (a 40 Hz axis at ZV's time: 0 with 128 steps); so does
     # the shortest-time search (more than `FIXED_TIME_KNOTS` per cycle): near the time-optimal move more knots pay
-    if basis == "spline" and knots_per_cycle <= FIXED_TIME_KNOTS:
+    if cap and basis == "spline" and knots_per_cycle <= FIXED_TIME_KNOTS:
         n_knots = min(n_knots, knot_slots(int(math.ceil(KNOT_FILL * knots_per_cycle * cycles))))
     if basis in ("steps", "ramps"):
         n_knots = max(n_knots, MIN_STEPS)

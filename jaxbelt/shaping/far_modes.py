@@ -123,8 +123,9 @@ class LPSetup:
 
 
 def lp_setup(
-    axis: ModalAxis, T: float, u: float, j_max, fixed_time: bool, smooth: bool, per: int = 1, refuse: bool = True
-) -> LPSetup:
+    axis: ModalAxis, T: float, u: float, j_max, fixed_time: bool, smooth: bool, per: int = 1, refuse: bool = True,
+    cap: bool = True,
+) -> LPSetup:  # fmt: skip
     """The minimax design's LP on `axis` at (about) move time `T` [s] (band ±`u`): the modes it leaves out
     (`_far_modes`; with `refuse`, the `ValueError` of `_refuse_all_far` where it would weigh none), the axis of the
     modes it keeps and its options (`_minimax_options`: knots set by `_knots_modes`), in one call."""
@@ -134,7 +135,7 @@ def lp_setup(
     idx = np.asarray(far.kept, dtype=int)
     knots = np.asarray(axis.frequencies)[_knots_modes(axis.n_modes, far)]
     basis = "spline" if smooth else ("steps" if j_max is None else "ramps")  # as `_minimax_options`
-    opts = _design.default_options(knots, T, u, j_max is not None, 6.0 if fixed_time else 12.0, basis)
+    opts = _design.default_options(knots, T, u, j_max is not None, 6.0 if fixed_time else 12.0, basis, cap)
     if not far.left_out:
         return LPSetup(far, axis, idx, opts)
     return LPSetup(far, _sub_axis(axis, idx), idx, opts)  # the modes it keeps
