@@ -82,7 +82,57 @@ def test_an_error_beside_the_worker_waits_for_it(monkeypatch):
 
 
 def test_no_worker_without_a_move_time_or_the_minimax_row(monkeypatch):
-    """The shortest-time search (move_time None) and a table without the minimax row start no worker."""
+    """A table without the minimax row and the shortest-time search (move_time None: the LP's time is what the
+    other candidates wait for) start no worker."""
     futures = _recording_submit(monkeypatch)
     p = jb.design_move(jb.ModalAxis(*AXIS), 0.1, 1.0, include=("ZV", "unshaped"), **KW)
     assert futures == [] and {r.name for r in p.table} == {"ZV", "unshaped"}
+    p = jb.design_move(jb.ModalAxis(*AXIS), 0.1, None, include=("minimax", "ZV"), **KW)
+    assert futures == [] and p.minimax is not None
+
+
+def test_the_worker_runs_under_the_callers_x64_block():
+    """With JAX's 64-bit mode off for the process and on in the caller's `with jax.enable_x64(True):` block (a
+    thread-local setting), the LP in the worker runs in 64 bits too: the design equals the one made with the mode on
+    for the process (before the worker re-entered the caller's settings, its checks refused the float32 inputs)."""
+    import jax
+
+    ax = jb.ModalAxis(*AXIS)
+    reference = jb.design_move(ax, 0.1, 1.0, **KW)
+    prev = jax.config.jax_enable_x64
+    jax.config.update("jax_enable_x64", False)
+    try:
+        with jax.enable_x64(True):
+            in_block = jb.design_move(ax, 0.1, 1.0, **KW)
+    finally:
+        jax.config.update("jax_enable_x64", prev)
+    assert _table(in_block) == _table(reference)
+    assert np.asarray(in_block.minimax.lp.x).dtype == np.float64
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="os.fork: POSIX only")
+def test_a_forked_child_has_a_worker_of_its_own():
+    """A child forked after the worker ran (a multiprocessing pool's default start on Linux) gets a worker that
+    runs its work: the parent's executor, copied, would never run it (`design_move` would wait forever)."""
+    import os
+    import time
+
+    mr._WORKER.submit(int).result(timeout=30)  # the parent's worker thread has started
+    pid = os.fork()
+    if pid == 0:  # the child: no JAX here, only the executor
+        try:
+            ok = mr._WORKER.submit(int, 7).result(timeout=10) == 7
+        except BaseException:  # noqa: BLE001 - any failure is the child's exit status
+            ok = False
+        os._exit(0 if ok else 1)
+    deadline = time.monotonic() + 30
+    while True:
+        done, status = os.waitpid(pid, os.WNOHANG)
+        if done:
+            break
+        if time.monotonic() > deadline:
+            os.kill(pid, 9)
+            os.waitpid(pid, 0)
+            pytest.fail("the forked child's worker never ran its work")
+        time.sleep(0.05)
+    assert os.waitstatus_to_exitcode(status) == 0

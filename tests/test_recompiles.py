@@ -350,10 +350,9 @@ def test_residual_curves_of_pseudo_polynomials_of_any_order_up_to_8_share_one_pr
         # the Gauss-Legendre rule's accuracy: 1e-8 of the curve's largest value (the 17 Hz mode's residual is
         # 1e-4 of the 6 Hz mode's here)
         np.testing.assert_allclose(curve, ref, rtol=1e-6, atol=1e-7 * float(np.max(ref)))
-    # and the padding changes nothing: the unpadded integral of the same rule (`residual_integral`), to the
-    # rounding of its sums (the rule is padded to `NODE_SLOT` nodes of weight 0, which changes the order of the
-    # sums; the order-8 command's terms cancel to 1e-9 of the curve, so its last bits show at 2e-9 of the curve's
-    # largest value, 5x below the rule's own accuracy checked above)
+    # and the curve's program is the plain integral (`residual_integral`, whose rule `_nodes_for` is the curve's
+    # `NODE_SLOT` nodes here), to the rounding of its sums (the order-8 command's terms cancel to 1e-9 of the curve,
+    # so its last bits show at 2e-9 of the curve's largest value, 5x below the rule's own accuracy checked above)
     from jaxbelt.shaping.residual import residual_integral
 
     w = 2 * np.pi * np.array([6.0, 17.0])[:, None] * factors
@@ -516,11 +515,12 @@ def test_design_move_warm_at_another_move_time_of_its_knot_slot_compiles_nothing
 
 @pytest.mark.slow
 def test_residual_curves_of_pseudo_polynomials_of_other_move_times_share_one_program():
-    # the Gauss-Legendre rule's node count follows |s|T (256, 512 and 1024 nodes here): the rule is data, padded to
-    # `NODE_SLOT` nodes of weight 0, so a pseudo-polynomial at another move time compiles nothing; the padded rule's
-    # curve is the unpadded rule's (`residual_integral`, the test above checks that against an independent
-    # quadrature) to round-off
-    from jaxbelt.shaping.residual import _nodes_for, residual_curve, residual_integral
+    # the curve's Gauss-Legendre rule is data of `_curve_nodes` nodes (0.75 |s|T + 64, at least `NODE_SLOT` = 512:
+    # 512 for all three move times here, where the designs' older rule `_nodes_for` asked 256, 512 and 1024), so a
+    # pseudo-polynomial at another move time compiles nothing; the curve is the plain integral
+    # (`residual_integral`, the test above checks that against an independent quadrature) of the same size to
+    # round-off
+    from jaxbelt.shaping.residual import NODE_SLOT, _curve_nodes, _nodes_for, residual_curve, residual_integral
 
     axis = jb.ModalAxis([6.0, 17.0], [0.02, 0.01])
     factors = np.linspace(0.8, 1.2, 9)
@@ -530,6 +530,7 @@ def test_residual_curves_of_pseudo_polynomials_of_other_move_times_share_one_pro
     s = -z * w + 1j * wd
     cmds = [jb.PseudoPolynomial(np.array([3.2, 4.5, 5.1, 6.3]), 0.1, T) for T in (0.3, 0.8, 2.0)]
     assert [_nodes_for(cmd, s) for cmd in cmds] == [256, 512, 1024]
+    assert [_curve_nodes(cmd, s) for cmd in cmds] == [NODE_SLOT] * 3
     got = [np.asarray(residual_curve(axis, cmds[0], factors))]
     with count_compiles() as c:
         got += [np.asarray(residual_curve(axis, cmd, factors)) for cmd in cmds[1:]]

@@ -26,7 +26,14 @@ from .._guard import all_ok, checked, reraising, traced_checks
 from .._params import recheck
 from .._threads import blas_limited
 from ..models.axis import FREQUENCY_RANGE_HZ, ModalAxis
-from .design import MinimaxDesign, default_options, max_distance, minimax_design, minimax_value
+from .design import (
+    SURELY_FEASIBLE,
+    MinimaxDesign,
+    default_options,
+    max_distance,
+    minimax_design,
+    minimax_value,
+)
 from .moves import fastest_time
 
 
@@ -108,23 +115,24 @@ def _problem(design: MinimaxDesign, axis, move_time):
 
 #: below this multiple of the time-optimal move time, `best_residual` checks that the design's spline covers the
 #: distance within the limits (an LP, ~30 ms once compiled, ~3 s to compile): the spline's own shortest move is a
-#: few % longer (3-7 % measured with 48-96 knots, `plan._SURELY_FEASIBLE`), so 25 % leaves room and spares most
+#: few % longer (3-7 % measured with 48-96 knots, `design.SURELY_FEASIBLE`), so 25 % leaves room and spares most
 #: `shortest_move_time` calls the compile
 SPLINE_CHECK_BELOW = 1.25
 
 
-def _check_spline_reaches(owner: str, axis, move_time, design: MinimaxDesign) -> None:
+def _check_spline_reaches(owner: str, axis, move_time, design: MinimaxDesign, options=None) -> None:
     """`ValueError` where `move_time` [s] (concrete, near the time-optimal move) is too short for the design's
-    spline command to cover the distance within the limits: the minimax LP is infeasible there, and its value is
-    a large meaningless number."""
+    spline command (or one of `options`' knots: `shortest_move_time`'s re-made designs) to cover the distance within
+    the limits: the minimax LP is infeasible there, and its value is a large meaningless number."""
     T, t_min = float(move_time), _fastest(design)
     if not (math.isfinite(t_min) and T < SPLINE_CHECK_BELOW * t_min):
         return
-    reach = float(max_distance(_problem(design, axis, move_time), design.options))
+    options = design.options if options is None else options
+    reach = float(max_distance(_problem(design, axis, move_time), options))
     if not reach >= 1.0:
         raise ValueError(
             f"{owner}: parameter `move_time` = {T:.6g} s is too short for the design's command: a spline of "
-            f"{design.options.n_knots} knot intervals moves at most {100 * reach:.4g} % of the distance in that time "
+            f"{options.n_knots} knot intervals moves at most {100 * reach:.4g} % of the distance in that time "
             f"within the limits (the time-optimal move, which no smooth command reaches, takes {t_min:.6g} s); give a "
             "longer `move_time`"
         )
@@ -451,13 +459,19 @@ def _redesign_options(design: MinimaxDesign, T: float):
     (`default_options`: knots per cycle of the highest mode over the move, a starting grid that grows with T),
     else `design`'s own. A design re-made at a longer time with more knots leaves a smaller residual (20 % smaller
     at 1e-6 of the references, 160 instead of 128 knots): `shortest_move_time` calibrates against the design
-    `design_move` would make there."""
+    `design_move` would make there. Its knot cap too: lifted below `SURELY_FEASIBLE` times the time-optimal move's
+    time, as `design_move` lifts it (`minimax_solve.solve`)."""
     o, p = design.options, design.problem
     freqs, u, T0 = np.asarray(p.axis.frequencies), float(np.asarray(p.uncertainty)), float(design.command.duration)
+    t_min = _fastest(design)
+
+    def capped(t):  # design_move's cap: off near the time-optimal move
+        return not (math.isfinite(t_min) and t < SURELY_FEASIBLE * t_min)
+
     for kpc in (6.0, 12.0):  # design_move's rule at a fixed time, and while it searches the shortest time
-        mine = default_options(freqs, T0, u, o.jerk, kpc, o.basis)
+        mine = default_options(freqs, T0, u, o.jerk, kpc, o.basis, cap=capped(T0))
         if (mine.n_knots, mine.n_freq) == (o.n_knots, o.n_freq):
-            at_T = default_options(freqs, T, u, o.jerk, kpc, o.basis)
+            at_T = default_options(freqs, T, u, o.jerk, kpc, o.basis, cap=capped(T))
             return o._replace(n_knots=at_T.n_knots, n_freq=at_T.n_freq)
     return o
 
@@ -554,8 +568,8 @@ def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, r
     def feasible(T):
         if T >= feasible_from[0]:
             return True
-        try:
-            _check_spline_reaches(o, axis, T, design)
+        try:  # with the knots the LPs take at T (with `refine`, those `design_move` picks there)
+            _check_spline_reaches(o, axis, T, design, _redesign_options(design, T) if refine else None)
         except ValueError:
             return False
         feasible_from[0] = T

@@ -174,6 +174,13 @@ def design_command(coef, move_time, opts: DesignOptions):
     return PiecewiseMove(times, steps, jnp.zeros_like(steps), move_time)
 
 
+#: move time, relative to the time-optimal move's, above which the smooth design is feasible (measured: it needs
+#: 3-7 % more with 48-96 knots; the design's convergence is checked, and the feasibility LP decides otherwise); below
+#: it `design_move` lifts the spline's knot cap (`default_options(cap=False)`), and so does `shortest_move_time`'s
+#: re-made design there
+SURELY_FEASIBLE = 1.15
+
+
 def default_options(
     axis_freqs, move_time, uncertainty, jerk: bool, knots_per_cycle: float = 6.0, basis: str = "spline",
     cap: bool = True,
@@ -651,13 +658,16 @@ def minimax_design(
             break
         fine, ratios = (np.asarray(x) for x in _fine_ratios(problem, opts, coef))
         fine_worst = float(ratios.max())
-        if fine_worst <= worst * (1 + opts.exchange_tol) or fine_worst <= atol or rounds >= opts.n_rounds:
+        # a rough round's value is up to `ROUGH_GAP` above the grid's optimum: judged by its rigorous lower bound, the
+        # exchange stops no sooner than on the optimum's own value (with a certify tolerance below `ROUGH_GAP` too)
+        level = float(lower_a) if bool(rough) else worst
+        if fine_worst <= level * (1 + opts.exchange_tol) or fine_worst <= atol or rounds >= opts.n_rounds:
             break
         added = 0
         for i in range(n_modes):
             free = np.where(mask[i, : opts.n_freq + opts.n_extra] == 0)[0]  # the padding stays unused
             peaks_i = _local_maxima(fine, ratios[i])
-            peaks_i = peaks_i[ratios[i, peaks_i] > worst * (1 + opts.exchange_tol)]
+            peaks_i = peaks_i[ratios[i, peaks_i] > level * (1 + opts.exchange_tol)]
             peaks_i = peaks_i[np.argsort(-ratios[i, peaks_i])][: min(per_round, len(free))]
             for slot, k in zip(free, peaks_i):
                 factors[i, slot] = fine[k]
@@ -858,7 +868,7 @@ class MinimaxSolver:
             # near the time-optimal move a spline needs more knots than `default_options`' cap (`KNOT_FILL`) leaves it
             # (a 40 Hz axis at ZV's time and peaks: 128 knots cannot move the distance, 192 can): the next slots' knot
             # counts, each a compiled LP of its own, before the time is refused
-            finer = finer_options(self.opts)
+            finer = finer_options(self.opts) if self.opts.basis == "spline" else None  # steps, ramps: uncapped
             if finer is None:
                 self.opts = own  # the shortest time at which the rule's own knot count moves the distance
                 return None, self.shortest_feasible(t_min)

@@ -11,7 +11,9 @@ import concurrent.futures
 import contextlib
 import dataclasses
 import math
+import os
 
+import jax
 import numpy as np
 
 from .bands import JUMPS as JUMPS
@@ -31,8 +33,31 @@ def _smooth_certificate(row, bound: float) -> str:
 #: the thread the minimax LP at a given move time runs in, beside the other candidates (`solving`): the LP is the
 #: longest stage of a design and needs nothing they compute; XLA releases the GIL while it runs and compiles, so on
 #: two cores the two overlap (a warm 3-mode design 2.5 s -> 1.7 s, a first call 18 s -> 12 s). Created at import,
-#: its thread starts at the first submit.
+#: its thread starts at the first submit; a forked child makes its own (a parent's executor never runs the child's
+#: work: `design_move` would wait for it forever).
 _WORKER = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="jaxbelt-minimax")
+
+
+def _new_worker() -> None:
+    global _WORKER
+    _WORKER = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="jaxbelt-minimax")
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_new_worker)
+
+
+def _in_callers_context(fun, *args):
+    """`fun(*args)` as a thread of its own would run it under the caller's JAX settings: the 64-bit mode and the
+    default device, which a `with jax.enable_x64(True):` or `with jax.default_device(d):` block sets for the
+    caller's thread only (read here, in the caller's thread; re-entered in the worker's)."""
+    x64, device = bool(jax.enable_x64.value), jax.default_device.value
+
+    def run():
+        with jax.enable_x64(x64), jax.default_device(device):
+            return fun(*args)
+
+    return run
 
 
 @contextlib.contextmanager
@@ -40,11 +65,12 @@ def solving(req: MoveRequest, ref):
     """Inside the block, `solve(req, ref, req.move_time)` runs in the worker thread (`_WORKER`): yields its future,
     for `minimax_rows(..., solved=)`, or None where the move time is not given or the minimax design is not asked
     for (then `minimax_rows` solves it itself). On leaving the block (also on an error) the solve is cancelled if it
-    has not started, and waited for if it has: no LP outlives the call, none runs outside its BLAS limit."""
+    has not started, and waited for if it has: no LP outlives the call, none runs outside its BLAS limit. The
+    worker runs under the caller's 64-bit mode and default device (`_in_callers_context`)."""
     if req.move_time is None or "minimax" not in req.include:
         yield None
         return
-    fut = _WORKER.submit(solve, req, ref, req.move_time)
+    fut = _WORKER.submit(_in_callers_context(solve, req, ref, req.move_time))
     try:
         yield fut
     finally:

@@ -182,7 +182,6 @@ def lagrange_coefficients(gammas, active=None):
 # The objective
 # --------------------------------------------------------------------------------------------
 @functools.cache
-@functools.lru_cache(maxsize=16)
 def _gauss_legendre(n_nodes: int):
     """The `n_nodes`-point Gauss-Legendre rule on [0, 1], `(nodes, weights)`, read-only: kept per size (numpy's
     `leggauss` solves an eigenproblem, 30 ms at 512 nodes, and a design takes the rule five times)."""

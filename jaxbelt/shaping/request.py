@@ -16,6 +16,7 @@ import numpy as np
 from .._checks import check_positive, check_range
 from ..models.axis import ModalAxis
 from .bands import band_factors
+from .design import SURELY_FEASIBLE as SURELY_FEASIBLE
 from .far_modes import LPSetup, lp_setup, modes_axis, prepare_lp
 from .hull import INTERPOLATIONS
 from .moves import (
@@ -205,11 +206,6 @@ class MoveRequest:
     def clearly(self) -> bool:
         """A given move time well above the time-optimal move's: the smooth design is surely feasible there."""
         return self.move_time is not None and self.move_time >= SURELY_FEASIBLE * self.t_min
-
-
-#: move time, relative to the time-optimal move's, above which the smooth design is feasible (measured: it needs
-#: 3-7 % more with 48-96 knots; the design's convergence is checked, and the feasibility LP decides otherwise)
-SURELY_FEASIBLE = 1.15
 
 
 def _check_smooth(smooth, progress, certify_rtol, j_max) -> float | None:
