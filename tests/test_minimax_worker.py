@@ -111,6 +111,7 @@ def test_the_worker_runs_under_the_callers_x64_block():
 
 
 @pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="os.fork: POSIX only")
+@pytest.mark.filterwarnings("ignore:os.fork:RuntimeWarning")  # the child runs no JAX
 def test_a_forked_child_has_a_worker_of_its_own():
     """A child forked after the worker ran (a multiprocessing pool's default start on Linux) gets a worker that
     runs its work: the parent's executor, copied, would never run it (`design_move` would wait forever)."""
