@@ -526,32 +526,30 @@ def rerun_speed_every_candidate():
     """Run `speed_every_candidate` alone and write it into the committed results (`speed_every_candidate`, with
     headline rows)."""
     res = speed_every_candidate()
-    head = []
-    for m, v in res.items():
-        for key, when in (
-            ("warm_same_time_median_s", "same move time"),
-            ("warm_other_times_median_s", "another move time per call"),
-        ):
-            head.append(
-                dict(
-                    what=f"design_move warm, every candidate, {m} mode(s), {when}, median",
-                    value=v[key],
-                    unit="s",
-                    target="<= 1",
-                )
-            )
-        for key, when in (
-            ("first_s", "no compilation cache"),
-            ("first_cached_s", "compilation cache filled by an earlier process (the CLI's default), import apart"),
-        ):
-            head.append(
-                dict(
-                    what=f"design_move first call in a fresh process, every candidate, {m} mode(s), {when}",
-                    value=v[key],
-                    unit="s",
-                    target="<= 5",
-                )
-            )
+    rows = (
+        ("warm_same_time_median_s", "design_move warm, every candidate, {m} mode(s), same move time, median", "<= 1"),
+        (
+            "warm_other_times_median_s",
+            "design_move warm, every candidate, {m} mode(s), another move time per call, median",
+            "<= 1",
+        ),
+        (
+            "first_s",
+            "design_move first call in a fresh process, every candidate, {m} mode(s), no compilation cache",
+            "<= 5",
+        ),
+        (
+            "first_cached_s",
+            "design_move first call in a fresh process, every candidate, {m} mode(s), compilation cache filled by an "
+            "earlier process (the CLI's default), import apart",
+            "<= 5",
+        ),
+    )
+    head = [
+        dict(what=what.format(m=m), value=v[key], unit="s", target=target)
+        for m, v in res.items()
+        for key, what, target in rows
+    ]
     _merge_into_results(
         "speed_every_candidate",
         res,
