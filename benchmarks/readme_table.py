@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -415,14 +416,18 @@ def _far_and_inverse(data) -> str:
         )
     inv = data.get("inverse")
     if inv:
+        same, other = (_nanmax(inv, f"max_miss_design_move_{k}_options") for k in ("same", "other"))
+        crossed = (
+            f"where it picks others (a knot count crossed), within {100 * other:.2g} %"
+            if math.isfinite(other)
+            else "and it picks them in every case"
+        )
         out += (
             f"`shortest_move_time` (`--inverse`, {data.get('inverse_run', '?')[:10]}), warm medians: "
             + ", ".join(f"{k} {v['warm_median_s']:.2f} s (max {v['warm_max_s']:.2f})" for k, v in inv.items())
             + " (target 5 s); a design re-made at its answer with the same discretisation leaves the target within "
             f"{100 * max(v['max_miss'] for v in inv.values()):.2g} % (target 1 %); `design_move` at the answer, where "
-            f"it picks the same knots and grid, within {100 * _nanmax(inv, 'max_miss_design_move_same_options'):.2g} %, "
-            f"where it picks others (a knot count crossed), within "
-            f"{100 * _nanmax(inv, 'max_miss_design_move_other_options'):.2g} %. "
+            f"it picks the same knots and grid, within {100 * same:.2g} %, {crossed}. "
         )
     return out
 
