@@ -6,6 +6,7 @@ import pytest
 
 import jaxbelt as jb
 from jaxbelt.shaping import pseudo as P
+from jaxbelt.shaping import quadrature as Q
 
 #: the axes of `benchmarks/shaping_axis.py`'s `speed_every_candidate`
 AXES = {1: ([6.0], [0.02]), 2: ([7.3, 18.0], [0.015, 0.01]), 3: ([3.1, 9.7, 17.0], [0.03, 0.02, 0.01])}
@@ -30,7 +31,7 @@ def _batch():
 def test_design_nodes_accurate_at_the_top_of_each_bucket(n_nodes):
     # the largest omega T a bucket takes, on one mode: the ratios against a rule of twice the nodes (a finer solve),
     # 1e-11
-    wT = (n_nodes - P.DESIGN_NODES_EXTRA) / P.DESIGN_NODES_PER_RAD
+    wT = (n_nodes - Q.NODES_EXTRA) / Q.NODES_PER_RAD
     assert P.design_nodes(wT) == n_nodes
     assert P.design_nodes(wT * 1.01) == 2 * n_nodes
     T = 1.0

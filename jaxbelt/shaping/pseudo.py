@@ -68,7 +68,6 @@ compile with XLA's classic CPU emitters (`COMPILER_OPTIONS`).
 
 from __future__ import annotations
 
-import functools
 import math
 from typing import Any, NamedTuple
 
@@ -85,6 +84,8 @@ from .._guard import eager
 from .._xla import LazyJit, quick_compile
 from ..commands import PseudoPolynomial
 from ..models.axis import ModalAxis
+from .quadrature import gauss_legendre_01 as _gauss_legendre
+from .quadrature import rule_nodes
 
 #: substitution power u = v**p of the Gauss-Legendre rule (as in `jaxbelt.shaping.residual`)
 _P = 4
@@ -181,17 +182,6 @@ def lagrange_coefficients(gammas, active=None):
 # --------------------------------------------------------------------------------------------
 # The objective
 # --------------------------------------------------------------------------------------------
-@functools.cache
-def _gauss_legendre(n_nodes: int):
-    """The `n_nodes`-point Gauss-Legendre rule on [0, 1], `(nodes, weights)`, read-only: kept per size (numpy's
-    `leggauss` solves an eigenproblem, 30 ms at 512 nodes, and a design takes the rule five times)."""
-    x, w = np.polynomial.legendre.leggauss(int(n_nodes))
-    v, w = 0.5 * (x + 1.0), 0.5 * w
-    v.setflags(write=False)
-    w.setflags(write=False)
-    return v, w
-
-
 def n_nodes_for(max_omega_t: float) -> int:
     """Gauss-Legendre nodes that resolve $e^{i\\omega T u}$ under the substitution $u = v^4$ (a host decision,
     bucketed so that nearby axes share the program): about $2.5\\,\\omega T + 64$, at least 256."""
@@ -200,11 +190,6 @@ def n_nodes_for(max_omega_t: float) -> int:
         if n >= need:
             return n
     return 4096
-
-
-#: `design_nodes`' rule: nodes per radian of the highest $\omega T$ of the band, and the nodes added
-DESIGN_NODES_PER_RAD = 0.75
-DESIGN_NODES_EXTRA = 64
 
 
 def design_nodes(max_omega_t: float) -> int:
@@ -219,12 +204,9 @@ def design_nodes(max_omega_t: float) -> int:
     at 1.0 s, then 1.7 s: 3 s). On the 1-3 mode benchmark axes the designs at 0.8-1.3 s are `n_nodes_for`'s; at
     1.7 s (512 nodes against 1024) every design still converges, the robust ones' worst residuals agree to 1e-5 and
     the optimal ones' move by the optimiser's path on a flat objective (2 modes: 0.0525 -> 0.0520 %, 3 modes:
-    0.8738 -> 0.8741 % of the unshaped move's residual; measured)."""
-    need = int(DESIGN_NODES_PER_RAD * float(max_omega_t) + DESIGN_NODES_EXTRA)
-    cap = 512
-    while cap < need and cap < 4096:
-        cap *= 2
-    return min(n_nodes_for(max_omega_t), cap)
+    0.8738 -> 0.8741 % of the unshaped move's residual; measured). The cap is `quadrature.rule_nodes`, the residual
+    curves' rule."""
+    return min(n_nodes_for(max_omega_t), rule_nodes(max_omega_t))
 
 
 def residual_kernels(axis: ModalAxis, move_time, factors, reference, n_nodes: int):

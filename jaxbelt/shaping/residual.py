@@ -38,6 +38,7 @@ from .moves import (
     padded_command,
     padded_pseudo,
 )
+from .quadrature import MIN_NODES, gauss_legendre_01, rule_nodes
 
 _P = 4  # substitution power u = v**p of the pseudo-polynomial rule (as in jaxbelt.objectives.residual)
 
@@ -58,23 +59,18 @@ def _nodes_for(cmd, s) -> int:
 
 
 def _curve_nodes(cmd, s) -> int:
-    """The nodes of `_curve`'s rule for a pseudo-polynomial (host decision): $0.75\\,\\omega T + 64$ rounded up to a
-    power of two, at least `NODE_SLOT` (the designs' rule, `jaxbelt.shaping.pseudo.design_nodes`, where it is
-    measured: 5e-13 of the curve against a 4096-node rule wherever $0.55\\,\\omega T$ nodes are given), $\\omega T$
-    the largest $|s|T$ of the modes the quadrature takes. `_nodes_for`'s $2.5\\,\\omega T + 64$ asked twice the
-    nodes on the benchmarks' axes (1024 at a 1.0 s move of a 17 Hz mode over 0.5-1.5 of its frequency): a
-    pseudo-polynomial's row cost twice the time."""
+    """The nodes of `_curve`'s rule for a pseudo-polynomial (host decision, `quadrature.rule_nodes`):
+    $0.75\\,\\omega T + 64$ rounded up to a power of two, at least `NODE_SLOT` (the designs' cap,
+    `jaxbelt.shaping.pseudo.design_nodes`, where it is measured: 5e-13 of the curve against a 4096-node rule
+    wherever $0.55\\,\\omega T$ nodes are given), $\\omega T$ the largest $|s|T$ of the modes the quadrature takes.
+    `_nodes_for`'s $2.5\\,\\omega T + 64$ asked twice the nodes on the benchmarks' axes (1024 at a 1.0 s move of a
+    17 Hz mode over 0.5-1.5 of its frequency): a pseudo-polynomial's row cost twice the time."""
     try:
         sT = np.asarray(s) * float(cmd.duration)
     except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
         return NODE_SLOT
     quad = -sT.real <= _DAMPED_AWAY  # the others take the closed form (`_pseudo_polynomial_w`)
-    wT = float(np.max(np.abs(sT[quad]))) if np.any(quad) else 0.0
-    need = int(0.75 * wT + 64)
-    n = NODE_SLOT
-    while n < need and n < 4096:
-        n *= 2
-    return n
+    return rule_nodes(float(np.max(np.abs(sT[quad]))) if np.any(quad) else 0.0)
 
 
 #: a mode with zeta omega T above this (the start of the move damped by e^-700 at its end: a 2 kHz or a 1 MHz mode in a
@@ -82,27 +78,20 @@ def _curve_nodes(cmd, s) -> int:
 _DAMPED_AWAY = 700.0
 
 
-#: `_pseudo_curve`'s rule has at least this many nodes (`_curve_nodes`): the pseudo-polynomials of a design (1-3
-#: modes, moves of 0.3 to 4 s) share one compiled program
-NODE_SLOT = 512
+#: `_pseudo_curve`'s rule has at least this many nodes (`_curve_nodes`, `quadrature.rule_nodes`): the
+#: pseudo-polynomials of a design (1-3 modes, moves of 0.3 to 4 s) share one compiled program
+NODE_SLOT = MIN_NODES
 
 
 @functools.lru_cache(maxsize=16)
-def _rule(n_nodes: int, size: int = 0):
-    r"""The `n_nodes`-point Gauss-Legendre rule on [0, 1] in v as numpy arrays `(log v, u = v**_P, weights)`, padded
-    to `size` nodes by nodes at v = 1/2 of weight exactly 0 (they add 0 to every sum). log v on the host, as the
-    rule's constants were folded before it was data: the powers $v^{p(\gamma - 1) - 1}$ of an order-8
-    pseudo-polynomial (exponents to 16.5) cancel to 1e-9 in W, so their last bits show. Kept per size, read-only
-    (numpy's `leggauss` solves an eigenproblem: 0.14 s a call at 1024 nodes, four calls a design)."""
-    x, w = np.polynomial.legendre.leggauss(n_nodes)
-    v, w = 0.5 * (x + 1.0), 0.5 * w
+def _rule(n_nodes: int):
+    r"""The `n_nodes`-point Gauss-Legendre rule on [0, 1] (`quadrature.gauss_legendre_01`) in v as numpy arrays
+    `(log v, u = v**_P, weights)`. log v on the host, as the rule's constants were folded before it was data: the
+    powers $v^{p(\gamma - 1) - 1}$ of an order-8 pseudo-polynomial (exponents to 16.5) cancel to 1e-9 in W, so their
+    last bits show. Kept per size, read-only."""
+    v, w = gauss_legendre_01(n_nodes)
     u, logv = v**_P, np.log(v)
-    extra = max(size - n_nodes, 0)
-    if extra:
-        logv = np.concatenate([logv, np.full(extra, np.log(0.5))])
-        u = np.concatenate([u, np.full(extra, 0.5**_P)])
-        w = np.concatenate([w, np.zeros(extra)])
-    for q in (logv, u, w):
+    for q in (logv, u):
         q.setflags(write=False)
     return logv, u, w
 
@@ -112,7 +101,7 @@ def _pseudo_polynomial_w(cmd, s, n_nodes):
     $\\int_0^1 u^{\\gamma-2}e^{-pu}du = \\Gamma(\\gamma - 1)p^{1-\\gamma} - \\Gamma(\\gamma - 1, p)p^{1-\\gamma}$, whose last
     term is below $|p|^{\\gamma}e^{-\\mathrm{Re}\\,p}$ (the vibration from the start of the move, damped away): the rule
     would need about 2.5|s|T nodes (1e7 for a 1 MHz mode in 0.8 s). `n_nodes`: the node count, or the rule
-    `(log v, u, weights)` itself (`_rule`, padded)."""
+    `(log v, u, weights)` itself (`_rule`)."""
     logv, u, w = _rule(n_nodes) if isinstance(n_nodes, int) else n_nodes
     T = cmd.duration
     coef = falling_factorial(cmd.gammas, 2) * cmd.coefficients  # phi'' = -Phi/T^2 sum_i a_i u^(g_i - 2)
