@@ -26,14 +26,7 @@ from .._guard import all_ok, checked, reraising, traced_checks
 from .._params import recheck
 from .._threads import blas_limited
 from ..models.axis import FREQUENCY_RANGE_HZ, ModalAxis
-from .design import (
-    SURELY_FEASIBLE,
-    MinimaxDesign,
-    default_options,
-    max_distance,
-    minimax_design,
-    minimax_value,
-)
+from .design import MinimaxDesign, default_options, knot_cap, max_distance, minimax_design, minimax_value
 from .moves import fastest_time
 
 
@@ -459,19 +452,14 @@ def _redesign_options(design: MinimaxDesign, T: float):
     (`default_options`: knots per cycle of the highest mode over the move, a starting grid that grows with T),
     else `design`'s own. A design re-made at a longer time with more knots leaves a smaller residual (20 % smaller
     at 1e-6 of the references, 160 instead of 128 knots): `shortest_move_time` calibrates against the design
-    `design_move` would make there. Its knot cap too: lifted below `SURELY_FEASIBLE` times the time-optimal move's
-    time, as `design_move` lifts it (`minimax_solve.solve`)."""
+    `design_move` would make there, its knot cap included (`design.knot_cap`)."""
     o, p = design.options, design.problem
     freqs, u, T0 = np.asarray(p.axis.frequencies), float(np.asarray(p.uncertainty)), float(design.command.duration)
     t_min = _fastest(design)
-
-    def capped(t):  # design_move's cap: off near the time-optimal move
-        return not (math.isfinite(t_min) and t < SURELY_FEASIBLE * t_min)
-
     for kpc in (6.0, 12.0):  # design_move's rule at a fixed time, and while it searches the shortest time
-        mine = default_options(freqs, T0, u, o.jerk, kpc, o.basis, cap=capped(T0))
+        mine = default_options(freqs, T0, u, o.jerk, kpc, o.basis, cap=knot_cap(T0, t_min))
         if (mine.n_knots, mine.n_freq) == (o.n_knots, o.n_freq):
-            at_T = default_options(freqs, T, u, o.jerk, kpc, o.basis, cap=capped(T))
+            at_T = default_options(freqs, T, u, o.jerk, kpc, o.basis, cap=knot_cap(T, t_min))
             return o._replace(n_knots=at_T.n_knots, n_freq=at_T.n_freq)
     return o
 
@@ -575,7 +563,6 @@ def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, r
         feasible_from[0] = T
         return True
 
-    tau = jax.lax.stop_gradient(design.worst)
     memo = _memo(design, axis)
     own = start == float(design.command.duration) and _same_axis(axis, design)
     # refine=False: the LP on the design's grid with its options; refine=True: on the design's grid with the options
@@ -589,9 +576,7 @@ def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, r
     if mine and (start, float(design.worst)) not in known:
         known.append((start, float(design.worst)))
 
-    def on_grid(T_):
-        opts = _redesign_options(design, T_) if refine else design.options
-        return minimax_value(_problem(design, axis, T_), opts, tau=tau)
+    on_grid = _grid_of(design, axis, design, None if refine else design.options)
 
     def root(goal, start_, rtol, predict=0.0, first=None, fn=on_grid, known=known, pairs=pairs):
         # the pairs known are values of the same function: re-used for the bracket and the secant at a new level
@@ -611,7 +596,7 @@ def _shortest_time(axis, target, design, lo, hi, start, *, user_bracket: bool, r
     # the re-made designs known: an earlier call's (`_Memo`), and the design itself where it is the one `design_move`
     # makes at its own time (same axis, the options its rule picks there)
     made: dict[float, float] = {T_: float(d_.fine_worst) for T_, d_ in memo.remade.items() if lo <= T_ <= hi}
-    if own and _redesign_options(design, start) == design.options:
+    if mine:
         made.setdefault(start, float(design.fine_worst))
     for T_, f_ in sorted(made.items()):
         if abs(f_ - target) <= REDESIGN_RTOL * target:
@@ -688,13 +673,14 @@ def _extrapolated(made: dict, near: float, target: float) -> float | None:
     return min(max(T, near / 1.3), near * 1.3)
 
 
-def _grid_of(src: MinimaxDesign, axis, design: MinimaxDesign):
+def _grid_of(src: MinimaxDesign, axis, design: MinimaxDesign, options=None):
     """T [s] -> the minimax LP's value on the final frequency grid of `src` (with `design`'s references), with the
-    discretisation `design_move` picks at T (`_redesign_options`)."""
+    discretisation `design_move` picks at T (`_redesign_options`), or `options`."""
     tau = jax.lax.stop_gradient(src.worst)
 
     def value(T_):
-        return minimax_value(_problem(src, axis, T_), _redesign_options(design, T_), tau=tau)
+        opts = _redesign_options(design, T_) if options is None else options
+        return minimax_value(_problem(src, axis, T_), opts, tau=tau)
 
     return value
 

@@ -181,6 +181,15 @@ def design_command(coef, move_time, opts: DesignOptions):
 SURELY_FEASIBLE = 1.15
 
 
+def knot_cap(move_time: float, t_min: float) -> bool:
+    """Whether the spline's knot count at `move_time` [s] is capped (`default_options(cap=)`, `KNOT_FILL`): not below
+    `SURELY_FEASIBLE` times the time-optimal move's time `t_min` [s] (NaN: none known, capped), where the finer
+    spline comes closer to the bang-bang move (a 36 Hz axis at ZV's own time and peaks: with the cap's 128 knots
+    instead of 160 the recommended command left more than ZV). `design_move`'s LP (`request.validate`) and
+    `shortest_move_time`'s re-made designs take this one rule."""
+    return not (math.isfinite(t_min) and move_time < SURELY_FEASIBLE * t_min)
+
+
 def default_options(
     axis_freqs, move_time, uncertainty, jerk: bool, knots_per_cycle: float = 6.0, basis: str = "spline",
     cap: bool = True,
@@ -191,8 +200,8 @@ def default_options(
     one point per radian of $2u\\omega T$ (the residual's own scale in frequency is $1/T$), 9 to 41 points.
 
     The spline at a given move time (at most `FIXED_TIME_KNOTS` per cycle) takes no more knots than the least of
-    `KNOT_SLOTS` that gives `KNOT_FILL` x `knots_per_cycle` per period (unless `cap` is False: `design_move` near the
-    time-optimal move, `minimax_solve.solve`), so that its knot count, padded to its slot,
+    `KNOT_SLOTS` that gives `KNOT_FILL` x `knots_per_cycle` per period (unless `cap` is False: near the time-optimal
+    move, `knot_cap`), so that its knot count, padded to its slot,
     keeps one compiled LP over a wide range of move times (128 knots from 0.8 to 1.7 s on a 20 Hz band). Its cost,
     measured on the 3-mode axis of benchmarks/shaping_axis.py (worst residual on a 10x finer grid, in units of the
     unshaped move's): at 1.3 s 128 knots instead of 160 leave 1.79e-4 instead of 1.49e-4 (20 % more), at 1.7 s 128

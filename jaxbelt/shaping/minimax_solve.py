@@ -30,11 +30,6 @@ def solve(req: MoveRequest, ref, T: float | None, *, jumps: bool = False, T_gues
     else:
         setup = req.lp if req.lp is not None else lp_setup(req.axis, T_guess, u, j, False, req.smooth, req.per)
         clearly = req.clearly
-        if T is not None and not clearly and setup.opts.basis == "spline":
-            # near the time-optimal move the spline keeps its full knot count (`design.KNOT_FILL`'s cap off): there
-            # the finer spline comes closer to the bang-bang move (a 36 Hz axis at ZV's own time and peaks: with the
-            # cap's 128 knots instead of 160 the recommended command left more than ZV)
-            setup = lp_setup(req.axis, T, u, j, True, True, req.per, cap=False)
     solver = _design.MinimaxSolver(
         setup.lp_axis, req.distance, req.v_max, req.a_max, j, u, np.asarray(ref)[setup.kept], setup.opts
     )

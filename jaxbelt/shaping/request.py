@@ -17,6 +17,7 @@ from .._checks import check_positive, check_range
 from ..models.axis import ModalAxis
 from .bands import band_factors
 from .design import SURELY_FEASIBLE as SURELY_FEASIBLE
+from .design import knot_cap
 from .far_modes import LPSetup, lp_setup, modes_axis, prepare_lp
 from .hull import INTERPOLATIONS
 from .moves import (
@@ -275,7 +276,8 @@ def validate(axis, distance, move_time, *, v_max, a_max, j_max, uncertainty, inc
     j = None if j_max is None else float(j_max)
     lp = None
     if "minimax" in include and T is not None:  # the modes the LP leaves out: refused here where it keeps none
-        lp = lp_setup(judged, T, u, j, True, auto or bool(smooth), per)
+        # the spline's knots capped except near the time-optimal move (`design.knot_cap`)
+        lp = lp_setup(judged, T, u, j, True, auto or bool(smooth), per, cap=knot_cap(T, t_min))
         if T >= SURELY_FEASIBLE * t_min:  # its programs compile while the reference and the candidates are computed
             prepare_lp(lp, d, float(v_max), float(a_max), j, u, T)
     ref_cmd, band = fastest_move(d, float(v_max), float(a_max), j), band_factors(u)
