@@ -35,7 +35,7 @@ def _smooth_certificate(row, bound: float) -> str:
 #: two cores the two overlap (a warm 3-mode design 2.5 s -> 1.7 s, a first call 18 s -> 12 s). Created at import,
 #: its thread starts at the first submit; a forked child makes its own (a parent's executor never runs the child's
 #: work: `design_move` would wait for it forever).
-_WORKER = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="jaxbelt-minimax")
+_WORKER: concurrent.futures.ThreadPoolExecutor
 
 
 def _new_worker() -> None:
@@ -43,6 +43,7 @@ def _new_worker() -> None:
     _WORKER = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="jaxbelt-minimax")
 
 
+_new_worker()
 if hasattr(os, "register_at_fork"):
     os.register_at_fork(after_in_child=_new_worker)
 
@@ -93,10 +94,8 @@ def minimax_rows(req: MoveRequest, ref, classic: list, solved=None):
     usable = [r for r in classic if r.ok]
     target = min((r.worst_percent for r in usable), default=math.nan)
     T_guess = min((r.move_time for r in usable), default=2 * req.t_min)  # where the shortest time is searched
-    if solved is None:
-        solved_now = solve(req, ref, T, T_guess=T_guess, target=target)
-    else:  # `solving`'s: the same call, started earlier (`T` is the given move time)
-        solved_now = solved.result()
+    # `solving`'s future: the same call, started earlier (`T` is the given move time)
+    solved_now = solve(req, ref, T, T_guess=T_guess, target=target) if solved is None else solved.result()
     setup, _, (mm, bound, note, ok) = solved_now
     if T is None:  # at the shortest time that reaches the best classic shaper (no design where none is usable)
         if mm is None:
