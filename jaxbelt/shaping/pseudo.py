@@ -84,8 +84,8 @@ from .._guard import eager
 from .._xla import LazyJit, quick_compile
 from ..commands import PseudoPolynomial
 from ..models.axis import ModalAxis
+from .quadrature import SINGLE_MAX_OMEGA_T, rule_nodes
 from .quadrature import gauss_legendre_01 as _gauss_legendre
-from .quadrature import rule_nodes
 
 #: substitution power u = v**p of the Gauss-Legendre rule (as in `jaxbelt.shaping.residual`)
 _P = 4
@@ -205,7 +205,10 @@ def design_nodes(max_omega_t: float) -> int:
     1.7 s (512 nodes against 1024) every design still converges, the robust ones' worst residuals agree to 1e-5 and
     the optimal ones' move by the optimiser's path on a flat objective (2 modes: 0.0525 -> 0.0520 %, 3 modes:
     0.8738 -> 0.8741 % of the unshaped move's residual; measured). The cap is `quadrature.rule_nodes`, the residual
-    curves' rule."""
+    curves' rule, also above $\\omega T$ = `quadrature.SINGLE_MAX_OMEGA_T`, where it is composite (more than 4096
+    nodes, which one rule would not resolve)."""
+    if float(max_omega_t) > SINGLE_MAX_OMEGA_T:
+        return rule_nodes(max_omega_t)
     return min(n_nodes_for(max_omega_t), rule_nodes(max_omega_t))
 
 

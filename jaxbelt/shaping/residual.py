@@ -38,7 +38,7 @@ from .moves import (
     padded_command,
     padded_pseudo,
 )
-from .quadrature import MIN_NODES, gauss_legendre_01, rule_nodes
+from .quadrature import MIN_NODES, SINGLE_MAX_OMEGA_T, gauss_legendre_01, rule_nodes
 
 _P = 4  # substitution power u = v**p of the pseudo-polynomial rule (as in jaxbelt.objectives.residual)
 
@@ -55,7 +55,7 @@ def _nodes_for(cmd, s) -> int:
     for n in (128, 256, 512, 1024, 2048):
         if n >= need:
             return n
-    return 4096
+    return 4096 if wT <= SINGLE_MAX_OMEGA_T else rule_nodes(wT)  # above: a composite rule (`quadrature`)
 
 
 def _curve_nodes(cmd, s) -> int:
