@@ -22,7 +22,7 @@ from .moves import (
     peaks,
 )
 from .request import MoveRequest
-from .residual import measured_curve, tolerance_band
+from .residual import closed_curve, tolerance_band
 
 
 @dataclasses.dataclass(frozen=True)
@@ -75,18 +75,18 @@ def _measure(axis, cmd, ref, u, limits, per: int = 1, size: int = 0) -> tuple[An
     """The table's numbers for one command (`per`: damping copies of each user mode in `axis`), a `PiecewiseMove`
     padded to `size` terms first: `(command, numbers, within the limits, worst ratio over the band per mode of
     `axis`)`."""
-    if isinstance(cmd, PiecewiseMove):  # shaped on the user's modes: padded to their size
-        cmd = padded(cmd, size)
     if isinstance(cmd, PseudoPolynomial):  # the same 20001 instants on the host: no program call
         from .pseudo import _peaks_np  # (not at import: it brings optax)
 
         pv, pa, pj = (float(x) for x in _peaks_np(np.asarray(cmd.gammas), float(cmd.displacement), float(cmd.duration)))
     else:
+        if isinstance(cmd, PiecewiseMove):  # shaped on the user's modes: padded to their size
+            cmd = padded(cmd, size)
         pv, pa, pj = peaks(cmd)
     band, wide = measure_grids(u)
-    res = np.asarray(measured_curve(axis, cmd, band))  # (modes, K)
+    res = np.asarray(closed_curve(axis, cmd, band))  # (modes, K)
     ratio = res / ref[:, None]
-    wr = np.asarray(measured_curve(axis, cmd, wide)) / ref[:, None]
+    wr = np.asarray(closed_curve(axis, cmd, wide)) / ref[:, None]
     f = np.asarray(axis.frequencies)
     bands = []
     for i in range(0, axis.n_modes, per):
