@@ -9,10 +9,10 @@ SHAPING = Path(__file__).resolve().parents[1] / "jaxbelt" / "shaping"
 #: the pipeline's modules from the bottom up: each may import only the ones before it (among these)
 ORDER = (
     "bands",
-    "shaped",
     "hull",
     "far_modes",
     "request",
+    "shaped",
     "certificate",
     "minimax_solve",
     "candidates",
