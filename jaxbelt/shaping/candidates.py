@@ -2,9 +2,9 @@
 table rows beside the classic shapers, `jaxbelt.shaping.shaped.classic_commands`, and the minimax rows), each built
 on its own, none measured.
 
-Each builder (here and `shaped.classic_commands`) returns `(name, command or None, move time [s], note, ok, peaks or None)` per row, which
-`jaxbelt.shaping.measure.measure_rows` measures (`peaks`: the command's `(peak |v|, peak |a|, peak |jerk|)` where its
-builder measured them already, as the pseudo-polynomials' design does).
+Each builder (here and `shaped.classic_commands`) returns `(name, command or None, move time [s], note, ok, peaks or
+None)` per row, which `jaxbelt.shaping.measure.measure_rows` measures (`peaks`: the command's `(peak |v|, peak |a|,
+peak |jerk|)` where its builder measured them already, as the pseudo-polynomials' design does).
 """
 
 import numpy as np
@@ -15,7 +15,7 @@ from .request import MoveRequest
 
 def timed_commands(req: MoveRequest, T: float) -> list:
     """The candidates of the common move time `T` [s] (the given one, else the minimax design's,
-    `minimax_solve.placed`): Incerti's commands (`pseudo_commands`) and the unshaped move: the time-optimal one with
+    `minimax_solve.solving`): Incerti's commands (`pseudo_commands`) and the unshaped move: the time-optimal one with
     `move_time` None, else the gentlest trapezoid (S-curve) of `T`."""
     out = pseudo_commands(req, T)
     if "unshaped" not in req.include:

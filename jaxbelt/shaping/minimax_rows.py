@@ -3,7 +3,7 @@
 command space that holds every candidate (`jaxbelt.shaping.hull`, `jaxbelt.shaping.measure.blended_rows`).
 
 This stage composes lower modules only, in this order: the design (solved by `minimax_solve`, placed at the table's
-move time by `minimax_solve.placed`), the shaped moves of the command space (`shaped`), its row (`measure`), the
+move time by `minimax_solve.solving`), the shaped moves of the command space (`shaped`), its row (`measure`), the
 comparison as executed (`hull`), the design with jumps (`minimax_solve.solve`, its row), and the blends (`measure`).
 """
 
@@ -25,10 +25,10 @@ def _smooth_certificate(row, bound: float) -> str:
 
 
 def minimax_rows(req: MoveRequest, solved, T: float):
-    """The minimax rows at the move time `T` [s] (`minimax_solve.placed`; the design; with `smooth="auto"` the design
+    """The minimax rows at the move time `T` [s] (`minimax_solve.solving`; the design; with `smooth="auto"` the design
     with jumps where the smooth one does not win), each the least worst blend of the command space that holds every
     candidate (`measure.blended_rows`), the design of the better row and the continuous bound: `(rows, design or
-    None, bound)`. `solved`: the future of `minimax_solve.solve`'s result for the design (`placed`), None without
+    None, bound)`. `solved`: the future of `minimax_solve.solve`'s result for the design (`solving`), None without
     "minimax" in `req.include`; with `move_time` None and no design reaching the target, no row.
 
     The design with jumps (steps; with `j_max`, ramps whose jerk may jump), as `smooth=False` designs it: its command

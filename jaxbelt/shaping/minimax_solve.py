@@ -1,7 +1,8 @@
 """Solve the minimax design (`jaxbelt.shaping.design`) for `design_move`'s minimax rows: in one call (`solve`) its
 LP's setup, its solver, the design at a move time (with its feasibility) or at the shortest time that reaches a
-target, and its certificate (`jaxbelt.shaping.certificate`); where it runs (`solving`: at a given move time in a
-worker thread beside the other candidates) and the move time it places the table at (`placed`).
+target, and its certificate (`jaxbelt.shaping.certificate`); where it runs and the move time it places the table at
+(`solving`: at a given move time in a worker thread beside the timed candidates, else here, at the shortest time
+that reaches the best classic row).
 
 A lower-level module of the minimax rows (`jaxbelt.shaping.minimax_rows`): it designs and certifies, measures no row.
 """

@@ -94,10 +94,13 @@ one more compiled LP (about 10 s for a 5.5 Hz mode within 1 %; a minute or more 
 **The pipeline.** `design_move` composes one module per stage, each taking the checked request
 (`jaxbelt.shaping.request.MoveRequest`) and the previous stage's output: validate (`request`: every check, and every
 quantity derived from the arguments once: the judged and nominal axes as checked arrays, the minimax LP's setup with
-its programs started compiling, the unshaped moves and their references) → build the candidates (`candidates`; the
-shaped moves in `shaped`) → measure them the same way (`measure`) → the minimax rows (`minimax_rows`: solved and
-certified in one call of `minimax_solve`, the command space in `hull`) → rank (`rank`). The stages take plain data
-from the request: none re-enters the axis' checks or an earlier stage.
+its programs started compiling, the unshaped moves and their references) → build the classic shapers' candidates
+(`shaped`) and measure them (`measure`) → place the common move time and solve the minimax design
+(`minimax_solve.solving`: at a given time in a worker thread beside the next two stages, else at the shortest time
+that reaches the best classic row) → build the candidates of that time (`candidates`) and measure them the same way
+(`measure`) → the minimax rows (`minimax_rows`: the design's rows, the design with jumps, the command space in
+`hull`) → rank (`rank`). The stages take plain data from the request: none re-enters the axis' checks or an earlier
+stage.
 """
 
 import csv
