@@ -536,7 +536,8 @@ def design_move(
         built = timed_commands(req, T)
         timed = measure_rows(req, built)
         minimax, mm, bound = minimax_rows(req, design, T)
-    rows = [_within_range(r, req.distance, req.x_range, req.rate_hz) for r in (*classic, *minimax, *timed)]
+    rows = classic + minimax + timed
+    rows = [_within_range(r, req.distance, req.x_range, req.rate_hz) for r in rows]
     table, best = rank(rows)  # as executed, on the travel
     user, per, ref, damped = req.user, req.per, req.ref, req.damping is not None
     return MovePlan(axis=user, distance=req.distance, move_time=T, v_max=req.v_max, a_max=req.a_max, j_max=req.j_max,
