@@ -8,7 +8,8 @@ from references import modal_residual_reference
 
 import jaxbelt as jb
 from jaxbelt.shaping import residual as R
-from jaxbelt.shaping.moves import PiecewiseMove, blend_moves, fastest_move, shape_move
+from jaxbelt.shaping.hull import blend_moves
+from jaxbelt.shaping.moves import PiecewiseMove, fastest_move, shape_move
 from jaxbelt.shaping.shapers import shaper_for_axis
 
 AXIS = jb.ModalAxis([3.1, 9.7, 17.0], [0.03, 0.02, 0.01], [1.0, 0.5, 2.0])

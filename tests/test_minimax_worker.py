@@ -1,14 +1,14 @@
 """`design_move` at a given move time solves the minimax LP in a worker thread beside the other candidates
-(`jaxbelt.shaping.minimax_rows.solving`). The table must be the one the same call makes with the LP solved in line,
+(`jaxbelt.shaping.minimax_solve.solving`). The table must be the one the same call makes with the LP solved in line,
 an error in either thread must reach the caller, and no LP may outlive the call."""
 
-import contextlib
+import concurrent.futures
 
 import numpy as np
 import pytest
 
 import jaxbelt as jb
-from jaxbelt.shaping import minimax_rows as mr
+from jaxbelt.shaping import minimax_solve as ms
 from jaxbelt.shaping import plan
 
 pytestmark = pytest.mark.slow  # a first design_move compiles its programs (~10 s)
@@ -17,10 +17,13 @@ AXIS = ([6.0], [0.02])
 KW = dict(v_max=0.3, a_max=1.2, uncertainty=0.2)
 
 
-@contextlib.contextmanager
-def _in_line(req, ref):
-    """`solving` that starts nothing: `minimax_rows` then solves the LP itself, in the caller's thread."""
-    yield None
+class _InLine:
+    """An executor that runs its work at `submit`, in the caller's thread: the LP solved in line."""
+
+    def submit(self, fn, *args, **kwargs):
+        fut: concurrent.futures.Future = concurrent.futures.Future()
+        fut.set_result(fn(*args, **kwargs))
+        return fut
 
 
 def _table(p):
@@ -33,7 +36,7 @@ def test_the_worker_makes_the_table_of_the_lp_solved_in_line(monkeypatch):
     programs on the same inputs: equal to the last bit)."""
     ax = jb.ModalAxis(*AXIS)
     threaded = jb.design_move(ax, 0.1, 1.0, **KW)
-    monkeypatch.setattr(plan, "solving", _in_line)
+    monkeypatch.setattr(ms, "_WORKER", _InLine())
     in_line = jb.design_move(ax, 0.1, 1.0, **KW)
     assert _table(threaded) == _table(in_line)
     assert threaded.best.name == in_line.best.name
@@ -43,14 +46,14 @@ def test_the_worker_makes_the_table_of_the_lp_solved_in_line(monkeypatch):
 def _recording_submit(monkeypatch):
     """Record the futures the worker is given."""
     futures = []
-    submit = mr._WORKER.submit
+    submit = ms._WORKER.submit
 
     def record(*args, **kwargs):
         fut = submit(*args, **kwargs)
         futures.append(fut)
         return fut
 
-    monkeypatch.setattr(mr._WORKER, "submit", record)
+    monkeypatch.setattr(ms._WORKER, "submit", record)
     return futures
 
 
@@ -61,7 +64,7 @@ def test_an_error_in_the_worker_reaches_the_caller(monkeypatch):
         raise RuntimeError("the LP failed here")
 
     futures = _recording_submit(monkeypatch)
-    monkeypatch.setattr(mr, "solve", failing)
+    monkeypatch.setattr(ms, "solve", failing)
     with pytest.raises(RuntimeError, match="the LP failed here"):
         jb.design_move(jb.ModalAxis(*AXIS), 0.1, 1.0, **KW)
     assert len(futures) == 1 and futures[0].done()
@@ -72,8 +75,13 @@ def test_an_error_beside_the_worker_waits_for_it(monkeypatch):
     cancelled): no LP runs on after `design_move` has returned."""
     futures = _recording_submit(monkeypatch)
 
-    def failing(*args, **kwargs):
-        raise ValueError("a candidate failed here")
+    measure_rows, calls = plan.measure_rows, []
+
+    def failing(req, built):  # the classic rows (before the LP starts) measured; the timed ones fail
+        calls.append(len(built))
+        if len(calls) > 1:
+            raise ValueError("a candidate failed here")
+        return measure_rows(req, built)
 
     monkeypatch.setattr(plan, "measure_rows", failing)
     with pytest.raises(ValueError, match="a candidate failed here"):
@@ -118,11 +126,11 @@ def test_a_forked_child_has_a_worker_of_its_own():
     import os
     import time
 
-    mr._WORKER.submit(int).result(timeout=30)  # the parent's worker thread has started
+    ms._WORKER.submit(int).result(timeout=30)  # the parent's worker thread has started
     pid = os.fork()
     if pid == 0:  # the child: no JAX here, only the executor
         try:
-            ok = mr._WORKER.submit(int, 7).result(timeout=10) == 7
+            ok = ms._WORKER.submit(int, 7).result(timeout=10) == 7
         except BaseException:  # noqa: BLE001 - any failure is the child's exit status
             ok = False
         os._exit(0 if ok else 1)

@@ -4,15 +4,17 @@ stage a module that imports only the modules below it, and `design_move` a short
 import ast
 from pathlib import Path
 
+import pytest
+
 SHAPING = Path(__file__).resolve().parents[1] / "jaxbelt" / "shaping"
 
 #: the pipeline's modules from the bottom up: each may import only the ones before it (among these)
 ORDER = (
     "bands",
-    "shaped",
     "hull",
     "far_modes",
     "request",
+    "shaped",
     "certificate",
     "minimax_solve",
     "candidates",
@@ -117,3 +119,33 @@ def test_convolved_is_shape_move_without_its_checks():
         np.testing.assert_array_equal(np.asarray(getattr(a, name)), np.asarray(getattr(b, name)))
     with pytest.raises(ValueError, match="amplitudes"):
         shape_move(base, np.array([0.6, 0.6]), tau)
+
+
+@pytest.mark.slow  # compiles the curve programs of five command kinds (~10 s)
+def test_closed_curve_is_measured_curve_for_every_candidate_kind():
+    """`residual.closed_curve` (the pipeline's curve: no ODE branch, the quadrature's poles on the host) gives
+    `measured_curve`'s numbers to the last bit for every kind of command the pipeline measures: a piecewise move
+    (plain and shaped), a spline, a blend of both, a pseudo-polynomial (plain and shaped), on the band's 401 factors
+    (padded to a slot) and on 9 (not padded)."""
+    import numpy as np
+
+    import jaxbelt as jb
+    from jaxbelt.commands import PseudoPolynomial, ShapedCommand
+    from jaxbelt.shaping.hull import blend_moves
+    from jaxbelt.shaping.moves import SplineMove, convolved, fastest_move
+    from jaxbelt.shaping.residual import closed_curve, measured_curve
+
+    axis = jb.ModalAxis([7.3, 18.0], [0.015, 0.01], [1.0, -0.5])
+    base = fastest_move(0.1, 0.3, 1.2)
+    T = float(base.duration)
+    shaped = convolved(base, np.array([0.6, 0.4]), np.array([0.0, 0.05]))
+    coef = np.sin(np.arange(13.0))
+    spline = SplineMove(coef - coef.mean(), T)
+    pseudo = PseudoPolynomial(np.array([3.0, 4.0, 5.0]), 0.1, T)
+    cmds = (base, shaped, spline, blend_moves([spline, base], [0.3, 0.7]), pseudo)
+    cmds += (ShapedCommand(pseudo, np.array([0.0, 0.05]), np.array([0.5, 0.5])),)
+    for factors in (np.linspace(0.8, 1.2, 401), np.linspace(0.9, 1.1, 9)):
+        for cmd in cmds:
+            got = closed_curve(axis, cmd, factors)
+            assert isinstance(got, np.ndarray) and got.shape == (2, factors.size)
+            np.testing.assert_array_equal(got, np.asarray(measured_curve(axis, cmd, factors)))

@@ -125,7 +125,8 @@ def test_position_range():
     """A command that backs off behind its start: a = -a0 on [0, tau], +a0 on [tau, 3 tau], -a0 on [3 tau, 4 tau]
     (zero net distance) lowest at x(2 tau) = -a0 tau^2; added to a trapezoid that ends later, the whole is noted
     as leaving the segment, and marked not ok where it leaves `x_min`."""
-    from jaxbelt.shaping.moves import PiecewiseMove, blend_moves
+    from jaxbelt.shaping.hull import blend_moves
+    from jaxbelt.shaping.moves import PiecewiseMove
     from jaxbelt.shaping.plan import _row, _within_range
 
     a0, tau, d = 4.0, 0.05, 0.1

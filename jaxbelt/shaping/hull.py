@@ -30,7 +30,7 @@ import numpy as np
 
 from .. import _xla
 from ..models.axis import ModalAxis
-from .moves import BlendMove, PiecewiseMove, derivatives_at, piecewise_derivatives
+from .moves import BlendMove, PiecewiseMove, SplineMove, derivatives_at, piecewise_derivatives
 
 #: angles of the modulus' polygon in the blend's programme (|r| <= t to within 1/cos(pi/32) - 1 = 0.5 %)
 _ANGLES = 32
@@ -46,6 +46,36 @@ _LP_COLUMNS = 16
 _BLOCK = 4096
 #: the drive's interpolation of its setpoints that `executed_integral` models
 INTERPOLATIONS = ("linear",)
+
+
+def blend_moves(members, weights) -> "PiecewiseMove | SplineMove | BlendMove":
+    """$\\sum_m w_m$ `members[m]` (moves of one duration). A single member of weight 1 is returned as is; otherwise the
+    `PiecewiseMove` members are merged into one (their terms, scaled, padded to a power of two: blends of one axis
+    size share their compiled programs), returned as is when every member is one, else as the last member of a
+    `BlendMove` with the others."""
+    w = np.asarray(weights, dtype=float)
+    keep = [i for i in range(w.size) if w[i] != 0.0]
+    if len(keep) == 1 and w[keep[0]] == 1.0:
+        return members[keep[0]]
+    pieces = [(w[i], members[i]) for i in keep if isinstance(members[i], PiecewiseMove)]
+    others = [(w[i], members[i]) for i in keep if not isinstance(members[i], PiecewiseMove)]
+    parts, ws = [m for _, m in others], [wi for wi, _ in others]
+    if pieces:
+        # in numpy (no eager JAX operation to compile), padded with zero terms at t = 0
+        times = np.concatenate([np.asarray(m.times) for _, m in pieces])
+        size = 1 << max(times.size - 1, 1).bit_length()
+        pad = np.zeros(size - times.size)
+        merged = PiecewiseMove(
+            np.concatenate([times, pad]),
+            np.concatenate([*(wi * np.asarray(m.steps) for wi, m in pieces), pad]),
+            np.concatenate([*(wi * np.asarray(m.ramps) for wi, m in pieces), pad]),
+            pieces[0][1].duration,
+        )
+        if not others:
+            return merged
+        parts.append(merged)
+        ws.append(1.0)
+    return BlendMove(tuple(parts), np.asarray(ws), parts[0].duration)
 
 
 def sample_times(duration: float, rate_hz: float) -> np.ndarray:

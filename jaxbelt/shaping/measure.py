@@ -10,19 +10,14 @@ from typing import Any
 
 import numpy as np
 
-from ..commands import AbstractMotionCommand, PseudoPolynomial
+from ..commands import AbstractMotionCommand
 from .bands import _N_WIDE as _N_WIDE
 from .bands import _WIDE as _WIDE
 from .bands import JUMPS, measure_grids, mode_label
-from .hull import best_blend, positions, sample_times
-from .moves import (
-    PiecewiseMove,
-    blend_moves,
-    padded,
-    peaks,
-)
+from .hull import best_blend, blend_moves, positions, sample_times
+from .moves import PiecewiseMove, padded, peaks
 from .request import MoveRequest
-from .residual import measured_curve, tolerance_band
+from .residual import closed_curve, tolerance_band
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,22 +66,18 @@ class Candidate:
         return d
 
 
-def _measure(axis, cmd, ref, u, limits, per: int = 1, size: int = 0) -> tuple[Any, dict[str, Any], bool, Any]:
+def _measure(axis, cmd, ref, u, limits, per: int = 1, size: int = 0, pk=None) -> tuple[Any, dict[str, Any], bool, Any]:
     """The table's numbers for one command (`per`: damping copies of each user mode in `axis`), a `PiecewiseMove`
     padded to `size` terms first: `(command, numbers, within the limits, worst ratio over the band per mode of
-    `axis`)`."""
+    `axis`)`. `pk`: the command's `(peak |v|, peak |a|, peak |jerk|)` where its builder measured them (a
+    pseudo-polynomial's design: on 20001 instants on the host), else measured here (`moves.peaks`)."""
     if isinstance(cmd, PiecewiseMove):  # shaped on the user's modes: padded to their size
         cmd = padded(cmd, size)
-    if isinstance(cmd, PseudoPolynomial):  # the same 20001 instants on the host: no program call
-        from .pseudo import _peaks_np  # (not at import: it brings optax)
-
-        pv, pa, pj = (float(x) for x in _peaks_np(np.asarray(cmd.gammas), float(cmd.displacement), float(cmd.duration)))
-    else:
-        pv, pa, pj = peaks(cmd)
+    pv, pa, pj = peaks(cmd) if pk is None else pk
     band, wide = measure_grids(u)
-    res = np.asarray(measured_curve(axis, cmd, band))  # (modes, K)
+    res = np.asarray(closed_curve(axis, cmd, band))  # (modes, K)
     ratio = res / ref[:, None]
-    wr = np.asarray(measured_curve(axis, cmd, wide)) / ref[:, None]
+    wr = np.asarray(closed_curve(axis, cmd, wide)) / ref[:, None]
     f = np.asarray(axis.frequencies)
     bands = []
     for i in range(0, axis.n_modes, per):
@@ -124,10 +115,10 @@ def _pad_size(n_modes: int, jerk: bool, terms: int) -> int:
     return 1 << max(int(terms) - 1, 1).bit_length()
 
 
-def _row(name, axis, cmd, T, ref, u, limits, note="", ok=True, per: int = 1, left_out=()):
-    """One candidate measured on `axis` (with `per` damping copies of each of the user's modes); its note then
-    names the modes `left_out` (`(index, why)` pairs: those a minimax design's LP left out) with their residual,
-    computed exactly for this command."""
+def _row(name, axis, cmd, T, ref, u, limits, note="", ok=True, per: int = 1, left_out=(), pk=None):
+    """One candidate measured on `axis` (with `per` damping copies of each of the user's modes; `pk`: its peaks
+    where its builder measured them, `_measure`); its note then names the modes `left_out` (`(index, why)` pairs:
+    those a minimax design's LP left out) with their residual, computed exactly for this command."""
     n_user = axis.n_modes // per
     size = _pad_size(n_user, limits[2] is not None, cmd.times.shape[0]) if isinstance(cmd, PiecewiseMove) else 0
     if cmd is None:
@@ -135,7 +126,7 @@ def _row(name, axis, cmd, T, ref, u, limits, note="", ok=True, per: int = 1, lef
         return Candidate(
             name, None, T, nan, nan, nan, tuple((nan, nan) for _ in range(n_user)), nan, nan, nan, False, note
         )
-    cmd, m, within, mode_worst = _measure(axis, cmd, ref, u, limits, per, size)
+    cmd, m, within, mode_worst = _measure(axis, cmd, ref, u, limits, per, size, pk)
     if not within:
         ok = False
         note = (note + "; " if note else "") + "exceeds the limits"
@@ -149,22 +140,30 @@ def _row(name, axis, cmd, T, ref, u, limits, note="", ok=True, per: int = 1, lef
     return Candidate(name, cmd, float(T), ok=ok, note=note, **m)
 
 
-def design_row(name: str, mm, T: float, note: str, ok: bool, far, req: MoveRequest, ref) -> Candidate:
+def design_row(name: str, mm, T: float, note: str, ok: bool, far, req: MoveRequest) -> Candidate:
     """The table row of a minimax design `mm` (`note`, `ok`: its certificate, `certificate.certificate`; None: no
     design at move time `T` [s], `note` says why), measured as every candidate is (`_row`), its note then naming the
     modes its LP left out (`far`, a `far_modes._FarModes`) with their residual, computed exactly for this command."""
     cmd, T = (None, T) if mm is None else (mm.command, float(mm.command.duration))
-    return _row(name, req.axis, cmd, T, ref, req.uncertainty, req.limits, note, ok, req.per, far.left_out)
+    return _row(name, req.axis, cmd, T, req.ref, req.uncertainty, req.limits, note, ok, req.per, far.left_out)
 
 
-def blended_rows(req: MoveRequest, ref, rows: list, space: dict) -> list:
+def blended_rows(req: MoveRequest, rows: list, space: dict) -> list:
     """`rows` with each minimax row replaced by the least worst residual, as executed at `req.rate_hz` [Hz], of the
     blends of its design with the designs with jumps of the table and the members of `space`
     (`shaped.shaped_members`; `jaxbelt.shaping.hull`): at most what each of them leaves, by construction. The row's
     note says which blend it is. A minimax row whose design is infeasible or did not converge is kept as it is (not
     ok, its note says why): a blend of the other candidates alone is not that design, and the table shows those
     candidates' own rows."""
-    axis, u, limits, per, band, rate = req.axis, req.uncertainty, req.limits, req.per, req.band, req.rate_hz
+    axis, ref, u, limits, per, band, rate = (
+        req.axis,
+        req.ref,
+        req.uncertainty,
+        req.limits,
+        req.per,
+        req.band,
+        req.rate_hz,
+    )
     designs = {r.name: r.command for r in rows if r.name in ("minimax", JUMPS) and r.ok and r.command is not None}
     out = []
     for r in rows:
@@ -213,8 +212,8 @@ def _within_range(row, d: float, x_range, rate: float):
     return dataclasses.replace(row, ok=ok, note="; ".join([row.note, *notes] if row.note else notes))
 
 
-def measure_rows(req: MoveRequest, ref, built) -> list:
-    """Every built candidate measured the same way (`_row`) on `req.axis` against the references `ref` [m]:
-    `built` holds `(name, command or None, move time [s], note, ok)` (`jaxbelt.shaping.candidates`)."""
-    axis, u, limits, per = req.axis, req.uncertainty, req.limits, req.per
-    return [_row(name, axis, cmd, T, ref, u, limits, note, ok, per) for name, cmd, T, note, ok in built]
+def measure_rows(req: MoveRequest, built) -> list:
+    """Every built candidate measured the same way (`_row`) on `req.axis` against the references `req.ref` [m]:
+    `built` holds `(name, command or None, move time [s], note, ok, peaks or None)` (`jaxbelt.shaping.candidates`)."""
+    axis, ref, u, limits, per = req.axis, req.ref, req.uncertainty, req.limits, req.per
+    return [_row(name, axis, cmd, T, ref, u, limits, note, ok, per, (), pk) for name, cmd, T, note, ok, pk in built]

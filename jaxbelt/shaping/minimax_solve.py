@@ -1,12 +1,18 @@
-"""Solve the minimax design (`jaxbelt.shaping.design`) for `design_move`'s minimax rows, in one call (`solve`): its
+"""Solve the minimax design (`jaxbelt.shaping.design`) for `design_move`'s minimax rows: in one call (`solve`) its
 LP's setup, its solver, the design at a move time (with its feasibility) or at the shortest time that reaches a
-target, and its certificate (`jaxbelt.shaping.certificate`).
+target, and its certificate (`jaxbelt.shaping.certificate`); where it runs and the move time it places the table at
+(`solving`: at a given move time in a worker thread beside the timed candidates, else here, at the shortest time
+that reaches the best classic row).
 
 A lower-level module of the minimax rows (`jaxbelt.shaping.minimax_rows`): it designs and certifies, measures no row.
 """
 
+import concurrent.futures
+import contextlib
 import math
+import os
 
+import jax
 import numpy as np
 
 from . import design as _design
@@ -14,10 +20,73 @@ from .certificate import certificate
 from .far_modes import lp_setup
 from .request import SURELY_FEASIBLE, MoveRequest
 
+#: the thread the minimax LP at a given move time runs in, beside the other candidates (`solving`): the LP is the
+#: longest stage of a design and needs nothing they compute; XLA releases the GIL while it runs and compiles, so on
+#: two cores the two overlap (a warm 3-mode design 2.5 s -> 1.7 s, a first call 18 s -> 12 s). Created at import,
+#: its thread starts at the first submit; a forked child makes its own (a parent's executor never runs the child's
+#: work: `design_move` would wait for it forever).
+_WORKER: concurrent.futures.ThreadPoolExecutor
 
-def solve(req: MoveRequest, ref, T: float | None, *, jumps: bool = False, T_guess: float = math.nan,
+
+def _new_worker() -> None:
+    global _WORKER
+    _WORKER = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="jaxbelt-minimax")
+
+
+_new_worker()
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_new_worker)
+
+
+def _in_callers_context(fun, *args):
+    """`fun(*args)` as a thread of its own would run it under the caller's JAX settings: the 64-bit mode and the
+    default device, which a `with jax.enable_x64(True):` or `with jax.default_device(d):` block sets for the
+    caller's thread only (read here, in the caller's thread; re-entered in the worker's)."""
+    x64, device = bool(jax.enable_x64.value), jax.default_device.value
+
+    def run():
+        with jax.enable_x64(x64), jax.default_device(device):
+            return fun(*args)
+
+    return run
+
+
+@contextlib.contextmanager
+def solving(req: MoveRequest, classic: list):
+    """The move time [s] of the timed candidates and the minimax rows, and the minimax design, for the block: yields
+    `(T, future of solve's result)` (no future without "minimax" in `req.include`).
+
+    - at a given move time: that time, and `solve(req, T)` running in the worker thread (`_WORKER`) beside the
+      other candidates (its result is waited for by `minimax_rows`, after them). On leaving the block (also on an
+      error) the solve is cancelled if it has not started, and waited for if it has: no LP outlives the call, none
+      runs outside its BLAS limit. The worker runs under the caller's 64-bit mode and default device
+      (`_in_callers_context`);
+    - with `move_time` None: the design at the shortest time whose worst residual reaches the best usable row of
+      `classic` (the measured classic rows; searched from the shortest of their times), solved here, and its time;
+      without a design, the shortest usable classic row's time (twice the time-optimal move's without one)."""
+    usable = [r for r in classic if r.ok]
+    fallback = min((r.move_time for r in usable), default=2 * req.t_min)
+    if "minimax" not in req.include:
+        yield (fallback if req.move_time is None else req.move_time), None
+        return
+    if req.move_time is not None:
+        fut = _WORKER.submit(_in_callers_context(solve, req, req.move_time))
+        try:
+            yield req.move_time, fut
+        finally:
+            if not fut.cancel():
+                concurrent.futures.wait([fut])
+        return
+    target = min((r.worst_percent for r in usable), default=math.nan)
+    done: concurrent.futures.Future = concurrent.futures.Future()  # solved here, in the caller's thread
+    done.set_result(solve(req, None, T_guess=fallback, target=target))
+    mm = done.result()[2][0]
+    yield (fallback if mm is None else float(mm.command.duration)), done
+
+
+def solve(req: MoveRequest, T: float | None, *, jumps: bool = False, T_guess: float = math.nan,
           target: float = math.nan):  # fmt: skip
-    """The minimax design of `req` against the references `ref` [m], in one call: its LP's setup (`req.lp`, or
+    """The minimax design of `req` against its references `req.ref` [m], in one call: its LP's setup (`req.lp`, or
     `far_modes.lp_setup` at `T_guess` [s] where the shortest time is searched; with `jumps`, the design with jumps
     at `T`, keeping every mode the spline's LP keeps), its solver, and the design at move time `T` [s]
     (`MinimaxSolver.at`; the feasibility LP skipped well above the time-optimal move's) or, with `T` None, at the
@@ -31,7 +100,7 @@ def solve(req: MoveRequest, ref, T: float | None, *, jumps: bool = False, T_gues
         setup = req.lp if req.lp is not None else lp_setup(req.axis, T_guess, u, j, False, req.smooth, req.per)
         clearly = req.clearly
     solver = _design.MinimaxSolver(
-        setup.lp_axis, req.distance, req.v_max, req.a_max, j, u, np.asarray(ref)[setup.kept], setup.opts
+        setup.lp_axis, req.distance, req.v_max, req.a_max, j, u, np.asarray(req.ref)[setup.kept], setup.opts
     )
     if T is None:
         mm, t_f = solver.shortest(req.t_min, target), math.nan

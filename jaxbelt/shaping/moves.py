@@ -260,7 +260,7 @@ class BlendMove(AbstractMotionCommand):
       distance, rests at both ends, and its peak |v|, |a|, |jerk| are at most the largest member's (the limits are
       convex), while its residual integral is the same sum of theirs, $W(s) = \\sum_m w_m W_m(s)$.
 
-    Build one with `blend_moves`, which returns a plain `PiecewiseMove` when every member is one."""
+    Build one with `jaxbelt.shaping.hull.blend_moves`, which returns a plain `PiecewiseMove` when every member is one."""
 
     array_fields: ClassVar[tuple[str, ...]] = ("weights",)
 
@@ -290,36 +290,6 @@ class BlendMove(AbstractMotionCommand):
     def sample(self, rate_hz: float):
         """`(t, x, v, a)` numpy arrays sampled every `1 / rate_hz` seconds (`AbstractMotionCommand.sample`)."""
         return _sample(self, rate_hz)
-
-
-def blend_moves(members, weights) -> "PiecewiseMove | SplineMove | BlendMove":
-    """$\\sum_m w_m$ `members[m]` (moves of one duration). A single member of weight 1 is returned as is; otherwise the
-    `PiecewiseMove` members are merged into one (their terms, scaled, padded to a power of two: blends of one axis
-    size share their compiled programs), returned as is when every member is one, else as the last member of a
-    `BlendMove` with the others."""
-    w = np.asarray(weights, dtype=float)
-    keep = [i for i in range(w.size) if w[i] != 0.0]
-    if len(keep) == 1 and w[keep[0]] == 1.0:
-        return members[keep[0]]
-    pieces = [(w[i], members[i]) for i in keep if isinstance(members[i], PiecewiseMove)]
-    others = [(w[i], members[i]) for i in keep if not isinstance(members[i], PiecewiseMove)]
-    parts, ws = [m for _, m in others], [wi for wi, _ in others]
-    if pieces:
-        # in numpy (no eager JAX operation to compile), padded with zero terms at t = 0
-        times = np.concatenate([np.asarray(m.times) for _, m in pieces])
-        size = 1 << max(times.size - 1, 1).bit_length()
-        pad = np.zeros(size - times.size)
-        merged = PiecewiseMove(
-            np.concatenate([times, pad]),
-            np.concatenate([*(wi * np.asarray(m.steps) for wi, m in pieces), pad]),
-            np.concatenate([*(wi * np.asarray(m.ramps) for wi, m in pieces), pad]),
-            pieces[0][1].duration,
-        )
-        if not others:
-            return merged
-        parts.append(merged)
-        ws.append(1.0)
-    return BlendMove(tuple(parts), np.asarray(ws), parts[0].duration)
 
 
 # --------------------------------------------------------------------------------------------

@@ -94,10 +94,13 @@ one more compiled LP (about 10 s for a 5.5 Hz mode within 1 %; a minute or more 
 **The pipeline.** `design_move` composes one module per stage, each taking the checked request
 (`jaxbelt.shaping.request.MoveRequest`) and the previous stage's output: validate (`request`: every check, and every
 quantity derived from the arguments once: the judged and nominal axes as checked arrays, the minimax LP's setup with
-its programs started compiling, the unshaped moves and their references) → build the candidates (`candidates`; the
-shaped moves in `shaped`) → measure them the same way (`measure`) → the minimax rows (`minimax_rows`: solved and
-certified in one call of `minimax_solve`, the command space in `hull`) → rank (`rank`). The stages take plain data
-from the request: none re-enters the axis' checks or an earlier stage.
+its programs started compiling, the unshaped moves and their references) → build the classic shapers' candidates
+(`shaped`) and measure them (`measure`) → place the common move time and solve the minimax design
+(`minimax_solve.solving`: at a given time in a worker thread beside the next two stages, else at the shortest time
+that reaches the best classic row) → build the candidates of that time (`candidates`) and measure them the same way
+(`measure`) → the minimax rows (`minimax_rows`: the design's rows, the design with jumps, the command space in
+`hull`) → rank (`rank`). The stages take plain data from the request: none re-enters the axis' checks or an earlier
+stage.
 """
 
 import csv
@@ -112,7 +115,7 @@ from .._io import IMAGE_FORMATS, atomic_open, check_output_path, save_figure
 from .._threads import blas_limited
 from ..models.axis import ModalAxis
 from .bands import _N_WIDE, _WIDE
-from .candidates import classic_commands, common_time, timed_commands
+from .candidates import timed_commands
 from .certificate import CERTIFY_ATOL as CERTIFY_ATOL  # noqa: E402
 from .certificate import CERTIFY_MAX_STEPS as CERTIFY_MAX_STEPS  # noqa: E402
 from .far_modes import _far_modes as _far_modes  # noqa: E402
@@ -123,7 +126,8 @@ from .measure import Candidate, _within_range, measure_rows
 from .measure import _row as _row  # noqa: E402
 from .minimax_rows import JUMPS as JUMPS  # noqa: E402
 from .minimax_rows import _smooth_certificate as _smooth_certificate  # noqa: E402
-from .minimax_rows import minimax_rows, solving
+from .minimax_rows import minimax_rows
+from .minimax_solve import solving
 from .moves import (
     SplineMove,
     executable_samples,
@@ -138,6 +142,7 @@ from .request import UNKNOWN_SHAPER_DAMPING as UNKNOWN_SHAPER_DAMPING  # noqa: E
 from .request import damping_samples as damping_samples  # noqa: E402
 from .request import validate
 from .residual import residual_curve
+from .shaped import classic_commands
 from .shapers import SHAPERS
 
 #: units of the sampled move (`MovePlan.samples_to_pandas`)
@@ -525,18 +530,16 @@ def design_move(
     req = validate(axis, distance, move_time, v_max=v_max, a_max=a_max, j_max=j_max, uncertainty=uncertainty,
                    include=include, progress=progress, smooth=smooth, certify_rtol=certify_rtol, damping=damping,
                    rate_hz=rate_hz, interpolation=interpolation, x_min=x_min, x_max=x_max)  # fmt: skip
-    classic = classic_commands(req)
-    ref, ref_nominal = req.ref, req.ref_nominal
-    with solving(req, ref) as solved:  # the minimax LP at a given move time runs beside the other candidates
-        rows = measure_rows(req, ref, classic)
-        T0 = req.move_time
-        timed = None if T0 is None else measure_rows(req, ref, timed_commands(req, ref_nominal, T0))
-        minimax, mm, bound = minimax_rows(req, ref, rows, solved) if "minimax" in req.include else ([], None, math.nan)
-    T = common_time(req, mm, rows)
-    rows += minimax + (timed if timed is not None else measure_rows(req, ref, timed_commands(req, ref_nominal, T)))
-    rows = [_within_range(r, req.distance, req.x_range, req.rate_hz) for r in rows]  # as executed, on the travel
-    table, best = rank(rows)
-    user, per, damped = req.user, req.per, req.damping is not None
+    built = classic_commands(req)
+    classic = measure_rows(req, built)
+    with solving(req, classic) as (T, design):  # at a given move time the minimax LP runs beside the candidates
+        built = timed_commands(req, T)
+        timed = measure_rows(req, built)
+        minimax, mm, bound = minimax_rows(req, design, T)
+    rows = classic + minimax + timed
+    rows = [_within_range(r, req.distance, req.x_range, req.rate_hz) for r in rows]
+    table, best = rank(rows)  # as executed, on the travel
+    user, per, ref, damped = req.user, req.per, req.ref, req.damping is not None
     return MovePlan(axis=user, distance=req.distance, move_time=T, v_max=req.v_max, a_max=req.a_max, j_max=req.j_max,
                     uncertainty=req.uncertainty, table=table, best=best, minimax=mm, continuous_bound=bound,
                     reference_m=ref if per == 1 else ref.reshape(user.n_modes, per).max(axis=1), damping=req.damping,

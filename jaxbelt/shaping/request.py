@@ -27,7 +27,7 @@ from .moves import (
     fastest_move,
     fastest_time,
 )
-from .residual import measured_curve
+from .residual import closed_curve
 from .shapers import SHAPERS
 
 #: damping samples per mode with `design_move(..., damping=(lo, hi))`: the worst residual of a design over the damping
@@ -282,7 +282,7 @@ def validate(axis, distance, move_time, *, v_max, a_max, j_max, uncertainty, inc
             prepare_lp(lp, d, float(v_max), float(a_max), j, u, T)
     ref_cmd, band = fastest_move(d, float(v_max), float(a_max), j), band_factors(u)
     both = per > 1 and "pseudo-polynomial" in include  # the pseudo-polynomials' references at the nominal damping
-    curves = [measured_curve(axis, ref_cmd, band) for axis in (judged, nominal)[: 1 + both]]
+    curves = [closed_curve(axis, ref_cmd, band) for axis in (judged, nominal)[: 1 + both]]
     ref, ref_nominal = (np.max(np.asarray(curves[k]), axis=1) for k in (0, -1))
     return MoveRequest(
         user=axis,

@@ -217,6 +217,31 @@ def measured_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors) -> np.n
     return np.asarray(_curve(axis, cmd, padded_factors(r), 1e-10, 1e-14, n_used=r.shape[0]))[:, : r.shape[0]]
 
 
+def closed_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors) -> np.ndarray:
+    """`measured_curve(axis, cmd, factors)` [m] for a command with a closed-form residual (every command the design
+    pipeline measures: piecewise moves, splines, their blends, pseudo-polynomials, each maybe shaped) on a concrete
+    axis: the same numbers by the same programs (`_curve`'s closed-form part), a numpy array (n_modes,
+    len(factors)). The quadrature's node count is decided on the poles computed in numpy (`_host_poles`' host
+    branch: the pipeline's axes are concrete), and no ODE fallback is reachable: a `TypeError` names the command
+    otherwise."""
+    if not _has_closed_form(cmd):
+        raise TypeError(f"closed_curve: {type(cmd).__name__} has no closed-form residual (use `residual_curve`)")
+    r = np.atleast_1d(np.asarray(factors, dtype=float))
+    n, rp = r.shape[0], padded_factors(r)
+    pseudo = cmd.base if isinstance(cmd, ShapedCommand) else cmd
+    if isinstance(pseudo, PseudoPolynomial):
+        shaper = (cmd.times, cmd.amplitudes) if isinstance(cmd, ShapedCommand) else None
+        w = 2.0 * np.pi * np.asarray(axis.frequencies, dtype=float)[:, None] * r[None, :]
+        z = np.asarray(axis.damping_ratios, dtype=float)[:, None]
+        n_nodes = _curve_nodes(pseudo, -z * w + 1j * (w * np.sqrt(1.0 - z**2)))
+        rule = tuple(jax.device_put(x) for x in _rule(n_nodes))  # data: one program per node count
+        return np.asarray(_pseudo_curve(axis, padded_pseudo(pseudo), shaper, rp, rule))[:, :n]
+    cmd = padded_command(cmd)  # a spline of any knot count of its slot: one program (`moves.INTERVAL_SLOT`)
+    grid = _uniform_grid(axis, cmd, rp)
+    out = _grid_curve(axis, cmd, *grid) if grid is not None else _closed_form_curve(axis, cmd, rp, 0)
+    return np.asarray(out)[:, :n]
+
+
 #: `measured_curve`'s factor grids of more than 64 factors are padded to a multiple of this
 FACTOR_SLOT = 256
 

@@ -1,13 +1,17 @@
 """Shaped moves of a given end time: a classic shaper's impulses convolved with the gentlest base move that ends
-there, and the set of such moves (with the unshaped move) that the minimax design's command space holds.
+there; the classic shapers' rows of `design_move`'s table (`classic_commands`, the first candidates built: at a
+given move time or each at its own), and the set of such moves (with the unshaped move) that the minimax design's
+command space holds (`shaped_members`).
 
-A lower-level module of the pipeline: it builds commands only (no measuring); the candidates and the minimax rows
-both take their shaped moves from here.
+It builds commands only (no measuring): `jaxbelt.shaping.measure` measures them, the minimax rows blend them.
 """
+
+import math
 
 import numpy as np
 
 from .moves import _trapezoid_move, convolved, peaks
+from .request import MoveRequest
 from .shapers import SHAPERS, ShaperRangeError, shaper_for_axis
 
 
@@ -41,18 +45,38 @@ def gentlest_shaped(name: str, axis, distance, T, t_min, v_max, a_max, j_max):
     return cmd, T, t_short
 
 
+def shaped_moves(axis, distance, T, t_min, v_max, a_max, j_max, names=SHAPERS) -> dict:
+    """Every classic shaper of `names` on the gentlest base that ends at `T` [s] (`gentlest_shaped`; with `T` None at
+    its own shortest time), and, at a given `T`, the gentlest trapezoid (S-curve) of `T` (a relative 1e-9 of `a_max`
+    spared, so that a move at the time-optimal time is built), as `"unshaped"`: `{name: (command or None, move time
+    [s], note)}`. A shaper that cannot be built has no command and a note saying why: a firmware fit beyond its
+    damping range (its `ShaperRangeError`'s note; move time `T`, NaN with `T` None), or a move time below its own
+    shortest one (move time: that shortest time)."""
+    out = {}
+    for name in names:
+        try:
+            cmd, T_row, t_short = gentlest_shaped(name, axis, distance, T, t_min, v_max, a_max, j_max)
+        except ShaperRangeError as e:
+            out[name] = (None, math.nan if T is None else T, e.note)
+            continue
+        note = "" if cmd is not None else f"infeasible: needs a move time >= {t_short:.4g} s"
+        out[name] = (cmd, T_row if cmd is not None else t_short, note)
+    if T is not None:
+        out["unshaped"] = (_trapezoid_move(distance, T, v_max, a_max * (1 + 1e-9), j_max), T, "")
+    return out
+
+
 def shaped_members(nominal, distance, T, v_max, a_max, j_max) -> dict:
     """The moves the minimax design's command space holds at move time `T` [s]: every classic shaper buildable on
-    the axis `nominal` within the limits (`gentlest_shaped`), and the unshaped move: `{name: command}`."""
-    out = {}
-    for name in SHAPERS:
-        try:
-            cmd = gentlest_shaped(name, nominal, distance, T, 0.0, v_max, a_max, j_max)[0]
-        except ShaperRangeError:
-            continue
-        if cmd is not None:
-            out[name] = cmd
-    base = _trapezoid_move(distance, T, v_max, a_max * (1 + 1e-9), j_max)
-    if base is not None:
-        out["unshaped"] = base
-    return out
+    the axis `nominal` within the limits, and the unshaped move (`shaped_moves`): `{name: command}`."""
+    moves = shaped_moves(nominal, distance, T, 0.0, v_max, a_max, j_max)
+    return {name: cmd for name, (cmd, _, _) in moves.items() if cmd is not None}
+
+
+def classic_commands(req: MoveRequest) -> list:
+    """The classic shapers `req.include` names, each on the gentlest base that ends at the move time (with
+    `move_time` None: at its own shortest time); a firmware fit beyond its damping range is listed, not built
+    (`shaped.shaped_moves`)."""
+    names = tuple(n for n in SHAPERS if n in req.include)
+    built = shaped_moves(req.nominal, req.distance, req.move_time, req.t_min, req.v_max, req.a_max, req.j_max, names)
+    return [(name, *built[name], built[name][0] is not None, None) for name in names]
