@@ -288,14 +288,18 @@ def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter, groups=(), used=None):
             # many orders of magnitude near the optimum)
             r1 = -rd - Gt @ (w * rp - rc / s)
 
-            def refine(_, d):
+            def refine(k, d):
+                # pass 0 solves from zero; each later pass refines (one Newton solve in the program)
                 dx, dy = d
                 ds = -rp - G @ dx
                 dz = -(rc + z * ds) / s
-                ddx, ddy = newton(L, Ls, -rd - Gt @ dz - A.T @ dy, -re - A @ dx)
+                first = k == 0
+                ddx, ddy = newton(
+                    L, Ls, jnp.where(first, r1, -rd - Gt @ dz - A.T @ dy), jnp.where(first, -re, -re - A @ dx)
+                )
                 return dx + ddx, dy + ddy
 
-            dx, dy = jax.lax.fori_loop(0, _REFINE, refine, newton(L, Ls, r1, -re))
+            dx, dy = jax.lax.fori_loop(0, _REFINE + 1, refine, (jnp.zeros_like(c), jnp.zeros_like(b)))
             ds = -rp - G @ dx
             dz = -(rc + z * ds) / s
             return dx, ds, dz, dy
