@@ -466,16 +466,21 @@ def _solve_round_impl(
         # on stopping, tau is the scale the returned LP was posed in
         return k + 1, jnp.where(stop_now, t_use, new_tau), res, stop_now, rough
 
-    shapes = jax.eval_shape(
-        lambda: solve_lp_data(*lp_data(prob_s, opts, 1.0, knots), _x_bound(prob_s, opts, 1.0, knots), tol, 1)
-    )
-    res0 = jax.tree_util.tree_map(lambda sd: jnp.zeros(sd.shape, sd.dtype), shapes)
+    # the loop's initial result: zeros of the LP's sizes, from the data's shapes (tracing the solver for them would
+    # trace the interior point method a second time)
+    c0, G0, _, A0, _ = jax.eval_shape(lambda: lp_data(prob_s, opts, 1.0, knots))
+    n, m, p, dt = c0.shape[0], G0.shape[0], A0.shape[0], c0.dtype
+    zero = jnp.zeros((), dt)
+    flag = jnp.asarray(False)
+    res0 = LPResult(jnp.zeros((n,), dt), jnp.zeros((m,), dt), jnp.zeros((m,), dt), jnp.zeros((p,), dt), zero, zero,
+                    zero, zero, jnp.asarray(0), flag, flag, zero)  # fmt: skip
     init = (jnp.asarray(0), tau, res0, jnp.asarray(False), jnp.asarray(False))
     _, tau, res, _, rough = jax.lax.while_loop(lambda st: ~st[3], attempt, init)
     data = lp_data(problem, opts, tau, knots)
     value = lp_value(*data, stop(res.x), stop(res.z), stop(res.y))
     res = res._replace(value=value)
-    lower = _lower_bound(prob_s, opts, tau, res, lp_data(prob_s, opts, tau, knots), knots)
+    # the same LP's data, its derivatives stopped (built once: the program holds one copy)
+    lower = _lower_bound(prob_s, opts, tau, res, jax.tree_util.tree_map(stop, data), knots)
     res = res._replace(lower_bound=stop(lower))
     # the command's coefficients [m/s^2], the worst residual and its bound in units of the references
     coef = stop(res.x[:-1]) * prob_s.distance / prob_s.move_time**2

@@ -140,11 +140,21 @@ def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter, groups=(), used=None):
 
         # near the optimum W spreads over many orders of magnitude and the triangular factor may become
         # numerically singular (the Schur complement A H^-1 A^T, then its Cholesky factor, not finite): then
-        # factorise again with a larger regularisation (the refinement step recovers the accuracy it costs)
-        f = factorise(reg)
-        for r in _REG_RETRIES:
-            f = jax.lax.cond(finite(f), lambda _, f=f: f, lambda r_: factorise(r_), r)
-        return f
+        # factorise again with a larger regularisation (the refinement step recovers the accuracy it costs). A loop
+        # over the regularisations: one factorisation in the program, not one per regularisation (XLA compiles each)
+        regs = jnp.asarray((reg, *_REG_RETRIES), dtype=w.dtype)
+
+        def again(st):
+            i, f = st
+            return (i == 0) | ((i < regs.shape[0]) & ~finite(f))
+
+        def attempt(st):
+            i, _ = st
+            return i + 1, factorise(regs[i])
+
+        blank = jax.eval_shape(factorise, regs[0])
+        f0 = jax.tree_util.tree_map(lambda sd: jnp.zeros(sd.shape, sd.dtype), blank)
+        return jax.lax.while_loop(again, attempt, (jnp.asarray(0), f0))[1]
 
     def newton(L, Ls, r1, r2):
         """Solve H dx + A^T dy = r1, A dx = r2 (L, Ls: lower Cholesky factors of H and of A H^-1 A^T)."""
@@ -204,22 +214,25 @@ def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter, groups=(), used=None):
 
     def repaired(act, repairs):
         """Up to `repairs` exchanges of the active-set guess: the most violated inequality enters, the active one
-        with the least multiplier leaves (the interior point iterate may rank a few constraints wrongly)."""
+        with the least multiplier leaves (the interior point iterate may rank a few constraints wrongly). One
+        vertex solve in the program: a loop whose first pass solves the guess and each later one exchanges a pair
+        of rows (from the previous pass' slacks and multipliers) and solves again."""
+        if repairs == 0:
+            ok, vert, _, _ = vertex_at(act)
+            return ok, vert
 
         def step(carry):
-            act, ok, vert, i = carry
-            _, _, sv, mult = vertex_at(act)
+            act, _, _, sv, mult, i = carry
             inside = jnp.zeros((m + n,), dtype=bool).at[act].set(True)[:m]
             enter = jnp.argmin(jnp.where(inside, jnp.inf, sv))
             leave = jnp.argmin(jnp.where(act >= m, jnp.inf, mult[:k_act]))
-            act = act.at[leave].set(enter.astype(act.dtype))
-            ok, vert, _, _ = vertex_at(act)
-            return act, ok, vert, i + 1
+            act = jnp.where(i > 0, act.at[leave].set(enter.astype(act.dtype)), act)
+            ok, vert, sv, mult = vertex_at(act)
+            return act, ok, vert, sv, mult, i + 1
 
-        ok, vert, _, _ = vertex_at(act)
-        if repairs == 0:
-            return ok, vert
-        _, ok, vert, _ = jax.lax.while_loop(lambda cr: ~cr[1] & (cr[3] < repairs), step, (act, ok, vert, 0))
+        blank = jax.eval_shape(vertex_at, act)
+        init = (act, *jax.tree_util.tree_map(lambda sd: jnp.zeros(sd.shape, sd.dtype), blank), 0)
+        _, ok, vert, _, _, _ = jax.lax.while_loop(lambda cr: (cr[5] == 0) | (~cr[1] & (cr[5] <= repairs)), step, init)
         return ok, vert
 
     def crossover(x, s, z, y, repairs=8):
@@ -275,26 +288,34 @@ def _solve_impl(c, G, h, A, b, x_bound, tol, max_iter, groups=(), used=None):
             # many orders of magnitude near the optimum)
             r1 = -rd - Gt @ (w * rp - rc / s)
 
-            def refine(_, d):
+            def refine(k, d):
+                # pass 0 solves from zero; each later pass refines (one Newton solve in the program)
                 dx, dy = d
                 ds = -rp - G @ dx
                 dz = -(rc + z * ds) / s
-                ddx, ddy = newton(L, Ls, -rd - Gt @ dz - A.T @ dy, -re - A @ dx)
+                first = k == 0
+                ddx, ddy = newton(
+                    L, Ls, jnp.where(first, r1, -rd - Gt @ dz - A.T @ dy), jnp.where(first, -re, -re - A @ dx)
+                )
                 return dx + ddx, dy + ddy
 
-            dx, dy = jax.lax.fori_loop(0, _REFINE, refine, newton(L, Ls, r1, -re))
+            dx, dy = jax.lax.fori_loop(0, _REFINE + 1, refine, (jnp.zeros_like(c), jnp.zeros_like(b)))
             ds = -rp - G @ dx
             dz = -(rc + z * ds) / s
             return dx, ds, dz, dy
 
-        # predictor (affine scaling)
-        dx_a, ds_a, dz_a, dy_a = direction(s * z)
-        ap = _max_step(s, ds_a)
-        ad = _max_step(z, dz_a)
-        mu_aff = ((s + ap * ds_a) @ (z + ad * dz_a)) / m
-        sigma = jnp.clip(mu_aff / mu, 0.0, 1.0) ** 3
-        # corrector with centring
-        dx, ds, dz, dy = direction(s * z + ds_a * dz_a - sigma * mu)
+        def predict_correct(k, d):
+            # pass 0: the predictor (affine scaling); pass 1: the corrector with centring, from the predictor's
+            # step (a loop of two passes: one Newton solve in the program, not two)
+            _, ds_a, dz_a, _ = d
+            ap = _max_step(s, ds_a)
+            ad = _max_step(z, dz_a)
+            mu_aff = ((s + ap * ds_a) @ (z + ad * dz_a)) / m
+            sigma = jnp.clip(mu_aff / mu, 0.0, 1.0) ** 3
+            return direction(jnp.where(k == 0, s * z, s * z + ds_a * dz_a - sigma * mu))
+
+        zero = (jnp.zeros_like(x), jnp.zeros_like(s), jnp.zeros_like(z), jnp.zeros_like(y))
+        dx, ds, dz, dy = jax.lax.fori_loop(0, 2, predict_correct, zero)
         ap = 0.99 * _max_step(s, ds)
         ad = 0.99 * _max_step(z, dz)
         x, s = x + ap * dx, s + ap * ds
