@@ -72,8 +72,8 @@ def solving(req: MoveRequest, ref):
 
     Everything after the LP needs only the LP's design, the request and the references (the classic rows matter only
     where the move time is searched): measured in the worker too, it overlaps the pseudo-polynomial designs of the
-    caller's thread instead of following them (a warm design on 1-3 modes, 2 cores at load 5: 1.45 / 2.36 / 3.42 s ->
-    0.95 / 1.73 / 1.91 s, the same rows)."""
+    caller's thread instead of following them (warm, 3 modes, on 2 cores shared at a load of 5: 3.9-4.3 s -> 2.3-3.3 s;
+    the same rows)."""
     if req.move_time is None or "minimax" not in req.include:
         yield None
         return
