@@ -87,10 +87,10 @@ def test_gentlest_shaped_of_a_move_time_is_built_once_and_is_the_fresh_build():
     assert t_short == 0.5 + float(tau[-1]) and t_short2 == 0.0 + float(tau[-1])
     shaped._RECENT.clear()
     fresh = shaped.gentlest_shaped("ZVD", *args)[0]
-    assert fresh is not cmd
+    assert cmd is not None and fresh is not None and fresh is not cmd
     for x, y in zip((cmd.times, cmd.steps, cmd.ramps), (fresh.times, fresh.steps, fresh.ramps)):
         np.testing.assert_array_equal(np.asarray(x), np.asarray(y))
     other_T = shaped.gentlest_shaped("ZVD", ax, 0.1, 1.1, 0.5, 0.3, 1.2, None)[0]
     other_a = shaped.gentlest_shaped("ZVD", ax, 0.1, 1.0, 0.5, 0.3, 1.3, None)[0]
-    assert other_T is not fresh and other_a is not fresh
+    assert other_T is not None and other_T is not fresh and other_a is not fresh
     assert float(other_T.duration) == pytest.approx(1.1, rel=1e-15)
