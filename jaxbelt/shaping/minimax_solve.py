@@ -51,37 +51,54 @@ def _in_callers_context(fun, *args):
     return run
 
 
+def _here(fun, *args) -> concurrent.futures.Future:
+    """`fun(*args)` run now, in the caller's thread, as a done future (its error raised by `result()`)."""
+    done: concurrent.futures.Future = concurrent.futures.Future()
+    try:
+        done.set_result(fun(*args))
+    except BaseException as e:  # noqa: BLE001 - handed to the caller by `result()`, as the worker's would be
+        done.set_exception(e)
+    return done
+
+
 @contextlib.contextmanager
 def solving(req: MoveRequest, classic: list):
-    """The move time [s] of the timed candidates and the minimax rows, and the minimax design, for the block: yields
-    `(T, future of solve's result)` (no future without "minimax" in `req.include`).
+    """The move time [s] of the timed candidates and the minimax rows, the minimax design, and where the work that
+    follows the design runs, for the block: yields `(T, future of solve's result, beside)` (no future without
+    "minimax" in `req.include`); `beside(fun, *args)` returns the future of `fun(*args)`.
 
-    - at a given move time: that time, and `solve(req, T)` running in the worker thread (`_WORKER`) beside the
-      other candidates (its result is waited for by `minimax_rows`, after them). On leaving the block (also on an
-      error) the solve is cancelled if it has not started, and waited for if it has: no LP outlives the call, none
-      runs outside its BLAS limit. The worker runs under the caller's 64-bit mode and default device
-      (`_in_callers_context`);
+    - at a given move time: that time, `solve(req, T)` running in the worker thread (`_WORKER`) beside the other
+      candidates, and `beside` queuing work on the same worker after it (the minimax rows: their shaped moves,
+      blends and the design with jumps need only the design, so they overlap the timed candidates too; warm, 3 modes,
+      2 cores at load 5: 3.9-4.3 s -> 2.3-3.3 s, the same rows). On leaving the block (also on an error) the work
+      not started is cancelled and the work started is waited for: no LP outlives the call, none runs outside its
+      BLAS limit. The worker runs under the caller's 64-bit mode and default device (`_in_callers_context`);
     - with `move_time` None: the design at the shortest time whose worst residual reaches the best usable row of
       `classic` (the measured classic rows; searched from the shortest of their times), solved here, and its time;
-      without a design, the shortest usable classic row's time (twice the time-optimal move's without one)."""
+      without a design, the shortest usable classic row's time (twice the time-optimal move's without one);
+      `beside` runs here."""
     usable = [r for r in classic if r.ok]
     fallback = min((r.move_time for r in usable), default=2 * req.t_min)
     if "minimax" not in req.include:
-        yield (fallback if req.move_time is None else req.move_time), None
+        yield (fallback if req.move_time is None else req.move_time), None, _here
         return
     if req.move_time is not None:
-        fut = _WORKER.submit(_in_callers_context(solve, req, req.move_time))
+        queued = [_WORKER.submit(_in_callers_context(solve, req, req.move_time))]
+
+        def beside(fun, *args):
+            queued.append(_WORKER.submit(_in_callers_context(fun, *args)))
+            return queued[-1]
+
         try:
-            yield req.move_time, fut
+            yield req.move_time, queued[0], beside
         finally:
-            if not fut.cancel():
-                concurrent.futures.wait([fut])
+            started = [f for f in queued if not f.cancel()]
+            concurrent.futures.wait(started)
         return
     target = min((r.worst_percent for r in usable), default=math.nan)
-    done: concurrent.futures.Future = concurrent.futures.Future()  # solved here, in the caller's thread
-    done.set_result(solve(req, None, T_guess=fallback, target=target))
+    done = _here(lambda: solve(req, None, T_guess=fallback, target=target))  # solved here, in the caller's thread
     mm = done.result()[2][0]
-    yield (fallback if mm is None else float(mm.command.duration)), done
+    yield (fallback if mm is None else float(mm.command.duration)), done, _here
 
 
 def solve(req: MoveRequest, T: float | None, *, jumps: bool = False, T_guess: float = math.nan,

@@ -24,7 +24,9 @@ which `jaxbelt.shaping.residual` takes the ringing amplitude $|g| |W| / \\omega_
 The $\\varphi$ functions are evaluated by their Taylor series near 0 (no cancellation).
 """
 
+import collections
 import math
+import threading
 from typing import Any, ClassVar
 
 import equinox as eqx
@@ -1081,16 +1083,56 @@ def derivatives_at(cmd: AbstractMotionCommand, times, orders=(0, 1, 2)) -> list:
     rows = [run_orders.index(k) for k in orders]
     if t.size == 0:
         return [np.empty(0) for _ in orders]
-    n_blocks = -(-t.size // size)
-    padded_t = np.concatenate([t, np.full(n_blocks * size - t.size, t[-1])])
-    out = [np.empty(t.size) for _ in orders]
-    for b in range(n_blocks):
-        lo, hi = b * size, min((b + 1) * size, t.size)
-        # `jax.device_put`: `jnp.asarray` of a host array compiles a small program per new shape
-        vals = np.asarray(jax.device_get(_derivatives(run, jax.device_put(padded_t[lo : lo + size]), run_orders)))
-        for o, i in zip(out, rows):
-            o[lo:hi] = vals[i, : hi - lo]
-    return out
+    key = _memo_key(run, t, run_orders)
+    full = _memo_get(key)
+    if full is None:
+        n_blocks = -(-t.size // size)
+        padded_t = np.concatenate([t, np.full(n_blocks * size - t.size, t[-1])])
+        full = np.empty((len(run_orders), t.size))
+        for b in range(n_blocks):
+            lo, hi = b * size, min((b + 1) * size, t.size)
+            # `jax.device_put`: `jnp.asarray` of a host array compiles a small program per new shape
+            vals = np.asarray(jax.device_get(_derivatives(run, jax.device_put(padded_t[lo : lo + size]), run_orders)))
+            full[:, lo:hi] = vals[:, : hi - lo]
+        _memo_put(key, full)
+    return [full[i].copy() for i in rows]
+
+
+#: the last `derivatives_at` results of between `_MEMO_MIN` and `_MEMO_MAX` times (every order its program
+#: evaluates), by the padded command's values, the times and the orders: a design's spline is sampled at the same
+#: 20001 instants for its own row's peaks and again as a member of its blend's (`blend_derivatives`), 20 program
+#: calls of 1024 times x its slot's coefficients (0.05-0.1 s of CPU) each time. The same program on the same
+#: inputs: the values are those it returned.
+_MEMO: collections.deque = collections.deque(maxlen=4)
+_MEMO_LOCK = threading.Lock()
+_MEMO_MIN = 4096
+_MEMO_MAX = 1 << 17
+
+
+def _memo_key(run, t: np.ndarray, orders: tuple):
+    """The key of `derivatives_at`'s memo for the padded command `run` at the times `t` (None: not kept, too few or
+    too many times, or a traced command)."""
+    if not _MEMO_MIN <= t.size <= _MEMO_MAX:
+        return None
+    leaves, tree = jax.tree_util.tree_flatten(run)
+    if not all(isinstance(x, np.ndarray | jax.Array | float | int) for x in leaves) or not is_concrete(run):
+        return None
+    data = tuple((np.shape(x), np.asarray(x).dtype.str, np.asarray(x).tobytes()) for x in leaves)
+    return (type(run), tree, data, t.tobytes(), orders)
+
+
+def _memo_get(key):
+    if key is None:
+        return None
+    with _MEMO_LOCK:
+        return next((v for k, v in _MEMO if k == key), None)
+
+
+def _memo_put(key, full: np.ndarray) -> None:
+    if key is not None:
+        full.flags.writeable = False  # handed out as copies only
+        with _MEMO_LOCK:
+            _MEMO.append((key, full))
 
 
 #: the orders `_derivatives` evaluates for jaxbelt's own moves, whichever are asked for: the samples (0, 1, 2), the

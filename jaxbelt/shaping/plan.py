@@ -532,10 +532,11 @@ def design_move(
                    rate_hz=rate_hz, interpolation=interpolation, x_min=x_min, x_max=x_max)  # fmt: skip
     built = classic_commands(req)
     classic = measure_rows(req, built)
-    with solving(req, classic) as (T, design):  # at a given move time the minimax LP runs beside the candidates
+    with solving(req, classic) as (T, design, beside):  # at a given move time the minimax LP and its rows run
+        minimax = beside(minimax_rows, req, design, T)  # in the worker, beside the timed candidates
         built = timed_commands(req, T)
         timed = measure_rows(req, built)
-        minimax, mm, bound = minimax_rows(req, design, T)
+    minimax, mm, bound = minimax.result()
     rows = classic + minimax + timed
     rows = [_within_range(r, req.distance, req.x_range, req.rate_hz) for r in rows]
     table, best = rank(rows)  # as executed, on the travel
