@@ -67,12 +67,12 @@ def test_an_error_in_the_worker_reaches_the_caller(monkeypatch):
     monkeypatch.setattr(ms, "solve", failing)
     with pytest.raises(RuntimeError, match="the LP failed here"):
         jb.design_move(jb.ModalAxis(*AXIS), 0.1, 1.0, **KW)
-    assert len(futures) == 1 and futures[0].done()
+    assert len(futures) == 2 and all(f.done() for f in futures)  # the LP, then the minimax rows that wait for it
 
 
 def test_an_error_beside_the_worker_waits_for_it(monkeypatch):
     """When the caller's thread fails while the LP runs, the error is raised after the LP has finished (or was
-    cancelled): no LP runs on after `design_move` has returned."""
+    cancelled), and the minimax rows queued after it too: no LP runs on after `design_move` has returned."""
     futures = _recording_submit(monkeypatch)
 
     measure_rows, calls = plan.measure_rows, []
@@ -86,7 +86,7 @@ def test_an_error_beside_the_worker_waits_for_it(monkeypatch):
     monkeypatch.setattr(plan, "measure_rows", failing)
     with pytest.raises(ValueError, match="a candidate failed here"):
         jb.design_move(jb.ModalAxis(*AXIS), 0.1, 1.0, **KW)
-    assert len(futures) == 1 and futures[0].done()
+    assert len(futures) == 2 and all(f.done() for f in futures)  # the LP and the minimax rows: finished or cancelled
 
 
 def test_no_worker_without_a_move_time_or_the_minimax_row(monkeypatch):
