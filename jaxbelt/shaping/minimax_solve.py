@@ -70,9 +70,9 @@ def solving(req: MoveRequest, classic: list):
     - at a given move time: that time, `solve(req, T)` running in the worker thread (`_WORKER`) beside the other
       candidates, and `beside` queuing work on the same worker after it (the minimax rows: their shaped moves,
       blends and the design with jumps need only the design, so they overlap the timed candidates too; warm, 3 modes,
-      2 cores at load 5: 3.9-4.3 s -> 2.3-3.3 s, the same rows). On leaving the block (also on an error) the work
-      not started is cancelled and the work started is waited for: no LP outlives the call, none runs outside its
-      BLAS limit. The worker runs under the caller's 64-bit mode and default device (`_in_callers_context`);
+      2 cores at load 5: 3.9-4.3 s -> 2.3-3.3 s, the same rows). On leaving the block the queued work is waited
+      for; on an error the work not started is cancelled and the work started is waited for: no LP outlives the
+      call, none runs outside its BLAS limit. The worker runs under the caller's 64-bit mode and default device (`_in_callers_context`);
     - with `move_time` None: the design at the shortest time whose worst residual reaches the best usable row of
       `classic` (the measured classic rows; searched from the shortest of their times), solved here, and its time;
       without a design, the shortest usable classic row's time (twice the time-optimal move's without one);
@@ -91,9 +91,12 @@ def solving(req: MoveRequest, classic: list):
 
         try:
             yield req.move_time, queued[0], beside
+        except BaseException:
+            for f in queued:  # the work not started is not needed
+                f.cancel()
+            raise
         finally:
-            started = [f for f in queued if not f.cancel()]
-            concurrent.futures.wait(started)
+            concurrent.futures.wait(queued)  # the work started has finished (cancelled futures count as done)
         return
     target = min((r.worst_percent for r in usable), default=math.nan)
     done = _here(lambda: solve(req, None, T_guess=fallback, target=target))  # solved here, in the caller's thread
