@@ -3,6 +3,7 @@
 an error in either thread must reach the caller, and no LP may outlive the call."""
 
 import concurrent.futures
+import time
 
 import numpy as np
 import pytest
@@ -145,3 +146,21 @@ def test_a_forked_child_has_a_worker_of_its_own():
             pytest.fail("the forked child's worker never ran its work")
         time.sleep(0.05)
     assert os.waitstatus_to_exitcode(status) == 0
+
+
+def test_the_minimax_rows_queued_after_a_slow_lp_are_made(monkeypatch):
+    """The minimax rows queue on the worker after the LP (`minimax_solve.solving`'s `beside`): when the other
+    candidates finish first (here: an LP slowed by 2 s), the rows are still made, not cancelled, and equal those of
+    the LP solved in line."""
+    ax = jb.ModalAxis(*AXIS)
+    solve = ms.solve
+
+    def slow(*args, **kwargs):
+        time.sleep(2.0)
+        return solve(*args, **kwargs)
+
+    monkeypatch.setattr(ms, "solve", slow)
+    threaded = jb.design_move(ax, 0.1, 1.0, **KW)
+    monkeypatch.setattr(ms, "_WORKER", _InLine())
+    in_line = jb.design_move(ax, 0.1, 1.0, **KW)
+    assert _table(threaded) == _table(in_line) and "minimax" in {r.name for r in threaded.table}
