@@ -10,7 +10,7 @@ import pytest
 
 import jaxbelt as jb
 from jaxbelt.shaping import minimax_solve as ms
-from jaxbelt.shaping import plan
+from jaxbelt.shaping import moves, plan, shaped
 
 pytestmark = pytest.mark.slow  # a first design_move compiles its programs (~10 s)
 
@@ -27,6 +27,12 @@ class _InLine:
         return fut
 
 
+def _forget():
+    """Empty the caches of the last shaped moves and sampled derivatives, so that a second call computes them anew."""
+    shaped._RECENT.clear()
+    moves._MEMO.clear()
+
+
 def _table(p):
     return [(r.name, r.worst_percent, r.move_time, r.ok) for r in p.table]
 
@@ -38,6 +44,7 @@ def test_the_worker_makes_the_table_of_the_lp_solved_in_line(monkeypatch):
     ax = jb.ModalAxis(*AXIS)
     threaded = jb.design_move(ax, 0.1, 1.0, **KW)
     monkeypatch.setattr(ms, "_WORKER", _InLine())
+    _forget()
     in_line = jb.design_move(ax, 0.1, 1.0, **KW)
     assert _table(threaded) == _table(in_line)
     assert threaded.best.name == in_line.best.name
@@ -110,6 +117,7 @@ def test_the_worker_runs_under_the_callers_x64_block():
     reference = jb.design_move(ax, 0.1, 1.0, **KW)
     prev = jax.config.jax_enable_x64
     jax.config.update("jax_enable_x64", False)
+    _forget()
     try:
         with jax.enable_x64(True):
             in_block = jb.design_move(ax, 0.1, 1.0, **KW)
@@ -162,5 +170,6 @@ def test_the_minimax_rows_queued_after_a_slow_lp_are_made(monkeypatch):
     monkeypatch.setattr(ms, "solve", slow)
     threaded = jb.design_move(ax, 0.1, 1.0, **KW)
     monkeypatch.setattr(ms, "_WORKER", _InLine())
+    _forget()
     in_line = jb.design_move(ax, 0.1, 1.0, **KW)
     assert _table(threaded) == _table(in_line) and "minimax" in {r.name for r in threaded.table}

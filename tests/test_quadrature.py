@@ -7,6 +7,7 @@ from scipy import integrate
 
 import jaxbelt as jb
 from jaxbelt.shaping import quadrature as Q
+from jaxbelt.shaping import residual
 from jaxbelt.shaping.residual import residual_curve
 
 
@@ -65,3 +66,31 @@ def test_residual_of_a_pseudo_polynomial_on_a_fast_lightly_damped_mode_against_s
         ref = abs(complex(re, im)) / wd
         got = float(np.asarray(residual_curve(ax, cmd, r))[0, 0])
         assert abs(got - ref) <= 1e-7 * ref, (r, got, ref)
+
+
+@pytest.mark.parametrize("wt", [12000.0, 30000.0])
+def test_asymptotic_closed_form_beyond_the_rules_reach_agrees_with_the_rule(monkeypatch, wt):
+    # `_pseudo_polynomial_w` beyond `REACH_OMEGA_T` takes Gamma(a, p)'s asymptotic series: with the reach lowered
+    # to 10000 rad it must agree with the composite rule (valid to 38400) on a 3-4-5 and a fractional move: 1e-13 m/s
+    # absolute, the rule's own rounding (W, 1e-10 to 1e-7 m/s, is 1e3-1e6 times below the terms the rule sums; a wrong
+    # series term is off by W itself)
+    D, T = 0.1, 1.0
+    s = np.array([-0.002 * wt + 1j * wt, -0.0 + 1j * wt * 1.1, -0.05 * wt + 1j * wt * 0.9]) / T
+    for g in ([3.0, 4.0, 5.0], [3.3, 4.7, 5.9, 7.2]):
+        cmd = jb.PseudoPolynomial(np.array(g), D, T)
+        rule = residual._rule(Q.rule_nodes(1.1 * wt))
+        by_rule = np.asarray(residual._pseudo_polynomial_w(cmd, s, rule))
+        monkeypatch.setattr(residual, "REACH_OMEGA_T", 10000.0)
+        closed = np.asarray(residual._pseudo_polynomial_w(cmd, s, rule))
+        monkeypatch.undo()
+        assert np.max(np.abs(closed - by_rule)) <= 1e-13
+
+
+def test_design_move_on_a_fast_lightly_damped_mode_beyond_the_rules_reach():
+    # a 1500 Hz, zeta 0.002 mode in a 3 s move: omega T up to 42400 rad over the wide range (was a ValueError); the
+    # table holds every row, each finite
+    ax = jb.ModalAxis([8.0, 1500.0], [0.02, 0.002])
+    p = jb.design_move(ax, 0.2, 3.0, v_max=0.5, a_max=2.0, include=("ZV", "pseudo-polynomial"))
+    names = {r.name for r in p.table}
+    assert "ZV" in names and any(n.startswith("pseudo-polynomial") for n in names)
+    assert all(np.isfinite(r.worst_percent) for r in p.table)

@@ -56,7 +56,7 @@ def _here(fun, *args) -> concurrent.futures.Future:
     done: concurrent.futures.Future = concurrent.futures.Future()
     try:
         done.set_result(fun(*args))
-    except BaseException as e:  # noqa: BLE001 - handed to the caller by `result()`, as the worker's would be
+    except Exception as e:  # noqa: BLE001 - handed to the caller by `result()`, as the worker's would be
         done.set_exception(e)
     return done
 

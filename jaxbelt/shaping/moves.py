@@ -26,6 +26,7 @@ The $\\varphi$ functions are evaluated by their Taylor series near 0 (no cancell
 
 import collections
 import math
+import os
 import threading
 from typing import Any, ClassVar
 
@@ -1105,6 +1106,18 @@ def derivatives_at(cmd: AbstractMotionCommand, times, orders=(0, 1, 2)) -> list:
 #: inputs: the values are those it returned.
 _MEMO: collections.deque = collections.deque(maxlen=4)
 _MEMO_LOCK = threading.Lock()
+
+
+def _fresh_memo() -> None:
+    """A forked child's own lock and memo (a parent thread may hold the lock at the fork: the child would wait for
+    it forever)."""
+    global _MEMO_LOCK
+    _MEMO_LOCK = threading.Lock()
+    _MEMO.clear()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_fresh_memo)
 _MEMO_MIN = 4096
 _MEMO_MAX = 1 << 17
 

@@ -84,7 +84,7 @@ from .._guard import eager
 from .._xla import LazyJit, quick_compile
 from ..commands import PseudoPolynomial
 from ..models.axis import ModalAxis
-from .quadrature import SINGLE_MAX_OMEGA_T, rule_nodes
+from .quadrature import REACH_OMEGA_T, SINGLE_MAX_OMEGA_T, rule_nodes
 from .quadrature import gauss_legendre_01 as _gauss_legendre
 
 #: substitution power u = v**p of the Gauss-Legendre rule (as in `jaxbelt.shaping.residual`)
@@ -206,9 +206,10 @@ def design_nodes(max_omega_t: float) -> int:
     the optimal ones' move by the optimiser's path on a flat objective (2 modes: 0.0525 -> 0.0520 %, 3 modes:
     0.8738 -> 0.8741 % of the unshaped move's residual; measured). The cap is `quadrature.rule_nodes`, the residual
     curves' rule, also above $\\omega T$ = `quadrature.SINGLE_MAX_OMEGA_T`, where it is composite (more than 4096
-    nodes, which one rule would not resolve)."""
-    if float(max_omega_t) > SINGLE_MAX_OMEGA_T:
-        return rule_nodes(max_omega_t)
+    nodes, which one rule would not resolve); beyond `quadrature.REACH_OMEGA_T` its largest size (the designs' objective
+    then resolves that mode less well; the table's rows measure it in closed form, `jaxbelt.shaping.residual`)."""
+    if float(max_omega_t) > SINGLE_MAX_OMEGA_T:  # beyond the rules' reach the largest (the rows are measured exactly)
+        return rule_nodes(min(float(max_omega_t), REACH_OMEGA_T))
     return min(n_nodes_for(max_omega_t), rule_nodes(max_omega_t))
 
 

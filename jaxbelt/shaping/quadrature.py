@@ -21,8 +21,12 @@ SINGLE_MAX_OMEGA_T = 7000.0
 PANEL_NODES = 512
 PANEL_RAD = 600.0
 #: the most nodes a composite rule takes ($\omega T$ up to 64 x 600 = 38400 rad: a 1 kHz mode in a 6 s move); a
-#: residual curve holds (modes x factors x nodes) complex numbers, 0.4 GB for 2 modes x 401 factors at this size
+#: residual curve holds (modes x factors x nodes) complex numbers: 0.5 GB for 2 modes x 512 (padded) factors at this
+#: size, 5x that with a damping range (`design_move(damping=)` judges 5 damping ratios per mode)
 MAX_COMPOSITE_NODES = 64 * PANEL_NODES
+#: the most $\omega T$ [rad] a rule resolves (`MAX_COMPOSITE_NODES` / `PANEL_NODES` panels of `PANEL_RAD`); above it the
+#: residual curves take the integrals' asymptotic closed form (`jaxbelt.shaping.residual`), exact to rounding there
+REACH_OMEGA_T = MAX_COMPOSITE_NODES // PANEL_NODES * PANEL_RAD
 
 
 @functools.cache

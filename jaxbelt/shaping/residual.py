@@ -38,7 +38,7 @@ from .moves import (
     padded_command,
     padded_pseudo,
 )
-from .quadrature import MIN_NODES, SINGLE_MAX_OMEGA_T, gauss_legendre_01, rule_nodes
+from .quadrature import MIN_NODES, REACH_OMEGA_T, SINGLE_MAX_OMEGA_T, gauss_legendre_01, rule_nodes
 
 _P = 4  # substitution power u = v**p of the pseudo-polynomial rule (as in jaxbelt.objectives.residual)
 
@@ -49,7 +49,9 @@ def _nodes_for(cmd, s) -> int:
         sT = np.asarray(s) * float(cmd.duration)
     except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
         return 512
-    quad = -sT.real <= _DAMPED_AWAY  # the others take the closed form (`_pseudo_polynomial_w`)
+    quad = (-sT.real <= _DAMPED_AWAY) & (
+        np.abs(sT) <= REACH_OMEGA_T
+    )  # the others: closed forms (`_pseudo_polynomial_w`)
     wT = float(np.max(np.abs(sT[quad]))) if np.any(quad) else 0.0
     need = int(2.5 * _P * wT / 4 + 64)
     for n in (128, 256, 512, 1024, 2048):
@@ -60,16 +62,20 @@ def _nodes_for(cmd, s) -> int:
 
 def _curve_nodes(cmd, s) -> int:
     """The nodes of `_curve`'s rule for a pseudo-polynomial (host decision, `quadrature.rule_nodes`):
-    $0.75\\,\\omega T + 64$ rounded up to a power of two, at least `NODE_SLOT` (the designs' cap,
+    $0.75\\,\\omega T + 64$ rounded up to a power of two (a composite rule above $\\omega T$ = 7000), at least
+    `NODE_SLOT` (the designs' cap,
     `jaxbelt.shaping.pseudo.design_nodes`, where it is measured: 5e-13 of the curve against a 4096-node rule
     wherever $0.55\\,\\omega T$ nodes are given), $\\omega T$ the largest $|s|T$ of the modes the quadrature takes.
     `_nodes_for`'s $2.5\\,\\omega T + 64$ asked twice the nodes on the benchmarks' axes (1024 at a 1.0 s move of a
-    17 Hz mode over 0.5-1.5 of its frequency): a pseudo-polynomial's row cost twice the time."""
+    17 Hz mode over 0.5-1.5 of its frequency): a pseudo-polynomial's row cost twice the time. Modes beyond the rules'
+    reach (`quadrature.REACH_OMEGA_T`) take the closed form and ask no nodes."""
     try:
         sT = np.asarray(s) * float(cmd.duration)
     except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
         return NODE_SLOT
-    quad = -sT.real <= _DAMPED_AWAY  # the others take the closed form (`_pseudo_polynomial_w`)
+    quad = (-sT.real <= _DAMPED_AWAY) & (
+        np.abs(sT) <= REACH_OMEGA_T
+    )  # the others: closed forms (`_pseudo_polynomial_w`)
     return rule_nodes(float(np.max(np.abs(sT[quad]))) if np.any(quad) else 0.0)
 
 
@@ -96,12 +102,18 @@ def _rule(n_nodes: int):
     return logv, u, w
 
 
+#: terms of the asymptotic series of $\Gamma(a, p)$ that `_pseudo_polynomial_w` sums beyond the rule's reach
+_ASYMPTOTIC_TERMS = 8
+
+
 def _pseudo_polynomial_w(cmd, s, n_nodes):
     """W(s) by the Gauss-Legendre rule, or, where $p = -sT$ has Re p > `_DAMPED_AWAY`, in closed form:
     $\\int_0^1 u^{\\gamma-2}e^{-pu}du = \\Gamma(\\gamma - 1)p^{1-\\gamma} - \\Gamma(\\gamma - 1, p)p^{1-\\gamma}$, whose last
     term is below $|p|^{\\gamma}e^{-\\mathrm{Re}\\,p}$ (the vibration from the start of the move, damped away): the rule
-    would need about 2.5|s|T nodes (1e7 for a 1 MHz mode in 0.8 s). `n_nodes`: the node count, or the rule
-    `(log v, u, weights)` itself (`_rule`)."""
+    would need about 2.5|s|T nodes (1e7 for a 1 MHz mode in 0.8 s); where |p| is beyond the rules' reach
+    (`quadrature.REACH_OMEGA_T`, a lightly damped fast mode: 1.5 kHz, zeta 0.002 in a 3 s move) with its last term
+    by its asymptotic series, $\\Gamma(a, p) \\sim p^{a-1}e^{-p}\\sum_k (a-1)\\cdots(a-k)p^{-k}$. `n_nodes`: the node
+    count, or the rule `(log v, u, weights)` itself (`_rule`)."""
     logv, u, w = _rule(n_nodes) if isinstance(n_nodes, int) else n_nodes
     T = cmd.duration
     coef = falling_factorial(cmd.gammas, 2) * cmd.coefficients  # phi'' = -Phi/T^2 sum_i a_i u^(g_i - 2)
@@ -113,11 +125,20 @@ def _pseudo_polynomial_w(cmd, s, n_nodes):
     quad = -(cmd.displacement / T) * (moments @ coef.astype(moments.dtype))
     p = -jnp.asarray(s) * T
     far = jnp.real(p) > _DAMPED_AWAY
-    p_far = jnp.where(far, p, _DAMPED_AWAY + 1.0)  # the closed form where it holds (finite everywhere)
+    fast = ~far & (jnp.abs(p) > REACH_OMEGA_T)  # beyond the rule's reach: the asymptotic closed form
+    p_far = jnp.where(far | fast, p, REACH_OMEGA_T + 1.0)  # the closed forms where they hold (finite everywhere)
     g1 = cmd.gammas - 1.0
     terms = jnp.exp(gammaln(g1) - g1 * jnp.log(p_far)[..., None])  # Gamma(g - 1) p^(1 - g)
+    # Gamma(g - 1, p) p^(1 - g) ~ e^-p sum_k (g-2)(g-3)...(g-1-k) p^(-k-1): each term (g - 1 - k) / |p| <= 5e-4 times
+    # the one before at |p| > REACH_OMEGA_T (exponents below 20), so 8 terms leave 1e-26 of the first
+    inv = 1.0 / p_far[..., None]
+    c, tail = jnp.ones_like(g1), jnp.zeros_like(terms)
+    for k in range(_ASYMPTOTIC_TERMS):
+        tail = tail + c * inv ** (k + 1)
+        c = c * (g1 - 1.0 - k)
+    terms = jnp.where(fast[..., None], terms - jnp.exp(-p_far)[..., None] * tail, terms)
     closed = -(cmd.displacement / T) * (terms @ coef.astype(terms.dtype))
-    return jnp.where(far, closed, quad)
+    return jnp.where(far | fast, closed, quad)
 
 
 def residual_integral(cmd: AbstractMotionCommand, s):

@@ -8,6 +8,7 @@ It builds commands only (no measuring): `jaxbelt.shaping.measure` measures them,
 
 import collections
 import math
+import os
 import threading
 
 import numpy as np
@@ -47,6 +48,17 @@ def gentlest_shaped(name: str, axis, distance, T, t_min, v_max, a_max, j_max):
 #: moves of a `design_move` call (0.04-0.09 s of eager operations on 1-3 modes); commands are immutable
 _RECENT: collections.deque = collections.deque(maxlen=32)
 _LOCK = threading.Lock()
+
+
+def _fresh_recent() -> None:
+    """A forked child's own lock and cache (a parent thread may hold the lock at the fork)."""
+    global _LOCK
+    _LOCK = threading.Lock()
+    _RECENT.clear()
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_fresh_recent)
 
 
 def _key(name, axis, distance, T, v_max, a_max, j_max):
