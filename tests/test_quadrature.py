@@ -86,6 +86,7 @@ def test_asymptotic_closed_form_beyond_the_rules_reach_agrees_with_the_rule(monk
         assert np.max(np.abs(closed - by_rule)) <= 1e-13
 
 
+@pytest.mark.slow  # a first design_move: ~12 s
 def test_design_move_on_a_fast_lightly_damped_mode_beyond_the_rules_reach():
     # a 1500 Hz, zeta 0.002 mode in a 3 s move: omega T up to 42400 rad over the wide range (was a ValueError); the
     # table holds every row, each finite
