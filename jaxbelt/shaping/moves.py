@@ -24,10 +24,7 @@ which `jaxbelt.shaping.residual` takes the ringing amplitude $|g| |W| / \\omega_
 The $\\varphi$ functions are evaluated by their Taylor series near 0 (no cancellation).
 """
 
-import collections
 import math
-import os
-import threading
 from typing import Any, ClassVar
 
 import equinox as eqx
@@ -38,6 +35,7 @@ from jaxtyping import Array, Float
 
 from .._checks import as_float_array, check_positive, check_real, check_scalar, is_concrete
 from .._guard import checked, prepare, reraising, stored_jit
+from .._recent import Recent
 from .._threads import blas_limited
 from ..commands import AbstractMotionCommand, PseudoPolynomial, _safe_pow, falling_factorial
 
@@ -1085,7 +1083,7 @@ def derivatives_at(cmd: AbstractMotionCommand, times, orders=(0, 1, 2)) -> list:
     if t.size == 0:
         return [np.empty(0) for _ in orders]
     key = _memo_key(run, t, run_orders)
-    full = _memo_get(key)
+    full = _MEMO.get(key)
     if full is None:
         n_blocks = -(-t.size // size)
         padded_t = np.concatenate([t, np.full(n_blocks * size - t.size, t[-1])])
@@ -1095,7 +1093,8 @@ def derivatives_at(cmd: AbstractMotionCommand, times, orders=(0, 1, 2)) -> list:
             # `jax.device_put`: `jnp.asarray` of a host array compiles a small program per new shape
             vals = np.asarray(jax.device_get(_derivatives(run, jax.device_put(padded_t[lo : lo + size]), run_orders)))
             full[:, lo:hi] = vals[:, : hi - lo]
-        _memo_put(key, full)
+        full.flags.writeable = False  # handed out as copies only
+        _MEMO.put(key, full)
     return [full[i].copy() for i in rows]
 
 
@@ -1104,20 +1103,7 @@ def derivatives_at(cmd: AbstractMotionCommand, times, orders=(0, 1, 2)) -> list:
 #: 20001 instants for its own row's peaks and again as a member of its blend's (`blend_derivatives`), 20 program
 #: calls of 1024 times x its slot's coefficients (0.05-0.1 s of CPU) each time. The same program on the same
 #: inputs: the values are those it returned.
-_MEMO: collections.deque = collections.deque(maxlen=4)
-_MEMO_LOCK = threading.Lock()
-
-
-def _fresh_memo() -> None:
-    """A forked child's own lock and memo (a parent thread may hold the lock at the fork: the child would wait for
-    it forever)."""
-    global _MEMO_LOCK
-    _MEMO_LOCK = threading.Lock()
-    _MEMO.clear()
-
-
-if hasattr(os, "register_at_fork"):
-    os.register_at_fork(after_in_child=_fresh_memo)
+_MEMO = Recent(4)
 _MEMO_MIN = 4096
 _MEMO_MAX = 1 << 17
 
@@ -1132,20 +1118,6 @@ def _memo_key(run, t: np.ndarray, orders: tuple):
         return None
     data = tuple((np.shape(x), np.asarray(x).dtype.str, np.asarray(x).tobytes()) for x in leaves)
     return (type(run), tree, data, t.tobytes(), orders)
-
-
-def _memo_get(key):
-    if key is None:
-        return None
-    with _MEMO_LOCK:
-        return next((v for k, v in _MEMO if k == key), None)
-
-
-def _memo_put(key, full: np.ndarray) -> None:
-    if key is not None:
-        full.flags.writeable = False  # handed out as copies only
-        with _MEMO_LOCK:
-            _MEMO.append((key, full))
 
 
 #: the orders `_derivatives` evaluates for jaxbelt's own moves, whichever are asked for: the samples (0, 1, 2), the

@@ -6,13 +6,11 @@ command space holds (`shaped_members`).
 It builds commands only (no measuring): `jaxbelt.shaping.measure` measures them, the minimax rows blend them.
 """
 
-import collections
 import math
-import os
-import threading
 
 import numpy as np
 
+from .._recent import Recent
 from .moves import _trapezoid_move, convolved, peaks
 from .request import MoveRequest
 from .shapers import SHAPERS, ShaperRangeError, shaper_for_axis
@@ -29,36 +27,21 @@ def gentlest_shaped(name: str, axis, distance, T, t_min, v_max, a_max, j_max):
     acceleration phase is shorter than its delay, so at a ZV-shaped move's own time and peaks the base exceeds
     `a_max` while the shaped move does not)."""
     key = None if T is None else _key(name, axis, distance, T, v_max, a_max, j_max)
-    with _LOCK:
-        hit = next((v for k, v in _RECENT if k == key), None) if key is not None else None
+    hit = _RECENT.get(key)
     if hit is not None:
         cmd, tau_end = hit
         return cmd, T, t_min + tau_end
     A, tau = shaper_for_axis(name, axis.frequencies, axis.damping_ratios)
     tau_end = float(tau[-1])
     cmd = _build(A, tau, distance, T, t_min, v_max, a_max, j_max)
-    if key is not None:
-        with _LOCK:
-            _RECENT.append((key, (cmd, tau_end)))
+    _RECENT.put(key, (cmd, tau_end))
     return cmd, (t_min + tau_end if T is None else T), t_min + tau_end
 
 
 #: the last shaped moves of a given end time, by the shaper, the axis' values, the distance, the time and the
 #: limits: the candidates' classic rows and the minimax design's command space (`shaped_members`) build the same
 #: moves of a `design_move` call (0.04-0.09 s of eager operations on 1-3 modes); commands are immutable
-_RECENT: collections.deque = collections.deque(maxlen=32)
-_LOCK = threading.Lock()
-
-
-def _fresh_recent() -> None:
-    """A forked child's own lock and cache (a parent thread may hold the lock at the fork)."""
-    global _LOCK
-    _LOCK = threading.Lock()
-    _RECENT.clear()
-
-
-if hasattr(os, "register_at_fork"):
-    os.register_at_fork(after_in_child=_fresh_recent)
+_RECENT = Recent(32)
 
 
 def _key(name, axis, distance, T, v_max, a_max, j_max):
