@@ -126,14 +126,15 @@ def test_closed_curve_is_measured_curve_for_every_candidate_kind():
     """`residual.closed_curve` (the pipeline's curve: no ODE branch, the quadrature's poles on the host) gives
     `measured_curve`'s numbers to the last bit for every kind of command the pipeline measures: a piecewise move
     (plain and shaped), a spline, a blend of both, a pseudo-polynomial (plain and shaped), on the band's 401 factors
-    (padded to a slot) and on 9 (not padded)."""
+    (padded to a slot) and on 9 (not padded); and the public `residual_curve`'s (checked, its factors unpadded) to
+    1e-12 of the curve's largest value (a padded uniform grid's blocked sums round differently)."""
     import numpy as np
 
     import jaxbelt as jb
     from jaxbelt.commands import PseudoPolynomial, ShapedCommand
     from jaxbelt.shaping.hull import blend_moves
     from jaxbelt.shaping.moves import SplineMove, convolved, fastest_move
-    from jaxbelt.shaping.residual import closed_curve, measured_curve
+    from jaxbelt.shaping.residual import closed_curve, measured_curve, residual_curve
 
     axis = jb.ModalAxis([7.3, 18.0], [0.015, 0.01], [1.0, -0.5])
     base = fastest_move(0.1, 0.3, 1.2)
@@ -149,3 +150,5 @@ def test_closed_curve_is_measured_curve_for_every_candidate_kind():
             got = closed_curve(axis, cmd, factors)
             assert isinstance(got, np.ndarray) and got.shape == (2, factors.size)
             np.testing.assert_array_equal(got, np.asarray(measured_curve(axis, cmd, factors)))
+            public = np.asarray(residual_curve(axis, cmd, factors))
+            assert np.max(np.abs(got - public)) <= 1e-12 * np.max(public)

@@ -49,10 +49,7 @@ def _nodes_for(cmd, s) -> int:
         sT = np.asarray(s) * float(cmd.duration)
     except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
         return 512
-    quad = (-sT.real <= _DAMPED_AWAY) & (
-        np.abs(sT) <= REACH_OMEGA_T
-    )  # the others: closed forms (`_pseudo_polynomial_w`)
-    wT = float(np.max(np.abs(sT[quad]))) if np.any(quad) else 0.0
+    wT = _quadrature_omega_t(sT)
     need = int(2.5 * _P * wT / 4 + 64)
     for n in (128, 256, 512, 1024, 2048):
         if n >= need:
@@ -73,10 +70,15 @@ def _curve_nodes(cmd, s) -> int:
         sT = np.asarray(s) * float(cmd.duration)
     except (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError):
         return NODE_SLOT
-    quad = (-sT.real <= _DAMPED_AWAY) & (
-        np.abs(sT) <= REACH_OMEGA_T
-    )  # the others: closed forms (`_pseudo_polynomial_w`)
-    return rule_nodes(float(np.max(np.abs(sT[quad]))) if np.any(quad) else 0.0)
+    return rule_nodes(_quadrature_omega_t(sT))
+
+
+def _quadrature_omega_t(sT) -> float:
+    """The largest $|sT|$ [rad] of the poles times the move time `sT` (numpy) that the rule integrates (0 without
+    one): the others take a closed form in `_pseudo_polynomial_w`, damped away (Re $-sT$ > `_DAMPED_AWAY`) or beyond
+    the rules' reach (`quadrature.REACH_OMEGA_T`)."""
+    quad = (-sT.real <= _DAMPED_AWAY) & (np.abs(sT) <= REACH_OMEGA_T)
+    return float(np.max(np.abs(sT[quad]))) if np.any(quad) else 0.0
 
 
 #: a mode with zeta omega T above this (the start of the move damped by e^-700 at its end: a 2 kHz or a 1 MHz mode in a
@@ -232,35 +234,22 @@ def measured_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors) -> np.n
     checks, which each stage would otherwise repeat on every candidate; a numpy array (n_modes, len(factors)),
     computed on the factors padded to a multiple of `FACTOR_SLOT` (`padded_factors`: the band's 401 and the wide
     range's 501 factors run one program per command kind)."""
-    r = np.atleast_1d(np.asarray(factors, dtype=float))
     if not _has_closed_form(cmd):  # the ODE's vmapped batch would integrate the extra (stiffer) factors too
-        return np.asarray(_curve(axis, cmd, r, 1e-10, 1e-14))
-    return np.asarray(_curve(axis, cmd, padded_factors(r), 1e-10, 1e-14, n_used=r.shape[0]))[:, : r.shape[0]]
+        return np.asarray(_curve(axis, cmd, np.atleast_1d(np.asarray(factors, dtype=float)), 1e-10, 1e-14))
+    return closed_curve(axis, cmd, factors)
 
 
 def closed_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors) -> np.ndarray:
     """`measured_curve(axis, cmd, factors)` [m] for a command with a closed-form residual (every command the design
     pipeline measures: piecewise moves, splines, their blends, pseudo-polynomials, each maybe shaped) on a concrete
-    axis: the same numbers by the same programs (`_curve`'s closed-form part), a numpy array (n_modes,
+    axis: the same numbers by the same programs (`_closed`, `_curve`'s closed-form part), a numpy array (n_modes,
     len(factors)). The quadrature's node count is decided on the poles computed in numpy (`_host_poles`' host
     branch: the pipeline's axes are concrete), and no ODE fallback is reachable: a `TypeError` names the command
     otherwise."""
     if not _has_closed_form(cmd):
         raise TypeError(f"closed_curve: {type(cmd).__name__} has no closed-form residual (use `residual_curve`)")
     r = np.atleast_1d(np.asarray(factors, dtype=float))
-    n, rp = r.shape[0], padded_factors(r)
-    pseudo = cmd.base if isinstance(cmd, ShapedCommand) else cmd
-    if isinstance(pseudo, PseudoPolynomial):
-        shaper = (cmd.times, cmd.amplitudes) if isinstance(cmd, ShapedCommand) else None
-        w = 2.0 * np.pi * np.asarray(axis.frequencies, dtype=float)[:, None] * r[None, :]
-        z = np.asarray(axis.damping_ratios, dtype=float)[:, None]
-        n_nodes = _curve_nodes(pseudo, -z * w + 1j * (w * np.sqrt(1.0 - z**2)))
-        rule = tuple(jax.device_put(x) for x in _rule(n_nodes))  # data: one program per node count
-        return np.asarray(_pseudo_curve(axis, padded_pseudo(pseudo), shaper, rp, rule))[:, :n]
-    cmd = padded_command(cmd)  # a spline of any knot count of its slot: one program (`moves.INTERVAL_SLOT`)
-    grid = _uniform_grid(axis, cmd, rp)
-    out = _grid_curve(axis, cmd, *grid) if grid is not None else _closed_form_curve(axis, cmd, rp, 0)
-    return np.asarray(out)[:, :n]
+    return np.asarray(_closed(axis, cmd, padded_factors(r), r.shape[0]))[:, : r.shape[0]]
 
 
 #: `measured_curve`'s factor grids of more than 64 factors are padded to a multiple of this
@@ -288,6 +277,12 @@ def _curve(axis, cmd, r, rtol, atol, n_used=None):
     follows those only."""
     if not _has_closed_form(cmd):
         return _residual_ode(axis, cmd, r, rtol, atol)
+    return _closed(axis, cmd, r, n_used)
+
+
+def _closed(axis, cmd, r, n_used=None):
+    """`_curve` of a command with a closed-form residual: the quadrature's node count from the first `n_used`
+    factors of `r` (`_host_poles`: in numpy where the axis is concrete)."""
     pseudo = cmd.base if isinstance(cmd, ShapedCommand) else cmd
     if isinstance(pseudo, PseudoPolynomial):
         shaper = (cmd.times, cmd.amplitudes) if isinstance(cmd, ShapedCommand) else None
