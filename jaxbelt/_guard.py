@@ -275,23 +275,49 @@ def host_checked(
         return out
 
     def prepare(*args):
-        """Start compiling the program `call(*args)` will run and return its output's types (see
-        `jaxbelt._store.prepare`): while the program store is on, outside any trace; else None."""
-        if not (storable and _store.folder() is not None and not _host_checks.value and eager()):
+        """Start compiling the program `call(*args)` will run, in the background, and return its output's types
+        (outside any trace; else None): through the program store while it is on (`jaxbelt._store.prepare`),
+        else in memory (`_compile_ahead`)."""
+        if _host_checks.value or not eager():
             return None
         _equinox_errors_as_checks()
         with _host_checks(True):
-            types = _store.prepare(name, checkified, args, checked.options())
+            if storable and _store.folder() is not None:
+                types = _store.prepare(name, checkified, args, checked.options())
+            else:
+                types = _compile_ahead(checked, args)
         return types[1] if checks and types is not None else types  # without checkify's error
 
     call.prepare = prepare  # pyright: ignore[reportAttributeAccessIssue]
     return call
 
 
+def _compile_ahead(jitted, args):
+    """Trace `jitted(*args)` here (an `eqx.filter_jit` function, or a `LazyJit` of one; an array argument may be
+    given by its type, `jax.ShapeDtypeStruct`: zeros stand in) and compile it in the store's compile threads
+    (`jaxbelt._store.compile_in_background`; XLA releases the GIL): JAX keeps one compilation per jitted function
+    and input types, so the later call with inputs of these types finds it compiled, or waits for it (never
+    compiles it twice). Returns the output's types, or None (and nothing started) where it cannot be traced here:
+    the call then compiles it as before."""
+    args = jax.tree_util.tree_map(
+        lambda x: jax.device_put(np.zeros(x.shape, x.dtype)) if isinstance(x, jax.ShapeDtypeStruct) else x, args
+    )
+    try:
+        lowered = jitted.lower(*args)  # equinox's `Lowered`: JAX's, and the output's static parts
+        types = lowered.postprocess(lowered.lowered.out_info)
+    except Exception:  # noqa: BLE001 - compiling ahead only saves time
+        return None
+    future = _store.compile_in_background(lowered.lowered)
+    if isinstance(jitted, _xla.LazyJit):
+        jitted.compiling(future)
+    return types
+
+
 def prepare(fn, *args):
     """Start compiling the program `fn(*args)` will run, in the background, and return its output's types
-    (`jax.ShapeDtypeStruct`s) where `fn` is a `host_checked` or `stored_jit` function and the program store is
-    on; else do nothing and return None. An array argument may be given by its type."""
+    (`jax.ShapeDtypeStruct`s) where `fn` is a `host_checked` or `stored_jit` function called outside any trace
+    (through the program store while it is on, else in memory: `_compile_ahead`); else do nothing and return
+    None. An array argument may be given by its type."""
     start = getattr(fn, "prepare", None)
     return None if start is None else start(*args)
 
@@ -325,11 +351,14 @@ def stored_jit(fun: Any = None, *, compiler_options: dict | None = None) -> Any:
         return _store.call(name, fun, args, top, top.options())
 
     def prepare(*args):
-        """Start compiling the program `wrapper(*args)` will run and return its output's types (see
-        `jaxbelt._store.prepare`): while the program store is on, outside any trace; else None."""
-        if not (storable and _store.folder() is not None and eager()):
+        """Start compiling the program `wrapper(*args)` will run, in the background, and return its output's types
+        (outside any trace; else None): through the program store while it is on (`jaxbelt._store.prepare`), else
+        in memory (`_compile_ahead`)."""
+        if not eager():
             return None
-        return _store.prepare(name, fun, args, top.options())
+        if storable and _store.folder() is not None:
+            return _store.prepare(name, fun, args, top.options())
+        return _compile_ahead(top, args)
 
     wrapper.prepare = prepare  # pyright: ignore[reportAttributeAccessIssue]
     return wrapper

@@ -314,6 +314,13 @@ def _executor():
     return _state["executor"]
 
 
+def compile_in_background(lowered):
+    """Compile a lowered program (`jax.stages.Lowered`) in the compile threads and return the future: a later call
+    of its jitted function on inputs of the same types finds it compiled (see `jaxbelt._xla.LazyJit.compiling` for
+    a call made while it compiles). Errors are left to that call."""
+    return _executor().submit(lowered.compile)
+
+
 def _after_fork_in_child() -> None:
     # a forked process has none of its parent's threads: a new pool, and the programs compiled anew (a
     # compilation pending in the parent would never finish here)

@@ -128,6 +128,7 @@ class LazyJit:
         self._wanted = wanted
         self._built = None
         self._options: tuple | None = None  # (options,) once found: the backend does not change after its start
+        self._ahead: list = []  # the futures of its compilations started ahead (`compiling`)
         functools.update_wrapper(self, fun)
 
     def options(self) -> dict | None:
@@ -141,7 +142,20 @@ class LazyJit:
             self._built = self._make(compiler_options=options) if options else self._make()
         return self._built
 
+    def compiling(self, future) -> None:
+        """Note a compilation of this program started ahead of its call, in another thread (`future`): the next call
+        waits for it. (JAX keeps one compilation per program and input types, but a call made while another
+        thread compiles the same program ahead of time compiles it a second time.)"""
+        self._ahead.append((os.getpid(), future))
+
     def __call__(self, *args, **kwargs):
+        while self._ahead:
+            try:
+                pid, future = self._ahead.pop()
+            except IndexError:  # another thread took it
+                break
+            if pid == os.getpid():  # a forked child never sees its parent's compile threads finish
+                future.exception()  # waits; its error, if any, is the call's to raise
         return self._get()(*args, **kwargs)
 
     def __getattr__(self, name):  # lower, trace, ... of the jitted function

@@ -578,3 +578,29 @@ def test_design_move_at_0_8_to_1_7_s_after_1_s_compiles_no_lp():
         assert c["n"] == 0, T
         assert plan.minimax is not None and plan.minimax.converged
         assert plan.minimax.options.n_knots == 128
+
+
+def test_design_move_compiles_the_programs_it_prepares_once_in_the_compile_threads():
+    # at a given move time the minimax worker traces the LP's, the fine check's, the measure's and the blends'
+    # programs before it runs them, and the timed candidates' residual program is traced before the exponents are
+    # optimised; each compiles in a compile thread and its call waits for it: compiled once, in that thread (a
+    # prepared type that differed from the call's, or a call that did not wait, would compile it a second time)
+    import threading
+
+    import jax.monitoring
+
+    jax.clear_caches()
+    seen = []
+
+    def listener(name, duration, **kw):
+        if name == "/jax/core/compile/backend_compile_duration":
+            seen.append((kw.get("fun_name"), threading.current_thread().name))
+
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        jb.design_move(jb.ModalAxis([5.3, 13.1], [0.02, 0.012]), 0.1, 0.93, v_max=0.3, a_max=1.2)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+    for name in ("_solve_round_impl", "_fine_ratios_program", "_blend_programme", "_pseudo_curve"):
+        where = [thread for fun, thread in seen if fun == f"jit({name})"]
+        assert len(where) == 1 and where[0].startswith("jaxbelt-compile"), (name, seen)

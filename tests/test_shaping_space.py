@@ -154,3 +154,21 @@ def test_position_range():
     assert _within_range(row, d, (1.01 * lowest, 0.2), RATE).ok
     with pytest.raises(ValueError, match="x_min"):
         jb.design_move(axis, d, 0.8, v_max=V, a_max=A, include=("unshaped",), x_min=0.01)
+
+
+def test_pseudo_positions_on_the_host_match_eq_17():
+    """`hull.positions` of a pseudo-polynomial (Incerti, eq. 17, coefficients as Lagrange weights, numpy) against
+    the integer-exponent closed form (3, 4, 5) -> C = (10, -15, 6) to 1e-14 of the distance, and against the
+    command's own `derivative` (eq. 17 with the linear solve of eq. 22-23, JAX) to 1e-10 (the linear solve loses more to rounding than the product form)."""
+    from jaxbelt.commands import PseudoPolynomial
+    from jaxbelt.shaping.hull import positions
+
+    t = np.linspace(-0.2, 1.0, 1201)
+    d, T = 0.1, 0.8
+    u = np.clip(1 - t / T, 0, 1)
+    exact = np.where(t < 0, 0.0, d * (1 - 10 * u**3 + 15 * u**4 - 6 * u**5))
+    x = positions(PseudoPolynomial(gammas=np.array([3.0, 4.0, 5.0]), displacement=d, duration=T), t)
+    np.testing.assert_allclose(x, exact, rtol=0, atol=1e-14 * d)
+    for g in ([3.5, 4.25, 5.75], [4.2, 5.1, 6.3, 7.0], [6.1, 7.3, 8.2, 9.6, 10.4, 11.9]):
+        cmd = PseudoPolynomial(gammas=np.array(g), displacement=-d, duration=T)
+        np.testing.assert_allclose(positions(cmd, t), np.asarray(cmd.derivative(t, 0)), rtol=0, atol=1e-10 * d)

@@ -8,11 +8,13 @@ import math
 import os
 import subprocess
 import sys
+import threading
 import types
 from pathlib import Path
 
 import equinox as eqx
 import jax
+import jax.monitoring
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -373,7 +375,26 @@ def test_prepared_programs_are_traced_once_and_serve_the_calls(tmp_path, monkeyp
     names = []
     export = _store._export
     monkeypatch.setattr(_store, "_export", lambda fun, name, *a, **k: names.append(name) or export(fun, name, *a, **k))
-    assert prepare(harmonic._curve_post_jit, belt, jnp.zeros((4, 7)), jnp.ones(4, bool), 1) is None  # store off
+    # store off: compiled ahead in memory, in a compile thread, with the output's types; the call compiles nothing
+    # itself (it waits for that compilation)
+    args = (belt, jnp.zeros((4, 7)), jnp.ones(4, bool), 1)
+    jax.clear_caches()
+    threads = []
+
+    def listener(name, duration, **kw):
+        if name == "/jax/core/compile/backend_compile_duration" and kw.get("fun_name") == "jit(_curve_post_jit)":
+            threads.append(threading.current_thread().name)
+
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        ahead = prepare(harmonic._curve_post_jit, *args)
+        out = harmonic._curve_post_jit(*args)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+    assert len(threads) == 1 and threads[0].startswith("jaxbelt-compile"), threads
+    assert [(t.shape, t.dtype) for t in jax.tree_util.tree_leaves(ahead)] == [
+        (o.shape, o.dtype) for o in jax.tree_util.tree_leaves(out)
+    ]
     with store_in(tmp_path / "xla") as folder:
         stored = jb.response_curve(belt, (7.5, 10.5), 1)
         assert sorted(n.rsplit(".", 1)[-1] for n in names) == ["_continue_jit", "_curve_post_jit", "_folds_jit"]

@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import _xla
+from ..commands import PseudoPolynomial
 from ..models.axis import ModalAxis
 from .moves import BlendMove, PiecewiseMove, SplineMove, derivatives_at, piecewise_derivatives
 
@@ -92,7 +93,24 @@ def positions(cmd, t) -> np.ndarray:
         return _piecewise_positions(cmd, t)
     if isinstance(cmd, BlendMove):
         return np.sum([float(w) * positions(m, t) for w, m in zip(np.asarray(cmd.weights), cmd.members)], axis=0)
+    if isinstance(cmd, PseudoPolynomial):
+        return _pseudo_positions(cmd, t)
     return derivatives_at(cmd, t, (0,))[0]
+
+
+def _pseudo_positions(cmd: PseudoPolynomial, t: np.ndarray) -> np.ndarray:
+    """$\\varphi_m(t) = \\Phi[1 - \\sum_i C_i (1 - t/T)^{\\gamma_i}]$ [m] (Incerti, eq. 17) on the host, 0 before
+    t = 0 and $\\Phi$ after T: no program to compile (a pseudo-polynomial row is otherwise the only command whose
+    positions `design_move` would evaluate in one). $C_i = \\prod_{j \\ne i} \\gamma_j / (\\gamma_j - \\gamma_i)$, the
+    solution of eq. 22-23 ($\\sum_i C_i P(\\gamma_i, k) = [k = 0]$, k = 0..n: the Lagrange weights at 0 of the
+    exponents, since the falling factorials $P(\\gamma, k)$ span the polynomials of degree <= n that vanish at 0
+    for k >= 1)."""
+    g = np.asarray(cmd.gammas, dtype=float)
+    ratio = g[None, :] / np.where(np.eye(g.size, dtype=bool), 1.0, g[None, :] - g[:, None])
+    C = np.prod(np.where(np.eye(g.size, dtype=bool), 1.0, ratio), axis=1)
+    u = np.clip(1.0 - t / float(cmd.duration), 0.0, 1.0)
+    x = float(cmd.displacement) * (1.0 - (u[..., None] ** g) @ C)
+    return np.where(t < 0, 0.0, x)
 
 
 def _piecewise_positions(move: PiecewiseMove, t) -> np.ndarray:
@@ -187,6 +205,29 @@ def _blend_programme(C, tol):
 _blend_programme = _xla.LazyJit(jax.jit, _blend_programme, _xla.QUICK_COMPILE)
 
 
+def _coarse(K: int) -> np.ndarray:
+    """The factors (indices of `K`) the blend programme weighs: every `_LP_STRIDE`-th and the last."""
+    return np.unique(np.r_[np.arange(0, K, _LP_STRIDE), K - 1])
+
+
+def prepare_blend(n_modes: int, factors) -> None:
+    """Start compiling, in the background (`jaxbelt._store`'s compile threads; XLA releases the GIL), the blend
+    programme `best_blend` will run for `n_modes` modes (damping copies included) over the band `factors`: its
+    call then finds it compiled (JAX's compilation is cached per jitted function and input types). Traced here
+    (~0.3 s, JAX's settings are per thread); on any failure nothing is started and the call compiles it."""
+    from .. import _store
+
+    rows = _ANGLES * _coarse(np.asarray(factors).size).size * int(n_modes)
+    real = jax.dtypes.canonicalize_dtype(np.float64)  # as `jax.device_put` of a float64 host array makes it
+    try:
+        lowered = _blend_programme.trace(
+            jax.ShapeDtypeStruct((rows, _LP_COLUMNS), real), jax.ShapeDtypeStruct((), real)
+        ).lower()
+    except Exception:  # noqa: BLE001 - an ahead-of-time compile only saves time: the call compiles it
+        return
+    _blend_programme.compiling(_store.compile_in_background(lowered))
+
+
 def best_blend(axis: ModalAxis, members, reference, factors, rate_hz: float, blend: bool = True):
     """The weights of the blend of `members` (moves of one duration) that leaves the least worst residual over the
     band `factors` as executed at `rate_hz` [Hz] (see the module docstring), in units of `reference` [m] per mode:
@@ -201,7 +242,7 @@ def best_blend(axis: ModalAxis, members, reference, factors, rate_hz: float, ble
     best_w, best = np.eye(M)[k0], float(member_worst[k0])
     if M > 1 and blend:
         K = np.asarray(factors).size
-        coarse = np.unique(np.r_[np.arange(0, K, _LP_STRIDE), K - 1])
+        coarse = _coarse(K)
         Cl = np.stack([c.reshape(-1, K)[:, coarse].ravel() for c in C.T], axis=1)
         th = 2 * np.pi * np.arange(_ANGLES) / _ANGLES
         rows = np.real(np.exp(-1j * th)[:, None, None] * Cl[None]).reshape(-1, M)

@@ -16,8 +16,10 @@ import jax
 import numpy as np
 
 from . import design as _design
+from .candidates import prepare_timed
 from .certificate import certificate
-from .far_modes import lp_setup
+from .far_modes import lp_setup, prepare_lp
+from .hull import prepare_blend
 from .request import SURELY_FEASIBLE, MoveRequest
 
 #: the thread the minimax LP at a given move time runs in, beside the other candidates (`solving`): the LP is the
@@ -84,7 +86,7 @@ def solving(req: MoveRequest, classic: list):
         yield (fallback if req.move_time is None else req.move_time), None, _here
         return
     if req.move_time is not None:
-        queued = [_WORKER.submit(_in_callers_context(solve, req, req.move_time))]
+        queued = [_WORKER.submit(_in_callers_context(_prepared_solve, req, req.move_time))]
 
         def beside(fun, *args):
             queued.append(_WORKER.submit(_in_callers_context(fun, *args)))
@@ -103,6 +105,20 @@ def solving(req: MoveRequest, classic: list):
     done = _here(lambda: solve(req, None, T_guess=fallback, target=target))  # solved here, in the caller's thread
     mm = done.result()[2][0]
     yield (fallback if mm is None else float(mm.command.duration)), done, _here
+
+
+def _prepared_solve(req: MoveRequest, T: float):
+    """`solve(req, T)` (`T` [s]: the given move time) after starting, in the background, the compilation of the programs the table's rows
+    run: the minimax design's (`far_modes.prepare_lp`, where the smooth design is surely feasible), the timed
+    candidates' measure (`candidates.prepare_timed`) and the blends' (`hull.prepare_blend`). Traced here, in the
+    worker, while the caller traces the pseudo-polynomials' optimiser; each compiles in the compile threads while
+    the ones after it are traced, and a call waits for its program's compilation (`jaxbelt._guard.prepare`)."""
+    if req.clearly and req.lp is not None:
+        prepare_lp(req.lp, req.distance, req.v_max, req.a_max, req.j_max, req.uncertainty, T)
+    prepare_timed(req, T)
+    if req.smooth_arg is not True:  # the blends of the command space (`minimax_rows`), the worker's last programme
+        prepare_blend(req.axis.n_modes, req.band)
+    return solve(req, T)
 
 
 def solve(req: MoveRequest, T: float | None, *, jumps: bool = False, T_guess: float = math.nan,
