@@ -1299,12 +1299,12 @@ def padded_spline(cmd: SplineMove) -> PaddedSpline:
 
 
 def padded_command(cmd) -> Any:
-    """`cmd` in the padded form its programs take (peaks, samples, residual curves), where its values are concrete:
-    a `PseudoPolynomial` to `TERMS_BUCKET` exponents (`padded_pseudo`), a `SplineMove` to its `INTERVAL_SLOT`
-    slot (`padded_spline`), a `PiecewiseMove` of more than `INTERVAL_SLOT` terms to a multiple of it (`padded`), a
-    `BlendMove`'s members each; the same values, shared programs. Anything else (or traced), as it is."""
-    if not is_concrete(cmd):
-        return cmd
+    """`cmd` (concrete) in the padded form its programs take (peaks, samples, residual curves): a `PseudoPolynomial`
+    to `TERMS_BUCKET` exponents (`padded_pseudo`), a `SplineMove` to its `INTERVAL_SLOT` slot (`padded_spline`), a
+    `PiecewiseMove` of more than `INTERVAL_SLOT` terms to a multiple of it (`padded`), a `BlendMove`'s members each;
+    the same values, shared programs. Anything else, as it is. Its callers' commands hold values (`derivatives_at`
+    returns them on the host, the programs prepared are the pipeline's); a traced one is left as it is by the caller
+    that may see it (`residual._closed`)."""
     if isinstance(cmd, PseudoPolynomial):
         return padded_pseudo(cmd)
     if isinstance(cmd, SplineMove):

@@ -280,8 +280,9 @@ def _curve(axis, cmd, r, rtol, atol, n_used=None):
 
 def _closed(axis, cmd, r, n_used=None, *, host: bool):
     """`_curve` of a command with a closed-form residual: the quadrature's node count from the first `n_used`
-    factors of `r`, on poles computed in numpy (`_host_poles`) where `host` says that the axis and the factors are
-    concrete (`closed_curve`'s always are: it returns numpy)."""
+    factors of `r`. `host`: the axis and the factors are concrete (`closed_curve`'s always are: it returns numpy),
+    so the quadrature's poles are computed in numpy (`_host_poles`) and a uniform grid is looked for
+    (`_uniform_grid`); a traced command takes the closed form as it is, a concrete one its padded form."""
     pseudo = cmd.base if isinstance(cmd, ShapedCommand) else cmd
     if isinstance(pseudo, PseudoPolynomial):
         shaper = (cmd.times, cmd.amplitudes) if isinstance(cmd, ShapedCommand) else None
@@ -289,8 +290,10 @@ def _closed(axis, cmd, r, n_used=None, *, host: bool):
         n_nodes = _curve_nodes(pseudo, s)
         rule = tuple(jax.device_put(x) for x in _rule(n_nodes))  # data: one program per node count
         return _pseudo_curve(axis, padded_pseudo(pseudo), shaper, r, rule)
+    if not is_concrete(cmd):
+        return _closed_form_curve(axis, cmd, r, 0)
     cmd = padded_command(cmd)  # a spline of any knot count of its slot: one program (`moves.INTERVAL_SLOT`)
-    grid = _uniform_grid(axis, cmd, r)
+    grid = _uniform_grid(axis, cmd, r) if host else None
     if grid is not None:
         return _grid_curve(axis, cmd, *grid)
     return _closed_form_curve(axis, cmd, r, 0)
@@ -312,9 +315,10 @@ def _has_piecewise(cmd) -> bool:
 
 def _uniform_grid(axis, cmd, r):
     """`(r0, dr, n)` where the factors `r` (1-D) are a uniform grid of at least `GRID_MIN` points (to round-off: the
-    grid $r_0 + j\\,dr$ is within 1e-14 of them), the command holds a `PiecewiseMove` and every value is concrete,
-    with $|s|T \\ge$ `GRID_MIN_ST` for every mode at the lowest factor; else None (the direct form)."""
-    if not _has_piecewise(cmd) or not is_concrete((axis, cmd, r)):
+    grid $r_0 + j\\,dr$ is within 1e-14 of them) and the command holds a `PiecewiseMove`, with $|s|T \\ge$
+    `GRID_MIN_ST` for every mode at the lowest factor; else None (the direct form). The axis, the command and the
+    factors are concrete (`_closed` asks; `prepare_curve`'s are the pipeline's)."""
+    if not _has_piecewise(cmd):
         return None
     r = np.asarray(r, dtype=float)
     n = r.shape[0]
