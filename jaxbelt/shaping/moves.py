@@ -512,29 +512,29 @@ def shape_move(base: PiecewiseMove, amplitudes, delays) -> PiecewiseMove:
     jit/vmap/grad) are checked at run time: the returned move carries the checks, and an invalid impulse raises,
     naming the parameter, where the move is used (never a silently longer or NaN move)."""
     found = _check_impulses("shape_move", amplitudes, delays)
-    move = convolved(base, amplitudes, delays)
-    return checked(move, checks=found) if found else move
-
-
-def convolved(base: PiecewiseMove, amplitudes, delays) -> PiecewiseMove:
-    """`shape_move` for an impulse sequence already known to be one (a shaper's, `shapers.shaper_for_axis`):
-    the same move, without the checks. Concrete values are convolved on the host (eager operations would compile a
-    program per impulse count: a shaper on three modes has 64 or 125 impulses), traced ones in the trace."""
     if is_concrete((base, amplitudes, delays)):
-        A = np.asarray(amplitudes, dtype=float)
-        tau = np.asarray(delays, dtype=float)
-        return PiecewiseMove(
-            (np.asarray(base.times)[None, :] + tau[:, None]).ravel(),
-            (np.asarray(base.steps)[None, :] * A[:, None]).ravel(),
-            (np.asarray(base.ramps)[None, :] * A[:, None]).ravel(),
-            np.asarray(base.duration) + tau[-1],
-        )
+        return convolved(base, amplitudes, delays)  # `found` is empty: concrete impulses were checked on the host
     A = jnp.asarray(amplitudes, dtype=float)
     tau = jnp.asarray(delays, dtype=float)
     times = (base.times[None, :] + tau[:, None]).ravel()
     steps = (base.steps[None, :] * A[:, None]).ravel()
     ramps = (base.ramps[None, :] * A[:, None]).ravel()
-    return PiecewiseMove(times, steps, ramps, base.duration + tau[-1])
+    move = PiecewiseMove(times, steps, ramps, base.duration + tau[-1])
+    return checked(move, checks=found) if found else move
+
+
+def convolved(base: PiecewiseMove, amplitudes, delays) -> PiecewiseMove:
+    """`shape_move` of concrete values and an impulse sequence already known to be one (a shaper's,
+    `shapers.shaper_for_axis`): the same move, without the checks, convolved on the host (eager operations would
+    compile a program per impulse count: a shaper on three modes has 64 or 125 impulses)."""
+    A = np.asarray(amplitudes, dtype=float)
+    tau = np.asarray(delays, dtype=float)
+    return PiecewiseMove(
+        (np.asarray(base.times)[None, :] + tau[:, None]).ravel(),
+        (np.asarray(base.steps)[None, :] * A[:, None]).ravel(),
+        (np.asarray(base.ramps)[None, :] * A[:, None]).ravel(),
+        np.asarray(base.duration) + tau[-1],
+    )
 
 
 @stored_jit
@@ -662,24 +662,16 @@ def prepare_peaks(cmd: AbstractMotionCommand, n: int = 20001) -> None:
 
 
 def padded(move: PiecewiseMove, size: int) -> PiecewiseMove:
-    """The same move with its terms padded to `size` by zero terms at t = 0 (moves of one padded size share their
-    compiled programs)."""
+    """The same (concrete) move with its terms padded to `size` by zero terms at t = 0 (moves of one padded size
+    share their compiled programs), on the host: an eager concatenation compiles a program per size."""
     k = int(move.times.shape[0])
     if k >= size:
         return move
-    if is_concrete(move):  # on the host: an eager concatenation compiles a program per size
-        z = np.zeros((size - k,))
-        return PiecewiseMove(
-            np.concatenate([np.asarray(move.times), z]),
-            np.concatenate([np.asarray(move.steps), z]),
-            np.concatenate([np.asarray(move.ramps), z]),
-            move.duration,
-        )
-    z = jnp.zeros((size - k,))
+    z = np.zeros((size - k,))
     return PiecewiseMove(
-        jnp.concatenate([move.times, z]),
-        jnp.concatenate([move.steps, z]),
-        jnp.concatenate([move.ramps, z]),
+        np.concatenate([np.asarray(move.times), z]),
+        np.concatenate([np.asarray(move.steps), z]),
+        np.concatenate([np.asarray(move.ramps), z]),
         move.duration,
     )
 
@@ -1110,11 +1102,12 @@ _MEMO_MAX = 1 << 17
 
 def _memo_key(run, t: np.ndarray, orders: tuple):
     """The key of `derivatives_at`'s memo for the padded command `run` at the times `t` (None: not kept, too few or
-    too many times, or a traced command)."""
+    too many times, or a leaf that is not a number). `run` holds values: `derivatives_at` returns them on the host
+    (a traced command stops at the first `np.asarray`, here or there)."""
     if not _MEMO_MIN <= t.size <= _MEMO_MAX:
         return None
     leaves, tree = jax.tree_util.tree_flatten(run)
-    if not all(isinstance(x, np.ndarray | jax.Array | float | int) for x in leaves) or not is_concrete(run):
+    if not all(isinstance(x, np.ndarray | jax.Array | float | int) for x in leaves):
         return None
     data = tuple((np.shape(x), np.asarray(x).dtype.str, np.asarray(x).tobytes()) for x in leaves)
     return (type(run), tree, data, t.tobytes(), orders)
@@ -1306,12 +1299,12 @@ def padded_spline(cmd: SplineMove) -> PaddedSpline:
 
 
 def padded_command(cmd) -> Any:
-    """`cmd` in the padded form its programs take (peaks, samples, residual curves), where its values are concrete:
-    a `PseudoPolynomial` to `TERMS_BUCKET` exponents (`padded_pseudo`), a `SplineMove` to its `INTERVAL_SLOT`
-    slot (`padded_spline`), a `PiecewiseMove` of more than `INTERVAL_SLOT` terms to a multiple of it (`padded`), a
-    `BlendMove`'s members each; the same values, shared programs. Anything else (or traced), as it is."""
-    if not is_concrete(cmd):
-        return cmd
+    """`cmd` (concrete) in the padded form its programs take (peaks, samples, residual curves): a `PseudoPolynomial`
+    to `TERMS_BUCKET` exponents (`padded_pseudo`), a `SplineMove` to its `INTERVAL_SLOT` slot (`padded_spline`), a
+    `PiecewiseMove` of more than `INTERVAL_SLOT` terms to a multiple of it (`padded`), a `BlendMove`'s members each;
+    the same values, shared programs. Anything else, as it is. Its callers' commands hold values (`derivatives_at`
+    returns them on the host, the programs prepared are the pipeline's); a traced one is left as it is by the caller
+    that may see it (`residual._closed`)."""
     if isinstance(cmd, PseudoPolynomial):
         return padded_pseudo(cmd)
     if isinstance(cmd, SplineMove):

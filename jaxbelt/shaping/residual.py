@@ -175,10 +175,8 @@ def _poles(axis: ModalAxis, factors):
 
 
 def _host_poles(axis: ModalAxis, r):
-    """The poles s of `_poles` (n_modes, K) in numpy where the axis and the factors are concrete (the host decision of
-    `_nodes_for`: eager operations compile a program each in a fresh process), else `_poles`'."""
-    if not is_concrete((axis, r)):
-        return _poles(axis, r)[0]
+    """The poles s of `_poles` (n_modes, K) in numpy, of a concrete axis and factors (the host decision of
+    `_curve_nodes`: eager operations compile a program each in a fresh process)."""
     w = (
         2.0
         * np.pi
@@ -243,13 +241,13 @@ def closed_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors) -> np.nda
     """`measured_curve(axis, cmd, factors)` [m] for a command with a closed-form residual (every command the design
     pipeline measures: piecewise moves, splines, their blends, pseudo-polynomials, each maybe shaped) on a concrete
     axis: the same numbers by the same programs (`_closed`, `_curve`'s closed-form part), a numpy array (n_modes,
-    len(factors)). The quadrature's node count is decided on the poles computed in numpy (`_host_poles`' host
-    branch: the pipeline's axes are concrete), and no ODE fallback is reachable: a `TypeError` names the command
+    len(factors)). The quadrature's node count is decided on the poles computed in numpy (`_host_poles`: the
+    pipeline's axes are concrete), and no ODE fallback is reachable: a `TypeError` names the command
     otherwise."""
     if not _has_closed_form(cmd):
         raise TypeError(f"closed_curve: {type(cmd).__name__} has no closed-form residual (use `residual_curve`)")
     r = np.atleast_1d(np.asarray(factors, dtype=float))
-    return np.asarray(_closed(axis, cmd, padded_factors(r), r.shape[0]))[:, : r.shape[0]]
+    return np.asarray(_closed(axis, cmd, padded_factors(r), r.shape[0], host=True))[:, : r.shape[0]]
 
 
 #: `measured_curve`'s factor grids of more than 64 factors are padded to a multiple of this
@@ -277,20 +275,25 @@ def _curve(axis, cmd, r, rtol, atol, n_used=None):
     follows those only."""
     if not _has_closed_form(cmd):
         return _residual_ode(axis, cmd, r, rtol, atol)
-    return _closed(axis, cmd, r, n_used)
+    return _closed(axis, cmd, r, n_used, host=is_concrete((axis, r)))
 
 
-def _closed(axis, cmd, r, n_used=None):
+def _closed(axis, cmd, r, n_used=None, *, host: bool):
     """`_curve` of a command with a closed-form residual: the quadrature's node count from the first `n_used`
-    factors of `r` (`_host_poles`: in numpy where the axis is concrete)."""
+    factors of `r`. `host`: the axis and the factors are concrete (`closed_curve`'s always are: it returns numpy),
+    so the quadrature's poles are computed in numpy (`_host_poles`) and a uniform grid is looked for
+    (`_uniform_grid`); a traced command takes the closed form as it is, a concrete one its padded form."""
     pseudo = cmd.base if isinstance(cmd, ShapedCommand) else cmd
     if isinstance(pseudo, PseudoPolynomial):
         shaper = (cmd.times, cmd.amplitudes) if isinstance(cmd, ShapedCommand) else None
-        n_nodes = _curve_nodes(pseudo, _host_poles(axis, r[:n_used]))
+        s = _host_poles(axis, r[:n_used]) if host else _poles(axis, r[:n_used])[0]
+        n_nodes = _curve_nodes(pseudo, s)
         rule = tuple(jax.device_put(x) for x in _rule(n_nodes))  # data: one program per node count
         return _pseudo_curve(axis, padded_pseudo(pseudo), shaper, r, rule)
+    if not is_concrete(cmd):
+        return _closed_form_curve(axis, cmd, r, 0)
     cmd = padded_command(cmd)  # a spline of any knot count of its slot: one program (`moves.INTERVAL_SLOT`)
-    grid = _uniform_grid(axis, cmd, r)
+    grid = _uniform_grid(axis, cmd, r) if host else None
     if grid is not None:
         return _grid_curve(axis, cmd, *grid)
     return _closed_form_curve(axis, cmd, r, 0)
@@ -312,9 +315,10 @@ def _has_piecewise(cmd) -> bool:
 
 def _uniform_grid(axis, cmd, r):
     """`(r0, dr, n)` where the factors `r` (1-D) are a uniform grid of at least `GRID_MIN` points (to round-off: the
-    grid $r_0 + j\\,dr$ is within 1e-14 of them), the command holds a `PiecewiseMove` and every value is concrete,
-    with $|s|T \\ge$ `GRID_MIN_ST` for every mode at the lowest factor; else None (the direct form)."""
-    if not _has_piecewise(cmd) or not is_concrete((axis, cmd, r)):
+    grid $r_0 + j\\,dr$ is within 1e-14 of them) and the command holds a `PiecewiseMove`, with $|s|T \\ge$
+    `GRID_MIN_ST` for every mode at the lowest factor; else None (the direct form). The axis, the command and the
+    factors are concrete (`_closed` asks; `prepare_curve`'s are the pipeline's)."""
+    if not _has_piecewise(cmd):
         return None
     r = np.asarray(r, dtype=float)
     n = r.shape[0]
