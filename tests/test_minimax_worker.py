@@ -10,7 +10,7 @@ import pytest
 
 import jaxbelt as jb
 from jaxbelt.shaping import minimax_solve as ms
-from jaxbelt.shaping import moves, plan, shaped
+from jaxbelt.shaping import moves, plan, shaped, worker
 
 pytestmark = pytest.mark.slow  # a first design_move compiles its programs (~10 s)
 
@@ -43,7 +43,7 @@ def test_the_worker_makes_the_table_of_the_lp_solved_in_line(monkeypatch):
     programs on the same inputs: equal to the last bit)."""
     ax = jb.ModalAxis(*AXIS)
     threaded = jb.design_move(ax, 0.1, 1.0, **KW)
-    monkeypatch.setattr(ms, "_WORKER", _InLine())
+    monkeypatch.setattr(worker, "_WORKER", _InLine())
     _forget()
     in_line = jb.design_move(ax, 0.1, 1.0, **KW)
     assert _table(threaded) == _table(in_line)
@@ -54,14 +54,14 @@ def test_the_worker_makes_the_table_of_the_lp_solved_in_line(monkeypatch):
 def _recording_submit(monkeypatch):
     """Record the futures the worker is given."""
     futures = []
-    submit = ms._WORKER.submit
+    submit = worker._WORKER.submit
 
     def record(*args, **kwargs):
         fut = submit(*args, **kwargs)
         futures.append(fut)
         return fut
 
-    monkeypatch.setattr(ms._WORKER, "submit", record)
+    monkeypatch.setattr(worker._WORKER, "submit", record)
     return futures
 
 
@@ -75,7 +75,8 @@ def test_an_error_in_the_worker_reaches_the_caller(monkeypatch):
     monkeypatch.setattr(ms, "solve", failing)
     with pytest.raises(RuntimeError, match="the LP failed here"):
         jb.design_move(jb.ModalAxis(*AXIS), 0.1, 1.0, **KW)
-    assert len(futures) == 2 and all(f.done() for f in futures)  # the LP, then the minimax rows that wait for it
+    # the LP's preparation (queued by validate), the LP, then the minimax rows that wait for it
+    assert len(futures) == 3 and all(f.done() for f in futures)
 
 
 def test_an_error_beside_the_worker_waits_for_it(monkeypatch):
@@ -94,7 +95,8 @@ def test_an_error_beside_the_worker_waits_for_it(monkeypatch):
     monkeypatch.setattr(plan, "measure_rows", failing)
     with pytest.raises(ValueError, match="a candidate failed here"):
         jb.design_move(jb.ModalAxis(*AXIS), 0.1, 1.0, **KW)
-    assert len(futures) == 2 and all(f.done() for f in futures)  # the LP and the minimax rows: finished or cancelled
+    # the LP's preparation, the LP and the minimax rows: finished or cancelled
+    assert len(futures) == 3 and all(f.done() for f in futures)
 
 
 def test_no_worker_without_a_move_time_or_the_minimax_row(monkeypatch):
@@ -135,11 +137,11 @@ def test_a_forked_child_has_a_worker_of_its_own():
     import os
     import time
 
-    ms._WORKER.submit(int).result(timeout=30)  # the parent's worker thread has started
+    worker._WORKER.submit(int).result(timeout=30)  # the parent's worker thread has started
     pid = os.fork()
     if pid == 0:  # the child: no JAX here, only the executor
         try:
-            ok = ms._WORKER.submit(int, 7).result(timeout=10) == 7
+            ok = worker._WORKER.submit(int, 7).result(timeout=10) == 7
         except BaseException:  # noqa: BLE001 - any failure is the child's exit status
             ok = False
         os._exit(0 if ok else 1)
@@ -169,7 +171,7 @@ def test_the_minimax_rows_queued_after_a_slow_lp_are_made(monkeypatch):
 
     monkeypatch.setattr(ms, "solve", slow)
     threaded = jb.design_move(ax, 0.1, 1.0, **KW)
-    monkeypatch.setattr(ms, "_WORKER", _InLine())
+    monkeypatch.setattr(worker, "_WORKER", _InLine())
     _forget()
     in_line = jb.design_move(ax, 0.1, 1.0, **KW)
     assert _table(threaded) == _table(in_line) and "minimax" in {r.name for r in threaded.table}

@@ -581,10 +581,10 @@ def test_design_move_at_0_8_to_1_7_s_after_1_s_compiles_no_lp():
 
 
 def test_design_move_compiles_the_programs_it_prepares_once_in_the_compile_threads():
-    # at a given move time the minimax worker traces the LP's, the fine check's, the measure's and the blends'
-    # programs before it runs them, and the timed candidates' residual program is traced before the exponents are
-    # optimised; each compiles in a compile thread and its call waits for it: compiled once, in that thread (a
-    # prepared type that differed from the call's, or a call that did not wait, would compile it a second time)
+    # at a given move time the minimax worker first traces the LP's, the fine check's and the programs that measure
+    # the design (far_modes.prepare_lp), before it runs them; each compiles in a compile thread and its call waits
+    # for it: compiled once, in that thread (a prepared type that differed from the call's, or a call that did not
+    # wait, would compile it a second time, in the worker)
     import threading
 
     import jax.monitoring
@@ -601,6 +601,6 @@ def test_design_move_compiles_the_programs_it_prepares_once_in_the_compile_threa
         jb.design_move(jb.ModalAxis([5.3, 13.1], [0.02, 0.012]), 0.1, 0.93, v_max=0.3, a_max=1.2)
     finally:
         jax.monitoring.unregister_event_duration_listener(listener)
-    for name in ("_solve_round_impl", "_fine_ratios_program", "_blend_programme", "_pseudo_curve"):
+    for name in ("_solve_round_impl", "_fine_ratios_program", "_closed_form_curve", "_derivatives"):
         where = [thread for fun, thread in seen if fun == f"jit({name})"]
         assert len(where) == 1 and where[0].startswith("jaxbelt-compile"), (name, seen)

@@ -518,8 +518,8 @@ def _tune_step(opt, drive, train_pid, g0, cfg: _Config, p, state):
 
 
 def _prepare_step(opt, drive, train_pid, g0, cfg: _Config, p, state) -> None:
-    """While the program store is on: trace the step's simulation and start compiling it, then trace the update from
-    the simulation's output types while it compiles. Nothing otherwise."""
+    """Trace the step's simulation and start compiling it in the background (`jaxbelt._guard.prepare`), then trace
+    the update from the simulation's output types while it compiles."""
     types = prepare(_tune_run, drive, train_pid, g0, cfg, p)
     if types is not None:
         prepare(_tune_update, opt, drive, train_pid, g0, cfg, p, state, *types)

@@ -9,11 +9,8 @@ peak |jerk|)` where its builder measured them already, as the pseudo-polynomials
 
 import numpy as np
 
-from ..commands import PseudoPolynomial
-from .bands import measure_grids
 from .far_modes import _far_modes, _sub_axis
 from .request import MoveRequest
-from .residual import prepare_curve
 
 
 def timed_commands(req: MoveRequest, T: float) -> list:
@@ -26,17 +23,6 @@ def timed_commands(req: MoveRequest, T: float) -> list:
     if req.move_time is None:
         return [*out, ("unshaped (time-optimal)", req.ref_cmd, float(req.ref_cmd.duration), "", True, None)]
     return [*out, ("unshaped", req.unshaped, T, "", True, None)]
-
-
-def prepare_timed(req: MoveRequest, T: float) -> None:
-    """Start compiling, in the background, the programs that measure the timed candidates at move time `T` [s] (the
-    pseudo-polynomials' residual on the measure's grids, `residual.prepare_curve`): they compile while the exponents
-    are optimised."""
-    if "pseudo-polynomial" not in req.include:
-        return
-    stand_in = PseudoPolynomial(gammas=np.array([3.0, 4.0, 5.0]), displacement=req.distance, duration=T)
-    for factors in measure_grids(req.uncertainty):
-        prepare_curve(req.axis, stand_in, factors)
 
 
 def pseudo_commands(req: MoveRequest, T: float) -> list:
@@ -60,8 +46,6 @@ def pseudo_commands(req: MoveRequest, T: float) -> list:
         without = f"exponents optimised without mode(s) {', '.join(str(i + 1) for i in far.far)}"
         axis = _sub_axis(axis, kept)
     ref = np.asarray(req.ref_nominal)[kept]
-    if req.move_time is None or "minimax" not in req.include:  # else the minimax worker has started them
-        prepare_timed(req, T)
     designs = designs_for(axis, req.distance, T, req.limits, ref, req.uncertainty, req.progress)
     out = []
     for name, pd in designs.items():

@@ -164,11 +164,11 @@ def _refuse_all_far(axis: ModalAxis, T: float, u: float, far: _FarModes, per: in
 
 
 def prepare_lp(setup: LPSetup, d: float, v_max: float, a_max: float, j_max, u: float, T: float) -> None:
-    """While the program store is on: start compiling, in the background, the programs the minimax design of `setup`
+    """Start compiling, in the background (`jaxbelt._guard.prepare`), the programs the minimax design of `setup`
     at move time `T` [s] runs (distance `d` [m], limits, band ±`u`; a stand-in reference of the right shape) and
     those `measure._measure` runs on its command, each traced while the ones before compile (on two cores the LP's
     compilation, the longest, overlaps the others' tracing and compiling, and the reference's and the candidates'
-    work). Nothing otherwise."""
+    work)."""
     stand_in = np.ones(np.asarray(setup.kept).size)
     solver = _design.MinimaxSolver(setup.lp_axis, d, v_max, a_max, j_max, u, stand_in, setup.opts)
     problem = solver.problem(T)

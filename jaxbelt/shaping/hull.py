@@ -205,29 +205,6 @@ def _blend_programme(C, tol):
 _blend_programme = _xla.LazyJit(jax.jit, _blend_programme, _xla.QUICK_COMPILE)
 
 
-def _coarse(K: int) -> np.ndarray:
-    """The factors (indices of `K`) the blend programme weighs: every `_LP_STRIDE`-th and the last."""
-    return np.unique(np.r_[np.arange(0, K, _LP_STRIDE), K - 1])
-
-
-def prepare_blend(n_modes: int, factors) -> None:
-    """Start compiling, in the background (`jaxbelt._store`'s compile threads; XLA releases the GIL), the blend
-    programme `best_blend` will run for `n_modes` modes (damping copies included) over the band `factors`: its
-    call then finds it compiled (JAX's compilation is cached per jitted function and input types). Traced here
-    (~0.3 s, JAX's settings are per thread); on any failure nothing is started and the call compiles it."""
-    from .. import _store
-
-    rows = _ANGLES * _coarse(np.asarray(factors).size).size * int(n_modes)
-    real = jax.dtypes.canonicalize_dtype(np.float64)  # as `jax.device_put` of a float64 host array makes it
-    try:
-        lowered = _blend_programme.trace(
-            jax.ShapeDtypeStruct((rows, _LP_COLUMNS), real), jax.ShapeDtypeStruct((), real)
-        ).lower()
-    except Exception:  # noqa: BLE001 - an ahead-of-time compile only saves time: the call compiles it
-        return
-    _blend_programme.compiling(_store.compile_in_background(lowered))
-
-
 def best_blend(axis: ModalAxis, members, reference, factors, rate_hz: float, blend: bool = True):
     """The weights of the blend of `members` (moves of one duration) that leaves the least worst residual over the
     band `factors` as executed at `rate_hz` [Hz] (see the module docstring), in units of `reference` [m] per mode:
@@ -242,7 +219,7 @@ def best_blend(axis: ModalAxis, members, reference, factors, rate_hz: float, ble
     best_w, best = np.eye(M)[k0], float(member_worst[k0])
     if M > 1 and blend:
         K = np.asarray(factors).size
-        coarse = _coarse(K)
+        coarse = np.unique(np.r_[np.arange(0, K, _LP_STRIDE), K - 1])
         Cl = np.stack([c.reshape(-1, K)[:, coarse].ravel() for c in C.T], axis=1)
         th = 2 * np.pi * np.arange(_ANGLES) / _ANGLES
         rows = np.real(np.exp(-1j * th)[:, None, None] * Cl[None]).reshape(-1, M)

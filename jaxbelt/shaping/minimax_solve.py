@@ -10,47 +10,14 @@ A lower-level module of the minimax rows (`jaxbelt.shaping.minimax_rows`): it de
 import concurrent.futures
 import contextlib
 import math
-import os
 
-import jax
 import numpy as np
 
 from . import design as _design
-from .candidates import prepare_timed
+from . import worker
 from .certificate import certificate
-from .far_modes import lp_setup, prepare_lp
-from .hull import prepare_blend
+from .far_modes import lp_setup
 from .request import SURELY_FEASIBLE, MoveRequest
-
-#: the thread the minimax LP at a given move time runs in, beside the other candidates (`solving`): the LP is the
-#: longest stage of a design and needs nothing they compute; XLA releases the GIL while it runs and compiles, so on
-#: two cores the two overlap (a warm 3-mode design 2.5 s -> 1.7 s, a first call 18 s -> 12 s). Created at import,
-#: its thread starts at the first submit; a forked child makes its own (a parent's executor never runs the child's
-#: work: `design_move` would wait for it forever).
-_WORKER: concurrent.futures.ThreadPoolExecutor
-
-
-def _new_worker() -> None:
-    global _WORKER
-    _WORKER = concurrent.futures.ThreadPoolExecutor(max_workers=1, thread_name_prefix="jaxbelt-minimax")
-
-
-_new_worker()
-if hasattr(os, "register_at_fork"):
-    os.register_at_fork(after_in_child=_new_worker)
-
-
-def _in_callers_context(fun, *args):
-    """`fun(*args)` as a thread of its own would run it under the caller's JAX settings: the 64-bit mode and the
-    default device, which a `with jax.enable_x64(True):` or `with jax.default_device(d):` block sets for the
-    caller's thread only (read here, in the caller's thread; re-entered in the worker's)."""
-    x64, device = bool(jax.enable_x64.value), jax.default_device.value
-
-    def run():
-        with jax.enable_x64(x64), jax.default_device(device):
-            return fun(*args)
-
-    return run
 
 
 def _here(fun, *args) -> concurrent.futures.Future:
@@ -69,13 +36,13 @@ def solving(req: MoveRequest, classic: list):
     follows the design runs, for the block: yields `(T, future of solve's result, beside)` (no future without
     "minimax" in `req.include`); `beside(fun, *args)` returns the future of `fun(*args)`.
 
-    - at a given move time: that time, `solve(req, T)` running in the worker thread (`_WORKER`) beside the other
+    - at a given move time: that time, `solve(req, T)` running in the minimax worker (`jaxbelt.shaping.worker`) beside the other
       candidates, and `beside` queuing work on the same worker after it (the minimax rows: their shaped moves,
       blends and the design with jumps need only the design, so they overlap the timed candidates too; warm, 3 modes,
       2 cores at load 5: 3.9-4.3 s -> 2.3-3.3 s, the same rows). On leaving the block the queued work is waited
       for; on an error the work not started is cancelled and the work started is waited for: no LP outlives the
       call, none runs outside its BLAS limit. The worker runs under the caller's 64-bit mode and default device
-      (`_in_callers_context`);
+      (`worker.submit`), after the LP's preparation `request.validate` queued;
     - with `move_time` None: the design at the shortest time whose worst residual reaches the best usable row of
       `classic` (the measured classic rows; searched from the shortest of their times), solved here, and its time;
       without a design, the shortest usable classic row's time (twice the time-optimal move's without one);
@@ -86,10 +53,10 @@ def solving(req: MoveRequest, classic: list):
         yield (fallback if req.move_time is None else req.move_time), None, _here
         return
     if req.move_time is not None:
-        queued = [_WORKER.submit(_in_callers_context(_prepared_solve, req, req.move_time))]
+        queued = [worker.submit(solve, req, req.move_time)]
 
         def beside(fun, *args):
-            queued.append(_WORKER.submit(_in_callers_context(fun, *args)))
+            queued.append(worker.submit(fun, *args))
             return queued[-1]
 
         try:
@@ -105,20 +72,6 @@ def solving(req: MoveRequest, classic: list):
     done = _here(lambda: solve(req, None, T_guess=fallback, target=target))  # solved here, in the caller's thread
     mm = done.result()[2][0]
     yield (fallback if mm is None else float(mm.command.duration)), done, _here
-
-
-def _prepared_solve(req: MoveRequest, T: float):
-    """`solve(req, T)` (`T` [s]: the given move time) after starting, in the background, the compilation of the programs the table's rows
-    run: the minimax design's (`far_modes.prepare_lp`, where the smooth design is surely feasible), the timed
-    candidates' measure (`candidates.prepare_timed`) and the blends' (`hull.prepare_blend`). Traced here, in the
-    worker, while the caller traces the pseudo-polynomials' optimiser; each compiles in the compile threads while
-    the ones after it are traced, and a call waits for its program's compilation (`jaxbelt._guard.prepare`)."""
-    if req.clearly and req.lp is not None:
-        prepare_lp(req.lp, req.distance, req.v_max, req.a_max, req.j_max, req.uncertainty, T)
-    prepare_timed(req, T)
-    if req.smooth_arg is not True:  # the blends of the command space (`minimax_rows`), the worker's last programme
-        prepare_blend(req.axis.n_modes, req.band)
-    return solve(req, T)
 
 
 def solve(req: MoveRequest, T: float | None, *, jumps: bool = False, T_guess: float = math.nan,

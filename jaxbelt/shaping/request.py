@@ -4,7 +4,7 @@ with every quantity the later stages share derived from them once.
 Every refusal names the parameter and its valid range; a damping range expands the axis the residuals are judged on
 (each mode once per damping sample). The later stages take their data from the request and never re-enter these
 checks: the axes are made from the checked arrays (`far_modes.modes_axis`), the minimax LP is set up here (its
-programs start compiling in the minimax worker, `minimax_solve.solving`), and the references of "% of the unshaped move" are computed here.
+programs start compiling, `far_modes.prepare_lp`, queued first on the minimax worker, `jaxbelt.shaping.worker`), and the references of "% of the unshaped move" are computed here.
 """
 
 import dataclasses
@@ -15,10 +15,11 @@ import numpy as np
 
 from .._checks import check_positive, check_range
 from ..models.axis import ModalAxis
+from . import worker
 from .bands import band_factors
 from .design import SURELY_FEASIBLE as SURELY_FEASIBLE
 from .design import knot_cap
-from .far_modes import LPSetup, lp_setup, modes_axis
+from .far_modes import LPSetup, lp_setup, modes_axis, prepare_lp
 from .hull import INTERPOLATIONS
 from .moves import (
     PiecewiseMove,
@@ -278,6 +279,9 @@ def validate(axis, distance, move_time, *, v_max, a_max, j_max, uncertainty, inc
     if "minimax" in include and T is not None:  # the modes the LP leaves out: refused here where it keeps none
         # the spline's knots capped except near the time-optimal move (`design.knot_cap`)
         lp = lp_setup(judged, T, u, j, True, auto or bool(smooth), per, cap=knot_cap(T, t_min))
+        if T >= SURELY_FEASIBLE * t_min:  # first in the minimax worker: traced there while the caller goes on (the
+            # reference, the candidates), each compiled in the compile threads while the next is traced
+            worker.submit(prepare_lp, lp, d, float(v_max), float(a_max), j, u, T)
     ref_cmd, band = fastest_move(d, float(v_max), float(a_max), j), band_factors(u)
     both = per > 1 and "pseudo-polynomial" in include  # the pseudo-polynomials' references at the nominal damping
     curves = [closed_curve(axis, ref_cmd, band) for axis in (judged, nominal)[: 1 + both]]

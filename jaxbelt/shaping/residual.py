@@ -387,16 +387,11 @@ def _pseudo_curve(axis, terms: PaddedPseudo, shaper, r, rule):
 
 def prepare_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors) -> None:
     """Start compiling the program of `closed_curve(axis, cmd, factors)` in the background (`jaxbelt._guard.prepare`),
-    for an unshaped command with a closed-form residual. `cmd` stands for commands of its structure and shapes (its
-    values are not read; a pseudo-polynomial's duration is: it sets the quadrature's node count)."""
-    if isinstance(cmd, ShapedCommand) or not _has_closed_form(cmd):
+    for a command with a closed-form residual other than a pseudo-polynomial. `cmd` stands for commands of its
+    structure and shapes (its values are not read)."""
+    if isinstance(cmd, (PseudoPolynomial, ShapedCommand)) or not _has_closed_form(cmd):
         return
-    r0 = np.atleast_1d(np.asarray(factors, dtype=float))
-    r = padded_factors(r0)  # as `closed_curve` computes it
-    if isinstance(cmd, PseudoPolynomial):
-        rule = _rule(_curve_nodes(cmd, _host_poles(axis, r0)))
-        prepare(_pseudo_curve, axis, padded_pseudo(cmd), None, r, tuple(jax.device_put(x) for x in rule))
-        return
+    r = padded_factors(np.atleast_1d(np.asarray(factors, dtype=float)))  # as `measured_curve` computes it
     cmd = padded_command(cmd)
     grid = _uniform_grid(axis, cmd, r)
     if grid is not None:
