@@ -282,7 +282,10 @@ def test_platform_axis_gives_the_platform_result():
     sigma, wd, lam = float(plat.damping_ratio * plat.omega_n), float(plat.omega_d), float(plat.lam)
     amp_platform = abs(lam) / wd * math.hypot(float(F), (float(G) + sigma * float(F)) / wd)
     amp_axis = float(residual_curve(axis, rob, 1.0)[0, 0])
-    assert amp_axis == pytest.approx(amp_platform, rel=1e-8)
+    # 1e-7: the robust exponents lie 0.5 apart, so eq. 23's coefficients cancel over ~4 digits; the rounding of the
+    # program that evaluates them (XLA's options, the CPU's kernels) moves the residual by up to 3e-8 of itself, and
+    # the reference's own rule by 3e-9 between 512 and 4096 nodes
+    assert amp_axis == pytest.approx(amp_platform, rel=1e-7)
     sol = jb.simulate(
         jb.Scene(plat, rob, ts=jnp.array([0.0, 1.0]), observe=("alpha", "omega")), method="ode", rtol=1e-12, atol=1e-14
     )
