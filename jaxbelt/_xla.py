@@ -146,7 +146,8 @@ class LazyJit:
         """Note a compilation of this program started ahead of its call, in another thread (`future`): the next call
         waits for it. (JAX keeps one compilation per program and input types, but a call made while another
         thread compiles the same program ahead of time compiles it a second time.)"""
-        self._ahead.append((os.getpid(), future))
+        # the finished ones dropped: a program prepared at every call but called only now and then holds no more
+        self._ahead = [(pid, f) for pid, f in self._ahead if not f.done()] + [(os.getpid(), future)]
 
     def __call__(self, *args, **kwargs):
         while self._ahead:

@@ -199,6 +199,21 @@ def _safe_pow(u, e):
     return jnp.where(pos, jnp.exp(e * jnp.log(us)), 0.0)
 
 
+def lagrange_weights_np(gammas, active=None) -> np.ndarray:
+    """The coefficients $C_i$ of a pseudo-polynomial (Incerti, eq. 22-23) on the host (numpy), as the Lagrange
+    weights at 0 of its exponents: $C_i = \\prod_{j \\ne i} \\gamma_j / (\\gamma_j - \\gamma_i)$, the solution of
+    $\\sum_i C_i P(\\gamma_i, k) = [k = 0]$, k = 0..n (the falling factorials $P(\\gamma, k)$, k >= 1, span the
+    polynomials of degree <= n that vanish at 0). As accurate as the linear solve of `PseudoPolynomial.coefficients`
+    or more (no pivoting of a Vandermonde-like matrix). `active` (1-D, 1 or 0 per exponent; default all): the
+    inactive exponents (padding) take 0 and are left out of the others' products."""
+    g = np.asarray(gammas, dtype=float)
+    on = np.ones(g.shape[0]) if active is None else np.asarray(active, dtype=float)
+    eye = np.eye(g.shape[0], dtype=bool)
+    skip = eye | (on[None, :] <= 0)
+    diff = np.where(eye, 1.0, g[None, :] - g[:, None])
+    return np.prod(np.where(skip, 1.0, g[None, :] / diff), axis=1) * (on > 0)
+
+
 def falling_factorial(gammas, k: int):
     """$P(\\gamma, k) = \\prod_{r=0}^{k-1} (\\gamma - r)$ (Incerti, pseudo-polynomial commands, eq. 19); $P(\\gamma, 0) = 1$."""
     gammas = jnp.asarray(gammas, dtype=float)

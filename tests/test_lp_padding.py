@@ -85,8 +85,9 @@ def test_minimax_lp_padded_to_its_slot_is_the_unpadded_lp(basis, jerk):
     assert not np.delete(A1, cols, axis=1).any() and not np.delete(c1, cols).any()
     xb = dsg._x_bound(prob, slot, tau, knots)
     used = dsg._used_variables(slot, knots)
-    # tolerance 1e-8: the interior point's dual residual stalls near 1e-9 on some CPUs under XLA's quick options (the
-    # design's exchange works to its own tolerances); the value is then checked against HiGHS's to 1e-7
+    # tolerance 1e-8: on this first round's grid the interior point's dual residual stalls near 1e-9 on some CPUs
+    # under XLA's quick options (design_move's own designs of this axis and time, with the exchange's grids, converge
+    # there); the value is then checked against HiGHS's to 1e-7
     res = solve_lp_data(c1, G1, h1, A1, b1, xb, 1e-8, 100, groups, used)
     assert bool(res.converged)
     x = np.asarray(res.x)

@@ -29,7 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import _xla
-from ..commands import PseudoPolynomial
+from ..commands import PseudoPolynomial, lagrange_weights_np
 from ..models.axis import ModalAxis
 from .moves import BlendMove, PiecewiseMove, SplineMove, derivatives_at, piecewise_derivatives
 
@@ -87,7 +87,8 @@ def sample_times(duration: float, rate_hz: float) -> np.ndarray:
 
 
 def positions(cmd, t) -> np.ndarray:
-    """The exact positions [m] of `cmd` at the times `t` [s] (numpy; a `PiecewiseMove` in closed form)."""
+    """The exact positions [m] of `cmd` at the times `t` [s] (numpy; a `PiecewiseMove` and a pseudo-polynomial in
+    closed form)."""
     t = np.asarray(t, dtype=float)
     if isinstance(cmd, PiecewiseMove):
         return _piecewise_positions(cmd, t)
@@ -100,16 +101,11 @@ def positions(cmd, t) -> np.ndarray:
 
 def _pseudo_positions(cmd: PseudoPolynomial, t: np.ndarray) -> np.ndarray:
     """$\\varphi_m(t) = \\Phi[1 - \\sum_i C_i (1 - t/T)^{\\gamma_i}]$ [m] (Incerti, eq. 17) on the host, 0 before
-    t = 0 and $\\Phi$ after T: no program to compile (a pseudo-polynomial row is otherwise the only command whose
-    positions `design_move` would evaluate in one). $C_i = \\prod_{j \\ne i} \\gamma_j / (\\gamma_j - \\gamma_i)$, the
-    solution of eq. 22-23 ($\\sum_i C_i P(\\gamma_i, k) = [k = 0]$, k = 0..n: the Lagrange weights at 0 of the
-    exponents, since the falling factorials $P(\\gamma, k)$ span the polynomials of degree <= n that vanish at 0
-    for k >= 1)."""
+    t = 0 and $\\Phi$ after T, the coefficients as Lagrange weights (`commands.lagrange_weights_np`): no program to
+    compile (a pseudo-polynomial row is otherwise the only command whose positions `design_move` evaluates in one)."""
     g = np.asarray(cmd.gammas, dtype=float)
-    ratio = g[None, :] / np.where(np.eye(g.size, dtype=bool), 1.0, g[None, :] - g[:, None])
-    C = np.prod(np.where(np.eye(g.size, dtype=bool), 1.0, ratio), axis=1)
     u = np.clip(1.0 - t / float(cmd.duration), 0.0, 1.0)
-    x = float(cmd.displacement) * (1.0 - (u[..., None] ** g) @ C)
+    x = float(cmd.displacement) * (1.0 - (u[..., None] ** g) @ lagrange_weights_np(g))
     return np.where(t < 0, 0.0, x)
 
 

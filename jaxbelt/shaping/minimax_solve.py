@@ -42,7 +42,8 @@ def solving(req: MoveRequest, classic: list):
       2 cores at load 5: 3.9-4.3 s -> 2.3-3.3 s, the same rows). On leaving the block the queued work is waited
       for; on an error the work not started is cancelled and the work started is waited for: no LP outlives the
       call, none runs outside its BLAS limit. The worker runs under the caller's 64-bit mode and default device
-      (`worker.submit`), after the LP's preparation `request.validate` queued;
+      (`worker.submit`), after the LP's preparation `request.validate` queued (`req.prepared`, waited for
+      with the rest);
     - with `move_time` None: the design at the shortest time whose worst residual reaches the best usable row of
       `classic` (the measured classic rows; searched from the shortest of their times), solved here, and its time;
       without a design, the shortest usable classic row's time (twice the time-optimal move's without one);
@@ -53,14 +54,15 @@ def solving(req: MoveRequest, classic: list):
         yield (fallback if req.move_time is None else req.move_time), None, _here
         return
     if req.move_time is not None:
-        queued = [worker.submit(solve, req, req.move_time)]
+        design = worker.submit(solve, req, req.move_time)
+        queued = [f for f in (req.prepared, design) if f is not None]
 
         def beside(fun, *args):
             queued.append(worker.submit(fun, *args))
             return queued[-1]
 
         try:
-            yield req.move_time, queued[0], beside
+            yield req.move_time, design, beside
         except BaseException:
             for f in queued:  # the work not started is not needed
                 f.cancel()

@@ -654,8 +654,8 @@ def piecewise_derivatives(move: PiecewiseMove, t, orders=(0, 1, 2, 3)) -> list:
 
 
 def prepare_peaks(cmd: AbstractMotionCommand, n: int = 20001) -> None:
-    """Start compiling the program of `peaks(cmd, n)` (`derivatives_at`'s) in the background while the program store
-    is on (`jaxbelt._guard.prepare`); else nothing. `cmd` stands for commands of its structure and shapes."""
+    """Start compiling the program of `peaks(cmd, n)` (`derivatives_at`'s) in the background (`jaxbelt._guard.prepare`;
+    nothing inside a trace). `cmd` stands for commands of its structure and shapes."""
     if not isinstance(cmd, PiecewiseMove):
         run, size, run_orders = _block_program(cmd, (1, 2, 3))
         prepare(_derivatives, run, jax.device_put(np.zeros(size)), run_orders)

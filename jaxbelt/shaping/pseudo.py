@@ -82,7 +82,7 @@ from .. import _store
 from .._checks import check_positive, check_range, device_array
 from .._guard import eager
 from .._xla import LazyJit, quick_compile
-from ..commands import PseudoPolynomial
+from ..commands import PseudoPolynomial, lagrange_weights_np
 from ..models.axis import ModalAxis
 from .quadrature import REACH_OMEGA_T, SINGLE_MAX_OMEGA_T, rule_nodes
 from .quadrature import gauss_legendre_01 as _gauss_legendre
@@ -245,15 +245,6 @@ def _kernels_np(axis: ModalAxis, move_time: float, factors, reference, n_nodes: 
     return np.concatenate([kern.real, kern.imag], axis=0)
 
 
-def _lagrange_np(g, active):
-    """`lagrange_coefficients` on the host (numpy)."""
-    n = g.shape[0]
-    eye = np.eye(n, dtype=bool)
-    skip = eye | (active[None, :] <= 0)
-    diff = np.where(eye, 1.0, g[None, :] - g[:, None])
-    return np.prod(np.where(skip, 1.0, g[None, :] / diff), axis=1) * (active > 0)
-
-
 def _evaluate_np(kern, n_modes, n_nodes, distance, move_time, gammas, active, n_peak: int = N_PEAK):
     """`evaluate` on the host (numpy), for a batch of padded exponents (B, S): ratios (B, M, K), peaks (B, 3). The
     batch in one product with the kernel (a pass over it for all runs, not one per run)."""
@@ -261,7 +252,7 @@ def _evaluate_np(kern, n_modes, n_nodes, distance, move_time, gammas, active, n_
     u = np.arange(1, n_peak + 1) / n_peak
     x = np.concatenate([_P * np.log(v), np.log(u)])
     g, a = np.atleast_2d(np.asarray(gammas, dtype=float)), np.atleast_2d(np.asarray(active, dtype=float))
-    C = np.stack([_lagrange_np(gi, ai) for gi, ai in zip(g, a)])
+    C = np.stack([lagrange_weights_np(gi, ai) for gi, ai in zip(g, a)])
     pw = np.exp(x[None, :, None] * (g - 1.0)[:, None, :])  # (B, N + P, S)
     c1 = C * g
     c2 = c1 * (g - 1.0)
@@ -923,7 +914,7 @@ def _peaks_np(gammas, distance, move_time, n: int = 20001) -> np.ndarray:
     eq. 18, a term $u^{\\gamma - k}$ taken as 0 at u = 0), on the host: one power per instant and exponent,
     $u^{\\gamma-3}$, the others from it."""
     g = np.asarray(gammas, dtype=float)
-    C = _lagrange_np(g, np.ones_like(g))
+    C = lagrange_weights_np(g, np.ones_like(g))
     u = np.clip(1.0 - np.linspace(0.0, 1.0, n), 0.0, 1.0)[1:-1]  # the instants with 0 < u < 1 (u = 1 below)
     e3 = np.exp(np.log(u)[:, None] * (g - 3.0)[None, :])  # (n - 2, n + 1)
     out = []

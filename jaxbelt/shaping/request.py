@@ -170,7 +170,9 @@ class MoveRequest:
       `smooth_arg` (as given), `certify_rtol`; `damping`: the range or None; `rate_hz`: the drive's setpoint
       rate [Hz]; `x_range`: the travel [m] or None;
     - `lp`: at a given move time with "minimax" in `include`, the minimax LP's setup (`far_modes.lp_setup`: the
-      modes it leaves out, refused at once where it would weigh none; its options), else None."""
+      modes it leaves out, refused at once where it would weigh none; its options), else None; `prepared`: the
+      future of its programs' preparation (`far_modes.prepare_lp`, queued first on the minimax worker where the
+      smooth design is surely feasible; `minimax_solve.solving` waits for it), else None."""
 
     user: ModalAxis
     axis: ModalAxis
@@ -198,6 +200,7 @@ class MoveRequest:
     rate_hz: float
     x_range: tuple[float, float] | None
     lp: LPSetup | None
+    prepared: Any = None
 
     @property
     def limits(self):
@@ -275,13 +278,13 @@ def validate(axis, distance, move_time, *, v_max, a_max, j_max, uncertainty, inc
     u = float(uncertainty)
     T = None if move_time is None else float(move_time)
     j = None if j_max is None else float(j_max)
-    lp = None
+    lp = prepared = None
     if "minimax" in include and T is not None:  # the modes the LP leaves out: refused here where it keeps none
         # the spline's knots capped except near the time-optimal move (`design.knot_cap`)
         lp = lp_setup(judged, T, u, j, True, auto or bool(smooth), per, cap=knot_cap(T, t_min))
         if T >= SURELY_FEASIBLE * t_min:  # first in the minimax worker: traced there while the caller goes on (the
             # reference, the candidates), each compiled in the compile threads while the next is traced
-            worker.submit(prepare_lp, lp, d, float(v_max), float(a_max), j, u, T)
+            prepared = worker.submit(prepare_lp, lp, d, float(v_max), float(a_max), j, u, T)
     ref_cmd, band = fastest_move(d, float(v_max), float(a_max), j), band_factors(u)
     both = per > 1 and "pseudo-polynomial" in include  # the pseudo-polynomials' references at the nominal damping
     curves = [closed_curve(axis, ref_cmd, band) for axis in (judged, nominal)[: 1 + both]]
@@ -313,4 +316,5 @@ def validate(axis, distance, move_time, *, v_max, a_max, j_max, uncertainty, inc
         rate_hz=rate,
         x_range=x_range,
         lp=lp,
+        prepared=prepared,
     )

@@ -417,8 +417,8 @@ def _continue_jit(belt, v0, v1, H, max_points, ds0, ds_max):
 
 def _trace(belt, v0, v1, H, max_points, ds0, ds_max, then=(), n_folds: int = 0):
     """The continuation's `(us, ts, acc)`. `then`: the programs that will read the curve (`"folds"`, `"post"`,
-    `"landing"` with `n_folds` folds): called outside any trace with the program store on, each is traced now and
-    compiled in the background while the continuation compiles and runs (their input types are the
+    `"landing"` with `n_folds` folds): called outside any trace, each is traced now and compiled in the
+    background (`jaxbelt._guard.prepare`) while the continuation compiles and runs (their input types are the
     continuation's outputs)."""
     b = jax.lax.stop_gradient(belt)
     v0, v1, ds0, ds_max = (jax.lax.stop_gradient(device_array(x, float)) for x in (v0, v1, ds0, ds_max))
