@@ -293,12 +293,12 @@ def host_checked(
 
 
 def _compile_ahead(jitted, args):
-    """Trace `jitted(*args)` here (an `eqx.filter_jit` function, or a `LazyJit` of one; an array argument may be
-    given by its type, `jax.ShapeDtypeStruct`: zeros stand in) and compile it in the store's compile threads
+    """Trace `jitted(*args)` here (a `LazyJit` of an `eqx.filter_jit` function; an array argument may be given by
+    its type, `jax.ShapeDtypeStruct`: zeros stand in) and compile it in the store's compile threads
     (`jaxbelt._store.compile_in_background`; XLA releases the GIL): JAX keeps one compilation per jitted function
-    and input types, so the later call with inputs of these types finds it compiled, or waits for it (never
-    compiles it twice). Returns the output's types, or None (and nothing started) where it cannot be traced here:
-    the call then compiles it as before."""
+    and input types, so the later call with inputs of these types finds it compiled, or waits for it
+    (`LazyJit.compiling`: a call made meanwhile would compile it a second time). Returns the output's types, or
+    None (and nothing started) where it cannot be traced here: the call then compiles it as before."""
     args = jax.tree_util.tree_map(
         lambda x: jax.device_put(np.zeros(x.shape, x.dtype)) if isinstance(x, jax.ShapeDtypeStruct) else x, args
     )
@@ -307,9 +307,7 @@ def _compile_ahead(jitted, args):
         types = lowered.postprocess(lowered.lowered.out_info)
     except Exception:  # noqa: BLE001 - compiling ahead only saves time
         return None
-    future = _store.compile_in_background(lowered.lowered)
-    if isinstance(jitted, _xla.LazyJit):
-        jitted.compiling(future)
+    jitted.compiling(_store.compile_in_background(lowered.lowered))
     return types
 
 

@@ -32,8 +32,8 @@ def _counting(monkeypatch):
 
 def test_derivatives_at_the_same_instants_are_computed_once_and_equal_the_defining_sums(monkeypatch):
     """A spline sampled twice at 20001 instants runs its program for the first call only (20 blocks of 1024); both
-    calls equal `SplineMove.derivative` (the defining B-spline sums, evaluated whole; every 7th instant) to 1e-13 of the largest value,
-    and each other; a copy is handed out (changing it leaves the kept values alone)."""
+    calls equal `SplineMove.derivative` (the defining B-spline sums, evaluated whole; every 7th instant) to 1e-13 of
+    the largest value, and each other; a copy is handed out (changing it leaves the kept values alone)."""
     moves._MEMO.clear()
     calls = _counting(monkeypatch)
     cmd = _spline()

@@ -279,8 +279,9 @@ _step = host_checked(_step_impl, store=True, compiler_options=_COMPILE)
 
 
 def _prepare_programs(problem, cmd, optimizer, learning_rate, use_state_value: bool, max_steps: int) -> None:
-    """Trace the start program and start compiling it in the background (`jaxbelt._guard.prepare`), then trace the step program
-    from the start's output types while the start compiles (XLA releases the GIL: on two cores the two overlap).
+    """Trace the start program and start compiling it in the background (`jaxbelt._guard.prepare`), then trace the
+    step program from the start's output types while the start compiles (XLA releases the GIL: on two cores the two
+    overlap).
     The calls that follow find the programs compiled or compiling."""
     types = prepare(_start, optimizer, learning_rate, problem, cmd)
     if types is None or max_steps == 0:

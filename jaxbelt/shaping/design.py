@@ -723,9 +723,10 @@ def _on_grid(problem: MinimaxProblem, factors, mask) -> MinimaxProblem:
 
 def prepare_design(problem: MinimaxProblem, opts: DesignOptions, tol=1e-9):
     """Trace the exchange's LP program (`minimax_design(problem, opts, tol)`'s) and start compiling it in the
-    background (`jaxbelt._guard.prepare`: through the program store while it is on, else in memory), then trace and start compiling the fine-grid check while it compiles (XLA releases the GIL:
-    on two cores they overlap). Returns the type of the design's B-spline coefficients (`jax.ShapeDtypeStruct`),
-    for the caller to prepare the programs that measure the command; None (and nothing started) inside a trace."""
+    background (`jaxbelt._guard.prepare`: through the program store while it is on, else in memory), then trace and
+    start compiling the fine-grid check while it compiles (XLA releases the GIL: on two cores they overlap). Returns
+    the type of the design's B-spline coefficients (`jax.ShapeDtypeStruct`), for the caller to prepare the programs
+    that measure the command; None (and nothing started) inside a trace."""
     factors, mask = _initial_grid(opts, problem.axis.n_modes, float(problem.uncertainty))
     problem = _on_grid(problem, factors, mask)
     slot, knots = _program_options(opts), _knots(opts)

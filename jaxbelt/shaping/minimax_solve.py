@@ -36,14 +36,14 @@ def solving(req: MoveRequest, classic: list):
     follows the design runs, for the block: yields `(T, future of solve's result, beside)` (no future without
     "minimax" in `req.include`); `beside(fun, *args)` returns the future of `fun(*args)`.
 
-    - at a given move time: that time, `solve(req, T)` running in the minimax worker (`jaxbelt.shaping.worker`) beside the other
-      candidates, and `beside` queuing work on the same worker after it (the minimax rows: their shaped moves,
-      blends and the design with jumps need only the design, so they overlap the timed candidates too; warm, 3 modes,
-      2 cores at load 5: 3.9-4.3 s -> 2.3-3.3 s, the same rows). On leaving the block the queued work is waited
-      for; on an error the work not started is cancelled and the work started is waited for: no LP outlives the
-      call, none runs outside its BLAS limit. The worker runs under the caller's 64-bit mode and default device
-      (`worker.submit`), after the LP's preparation `request.validate` queued (`req.prepared`, waited for
-      with the rest);
+    - at a given move time: that time, `solve(req, T)` running in the minimax worker (`jaxbelt.shaping.worker`)
+      beside the other candidates, and `beside` queuing work on the same worker after it (the minimax rows: their
+      shaped moves, blends and the design with jumps need only the design, so they overlap the timed candidates
+      too; warm, 3 modes, 2 cores at load 5: 3.9-4.3 s -> 2.3-3.3 s, the same rows). On leaving the block the
+      queued work is waited for; on an error the work not started is cancelled and the work started is waited
+      for: no LP outlives the call, none runs outside its BLAS limit. The worker runs under the caller's 64-bit
+      mode and default device (`worker.submit`), after the LP's preparation `request.validate` queued
+      (`req.prepared`, waited for with the rest);
     - with `move_time` None: the design at the shortest time whose worst residual reaches the best usable row of
       `classic` (the measured classic rows; searched from the shortest of their times), solved here, and its time;
       without a design, the shortest usable classic row's time (twice the time-optimal move's without one);

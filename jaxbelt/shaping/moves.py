@@ -261,7 +261,8 @@ class BlendMove(AbstractMotionCommand):
       distance, rests at both ends, and its peak |v|, |a|, |jerk| are at most the largest member's (the limits are
       convex), while its residual integral is the same sum of theirs, $W(s) = \\sum_m w_m W_m(s)$.
 
-    Build one with `jaxbelt.shaping.hull.blend_moves`, which returns a plain `PiecewiseMove` when every member is one."""
+    Build one with `jaxbelt.shaping.hull.blend_moves`, which returns a plain `PiecewiseMove` when every member is
+    one."""
 
     array_fields: ClassVar[tuple[str, ...]] = ("weights",)
 

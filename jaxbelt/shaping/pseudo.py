@@ -914,7 +914,7 @@ def _peaks_np(gammas, distance, move_time, n: int = 20001) -> np.ndarray:
     eq. 18, a term $u^{\\gamma - k}$ taken as 0 at u = 0), on the host: one power per instant and exponent,
     $u^{\\gamma-3}$, the others from it."""
     g = np.asarray(gammas, dtype=float)
-    C = lagrange_weights_np(g, np.ones_like(g))
+    C = lagrange_weights_np(g)
     u = np.clip(1.0 - np.linspace(0.0, 1.0, n), 0.0, 1.0)[1:-1]  # the instants with 0 < u < 1 (u = 1 below)
     e3 = np.exp(np.log(u)[:, None] * (g - 3.0)[None, :])  # (n - 2, n + 1)
     out = []

@@ -75,7 +75,7 @@ def rule_nodes(max_omega_t: float) -> int:
         if k * PANEL_RAD < wt:
             raise ValueError(
                 f"residual of a pseudo-polynomial move: a mode's omega*T = {wt:.6g} rad (2 pi x its frequency x the "
-                f"move time) is above {MAX_COMPOSITE_NODES // PANEL_NODES * PANEL_RAD:.6g} rad, the most its "
+                f"move time) is above {REACH_OMEGA_T:.6g} rad, the most its "
                 "quadrature resolves; shorten the move or leave that mode out of the axis"
             )
         return k * PANEL_NODES

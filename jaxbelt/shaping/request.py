@@ -4,7 +4,8 @@ with every quantity the later stages share derived from them once.
 Every refusal names the parameter and its valid range; a damping range expands the axis the residuals are judged on
 (each mode once per damping sample). The later stages take their data from the request and never re-enter these
 checks: the axes are made from the checked arrays (`far_modes.modes_axis`), the minimax LP is set up here (its
-programs start compiling, `far_modes.prepare_lp`, queued first on the minimax worker, `jaxbelt.shaping.worker`), and the references of "% of the unshaped move" are computed here.
+programs start compiling, `far_modes.prepare_lp`, queued first on the minimax worker, `jaxbelt.shaping.worker`), and
+the references of "% of the unshaped move" are computed here.
 """
 
 import dataclasses
