@@ -80,6 +80,35 @@ def modal_residual_reference(frequencies, damping_ratios, gains, accel, breaks, 
     return out
 
 
+def executed_residual_reference(frequencies, damping_ratios, gains, t, x, factors=(1.0,)):
+    """Residual amplitude [m] of each mode of $q'' + 2\\zeta\\omega q' + \\omega^2 q = -g\\,x''(t)$ after a drive
+    executes the position setpoints `x` [m] at the uniform times `t` [s], linear between them (at rest before the
+    first and after the last), at the mode frequencies scaled by each of `factors`: shape (n_modes, len(factors)).
+
+    The velocity is constant between setpoints, so $x''$ is a train of impulses, the velocity's jumps: each kicks
+    $q'$ by $-g\\,\\Delta v_k$, and the exact propagator $e^{Ah}$ of the mode (scipy's `expm`, stacked over the
+    factors) carries $(q, q')$ from one setpoint to the next. No jaxbelt evaluator is involved."""
+    f, z, g = (np.asarray(a, float) for a in (frequencies, damping_ratios, gains))
+    r = np.atleast_1d(np.asarray(factors, float))
+    t, x = np.asarray(t, float), np.asarray(x, float)
+    h = float(t[1] - t[0])
+    dv = np.diff(np.concatenate([[0.0], np.diff(x) / h, [0.0]]))
+    out = np.empty((f.size, r.size))
+    for i in range(f.size):
+        w = 2 * np.pi * f[i] * r
+        A = np.zeros((r.size, 2, 2))
+        A[:, 0, 1], A[:, 1, 0], A[:, 1, 1] = 1.0, -(w**2), -2 * z[i] * w
+        P = sl.expm(A * h)
+        y = np.zeros((r.size, 2))
+        for k in range(t.size):
+            y[:, 1] -= g[i] * dv[k]
+            if k < t.size - 1:
+                y = np.einsum("kij,kj->ki", P, y)
+        wd = w * np.sqrt(1 - z[i] ** 2)
+        out[i] = np.hypot(y[:, 0], (y[:, 1] + z[i] * w * y[:, 0]) / wd)
+    return out
+
+
 def spline_move_reference(coefficients, duration):
     """`(acceleration, velocity, position, breaks)` of a move whose acceleration is $\\sum_j c_j B_j(t)$, $B_j$ the
     cubic B-spline on the knots $jh .. (j+4)h$, $h = T/N$, N = len(c) + 3 (scipy's `BSpline`; the acceleration and

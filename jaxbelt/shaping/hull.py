@@ -31,7 +31,7 @@ import numpy as np
 from .. import _xla
 from ..commands import PseudoPolynomial, lagrange_weights_np
 from ..models.axis import ModalAxis
-from .moves import BlendMove, PiecewiseMove, SplineMove, derivatives_at, piecewise_derivatives
+from .moves import BlendMove, PiecewiseMove, SplineMove, derivatives_at, executable_samples, piecewise_derivatives
 
 #: angles of the modulus' polygon in the blend's programme (|r| <= t to within 1/cos(pi/32) - 1 = 0.5 %)
 _ANGLES = 32
@@ -151,6 +151,28 @@ def _poles(axis: ModalAxis, factors):
     return -z * w + 1j * wd, wd
 
 
+def sampled_ratios(axis: ModalAxis, t, x, reference, factors) -> np.ndarray:
+    """The complex residuals $g_i W(s)/(\\omega_d r_i)$ of the position setpoints `x` [m] at the uniform times `t` [s],
+    linear between them (`executed_integral`), on every mode of `axis` at each frequency factor, in units of
+    `reference` $r_i$ [m]: shape (n_modes, K); their modulus is the residual amplitude in units of the reference."""
+    s, wd = _poles(axis, factors)
+    g = np.abs(np.asarray(axis.gains, dtype=float))[:, None]
+    return g * executed_integral(t, x, s) / (wd * np.asarray(reference, dtype=float)[:, None])
+
+
+def drive_positions(cmd, rate_hz: float, axis: ModalAxis, reference, uncertainty: float, limits):
+    """`(t, x)`: the position setpoints [s, m] of `cmd` at `rate_hz` [Hz] that `MovePlan.to_csv` writes, so that
+    a drive executing them (linear between them) runs what the table measured: for a smooth minimax design (a
+    `SplineMove`), its corrected samples (`moves.executable_samples`, on `axis` with its `reference` [m], the band
+    ±`uncertainty` and the `limits` (v_max, a_max, j_max or None)); for any other command, its exact positions
+    (`positions`; `moves.limited_samples` stretches them by about 1e-7 in time only where a rounding exceeds a limit)."""
+    if isinstance(cmd, SplineMove):
+        t, x, _, _ = executable_samples(cmd, rate_hz, axis, reference, uncertainty, limits=limits)
+        return np.asarray(t, dtype=float), np.asarray(x, dtype=float)
+    t = sample_times(float(cmd.end_time), rate_hz)
+    return t, positions(cmd, t)
+
+
 def executed_ratios(axis: ModalAxis, cmd, reference, factors, rate_hz: float) -> np.ndarray:
     """The complex residuals $g_i W(s)/(\\omega_d r_i)$ of `cmd` as executed at `rate_hz` (`executed_integral`), on
     every mode of `axis` at each frequency factor, in units of `reference` $r_i$ [m]: shape (n_modes, K); their
@@ -159,11 +181,8 @@ def executed_ratios(axis: ModalAxis, cmd, reference, factors, rate_hz: float) ->
     for c, a, r, f, h, out in _RECENT:  # the same command judged again (`jumps_reason`, then `best_blend`)
         if c is cmd and a is axis and h == rate_hz and np.array_equal(r, ref) and np.array_equal(f, fac):
             return out.copy()
-    s, wd = _poles(axis, fac)
     t = sample_times(float(cmd.end_time), rate_hz)
-    W = executed_integral(t, positions(cmd, t), s)
-    g = np.abs(np.asarray(axis.gains, dtype=float))[:, None]
-    out = g * W / (wd * ref[:, None])
+    out = sampled_ratios(axis, t, positions(cmd, t), ref, fac)
     _RECENT.append((cmd, axis, ref.copy(), fac.copy(), rate_hz, out.copy()))
     return out
 

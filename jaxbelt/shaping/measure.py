@@ -14,10 +14,10 @@ from ..commands import AbstractMotionCommand
 from .bands import _N_WIDE as _N_WIDE
 from .bands import _WIDE as _WIDE
 from .bands import JUMPS, measure_grids, mode_label
-from .hull import best_blend, blend_moves, positions, sample_times
+from .hull import best_blend, blend_moves, drive_positions, positions, sample_times, sampled_ratios
 from .moves import PiecewiseMove, padded, peaks
 from .request import MoveRequest
-from .residual import closed_curve, tolerance_band
+from .residual import tolerance_band
 
 
 @dataclasses.dataclass(frozen=True)
@@ -27,7 +27,9 @@ class Candidate:
     - `name`; `command`: the motion command (None when the candidate is infeasible at this move time);
     - `move_time` [s];
     - `worst_percent`, `mean_percent`: worst and mean residual over every mode's band, in % of the unshaped
-      move's worst residual on that mode; `worst_m`: the worst residual amplitude in length units [m];
+      move's worst residual on that mode; `worst_m`: the worst residual amplitude in length units [m]; each of
+      the command as the drive executes it (the position setpoints `MovePlan.to_csv` writes at the plan's
+      `rate_hz`, linear between them);
     - `band_hz`: per mode, `(low, high)` [Hz] of the 5 % band (NaN when the nominal residual is above 5 %); with a
       damping range, the band within which the residual stays within 5 % at every damping sample (the
       intersection of the samples' bands);
@@ -66,18 +68,22 @@ class Candidate:
         return d
 
 
-def _measure(axis, cmd, ref, u, limits, per: int = 1, size: int = 0, pk=None) -> tuple[Any, dict[str, Any], bool, Any]:
-    """The table's numbers for one command (`per`: damping copies of each user mode in `axis`), a `PiecewiseMove`
-    padded to `size` terms first: `(command, numbers, within the limits, worst ratio over the band per mode of
-    `axis`)`. `pk`: the command's `(peak |v|, peak |a|, peak |jerk|)` where its builder measured them (a
-    pseudo-polynomial's design: on 20001 instants on the host), else measured here (`moves.peaks`)."""
+def _measure(req: MoveRequest, cmd, size: int = 0, pk=None) -> tuple[Any, dict[str, Any], bool, Any]:
+    """The table's numbers for one command on `req.axis` (`req.per` damping copies of each user mode), a
+    `PiecewiseMove` padded to `size` terms first: `(command, numbers, within the limits, worst ratio over the band per
+    mode of `req.axis`)`. Every residual is that of the command *as executed*: the position setpoints `to_csv` writes
+    at `req.rate_hz`, linear between them (`hull.drive_positions`, `hull.sampled_ratios`). `pk`: the command's `(peak
+    |v|, peak |a|, peak |jerk|)` where its builder measured them (a pseudo-polynomial's design: on 20001 instants on
+    the host), else measured here (`moves.peaks`)."""
+    axis, ref, u, limits, per = req.axis, req.ref, req.uncertainty, req.limits, req.per
     if isinstance(cmd, PiecewiseMove):  # shaped on the user's modes: padded to their size
         cmd = padded(cmd, size)
     pv, pa, pj = peaks(cmd) if pk is None else pk
     band, wide = measure_grids(u)
-    res = np.asarray(closed_curve(axis, cmd, band))  # (modes, K)
-    ratio = res / ref[:, None]
-    wr = np.asarray(closed_curve(axis, cmd, wide)) / ref[:, None]
+    t, x = drive_positions(cmd, req.rate_hz, axis, ref, u, limits)
+    r = np.abs(sampled_ratios(axis, t, x, ref, np.concatenate([band, wide])))
+    ratio, wr = r[:, : band.size], r[:, band.size :]
+    res = ratio * ref[:, None]  # (modes, K) [m]
     f = np.asarray(axis.frequencies)
     bands = []
     for i in range(0, axis.n_modes, per):
@@ -115,10 +121,11 @@ def _pad_size(n_modes: int, jerk: bool, terms: int) -> int:
     return 1 << max(int(terms) - 1, 1).bit_length()
 
 
-def _row(name, axis, cmd, T, ref, u, limits, note="", ok=True, per: int = 1, left_out=(), pk=None):
-    """One candidate measured on `axis` (with `per` damping copies of each of the user's modes; `pk`: its peaks
-    where its builder measured them, `_measure`); its note then names the modes `left_out` (`(index, why)` pairs:
-    those a minimax design's LP left out) with their residual, computed exactly for this command."""
+def _row(req: MoveRequest, name, cmd, T, note="", ok=True, left_out=(), pk=None):
+    """One candidate measured on `req.axis` (with `req.per` damping copies of each of the user's modes; `pk`: its
+    peaks where its builder measured them, `_measure`); its note then names the modes `left_out` (`(index, why)`
+    pairs: those a minimax design's LP left out) with their residual, computed exactly for this command."""
+    axis, per, limits = req.axis, req.per, req.limits
     n_user = axis.n_modes // per
     size = _pad_size(n_user, limits[2] is not None, cmd.times.shape[0]) if isinstance(cmd, PiecewiseMove) else 0
     if cmd is None:
@@ -126,14 +133,14 @@ def _row(name, axis, cmd, T, ref, u, limits, note="", ok=True, per: int = 1, lef
         return Candidate(
             name, None, T, nan, nan, nan, tuple((nan, nan) for _ in range(n_user)), nan, nan, nan, False, note
         )
-    cmd, m, within, mode_worst = _measure(axis, cmd, ref, u, limits, per, size, pk)
+    cmd, m, within, mode_worst = _measure(req, cmd, size, pk)
     if not within:
         ok = False
         note = (note + "; " if note else "") + "exceeds the limits"
     if left_out:
         f = np.asarray(axis.frequencies, dtype=float)
         parts = [
-            f"{mode_label(axis, i, per)} ({f[i]:.6g} Hz; {why}): {100.0 * float(mode_worst[i]):.2g} % (exact)"
+            f"{mode_label(axis, i, per)} ({f[i]:.6g} Hz; {why}): {100.0 * float(mode_worst[i]):.2g} % (as executed)"
             for i, why in left_out
         ]
         note += "; left out of the LP, their residual computed for this command: " + "; ".join(parts)
@@ -145,7 +152,7 @@ def design_row(name: str, mm, T: float, note: str, ok: bool, far, req: MoveReque
     design at move time `T` [s], `note` says why), measured as every candidate is (`_row`), its note then naming the
     modes its LP left out (`far`, a `far_modes._FarModes`) with their residual, computed exactly for this command."""
     cmd, T = (None, T) if mm is None else (mm.command, float(mm.command.duration))
-    return _row(name, req.axis, cmd, T, req.ref, req.uncertainty, req.limits, note, ok, req.per, far.left_out)
+    return _row(req, name, cmd, T, note, ok, far.left_out)
 
 
 def blended_rows(req: MoveRequest, rows: list, space: dict) -> list:
@@ -155,15 +162,7 @@ def blended_rows(req: MoveRequest, rows: list, space: dict) -> list:
     note says which blend it is. A minimax row whose design is infeasible or did not converge is kept as it is (not
     ok, its note says why): a blend of the other candidates alone is not that design, and the table shows those
     candidates' own rows."""
-    axis, ref, u, limits, per, band, rate = (
-        req.axis,
-        req.ref,
-        req.uncertainty,
-        req.limits,
-        req.per,
-        req.band,
-        req.rate_hz,
-    )
+    axis, ref, band, rate = req.axis, req.ref, req.band, req.rate_hz
     designs = {r.name: r.command for r in rows if r.name in ("minimax", JUMPS) and r.ok and r.command is not None}
     out = []
     for r in rows:
@@ -183,7 +182,7 @@ def blended_rows(req: MoveRequest, rows: list, space: dict) -> list:
             out.append(dataclasses.replace(r, note=r.note + "; " + note))
             continue
         cmd = blend_moves(cmds, w)
-        out.append(_row(r.name, axis, cmd, float(cmd.end_time), ref, u, limits, note=r.note + "; " + note, per=per))
+        out.append(_row(req, r.name, cmd, float(cmd.end_time), note=r.note + "; " + note))
     return out
 
 
@@ -215,5 +214,4 @@ def _within_range(row, d: float, x_range, rate: float):
 def measure_rows(req: MoveRequest, built) -> list:
     """Every built candidate measured the same way (`_row`) on `req.axis` against the references `req.ref` [m]:
     `built` holds `(name, command or None, move time [s], note, ok, peaks or None)` (`jaxbelt.shaping.candidates`)."""
-    axis, ref, u, limits, per = req.axis, req.ref, req.uncertainty, req.limits, req.per
-    return [_row(name, axis, cmd, T, ref, u, limits, note, ok, per, (), pk) for name, cmd, T, note, ok, pk in built]
+    return [_row(req, name, cmd, T, note, ok, (), pk) for name, cmd, T, note, ok, pk in built]

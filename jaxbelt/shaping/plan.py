@@ -42,8 +42,14 @@ of each mode: about 5 times its rows (a 1-mode design costs about what a 5-mode 
 
 **Execution and travel** (`rate_hz`, `interpolation`, `x_min`, `x_max`): `rate_hz` [Hz] (default 1000, as the CLI's
 export; at most `MAX_RATE_HZ`) and `interpolation` (`"linear"`): how the user's drive executes the command, position
-setpoints at `rate_hz`, linear between them (what `MovePlan.to_csv` writes). The minimax rows are chosen on the
-residual as executed so (`jaxbelt.shaping.hull`); their notes state it. `x_min`, `x_max` [m, positions from the
+setpoints at `rate_hz`, linear between them (what `MovePlan.to_csv` writes). Every residual of the table, of
+`MovePlan.curves` and of the figure is that of the command *as executed so*: of the very setpoints `to_csv` writes at
+that rate (`jaxbelt.shaping.hull.drive_positions`), so an exact replay of the CSV finds the stated residual (to 1e-6,
+tests/test_shaping_space.py). It differs from the command's own, continuous residual: linear
+steps scale a mode's excitation by about $\\mathrm{sinc}^2(\\omega h/2) \\approx 1 - (\\omega h)^2/12$ (h = 1 /
+`rate_hz`; 1.2 % for a 60 Hz mode at 1 kHz), which a minimax design's cancellation can make a large part of its
+own. The minimax rows are chosen on the same residual (`jaxbelt.shaping.hull`); their certificates (below) concern
+the command itself, continuous. `x_min`, `x_max` [m, positions from the
 start] (optional): the axis' travel. A candidate whose positions, as executed, leave it is marked not ok; any
 candidate that leaves the segment between its start and its end by more than `EXCURSION_RTOL` (1 %) of the distance
 is noted so (a long move's design may back off behind its start).
@@ -119,6 +125,7 @@ from .candidates import timed_commands
 from .certificate import CERTIFY_ATOL as CERTIFY_ATOL  # noqa: E402
 from .certificate import CERTIFY_MAX_STEPS as CERTIFY_MAX_STEPS  # noqa: E402
 from .far_modes import _far_modes as _far_modes  # noqa: E402
+from .hull import drive_positions, sampled_ratios
 
 # names of the pipeline's stages that users and tests reach through this module
 from .measure import EXCURSION_RTOL as EXCURSION_RTOL  # noqa: E402
@@ -141,7 +148,6 @@ from .request import UNKNOWN_DAMPING as UNKNOWN_DAMPING  # noqa: E402
 from .request import UNKNOWN_SHAPER_DAMPING as UNKNOWN_SHAPER_DAMPING  # noqa: E402
 from .request import damping_samples as damping_samples  # noqa: E402
 from .request import validate
-from .residual import residual_curve
 from .shaped import classic_commands
 from .shapers import SHAPERS
 
@@ -163,7 +169,11 @@ class MovePlan:
     None (the axis' own damping ratios). With a range, `axis` is the user's axis, `reference_m` per mode the largest
     of its damping samples' references, and `measure_axis`, `measure_reference_m` the expanded axis (each mode once
     per damping sample, `damping_samples`) and its references, on which every residual of the table, the curves and
-    the exported samples' correction are computed."""
+    the exported samples' correction are computed.
+
+    `rate_hz` [Hz], `interpolation`: how the user's drive executes a command (`design_move(..., rate_hz=,
+    interpolation=)`): every residual of the table and of `curves` is that of the position setpoints `to_csv` writes
+    at this rate, executed linear between them."""
 
     axis: ModalAxis
     distance: float
@@ -180,6 +190,8 @@ class MovePlan:
     damping: tuple[float, float] | None = None
     measure_axis: ModalAxis | None = None
     measure_reference_m: np.ndarray | None = None
+    rate_hz: float = 1000.0
+    interpolation: str = "linear"
 
     def _measured(self) -> tuple[ModalAxis, np.ndarray, int]:
         """The axis every residual is computed on, its references [m], and its copies per mode of `axis`."""
@@ -212,8 +224,8 @@ class MovePlan:
         """Write the recommended command (or the candidate named `candidate`) sampled at `rate_hz` [Hz] as CSV
         columns `t,x,v,a` (s, m, m/s, m/s²) with that header line. The position column `x` is the command: a drive
         that executes it as position setpoints, linear between them, at the plan's rate (`design_move(...,
-        rate_hz=)`, 1 kHz by default) leaves the residual the minimax rows state as executed (an independent replay
-        finds it within 1 %, tests/test_shaping_space.py). The `v` and `a` columns are the command's own velocity
+        rate_hz=)`, `plan.rate_hz`, 1 kHz by default) leaves the residual the table states for that row (an exact,
+        independent replay of the file finds it to 1e-6, tests/test_shaping_space.py); at another rate, another. The `v` and `a` columns are the command's own velocity
         and acceleration at the samples, for feed-forward only: a drive that interpolates the `a` column instead of
         following `x` runs another command (for a design whose acceleration jumps, one that can leave many times the
         stated residual). The samples respect the plan's limits (see `samples`).
@@ -285,14 +297,17 @@ class MovePlan:
         raise ValueError(f"MovePlan: no candidate named {name!r}; candidates: {[c.name for c in self.table]}")
 
     def curves(self, factors=None):
-        """`(factors, {name: residual % of shape (n_modes, len(factors))})` for every candidate with a command; with
-        a damping range, per mode the worst over its damping samples."""
+        """`(factors, {name: residual % of shape (n_modes, len(factors))})` for every candidate with a command, as
+        the table measures it: the position setpoints `to_csv` writes at `rate_hz`, executed linear between them;
+        with a damping range, per mode the worst over its damping samples."""
         f = np.linspace(*_WIDE, _N_WIDE) if factors is None else np.asarray(factors, dtype=float)
         axis, ref, per = self._measured()
+        limits = (self.v_max, self.a_max, self.j_max)
         out = {}
         for c in self.table:
             if c.command is not None:
-                pct = 100.0 * np.asarray(residual_curve(axis, c.command, f)) / ref[:, None]
+                t, x = drive_positions(c.command, self.rate_hz, axis, ref, self.uncertainty, limits)
+                pct = 100.0 * np.abs(sampled_ratios(axis, t, x, ref, f))
                 out[c.name] = pct.reshape(self.axis.n_modes, per, -1).max(axis=1)
         return f, out
 
@@ -544,4 +559,5 @@ def design_move(
     return MovePlan(axis=user, distance=req.distance, move_time=T, v_max=req.v_max, a_max=req.a_max, j_max=req.j_max,
                     uncertainty=req.uncertainty, table=table, best=best, minimax=mm, continuous_bound=bound,
                     reference_m=ref if per == 1 else ref.reshape(user.n_modes, per).max(axis=1), damping=req.damping,
-                    measure_axis=req.axis if damped else None, measure_reference_m=ref if damped else None)  # fmt: skip
+                    measure_axis=req.axis if damped else None, measure_reference_m=ref if damped else None,
+                    rate_hz=req.rate_hz, interpolation=req.interpolation)  # fmt: skip

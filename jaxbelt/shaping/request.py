@@ -169,7 +169,7 @@ class MoveRequest:
       `j_max`; `uncertainty`; `band`: the frequency factors of the band;
     - `include`, `progress`; `auto` (`smooth="auto"`), `smooth` (the first minimax design is the spline),
       `smooth_arg` (as given), `certify_rtol`; `damping`: the range or None; `rate_hz`: the drive's setpoint
-      rate [Hz]; `x_range`: the travel [m] or None;
+      rate [Hz], `interpolation` between the setpoints; `x_range`: the travel [m] or None;
     - `lp`: at a given move time with "minimax" in `include`, the minimax LP's setup (`far_modes.lp_setup`: the
       modes it leaves out, refused at once where it would weigh none; its options), else None; `prepared`: the
       future of its programs' preparation (`far_modes.prepare_lp`, queued first on the minimax worker where the
@@ -199,6 +199,7 @@ class MoveRequest:
     certify_rtol: float | None
     damping: tuple[float, float] | None
     rate_hz: float
+    interpolation: str
     x_range: tuple[float, float] | None
     lp: LPSetup | None
     prepared: Any = None
@@ -315,6 +316,7 @@ def validate(axis, distance, move_time, *, v_max, a_max, j_max, uncertainty, inc
         certify_rtol=rtol,
         damping=damp,
         rate_hz=rate,
+        interpolation=interpolation,
         x_range=x_range,
         lp=lp,
         prepared=prepared,
