@@ -34,7 +34,7 @@ OVERVIEW_ONLY = ("gammas", "duration", "revolutions", "robust_order", "robust_mo
 AXIS_DEFAULTS = {"uncertainty": 0.2, "rate": 1000.0, "smooth": "auto"}
 AXIS_ONLY = (
     "distance", "move_time", "v_max", "a_max", "j_max", "n_modes", "uncertainty", "damping", "smooth", "certify",
-    "rate",
+    "rate", "resolution",
 )  # fmt: skip
 
 
@@ -132,7 +132,16 @@ def register(subparsers):
         "--rate",
         type=positive_float,
         default=None,
-        help="CSV sample rate [Hz], above twice the band's highest frequency (default 1000)",
+        help="the drive's setpoint rate [Hz]: the CSV's sample rate, at which the table's residuals are those of the "
+        "CSV executed linear between samples; above twice the band's highest frequency (default 1000)",
+    )
+    axis.add_argument(
+        "--resolution",
+        type=positive_float,
+        default=None,
+        metavar="STEP",
+        help="the drive's position step [m] (a motor step or encoder count, e.g. 1.25e-5): rows whose residual lies "
+        "below what rounding the setpoints to it leaves rank by their peaks; default: none",
     )
     p.add_argument(
         "--figure",
@@ -316,8 +325,8 @@ def check(args) -> str | None:
                 return damping
             args.damping = damping
         outs = list(args.out or [Path("move.csv")])
-        if args.rate is not None and not any(str(o).lower().endswith(".csv") for o in outs):
-            return "argument --rate: not used without a .csv in --out (the rate is the CSV's sample rate)"
+        if args.resolution is not None and not args.resolution <= abs(args.distance):
+            return f"argument --resolution: must lie in (0, {abs(args.distance):g}] m (at most --distance)"
         fill_defaults(args, AXIS_DEFAULTS)
         if args.mode:
             nyquist = 2.0 * max(f for f, _, _ in args.mode) * (1.0 + args.uncertainty)
@@ -429,6 +438,8 @@ def _axis_run(args) -> int:
         damping=args.damping,
         smooth={"auto": "auto", "true": True, "false": False}[args.smooth],
         certify_rtol=args.certify,
+        rate_hz=args.rate,
+        resolution=args.resolution,
     )
     print(plan.format_table())
     best = plan.best

@@ -173,6 +173,24 @@ def drive_positions(cmd, rate_hz: float, axis: ModalAxis, reference, uncertainty
     return t, positions(cmd, t)
 
 
+def resolution_floor(axis: ModalAxis, step: float, rate_hz: float, duration: float) -> np.ndarray:
+    """Per mode of `axis` [m]: the RMS residual that rounding every setpoint of a `duration` [s] move at `rate_hz`
+    [Hz] to the drive's position `step` [m] leaves, the rounding errors $e_k$ modelled as independent and uniform in
+    $\\pm q/2$ (standard deviation $q/\\sqrt{12}$; a move that crosses many steps per setpoint, from an arbitrary
+    start). Their residual integral is $W_e(s) = 4\\sinh^2(sh/2)/h \\sum_k e_k e^{s(t_n - t_k)}$ (the velocity's
+    jumps are the errors' second differences), so the RMS amplitude on a mode at its nominal frequency is
+    $|g|\\,|4\\sinh^2(sh/2)|/(h\\,\\omega_d) \\cdot q/\\sqrt{12} \\cdot (\\sum_{j=1}^{n-1} e^{-2\\zeta\\omega jh})^{1/2}$:
+    a residual below it cannot be told from the drive's own rounding (`design_move(..., resolution=)`)."""
+    s, wd = _poles(axis, np.ones(1))
+    s, wd = s[:, 0], wd[:, 0]
+    h = 1.0 / float(rate_hz)
+    n = int(math.ceil(float(duration) * float(rate_hz) - 1e-9))
+    j = np.arange(1, max(n, 1))
+    decay = np.sqrt(np.sum(np.exp(2.0 * np.real(s)[:, None] * h * j[None, :]), axis=1))
+    g = np.abs(np.asarray(axis.gains, dtype=float))
+    return g * np.abs(4.0 * np.sinh(s * h / 2.0) ** 2) / (h * wd) * float(step) / math.sqrt(12.0) * decay
+
+
 def executed_ratios(axis: ModalAxis, cmd, reference, factors, rate_hz: float) -> np.ndarray:
     """The complex residuals $g_i W(s)/(\\omega_d r_i)$ of `cmd` as executed at `rate_hz` (`executed_integral`), on
     every mode of `axis` at each frequency factor, in units of `reference` $r_i$ [m]: shape (n_modes, K); their

@@ -10,11 +10,12 @@ from typing import Any
 
 import numpy as np
 
+from .._display import fmt_list
 from ..commands import AbstractMotionCommand
 from .bands import _N_WIDE as _N_WIDE
 from .bands import _WIDE as _WIDE
 from .bands import JUMPS, measure_grids, mode_label
-from .hull import best_blend, blend_moves, drive_positions, positions, sample_times, sampled_ratios
+from .hull import best_blend, blend_moves, drive_positions, positions, resolution_floor, sample_times, sampled_ratios
 from .moves import PiecewiseMove, padded, peaks
 from .request import MoveRequest
 from .residual import tolerance_band
@@ -36,7 +37,10 @@ class Candidate:
     - `peak_v` [m/s], `peak_a` [m/s²], `peak_j` [m/s³];
     - `ok`: feasible, converged and within the limits; `note`: why not, or what to know;
     - `outside_percent`: the worst residual outside the band, between 0.5 and 1.5 times each mode's frequency,
-      in % of the same references (what an unmodelled or mistaken mode there would see; the ranking ignores it).
+      in % of the same references (what an unmodelled or mistaken mode there would see; the ranking ignores it);
+    - `at_resolution`: with `design_move(..., resolution=)`, every mode's worst residual lies below what the
+      drive's rounding of its setpoints to that step leaves (`hull.resolution_floor`): the ranking then takes it as
+      no residual and prefers the lower peaks (False without a resolution).
     """
 
     name: str
@@ -52,6 +56,7 @@ class Candidate:
     ok: bool
     note: str = ""
     outside_percent: float = math.nan
+    at_resolution: bool = False
 
     def sample(self, rate_hz: float):
         """`(t, x, v, a)` of the command sampled at `rate_hz` [Hz] (see `AbstractMotionCommand.sample`)."""
@@ -61,7 +66,7 @@ class Candidate:
 
     def as_dict(self) -> dict:
         d = {k: getattr(self, k) for k in ("name", "move_time", "worst_percent", "mean_percent", "worst_m")}
-        d.update(outside_percent=self.outside_percent)
+        d.update(outside_percent=self.outside_percent, at_resolution=self.at_resolution)
         d.update(peak_v=self.peak_v, peak_a=self.peak_a, peak_j=self.peak_j, ok=self.ok, note=self.note)
         for i, (lo, hi) in enumerate(self.band_hz):
             d[f"band5_mode{i + 1}_hz"] = (lo, hi)
@@ -137,6 +142,13 @@ def _row(req: MoveRequest, name, cmd, T, note="", ok=True, left_out=(), pk=None)
     if not within:
         ok = False
         note = (note + "; " if note else "") + "exceeds the limits"
+    floor = None if req.resolution is None else resolution_floor(axis, req.resolution, req.rate_hz, T)
+    at_floor = floor is not None and bool(np.all(mode_worst * req.ref <= floor))
+    if at_floor:
+        note = (note + "; " if note else "") + (
+            f"at the drive's resolution: every mode's residual lies below what rounding the setpoints to "
+            f"{req.resolution:g} m leaves ({fmt_list(floor, '.2g')} m RMS), so the ranking prefers the lower peaks"
+        )
     if left_out:
         f = np.asarray(axis.frequencies, dtype=float)
         parts = [
@@ -144,7 +156,7 @@ def _row(req: MoveRequest, name, cmd, T, note="", ok=True, left_out=(), pk=None)
             for i, why in left_out
         ]
         note += "; left out of the LP, their residual computed for this command: " + "; ".join(parts)
-    return Candidate(name, cmd, float(T), ok=ok, note=note, **m)
+    return Candidate(name, cmd, float(T), ok=ok, note=note, at_resolution=at_floor, **m)
 
 
 def design_row(name: str, mm, T: float, note: str, ok: bool, far, req: MoveRequest) -> Candidate:

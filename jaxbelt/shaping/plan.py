@@ -54,6 +54,15 @@ start] (optional): the axis' travel. A candidate whose positions, as executed, l
 candidate that leaves the segment between its start and its end by more than `EXCURSION_RTOL` (1 %) of the distance
 is noted so (a long move's design may back off behind its start).
 
+**The drive's resolution** (`resolution` [m], optional): a drive rounds every setpoint to its position step q (a
+motor step or an encoder count), and that rounding leaves a residual of its own, whatever the command:
+`jaxbelt.shaping.hull.resolution_floor` states its RMS per mode, the rounding errors modelled as independent and
+uniform in ±q/2 (simulated rounding of shaped moves from random start positions leaves 0.5-0.9 of it,
+tests/test_resolution.py). A row whose every mode lies below that floor is marked `at_resolution` and its note says
+so: its residual cannot be told from the drive's own, so it does not decide the ranking. Such rows rank first, by
+their peaks (|a|, then |jerk|, then |v|), before the rows above the floor, which rank by their worst residual. On a
+printer axis with 0.0125 mm steps, a minimax design and a classic shaper often both lie there.
+
 **The minimax design's command space** (`smooth`): True: a continuous acceleration (cubic B-spline, continuous
 jerk). False: an acceleration that is constant on each of N equal intervals and jumps between them, as a shaped
 trapezoid's does; its limits are exact rather than a little conservative, so it can come closer to the least
@@ -173,7 +182,8 @@ class MovePlan:
 
     `rate_hz` [Hz], `interpolation`: how the user's drive executes a command (`design_move(..., rate_hz=,
     interpolation=)`): every residual of the table and of `curves` is that of the position setpoints `to_csv` writes
-    at this rate, executed linear between them."""
+    at this rate, executed linear between them. `resolution` [m]: the drive's position step, or None
+    (`design_move(..., resolution=)`)."""
 
     axis: ModalAxis
     distance: float
@@ -192,6 +202,7 @@ class MovePlan:
     measure_reference_m: np.ndarray | None = None
     rate_hz: float = 1000.0
     interpolation: str = "linear"
+    resolution: float | None = None
 
     def _measured(self) -> tuple[ModalAxis, np.ndarray, int]:
         """The axis every residual is computed on, its references [m], and its copies per mode of `axis`."""
@@ -520,6 +531,7 @@ def design_move(
     interpolation: str = "linear",
     x_min=None,
     x_max=None,
+    resolution=None,
 ) -> MovePlan:
     """Design the move of `distance` [m] on `axis` every way jaxbelt knows, under the same limits and move time,
     and rank them (see the module docstring: the candidates, the measure, damping ranges, execution and travel, the
@@ -536,7 +548,8 @@ def design_move(
       `certify_rtol` (None or in (0, 1)): refine the design with jumps until certified within it;
     - `damping`: None, `(lo, hi)` or `"unknown"`: the damping range every residual is judged over;
     - `rate_hz` [Hz] (default 1000, at most `MAX_RATE_HZ`), `interpolation` (`"linear"`): the drive's position
-      setpoints; `x_min`, `x_max` [m, positions from the start] (optional): the axis' travel.
+      setpoints; `x_min`, `x_max` [m, positions from the start] (optional): the axis' travel; `resolution` [m]
+      (optional, in (0, |distance|]): the drive's position step (a motor step or an encoder count in length units).
 
     Returns a `MovePlan`: `plan.table` (ranked), `plan.best` (the recommendation: the least worst residual among
     the candidates that are feasible, converged and within the limits; a design the solver did not converge on
@@ -544,20 +557,18 @@ def design_move(
     """
     req = validate(axis, distance, move_time, v_max=v_max, a_max=a_max, j_max=j_max, uncertainty=uncertainty,
                    include=include, progress=progress, smooth=smooth, certify_rtol=certify_rtol, damping=damping,
-                   rate_hz=rate_hz, interpolation=interpolation, x_min=x_min, x_max=x_max)  # fmt: skip
-    built = classic_commands(req)
-    classic = measure_rows(req, built)
+                   rate_hz=rate_hz, interpolation=interpolation, x_min=x_min, x_max=x_max,
+                   resolution=resolution)  # fmt: skip
+    classic = measure_rows(req, classic_commands(req))
     with solving(req, classic) as (T, design, beside):  # at a given move time the minimax LP and its rows run
         minimax = beside(minimax_rows, req, design, T)  # in the worker, beside the timed candidates
-        built = timed_commands(req, T)
-        timed = measure_rows(req, built)
+        timed = measure_rows(req, timed_commands(req, T))
     minimax, mm, bound = minimax.result()
-    rows = classic + minimax + timed
-    rows = [_within_range(r, req.distance, req.x_range, req.rate_hz) for r in rows]
+    rows = [_within_range(r, req.distance, req.x_range, req.rate_hz) for r in classic + minimax + timed]
     table, best = rank(rows)  # as executed, on the travel
     user, per, ref, damped = req.user, req.per, req.ref, req.damping is not None
     return MovePlan(axis=user, distance=req.distance, move_time=T, v_max=req.v_max, a_max=req.a_max, j_max=req.j_max,
                     uncertainty=req.uncertainty, table=table, best=best, minimax=mm, continuous_bound=bound,
                     reference_m=ref if per == 1 else ref.reshape(user.n_modes, per).max(axis=1), damping=req.damping,
                     measure_axis=req.axis if damped else None, measure_reference_m=ref if damped else None,
-                    rate_hz=req.rate_hz, interpolation=req.interpolation)  # fmt: skip
+                    rate_hz=req.rate_hz, interpolation=req.interpolation, resolution=req.resolution)  # fmt: skip

@@ -109,6 +109,26 @@ def _check_execution(rate_hz, interpolation) -> float:
     return float(rate_hz)
 
 
+def _check_resolution(resolution, distance: float) -> float | None:
+    """`design_move`'s `resolution` [m]: None, or finite with 0 < resolution <= |distance| (a drive's step or
+    encoder count in the axis' length units); a `ValueError` naming it otherwise."""
+    if resolution is None:
+        return None
+    msg = (
+        f"design_move: parameter `resolution` (the drive's position step [m]) must be None or a finite number in "
+        f"(0, {abs(distance):g}] (at most the distance); got {resolution!r}"
+    )
+    if isinstance(resolution, bool | str | bytes) or np.ndim(resolution) != 0:
+        raise ValueError(msg)
+    try:
+        q = float(resolution)
+    except (TypeError, ValueError):
+        raise ValueError(msg) from None
+    if not (math.isfinite(q) and 0.0 < q <= abs(distance)):
+        raise ValueError(msg)
+    return q
+
+
 def _check_damping(damping) -> tuple[float, float] | None:
     """`design_move`'s `damping` as `(lo, hi)`, or None; a `ValueError` naming it otherwise."""
     if damping is None:
@@ -169,7 +189,8 @@ class MoveRequest:
       `j_max`; `uncertainty`; `band`: the frequency factors of the band;
     - `include`, `progress`; `auto` (`smooth="auto"`), `smooth` (the first minimax design is the spline),
       `smooth_arg` (as given), `certify_rtol`; `damping`: the range or None; `rate_hz`: the drive's setpoint
-      rate [Hz], `interpolation` between the setpoints; `x_range`: the travel [m] or None;
+      rate [Hz], `interpolation` between the setpoints; `resolution`: its position step [m] or None;
+      `x_range`: the travel [m] or None;
     - `lp`: at a given move time with "minimax" in `include`, the minimax LP's setup (`far_modes.lp_setup`: the
       modes it leaves out, refused at once where it would weigh none; its options), else None; `prepared`: the
       future of its programs' preparation (`far_modes.prepare_lp`, queued first on the minimax worker where the
@@ -200,6 +221,7 @@ class MoveRequest:
     damping: tuple[float, float] | None
     rate_hz: float
     interpolation: str
+    resolution: float | None
     x_range: tuple[float, float] | None
     lp: LPSetup | None
     prepared: Any = None
@@ -267,7 +289,7 @@ def _judged_axes(axis: ModalAxis, damping, damp):
 
 
 def validate(axis, distance, move_time, *, v_max, a_max, j_max, uncertainty, include, progress, smooth, certify_rtol,
-             damping, rate_hz, interpolation, x_min, x_max) -> MoveRequest:  # fmt: skip
+             damping, rate_hz, interpolation, x_min, x_max, resolution=None) -> MoveRequest:  # fmt: skip
     """`design_move`'s arguments checked by name (see its docstring) into a `MoveRequest`."""
     _check_axis(axis)
     d, t_min = _check_inputs(distance, move_time, v_max, a_max, j_max, uncertainty, include)
@@ -275,6 +297,7 @@ def validate(axis, distance, move_time, *, v_max, a_max, j_max, uncertainty, inc
     damp = _check_damping(damping)
     rate = _check_execution(rate_hz, interpolation)
     x_range = _check_range(x_min, x_max, d)
+    step = _check_resolution(resolution, d)
     judged, nominal, per = _judged_axes(axis, damping, damp)
     auto = isinstance(smooth, str)
     u = float(uncertainty)
@@ -317,6 +340,7 @@ def validate(axis, distance, move_time, *, v_max, a_max, j_max, uncertainty, inc
         damping=damp,
         rate_hz=rate,
         interpolation=interpolation,
+        resolution=step,
         x_range=x_range,
         lp=lp,
         prepared=prepared,
