@@ -42,6 +42,7 @@ Writes `benchmarks/results/shaping_every_shaper.json` (with `--jerk`: `shaping_e
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from pathlib import Path
@@ -82,14 +83,14 @@ def every_shaper(label, f, z, d, shapers=CLASSIC, j_max=None):
             plan = on_shaper_terms(axis, d, row, smooth, jerk=j_max is not None)
             mm = plan.candidate("minimax")
             key = "smooth" if smooth else "steps"
-            cells[key + "_worst"] = worst_against(axis, mm.command, ref) if mm.command is not None else float("nan")
+            cells[key + "_worst"] = worst_against(axis, plan, "minimax", ref) if mm.command is not None else math.nan
             cells[key + "_ok"] = bool(mm.ok)
             cells[key + "_ratio"] = cells[key + "_worst"] / row.worst_percent
         plan = jb.design_move(
             axis, d, row.move_time, v_max=row.peak_v, a_max=row.peak_a, j_max=row.peak_j if j_max is not None else None,
             uncertainty=U, include=("minimax", row.name),
         )  # fmt: skip
-        default_cells(cells, plan, lambda cmd: worst_against(axis, cmd, ref), row.worst_percent)
+        default_cells(cells, plan, lambda p, name: worst_against(axis, p, name, ref), row.worst_percent)
         out.append(cells)
         print(
             f"{label:28s} {row.name:10s} {row.move_time:.3f} s: shaper {row.worst_percent:.3g} %, smooth "
@@ -104,12 +105,12 @@ def every_shaper(label, f, z, d, shapers=CLASSIC, j_max=None):
 def default_cells(cells, plan, measure, shaper_worst):
     """The default `design_move` (`smooth="auto"`, the shaper in the table at its own time and peaks): the minimax
     row a user takes (the better of "minimax" and, where added, "minimax (jumps)"), measured by `measure` (a
-    command's worst residual in %), against the shaper's; into `cells` (`default_*`)."""
+    candidate's worst residual in %, from the plan and the candidate's name), against the shaper's; into `cells` (`default_*`)."""
     rows = [c for c in plan.table if c.name in ("minimax", "minimax (jumps)") and c.ok]
     best = min(rows, key=lambda c: c.worst_percent) if rows else None
     cells["default_row"] = best.name if best is not None else None
     cells["default_rows"] = [c.name for c in plan.table if c.name.startswith("minimax")]
-    cells["default_worst"] = measure(best.command) if best is not None else float("nan")
+    cells["default_worst"] = measure(plan, best.name) if best is not None else float("nan")
     cells["default_ratio"] = cells["default_worst"] / shaper_worst
 
 
@@ -138,7 +139,7 @@ def unknown_damping(label, f, d, shapers=CLASSIC):
     for row in own.table:
         if not row.ok:
             continue
-        shaper = worst_against(dense, row.command, ref)
+        shaper = worst_against(dense, own, row.name, ref)
         cells = dict(axis=label, shaper=row.name, time=row.move_time, shaper_worst=shaper)
         for smooth in (True, False):  # the smooth design and the one with steps, as the default mode
             t0 = time.perf_counter()
@@ -156,7 +157,7 @@ def unknown_damping(label, f, d, shapers=CLASSIC):
             key = "smooth" if smooth else "steps"
             cells[key + "_design_move_s"] = time.perf_counter() - t0
             mm = plan.candidate("minimax")
-            cells[key + "_worst"] = worst_against(dense, mm.command, ref) if mm.command is not None else float("nan")
+            cells[key + "_worst"] = worst_against(dense, plan, "minimax", ref) if mm.command is not None else math.nan
             cells[key + "_stated"] = mm.worst_percent  # over the 5 samples, against the plan's own references
             cells[key + "_ok"] = bool(mm.ok)
             cells[key + "_ratio"] = cells[key + "_worst"] / shaper
@@ -166,7 +167,7 @@ def unknown_damping(label, f, d, shapers=CLASSIC):
             include=("minimax", row.name), damping="unknown",
         )  # fmt: skip
         cells["default_design_move_s"] = time.perf_counter() - t0
-        default_cells(cells, plan, lambda cmd: worst_against(dense, cmd, ref), shaper)
+        default_cells(cells, plan, lambda p, name: worst_against(dense, p, name, ref), shaper)
         out.append(cells)
         print(
             f"{label:28s} {row.name:10s} {row.move_time:.3f} s: shaper (zeta 0.1) {shaper:.3g} %, smooth "

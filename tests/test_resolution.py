@@ -41,7 +41,7 @@ def _rounded_rms(t, x, f, z, step, trials, seed=0):
 def test_floor_is_the_rms_of_a_simulated_rounding(f, z):
     """ZV-shaped moves rounded to 0.0125 mm steps from 400 random start positions: the RMS residual the rounding
     adds lies within 0.45-1.0 of the floor (the model's independent errors: the creeping ends of a move round
-    coherently, so the simulation stays below it; measured 0.56-0.88)."""
+    coherently, so the simulation stays below it; measured 0.55-0.87)."""
     axis = jb.ModalAxis([f], [z])
     zv = jb.design_move(axis, 0.1, None, v_max=0.3, a_max=3.0, include=("ZV",)).candidate("ZV")
     t, x, _, _ = zv.sample(RATE)

@@ -140,7 +140,7 @@ def test_position_range():
     cmd = blend_moves([back, base], [1.0, 1.0])
     axis = jb.ModalAxis([5.0], [0.02])
     req = types.SimpleNamespace(
-        axis=axis, ref=np.ones(1), uncertainty=U, limits=(10.0, 10.0, None), per=1, rate_hz=RATE
+        axis=axis, ref=np.ones(1), uncertainty=U, limits=(10.0, 10.0, None), per=1, rate_hz=RATE, resolution=None
     )
     row = _row(req, "test", cmd, 0.8)
     tf = np.linspace(0.0, 4 * tau, 40001)  # the sum's minimum, on a fine grid: x_back in closed form per phase
