@@ -160,15 +160,40 @@ def sampled_ratios(axis: ModalAxis, t, x, reference, factors) -> np.ndarray:
     return g * executed_integral(t, x, s) / (wd * np.asarray(reference, dtype=float)[:, None])
 
 
-def drive_positions(cmd, rate_hz: float, axis: ModalAxis, reference, uncertainty: float, limits):
-    """`(t, x)`: the position setpoints [s, m] of `cmd` at `rate_hz` [Hz] that `MovePlan.to_csv` writes, so that
-    a drive executing them (linear between them) runs what the table measured: for a smooth minimax design (a
-    `SplineMove`), its corrected samples (`moves.executable_samples`, on `axis` with its `reference` [m], the band
-    ±`uncertainty` and the `limits` (v_max, a_max, j_max or None)); for any other command, its exact positions
-    (`positions`; `moves.limited_samples` stretches them by about 1e-7 in time only where a rounding exceeds a limit)."""
+def _has_spline(cmd) -> bool:
+    return isinstance(cmd, SplineMove) or (isinstance(cmd, BlendMove) and any(map(_has_spline, cmd.members)))
+
+
+def drive_samples(cmd, rate_hz: float, axis: ModalAxis, reference, correction):
+    """`(t, x, v, a)` [s, m, m/s, m/s²] at `rate_hz` [Hz] of a command that holds a smooth minimax design (a
+    `SplineMove`, or a blend with one): the design's samples corrected (`moves.executable_samples`, on `axis` with
+    its `reference` [m], `correction` = (the band's `uncertainty`, the `limits` (v_max, a_max, j_max or None))),
+    the other members' exact ones, blended with the blend's weights (a convex combination: within the same limits).
+    What `MovePlan.samples` writes for such a command; `drive_positions` its positions."""
     if isinstance(cmd, SplineMove):
-        t, x, _, _ = executable_samples(cmd, rate_hz, axis, reference, uncertainty, limits=limits)
-        return np.asarray(t, dtype=float), np.asarray(x, dtype=float)
+        u, limits = correction
+        return tuple(
+            np.asarray(q, dtype=float) for q in executable_samples(cmd, rate_hz, axis, reference, u, limits=limits)
+        )
+    t = sample_times(float(cmd.end_time), rate_hz)
+    if isinstance(cmd, PiecewiseMove):  # on the host, as `positions`
+        return (t, *piecewise_derivatives(cmd, t, (0, 1, 2)))
+    if not isinstance(cmd, BlendMove):
+        return (t, *derivatives_at(cmd, t, (0, 1, 2)))
+    parts = [drive_samples(m, rate_hz, axis, reference, correction)[1:] for m in cmd.members]
+    w = np.asarray(cmd.weights, dtype=float)
+    x, v, a = (w @ np.stack([p[k] for p in parts]) for k in range(3))
+    return t, x, v, a
+
+
+def drive_positions(cmd, rate_hz: float, axis: ModalAxis, reference, correction=None):
+    """`(t, x)`: the position setpoints [s, m] of `cmd` at `rate_hz` [Hz] that `MovePlan.to_csv` writes, so that a
+    drive executing them (linear between them) runs what the table measured. With `correction` = (the band's
+    uncertainty, the limits), a smooth minimax design's samples are corrected, in a blend too (`drive_samples`); any
+    other command's are its exact positions (`positions`), as without a `correction`."""
+    if correction is not None and _has_spline(cmd):
+        t, x, _, _ = drive_samples(cmd, rate_hz, axis, reference, correction)
+        return t, x
     t = sample_times(float(cmd.end_time), rate_hz)
     return t, positions(cmd, t)
 
@@ -191,17 +216,19 @@ def resolution_floor(axis: ModalAxis, step: float, rate_hz: float, duration: flo
     return g * np.abs(4.0 * np.sinh(s * h / 2.0) ** 2) / (h * wd) * float(step) / math.sqrt(12.0) * decay
 
 
-def executed_ratios(axis: ModalAxis, cmd, reference, factors, rate_hz: float) -> np.ndarray:
-    """The complex residuals $g_i W(s)/(\\omega_d r_i)$ of `cmd` as executed at `rate_hz` (`executed_integral`), on
-    every mode of `axis` at each frequency factor, in units of `reference` $r_i$ [m]: shape (n_modes, K); their
-    modulus is the residual amplitude in units of the reference."""
+def executed_ratios(axis: ModalAxis, cmd, reference, factors, rate_hz: float, correction=None) -> np.ndarray:
+    """The complex residuals $g_i W(s)/(\\omega_d r_i)$ of `cmd` as executed at `rate_hz` (`executed_integral`) from
+    the setpoints `drive_positions` gives (`correction`: see there), on every mode of `axis` at each frequency
+    factor, in units of `reference` $r_i$ [m]: shape (n_modes, K); their modulus is the residual amplitude in units
+    of the reference."""
     ref, fac = np.asarray(reference, dtype=float), np.asarray(factors, dtype=float)
-    for c, a, r, f, h, out in _RECENT:  # the same command judged again (`jumps_reason`, then `best_blend`)
-        if c is cmd and a is axis and h == rate_hz and np.array_equal(r, ref) and np.array_equal(f, fac):
+    key = (rate_hz, correction)
+    for c, a, r, f, k, out in _RECENT:  # the same command judged again (`jumps_reason`, then `best_blend`)
+        if c is cmd and a is axis and k == key and np.array_equal(r, ref) and np.array_equal(f, fac):
             return out.copy()
-    t = sample_times(float(cmd.end_time), rate_hz)
-    out = sampled_ratios(axis, t, positions(cmd, t), ref, fac)
-    _RECENT.append((cmd, axis, ref.copy(), fac.copy(), rate_hz, out.copy()))
+    t, x = drive_positions(cmd, rate_hz, axis, ref, correction)
+    out = sampled_ratios(axis, t, x, ref, fac)
+    _RECENT.append((cmd, axis, ref.copy(), fac.copy(), key, out.copy()))
     return out
 
 
@@ -238,14 +265,15 @@ def _blend_programme(C, tol):
 _blend_programme = _xla.LazyJit(jax.jit, _blend_programme, _xla.QUICK_COMPILE)
 
 
-def best_blend(axis: ModalAxis, members, reference, factors, rate_hz: float, blend: bool = True):
+def best_blend(axis: ModalAxis, members, reference, factors, rate_hz: float, correction=None, blend: bool = True):
     """The weights of the blend of `members` (moves of one duration) that leaves the least worst residual over the
     band `factors` as executed at `rate_hz` [Hz] (see the module docstring), in units of `reference` [m] per mode:
     `(weights, worst, member_worsts)`, `worst` <= min(`member_worsts`) (a member itself where the programme's blend
     is not below it by `_GAIN`, 1 %, of it; the earliest member on ties). The programme weighs every
-    `_LP_STRIDE`-th factor (and the last); the blend is then judged on all of them. `blend=False`: the members'
+    `_LP_STRIDE`-th factor (and the last); the blend is then judged on all of them. `correction`: as in
+    `drive_positions` (the blend's setpoints are the same blend of its members'). `blend=False`: the members'
     worsts only (the weights pick the least)."""
-    C = np.stack([executed_ratios(axis, m, reference, factors, rate_hz).ravel() for m in members], axis=1)
+    C = np.stack([executed_ratios(axis, m, reference, factors, rate_hz, correction).ravel() for m in members], axis=1)
     member_worst = np.max(np.abs(C), axis=0)
     M = C.shape[1]
     k0 = int(np.argmin(member_worst))  # the first of the least
@@ -272,14 +300,15 @@ def best_blend(axis: ModalAxis, members, reference, factors, rate_hz: float, ble
     return best_w, best, member_worst
 
 
-def jumps_reason(primary, space, axis, ref, band, rate) -> str:
+def jumps_reason(primary, space, axis, ref, band, rate, correction=None) -> str:
     """Why `smooth="auto"` adds the design with jumps ("" when it does not): the smooth minimax row is missing, not
     feasible or not converged, or a classic shaped move (whether or not the table shows it) or the unshaped move
-    leaves no more than it, as executed (`space`: `shaped.shaped_members`; `rate`: the drive's setpoint rate [Hz])."""
+    leaves no more than it, as executed (`space`: `shaped.shaped_members`; `rate`: the drive's setpoint rate [Hz];
+    `correction`: as in `drive_positions`)."""
     if primary is None or not primary.ok or not math.isfinite(primary.worst_percent):
         return "added: the smooth design is not feasible or not converged at this time"
     names = list(space)
-    _, _, worst = best_blend(axis, [primary.command, *space.values()], ref, band, rate, blend=False)
+    _, _, worst = best_blend(axis, [primary.command, *space.values()], ref, band, rate, correction, blend=False)
     k = int(np.argmin(worst[1:]))
     if worst[1 + k] > worst[0]:
         return ""

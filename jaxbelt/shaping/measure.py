@@ -85,7 +85,7 @@ def _measure(req: MoveRequest, cmd, size: int = 0, pk=None) -> tuple[Any, dict[s
         cmd = padded(cmd, size)
     pv, pa, pj = peaks(cmd) if pk is None else pk
     band, wide = measure_grids(u)
-    t, x = drive_positions(cmd, req.rate_hz, axis, ref, u, limits)
+    t, x = drive_positions(cmd, req.rate_hz, axis, ref, (u, limits))
     r = np.abs(sampled_ratios(axis, t, x, ref, np.concatenate([band, wide])))
     ratio, wr = r[:, : band.size], r[:, band.size :]
     res = ratio * ref[:, None]  # (modes, K) [m]
@@ -183,7 +183,7 @@ def blended_rows(req: MoveRequest, rows: list, space: dict) -> list:
             continue
         keys = [n for n in designs if n in (r.name, JUMPS)]
         names, cmds = keys + list(space), [designs[n] for n in keys] + list(space.values())
-        w, worst, each = best_blend(axis, cmds, ref, band, rate)
+        w, worst, each = best_blend(axis, cmds, ref, band, rate, (req.uncertainty, req.limits))
         parts = ", ".join(f"{names[i]} {w[i]:.3g}" for i in np.flatnonzero(w))
         note = (
             f"its command space holds every classic shaped move and the unshaped move: the blend {parts} leaves "

@@ -45,7 +45,8 @@ def minimax_rows(req: MoveRequest, solved, T: float):
     space = shaped_members(req.nominal, req.distance, T, req.v_max, req.a_max, req.j_max)
     rows = [design_row("minimax", mm, T, note, ok, setup.far, req)]
     primary = rows[0]
-    why = jumps_reason(primary, space, req.axis, req.ref, req.band, req.rate_hz) if req.move_time is not None else ""
+    correction = (req.uncertainty, req.limits)
+    why = jumps_reason(primary, space, req.axis, req.ref, req.band, req.rate_hz, correction) if req.move_time else ""
     if req.auto and (why or req.certify_rtol is not None):
         why = why or "added: `certify_rtol` asks for the continuous certificate, which the design with jumps carries"
         if req.progress:

@@ -135,7 +135,7 @@ from .candidates import timed_commands
 from .certificate import CERTIFY_ATOL as CERTIFY_ATOL  # noqa: E402
 from .certificate import CERTIFY_MAX_STEPS as CERTIFY_MAX_STEPS  # noqa: E402
 from .far_modes import _far_modes as _far_modes  # noqa: E402
-from .hull import drive_positions, sampled_ratios
+from .hull import _has_spline, drive_positions, drive_samples, sampled_ratios
 
 # names of the pipeline's stages that users and tests reach through this module
 from .measure import EXCURSION_RTOL as EXCURSION_RTOL  # noqa: E402
@@ -146,8 +146,6 @@ from .minimax_rows import _smooth_certificate as _smooth_certificate  # noqa: E4
 from .minimax_rows import minimax_rows
 from .minimax_solve import solving
 from .moves import (
-    SplineMove,
-    executable_samples,
     limited_samples,
     sampled_peaks,
 )
@@ -269,9 +267,10 @@ class MovePlan:
 
     def samples(self, rate_hz: float, candidate: str | None = None):
         """`(t, x, v, a)` of the recommended command (or `candidate`) sampled at `rate_hz` [Hz], as `to_csv` writes
-        them: for the smooth minimax design, corrected so that a drive that executes the acceleration linearly
-        between samples leaves the residual the table states (`jaxbelt.shaping.moves.executable_samples`); for
-        the others, the exact samples.
+        them: for the smooth minimax design, alone or in a blend of the command space, corrected so that a drive
+        that executes the acceleration linearly between samples leaves its continuous residual
+        (`jaxbelt.shaping.moves.executable_samples`, `jaxbelt.shaping.hull.drive_samples`); for the others, the
+        exact samples. The table states the residual of these positions executed linearly between samples.
 
         Every sample respects the plan's limits to a relative 1e-9: |v| <= v_max [m/s], |a| <= a_max [m/s²] and,
         with j_max, |a_k+1 - a_k| rate_hz <= j_max [m/s³]. The design's correction includes them as constraints
@@ -283,9 +282,9 @@ class MovePlan:
         limits = (self.v_max, self.a_max, self.j_max)
         cmd = c.command
         assert cmd is not None  # `_chosen` refuses a candidate without a command
-        if isinstance(cmd, SplineMove):
+        if _has_spline(cmd):  # the smooth design, alone or in a blend: its samples corrected (`hull.drive_samples`)
             axis, ref, _ = self._measured()  # the residual the table states: over the band (and damping range)
-            return executable_samples(cmd, rate_hz, axis, ref, self.uncertainty, limits=limits)
+            return drive_samples(cmd, rate_hz, axis, ref, (self.uncertainty, limits))
         return limited_samples(cmd, rate_hz, limits)
 
     def _chosen(self, name: str | None, owner: str) -> Candidate:
@@ -318,7 +317,7 @@ class MovePlan:
         out = {}
         for c in self.table:
             if c.command is not None:
-                t, x = drive_positions(c.command, self.rate_hz, axis, ref, self.uncertainty, limits)
+                t, x = drive_positions(c.command, self.rate_hz, axis, ref, (self.uncertainty, limits))
                 pct = 100.0 * np.abs(sampled_ratios(axis, t, x, ref, f))
                 out[c.name] = pct.reshape(self.axis.n_modes, per, -1).max(axis=1)
         return f, out
