@@ -1,5 +1,5 @@
 """The faster paths of the design pipeline against independent references: the positions of a piecewise move as
-executed (`hull.positions`) against the defining sum, the pseudo-polynomial peaks on the host (`pseudo._peaks_np`)
+executed (`moves.positions`) against the defining sum, the pseudo-polynomial peaks on the host (`pseudo._peaks_np`)
 against the command's own derivatives, the batched host evaluation (`pseudo._evaluate_np`) against a run-by-run
 computation from the definition, and the chained stages (`pseudo.run_chain`) against the stages run one by one."""
 
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import jaxbelt as jb
-from jaxbelt.shaping import hull
+from jaxbelt.shaping import hull, moves
 from jaxbelt.shaping import pseudo as P
 from jaxbelt.shaping.moves import PiecewiseMove, fastest_time, padded
 from jaxbelt.shaping.shaped import gentlest_shaped
@@ -42,8 +42,8 @@ def test_piecewise_positions_match_the_defining_sum(jerk):
     assert isinstance(cmd, PiecewiseMove)
     cmd = padded(cmd, int(cmd.times.shape[0]) + 7)
     T = float(cmd.duration)
-    t = np.concatenate([hull.sample_times(T, 1000.0), np.linspace(0.0, T, 37) + 1e-4, [T, T + 0.3]])
-    x = hull.positions(cmd, t)
+    t = np.concatenate([moves.sample_times(T, 1000.0), np.linspace(0.0, T, 37) + 1e-4, [T, T + 0.3]])
+    x = moves.positions(cmd, t)
     ref = _direct_positions(cmd, t)
     np.testing.assert_allclose(x, ref, rtol=0, atol=1e-14)
     assert abs(x[-1] - 0.1) < 1e-14  # held at the distance after the end
@@ -145,7 +145,7 @@ def test_executed_ratios_kept_are_those_of_the_same_command_and_reference():
     twin = PiecewiseMove(cmd.times, cmd.steps, cmd.ramps, cmd.duration)
     np.testing.assert_allclose(hull.executed_ratios(axis, twin, ref, fac, 1000.0), a, rtol=1e-15)
     for rate in (1000.0, 250.0):
-        t = hull.sample_times(float(cmd.end_time), rate)
+        t = moves.sample_times(float(cmd.end_time), rate)
         w = np.asarray(axis.omega)[:, None] * fac[None, :]
         z = np.asarray(axis.damping_ratios)[:, None]
         wd = w * np.sqrt(1 - z**2)
@@ -169,4 +169,4 @@ def test_a_one_stage_chain_runs_its_first_slot_only():
 
 def test_positions_of_a_move_without_terms_are_zero():
     move = PiecewiseMove(jnp.zeros(0), jnp.zeros(0), jnp.zeros(0), 1.0)
-    assert np.array_equal(hull.positions(move, np.linspace(0.0, 1.5, 7)), np.zeros(7))
+    assert np.array_equal(moves.positions(move, np.linspace(0.0, 1.5, 7)), np.zeros(7))

@@ -164,12 +164,12 @@ def test_position_range():
 
 
 def test_pseudo_positions_on_the_host_match_eq_17():
-    """`hull.positions` of a pseudo-polynomial (Incerti, eq. 17, coefficients as Lagrange weights, numpy) against
+    """`moves.positions` of a pseudo-polynomial (Incerti, eq. 17, coefficients as Lagrange weights, numpy) against
     the integer-exponent closed form (3, 4, 5) -> C = (10, -15, 6) to 1e-14 of the distance, and against the
     command's own `derivative` (eq. 17 with the linear solve of eq. 22-23, JAX) to 1e-10 (the linear solve loses
     more to rounding than the product form)."""
     from jaxbelt.commands import PseudoPolynomial
-    from jaxbelt.shaping.hull import positions
+    from jaxbelt.shaping.moves import positions
 
     t = np.linspace(-0.2, 1.0, 1201)
     d, T = 0.1, 0.8

@@ -15,8 +15,8 @@ from ..commands import AbstractMotionCommand
 from .bands import _N_WIDE as _N_WIDE
 from .bands import _WIDE as _WIDE
 from .bands import JUMPS, measure_grids, mode_label
-from .hull import best_blend, blend_moves, drive_positions, positions, resolution_floor, sample_times, sampled_ratios
-from .moves import PiecewiseMove, padded, peaks
+from .hull import best_blend, blend_moves, resolution_floor, sampled_ratios
+from .moves import PiecewiseMove, drive_positions, padded, peaks, positions, sample_times
 from .request import MoveRequest
 from .residual import tolerance_band
 
@@ -77,7 +77,7 @@ def _measure(req: MoveRequest, cmd, size: int = 0, pk=None) -> tuple[Any, dict[s
     """The table's numbers for one command on `req.axis` (`req.per` damping copies of each user mode), a
     `PiecewiseMove` padded to `size` terms first: `(command, numbers, within the limits, worst ratio over the band per
     mode of `req.axis`)`. Every residual is that of the command *as executed*: the position setpoints `to_csv` writes
-    at `req.rate_hz`, linear between them (`hull.drive_positions`, `hull.sampled_ratios`). `pk`: the command's `(peak
+    at `req.rate_hz`, linear between them (`moves.drive_positions`, `hull.sampled_ratios`). `pk`: the command's `(peak
     |v|, peak |a|, peak |jerk|)` where its builder measured them (a pseudo-polynomial's design: on 20001 instants on
     the host), else measured here (`moves.peaks`)."""
     axis, ref, u, limits, per = req.axis, req.ref, req.uncertainty, req.limits, req.per

@@ -37,7 +37,7 @@ from .._checks import as_float_array, check_positive, check_real, check_scalar, 
 from .._guard import checked, prepare, reraising, stored_jit
 from .._recent import Recent
 from .._threads import blas_limited
-from ..commands import AbstractMotionCommand, PseudoPolynomial, _safe_pow, falling_factorial
+from ..commands import AbstractMotionCommand, PseudoPolynomial, _safe_pow, falling_factorial, lagrange_weights_np
 
 # --------------------------------------------------------------------------------------------
 # phi functions (complex, stable at 0)
@@ -1380,3 +1380,78 @@ def limited_samples(cmd: AbstractMotionCommand, rate_hz: float, limits, max_roun
         tau = np.minimum(t / stretch, float(cmd.end_time))
         x, v, a = (q / stretch**k for k, q in enumerate(derivatives_at(cmd, tau, (0, 1, 2))))
     return t, x, v, a
+
+
+# --- the command as a drive executes it: its setpoints ------------------------------------------------------------
+def sample_times(duration: float, rate_hz: float) -> np.ndarray:
+    """The setpoint times [s] of a move of `duration` [s] at `rate_hz` [Hz]: from 0 through the first at or after
+    the end (the command holds its final position there), as `MovePlan.to_csv` writes them."""
+    n = int(math.ceil(float(duration) * float(rate_hz) - 1e-9))
+    return np.arange(n + 1) / float(rate_hz)
+
+
+def positions(cmd, t) -> np.ndarray:
+    """The exact positions [m] of `cmd` at the times `t` [s] (numpy; a `PiecewiseMove` and a pseudo-polynomial in
+    closed form)."""
+    t = np.asarray(t, dtype=float)
+    if isinstance(cmd, PiecewiseMove):
+        return _piecewise_positions(cmd, t)
+    if isinstance(cmd, BlendMove):
+        return np.sum([float(w) * positions(m, t) for w, m in zip(np.asarray(cmd.weights), cmd.members)], axis=0)
+    if isinstance(cmd, PseudoPolynomial):
+        return _pseudo_positions(cmd, t)
+    return derivatives_at(cmd, t, (0,))[0]
+
+
+def _pseudo_positions(cmd: PseudoPolynomial, t: np.ndarray) -> np.ndarray:
+    """$\\varphi_m(t) = \\Phi[1 - \\sum_i C_i (1 - t/T)^{\\gamma_i}]$ [m] (Incerti, eq. 17) on the host, 0 before
+    t = 0 and $\\Phi$ after T, the coefficients as Lagrange weights (`commands.lagrange_weights_np`): no program to
+    compile (a pseudo-polynomial row is otherwise the only command whose positions `design_move` evaluates in one)."""
+    g = np.asarray(cmd.gammas, dtype=float)
+    u = np.clip(1.0 - t / float(cmd.duration), 0.0, 1.0)
+    x = float(cmd.displacement) * (1.0 - (u[..., None] ** g) @ lagrange_weights_np(g))
+    return np.where(t < 0, 0.0, x)
+
+
+def _piecewise_positions(move: PiecewiseMove, t) -> np.ndarray:
+    """$x(t) = \\sum_k \\alpha_k (t - t_k)_+^2/2 + \\beta_k (t - t_k)_+^3/6$ [m] of a `PiecewiseMove` at the times `t`
+    (held at the end after its duration T), in O((n + K) log K) (`moves.piecewise_derivatives`)."""
+    return piecewise_derivatives(move, t, (0,))[0]
+
+
+def _has_spline(cmd) -> bool:
+    return isinstance(cmd, SplineMove) or (isinstance(cmd, BlendMove) and any(map(_has_spline, cmd.members)))
+
+
+def drive_samples(cmd, rate_hz: float, axis, reference, correction):
+    """`(t, x, v, a)` [s, m, m/s, m/s²] at `rate_hz` [Hz] of a command that holds a smooth minimax design (a
+    `SplineMove`, or a blend with one): the design's samples corrected (`moves.executable_samples`, on `axis` with
+    its `reference` [m], `correction` = (the band's `uncertainty`, the `limits` (v_max, a_max, j_max or None))),
+    the other members' exact ones, blended with the blend's weights (a convex combination: within the same limits).
+    What `MovePlan.samples` writes for such a command; `drive_positions` its positions."""
+    if isinstance(cmd, SplineMove):
+        u, limits = correction
+        return tuple(
+            np.asarray(q, dtype=float) for q in executable_samples(cmd, rate_hz, axis, reference, u, limits=limits)
+        )
+    t = sample_times(float(cmd.end_time), rate_hz)
+    if isinstance(cmd, PiecewiseMove):  # on the host, as `positions`
+        return (t, *piecewise_derivatives(cmd, t, (0, 1, 2)))
+    if not isinstance(cmd, BlendMove):
+        return (t, *derivatives_at(cmd, t, (0, 1, 2)))
+    parts = [drive_samples(m, rate_hz, axis, reference, correction)[1:] for m in cmd.members]
+    w = np.asarray(cmd.weights, dtype=float)
+    x, v, a = (w @ np.stack([p[k] for p in parts]) for k in range(3))
+    return t, x, v, a
+
+
+def drive_positions(cmd, rate_hz: float, axis, reference, correction=None):
+    """`(t, x)`: the position setpoints [s, m] of `cmd` at `rate_hz` [Hz] that `MovePlan.to_csv` writes, so that a
+    drive executing them (linear between them) runs what the table measured. With `correction` = (the band's
+    uncertainty, the limits), a smooth minimax design's samples are corrected, in a blend too (`drive_samples`); any
+    other command's are its exact positions (`positions`), as without a `correction`."""
+    if correction is not None and _has_spline(cmd):
+        t, x, _, _ = drive_samples(cmd, rate_hz, axis, reference, correction)
+        return t, x
+    t = sample_times(float(cmd.end_time), rate_hz)
+    return t, positions(cmd, t)

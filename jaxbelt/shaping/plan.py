@@ -44,7 +44,7 @@ of each mode: about 5 times its rows (a 1-mode design costs about what a 5-mode 
 export; at most `MAX_RATE_HZ`) and `interpolation` (`"linear"`): how the user's drive executes the command, position
 setpoints at `rate_hz`, linear between them (what `MovePlan.to_csv` writes). Every residual of the table, of
 `MovePlan.curves` and of the figure is that of the command *as executed so*: of the very setpoints `to_csv` writes at
-that rate (`jaxbelt.shaping.hull.drive_positions`), so an exact replay of the CSV finds the stated residual (to 1e-6,
+that rate (`jaxbelt.shaping.moves.drive_positions`), so an exact replay of the CSV finds the stated residual (to 1e-6,
 tests/test_shaping_space.py). It differs from the command's own, continuous residual: linear
 steps scale a mode's excitation by about $\\mathrm{sinc}^2(\\omega h/2) \\approx 1 - (\\omega h)^2/12$ (h = 1 /
 `rate_hz`; 1.2 % for a 60 Hz mode at 1 kHz), which a minimax design's cancellation can make a large part of its
@@ -135,7 +135,7 @@ from .candidates import timed_commands
 from .certificate import CERTIFY_ATOL as CERTIFY_ATOL  # noqa: E402
 from .certificate import CERTIFY_MAX_STEPS as CERTIFY_MAX_STEPS  # noqa: E402
 from .far_modes import _far_modes as _far_modes  # noqa: E402
-from .hull import _has_spline, drive_positions, drive_samples, sampled_ratios
+from .hull import sampled_ratios
 
 # names of the pipeline's stages that users and tests reach through this module
 from .measure import EXCURSION_RTOL as EXCURSION_RTOL  # noqa: E402
@@ -145,10 +145,7 @@ from .minimax_rows import JUMPS as JUMPS  # noqa: E402
 from .minimax_rows import _smooth_certificate as _smooth_certificate  # noqa: E402
 from .minimax_rows import minimax_rows
 from .minimax_solve import solving
-from .moves import (
-    limited_samples,
-    sampled_peaks,
-)
+from .moves import _has_spline, drive_positions, drive_samples, limited_samples, sampled_peaks
 from .rank import rank
 from .request import MAX_RATE_HZ as MAX_RATE_HZ  # noqa: E402
 from .request import N_DAMPING as N_DAMPING  # noqa: E402
@@ -269,7 +266,7 @@ class MovePlan:
         """`(t, x, v, a)` of the recommended command (or `candidate`) sampled at `rate_hz` [Hz], as `to_csv` writes
         them: for the smooth minimax design, alone or in a blend of the command space, corrected so that a drive
         that executes the acceleration linearly between samples leaves its continuous residual
-        (`jaxbelt.shaping.moves.executable_samples`, `jaxbelt.shaping.hull.drive_samples`); for the others, the
+        (`jaxbelt.shaping.moves.executable_samples`, `jaxbelt.shaping.moves.drive_samples`); for the others, the
         exact samples. The table states the residual of these positions executed linearly between samples.
 
         Every sample respects the plan's limits to a relative 1e-9: |v| <= v_max [m/s], |a| <= a_max [m/s²] and,
@@ -282,7 +279,7 @@ class MovePlan:
         limits = (self.v_max, self.a_max, self.j_max)
         cmd = c.command
         assert cmd is not None  # `_chosen` refuses a candidate without a command
-        if _has_spline(cmd):  # the smooth design, alone or in a blend: its samples corrected (`hull.drive_samples`)
+        if _has_spline(cmd):  # the smooth design, alone or in a blend: its samples corrected (`moves.drive_samples`)
             axis, ref, _ = self._measured()  # the residual the table states: over the band (and damping range)
             return drive_samples(cmd, rate_hz, axis, ref, (self.uncertainty, limits))
         return limited_samples(cmd, rate_hz, limits)
