@@ -131,7 +131,7 @@ def test_position_range():
     as leaving the segment, and marked not ok where it leaves `x_min`."""
     from jaxbelt.shaping.hull import blend_moves
     from jaxbelt.shaping.moves import PiecewiseMove
-    from jaxbelt.shaping.plan import _row, _within_range
+    from jaxbelt.shaping.plan import _row
 
     a0, tau, d = 4.0, 0.05, 0.1
     back = PiecewiseMove(np.array([0, tau, 3 * tau, 4 * tau]), np.array([-a0, 2 * a0, -2 * a0, a0]), np.zeros(4), 0.8)
@@ -139,10 +139,12 @@ def test_position_range():
     assert base is not None
     cmd = blend_moves([back, base], [1.0, 1.0])
     axis = jb.ModalAxis([5.0], [0.02])
-    req = types.SimpleNamespace(
-        axis=axis, ref=np.ones(1), uncertainty=U, limits=(10.0, 10.0, None), per=1, rate_hz=RATE, resolution=None
-    )
-    row = _row(req, "test", cmd, 0.8)
+
+    def row(x_range):
+        req = types.SimpleNamespace(axis=axis, ref=np.ones(1), uncertainty=U, limits=(10.0, 10.0, None), per=1,
+                                    rate_hz=RATE, resolution=None, distance=d, x_range=x_range)  # fmt: skip
+        return _row(req, "test", cmd, 0.8)
+
     tf = np.linspace(0.0, 4 * tau, 40001)  # the sum's minimum, on a fine grid: x_back in closed form per phase
     x_back = np.where(
         tf < tau,
@@ -153,12 +155,13 @@ def test_position_range():
         tf >= 3 * tau, -a0 * tau**2 / 2 + a0 * tau * (tf - 3 * tau) - a0 * (tf - 3 * tau) ** 2 / 2, x_back
     )
     lowest = float(np.min(x_back + np.asarray(base.derivative(tf, 0))))
-    noted = _within_range(row, d, None, RATE)
+    noted = row(None)
     assert noted.ok and "leaves the segment from start to end" in noted.note
     low = float(noted.note.split("positions ")[1].split(" to")[0])
     assert low == pytest.approx(lowest, rel=1e-3)  # the samples' minimum (its velocity is ~0 there)
-    assert not _within_range(row, d, (-1e-3, 0.2), RATE).ok
-    assert _within_range(row, d, (1.01 * lowest, 0.2), RATE).ok
+    outside = row((-1e-3, 0.2))
+    assert not outside.ok and "leaves the position range [-0.001, 0.2] m" in outside.note
+    assert row((1.01 * lowest, 0.2)).ok
     with pytest.raises(ValueError, match="x_min"):
         jb.design_move(axis, d, 0.8, v_max=V, a_max=A, include=("unshaped",), x_min=0.01)
 

@@ -16,7 +16,8 @@ from .bands import _N_WIDE as _N_WIDE
 from .bands import _WIDE as _WIDE
 from .bands import JUMPS, measure_grids, mode_label
 from .hull import best_blend, blend_moves, resolution_floor, sampled_ratios
-from .moves import PiecewiseMove, drive_positions, padded, peaks, positions, sample_times
+from .moves import EXCURSION_RTOL as EXCURSION_RTOL
+from .moves import PiecewiseMove, drive_positions, padded, peaks, travel_notes
 from .request import MoveRequest
 from .residual import tolerance_band
 
@@ -73,7 +74,7 @@ class Candidate:
         return d
 
 
-def _measure(req: MoveRequest, cmd, size: int = 0, pk=None) -> tuple[Any, dict[str, Any], bool, Any]:
+def _measure(req: MoveRequest, cmd, size: int = 0, pk=None) -> tuple[Any, dict[str, Any], bool, Any, tuple]:
     """The table's numbers for one command on `req.axis` (`req.per` damping copies of each user mode), a
     `PiecewiseMove` padded to `size` terms first: `(command, numbers, within the limits, worst ratio over the band per
     mode of `req.axis`)`. Every residual is that of the command *as executed*: the position setpoints `to_csv` writes
@@ -86,6 +87,7 @@ def _measure(req: MoveRequest, cmd, size: int = 0, pk=None) -> tuple[Any, dict[s
     pv, pa, pj = peaks(cmd) if pk is None else pk
     band, wide = measure_grids(u)
     t, x = drive_positions(cmd, req.rate_hz, axis, ref, (u, limits))
+    travel = travel_notes(x, req.distance, req.x_range)
     r = np.abs(sampled_ratios(axis, t, x, ref, np.concatenate([band, wide])))
     ratio, wr = r[:, : band.size], r[:, band.size :]
     res = ratio * ref[:, None]  # (modes, K) [m]
@@ -114,6 +116,7 @@ def _measure(req: MoveRequest, cmd, size: int = 0, pk=None) -> tuple[Any, dict[s
         ),
         within,
         ratio.max(axis=1),
+        travel,
     )
 
 
@@ -138,7 +141,7 @@ def _row(req: MoveRequest, name, cmd, T, note="", ok=True, left_out=(), pk=None)
         return Candidate(
             name, None, T, nan, nan, nan, tuple((nan, nan) for _ in range(n_user)), nan, nan, nan, False, note
         )
-    cmd, m, within, mode_worst = _measure(req, cmd, size, pk)
+    cmd, m, within, mode_worst, (travel, inside) = _measure(req, cmd, size, pk)
     if not within:
         ok = False
         note = (note + "; " if note else "") + "exceeds the limits"
@@ -156,7 +159,8 @@ def _row(req: MoveRequest, name, cmd, T, note="", ok=True, left_out=(), pk=None)
             for i, why in left_out
         ]
         note += "; left out of the LP, their residual computed for this command: " + "; ".join(parts)
-    return Candidate(name, cmd, float(T), ok=ok, note=note, at_resolution=at_floor, **m)
+    note = "; ".join([note, *travel] if note else travel)
+    return Candidate(name, cmd, float(T), ok=ok and inside, note=note, at_resolution=at_floor, **m)
 
 
 def design_row(name: str, mm, T: float, note: str, ok: bool, far, req: MoveRequest) -> Candidate:
@@ -196,31 +200,6 @@ def blended_rows(req: MoveRequest, rows: list, space: dict) -> list:
         cmd = blend_moves(cmds, w)
         out.append(_row(req, r.name, cmd, float(cmd.end_time), note=r.note + "; " + note))
     return out
-
-
-#: how far [fraction of the distance] a command may leave the segment between its start and its end before the
-#: table notes it
-EXCURSION_RTOL = 0.01
-
-
-def _within_range(row, d: float, x_range, rate: float):
-    """`row` with its note saying where its command, as executed at `rate` [Hz], leaves the segment between the start
-    and the end by more than `EXCURSION_RTOL` of the distance, and marked not ok where it leaves `x_range`."""
-    if row.command is None:
-        return row
-    t = sample_times(float(row.command.end_time), rate)
-    x = positions(row.command, t)
-    lo, hi = float(np.min(x)), float(np.max(x))
-    below, above = min(0.0, d) - lo, hi - max(0.0, d)
-    notes, ok = [], row.ok
-    if max(below, above) > EXCURSION_RTOL * abs(d):
-        notes.append(f"leaves the segment from start to end: positions {lo:.4g} to {hi:.4g} m")
-    if x_range is not None and (lo < x_range[0] or hi > x_range[1]):
-        ok = False
-        notes.append(f"leaves the position range [{x_range[0]:g}, {x_range[1]:g}] m")
-    if not notes:
-        return row
-    return dataclasses.replace(row, ok=ok, note="; ".join([row.note, *notes] if row.note else notes))
 
 
 def measure_rows(req: MoveRequest, built) -> list:

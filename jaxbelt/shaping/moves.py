@@ -1455,3 +1455,23 @@ def drive_positions(cmd, rate_hz: float, axis, reference, correction=None):
         return t, x
     t = sample_times(float(cmd.end_time), rate_hz)
     return t, positions(cmd, t)
+
+
+#: how far [fraction of the distance] a command may leave the segment between its start and its end before the
+#: table notes it
+EXCURSION_RTOL = 0.01
+
+
+def travel_notes(x, d: float, x_range) -> tuple[list, bool]:
+    """`(notes, inside)` for the setpoints `x` [m] of a command, as executed: a note where they leave the segment
+    between the start and the end (`d` [m]) by more than `EXCURSION_RTOL` of the distance, and one, with `inside`
+    False, where they leave the travel `x_range` [m] (None: no travel given)."""
+    lo, hi = float(np.min(x)), float(np.max(x))
+    below, above = min(0.0, d) - lo, hi - max(0.0, d)
+    notes, inside = [], True
+    if max(below, above) > EXCURSION_RTOL * abs(d):
+        notes.append(f"leaves the segment from start to end: positions {lo:.4g} to {hi:.4g} m")
+    if x_range is not None and (lo < x_range[0] or hi > x_range[1]):
+        inside = False
+        notes.append(f"leaves the position range [{x_range[0]:g}, {x_range[1]:g}] m")
+    return notes, inside

@@ -139,7 +139,7 @@ from .hull import sampled_ratios
 
 # names of the pipeline's stages that users and tests reach through this module
 from .measure import EXCURSION_RTOL as EXCURSION_RTOL  # noqa: E402
-from .measure import Candidate, _within_range, measure_rows
+from .measure import Candidate, measure_rows
 from .measure import _row as _row  # noqa: E402
 from .minimax_rows import JUMPS as JUMPS  # noqa: E402
 from .minimax_rows import _smooth_certificate as _smooth_certificate  # noqa: E402
@@ -566,8 +566,7 @@ def design_move(
         minimax = beside(minimax_rows, req, design, T)  # in the worker, beside the timed candidates
         timed = measure_rows(req, timed_commands(req, T))
     minimax, mm, bound = minimax.result()
-    rows = [_within_range(r, req.distance, req.x_range, req.rate_hz) for r in classic + minimax + timed]
-    table, best = rank(rows)  # as executed, on the travel
+    table, best = rank(classic + minimax + timed)  # as executed, on the travel
     user, per, ref, damped = req.user, req.per, req.ref, req.damping is not None
     return MovePlan(axis=user, distance=req.distance, move_time=T, v_max=req.v_max, a_max=req.a_max, j_max=req.j_max,
                     uncertainty=req.uncertainty, table=table, best=best, minimax=mm, continuous_bound=bound,
