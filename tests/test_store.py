@@ -421,7 +421,7 @@ def _exports(monkeypatch):
 @stored_programs
 def test_design_move_prepares_its_programs_once_with_the_calls_types(tmp_path, monkeypatch):
     # at a given move time, design_move starts the minimax LP's compilation first, then traces the fine-grid check
-    # and the programs that measure the designed command (from the LP's output types) while it compiles: each
+    # and the programs that take the designed command's peaks (from the LP's output types) while it compiles: each
     # program is exported once (a prepared type that differed from the call's would export it twice), and the
     # design is the traced path's
     axis = jb.ModalAxis([6.0], [0.02])
@@ -437,7 +437,6 @@ def test_design_move_prepares_its_programs_once_with_the_calls_types(tmp_path, m
         stored = run()
         assert len(_programs(folder)) == len(names)
     assert sorted(n.rsplit(".", 1)[-1] for n in names) == [
-        "_closed_form_curve",  # the design's residual on the band and on the wide range (factors padded alike)
         "_derivatives",  # the command sampled at the drive's rate and its peaks (every order in one program)
         "_fine_ratios_program",
         "_grid_curve",  # the reference (time-optimal) move's residual: steps and ramps on a uniform grid of factors

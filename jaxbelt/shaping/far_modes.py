@@ -11,9 +11,8 @@ import numpy as np
 
 from ..models.axis import ModalAxis
 from . import design as _design
-from .bands import measure_grids, mode_label
+from .bands import mode_label
 from .moves import prepare_peaks
-from .residual import prepare_curve
 
 
 def _minimax_options(freqs, T_guess: float, u: float, j_max, fixed_time: bool, smooth: bool = True):
@@ -166,9 +165,9 @@ def _refuse_all_far(axis: ModalAxis, T: float, u: float, far: _FarModes, per: in
 def prepare_lp(setup: LPSetup, d: float, v_max: float, a_max: float, j_max, u: float, T: float) -> None:
     """Start compiling, in the background (`jaxbelt._guard.prepare`), the programs the minimax design of `setup`
     at move time `T` [s] runs (distance `d` [m], limits, band ±`u`; a stand-in reference of the right shape) and
-    those `measure._measure` runs on its command, each traced while the ones before compile (on two cores the LP's
-    compilation, the longest, overlaps the others' tracing and compiling, and the reference's and the candidates'
-    work)."""
+    the peaks `measure._measure` takes of its command (its residuals, as executed, are computed on the host), each
+    traced while the ones before compile (on two cores the LP's compilation, the longest, overlaps the others'
+    tracing and compiling, and the reference's and the candidates' work)."""
     stand_in = np.ones(np.asarray(setup.kept).size)
     solver = _design.MinimaxSolver(setup.lp_axis, d, v_max, a_max, j_max, u, stand_in, setup.opts)
     problem = solver.problem(T)
@@ -176,6 +175,4 @@ def prepare_lp(setup: LPSetup, d: float, v_max: float, a_max: float, j_max, u: f
     if coef is None:
         return
     cmd = _design.design_command(jax.device_put(np.zeros(coef.shape, coef.dtype)), problem.move_time, setup.opts)
-    for factors in measure_grids(u):
-        prepare_curve(setup.lp_axis, cmd, factors)
     prepare_peaks(cmd)

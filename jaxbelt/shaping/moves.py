@@ -979,6 +979,25 @@ class _SampledBasis:
 
 
 @blas_limited
+def _phi1_np(x):
+    """`phi1` in numpy (no eager JAX operation to compile): $(e^x - 1)/x$, the same Taylor series for |x| < 1."""
+    x = np.asarray(x, dtype=complex)
+    small = np.abs(x) < 1.0
+    xs = np.where(small, x, 0.0)
+    series = sum(xs**k / math.factorial(k + 1) for k in range(_SERIES))
+    xb = np.where(small, 1.0, x)
+    return np.where(small, series, np.expm1(xb) / xb)
+
+
+def _spline_residual_np(cmd: "SplineMove", s) -> np.ndarray:
+    """`SplineMove.residual_integral` in numpy [m/s] (the same closed form), for complex `s` of any shape."""
+    s = np.asarray(s, dtype=complex)
+    h, T = float(cmd.spacing), float(cmd.duration)
+    tj = np.arange(cmd.n_intervals - 3) * h
+    kern = h * np.exp(s[..., None] * (T - tj - 4.0 * h)) * _phi1_np(s * h)[..., None] ** 4
+    return kern @ np.asarray(cmd.coefficients, dtype=float)
+
+
 def executable_samples(
     cmd: SplineMove, rate_hz: float, axis, reference, uncertainty: float, n_freq: int = 61, limits=None
 ):
@@ -1017,7 +1036,7 @@ def executable_samples(
     z = np.asarray(axis.damping_ratios)[:, None]
     wd = w * np.sqrt(1 - z**2)
     s = -z * w + 1j * wd
-    target = np.asarray(cmd.residual_integral(jnp.asarray(s))) * np.exp(s * (t[-1] - T))
+    target = _spline_residual_np(cmd, s) * np.exp(s * (t[-1] - T))
     weight = np.abs(np.asarray(axis.gains))[:, None] / (wd * np.asarray(reference)[:, None])
     # the mismatch is linear in the correction d of the coefficients (the executed acceleration a0 + B d):
     # f0 + Jm d, with W(a) = sum_k c_k(s) a_k (`_weight_blocks`), accumulated over blocks of samples
@@ -1034,7 +1053,8 @@ def executable_samples(
     v_w[0] = v_w[-1] = hs / 2
     x_w = hs * (t[-1] - t)  # sum over steps of h v_k + h^2 (2 a_k + a_k+1) / 6, v_k the running velocity
     x_w[0], x_w[-1] = hs / 2 * (t[-1] - hs / 3), hs * hs / 6
-    distance = float(cmd.distance)
+    # `cmd.distance` in numpy (its eager JAX operations compiled per coefficient count)
+    distance = float(T / N) ** 2 * float(np.asarray(cmd.coefficients) @ (N - 2 - np.arange(N - 3)))
     scale = 1e3 / max(abs(distance), 1e-300)
     f0 = np.concatenate([e0.real.ravel(), e0.imag.ravel(), [scale * (x_w @ a0 - distance), scale * T * (v_w @ a0)]])
     Jm = np.vstack(

@@ -23,7 +23,7 @@ from jax.scipy.special import gammaln
 from jax.typing import ArrayLike
 
 from .._checks import atleast_1d, check_fits, check_positive, check_range, collecting, device_array, is_concrete
-from .._guard import checked, prepare, reraising, stored_jit
+from .._guard import checked, reraising, stored_jit
 from .._threads import blas_limited
 from .._xla import QUICK_COMPILE
 from ..commands import AbstractMotionCommand, PseudoPolynomial, ShapedCommand, falling_factorial
@@ -317,7 +317,7 @@ def _uniform_grid(axis, cmd, r):
     """`(r0, dr, n)` where the factors `r` (1-D) are a uniform grid of at least `GRID_MIN` points (to round-off: the
     grid $r_0 + j\\,dr$ is within 1e-14 of them) and the command holds a `PiecewiseMove`, with $|s|T \\ge$
     `GRID_MIN_ST` for every mode at the lowest factor; else None (the direct form). The axis, the command and the
-    factors are concrete (`_closed` asks; `prepare_curve`'s are the pipeline's)."""
+    factors are concrete (`_closed` asks)."""
     if not _has_piecewise(cmd):
         return None
     r = np.asarray(r, dtype=float)
@@ -383,21 +383,6 @@ def _pseudo_curve(axis, terms: PaddedPseudo, shaper, r, rule):
         times, amplitudes = shaper
         W = W * jnp.sum(amplitudes * jnp.exp(s[..., None] * (times[-1] - times)), axis=-1)
     return jnp.abs(axis.gains)[:, None] / wd * jnp.abs(W)
-
-
-def prepare_curve(axis: ModalAxis, cmd: AbstractMotionCommand, factors) -> None:
-    """Start compiling the program of `closed_curve(axis, cmd, factors)` in the background (`jaxbelt._guard.prepare`),
-    for a command with a closed-form residual other than a pseudo-polynomial. `cmd` stands for commands of its
-    structure and shapes (its values are not read)."""
-    if isinstance(cmd, (PseudoPolynomial, ShapedCommand)) or not _has_closed_form(cmd):
-        return
-    r = padded_factors(np.atleast_1d(np.asarray(factors, dtype=float)))  # as `measured_curve` computes it
-    cmd = padded_command(cmd)
-    grid = _uniform_grid(axis, cmd, r)
-    if grid is not None:
-        prepare(_grid_curve, axis, cmd, *grid)
-        return
-    prepare(_closed_form_curve, axis, cmd, r, 0)
 
 
 # kept by the program store while the compilation cache is on; XLA's quicker options: its run time is small
