@@ -45,14 +45,13 @@ export; at most `MAX_RATE_HZ`) and `interpolation` (`"linear"`): how the user's 
 setpoints at `rate_hz`, linear between them (what `MovePlan.to_csv` writes). Every residual of the table, of
 `MovePlan.curves` and of the figure is that of the command *as executed so*: of the very setpoints `to_csv` writes at
 that rate (`jaxbelt.shaping.moves.drive_positions`), so an exact replay of the CSV finds the stated residual (to 1e-6,
-tests/test_shaping_space.py). It differs from the command's own, continuous residual: linear
-steps scale a mode's excitation by about $\\mathrm{sinc}^2(\\omega h/2) \\approx 1 - (\\omega h)^2/12$ (h = 1 /
-`rate_hz`; 1.2 % for a 60 Hz mode at 1 kHz), which a minimax design's cancellation can make a large part of its
-own. The minimax rows are chosen on the same residual (`jaxbelt.shaping.hull`); their certificates (below) concern
-the command itself, continuous. `x_min`, `x_max` [m, positions from the
-start] (optional): the axis' travel. A candidate whose positions, as executed, leave it is marked not ok; any
-candidate that leaves the segment between its start and its end by more than `EXCURSION_RTOL` (1 %) of the distance
-is noted so (a long move's design may back off behind its start).
+tests/test_shaping_space.py). It differs from the command's own, continuous residual: linear steps scale a mode's
+excitation by about $\\mathrm{sinc}^2(\\omega h/2) \\approx 1 - (\\omega h)^2/12$ (h = 1 / `rate_hz`; 1.2 % for a 60 Hz
+mode at 1 kHz), which a minimax design's cancellation can make a large part of its own. The minimax rows are chosen on
+the same residual (`jaxbelt.shaping.hull`); their certificates (below) concern the command itself, continuous. `x_min`,
+`x_max` [m, positions from the start] (optional): the axis' travel. A candidate whose positions, as executed, leave it
+is marked not ok; any candidate that leaves the segment between its start and its end by more than `EXCURSION_RTOL`
+(1 %) of the distance is noted so (a long move's design may back off behind its start).
 
 **The drive's resolution** (`resolution` [m], optional): a drive rounds every setpoint to its position step q (a
 motor step or an encoder count), and that rounding leaves a residual of its own, whatever the command:
@@ -163,12 +162,12 @@ _SAMPLE_UNITS = {"t": "s", "x": "m", "v": "m/s", "a": "m/s²"}
 @dataclasses.dataclass(frozen=True)
 class MovePlan:
     """The result of `design_move`: `table` (candidates ranked, best first), `best` (the recommended
-    `Candidate`; None when no candidate is feasible, converged and within the limits), the axis, the move's data, `reference_m` (per mode, the unshaped move's worst residual over the
-    band [m]) and the minimax design's details (`minimax`: a `MinimaxDesign` or None); `continuous_bound`: a rigorous
-    lower bound on the least worst residual any command within the plan's limits, distance and time can leave over
-    the band, as a fraction of the references (the minimax rows' worst % are at least 100x this; NaN without a
-    converged minimax design with steps, `smooth=False` or the row `smooth="auto"` adds, without a jerk limit;
-    `jaxbelt.shaping.certify`).
+    `Candidate`; None when no candidate is feasible, converged and within the limits), the axis, the move's data,
+    `reference_m` (per mode, the unshaped move's worst residual over the band [m]) and the minimax design's details
+    (`minimax`: a `MinimaxDesign` or None); `continuous_bound`: a rigorous lower bound on the least worst residual any
+    command within the plan's limits, distance and time can leave over the band, as a fraction of the references (the
+    minimax rows' worst % are at least 100x this; NaN without a converged minimax design with steps, `smooth=False` or
+    the row `smooth="auto"` adds, without a jerk limit; `jaxbelt.shaping.certify`).
 
     `damping`: the damping range `(lo, hi)` every residual was judged over (`design_move(..., damping=...)`), or
     None (the axis' own damping ratios). With a range, `axis` is the user's axis, `reference_m` per mode the largest
@@ -228,14 +227,14 @@ class MovePlan:
         return "\n".join(lines)
 
     def to_csv(self, path, rate_hz: float, candidate: str | None = None) -> tuple[float, float, float]:
-        """Write the recommended command (or the candidate named `candidate`) sampled at `rate_hz` [Hz] as CSV
-        columns `t,x,v,a` (s, m, m/s, m/s²) with that header line. The position column `x` is the command: a drive
-        that executes it as position setpoints, linear between them, at the plan's rate (`design_move(...,
-        rate_hz=)`, `plan.rate_hz`, 1 kHz by default) leaves the residual the table states for that row (an exact,
-        independent replay of the file finds it to 1e-6, tests/test_shaping_space.py); at another rate, another. The `v` and `a` columns are the command's own velocity
-        and acceleration at the samples, for feed-forward only: a drive that interpolates the `a` column instead of
-        following `x` runs another command (for a design whose acceleration jumps, one that can leave many times the
-        stated residual). The samples respect the plan's limits (see `samples`).
+        """Write the recommended command (or the candidate named `candidate`) sampled at `rate_hz` [Hz] as CSV columns
+        `t,x,v,a` (s, m, m/s, m/s²) with that header line. The position column `x` is the command: a drive that executes
+        it as position setpoints, linear between them, at the plan's rate (`design_move(..., rate_hz=)`, `plan.rate_hz`,
+        1 kHz by default) leaves the residual the table states for that row (an exact, independent replay of the file
+        finds it to 1e-6, tests/test_shaping_space.py); at another rate, another. The `v` and `a` columns are the
+        command's own velocity and acceleration at the samples, for feed-forward only: a drive that interpolates the `a`
+        column instead of following `x` runs another command (for a design whose acceleration jumps, one that can leave
+        many times the stated residual). The samples respect the plan's limits (see `samples`).
 
         `path`: a `.csv` file in an existing, writable folder; `rate_hz` must exceed twice the highest frequency
         of the band (the samples must carry the modes). Both are checked before anything is computed. The file
