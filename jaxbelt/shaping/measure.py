@@ -77,7 +77,7 @@ class Candidate:
 def _measure(req: MoveRequest, cmd, size: int = 0, pk=None) -> tuple[Any, dict[str, Any], bool, Any, tuple]:
     """The table's numbers for one command on `req.axis` (`req.per` damping copies of each user mode), a
     `PiecewiseMove` padded to `size` terms first: `(command, numbers, within the limits, worst ratio over the band per
-    mode of `req.axis`)`. Every residual is that of the command *as executed*: the position setpoints `to_csv` writes
+    mode of `req.axis`, the travel of its setpoints: `(notes, inside)`, `moves.travel_notes`)`. Every residual is that of the command *as executed*: the position setpoints `to_csv` writes
     at `req.rate_hz`, linear between them (`moves.drive_positions`, `hull.sampled_ratios`). `pk`: the command's `(peak
     |v|, peak |a|, peak |jerk|)` where its builder measured them (a pseudo-polynomial's design: on 20001 instants on
     the host), else measured here (`moves.peaks`)."""
@@ -132,7 +132,8 @@ def _pad_size(n_modes: int, jerk: bool, terms: int) -> int:
 def _row(req: MoveRequest, name, cmd, T, note="", ok=True, left_out=(), pk=None):
     """One candidate measured on `req.axis` (with `req.per` damping copies of each of the user's modes; `pk`: its
     peaks where its builder measured them, `_measure`); its note then names the modes `left_out` (`(index, why)`
-    pairs: those a minimax design's LP left out) with their residual, computed exactly for this command."""
+    pairs: those a minimax design's LP left out) with their residual as executed, and where its setpoints leave the
+    segment from start to end or the travel (not ok then), and where it lies below the drive's resolution."""
     axis, per, limits = req.axis, req.per, req.limits
     n_user = axis.n_modes // per
     size = _pad_size(n_user, limits[2] is not None, cmd.times.shape[0]) if isinstance(cmd, PiecewiseMove) else 0
