@@ -862,14 +862,15 @@ def _constrained_correction(A, r, E, e, a0, basis: "_SampledBasis", hs: float, l
 _BLOCK = 2048
 
 
-def _phi2_np(x):
-    """`phi2` in numpy: $\\varphi_2(x) = (e^x - 1 - x)/x^2$ for complex `x` (Taylor series for |x| < 1)."""
+def _phi_np(x, order: int):
+    """`phi1` (`order` 1) or `phi2` (`order` 2) in numpy (no eager JAX operation to compile): $\\varphi_1(x) = (e^x -
+    1)/x$, $\\varphi_2(x) = (e^x - 1 - x)/x^2$ for complex `x`, the same Taylor series for |x| < 1."""
     x = np.asarray(x, dtype=complex)
     small = np.abs(x) < 1.0
     xs = np.where(small, x, 0.0)
-    series = sum(xs**k / math.factorial(k + 2) for k in range(_SERIES))
+    series = sum(xs**k / math.factorial(k + order) for k in range(_SERIES))
     xb = np.where(small, 1.0, x)
-    return np.where(small, series, (np.expm1(xb) - xb) / xb**2)
+    return np.where(small, series, (np.expm1(xb) - (xb if order == 2 else 0.0)) / xb**order)
 
 
 def _weight_blocks(s, t):
@@ -880,12 +881,12 @@ def _weight_blocks(s, t):
     On $[t_k, t_{k+1}]$ (spacing h, $x = sh$) the acceleration contributes
     $h e^{s(t_e - t_k)}(a_k (I_0 - I_1) + a_{k+1} I_1)$ with $I_0 = (1 - e^{-x})/x$,
     $I_1 = (1 - e^{-x}(1 + x))/x^2 = e^{-x}\\varphi_2(x)$ and $I_0 - I_1 = \\varphi_2(-x)$ (no cancellation at
-    small x: `_phi2_np`)."""
+    small x: `_phi_np`)."""
     s = np.asarray(s, dtype=complex).ravel()
     n = t.size - 1
     h = float(t[1] - t[0])
     x = s * h
-    first, last = h * _phi2_np(-x), h * np.exp(-x) * _phi2_np(x)  # weight of an interval's first and last sample
+    first, last = h * _phi_np(-x, 2), h * np.exp(-x) * _phi_np(x, 2)  # weight of an interval's first and last sample
     steps = np.exp(s[:, None] * (h * np.arange(min(_BLOCK, n + 1) + 1)))  # e^{s m h}: one block of exponentials
     for k0 in range(0, n + 1, _BLOCK):
         k1 = min(k0 + _BLOCK, n + 1)
@@ -978,26 +979,16 @@ class _SampledBasis:
         return out
 
 
-@blas_limited
-def _phi1_np(x):
-    """`phi1` in numpy (no eager JAX operation to compile): $(e^x - 1)/x$, the same Taylor series for |x| < 1."""
-    x = np.asarray(x, dtype=complex)
-    small = np.abs(x) < 1.0
-    xs = np.where(small, x, 0.0)
-    series = sum(xs**k / math.factorial(k + 1) for k in range(_SERIES))
-    xb = np.where(small, 1.0, x)
-    return np.where(small, series, np.expm1(xb) / xb)
-
-
 def _spline_residual_np(cmd: "SplineMove", s) -> np.ndarray:
     """`SplineMove.residual_integral` in numpy [m/s] (the same closed form), for complex `s` of any shape."""
     s = np.asarray(s, dtype=complex)
     h, T = float(cmd.spacing), float(cmd.duration)
     tj = np.arange(cmd.n_intervals - 3) * h
-    kern = h * np.exp(s[..., None] * (T - tj - 4.0 * h)) * _phi1_np(s * h)[..., None] ** 4
+    kern = h * np.exp(s[..., None] * (T - tj - 4.0 * h)) * _phi_np(s * h, 1)[..., None] ** 4
     return kern @ np.asarray(cmd.coefficients, dtype=float)
 
 
+@blas_limited
 def executable_samples(
     cmd: SplineMove, rate_hz: float, axis, reference, uncertainty: float, n_freq: int = 61, limits=None
 ):
