@@ -100,3 +100,26 @@ def test_resolution_is_checked(bad):
     axis = jb.ModalAxis([40.0], [0.05])
     with pytest.raises(ValueError, match=r"`resolution`.*\(0, 0\.1\]"):
         jb.design_move(axis, 0.1, 0.5, v_max=0.3, a_max=3.0, resolution=bad)
+
+
+def test_cli_passes_the_resolution_and_the_rate(printer, tmp_path, capsys):
+    """`jaxbelt shaping --resolution STEP --rate R`: the printed table marks the rows below the floor, the
+    recommendation is the library's at that resolution and rate, and the CSV holds that plan's setpoints."""
+    import csv
+
+    from jaxbelt.cli import main
+
+    axis, _, T, lim, include = printer
+    out = tmp_path / "move.csv"
+    argv = ["--no-cache", "shaping", "--mode", "48:0.08", "--mode", "62:0.1", "--distance", "0.05"]
+    argv += ["--move-time", repr(T), "--v-max", repr(lim["v_max"]), "--a-max", repr(lim["a_max"])]
+    argv += ["--resolution", "1e-4", "--rate", "2000", "--no-progress", "--out", str(out)]
+    assert main(argv) == 0
+    printed = capsys.readouterr().out
+    plan = jb.design_move(axis, 0.05, T, resolution=1e-4, rate_hz=2000.0, **lim)
+    assert plan.best is not None and f"recommended: {plan.best.name}," in printed
+    assert printed.count("at the drive's resolution") == sum(c.at_resolution for c in plan.table) > 0
+    with open(out) as fh:
+        rows = list(csv.reader(fh))[1:]
+    x = np.array([float(r[1]) for r in rows])
+    np.testing.assert_allclose(x, plan.samples(2000.0)[1], rtol=0, atol=1e-15)
