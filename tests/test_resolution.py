@@ -95,11 +95,12 @@ def test_rows_below_the_floor_rank_by_their_peaks(printer):
     assert worsts == sorted(worsts) and free.best.worst_percent == min(worsts)
 
 
-@pytest.mark.parametrize("bad", [0.0, -1e-5, float("nan"), float("inf"), 0.2, "1e-5", True, [1e-5]])
+@pytest.mark.parametrize("bad", [0.0, -1e-5, float("nan"), float("inf"), 2.5, "1e-5", True, np.True_, [1e-5]])
 def test_resolution_is_checked(bad):
+    """Refused by name with its range; a bool (1.0 would lie in range here: the distance is 2 m) as well."""
     axis = jb.ModalAxis([40.0], [0.05])
-    with pytest.raises(ValueError, match=r"`resolution`.*\(0, 0\.1\]"):
-        jb.design_move(axis, 0.1, 0.5, v_max=0.3, a_max=3.0, resolution=bad)
+    with pytest.raises(ValueError, match=r"`resolution`.*\(0, 2\]"):
+        jb.design_move(axis, 2.0, 10.0, v_max=0.3, a_max=3.0, resolution=bad)
 
 
 def test_cli_passes_the_resolution_and_the_rate(printer, tmp_path, capsys):
@@ -118,6 +119,12 @@ def test_cli_passes_the_resolution_and_the_rate(printer, tmp_path, capsys):
     printed = capsys.readouterr().out
     plan = jb.design_move(axis, 0.05, T, resolution=1e-4, rate_hz=2000.0, **lim)
     assert plan.best is not None and f"recommended: {plan.best.name}," in printed
+    # the table is the one at 2 kHz: its unshaped row's worst differs from the 1 kHz plan's in the fourth digit
+    at_1k = jb.design_move(axis, 0.05, T, resolution=1e-4, **lim).candidate("unshaped").worst_percent
+    at_2k = plan.candidate("unshaped").worst_percent
+    assert f"{at_2k:9.4f}" != f"{at_1k:9.4f}"
+    line = next(ln for ln in printed.splitlines() if ln[1:].startswith("unshaped"))
+    assert f"{at_2k:9.4f}" in line
     assert printed.count("at the drive's resolution") == sum(c.at_resolution for c in plan.table) > 0
     with open(out) as fh:
         rows = list(csv.reader(fh))[1:]

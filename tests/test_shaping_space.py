@@ -183,3 +183,24 @@ def test_pseudo_positions_on_the_host_match_eq_17():
     for g in ([3.5, 4.25, 5.75], [4.2, 5.1, 6.3, 7.0], [6.1, 7.3, 8.2, 9.6, 10.4, 11.9]):
         cmd = PseudoPolynomial(gammas=np.array(g), displacement=-d, duration=T)
         np.testing.assert_allclose(positions(cmd, t), np.asarray(cmd.derivative(t, 0)), rtol=0, atol=1e-10 * d)
+
+
+def test_every_row_states_what_its_export_leaves_stretched_rows_too():
+    """At ZV's own time and peaks on a 48 + 62 Hz axis the pseudo-polynomials exceed the limits: `samples` stretches
+    them in time to keep the limits, and their rows are measured on those very samples (noted); every row's worst
+    residual is its exported setpoints' exact replay, to 1e-6."""
+    axis = jb.ModalAxis([48.0, 62.0], [0.08, 0.1])
+    zv = jb.design_move(axis, 0.05, None, v_max=0.3, a_max=5.0, include=("ZV",)).candidate("ZV")
+    plan = jb.design_move(axis, 0.05, zv.move_time * (1 + 1e-9), v_max=zv.peak_v, a_max=zv.peak_a)
+    band = np.linspace(0.8, 1.2, 401)
+    stretched = 0
+    for c in plan.table:
+        if c.command is None:
+            continue
+        t, x, _, _ = plan.samples(RATE, c.name)
+        res = executed_residual_reference(axis.frequencies, axis.damping_ratios, axis.gains, t, x, band)
+        assert c.worst_percent == pytest.approx(100 * float((res / plan.reference_m[:, None]).max()), rel=1e-6)
+        if t[-1] > c.move_time + 1.5 / RATE:
+            stretched += 1
+            assert not c.ok and "stretched in time" in c.note
+    assert stretched >= 1

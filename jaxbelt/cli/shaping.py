@@ -468,9 +468,9 @@ def _axis_run(args) -> int:
             if isinstance(best.command, PiecewiseMove):
                 print(
                     f"note: the recommended command's {'jerk' if args.j_max is not None else 'acceleration'} jumps; "
-                    "a drive that interpolates linearly between samples smooths each jump over one sample, so its "
-                    "residual can differ from the table's: give a high --rate (10000 Hz and more) or --smooth true "
-                    "(its samples are corrected for that drive)"
+                    f"the table states its residual as a drive that follows the x column linearly at {args.rate:g} Hz "
+                    "executes it; a drive that interpolates the a column instead runs another command (v and a are "
+                    "for feed-forward)"
                 )
             if not figures:
                 figures.append(o.with_suffix(".png"))

@@ -151,7 +151,7 @@ def executed_ratios(axis: ModalAxis, cmd, reference, factors, rate_hz: float, co
     for c, a, r, f, k, out in _RECENT:  # the same command judged again (`jumps_reason`, then `best_blend`)
         if c is cmd and a is axis and k == key and np.array_equal(r, ref) and np.array_equal(f, fac):
             return out.copy()
-    t, x = drive_positions(cmd, rate_hz, axis, ref, correction)
+    t, x = drive_positions(cmd, rate_hz, axis, ref, correction, stretch=False)  # a blend's member: as blended
     out = sampled_ratios(axis, t, x, ref, fac)
     _RECENT.append((cmd, axis, ref.copy(), fac.copy(), key, out.copy()))
     return out

@@ -17,7 +17,7 @@ from .bands import _WIDE as _WIDE
 from .bands import JUMPS, measure_grids, mode_label
 from .hull import best_blend, blend_moves, resolution_floor, sampled_ratios
 from .moves import EXCURSION_RTOL as EXCURSION_RTOL
-from .moves import PiecewiseMove, drive_positions, padded, peaks, travel_notes
+from .moves import PiecewiseMove, drive_positions, padded, peaks, sample_times, travel_notes
 from .request import MoveRequest
 from .residual import tolerance_band
 
@@ -88,6 +88,8 @@ def _measure(req: MoveRequest, cmd, size: int = 0, pk=None) -> tuple[Any, dict[s
     band, wide = measure_grids(u)
     t, x = drive_positions(cmd, req.rate_hz, axis, ref, (u, limits))
     travel = travel_notes(x, req.distance, req.x_range)
+    if t.size > sample_times(float(cmd.end_time), req.rate_hz).size:  # stretched to keep the limits
+        travel[0].append(f"measured as exported: its samples stretched in time to {t[-1]:.6g} s to keep the limits")
     r = np.abs(sampled_ratios(axis, t, x, ref, np.concatenate([band, wide])))
     ratio, wr = r[:, : band.size], r[:, band.size :]
     res = ratio * ref[:, None]  # (modes, K) [m]
@@ -146,8 +148,12 @@ def _row(req: MoveRequest, name, cmd, T, note="", ok=True, left_out=(), pk=None)
     if not within:
         ok = False
         note = (note + "; " if note else "") + "exceeds the limits"
-    floor = None if req.resolution is None else resolution_floor(axis, req.resolution, req.rate_hz, T)
-    at_floor = floor is not None and bool(np.all(mode_worst * req.ref <= floor))
+    floor = (
+        None
+        if req.resolution is None or not (ok and inside)
+        else resolution_floor(axis, req.resolution, req.rate_hz, T)
+    )
+    at_floor = floor is not None and bool(np.all(mode_worst * req.ref <= floor))  # a usable row only
     if at_floor:
         note = (note + "; " if note else "") + (
             f"at the drive's resolution: every mode's residual lies below what rounding the setpoints to "
@@ -167,7 +173,7 @@ def _row(req: MoveRequest, name, cmd, T, note="", ok=True, left_out=(), pk=None)
 def design_row(name: str, mm, T: float, note: str, ok: bool, far, req: MoveRequest) -> Candidate:
     """The table row of a minimax design `mm` (`note`, `ok`: its certificate, `certificate.certificate`; None: no
     design at move time `T` [s], `note` says why), measured as every candidate is (`_row`), its note then naming the
-    modes its LP left out (`far`, a `far_modes._FarModes`) with their residual, computed exactly for this command."""
+    modes its LP left out (`far`, a `far_modes._FarModes`) with their residual, as executed, for this command."""
     cmd, T = (None, T) if mm is None else (mm.command, float(mm.command.duration))
     return _row(req, name, cmd, T, note, ok, far.left_out)
 

@@ -44,6 +44,7 @@ def minimax_rows(req: MoveRequest, solved, T: float):
     # every classic shaped move and the unshaped move at the design's time, whatever `include` shows
     space = shaped_members(req.nominal, req.distance, T, req.v_max, req.a_max, req.j_max)
     rows = [design_row("minimax", mm, T, note, ok, setup.far, req)]
+    smooth = mm
     primary = rows[0]
     correction = (req.uncertainty, req.limits)
     why = jumps_reason(primary, space, req.axis, req.ref, req.band, req.rate_hz, correction) if req.move_time else ""
@@ -59,8 +60,9 @@ def minimax_rows(req: MoveRequest, solved, T: float):
             bound = jbound
             if not primary.ok or jrow.worst_percent < primary.worst_percent:
                 mm = jmm  # `plan.minimax`: the design of the better minimax row
-    if primary.ok and req.smooth:  # the smooth row's place against any command
-        rows[0] = dataclasses.replace(primary, note=primary.note + smooth_certificate(primary.worst_percent, bound))
+    if primary.ok and req.smooth:  # the smooth command's place against any command: both continuous
+        worst = 100.0 * float(smooth.fine_worst) if smooth is not None else primary.worst_percent
+        rows[0] = dataclasses.replace(primary, note=primary.note + smooth_certificate(worst, bound))
     if space and req.smooth_arg is not True:  # the command space that holds every candidate
         rows = blended_rows(req, rows, space)
     return rows, mm, bound

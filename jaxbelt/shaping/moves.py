@@ -1434,35 +1434,78 @@ def _has_spline(cmd) -> bool:
     return isinstance(cmd, SplineMove) or (isinstance(cmd, BlendMove) and any(map(_has_spline, cmd.members)))
 
 
-def drive_samples(cmd, rate_hz: float, axis, reference, correction):
-    """`(t, x, v, a)` [s, m, m/s, m/s²] at `rate_hz` [Hz] of a command that holds a smooth minimax design (a
-    `SplineMove`, or a blend with one): the design's samples corrected (`moves.executable_samples`, on `axis` with
-    its `reference` [m], `correction` = (the band's `uncertainty`, the `limits` (v_max, a_max, j_max or None))),
-    the other members' exact ones, blended with the blend's weights (a convex combination: within the same limits).
-    What `MovePlan.samples` writes for such a command; `drive_positions` its positions."""
+def _host_derivatives(cmd, t) -> tuple:
+    """`(x, v, a)` of `cmd` at the times `t` [s] on the host where a closed form is (a `PiecewiseMove`, a
+    pseudo-polynomial, a blend of them; Incerti, eq. 17 and its derivatives), else by `derivatives_at`."""
+    t = np.asarray(t, dtype=float)
+    if isinstance(cmd, PiecewiseMove):
+        return tuple(piecewise_derivatives(cmd, t, (0, 1, 2)))
+    if isinstance(cmd, BlendMove):
+        parts = [_host_derivatives(m, t) for m in cmd.members]
+        w = np.asarray(cmd.weights, dtype=float)
+        return tuple(w @ np.stack([p[k] for p in parts]) for k in range(3))
+    if isinstance(cmd, PseudoPolynomial):
+        g, T, phi = np.asarray(cmd.gammas, dtype=float), float(cmd.duration), float(cmd.displacement)
+        c = lagrange_weights_np(g)
+        u = np.clip(1.0 - t / T, 0.0, 1.0)[..., None]
+        inside = (t >= 0) & (t <= T)
+        x = np.where(t < 0, 0.0, phi * (1.0 - (u**g) @ c))
+        v = np.where(inside, phi / T * (u ** (g - 1.0)) @ (c * g), 0.0)
+        a = np.where(inside, -phi / T**2 * (u ** (g - 2.0)) @ (c * g * (g - 1.0)), 0.0)
+        return x, v, a
+    return tuple(derivatives_at(cmd, t, (0, 1, 2)))
+
+
+def _stretched_samples(cmd, rate_hz: float, limits) -> tuple:
+    """`(t, x, v, a)` of a command without a smooth design, on the host (`_host_derivatives`), within `limits` at
+    every sample to a relative `LIMIT_RTOL`: stretched in time by the least factor that brings its sampled peaks
+    within them where they exceed them (as `limited_samples`)."""
+    T = float(cmd.end_time)
+    t = sample_times(T, rate_hz)
+    x, v, a = _host_derivatives(cmd, t)
+    v_max, a_max, j_max = limits
+    stretch = 1.0
+    for _ in range(8):
+        pv, pa, pj = sampled_peaks(t, v, a)
+        ratio = max(pv / v_max, math.sqrt(pa / a_max), (pj / j_max) ** (1 / 3) if j_max is not None else 0.0)
+        if ratio <= 1.0 + LIMIT_RTOL / 10:
+            break
+        stretch *= ratio * (1 + 1e-12)
+        t = sample_times(T * stretch, rate_hz)
+        x, v, a = (q / stretch**k for k, q in enumerate(_host_derivatives(cmd, np.minimum(t / stretch, T))))
+    return t, x, v, a
+
+
+def drive_samples(cmd, rate_hz: float, axis, reference, correction, stretch: bool = True):
+    """`(t, x, v, a)` [s, m, m/s, m/s²] at `rate_hz` [Hz]: what `MovePlan.samples` writes, and what the table
+    measures (`drive_positions`). `correction` = (the band's `uncertainty`, the `limits` (v_max, a_max, j_max or
+    None)). A smooth minimax design (a `SplineMove`) gives its corrected samples (`moves.executable_samples`, on
+    `axis` with its `reference` [m]); a blend holding one, the blend of its members' samples (the others' exact;
+    a convex combination of samples within the limits); any other command its exact samples on the host, stretched
+    in time where a rounding exceeds a limit (`_stretched_samples`; not with `stretch=False`: a blend's members)."""
+    u, limits = correction
     if isinstance(cmd, SplineMove):
-        u, limits = correction
         return tuple(
             np.asarray(q, dtype=float) for q in executable_samples(cmd, rate_hz, axis, reference, u, limits=limits)
         )
+    if not _has_spline(cmd):
+        if stretch:
+            return _stretched_samples(cmd, rate_hz, limits)
+        t = sample_times(float(cmd.end_time), rate_hz)
+        return (t, *_host_derivatives(cmd, t))
     t = sample_times(float(cmd.end_time), rate_hz)
-    if isinstance(cmd, PiecewiseMove):  # on the host, as `positions`
-        return (t, *piecewise_derivatives(cmd, t, (0, 1, 2)))
-    if not isinstance(cmd, BlendMove):
-        return (t, *derivatives_at(cmd, t, (0, 1, 2)))
-    parts = [drive_samples(m, rate_hz, axis, reference, correction)[1:] for m in cmd.members]
+    parts = [drive_samples(m, rate_hz, axis, reference, correction, stretch=False)[1:] for m in cmd.members]
     w = np.asarray(cmd.weights, dtype=float)
     x, v, a = (w @ np.stack([p[k] for p in parts]) for k in range(3))
     return t, x, v, a
 
 
-def drive_positions(cmd, rate_hz: float, axis, reference, correction=None):
+def drive_positions(cmd, rate_hz: float, axis, reference, correction=None, stretch: bool = True):
     """`(t, x)`: the position setpoints [s, m] of `cmd` at `rate_hz` [Hz] that `MovePlan.to_csv` writes, so that a
-    drive executing them (linear between them) runs what the table measured. With `correction` = (the band's
-    uncertainty, the limits), a smooth minimax design's samples are corrected, in a blend too (`drive_samples`); any
-    other command's are its exact positions (`positions`), as without a `correction`."""
-    if correction is not None and _has_spline(cmd):
-        t, x, _, _ = drive_samples(cmd, rate_hz, axis, reference, correction)
+    drive executing them (linear between them) runs what the table measured (`drive_samples`, with `correction`
+    and `stretch`). Without a `correction`: the exact positions (`positions`)."""
+    if correction is not None:
+        t, x, _, _ = drive_samples(cmd, rate_hz, axis, reference, correction, stretch)
         return t, x
     t = sample_times(float(cmd.end_time), rate_hz)
     return t, positions(cmd, t)

@@ -144,7 +144,7 @@ from .minimax_rows import JUMPS as JUMPS  # noqa: E402
 from .minimax_rows import _smooth_certificate as _smooth_certificate  # noqa: E402
 from .minimax_rows import minimax_rows
 from .minimax_solve import solving
-from .moves import _has_spline, drive_positions, drive_samples, limited_samples, sampled_peaks
+from .moves import drive_positions, drive_samples, sampled_peaks
 from .rank import rank
 from .request import MAX_RATE_HZ as MAX_RATE_HZ  # noqa: E402
 from .request import N_DAMPING as N_DAMPING  # noqa: E402
@@ -166,7 +166,7 @@ class MovePlan:
     `reference_m` (per mode, the unshaped move's worst residual over the band [m]) and the minimax design's details
     (`minimax`: a `MinimaxDesign` or None); `continuous_bound`: a rigorous lower bound on the least worst residual any
     command within the plan's limits, distance and time can leave over the band, as a fraction of the references (the
-    minimax rows' worst % are at least 100x this; NaN without a converged minimax design with steps, `smooth=False` or
+    minimax designs' own, continuous worst % are at least 100x this, the table's as executed may lie a little below; NaN without a converged minimax design with steps, `smooth=False` or
     the row `smooth="auto"` adds, without a jerk limit; `jaxbelt.shaping.certify`).
 
     `damping`: the damping range `(lo, hi)` every residual was judged over (`design_move(..., damping=...)`), or
@@ -263,25 +263,23 @@ class MovePlan:
 
     def samples(self, rate_hz: float, candidate: str | None = None):
         """`(t, x, v, a)` of the recommended command (or `candidate`) sampled at `rate_hz` [Hz], as `to_csv` writes
-        them: for the smooth minimax design, alone or in a blend of the command space, corrected so that a drive
-        that executes the acceleration linearly between samples leaves its continuous residual
-        (`jaxbelt.shaping.moves.executable_samples`, `jaxbelt.shaping.moves.drive_samples`); for the others, the
-        exact samples. The table states the residual of these positions executed linearly between samples.
+        them, and as the table measured them (`jaxbelt.shaping.moves.drive_samples`): the smooth minimax design's
+        corrected so that a drive that executes the acceleration linearly between samples leaves its continuous
+        residual (`jaxbelt.shaping.moves.executable_samples`; in a blend of the command space, that member's), the
+        others' exact. The table states the residual of these positions executed linearly between samples.
 
         Every sample respects the plan's limits to a relative 1e-9: |v| <= v_max [m/s], |a| <= a_max [m/s²] and,
         with j_max, |a_k+1 - a_k| rate_hz <= j_max [m/s³]. The design's correction includes them as constraints
         (the least change of the acceleration that restores the residual and keeps them; a scaled-down copy
         would change the distance); another command that exceeds them by a rounding is stretched in time by the
-        least factor that brings it within them (same distance, same rate; `jaxbelt.shaping.moves.limited_samples`)."""
+        least factor that brings it within them (same distance, same rate; `jaxbelt.shaping.moves._stretched_samples`)."""
         c = self._chosen(candidate, "MovePlan.samples")
         check_sample_count(rate_hz, c.move_time, "MovePlan.samples")
         limits = (self.v_max, self.a_max, self.j_max)
         cmd = c.command
         assert cmd is not None  # `_chosen` refuses a candidate without a command
-        if _has_spline(cmd):  # the smooth design, alone or in a blend: its samples corrected (`moves.drive_samples`)
-            axis, ref, _ = self._measured()  # the residual the table states: over the band (and damping range)
-            return drive_samples(cmd, rate_hz, axis, ref, (self.uncertainty, limits))
-        return limited_samples(cmd, rate_hz, limits)
+        axis, ref, _ = self._measured()  # the residual the table states: over the band (and damping range)
+        return drive_samples(cmd, rate_hz, axis, ref, (self.uncertainty, limits))  # what the table measured
 
     def _chosen(self, name: str | None, owner: str) -> Candidate:
         if name is not None:

@@ -27,14 +27,14 @@ def _not_beaten(ranked: list) -> list:
 
 
 def _key(r):
-    """Usable rows first; among them those at the drive's resolution (`Candidate.at_resolution`) by their peaks
-    (|a|, then |jerk|, then |v|; their residuals cannot be told from the drive's rounding), then the others by their
-    worst residual."""
+    """Usable rows first; among them those at the drive's resolution (`Candidate.at_resolution`) by their move time
+    (with `move_time` None the rows' times differ), then their peaks (|a|, then |jerk|, then |v|; their residuals
+    cannot be told from the drive's rounding), then the others by their worst residual."""
     worst = r.worst_percent if math.isfinite(r.worst_percent) else math.inf
     if r.ok and r.at_resolution:
         jerk = math.inf if math.isnan(r.peak_j) else r.peak_j  # a jump: infinite
-        return (False, 0, r.peak_a, jerk, r.peak_v, worst)
-    return (not r.ok, 1, worst, 0.0, 0.0, 0.0)
+        return (False, 0, r.move_time, r.peak_a, jerk, r.peak_v, worst)
+    return (not r.ok, 1, worst, 0.0, 0.0, 0.0, 0.0)
 
 
 def rank(rows: list):

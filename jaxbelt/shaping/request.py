@@ -118,7 +118,7 @@ def _check_resolution(resolution, distance: float) -> float | None:
         f"design_move: parameter `resolution` (the drive's position step [m]) must be None or a finite number in "
         f"(0, {abs(distance):g}] (at most the distance); got {resolution!r}"
     )
-    if isinstance(resolution, bool | str | bytes) or np.ndim(resolution) != 0:
+    if isinstance(resolution, bool | np.bool_ | str | bytes) or np.ndim(resolution) != 0:
         raise ValueError(msg)
     try:
         q = float(resolution)
