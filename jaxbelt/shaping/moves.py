@@ -1366,17 +1366,23 @@ def _sample(cmd: AbstractMotionCommand, rate_hz: float):
     return t, x, v, a
 
 
-def limited_samples(cmd: AbstractMotionCommand, rate_hz: float, limits, max_rounds: int = 8):
-    """`(t, x, v, a)` of `cmd` sampled at `rate_hz` [Hz] (`cmd.sample`), within `limits` = `(v_max [m/s],
-    a_max [m/s²], j_max [m/s³] or None)` at every sample to a relative `LIMIT_RTOL` (the jerk: the slope of the
-    acceleration between samples).
+def limited_samples(cmd: AbstractMotionCommand, rate_hz: float, limits, max_rounds: int = 8, derivatives=None):
+    """`(t, x, v, a)` of `cmd` sampled at `rate_hz` [Hz], within `limits` = `(v_max [m/s], a_max [m/s²], j_max
+    [m/s³] or None)` at every sample to a relative `LIMIT_RTOL` (the jerk: the slope of the acceleration between
+    samples). `derivatives(cmd, t)`: `(x, v, a)` at the times `t` [s] (default: `cmd.sample`, then
+    `derivatives_at`; `drive_samples` passes `_host_derivatives`).
 
     The exact samples of a command within its limits already are; a command that exceeds them by a rounding
     (its limits are checked to 1e-6 on a fine grid) is stretched in time by the least factor s >= 1 that brings
     its peaks within them: $x_s(t) = x(t/s)$, so $v$ scales by 1/s, $a$ by $1/s^2$, the jerk by $1/s^3$, the
     distance and the rest at both ends are kept exactly and the samples stay `1 / rate_hz` apart; the move
     lasts s times longer (s - 1 of the order of the excess, ~1e-7)."""
-    t, x, v, a = cmd.sample(rate_hz)
+    if derivatives is None:
+        t, x, v, a = cmd.sample(rate_hz)
+        derivatives = lambda c, tau: derivatives_at(c, tau, (0, 1, 2))  # noqa: E731
+    else:
+        t = sample_times(float(cmd.end_time), rate_hz)
+        x, v, a = derivatives(cmd, t)
     v_max, a_max, j_max = limits
     stretch = 1.0
     for _ in range(max_rounds):
@@ -1385,11 +1391,9 @@ def limited_samples(cmd: AbstractMotionCommand, rate_hz: float, limits, max_roun
         if ratio <= 1.0 + LIMIT_RTOL / 10:
             return t, x, v, a
         stretch *= ratio * (1 + 1e-12)
-        T = float(cmd.end_time) * stretch
-        n = int(math.ceil(T * float(rate_hz) - 1e-9))
-        t = np.arange(n + 1) / float(rate_hz)
+        t = sample_times(float(cmd.end_time) * stretch, rate_hz)
         tau = np.minimum(t / stretch, float(cmd.end_time))
-        x, v, a = (q / stretch**k for k, q in enumerate(derivatives_at(cmd, tau, (0, 1, 2))))
+        x, v, a = (q / stretch**k for k, q in enumerate(derivatives(cmd, tau)))
     return t, x, v, a
 
 
@@ -1403,77 +1407,38 @@ def sample_times(duration: float, rate_hz: float) -> np.ndarray:
 
 def positions(cmd, t) -> np.ndarray:
     """The exact positions [m] of `cmd` at the times `t` [s] (numpy; a `PiecewiseMove` and a pseudo-polynomial in
-    closed form)."""
-    t = np.asarray(t, dtype=float)
-    if isinstance(cmd, PiecewiseMove):
-        return _piecewise_positions(cmd, t)
-    if isinstance(cmd, BlendMove):
-        return np.sum([float(w) * positions(m, t) for w, m in zip(np.asarray(cmd.weights), cmd.members)], axis=0)
-    if isinstance(cmd, PseudoPolynomial):
-        return _pseudo_positions(cmd, t)
-    return derivatives_at(cmd, t, (0,))[0]
-
-
-def _pseudo_positions(cmd: PseudoPolynomial, t: np.ndarray) -> np.ndarray:
-    """$\\varphi_m(t) = \\Phi[1 - \\sum_i C_i (1 - t/T)^{\\gamma_i}]$ [m] (Incerti, eq. 17) on the host, 0 before
-    t = 0 and $\\Phi$ after T, the coefficients as Lagrange weights (`commands.lagrange_weights_np`): no program to
-    compile (a pseudo-polynomial row is otherwise the only command whose positions `design_move` evaluates in one)."""
-    g = np.asarray(cmd.gammas, dtype=float)
-    u = np.clip(1.0 - t / float(cmd.duration), 0.0, 1.0)
-    x = float(cmd.displacement) * (1.0 - (u[..., None] ** g) @ lagrange_weights_np(g))
-    return np.where(t < 0, 0.0, x)
-
-
-def _piecewise_positions(move: PiecewiseMove, t) -> np.ndarray:
-    """$x(t) = \\sum_k \\alpha_k (t - t_k)_+^2/2 + \\beta_k (t - t_k)_+^3/6$ [m] of a `PiecewiseMove` at the times `t`
-    (held at the end after its duration T), in O((n + K) log K) (`moves.piecewise_derivatives`)."""
-    return piecewise_derivatives(move, t, (0,))[0]
+    closed form: `_host_derivatives`)."""
+    return _host_derivatives(cmd, t, (0,))[0]
 
 
 def _has_spline(cmd) -> bool:
     return isinstance(cmd, SplineMove) or (isinstance(cmd, BlendMove) and any(map(_has_spline, cmd.members)))
 
 
-def _host_derivatives(cmd, t) -> tuple:
-    """`(x, v, a)` of `cmd` at the times `t` [s] on the host where a closed form is (a `PiecewiseMove`, a
-    pseudo-polynomial, a blend of them; Incerti, eq. 17 and its derivatives), else by `derivatives_at`."""
+def _host_derivatives(cmd, t, orders=(0, 1, 2)) -> tuple:
+    """The derivatives of `orders` (0: x [m], 1: v [m/s], 2: a [m/s²]) of `cmd` at the times `t` [s], on the host
+    where a closed form is: a `PiecewiseMove` (`piecewise_derivatives`), a pseudo-polynomial (Incerti, eq. 17 and its
+    derivatives, 0 before t = 0 and held after T, the coefficients as Lagrange weights: `commands.lagrange_weights_np`;
+    no program to compile), a blend of them; else by `derivatives_at`."""
     t = np.asarray(t, dtype=float)
     if isinstance(cmd, PiecewiseMove):
-        return tuple(piecewise_derivatives(cmd, t, (0, 1, 2)))
+        return tuple(piecewise_derivatives(cmd, t, orders))
     if isinstance(cmd, BlendMove):
-        parts = [_host_derivatives(m, t) for m in cmd.members]
+        parts = [_host_derivatives(m, t, orders) for m in cmd.members]
         w = np.asarray(cmd.weights, dtype=float)
-        return tuple(w @ np.stack([p[k] for p in parts]) for k in range(3))
+        return tuple(np.sum([float(wm) * p[k] for wm, p in zip(w, parts)], axis=0) for k in range(len(orders)))
     if isinstance(cmd, PseudoPolynomial):
         g, T, phi = np.asarray(cmd.gammas, dtype=float), float(cmd.duration), float(cmd.displacement)
         c = lagrange_weights_np(g)
         u = np.clip(1.0 - t / T, 0.0, 1.0)[..., None]
         inside = (t >= 0) & (t <= T)
-        x = np.where(t < 0, 0.0, phi * (1.0 - (u**g) @ c))
-        v = np.where(inside, phi / T * (u ** (g - 1.0)) @ (c * g), 0.0)
-        a = np.where(inside, -phi / T**2 * (u ** (g - 2.0)) @ (c * g * (g - 1.0)), 0.0)
-        return x, v, a
-    return tuple(derivatives_at(cmd, t, (0, 1, 2)))
-
-
-def _stretched_samples(cmd, rate_hz: float, limits) -> tuple:
-    """`(t, x, v, a)` of a command without a smooth design, on the host (`_host_derivatives`), within `limits` at
-    every sample to a relative `LIMIT_RTOL`: stretched in time by the least factor that brings its sampled peaks
-    within them where they exceed them (as `limited_samples`)."""
-    T = float(cmd.end_time)
-    t = sample_times(T, rate_hz)
-    x, v, a = _host_derivatives(cmd, t)
-    v_max, a_max, j_max = limits
-    stretch = 1.0
-    for _ in range(8):
-        pv, pa, pj = sampled_peaks(t, v, a)
-        ratio = max(pv / v_max, math.sqrt(pa / a_max), (pj / j_max) ** (1 / 3) if j_max is not None else 0.0)
-        if ratio <= 1.0 + LIMIT_RTOL / 10:
-            break
-        stretch *= ratio * (1 + 1e-12)
-        t = sample_times(T * stretch, rate_hz)
-        x, v, a = (q / stretch**k for k, q in enumerate(_host_derivatives(cmd, np.minimum(t / stretch, T))))
-    return t, x, v, a
+        out = {
+            0: lambda: np.where(t < 0, 0.0, phi * (1.0 - (u**g) @ c)),
+            1: lambda: np.where(inside, phi / T * (u ** (g - 1.0)) @ (c * g), 0.0),
+            2: lambda: np.where(inside, -phi / T**2 * (u ** (g - 2.0)) @ (c * g * (g - 1.0)), 0.0),
+        }
+        return tuple(out[k]() for k in orders)
+    return tuple(derivatives_at(cmd, t, orders))
 
 
 def drive_samples(cmd, rate_hz: float, axis, reference, correction, stretch: bool = True):
@@ -1482,7 +1447,7 @@ def drive_samples(cmd, rate_hz: float, axis, reference, correction, stretch: boo
     None)). A smooth minimax design (a `SplineMove`) gives its corrected samples (`moves.executable_samples`, on
     `axis` with its `reference` [m]); a blend holding one, the blend of its members' samples (the others' exact;
     a convex combination of samples within the limits); any other command its exact samples on the host, stretched
-    in time where a rounding exceeds a limit (`_stretched_samples`; not with `stretch=False`: a blend's members)."""
+    in time where a rounding exceeds a limit (`limited_samples`; not with `stretch=False`: a blend's members)."""
     u, limits = correction
     if isinstance(cmd, SplineMove):
         return tuple(
@@ -1490,7 +1455,7 @@ def drive_samples(cmd, rate_hz: float, axis, reference, correction, stretch: boo
         )
     if not _has_spline(cmd):
         if stretch:
-            return _stretched_samples(cmd, rate_hz, limits)
+            return limited_samples(cmd, rate_hz, limits, derivatives=_host_derivatives)
         t = sample_times(float(cmd.end_time), rate_hz)
         return (t, *_host_derivatives(cmd, t))
     t = sample_times(float(cmd.end_time), rate_hz)

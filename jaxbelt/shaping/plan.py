@@ -272,7 +272,7 @@ class MovePlan:
         with j_max, |a_k+1 - a_k| rate_hz <= j_max [m/s³]. The design's correction includes them as constraints
         (the least change of the acceleration that restores the residual and keeps them; a scaled-down copy
         would change the distance); another command that exceeds them by a rounding is stretched in time by the
-        least factor that brings it within them (same distance, same rate; `jaxbelt.shaping.moves._stretched_samples`)."""
+        least factor that brings it within them (same distance, same rate; `jaxbelt.shaping.moves.limited_samples`)."""
         c = self._chosen(candidate, "MovePlan.samples")
         check_sample_count(rate_hz, c.move_time, "MovePlan.samples")
         limits = (self.v_max, self.a_max, self.j_max)
